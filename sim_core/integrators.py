@@ -1,0 +1,131 @@
+"""Integrators of the plant (seed 000 eq 1): fixed-step RK4 kernels and a high-accuracy reference.
+
+``rk4_step_1`` is the classical fourth-order Runge–Kutta step with the wheel motor torque and the
+external torque held over the step (zero-order hold, seed 000 eq 3), followed by renormalisation of
+the quaternion Λ. ``reference_propagate`` integrates the same derivative with scipy's DOP853 at
+rtol 1e-12 for tests; it does not renormalise, so its quaternion norm is itself a check.
+State layout: see ``sim_core.spacecraft``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import numpy as np
+from numba import njit
+from scipy.integrate import solve_ivp
+
+from sim_core.spacecraft import PlantArrays, PlantParams, plant_derivative_1, state_size
+
+__all__ = ["rk4_step", "rk4_step_1", "rk4_propagate", "rk4_propagate_1", "reference_propagate"]
+
+REFERENCE_RTOL = 1e-12  # DOP853 tolerance of the reference path (near float64 round-off)
+
+
+@njit(cache=True)
+def rk4_step_1(
+    x: np.ndarray, dt: float, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays
+) -> np.ndarray:
+    """One RK4 step of seed 000 eq (1) with held torques, Λ renormalised (compiled kernel)."""
+    k1 = plant_derivative_1(x, wheel_motor_torque, ext_torque_b, p)
+    k2 = plant_derivative_1(x + 0.5 * dt * k1, wheel_motor_torque, ext_torque_b, p)
+    k3 = plant_derivative_1(x + 0.5 * dt * k2, wheel_motor_torque, ext_torque_b, p)
+    k4 = plant_derivative_1(x + dt * k3, wheel_motor_torque, ext_torque_b, p)
+    out = x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3])
+    for i in range(4):
+        out[i] /= norm
+    return out
+
+
+@njit(cache=True)
+def rk4_propagate_1(
+    x0: np.ndarray, dt: float, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray,
+    p: PlantArrays, every: int,
+) -> np.ndarray:
+    """RK4 over len(torque rows) steps; returns x at steps 0, every, 2·every, … (compiled kernel)."""
+    n_steps = wheel_motor_torque.shape[0]
+    out = np.empty((n_steps // every + 1, x0.shape[0]))
+    out[0] = x0
+    x = x0.copy()
+    for k in range(n_steps):
+        x = rk4_step_1(x, dt, wheel_motor_torque[k], ext_torque_b[k], p)
+        if (k + 1) % every == 0:
+            out[(k + 1) // every] = x
+    return out
+
+
+def _check_dt(dt_s: float) -> float:
+    dt = float(dt_s)
+    if not np.isfinite(dt) or dt <= 0.0:
+        raise ValueError(f"dt_s: must be a finite positive step, got {dt_s}")
+    return dt
+
+
+def _check_x(x, params: PlantParams) -> np.ndarray:
+    n = state_size(params.n_modes, params.n_wheels)
+    xs = np.ascontiguousarray(np.asarray(x, dtype=float))
+    if xs.shape != (n,) or not np.all(np.isfinite(xs)):
+        raise ValueError(f"x: expected a finite state of shape ({n},), got {xs.shape}")
+    return xs
+
+
+def rk4_step(x, dt_s: float, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantParams) -> np.ndarray:
+    """One RK4 step of seed 000 eq (1) with held torques (validated wrapper of ``rk4_step_1``)."""
+    m = np.ascontiguousarray(np.asarray(wheel_motor_torque_nm, dtype=float).reshape(params.n_wheels))
+    t = np.ascontiguousarray(np.asarray(ext_torque_b_nm, dtype=float).reshape(3))
+    return rk4_step_1(_check_x(x, params), _check_dt(dt_s), m, t, params.pack())
+
+
+def rk4_propagate(
+    x0, dt_s: float, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantParams, every: int = 1
+) -> np.ndarray:
+    """States every ``every`` RK4 steps under per-step torques of shape (n_steps, n_w) and (n_steps, 3)."""
+    m = np.ascontiguousarray(np.asarray(wheel_motor_torque_nm, dtype=float))
+    t = np.ascontiguousarray(np.asarray(ext_torque_b_nm, dtype=float))
+    if m.ndim != 2 or m.shape[1] != params.n_wheels or not np.all(np.isfinite(m)):
+        raise ValueError(f"wheel_motor_torque_nm: expected finite shape (n_steps, {params.n_wheels}), got {m.shape}")
+    if t.shape != (m.shape[0], 3) or not np.all(np.isfinite(t)):
+        raise ValueError(f"ext_torque_b_nm: expected finite shape ({m.shape[0]}, 3), got {t.shape}")
+    if int(every) < 1:
+        raise ValueError(f"every: must be a positive integer, got {every}")
+    return rk4_propagate_1(_check_x(x0, params), _check_dt(dt_s), m, t, params.pack(), int(every))
+
+
+TorqueFn = Callable[[float], np.ndarray]
+
+
+def reference_propagate(
+    x0,
+    t_eval_s: Sequence[float],
+    params: PlantParams,
+    wheel_motor_torque_fn: TorqueFn | None = None,
+    ext_torque_fn: TorqueFn | None = None,
+    breakpoints_s: Sequence[float] = (),
+    rtol: float = REFERENCE_RTOL,
+) -> np.ndarray:
+    """States at ``t_eval_s`` by DOP853 (rtol 1e-12) on seed 000 eq (1); restarts at torque breakpoints."""
+    x = _check_x(x0, params)
+    t_eval = np.asarray(t_eval_s, dtype=float)
+    if t_eval.ndim != 1 or t_eval.size == 0 or np.any(np.diff(t_eval) < 0.0) or t_eval[0] < 0.0:
+        raise ValueError("t_eval_s: expected a non-empty, non-decreasing sequence of times ≥ 0")
+    p = params.pack()
+    zero_m, zero_t = np.zeros(params.n_wheels), np.zeros(3)
+
+    def rhs(t: float, y: np.ndarray) -> np.ndarray:
+        m = zero_m if wheel_motor_torque_fn is None else np.asarray(wheel_motor_torque_fn(t), dtype=float)
+        e = zero_t if ext_torque_fn is None else np.asarray(ext_torque_fn(t), dtype=float)
+        return plant_derivative_1(y, m, e, p)
+
+    edges = np.unique(np.concatenate([[0.0], [b for b in breakpoints_s if 0.0 < b < t_eval[-1]], [t_eval[-1]]]))
+    out = np.empty((t_eval.size, x.size))
+    out[t_eval == 0.0] = x
+    for t0, t1 in zip(edges[:-1], edges[1:]):
+        inside = (t_eval > t0) & (t_eval <= t1)
+        seg_t = np.unique(np.append(t_eval[inside], t1))
+        sol = solve_ivp(rhs, (t0, t1), x, method="DOP853", rtol=rtol, atol=rtol * 1e-3, t_eval=seg_t)
+        if not sol.success:
+            raise RuntimeError(f"reference integration failed on [{t0}, {t1}] s: {sol.message}")
+        out[inside] = sol.y.T[np.searchsorted(seg_t, t_eval[inside])]
+        x = sol.y[:, -1]
+    return out

@@ -1,0 +1,312 @@
+"""Coupled rigid–flexible–wheel spacecraft plant of seed 000 eq (1).
+
+    Λ̇ = ½ Λ ∘ ω;   A^o {ω̇, q̈, Ω̇} = {F^ω, F^q, F^r}
+    A^o = [[J, D_q, D_r], [D_qᵗ, A^q, 0], [D_rᵗ, 0, A^r]],  D_r = A diag(J_r),  A^r = diag(J_r)
+    F^ω = −ω × G + M^o,  G = J ω + A h + D_q q̇,  h = J_r Ω
+    F^q_j = −a^q_j (δ^q_j/π Ω^q_j q̇_j + (Ω^q_j)² q_j),   F^r = M − M^f(Ω)
+
+J is the inertia of the whole spacecraft with the wheels locked (it contains the wheels' axial
+inertia), Ω the wheel speeds relative to the body, so the wheel's absolute spin momentum is
+J_r (a_pᵗ ω + Ω_p). δ^q is the logarithmic decrement of a mode (damping ratio δ/(2π)). M is the
+motor torque delivered to each wheel, M^f the bearing/drag friction (see ``wheels``), M^o the
+external torque in body axes (magnetic driver, gravity gradient, disturbances).
+
+State layout (float64, the engine relies on it), n_q flex modes, n_w wheels:
+
+    x = [Λ(4) q_ib scalar first | ω(3) rad/s body | q(n_q) | q̇(n_q) | Ω(n_w) rad/s]
+
+A^o is constant, so ``PlantParams.pack`` inverts it once; each derivative is one small
+mat-vec. Kernels take the packed ``PlantArrays`` named tuple.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from sim_core.quaternion import rotate_1
+from sim_core.wheels import WheelParams, friction_torque_1
+
+__all__ = [
+    "PlantParams",
+    "PlantArrays",
+    "state_size",
+    "pack_state",
+    "plant_derivative",
+    "plant_derivative_1",
+    "angular_momentum_b",
+    "angular_momentum_b_1",
+    "angular_momentum_i",
+    "kinetic_energy",
+    "kinetic_energy_1",
+    "mechanical_energy",
+    "mechanical_energy_1",
+]
+
+SYMMETRY_RTOL = 1e-9  # inertia matrices come from CAD/measurement: asymmetry above this is a typo
+
+
+class PlantArrays(NamedTuple):
+    """PlantParams packed into plain float64 arrays for the numba kernels."""
+
+    inertia: np.ndarray  # J (3, 3)
+    mass_inv: np.ndarray  # (A^o)^-1 (3+nq+nw, 3+nq+nw)
+    wheel_axes: np.ndarray  # A (3, nw)
+    wheel_inertia: np.ndarray  # J_r (nw,)
+    friction: np.ndarray  # rows m_f, Ω°, K_l, K_a (4, nw)
+    flex_coupling: np.ndarray  # D_q (3, nq)
+    flex_mass: np.ndarray  # a^q (nq,)
+    flex_freq: np.ndarray  # Ω^q (nq,)
+    flex_decrement: np.ndarray  # δ^q (nq,)
+
+
+def _finite(value, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != shape:
+        raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return np.ascontiguousarray(arr)
+
+
+def _check_inertia(j: np.ndarray) -> None:
+    scale = np.max(np.abs(j))
+    if not np.allclose(j, j.T, rtol=0.0, atol=SYMMETRY_RTOL * scale):
+        raise ValueError("inertia_kg_m2: matrix is not symmetric")
+    moments = np.linalg.eigvalsh(j)
+    if moments[0] <= 0.0:
+        raise ValueError(f"inertia_kg_m2: not positive definite (principal moments {moments})")
+    if moments[0] + moments[1] < moments[2] * (1.0 - SYMMETRY_RTOL):
+        raise ValueError(f"inertia_kg_m2: principal moments {moments} violate the triangle inequality")
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Mass properties of seed 000 eq (1): inertia J, wheel axes A and wheels, flexible modes."""
+
+    inertia_kg_m2: np.ndarray
+    wheel_axes_b: np.ndarray
+    wheels: WheelParams
+    flex_coupling: np.ndarray | None = None
+    flex_modal_mass: np.ndarray | None = None
+    flex_freq_rad_s: np.ndarray | None = None
+    flex_log_decrement: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        j = _finite(self.inertia_kg_m2, "inertia_kg_m2", (3, 3))
+        _check_inertia(j)
+        nw = self.wheels.n
+        axes = _finite(self.wheel_axes_b, "wheel_axes_b", (3, nw))
+        if nw and not np.allclose(np.linalg.norm(axes, axis=0), 1.0, atol=1e-12):
+            raise ValueError("wheel_axes_b: every column must be a unit vector")
+        coupling = np.zeros((3, 0)) if self.flex_coupling is None else np.asarray(self.flex_coupling, float)
+        if coupling.ndim != 2:
+            raise ValueError(f"flex_coupling: expected shape (3, n_modes), got {coupling.shape}")
+        nq = coupling.shape[1]
+        coupling = _finite(coupling, "flex_coupling", (3, nq))
+        flex = {
+            "flex_modal_mass": self.flex_modal_mass,
+            "flex_freq_rad_s": self.flex_freq_rad_s,
+            "flex_log_decrement": self.flex_log_decrement,
+        }
+        for name, value in flex.items():
+            arr = _finite(np.zeros(nq) if value is None else value, name, (nq,))
+            if np.any(arr < 0.0) or (name != "flex_log_decrement" and np.any(arr == 0.0)):
+                raise ValueError(f"{name}: must be positive (log decrement: non-negative), got {arr}")
+            object.__setattr__(self, name, arr)
+        object.__setattr__(self, "inertia_kg_m2", j)
+        object.__setattr__(self, "wheel_axes_b", axes)
+        object.__setattr__(self, "flex_coupling", coupling)
+        if np.linalg.eigvalsh(self.mass_matrix())[0] <= 0.0:
+            raise ValueError("inertia_kg_m2: mass matrix A^o not positive definite (wheel or flex coupling too large)")
+
+    @property
+    def n_modes(self) -> int:
+        """Number of flexible modes n_q."""
+        return self.flex_coupling.shape[1]
+
+    @property
+    def n_wheels(self) -> int:
+        """Number of wheels n_w."""
+        return self.wheels.n
+
+    def mass_matrix(self) -> np.ndarray:
+        """Constant mass matrix A^o of seed 000 eq (1), shape (3+n_q+n_w)²."""
+        nq, nw = self.n_modes, self.n_wheels
+        jr = self.wheels.inertia_kg_m2
+        d_r = self.wheel_axes_b * jr
+        m = np.zeros((3 + nq + nw, 3 + nq + nw))
+        m[:3, :3] = self.inertia_kg_m2
+        m[:3, 3 : 3 + nq] = self.flex_coupling
+        m[3 : 3 + nq, :3] = self.flex_coupling.T
+        m[:3, 3 + nq :] = d_r
+        m[3 + nq :, :3] = d_r.T
+        m[3 : 3 + nq, 3 : 3 + nq] = np.diag(self.flex_modal_mass)
+        m[3 + nq :, 3 + nq :] = np.diag(jr)
+        return m
+
+    def pack(self) -> PlantArrays:
+        """Plain float64 arrays for the kernels, with (A^o)^-1 computed once."""
+        return PlantArrays(
+            inertia=self.inertia_kg_m2.copy(),
+            mass_inv=np.ascontiguousarray(np.linalg.inv(self.mass_matrix())),
+            wheel_axes=self.wheel_axes_b.copy(),
+            wheel_inertia=self.wheels.inertia_kg_m2.copy(),
+            friction=self.wheels.friction_table(),
+            flex_coupling=self.flex_coupling.copy(),
+            flex_mass=self.flex_modal_mass.copy(),
+            flex_freq=self.flex_freq_rad_s.copy(),
+            flex_decrement=self.flex_log_decrement.copy(),
+        )
+
+
+def state_size(n_modes: int, n_wheels: int) -> int:
+    """Length 7 + 2 n_q + n_w of the plant state x."""
+    return 7 + 2 * n_modes + n_wheels
+
+
+def pack_state(params: PlantParams, q_ib, omega_b_rad_s, wheel_speed_rad_s=None, flex_q=None, flex_qdot=None):
+    """State x = [Λ, ω, q, q̇, Ω] from its parts, validated (layout of seed 000 eq 1)."""
+    nq, nw = params.n_modes, params.n_wheels
+    q = _finite(q_ib, "q_ib", (4,))
+    if abs(np.linalg.norm(q) - 1.0) > 1e-9:
+        raise ValueError(f"q_ib: not a unit quaternion (norm {np.linalg.norm(q)})")
+    parts = [
+        q,
+        _finite(omega_b_rad_s, "omega_b_rad_s", (3,)),
+        _finite(np.zeros(nq) if flex_q is None else flex_q, "flex_q", (nq,)),
+        _finite(np.zeros(nq) if flex_qdot is None else flex_qdot, "flex_qdot", (nq,)),
+        _finite(np.zeros(nw) if wheel_speed_rad_s is None else wheel_speed_rad_s, "wheel_speed_rad_s", (nw,)),
+    ]
+    return np.concatenate(parts)
+
+
+# --- kernels ---------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def angular_momentum_b_1(x: np.ndarray, p: PlantArrays) -> np.ndarray:
+    """Total angular momentum G = Jω + A J_r Ω + D_q q̇ in body axes, N·m·s (seed 000 eq 1)."""
+    nq = p.flex_mass.shape[0]
+    nw = p.wheel_inertia.shape[0]
+    g = np.zeros(3)
+    for i in range(3):
+        acc = 0.0
+        for k in range(3):
+            acc += p.inertia[i, k] * x[4 + k]
+        for j in range(nq):
+            acc += p.flex_coupling[i, j] * x[7 + nq + j]
+        for w in range(nw):
+            acc += p.wheel_axes[i, w] * p.wheel_inertia[w] * x[7 + 2 * nq + w]
+        g[i] = acc
+    return g
+
+
+@njit(cache=True)
+def plant_derivative_1(
+    x: np.ndarray, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays
+) -> np.ndarray:
+    """ẋ of seed 000 eq (1): Λ̇ = ½Λ∘ω and {ω̇, q̈, Ω̇} = (A^o)^-1 {F^ω, F^q, F^r}."""
+    nq = p.flex_mass.shape[0]
+    nw = p.wheel_inertia.shape[0]
+    n = 3 + nq + nw
+    g = angular_momentum_b_1(x, p)
+    wx, wy, wz = x[4], x[5], x[6]
+    force = np.empty(n)
+    force[0] = -(wy * g[2] - wz * g[1]) + ext_torque_b[0]
+    force[1] = -(wz * g[0] - wx * g[2]) + ext_torque_b[1]
+    force[2] = -(wx * g[1] - wy * g[0]) + ext_torque_b[2]
+    for j in range(nq):
+        om = p.flex_freq[j]
+        force[3 + j] = -p.flex_mass[j] * (p.flex_decrement[j] / np.pi * om * x[7 + nq + j] + om * om * x[7 + j])
+    friction = friction_torque_1(x[7 + 2 * nq :], p.friction)
+    for w in range(nw):
+        force[3 + nq + w] = wheel_motor_torque[w] - friction[w]
+    xdot = np.empty(x.shape[0])
+    q0, q1, q2, q3 = x[0], x[1], x[2], x[3]
+    xdot[0] = 0.5 * (-q1 * wx - q2 * wy - q3 * wz)
+    xdot[1] = 0.5 * (q0 * wx + q2 * wz - q3 * wy)
+    xdot[2] = 0.5 * (q0 * wy + q3 * wx - q1 * wz)
+    xdot[3] = 0.5 * (q0 * wz + q1 * wy - q2 * wx)
+    for j in range(nq):
+        xdot[7 + j] = x[7 + nq + j]
+    for r in range(n):
+        acc = 0.0
+        for c in range(n):
+            acc += p.mass_inv[r, c] * force[c]
+        if r < 3:
+            xdot[4 + r] = acc
+        elif r < 3 + nq:
+            xdot[7 + nq + (r - 3)] = acc
+        else:
+            xdot[7 + 2 * nq + (r - 3 - nq)] = acc
+    return xdot
+
+
+@njit(cache=True)
+def kinetic_energy_1(x: np.ndarray, p: PlantArrays) -> float:
+    """Kinetic energy ½ vᵀ A^o v, v = {ω, q̇, Ω}, J (seed 000 eq 1)."""
+    nq = p.flex_mass.shape[0]
+    nw = p.wheel_inertia.shape[0]
+    g = angular_momentum_b_1(x, p)
+    e = x[4] * g[0] + x[5] * g[1] + x[6] * g[2]
+    for j in range(nq):
+        qd = x[7 + nq + j]
+        e += qd * p.flex_mass[j] * qd
+        for i in range(3):
+            e += qd * p.flex_coupling[i, j] * x[4 + i]
+    for w in range(nw):
+        om = x[7 + 2 * nq + w]
+        axial = p.wheel_axes[0, w] * x[4] + p.wheel_axes[1, w] * x[5] + p.wheel_axes[2, w] * x[6]
+        e += p.wheel_inertia[w] * om * (axial + om)
+    return 0.5 * e
+
+
+@njit(cache=True)
+def mechanical_energy_1(x: np.ndarray, p: PlantArrays) -> float:
+    """Kinetic plus modal strain energy ½ Σ a^q_j (Ω^q_j q_j)², J (seed 000 eq 1)."""
+    nq = p.flex_mass.shape[0]
+    e = kinetic_energy_1(x, p)
+    for j in range(nq):
+        e += 0.5 * p.flex_mass[j] * (p.flex_freq[j] * x[7 + j]) ** 2
+    return e
+
+
+# --- friendly numpy API -------------------------------------------------------------------------
+
+
+def _state(x, params: PlantParams) -> np.ndarray:
+    n = state_size(params.n_modes, params.n_wheels)
+    return _finite(x, "x", (n,))
+
+
+def plant_derivative(x, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantParams) -> np.ndarray:
+    """ẋ of seed 000 eq (1) for one state (validated wrapper of ``plant_derivative_1``)."""
+    m = _finite(np.zeros(params.n_wheels) if wheel_motor_torque_nm is None else wheel_motor_torque_nm,
+                "wheel_motor_torque_nm", (params.n_wheels,))
+    t = _finite(np.zeros(3) if ext_torque_b_nm is None else ext_torque_b_nm, "ext_torque_b_nm", (3,))
+    return plant_derivative_1(_state(x, params), m, t, params.pack())
+
+
+def angular_momentum_b(x, params: PlantParams) -> np.ndarray:
+    """Total angular momentum G in body axes, N·m·s (seed 000 eq 1)."""
+    return angular_momentum_b_1(_state(x, params), params.pack())
+
+
+def angular_momentum_i(x, params: PlantParams) -> np.ndarray:
+    """Total angular momentum Λ ∘ G ∘ Λ̃ in inertial axes, N·m·s (conserved without M^o)."""
+    xs = _state(x, params)
+    return rotate_1(xs[:4], angular_momentum_b_1(xs, params.pack()))
+
+
+def kinetic_energy(x, params: PlantParams) -> float:
+    """Kinetic energy ½ vᵀ A^o v, J (seed 000 eq 1)."""
+    return float(kinetic_energy_1(_state(x, params), params.pack()))
+
+
+def mechanical_energy(x, params: PlantParams) -> float:
+    """Kinetic plus modal strain energy, J (seed 000 eq 1)."""
+    return float(mechanical_energy_1(_state(x, params), params.pack()))

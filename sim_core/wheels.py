@@ -1,0 +1,331 @@
+"""Reaction-wheel cluster: geometry, torque balance, friction, motor electrics and speed loop.
+
+Geometry (seed 000 §2): the columns of A (3 × n_w) are the unit spin axes in body axes, so the
+cluster momentum is H = A h with h = J_r Ω (Ω relative to the body). The General-Electric (GE)
+scheme puts four wheels in the device frame as A^d (angle γ) and turns the device frame into the
+body by A = [π/4]_1^t A^d; seed 000 writes [φ]_1 for the passive simple-turn matrix about x, so
+[π/4]_1^t is the active rotation R_x(+π/4) of the columns.
+
+Torque balance (seed 002 eq 1, 4): M_m = M_c + M_f + M_x + M_a + M_d. Seed 002 adds the friction
+terms with a plus sign although they oppose the spin; we keep the physical sign and write every
+resisting torque as a positive multiple of the spin direction that is *subtracted*:
+M^f = m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω √|Ω| (seed 000's saturated dry friction, seed 002's viscous
+and aerodynamic terms, seed 003 eq 34's k_e Ω and M_df sgn Ω). Seed 000 eq (1) then reads
+J_r (aᵗω̇ + Ω̇) = m − m^f. Noise M_x and imbalance M_d are added to the delivered motor torque.
+
+Motor electrics (seed 002 eq 2–3): L di/dt + R i + K_e Ω = u, M = K_m i.
+Speed loop (seed 003 eq 35–37): M_w = −(k_Ω + k_e)(Ω − Ω_0) − k_T T_c, first order with time
+constant T_w = J_r / (k_Ω + k_e).
+
+Limits (seed 000 eq 2): |m_p| ≤ m^m and |h_p| ≤ h^m; a wheel at its momentum limit accepts no
+torque that would drive it further.
+
+Units: SI (N·m, N·m·s, rad/s, kg·m², A, V, Ω, H). All ``*_1`` functions are numba kernels on
+per-wheel float64 arrays for the simulation loop.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "WheelParams",
+    "MotorParams",
+    "ge_device_axes",
+    "ge_scheme_axes",
+    "orthogonal_axes",
+    "skew_3plus1_axes",
+    "ge_normalized_momentum",
+    "friction_torque",
+    "friction_torque_1",
+    "limited_motor_torque",
+    "limited_motor_torque_1",
+    "aero_drag_torque",
+    "imbalance_torque",
+    "noise_torque",
+    "delivered_torque_1",
+    "motor_current_derivative",
+    "motor_current_derivative_1",
+    "motor_torque",
+    "speed_loop_torque",
+    "speed_loop_torque_1",
+]
+
+
+def _per_wheel(value, n: int, name: str, lower: float, strict: bool, allow_inf: bool) -> np.ndarray:
+    """Broadcast a scalar or per-wheel array to shape (n,) and check its range, naming the field."""
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{name}: expected a scalar or shape ({n},), got {arr.shape}")
+    if np.any(np.isnan(arr)) or (not allow_inf and not np.all(np.isfinite(arr))):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    bad = arr <= lower if strict else arr < lower
+    if np.any(bad):
+        relation = ">" if strict else "≥"
+        raise ValueError(f"{name}: every value must be {relation} {lower}, got {arr}")
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True)
+class WheelParams:
+    """Per-wheel parameters of the cluster (seed 000 eq 1–2, seed 002 eq 1–4); scalars broadcast."""
+
+    inertia_kg_m2: np.ndarray
+    max_torque_nm: np.ndarray | float = np.inf
+    max_momentum_nms: np.ndarray | float = np.inf
+    coulomb_nm: np.ndarray | float = 0.0
+    coulomb_sat_speed_rad_s: np.ndarray | float = 0.0
+    viscous_nm_s: np.ndarray | float = 0.0
+    aero_drag_nm_s15: np.ndarray | float = 0.0
+    noise_nm: np.ndarray | float = 0.0
+    imbalance_nm_s2: np.ndarray | float = 0.0
+    n: int = field(init=False)
+
+    def __post_init__(self) -> None:
+        j = np.atleast_1d(np.asarray(self.inertia_kg_m2, dtype=float))
+        if j.ndim != 1:
+            raise ValueError(f"inertia_kg_m2: expected shape (n_wheels,), got {j.shape}")
+        n = j.shape[0]
+        object.__setattr__(self, "n", n)
+        checks = {
+            "inertia_kg_m2": (0.0, True, False),
+            "max_torque_nm": (0.0, True, True),
+            "max_momentum_nms": (0.0, True, True),
+            "coulomb_nm": (0.0, False, False),
+            "coulomb_sat_speed_rad_s": (0.0, False, False),
+            "viscous_nm_s": (0.0, False, False),
+            "aero_drag_nm_s15": (0.0, False, False),
+            "noise_nm": (0.0, False, False),
+            "imbalance_nm_s2": (0.0, False, False),
+        }
+        for name, (lower, strict, allow_inf) in checks.items():
+            value = j if name == "inertia_kg_m2" else getattr(self, name)
+            object.__setattr__(self, name, _per_wheel(value, n, name, lower, strict, allow_inf))
+
+    @property
+    def max_speed_rad_s(self) -> np.ndarray:
+        """Relative speed limit Ω^m = h^m / J_r of each wheel (seed 000 eq 2)."""
+        return self.max_momentum_nms / self.inertia_kg_m2
+
+    def friction_table(self) -> np.ndarray:
+        """Friction coefficients packed for kernels: rows m_f, Ω°, K_l, K_a; shape (4, n)."""
+        return np.ascontiguousarray(
+            np.stack([self.coulomb_nm, self.coulomb_sat_speed_rad_s, self.viscous_nm_s, self.aero_drag_nm_s15])
+        )
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """Armature of a voltage-driven wheel motor (seed 002 eq 2): L, R, torque and back-EMF constants."""
+
+    inductance_h: float
+    resistance_ohm: float
+    torque_constant_nm_a: float
+    back_emf_v_s: float
+
+    def __post_init__(self) -> None:
+        for name in ("inductance_h", "resistance_ohm", "torque_constant_nm_a", "back_emf_v_s"):
+            value = float(getattr(self, name))
+            if not np.isfinite(value) or value <= 0.0:
+                raise ValueError(f"{name}: must be a finite positive number, got {value}")
+            object.__setattr__(self, name, value)
+
+
+# --- geometry -------------------------------------------------------------------------------
+
+
+def _check_angle(gamma_rad: float) -> float:
+    gamma = float(gamma_rad)
+    if not np.isfinite(gamma) or not 0.0 < gamma < 0.5 * np.pi:
+        raise ValueError(f"gamma_rad: must lie in (0, π/2), got {gamma_rad}")
+    return gamma
+
+
+def ge_device_axes(gamma_rad: float) -> np.ndarray:
+    """GE-scheme matrix A^d (3 × 4) in the cluster device frame (seed 000 eq 1)."""
+    g = _check_angle(gamma_rad)
+    c, s = np.cos(g), np.sin(g)
+    return np.array([[c, c, c, c], [s, -s, 0.0, 0.0], [0.0, 0.0, s, -s]])
+
+
+def ge_scheme_axes(gamma_rad: float) -> np.ndarray:
+    """Body-frame wheel axes A = [π/4]_1^t A^d of the GE scheme (seed 000 eq 1), shape (3, 4)."""
+    c, s = np.cos(0.25 * np.pi), np.sin(0.25 * np.pi)
+    turn_t = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])  # [π/4]_1 is passive: transpose is R_x(+π/4)
+    return turn_t @ ge_device_axes(gamma_rad)
+
+
+def orthogonal_axes() -> np.ndarray:
+    """Three wheels along body x, y, z (seed 003 Fig. 24), shape (3, 3)."""
+    return np.eye(3)
+
+
+def skew_3plus1_axes() -> np.ndarray:
+    """Three orthogonal wheels plus a fourth skewed along (1, 1, 1)/√3 (seed 003 §3.2.2.3), shape (3, 4)."""
+    return np.column_stack([np.eye(3), np.full(3, 1.0 / np.sqrt(3.0))])
+
+
+def ge_normalized_momentum(h_nms: np.ndarray, max_momentum_nms: float, gamma_rad: float) -> np.ndarray:
+    """Normalised GE cluster momentum {x, y, z} = A^d h / h^m written out as seed 000 eq (4)."""
+    h = np.asarray(h_nms, dtype=float)
+    if h.shape[-1:] != (4,) or not np.all(np.isfinite(h)):
+        raise ValueError(f"h_nms: expected finite shape (..., 4), got {h.shape}")
+    if not np.isfinite(max_momentum_nms) or max_momentum_nms <= 0.0:
+        raise ValueError(f"max_momentum_nms: must be finite and positive, got {max_momentum_nms}")
+    g = _check_angle(gamma_rad)
+    hn = h / max_momentum_nms
+    x1 = np.cos(g) * (hn[..., 0] + hn[..., 1])
+    x2 = np.cos(g) * (hn[..., 2] + hn[..., 3])
+    y = np.sin(g) * (hn[..., 0] - hn[..., 1])
+    z = np.sin(g) * (hn[..., 2] - hn[..., 3])
+    return np.stack([x1 + x2, y, z], axis=-1)
+
+
+# --- kernels ---------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def friction_torque_1(speed_rad_s: np.ndarray, friction: np.ndarray) -> np.ndarray:
+    """Resisting torque m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω√|Ω| per wheel (seed 000 eq 1, seed 002 eq 4)."""
+    n = speed_rad_s.shape[0]
+    out = np.empty(n)
+    for p in range(n):
+        w = speed_rad_s[p]
+        sat_speed = friction[1, p]
+        if sat_speed > 0.0:
+            dry = min(1.0, max(-1.0, w / sat_speed))
+        else:
+            dry = 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
+        out[p] = friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w))
+    return out
+
+
+@njit(cache=True)
+def limited_motor_torque_1(
+    torque_cmd_nm: np.ndarray, speed_rad_s: np.ndarray, inertia_kg_m2: np.ndarray,
+    max_torque_nm: np.ndarray, max_momentum_nms: np.ndarray,
+) -> np.ndarray:
+    """Motor torque within |m_p| ≤ m^m, none beyond |h_p| ≤ h^m (seed 000 eq 2), per wheel."""
+    n = torque_cmd_nm.shape[0]
+    out = np.empty(n)
+    for p in range(n):
+        m = min(max_torque_nm[p], max(-max_torque_nm[p], torque_cmd_nm[p]))
+        h = inertia_kg_m2[p] * speed_rad_s[p]
+        if (h >= max_momentum_nms[p] and m > 0.0) or (h <= -max_momentum_nms[p] and m < 0.0):
+            m = 0.0
+        out[p] = m
+    return out
+
+
+@njit(cache=True)
+def delivered_torque_1(
+    motor_torque_nm: np.ndarray, speed_rad_s: np.ndarray, t_s: float,
+    noise_nm: np.ndarray, imbalance_nm_s2: np.ndarray, white_noise: np.ndarray,
+) -> np.ndarray:
+    """Motor torque plus noise K_x W/|W_max| and imbalance K_d Ω² sin(Ωt) (seed 002 eq 1, 4).
+
+    ``white_noise`` holds samples W/|W_max| in [−1, 1] drawn by the caller (one per wheel).
+    """
+    n = motor_torque_nm.shape[0]
+    out = np.empty(n)
+    for p in range(n):
+        w = speed_rad_s[p]
+        out[p] = motor_torque_nm[p] + noise_nm[p] * white_noise[p] + imbalance_nm_s2[p] * w * w * np.sin(w * t_s)
+    return out
+
+
+@njit(cache=True)
+def motor_current_derivative_1(
+    current_a: np.ndarray, voltage_v: np.ndarray, speed_rad_s: np.ndarray,
+    inductance_h: float, resistance_ohm: float, back_emf_v_s: float,
+) -> np.ndarray:
+    """Armature di/dt = (u − R i − K_e Ω) / L per wheel (seed 002 eq 2)."""
+    return (voltage_v - resistance_ohm * current_a - back_emf_v_s * speed_rad_s) / inductance_h
+
+
+@njit(cache=True)
+def speed_loop_torque_1(
+    speed_rad_s: np.ndarray, speed_set_rad_s: np.ndarray, torque_request_nm: np.ndarray,
+    loop_gain_nm_s: np.ndarray, torque_gain: np.ndarray,
+) -> np.ndarray:
+    """Speed-loop motor torque −(k_Ω + k_e)(Ω − Ω_0) − k_T T_c (seed 003 eq 35), per wheel.
+
+    Seed 003 writes the request with the body-reaction sign (a positive T_c is a torque on the
+    body); the wheel motor torque is its opposite, hence the minus sign.
+    """
+    return -loop_gain_nm_s * (speed_rad_s - speed_set_rad_s) - torque_gain * torque_request_nm
+
+
+# --- friendly numpy API (tests, tools) ----------------------------------------------------------
+
+
+def _speeds(speed_rad_s: np.ndarray, n: int, name: str = "speed_rad_s") -> np.ndarray:
+    w = np.ascontiguousarray(np.atleast_1d(np.asarray(speed_rad_s, dtype=float)))
+    if w.shape != (n,):
+        raise ValueError(f"{name}: expected shape ({n},), got {w.shape}")
+    if not np.all(np.isfinite(w)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return w
+
+
+def friction_torque(wheels: WheelParams, speed_rad_s: np.ndarray) -> np.ndarray:
+    """Resisting friction torque per wheel, N·m (seed 000 eq 1 m^f, seed 002 eq 4 M_f + M_a)."""
+    return friction_torque_1(_speeds(speed_rad_s, wheels.n), wheels.friction_table())
+
+
+def aero_drag_torque(wheels: WheelParams, speed_rad_s: np.ndarray) -> np.ndarray:
+    """Aerodynamic drag K_a Ω √|Ω| per wheel, N·m (seed 002 eq 4 M_a)."""
+    w = _speeds(speed_rad_s, wheels.n)
+    return wheels.aero_drag_nm_s15 * w * np.sqrt(np.abs(w))
+
+
+def imbalance_torque(wheels: WheelParams, speed_rad_s: np.ndarray, t_s: float) -> np.ndarray:
+    """Dynamic-imbalance torque K_d Ω² sin(Ωt) per wheel, N·m (seed 002 eq 4 M_d)."""
+    w = _speeds(speed_rad_s, wheels.n)
+    return wheels.imbalance_nm_s2 * w * w * np.sin(w * float(t_s))
+
+
+def noise_torque(wheels: WheelParams, rng: np.random.Generator) -> np.ndarray:
+    """Noise torque K_x W/|W_max| with W uniform in [−1, 1] per wheel, N·m (seed 002 eq 4 M_x)."""
+    return wheels.noise_nm * rng.uniform(-1.0, 1.0, wheels.n)
+
+
+def limited_motor_torque(wheels: WheelParams, torque_cmd_nm: np.ndarray, speed_rad_s: np.ndarray) -> np.ndarray:
+    """Commanded motor torque clipped to m^m and cut at the momentum limit h^m (seed 000 eq 2)."""
+    m = _speeds(torque_cmd_nm, wheels.n, "torque_cmd_nm")
+    w = _speeds(speed_rad_s, wheels.n)
+    return limited_motor_torque_1(m, w, wheels.inertia_kg_m2, wheels.max_torque_nm, wheels.max_momentum_nms)
+
+
+def motor_current_derivative(motor: MotorParams, current_a, voltage_v, speed_rad_s) -> np.ndarray:
+    """Armature current rate di/dt = (u − R i − K_e Ω)/L, A/s (seed 002 eq 2)."""
+    i, u, w = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (current_a, voltage_v, speed_rad_s))
+    for name, a in (("current_a", i), ("voltage_v", u), ("speed_rad_s", w)):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: contains NaN or infinite values")
+    return motor_current_derivative_1(i, u, w, motor.inductance_h, motor.resistance_ohm, motor.back_emf_v_s)
+
+
+def motor_torque(motor: MotorParams, current_a) -> np.ndarray:
+    """Motor torque M = K_m i, N·m (seed 002 eq 2)."""
+    return motor.torque_constant_nm_a * np.asarray(current_a, dtype=float)
+
+
+def speed_loop_torque(
+    speed_rad_s, speed_set_rad_s, torque_request_nm, loop_gain_nm_s, torque_gain=1.0
+) -> np.ndarray:
+    """Speed-loop motor torque −(k_Ω + k_e)(Ω − Ω_0) − k_T T_c, N·m (seed 003 eq 35)."""
+    arrays = [np.atleast_1d(np.asarray(a, dtype=float)) for a in (speed_rad_s, speed_set_rad_s, torque_request_nm)]
+    n = arrays[0].shape[0]
+    gain = _per_wheel(loop_gain_nm_s, n, "loop_gain_nm_s", 0.0, True, False)
+    k_t = _per_wheel(torque_gain, n, "torque_gain", 0.0, False, False)
+    for name, a in zip(("speed_rad_s", "speed_set_rad_s", "torque_request_nm"), arrays):
+        if a.shape != (n,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: expected finite shape ({n},), got {a.shape}")
+    return speed_loop_torque_1(*arrays, gain, k_t)
