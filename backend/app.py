@@ -1,0 +1,49 @@
+"""The FastAPI application factory: ``create_app(settings)`` builds everything, nothing at import."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+
+from backend.errors import install_error_handlers
+from backend.services import build_services
+from backend.settings import Settings
+
+__all__ = ["create_app", "API_PREFIX"]
+
+API_PREFIX = "/api/v1"
+
+DESCRIPTION = """Control centre of the attitude-control system of Earth-observation small satellites:
+telemetry archive, simulation jobs, alarms and live streams. Authenticate with
+`Authorization: Bearer <token>`; roles viewer (reads), operator (changes), admin (tokens).
+Errors are JSON `{"message", "field", "status"}`."""
+
+
+def _routers() -> list:
+    from backend.routes import health, live, simulations, tokens
+
+    return [health.router, tokens.router, simulations.router, live.router]
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """A new app with its own database engine, job manager and live hub."""
+    settings = settings or Settings()
+    services = build_services(settings)
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        services.jobs.start()
+        services.telemetry.start()
+        try:
+            yield
+        finally:
+            services.close()
+
+    app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan)
+    app.state.services = services
+    install_error_handlers(app)
+    for router in _routers():
+        app.include_router(router, prefix=API_PREFIX)
+    return app

@@ -1,0 +1,100 @@
+"""API tokens and roles: tokens are random 256-bit strings stored as their sha256 hash.
+
+Why sha256 and not a slow password hash: a token carries 256 bits of entropy from ``secrets``, so
+a stolen hash cannot be brute-forced however fast the hash is; a fast, unsalted hash lets each
+request find its token by an indexed equality lookup instead of running a KDF per request.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import secrets
+import threading
+from dataclasses import dataclass
+from enum import IntEnum
+
+from backend.repositories.tokens import TokenRepository
+
+__all__ = ["Role", "Principal", "new_token", "token_sha256", "Authenticator", "TOKEN_PREFIX"]
+
+TOKEN_PREFIX = "acs_"
+
+
+class Role(IntEnum):
+    """Ordered roles: reads need viewer, state changes operator, token management admin."""
+
+    viewer = 1
+    operator = 2
+    admin = 3
+
+    @classmethod
+    def parse(cls, name: str) -> "Role":
+        """Role from its name; ValueError naming the field ``role`` otherwise."""
+        try:
+            return cls[name]
+        except KeyError:
+            raise ValueError(f"role: must be one of viewer, operator, admin, got {name!r}") from None
+
+
+@dataclass(frozen=True)
+class Principal:
+    """Who is calling: token id (None when auth is off), name and role."""
+
+    token_id: int | None
+    name: str
+    role: Role
+
+
+LOCAL_ADMIN = Principal(token_id=None, name="local (auth disabled)", role=Role.admin)
+
+
+def new_token() -> str:
+    """A fresh token: prefix + 43 URL-safe characters (256 bits from the OS CSPRNG)."""
+    return TOKEN_PREFIX + secrets.token_urlsafe(32)
+
+
+def token_sha256(token: str) -> str:
+    """Hex sha256 of a token, the only form stored at rest."""
+    return hashlib.sha256(token.encode("utf-8")).hexdigest()
+
+
+class Authenticator:
+    """Resolves bearer tokens to principals, caching hits in memory until a revocation."""
+
+    def __init__(self, tokens: TokenRepository, enabled: bool) -> None:
+        self._tokens, self.enabled = tokens, enabled
+        self._cache: dict[str, Principal] = {}
+        self._lock = threading.Lock()
+
+    def resolve(self, token: str | None) -> Principal | None:
+        """The principal owning ``token``; None when missing, unknown or revoked."""
+        if not self.enabled:
+            return LOCAL_ADMIN
+        if not token:
+            return None
+        digest = token_sha256(token)
+        with self._lock:
+            cached = self._cache.get(digest)
+        if cached is not None:
+            return cached
+        row = self._tokens.find_active(digest)
+        if row is None:
+            return None
+        principal = Principal(token_id=row.id, name=row.name, role=Role.parse(row.role))
+        with self._lock:
+            self._cache[digest] = principal
+        return principal
+
+    def forget(self, token_id: int) -> None:
+        """Drop a revoked token from the cache."""
+        with self._lock:
+            for digest in [d for d, p in self._cache.items() if p.token_id == token_id]:
+                del self._cache[digest]
+
+    def issue(self, name: str, role: Role) -> tuple[int, str]:
+        """Create a token, store its hash; returns (id, plain token) — shown once, never stored."""
+        if not name.strip():
+            raise ValueError("name: must not be empty")
+        token = new_token()
+        row = self._tokens.add(name=name, role=role.name, token_sha256=token_sha256(token))
+        return row.id, token

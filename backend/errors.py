@@ -1,0 +1,79 @@
+"""Errors of the API as JSON ``{"message", "field", "status"}``, replacing FastAPI's defaults."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from pydantic import BaseModel
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+__all__ = ["ApiError", "ErrorBody", "install_error_handlers", "ERROR_RESPONSES"]
+
+
+class ErrorBody(BaseModel):
+    """Body of every error answer: what went wrong, which input field, the HTTP status."""
+
+    message: str
+    field: str | None = None
+    status: int
+
+
+class ApiError(Exception):
+    """An error to answer with ``status``; ``field`` names the offending input."""
+
+    def __init__(self, status: int, message: str, field: str | None = None,
+                 headers: dict[str, str] | None = None) -> None:
+        super().__init__(message)
+        self.status, self.message, self.field, self.headers = status, message, field, headers
+
+
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
+    code: {"model": ErrorBody, "description": text}
+    for code, text in [(401, "Missing or unknown token"), (403, "Role too low"),
+                       (422, "Invalid input or over a limit")]
+}
+
+
+def _json(status: int, message: str, field: str | None,
+          headers: dict[str, str] | None = None) -> JSONResponse:
+    body = ErrorBody(message=message, field=field, status=status).model_dump()
+    return JSONResponse(body, status_code=status, headers=headers)
+
+
+def _field_of(loc: tuple[Any, ...] | list[Any]) -> str | None:
+    parts = [str(p) for p in loc if p not in ("body", "query", "path", "header", "cookie")]
+    return ".".join(parts) or (str(loc[0]) if loc else None)
+
+
+async def _on_api_error(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, ApiError)
+    return _json(exc.status, exc.message, exc.field, exc.headers)
+
+
+async def _on_validation(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, RequestValidationError)
+    first = exc.errors()[0] if exc.errors() else {"loc": (), "msg": "invalid request"}
+    field = _field_of(first.get("loc", ()))
+    return _json(422, f"{field}: {first.get('msg')}" if field else str(first.get("msg")), field)
+
+
+async def _on_http(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, StarletteHTTPException)
+    return _json(exc.status_code, str(exc.detail), None, getattr(exc, "headers", None))
+
+
+async def _on_value_error(_: Request, exc: Exception) -> JSONResponse:
+    message = str(exc)
+    field = message.split(":", 1)[0] if ":" in message else None
+    return _json(422, message, field)
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    """Route ApiError, validation errors, HTTP errors and ValueError to JSON bodies."""
+    app.add_exception_handler(ApiError, _on_api_error)
+    app.add_exception_handler(RequestValidationError, _on_validation)
+    app.add_exception_handler(StarletteHTTPException, _on_http)
+    app.add_exception_handler(ValueError, _on_value_error)

@@ -1,0 +1,93 @@
+"""Fan-out of live items (parameter samples, alarms, twin state) to WebSocket subscribers.
+
+Publishing never waits: each subscriber owns a bounded deque; when a slow client's deque is full
+the oldest items are dropped (thinning) and counted; the WebSocket sender drains it in batches at
+most ``rate_hz`` times per second and drops a client whose send stalls. Publish is safe from any
+thread (deque.append is atomic; the subscriber list is replaced, never mutated in place).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = ["LiveHub", "Subscription", "TOPIC_PREFIXES"]
+
+TOPIC_PREFIXES = ("parameters/", "alarms", "twin")
+
+
+def _check_topic(topic: str) -> str:
+    if not (topic in ("alarms", "twin") or (topic.startswith("parameters/") and len(topic) > 11)):
+        raise ValueError(f"topics: {topic!r} is not 'parameters/<name>', 'parameters/*', "
+                         "'alarms' or 'twin'")
+    return topic
+
+
+@dataclass(eq=False)
+class Subscription:
+    """One client's topics and pending items."""
+
+    capacity: int
+    topics: set[str] = field(default_factory=set)
+    pending: deque = field(init=False)
+    dropped: int = 0
+
+    def __post_init__(self) -> None:
+        self.pending = deque(maxlen=self.capacity)
+
+    def wants(self, topic: str) -> bool:
+        """True if ``topic`` matches one of the subscribed topics (``parameters/*`` = all)."""
+        return topic in self.topics or (topic.startswith("parameters/") and "parameters/*" in self.topics)
+
+    def offer(self, topic: str, data: Any) -> None:
+        """Queue one item without waiting; the oldest is dropped when full."""
+        if len(self.pending) == self.capacity:
+            self.dropped += 1
+        self.pending.append({"topic": topic, "data": data})
+
+    def drain(self) -> list[dict[str, Any]]:
+        """Take every pending item (for one batch)."""
+        items = []
+        for _ in range(len(self.pending)):
+            items.append(self.pending.popleft())
+        return items
+
+
+class LiveHub:
+    """Topic-based, non-blocking fan-out to subscriptions."""
+
+    def __init__(self, capacity: int) -> None:
+        self._capacity = capacity
+        self._subscriptions: tuple[Subscription, ...] = ()
+        self._lock = threading.Lock()
+        self.published = 0
+
+    def subscribe(self, topics: list[str] | None = None) -> Subscription:
+        """Register a subscription (topics validated; ValueError names the field ``topics``)."""
+        sub = Subscription(self._capacity, {_check_topic(t) for t in topics or []})
+        with self._lock:
+            self._subscriptions = self._subscriptions + (sub,)
+        return sub
+
+    def update(self, sub: Subscription, add: list[str], remove: list[str]) -> None:
+        """Change a subscription's topics."""
+        sub.topics = (sub.topics | {_check_topic(t) for t in add}) - set(remove)
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        """Forget a subscription."""
+        with self._lock:
+            self._subscriptions = tuple(s for s in self._subscriptions if s is not sub)
+
+    def publish(self, topic: str, data: Any) -> None:
+        """Offer an item to every matching subscription; never blocks."""
+        self.published += 1
+        for sub in self._subscriptions:
+            if sub.wants(topic):
+                sub.offer(topic, data)
+
+    @property
+    def subscriber_count(self) -> int:
+        """Number of connected subscriptions."""
+        return len(self._subscriptions)

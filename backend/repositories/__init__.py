@@ -1,0 +1,1 @@
+"""Repositories: the only code that touches a database session for the backend's tables."""

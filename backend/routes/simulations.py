@@ -1,0 +1,128 @@
+"""Simulation jobs: submit (202), status, cancel, result files and downsampled time series."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, Body, Query, Request
+from fastapi.responses import FileResponse
+
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.downsampling import minmax_indices
+from backend.errors import ERROR_RESPONSES, ApiError
+from backend.schemas import FilePublic, JobAccepted, JobPublic, SeriesPublic
+
+router = APIRouter(tags=["simulations"], responses=ERROR_RESPONSES)
+
+SCENARIO_EXAMPLES = {
+    "rigid-spin": {
+        "summary": "Torque-free spin of two bodies (built-in workload)",
+        "value": {"kind": "rigid-spin", "duration_s": 60.0, "dt_s": 0.01,
+                  "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
+                  "omega0_rad_s": [[0.01, -0.02, 0.03], [0.5, -0.4, 0.7]]},
+    },
+    "engine": {
+        "summary": "sim_core Scenario with defaults (when the engine is installed)",
+        "value": {"duration_s": 600.0},
+    },
+}
+
+
+def _job(services: Any, job_id: str) -> JobPublic:
+    row = services.job_repo.get(job_id)
+    if row is None:
+        raise ApiError(404, f"no simulation job {job_id!r}", "id")
+    job = JobPublic.model_validate(row)
+    live = services.jobs.progress(job_id)
+    if live is not None and job.status == "running":
+        job.progress = min(max(live, 0.0), 1.0)
+    return job
+
+
+@router.post("/simulations", response_model=JobAccepted, status_code=202,
+             summary="Queue a simulation", responses={429: ERROR_RESPONSES[422] | {"description": "Queue full"}})
+def create_simulation(request: Request, services: ServicesDep, principal: OperatorDep,
+                      scenario: dict[str, Any] = Body(..., openapi_examples=SCENARIO_EXAMPLES)) -> JobAccepted:
+    """Validate the scenario and its limits, queue it; poll the returned URL."""
+    job_id = services.jobs.submit(scenario, principal.name)
+    services.audit.record(principal.name, "simulation.create", f"simulation/{job_id}",
+                          {"kind": scenario.get("kind", "engine")})
+    return JobAccepted(id=job_id, status="queued", url=str(request.url_for("get_simulation", job_id=job_id)))
+
+
+@router.get("/simulations", response_model=list[JobPublic], summary="Recent simulation jobs")
+def list_simulations(services: ServicesDep, _: ViewerDep,
+                     limit: int = Query(100, ge=1, le=1000)) -> list[JobPublic]:
+    """Newest first."""
+    return [_job(services, row.id) for row in services.job_repo.list(limit)]
+
+
+@router.get("/simulations/{job_id}", response_model=JobPublic, summary="Job status, progress, summary")
+def get_simulation(job_id: str, services: ServicesDep, _: ViewerDep) -> JobPublic:
+    """Status with live progress while running, summary when done."""
+    return _job(services, job_id)
+
+
+@router.delete("/simulations/{job_id}", response_model=JobPublic, summary="Cancel a job")
+def cancel_simulation(job_id: str, services: ServicesDep, principal: OperatorDep) -> JobPublic:
+    """Cancel a queued or running job (its worker process is stopped); 409 if already finished."""
+    job = _job(services, job_id)
+    if not services.jobs.cancel(job_id):
+        raise ApiError(409, f"job {job_id} is already {job.status}", "id")
+    services.audit.record(principal.name, "simulation.cancel", f"simulation/{job_id}")
+    return _job(services, job_id)
+
+
+def _result_dir(services: Any, job_id: str) -> Path:
+    job = _job(services, job_id)
+    if job.status != "succeeded":
+        raise ApiError(409, f"job {job_id} is {job.status}: results exist once it succeeded", "id")
+    return services.jobs.result_dir(job_id)
+
+
+@router.get("/simulations/{job_id}/files", response_model=list[FilePublic], summary="Result files")
+def list_files(job_id: str, request: Request, services: ServicesDep, _: ViewerDep) -> list[FilePublic]:
+    """Files written by the job (trajectory.npz, summary.json, scenario.json)."""
+    folder = _result_dir(services, job_id)
+    return [FilePublic(name=p.name, size_bytes=p.stat().st_size,
+                       url=str(request.url_for("get_file", job_id=job_id, name=p.name)))
+            for p in sorted(folder.iterdir()) if p.is_file()]
+
+
+@router.get("/simulations/{job_id}/files/{name}", summary="Download a result file",
+            response_class=FileResponse)
+def get_file(job_id: str, name: str, services: ServicesDep, _: ViewerDep) -> FileResponse:
+    """One result file as bytes."""
+    folder = _result_dir(services, job_id)
+    path = folder / name
+    if "/" in name or "\\" in name or name.startswith(".") or not path.is_file():
+        raise ApiError(404, f"no file {name!r} in job {job_id}", "name")
+    return FileResponse(path, filename=name)
+
+
+def _series_columns(array: np.ndarray, n: int, member: int, name: str) -> np.ndarray:
+    if array.shape[:1] == (n,):
+        return array.reshape(n, -1)
+    if array.ndim >= 2 and array.shape[1] == n:
+        if not 0 <= member < array.shape[0]:
+            raise ApiError(422, f"member {member} outside 0..{array.shape[0] - 1}", "member")
+        return array[member].reshape(n, -1)
+    raise ApiError(422, f"{name!r} is not a time series (shape {array.shape})", "name")
+
+
+@router.get("/simulations/{job_id}/series/{name}", response_model=SeriesPublic,
+            summary="Downsampled time series of one result array")
+def get_series(job_id: str, name: str, services: ServicesDep, _: ViewerDep,
+               member: int = Query(0, ge=0, description="Batch member (fault variant)."),
+               max_points: int = Query(2000, ge=2, le=100_000)) -> SeriesPublic:
+    """Array ``name`` of trajectory.npz against t_s, min/max-bucket downsampled to max_points."""
+    with np.load(_result_dir(services, job_id) / "trajectory.npz") as npz:
+        if name not in npz.files or name == "t_s":
+            raise ApiError(404, f"no series {name!r}; available: {sorted(set(npz.files) - {'t_s'})}", "name")
+        t = npz["t_s"]
+        y = _series_columns(npz[name], t.size, member, name)
+    keep = minmax_indices(y, max_points)
+    return SeriesPublic(name=name, t_s=t[keep].tolist(), values=y[keep].tolist(),
+                        columns=[f"{name}[{i}]" for i in range(y.shape[1])], total_points=int(t.size))

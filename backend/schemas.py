@@ -1,0 +1,98 @@
+"""API schemas (request and response bodies), one per direction; ORM models live in models.py."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+__all__ = ["Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
+           "JobPublic", "SeriesPublic", "FilePublic"]
+
+
+class Health(BaseModel):
+    """Liveness and what is plugged in."""
+
+    status: Literal["ok"] = "ok"
+    version: str
+    database: str
+    auth_enabled: bool
+    components: dict[str, bool] = Field(description="Optional parts present in this build.")
+
+
+class TokenCreate(BaseModel):
+    """Ask for a new API token."""
+
+    name: str = Field(min_length=1, max_length=100, examples=["ops-console"])
+    role: Literal["viewer", "operator", "admin"] = Field(examples=["operator"])
+
+
+class TokenPublic(BaseModel):
+    """A token as listed: never the token nor its hash."""
+
+    model_config = ConfigDict(from_attributes=True)
+    id: int
+    name: str
+    role: str
+    created_at: datetime
+    revoked_at: datetime | None = None
+
+
+class TokenIssued(TokenPublic):
+    """A freshly issued token: the plain token appears here once and is never stored."""
+
+    token: str
+
+
+class AuditPublic(BaseModel):
+    """One audit-log entry."""
+
+    model_config = ConfigDict(from_attributes=True)
+    id: int
+    at: datetime
+    actor: str
+    action: str
+    target: str
+    detail: dict[str, Any]
+
+
+class JobAccepted(BaseModel):
+    """Answer to a queued simulation."""
+
+    id: str
+    status: str
+    url: str
+
+
+class JobPublic(BaseModel):
+    """Status, progress and summary of a simulation job."""
+
+    model_config = ConfigDict(from_attributes=True)
+    id: str
+    status: Literal["queued", "running", "succeeded", "failed", "cancelled", "interrupted"]
+    progress: float = Field(ge=0.0, le=1.0)
+    summary: dict[str, Any] | None = None
+    error: str | None = None
+    created_by: str
+    created_at: datetime
+    started_at: datetime | None = None
+    finished_at: datetime | None = None
+
+
+class SeriesPublic(BaseModel):
+    """A downsampled time series: x and one or more y columns (bucket min/max kept)."""
+
+    name: str
+    t_s: list[float]
+    values: list[list[float]]
+    columns: list[str]
+    total_points: int
+
+
+class FilePublic(BaseModel):
+    """One result file of a job."""
+
+    name: str
+    size_bytes: int
+    url: str

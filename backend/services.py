@@ -1,0 +1,56 @@
+"""The services one app instance uses, built from Settings in the app factory (no import-time state)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sqlalchemy import Engine
+from sqlalchemy.orm import Session, sessionmaker
+
+from backend.auth import Authenticator
+from backend.database import create_schema, make_engine, make_session_factory
+from backend.jobs import JobManager
+from backend.live_hub import LiveHub
+from backend.repositories.audit import AuditRepository
+from backend.repositories.jobs import JobRepository
+from backend.repositories.tokens import TokenRepository
+from backend.settings import Settings
+from backend.telemetry_gateway import TelemetryGateway
+
+__all__ = ["Services", "build_services"]
+
+
+@dataclass
+class Services:
+    """Everything routes need, reached through ``request.app.state.services``."""
+
+    settings: Settings
+    engine: Engine
+    sessions: sessionmaker[Session]
+    tokens: TokenRepository
+    audit: AuditRepository
+    job_repo: JobRepository
+    jobs: JobManager
+    auth: Authenticator
+    hub: LiveHub
+    telemetry: TelemetryGateway
+
+    def close(self) -> None:
+        """Stop jobs and the telemetry side, dispose of the engine."""
+        self.jobs.stop()
+        self.telemetry.close()
+        self.engine.dispose()
+
+
+def build_services(settings: Settings) -> Services:
+    """Create the engine, the backend tables, the repositories, the job manager and the hub."""
+    settings.data_dir.mkdir(parents=True, exist_ok=True)
+    engine = make_engine(settings.resolved_database_url())
+    create_schema(engine)
+    sessions = make_session_factory(engine)
+    tokens, job_repo = TokenRepository(sessions), JobRepository(sessions)
+    hub = LiveHub(settings.ws_buffer_items)
+    return Services(settings=settings, engine=engine, sessions=sessions, tokens=tokens,
+                    audit=AuditRepository(sessions), job_repo=job_repo,
+                    jobs=JobManager(settings, job_repo), auth=Authenticator(tokens, settings.auth_enabled),
+                    hub=hub, telemetry=TelemetryGateway(settings, engine, hub))

@@ -1,0 +1,45 @@
+"""One Settings object for the server, read from ACS_TWIN_* environment variables and CLI flags."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+__all__ = ["Settings"]
+
+
+class Settings(BaseSettings):
+    """Server configuration; every field can be set as ACS_TWIN_<FIELD> (e.g. ACS_TWIN_PORT)."""
+
+    model_config = SettingsConfigDict(env_prefix="ACS_TWIN_", extra="forbid")
+
+    data_dir: Path = Field(Path("data"), description="Directory for the SQLite file and job results.")
+    database_url: str | None = Field(None, description="SQLAlchemy URL; default SQLite under data_dir.")
+    host: str = Field("127.0.0.1", description="Interface to bind; loopback unless told otherwise.")
+    port: int = Field(8000, ge=0, le=65535, description="HTTP port of the REST/WebSocket API.")
+    viewer_port: int = Field(8080, ge=0, le=65535, description="Port of the 3D twin viewer.")
+    telemetry_port: int = Field(10025, ge=0, le=65535, description="TCP port of the live listener.")
+    auth_enabled: bool = Field(True, description="Require API tokens (turn off only locally).")
+    job_workers: int = Field(1, ge=1, le=64, description="Simulation worker processes.")
+    job_queue_size: int = Field(4, ge=1, le=1000, description="Queued + running jobs before 429.")
+    job_retry_after_s: int = Field(10, ge=1, description="Retry-After sent with 429.")
+    max_sim_duration_s: float = Field(86_400.0, gt=0, description="Longest simulated time per job.")
+    max_batch_size: int = Field(64, ge=1, description="Most fault variants in one job.")
+    max_output_mb: float = Field(512.0, gt=0, description="Largest result file a job may write.")
+    max_upload_mb: float = Field(256.0, gt=0, description="Largest telemetry/dictionary upload.")
+    max_points: int = Field(100_000, ge=2, description="Most points one time-series answer returns.")
+    ws_rate_hz: float = Field(10.0, gt=0, le=100, description="Batches per second per WS client.")
+    ws_buffer_items: int = Field(5_000, ge=1, description="Items buffered per WS client before thinning.")
+    ws_send_timeout_s: float = Field(2.0, gt=0, description="A slower WS send drops the client.")
+
+    def resolved_database_url(self) -> str:
+        """Database URL, defaulting to SQLite ``acs-twin.sqlite`` inside ``data_dir``."""
+        if self.database_url:
+            return self.database_url
+        return f"sqlite:///{(self.data_dir / 'acs-twin.sqlite').resolve()}"
+
+    def jobs_dir(self) -> Path:
+        """Directory holding one sub-directory of result files per simulation job."""
+        return self.data_dir / "jobs"
