@@ -1,0 +1,20 @@
+"""The telemetry archive: SQLAlchemy models, alembic migrations and the repository API."""
+
+from telemetry.archive.batch import PacketBatch, sequence_gaps
+from telemetry.archive.migrate import upgrade
+from telemetry.archive.records import AlarmEventRecord, AlarmRecord, Gap, IngestResult, PassRecord, StationRecord, UploadRecord
+from telemetry.archive.store import Archive
+
+__all__ = [
+    "Archive",
+    "PacketBatch",
+    "sequence_gaps",
+    "upgrade",
+    "IngestResult",
+    "Gap",
+    "UploadRecord",
+    "AlarmRecord",
+    "AlarmEventRecord",
+    "PassRecord",
+    "StationRecord",
+]

@@ -1,0 +1,93 @@
+"""The seam between decoding and the archive: one APID's decoded packets as columns.
+
+Sequence counts are the 14-bit CCSDS packet sequence count (CCSDS 133.0-B-2 §4.1.3.4.2.2); they
+wrap at 16,384, which is how gaps are counted.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["PacketBatch", "SEQUENCE_COUNT_MODULUS", "sequence_gaps"]
+
+SEQUENCE_COUNT_MODULUS = 16_384  # 14-bit packet sequence count, CCSDS 133.0-B-2 §4.1.3.4.2.2
+MAX_APID = 2_047  # 11-bit APID, CCSDS 133.0-B-2 §4.1.3.3.4
+
+
+@dataclass(frozen=True)
+class PacketBatch:
+    """Decoded packets of one APID: times, sequence counts, raw bytes and parameter columns."""
+
+    apid: int
+    t_utc_ns: np.ndarray
+    seq_count: np.ndarray
+    raw: bytes
+    raw_lengths: np.ndarray
+    values: Mapping[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not 0 <= int(self.apid) <= MAX_APID:
+            raise ValueError(f"apid: {self.apid} outside 0..{MAX_APID}")
+        t = np.asarray(self.t_utc_ns)
+        if t.ndim != 1 or t.dtype.kind not in "iu":
+            raise ValueError(f"t_utc_ns: expected a 1-D integer array of UTC ns, got {t.dtype}{t.shape}")
+        n = t.shape[0]
+        seq = np.asarray(self.seq_count)
+        if seq.shape != (n,) or np.any((seq < 0) | (seq >= SEQUENCE_COUNT_MODULUS)):
+            raise ValueError(f"seq_count: expected {n} counts in 0..{SEQUENCE_COUNT_MODULUS - 1}")
+        lengths = np.asarray(self.raw_lengths)
+        if lengths.shape != (n,) or int(lengths.sum()) != len(self.raw):
+            raise ValueError(f"raw_lengths: expected {n} lengths summing to len(raw) = {len(self.raw)}")
+        for name, column in self.values.items():
+            if np.shape(column) != (n,):
+                raise ValueError(f"values[{name!r}]: expected shape ({n},), got {np.shape(column)}")
+        object.__setattr__(self, "t_utc_ns", t.astype(np.int64, copy=False))
+        object.__setattr__(self, "seq_count", seq.astype(np.int64, copy=False))
+        object.__setattr__(self, "raw_lengths", lengths.astype(np.int64, copy=False))
+
+    @classmethod
+    def from_packets(
+        cls,
+        apid: int,
+        t_utc_ns: np.ndarray,
+        seq_count: np.ndarray,
+        packets: Sequence[bytes],
+        values: Mapping[str, np.ndarray],
+    ) -> PacketBatch:
+        """Batch from a list of raw packets (each ``bytes``) and their decoded columns."""
+        lengths = np.fromiter((len(p) for p in packets), dtype=np.int64, count=len(packets))
+        return cls(apid, np.asarray(t_utc_ns), np.asarray(seq_count), b"".join(packets), lengths, values)
+
+    @property
+    def n_packets(self) -> int:
+        """Number of packets in the batch."""
+        return int(self.t_utc_ns.shape[0])
+
+    def packets(self) -> list[bytes]:
+        """The raw packets, one ``bytes`` each, in batch order."""
+        ends = np.cumsum(self.raw_lengths)
+        starts = ends - self.raw_lengths
+        return [self.raw[s:e] for s, e in zip(starts.tolist(), ends.tolist())]
+
+    def take(self, index: np.ndarray) -> PacketBatch:
+        """A new batch with the packets at ``index`` (in that order)."""
+        index = np.asarray(index, dtype=np.int64)
+        starts = np.cumsum(self.raw_lengths) - self.raw_lengths
+        lengths = self.raw_lengths[index]
+        out_starts = np.cumsum(lengths) - lengths
+        byte_index = np.repeat(starts[index] - out_starts, lengths) + np.arange(int(lengths.sum()))
+        joined = np.frombuffer(self.raw, dtype=np.uint8)[byte_index].tobytes()
+        values = {name: np.asarray(col)[index] for name, col in self.values.items()}
+        return PacketBatch(self.apid, self.t_utc_ns[index], self.seq_count[index], joined, self.raw_lengths[index], values)
+
+
+def sequence_gaps(seq_count: np.ndarray) -> np.ndarray:
+    """Packets missing before each packet of a time-ordered stream (0 for the first), mod 2**14."""
+    seq = np.asarray(seq_count, dtype=np.int64)
+    missing = np.zeros(seq.shape, dtype=np.int64)
+    if seq.size > 1:
+        missing[1:] = (np.diff(seq) - 1) % SEQUENCE_COUNT_MODULUS
+    return missing

@@ -1,0 +1,44 @@
+"""Database engines of the archive: SQLite in WAL mode by default, PostgreSQL in production."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sqlalchemy import Engine, create_engine, event
+from sqlalchemy.engine import make_url
+
+__all__ = ["create_archive_engine", "DEFAULT_URL"]
+
+DEFAULT_URL = "sqlite:///data/archive.sqlite"
+SQLITE_BUSY_TIMEOUT_MS = 30_000  # writers queue behind a bulk upload instead of failing at once
+
+
+def _sqlite_pragmas(dbapi_connection: Any, _record: Any) -> None:
+    """WAL journal, full fsync on commit (an acknowledged upload survives a crash), foreign keys."""
+    dbapi_connection.isolation_level = None  # let SQLAlchemy's BEGIN below take over transactions
+    cursor = dbapi_connection.cursor()
+    cursor.execute("PRAGMA journal_mode=WAL")
+    cursor.execute("PRAGMA synchronous=FULL")
+    cursor.execute("PRAGMA foreign_keys=ON")
+    cursor.execute(f"PRAGMA busy_timeout={SQLITE_BUSY_TIMEOUT_MS}")
+    cursor.close()
+
+
+def _sqlite_begin_immediate(conn: Any) -> None:
+    """Take the write lock at BEGIN so concurrent writers queue rather than deadlock."""
+    conn.exec_driver_sql("BEGIN IMMEDIATE")
+
+
+def create_archive_engine(url: str) -> Engine:
+    """Engine for an archive URL (``sqlite:///path`` or ``postgresql+psycopg://...``)."""
+    if not isinstance(url, str) or not url:
+        raise ValueError("url: expected a SQLAlchemy database URL such as sqlite:///archive.sqlite")
+    parsed = make_url(url)
+    if parsed.get_backend_name() == "sqlite":
+        engine = create_engine(url, connect_args={"check_same_thread": False})
+        event.listen(engine, "connect", _sqlite_pragmas)
+        event.listen(engine, "begin", _sqlite_begin_immediate)
+        return engine
+    if parsed.get_backend_name() == "postgresql":
+        return create_engine(url, pool_pre_ping=True)
+    raise ValueError(f"url: unsupported database backend {parsed.get_backend_name()!r} (sqlite or postgresql)")

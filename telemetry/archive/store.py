@@ -1,0 +1,500 @@
+"""Repository of the telemetry archive: the only code that opens transactions on its tables.
+
+An upload is one transaction: the upload row, its packet and value chunks and its alarm events
+commit together or not at all, and the upload's SHA-256 makes a repeated upload a reported no-op.
+Writers are serialised per database (SQLite ``BEGIN IMMEDIATE``) or per satellite (PostgreSQL
+``SELECT ... FOR UPDATE`` on the satellite row), so duplicate detection is exact.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections.abc import Iterable, Mapping, Sequence
+
+import numpy as np
+from sqlalchemy import Connection, func, insert, select, update
+
+from telemetry.archive import alarms as alarm_state
+from telemetry.archive.batch import PacketBatch, sequence_gaps
+from telemetry.archive.chunks import decode_raw, decode_times, decode_values, encode_raw, encode_times, encode_values
+from telemetry.archive.engine import create_archive_engine
+from telemetry.archive.migrate import upgrade
+from telemetry.archive.models import (
+    Alarm,
+    AlarmEvent,
+    GroundStation,
+    PacketChunk,
+    Parameter,
+    Pass,
+    Satellite,
+    Tle,
+    Upload,
+    ValueChunk,
+)
+from telemetry.archive.records import (
+    AlarmEventRecord,
+    AlarmRecord,
+    Gap,
+    IngestResult,
+    PassRecord,
+    StationRecord,
+    UploadRecord,
+)
+from telemetry.limits import LimitSet, level_changes, limit_levels
+
+__all__ = ["Archive", "CHUNK_PACKETS"]
+
+CHUNK_PACKETS = 8_192  # packets per chunk: a 2-h pass at 4 Hz is 4 chunks; see benchmarks/ingest.py
+SAT, STATION, TLE, PASS = Satellite.__table__, GroundStation.__table__, Tle.__table__, Pass.__table__
+UPLOAD, PARAM, CHUNK, VALUE = Upload.__table__, Parameter.__table__, PacketChunk.__table__, ValueChunk.__table__
+ALARM, EVENT = Alarm.__table__, AlarmEvent.__table__
+
+
+def _now_ns() -> int:
+    return time.time_ns()
+
+
+class Archive:
+    """The telemetry archive at a database URL (migrated to the newest schema on open)."""
+
+    def __init__(self, url: str, *, migrate: bool = True) -> None:
+        self.url = url
+        self.engine = create_archive_engine(url)
+        self._is_postgres = self.engine.dialect.name == "postgresql"
+        if migrate:
+            upgrade(url, self.engine)
+
+    def close(self) -> None:
+        """Release the database connections."""
+        self.engine.dispose()
+
+    def __enter__(self) -> Archive:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- satellites, stations, TLEs -------------------------------------------------------
+    def satellite_id(self, name: str, norad_id: int | None = None) -> int:
+        """Id of the satellite called ``name``, registering it on first use."""
+        if not name:
+            raise ValueError("satellite: a satellite name is required")
+        with self.engine.begin() as conn:
+            found = conn.execute(select(SAT.c.id).where(SAT.c.name == name)).scalar()
+            if found is not None:
+                return int(found)
+            return int(conn.execute(insert(SAT).values(name=name, norad_id=norad_id).returning(SAT.c.id)).scalar_one())
+
+    def add_ground_station(self, name: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float) -> int:
+        """Register (or update) a ground station; returns its id."""
+        if not -90.0 <= lat_deg <= 90.0:
+            raise ValueError(f"lat_deg: {lat_deg} outside -90..90")
+        if not -180.0 <= lon_deg <= 360.0:
+            raise ValueError(f"lon_deg: {lon_deg} outside -180..360")
+        if not -90.0 <= min_elevation_deg < 90.0:
+            raise ValueError(f"min_elevation_deg: {min_elevation_deg} outside -90..90")
+        values = {"lat_deg": lat_deg, "lon_deg": lon_deg, "alt_m": alt_m, "min_elevation_deg": min_elevation_deg}
+        with self.engine.begin() as conn:
+            found = conn.execute(select(STATION.c.id).where(STATION.c.name == name)).scalar()
+            if found is not None:
+                conn.execute(update(STATION).where(STATION.c.id == found).values(**values))
+                return int(found)
+            return int(conn.execute(insert(STATION).values(name=name, **values).returning(STATION.c.id)).scalar_one())
+
+    def ground_station(self, name: str) -> StationRecord:
+        """The ground station called ``name``."""
+        with self.engine.connect() as conn:
+            row = conn.execute(select(STATION).where(STATION.c.name == name)).one_or_none()
+        if row is None:
+            raise ValueError(f"station: no ground station named {name!r}")
+        return StationRecord(**row._mapping)
+
+    def add_tle(self, satellite: str, line1: str, line2: str, epoch_ns: int) -> int:
+        """Store a TLE of ``satellite`` (idempotent on its epoch); returns its id."""
+        sat_id = self.satellite_id(satellite)
+        with self.engine.begin() as conn:
+            found = conn.execute(select(TLE.c.id).where(TLE.c.satellite_id == sat_id, TLE.c.epoch_ns == epoch_ns)).scalar()
+            if found is not None:
+                return int(found)
+            row = {"satellite_id": sat_id, "epoch_ns": int(epoch_ns), "line1": line1, "line2": line2}
+            return int(conn.execute(insert(TLE).values(**row).returning(TLE.c.id)).scalar_one())
+
+    def latest_tle(self, satellite: str, before_ns: int | None = None) -> tuple[int, str, str]:
+        """(id, line1, line2) of the newest TLE of ``satellite`` (optionally with epoch <= before_ns)."""
+        sat_id = self.satellite_id(satellite)
+        query = select(TLE.c.id, TLE.c.line1, TLE.c.line2).where(TLE.c.satellite_id == sat_id)
+        if before_ns is not None:
+            query = query.where(TLE.c.epoch_ns <= before_ns)
+        with self.engine.connect() as conn:
+            row = conn.execute(query.order_by(TLE.c.epoch_ns.desc()).limit(1)).one_or_none()
+        if row is None:
+            raise ValueError(f"satellite: no TLE stored for {satellite!r}")
+        return int(row[0]), row[1], row[2]
+
+    # --- ingest --------------------------------------------------------------------------
+    def ingest(
+        self,
+        satellite: str,
+        batches: Iterable[PacketBatch],
+        *,
+        source: str,
+        uploaded_by: str,
+        sha256: str | None = None,
+        limits: Mapping[str, LimitSet] | None = None,
+        extra_report: Mapping[str, object] | None = None,
+    ) -> IngestResult:
+        """Commit decoded batches atomically as one upload (duplicates dropped, limits checked)."""
+        if not uploaded_by:
+            raise ValueError("uploaded_by: the uploader's name is required")
+        batches = list(batches)
+        checksum = sha256 or _batches_sha256(batches)
+        sat_id = self.satellite_id(satellite)
+        with self.engine.begin() as conn:
+            self._lock_satellite(conn, sat_id)
+            existing = conn.execute(select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == checksum)).scalar()
+            if existing is not None:
+                return IngestResult(upload_id=int(existing), duplicate_upload=True)
+            upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, checksum)
+            result = self._write_batches(conn, sat_id, upload_id, _merge_by_apid(batches), limits or {})
+            report = {**result.as_report(), **dict(extra_report or {})}
+            conn.execute(
+                update(UPLOAD).where(UPLOAD.c.id == upload_id).values(
+                    packets_accepted=result.packets_accepted,
+                    samples_accepted=result.samples_accepted,
+                    report_json=json.dumps(report),
+                )
+            )
+        return result
+
+    def _lock_satellite(self, conn: Connection, sat_id: int) -> None:
+        if self._is_postgres:
+            conn.execute(select(SAT.c.id).where(SAT.c.id == sat_id).with_for_update())
+
+    def _insert_upload(self, conn: Connection, sat_id: int, source: str, uploaded_by: str, checksum: str) -> int:
+        row = {"satellite_id": sat_id, "uploaded_by": uploaded_by, "uploaded_at_ns": _now_ns(), "source": source,
+               "sha256": checksum, "packets_accepted": 0, "samples_accepted": 0, "report_json": "{}"}
+        return int(conn.execute(insert(UPLOAD).values(**row).returning(UPLOAD.c.id)).scalar_one())
+
+    def _write_batches(
+        self, conn: Connection, sat_id: int, upload_id: int, batches: list[PacketBatch], limits: Mapping[str, LimitSet]
+    ) -> IngestResult:
+        accepted = duplicates = samples = 0
+        gaps: list[Gap] = []
+        changes: list[alarm_state.LevelChange] = []
+        for batch in batches:
+            ordered, n_dup_inside = _order_and_dedupe(batch)
+            fresh, n_dup_archived = self._drop_archived(conn, sat_id, ordered)
+            duplicates += n_dup_inside + n_dup_archived
+            if fresh.n_packets == 0:
+                continue
+            self._write_chunks(conn, sat_id, upload_id, fresh)
+            accepted += fresh.n_packets
+            samples += fresh.n_packets * len(fresh.values)
+            gaps.extend(_gaps_of(fresh))
+            changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
+        changes.sort(key=lambda c: c.t_ns)
+        n_events = alarm_state.apply_level_changes(conn, sat_id, upload_id, changes) if changes else 0
+        return IngestResult(upload_id, False, accepted, duplicates, samples, n_events, gaps)
+
+    def _drop_archived(self, conn: Connection, sat_id: int, batch: PacketBatch) -> tuple[PacketBatch, int]:
+        t, seq = batch.t_utc_ns, batch.seq_count
+        if t.size == 0:
+            return batch, 0
+        old_t, old_seq = self._packet_keys(conn, sat_id, batch.apid, int(t[0]), int(t[-1]))
+        candidates = np.flatnonzero(np.isin(t, old_t))
+        if candidates.size == 0:
+            return batch, 0
+        near = np.isin(old_t, t[candidates])
+        archived = set(zip(old_t[near].tolist(), old_seq[near].tolist()))
+        is_dup = np.zeros(t.shape, dtype=bool)
+        is_dup[candidates] = [(a, b) in archived for a, b in zip(t[candidates].tolist(), seq[candidates].tolist())]
+        return batch.take(np.flatnonzero(~is_dup)), int(is_dup.sum())
+
+    def _packet_keys(self, conn: Connection, sat_id: int, apid: int, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        rows = conn.execute(
+            select(CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
+                CHUNK.c.satellite_id == sat_id, CHUNK.c.apid == apid, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns
+            )
+        ).all()
+        if not rows:
+            return np.empty(0, np.int64), np.empty(0, np.int64)
+        return (np.concatenate([decode_times(r[0]) for r in rows]),
+                np.concatenate([decode_values("<i8", r[1]) for r in rows]))
+
+    def _write_chunks(self, conn: Connection, sat_id: int, upload_id: int, batch: PacketBatch) -> None:
+        param_ids = self._parameter_ids(conn, sat_id, batch.apid, list(batch.values))
+        bounds = list(range(0, batch.n_packets, CHUNK_PACKETS)) + [batch.n_packets]
+        raw = np.frombuffer(batch.raw, dtype=np.uint8)
+        byte_ends = np.concatenate(([0], np.cumsum(batch.raw_lengths)))
+        chunk_rows = []
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            chunk_rows.append({
+                "satellite_id": sat_id, "upload_id": upload_id, "apid": batch.apid,
+                "t_start_ns": int(batch.t_utc_ns[lo]), "t_end_ns": int(batch.t_utc_ns[hi - 1]), "n_packets": hi - lo,
+                "t_blob": encode_times(batch.t_utc_ns[lo:hi]),
+                "seq_blob": encode_values(batch.seq_count[lo:hi])[1],
+                "length_blob": encode_values(batch.raw_lengths[lo:hi])[1],
+                "raw_blob": encode_raw(raw[byte_ends[lo]:byte_ends[hi]].tobytes()),
+            })
+        chunk_ids = conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
+        value_rows = []
+        for name, column in batch.values.items():
+            for chunk_id, lo, hi in zip(chunk_ids, bounds[:-1], bounds[1:]):
+                value_rows.append(_value_row(param_ids[name], chunk_id, np.asarray(column)[lo:hi]))
+        if value_rows:
+            conn.execute(insert(VALUE), value_rows)
+
+    def _parameter_ids(self, conn: Connection, sat_id: int, apid: int, names: list[str]) -> dict[str, int]:
+        rows = conn.execute(select(PARAM.c.name, PARAM.c.id, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(names)))
+        ids = {}
+        for name, param_id, param_apid in rows:
+            if param_apid != apid:
+                raise ValueError(f"values[{name!r}]: parameter already archived under APID {param_apid}, not {apid}")
+            ids[name] = int(param_id)
+        missing = [{"satellite_id": sat_id, "name": n, "apid": apid} for n in names if n not in ids]
+        if missing:
+            new_ids = conn.execute(insert(PARAM).returning(PARAM.c.id, sort_by_parameter_order=True), missing).scalars().all()
+            ids.update({row["name"]: int(i) for row, i in zip(missing, new_ids)})
+        return ids
+
+    # --- reading -------------------------------------------------------------------------
+    def parameters(self, satellite: str) -> dict[str, int]:
+        """Archived parameter names of ``satellite`` with their APID."""
+        sat_id = self.satellite_id(satellite)
+        with self.engine.connect() as conn:
+            return dict(conn.execute(select(PARAM.c.name, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id)).all())
+
+    def read_parameter(self, satellite: str, name: str, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Time-ordered (t_utc_ns, values) of a parameter with t0_ns <= t <= t1_ns."""
+        if t1_ns < t0_ns:
+            raise ValueError(f"t1_ns: {t1_ns} is before t0_ns {t0_ns}")
+        sat_id = self.satellite_id(satellite)
+        with self.engine.connect() as conn:
+            param = conn.execute(select(PARAM.c.id, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id, PARAM.c.name == name)).one_or_none()
+            if param is None:
+                raise ValueError(f"name: no parameter {name!r} archived for {satellite!r}")
+            rows = conn.execute(
+                select(CHUNK.c.t_blob, VALUE.c.dtype, VALUE.c.v_blob)
+                .join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
+                .where(CHUNK.c.satellite_id == sat_id, CHUNK.c.apid == param.apid, VALUE.c.parameter_id == param.id,
+                       CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
+                .order_by(CHUNK.c.t_start_ns)
+            ).all()
+        if not rows:
+            return np.empty(0, np.int64), np.empty(0, np.float64)
+        t = np.concatenate([decode_times(r[0]) for r in rows])
+        v = np.concatenate([decode_values(r[1], r[2]) for r in rows])
+        return _ordered_window(t, v, t0_ns, t1_ns)
+
+    def latest_values(self, satellite: str, names: Sequence[str] | None = None) -> dict[str, tuple[int, float]]:
+        """Newest (t_utc_ns, value) of each parameter (all archived ones by default)."""
+        sat_id = self.satellite_id(satellite)
+        with self.engine.connect() as conn:
+            query = select(PARAM.c.id, PARAM.c.name).where(PARAM.c.satellite_id == sat_id)
+            if names is not None:
+                query = query.where(PARAM.c.name.in_(list(names)))
+            params = conn.execute(query).all()
+            latest = {}
+            for param_id, name in params:
+                row = conn.execute(
+                    select(CHUNK.c.t_blob, VALUE.c.dtype, VALUE.c.v_blob).join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
+                    .where(VALUE.c.parameter_id == param_id).order_by(CHUNK.c.t_end_ns.desc()).limit(1)
+                ).one()
+                t, v = decode_times(row[0]), decode_values(row[1], row[2])
+                i = int(np.argmax(t))
+                latest[name] = (int(t[i]), v[i].item())
+        if names is not None and (unknown := set(names) - set(latest)):
+            raise ValueError(f"names: not archived: {sorted(unknown)}")
+        return latest
+
+    def packet_keys(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """Per APID, time-ordered (t_utc_ns, seq_count) of archived packets in [t0_ns, t1_ns]."""
+        sat_id = self.satellite_id(satellite)
+        query = select(CHUNK.c.apid, CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
+            CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
+        if apid is not None:
+            query = query.where(CHUNK.c.apid == apid)
+        with self.engine.connect() as conn:
+            rows = conn.execute(query.order_by(CHUNK.c.apid, CHUNK.c.t_start_ns)).all()
+        per_apid: dict[int, list] = {}
+        for row_apid, t_blob, seq_blob in rows:
+            per_apid.setdefault(int(row_apid), []).append((decode_times(t_blob), decode_values("<i8", seq_blob)))
+        return {a: _ordered_window(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), t0_ns, t1_ns)
+                for a, parts in per_apid.items()}
+
+    def replay(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> list[tuple[int, bytes]]:
+        """Archived raw packets (t_utc_ns, bytes) in [t0_ns, t1_ns], time-ordered, byte-exact."""
+        sat_id = self.satellite_id(satellite)
+        query = select(CHUNK.c.t_blob, CHUNK.c.length_blob, CHUNK.c.raw_blob).where(
+            CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
+        if apid is not None:
+            query = query.where(CHUNK.c.apid == apid)
+        out: list[tuple[int, bytes]] = []
+        with self.engine.connect() as conn:
+            for t_blob, length_blob, raw_blob in conn.execute(query):
+                t, lengths, raw = decode_times(t_blob), decode_values("<i8", length_blob), decode_raw(raw_blob)
+                ends = np.cumsum(lengths)
+                out.extend((int(ti), raw[e - n:e]) for ti, e, n in zip(t.tolist(), ends.tolist(), lengths.tolist()) if t0_ns <= ti <= t1_ns)
+        out.sort(key=lambda item: item[0])
+        return out
+
+    def uploads(self, satellite: str) -> list[UploadRecord]:
+        """Uploads of ``satellite``, oldest first."""
+        sat_id = self.satellite_id(satellite)
+        with self.engine.connect() as conn:
+            rows = conn.execute(select(UPLOAD).where(UPLOAD.c.satellite_id == sat_id).order_by(UPLOAD.c.id)).all()
+        return [UploadRecord(r.id, r.uploaded_by, r.uploaded_at_ns, r.source, r.sha256, r.packets_accepted,
+                             r.samples_accepted, json.loads(r.report_json)) for r in rows]
+
+    def upload_contents(self, upload_id: int) -> tuple[int, int]:
+        """(packets, samples) actually stored for an upload (to audit it against its report)."""
+        with self.engine.connect() as conn:
+            packets = conn.execute(select(func.coalesce(func.sum(CHUNK.c.n_packets), 0)).where(CHUNK.c.upload_id == upload_id)).scalar_one()
+            chunks = conn.execute(select(CHUNK.c.id, CHUNK.c.n_packets).where(CHUNK.c.upload_id == upload_id)).all()
+            n_by_chunk = {cid: n for cid, n in chunks}
+            value_chunks = conn.execute(select(VALUE.c.chunk_id).where(VALUE.c.chunk_id.in_(list(n_by_chunk)))).scalars().all()
+        return int(packets), int(sum(n_by_chunk[c] for c in value_chunks))
+
+    # --- alarms --------------------------------------------------------------------------
+    def alarms(self, satellite: str, *, now_ns: int | None = None, include_cleared: bool = False) -> list[AlarmRecord]:
+        """Alarms of ``satellite``; shelved alarms whose shelf time passed are reported active."""
+        sat_id = self.satellite_id(satellite)
+        now = _now_ns() if now_ns is None else now_ns
+        query = select(ALARM).where(ALARM.c.satellite_id == sat_id)
+        if not include_cleared:
+            query = query.where(ALARM.c.state != "cleared")
+        with self.engine.connect() as conn:
+            rows = conn.execute(query.order_by(ALARM.c.first_t_ns, ALARM.c.id)).all()
+        return [_alarm_record(r, now) for r in rows]
+
+    def alarm_events(self, alarm_id: int) -> list[AlarmEventRecord]:
+        """Events of one alarm in the order they happened."""
+        with self.engine.connect() as conn:
+            rows = conn.execute(select(EVENT).where(EVENT.c.alarm_id == alarm_id).order_by(EVENT.c.t_ns, EVENT.c.id)).all()
+        return [AlarmEventRecord(r.alarm_id, r.t_ns, r.kind, r.severity, r.value, r.actor) for r in rows]
+
+    def alarm_action(self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None) -> None:
+        """Acknowledge, shelve (until ``shelved_until_ns``), unshelve or clear an alarm."""
+        with self.engine.begin() as conn:
+            alarm_state.operator_action(conn, alarm_id, action, actor, _now_ns() if t_ns is None else t_ns, shelved_until_ns)
+
+    # --- passes --------------------------------------------------------------------------
+    def save_passes(self, satellite: str, station: str, passes: Iterable[tuple[int, int, int, float]], tle_id: int | None = None) -> list[int]:
+        """Store predicted passes (aos_ns, los_ns, max_elevation_ns, max_elevation_deg); idempotent on AOS."""
+        sat_id, station_id = self.satellite_id(satellite), self.ground_station(station).id
+        ids = []
+        with self.engine.begin() as conn:
+            for aos_ns, los_ns, tmax_ns, max_el_deg in passes:
+                found = conn.execute(select(PASS.c.id).where(PASS.c.satellite_id == sat_id, PASS.c.station_id == station_id, PASS.c.aos_ns == int(aos_ns))).scalar()
+                if found is None:
+                    row = {"satellite_id": sat_id, "station_id": station_id, "tle_id": tle_id, "aos_ns": int(aos_ns), "los_ns": int(los_ns),
+                           "max_elevation_ns": int(tmax_ns), "max_elevation_deg": float(max_el_deg), "packets_received": 0, "packets_missing": 0}
+                    found = conn.execute(insert(PASS).values(**row).returning(PASS.c.id)).scalar_one()
+                ids.append(int(found))
+        return ids
+
+    def passes(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
+        """Passes of ``satellite`` overlapping [t0_ns, t1_ns], in AOS order."""
+        sat_id = self.satellite_id(satellite)
+        with self.engine.connect() as conn:
+            rows = conn.execute(
+                select(PASS, STATION.c.name.label("station_name")).join(STATION, STATION.c.id == PASS.c.station_id)
+                .where(PASS.c.satellite_id == sat_id, PASS.c.aos_ns <= t1_ns, PASS.c.los_ns >= t0_ns).order_by(PASS.c.aos_ns)
+            ).all()
+        return [_pass_record(r) for r in rows]
+
+    def record_reception(self, pass_id: int, received_start_ns: int | None, received_end_ns: int | None, packets_received: int, packets_missing: int) -> None:
+        """Store what was received during a pass (span, packets, missing packets)."""
+        with self.engine.begin() as conn:
+            conn.execute(update(PASS).where(PASS.c.id == pass_id).values(
+                received_start_ns=received_start_ns, received_end_ns=received_end_ns,
+                packets_received=int(packets_received), packets_missing=int(packets_missing)))
+
+
+def _batches_sha256(batches: Sequence[PacketBatch]) -> str:
+    digest = hashlib.sha256()
+    for batch in batches:
+        digest.update(batch.raw)
+    return digest.hexdigest()
+
+
+def _merge_by_apid(batches: Sequence[PacketBatch]) -> list[PacketBatch]:
+    by_apid: dict[int, list[PacketBatch]] = {}
+    for batch in batches:
+        by_apid.setdefault(batch.apid, []).append(batch)
+    return [parts[0] if len(parts) == 1 else _concatenate(parts) for parts in by_apid.values()]
+
+
+def _concatenate(parts: list[PacketBatch]) -> PacketBatch:
+    names = list(parts[0].values)
+    if any(list(p.values) != names for p in parts):
+        raise ValueError(f"batches: APID {parts[0].apid} batches carry different parameter sets")
+    return PacketBatch(
+        parts[0].apid,
+        np.concatenate([p.t_utc_ns for p in parts]),
+        np.concatenate([p.seq_count for p in parts]),
+        b"".join(p.raw for p in parts),
+        np.concatenate([p.raw_lengths for p in parts]),
+        {n: np.concatenate([np.asarray(p.values[n]) for p in parts]) for n in names},
+    )
+
+
+def _order_and_dedupe(batch: PacketBatch) -> tuple[PacketBatch, int]:
+    t, seq = batch.t_utc_ns, batch.seq_count
+    if t.size > 1 and np.all(t[1:] > t[:-1]):
+        return batch, 0
+    order = np.lexsort((seq, t))
+    t_o, s_o = t[order], seq[order]
+    keep = np.ones(order.shape, dtype=bool)
+    keep[1:] = (t_o[1:] != t_o[:-1]) | (s_o[1:] != s_o[:-1])
+    return batch.take(order[keep]), int((~keep).sum())
+
+
+def _gaps_of(batch: PacketBatch) -> list[Gap]:
+    missing = sequence_gaps(batch.seq_count)
+    idx = np.flatnonzero(missing)
+    t = batch.t_utc_ns
+    return [Gap(batch.apid, int(t[i - 1]), int(t[i]), int(missing[i])) for i in idx.tolist()]
+
+
+def _limit_changes(batch: PacketBatch, limits: Mapping[str, LimitSet], open_levels: dict[str, tuple[int, int]]) -> list[alarm_state.LevelChange]:
+    changes = []
+    for name, limit in limits.items():
+        if name not in batch.values:
+            continue
+        values = np.asarray(batch.values[name], dtype=np.float64)
+        levels = limit_levels(values, limit)
+        idx = level_changes(levels, open_levels.get(name, (0, 0))[1])
+        changes.extend(alarm_state.LevelChange(name, int(batch.t_utc_ns[i]), int(levels[i]), float(values[i])) for i in idx.tolist())
+    return changes
+
+
+def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict:
+    dtype, blob = encode_values(values)
+    as_float = values.astype(np.float64, copy=False)
+    finite = as_float[np.isfinite(as_float)]
+    v_min, v_max = (float(finite.min()), float(finite.max())) if finite.size else (None, None)
+    return {"parameter_id": param_id, "chunk_id": chunk_id, "dtype": dtype, "v_min": v_min, "v_max": v_max, "v_blob": blob}
+
+
+def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    if t.size > 1 and np.any(t[1:] < t[:-1]):
+        order = np.argsort(t, kind="stable")
+        t, v = t[order], v[order]
+    lo, hi = np.searchsorted(t, t0_ns, side="left"), np.searchsorted(t, t1_ns, side="right")
+    return t[lo:hi], v[lo:hi]
+
+
+def _alarm_record(row: object, now_ns: int) -> AlarmRecord:
+    state = row.state
+    if state == "shelved" and row.shelved_until_ns is not None and row.shelved_until_ns <= now_ns:
+        state = "active"
+    return AlarmRecord(row.id, row.parameter, state, row.severity, row.level, row.first_t_ns, row.last_t_ns,
+                       row.acknowledged_by, row.shelved_until_ns)
+
+
+def _pass_record(row: object) -> PassRecord:
+    return PassRecord(row.id, row.station_name, row.aos_ns, row.los_ns, row.max_elevation_ns, row.max_elevation_deg,
+                      row.received_start_ns, row.received_end_ns, row.packets_received, row.packets_missing)

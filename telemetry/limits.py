@@ -1,0 +1,57 @@
+"""Limit checking of decoded parameters (issue 5): yellow/red low/high limits -> alarm levels.
+
+A sample is *red* outside [red_low, red_high], else *yellow* outside [yellow_low, yellow_high],
+else nominal; a NaN sample is red (an unknown value of a monitored parameter is unsafe).  Checking
+is vectorised over a whole ingest batch; the alarm transitions are the indices where the level
+changes, starting from the level the parameter had before the batch.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["NOMINAL", "YELLOW", "RED", "SEVERITY_NAMES", "LimitSet", "limit_levels", "level_changes"]
+
+NOMINAL, YELLOW, RED = 0, 1, 2
+SEVERITY_NAMES = ("nominal", "yellow", "red")
+
+
+@dataclass(frozen=True)
+class LimitSet:
+    """Yellow and red limits of one parameter (engineering units; infinite = no limit)."""
+
+    yellow_low: float = -math.inf
+    yellow_high: float = math.inf
+    red_low: float = -math.inf
+    red_high: float = math.inf
+
+    def __post_init__(self) -> None:
+        bounds = (self.red_low, self.yellow_low, self.yellow_high, self.red_high)
+        if any(math.isnan(b) for b in bounds):
+            raise ValueError("limits: a limit is NaN (use +/-inf for 'no limit')")
+        if not self.red_low <= self.yellow_low <= self.yellow_high <= self.red_high:
+            raise ValueError(
+                f"limits: need red_low <= yellow_low <= yellow_high <= red_high, got {bounds}"
+            )
+
+
+def limit_levels(values: np.ndarray, limits: LimitSet) -> np.ndarray:
+    """Alarm level per sample (0 nominal, 1 yellow, 2 red) of a 1-D array (issue 5 limits)."""
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim != 1:
+        raise ValueError(f"values: expected a 1-D array, got shape {v.shape}")
+    red = ~((v >= limits.red_low) & (v <= limits.red_high))
+    yellow = ~((v >= limits.yellow_low) & (v <= limits.yellow_high))
+    return np.where(red, RED, np.where(yellow, YELLOW, NOMINAL)).astype(np.int8)
+
+
+def level_changes(levels: np.ndarray, initial_level: int = NOMINAL) -> np.ndarray:
+    """Indices where the level differs from the previous sample (the first vs ``initial_level``)."""
+    lv = np.asarray(levels, dtype=np.int8)
+    if initial_level not in (NOMINAL, YELLOW, RED):
+        raise ValueError(f"initial_level: expected 0, 1 or 2, got {initial_level}")
+    previous = np.concatenate(([np.int8(initial_level)], lv[:-1]))
+    return np.flatnonzero(lv != previous)
