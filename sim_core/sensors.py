@@ -29,9 +29,12 @@ __all__ = [
     "gyro",
     "gyro_1",
     "earth_sensor",
+    "earth_sensor_1",
     "magnetometer",
+    "magnetometer_1",
     "in_earth_shadow",
     "sun_sensor",
+    "sun_sensor_1",
     "wheel_tachometer",
     "wheel_tachometer_1",
     "gps_receiver",
@@ -206,3 +209,194 @@ def gyro_1(
             valid = False
         meas[i] = min(max(meas[i], -range_rad_s), range_rad_s)
     return meas, valid
+
+
+# --- earth (horizon) sensor: φ_e = φ + φ_b + φ_n, θ_e = θ + θ_b + θ_n (seed 002 eq 14) ----------
+
+
+def earth_sensor(
+    roll_rad: np.ndarray,
+    pitch_rad: np.ndarray,
+    bias_rad: np.ndarray,
+    noise_std_rad: float | np.ndarray,
+    range_rad: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Measured (roll, pitch) = true + constant bias + white noise, invalid outside ±range (seed 002 eq 14).
+
+    Returns (angles (..., 2), valid (...)); ``bias_rad`` is (φ_b, θ_b).
+    """
+    angles = np.stack(np.broadcast_arrays(np.asarray(roll_rad, float), np.asarray(pitch_rad, float)), axis=-1)
+    bias = np.asarray(bias_rad, dtype=float)
+    if bias.shape != (2,):
+        raise ValueError(f"bias_rad: expected (roll, pitch) shape (2,), got {bias.shape}")
+    sigma = _positive(noise_std_rad, "noise_std_rad") * np.ones(2)
+    _positive(range_rad, "range_rad")
+    meas = angles + bias + sigma * rng.standard_normal(angles.shape)
+    return meas, np.all(np.abs(angles) <= range_rad, axis=-1)
+
+
+@njit(cache=True)
+def earth_sensor_1(
+    roll: float, pitch: float, bias2: np.ndarray, noise_std2: np.ndarray, range_rad: float, normal2: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """Compiled earth-sensor sample (roll, pitch) + bias + noise from pre-drawn normals (seed 002 eq 14)."""
+    meas = np.empty(2)
+    meas[0] = roll + bias2[0] + noise_std2[0] * normal2[0]
+    meas[1] = pitch + bias2[1] + noise_std2[1] * normal2[1]
+    return meas, abs(roll) <= range_rad and abs(pitch) <= range_rad
+
+
+# --- magnetometer: B_b = Λ̃ ∘ B_i ∘ Λ + bias + noise (seed 003 §3.2.1.2.1, MAG) ------------------
+
+
+def magnetometer(
+    q_ib: np.ndarray,
+    b_i_t: np.ndarray,
+    bias_b_t: np.ndarray,
+    noise_std_t: float,
+    range_t: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Field in body axes B_b = Λ̃∘B_i∘Λ + bias + noise (T); invalid when an axis saturates (seed 003 MAG)."""
+    q = qt.normalize(q_ib)
+    b_i = _vectors(b_i_t, "b_i_t")
+    bias = _vectors(bias_b_t, "bias_b_t")
+    sigma = float(_positive(noise_std_t, "noise_std_t"))
+    _positive(range_t, "range_t")
+    b_b = qt.rotate(qt.conjugate(q), b_i) + bias + sigma * rng.standard_normal(np.broadcast_shapes(q.shape[:-1] + (3,), b_i.shape))
+    valid = np.all(np.abs(b_b) <= range_t, axis=-1)
+    return np.clip(b_b, -range_t, range_t), valid
+
+
+@njit(cache=True)
+def magnetometer_1(
+    q_ib: np.ndarray, b_i: np.ndarray, bias_b: np.ndarray, noise_std: float, range_t: float, normal3: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """Compiled magnetometer sample Λ̃∘B_i∘Λ + bias + noise, saturating at ±range (seed 003 MAG)."""
+    b_b = qt.conjugate_rotate_1(q_ib, b_i)
+    valid = True
+    for i in range(3):
+        b_b[i] += bias_b[i] + noise_std * normal3[i]
+        if abs(b_b[i]) > range_t:
+            valid = False
+            b_b[i] = min(max(b_b[i], -range_t), range_t)
+    return b_b, valid
+
+
+# --- sun sensor: eclipse-aware unit Sun vector in body axes (seed 003 §3.2.1.2.1, SS) ------------
+
+
+def in_earth_shadow(r_i_m: np.ndarray, sun_i: np.ndarray) -> np.ndarray:
+    """True where the spacecraft at r_i is inside Earth's cylindrical shadow opposite the Sun direction.
+
+    Cylindrical model: behind the Earth (⟨r, ŝ⟩ < 0) and within one Earth radius of the Sun line.
+    """
+    r = _vectors(r_i_m, "r_i_m")
+    s = _vectors(sun_i, "sun_i")
+    s = s / np.linalg.norm(s, axis=-1, keepdims=True)
+    along = np.sum(r * s, axis=-1)
+    perp = np.linalg.norm(r - along[..., None] * s, axis=-1)
+    return (along < 0.0) & (perp < EARTH_RADIUS_M)
+
+
+def sun_sensor(
+    q_ib: np.ndarray,
+    sun_i: np.ndarray,
+    r_i_m: np.ndarray,
+    boresight_b: np.ndarray,
+    half_fov_rad: float,
+    noise_std_rad: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unit Sun vector in body axes with angular noise; invalid in eclipse or outside the field of view (seed 003 SS)."""
+    q = qt.normalize(q_ib)
+    s_i = _vectors(sun_i, "sun_i")
+    bore = _vectors(boresight_b, "boresight_b")
+    bore = bore / np.linalg.norm(bore)
+    sigma = float(_positive(noise_std_rad, "noise_std_rad"))
+    _positive(half_fov_rad, "half_fov_rad")
+    s_b = qt.rotate(qt.conjugate(q), s_i / np.linalg.norm(s_i, axis=-1, keepdims=True))
+    theta = sigma * rng.standard_normal(s_b.shape)
+    s_b = qt.rotate(rotation_noise_quaternion(theta), s_b)
+    visible = np.sum(s_b * bore, axis=-1) >= np.cos(half_fov_rad)
+    return s_b, visible & ~in_earth_shadow(r_i_m, s_i)
+
+
+@njit(cache=True)
+def sun_sensor_1(
+    q_ib: np.ndarray,
+    sun_i: np.ndarray,
+    r_i: np.ndarray,
+    boresight_b: np.ndarray,
+    cos_half_fov: float,
+    noise_std: float,
+    normal3: np.ndarray,
+) -> tuple[np.ndarray, bool]:
+    """Compiled sun-sensor sample: noisy unit Sun vector in body axes and its eclipse/FOV validity (seed 003 SS)."""
+    sn = np.sqrt(sun_i[0] ** 2 + sun_i[1] ** 2 + sun_i[2] ** 2)
+    s = sun_i / sn
+    s_b = qt.conjugate_rotate_1(q_ib, s)
+    t = noise_std * normal3
+    tn = np.sqrt(t[0] ** 2 + t[1] ** 2 + t[2] ** 2)
+    qn = np.empty(4)
+    qn[0] = np.cos(0.5 * tn)
+    k = np.sin(0.5 * tn) / tn if tn > 0.0 else 0.5
+    qn[1:] = k * t
+    s_b = qt.rotate_1(qn, s_b)
+    along = r_i[0] * s[0] + r_i[1] * s[1] + r_i[2] * s[2]
+    p = r_i - along * s
+    shadow = along < 0.0 and np.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2) < EARTH_RADIUS_M
+    visible = s_b[0] * boresight_b[0] + s_b[1] * boresight_b[1] + s_b[2] * boresight_b[2] >= cos_half_fov
+    return s_b, visible and not shadow
+
+
+# --- wheel tachometers: speed quantisation (seed 003 §3.2.3.1 conversion to physical units) ------
+
+
+def wheel_tachometer(speed_rad_s: np.ndarray, resolution_rad_s: float, max_speed_rad_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Quantised wheel speed round(Ω/q)·q with q the resolution; invalid beyond the speed range (seed 003 §3.2.3.1)."""
+    speed = np.asarray(speed_rad_s, dtype=float)
+    if not np.all(np.isfinite(speed)):
+        raise ValueError("speed_rad_s: contains NaN or infinite values")
+    if not resolution_rad_s > 0.0:
+        raise ValueError(f"resolution_rad_s: must be > 0, got {resolution_rad_s}")
+    _positive(max_speed_rad_s, "max_speed_rad_s")
+    return np.round(speed / resolution_rad_s) * resolution_rad_s, np.abs(speed) <= max_speed_rad_s
+
+
+@njit(cache=True)
+def wheel_tachometer_1(speed: np.ndarray, resolution: float, max_speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """Compiled quantised wheel speeds and per-wheel validity (seed 003 §3.2.3.1)."""
+    out = np.empty_like(speed)
+    valid = np.empty(speed.shape[0], dtype=np.bool_)
+    for i in range(speed.shape[0]):
+        out[i] = np.round(speed[i] / resolution) * resolution
+        valid[i] = abs(speed[i]) <= max_speed
+    return out, valid
+
+
+# --- GPS receiver: position and velocity with white noise and dropouts (seed 003 §3.2.1.1) -------
+
+
+def gps_receiver(
+    r_m: np.ndarray,
+    v_m_s: np.ndarray,
+    sigma_r_m: float,
+    sigma_v_m_s: float,
+    dropout_probability: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GPS fix (r, v) with white noise; each fix is lost with the given probability (seed 003 §3.2.1.1)."""
+    r = _vectors(r_m, "r_m")
+    v = _vectors(v_m_s, "v_m_s")
+    if r.shape != v.shape:
+        raise ValueError(f"v_m_s: shape {v.shape} differs from r_m {r.shape}")
+    sr = float(_positive(sigma_r_m, "sigma_r_m"))
+    sv = float(_positive(sigma_v_m_s, "sigma_v_m_s"))
+    if not 0.0 <= dropout_probability <= 1.0:
+        raise ValueError(f"dropout_probability: must be in [0, 1], got {dropout_probability}")
+    r_meas = r + sr * rng.standard_normal(r.shape)
+    v_meas = v + sv * rng.standard_normal(v.shape)
+    valid = rng.random(r.shape[:-1]) >= dropout_probability
+    return r_meas, v_meas, valid

@@ -123,8 +123,110 @@ def test_gyro_saturates_and_flags_out_of_range_rates():
         (lambda: sensors.GaussMarkovDrift(1.0, -1.0, 0.1), "density_rad_s_sqrt_s"),
         (lambda: sensors.star_tracker([1, 0, 0, 0], [0, 0, 0], -1.0, 1.0, np.random.default_rng()), "sigma_rad"),
         (lambda: sensors.variant_generators(1, 0), "n_variants"),
+        (lambda: sensors.earth_sensor(0.0, 0.0, [0.0], 1e-3, 0.2, np.random.default_rng()), "bias_rad"),
+        (lambda: sensors.magnetometer([1, 0, 0, 0], [np.nan, 0, 0], np.zeros(3), 0.0, 1.0, np.random.default_rng()), "b_i_t"),
+        (lambda: sensors.wheel_tachometer([1.0], 0.0, 10.0), "resolution_rad_s"),
+        (lambda: sensors.gps_receiver(np.zeros(3), np.zeros(3), 1.0, 1.0, 1.5, np.random.default_rng()), "dropout_probability"),
     ],
 )
 def test_bad_input_names_the_field(call, field):
     with pytest.raises(ValueError, match=field):
         call()
+
+
+def test_earth_sensor_residual_is_constant_bias_plus_white_noise():
+    rng = np.random.default_rng(21)
+    roll, pitch = rng.uniform(-0.1, 0.1, N_SAMPLES), rng.uniform(-0.1, 0.1, N_SAMPLES)
+    bias, sigma = np.array([2e-3, -1e-3]), np.array([1e-3, 2e-3])
+    meas, valid = sensors.earth_sensor(roll, pitch, bias, sigma, np.radians(15.0), rng)
+    res = meas - np.column_stack([roll, pitch])
+    assert valid.all()
+    assert np.all(np.abs(res.mean(axis=0) - bias) < STAT_SIGMAS * sigma / np.sqrt(N_SAMPLES))
+    assert np.all(np.abs(res.std(axis=0) / sigma - 1.0) < STAT_SIGMAS * _std_error_of_variance(N_SAMPLES) / 2.0)
+    _, out = sensors.earth_sensor(0.3, 0.0, bias, sigma, np.radians(15.0), rng)
+    assert not out
+
+
+def test_earth_sensor_kernel_equals_vectorised_model():
+    bias, sigma = np.array([2e-3, -1e-3]), np.array([1e-3, 2e-3])
+    meas, valid = sensors.earth_sensor(0.05, -0.02, bias, sigma, 0.2, np.random.default_rng(4))
+    m1, v1 = sensors.earth_sensor_1(0.05, -0.02, bias, sigma, 0.2, np.random.default_rng(4).standard_normal(2))
+    assert v1 == valid and np.allclose(m1, meas, atol=EXACT)
+
+
+def test_magnetometer_without_noise_is_the_scipy_inverse_rotation():
+    rng = np.random.default_rng(8)
+    q = qt.normalize(rng.normal(size=(100, 4)))
+    b_i = rng.normal(size=(100, 3)) * 3e-5
+    b_b, valid = sensors.magnetometer(q, b_i, np.zeros(3), 0.0, 1e-4, rng)
+    expected = Rotation.from_quat(q, scalar_first=True).inv().apply(b_i)
+    assert valid.all()
+    assert np.allclose(b_b, expected, atol=EXACT * 1e-4)
+    k, ok = sensors.magnetometer_1(q[0], b_i[0], np.zeros(3), 0.0, 1e-4, np.zeros(3))
+    assert ok and np.allclose(k, expected[0], atol=EXACT * 1e-4)
+
+
+def test_magnetometer_saturates_and_flags_out_of_range_field():
+    b_b, valid = sensors.magnetometer([1, 0, 0, 0], [8e-5, 0, 0], np.zeros(3), 0.0, 6e-5, np.random.default_rng(0))
+    assert not valid and b_b[0] == 6e-5
+
+
+def test_shadow_fraction_of_an_orbit_in_the_sun_plane_is_asin_r_over_a_over_pi():
+    EARTH = sensors.EARTH_RADIUS_M
+    a = EARTH + 600e3
+    u = np.linspace(0.0, 2.0 * np.pi, 200_001)[:-1]
+    r = a * np.column_stack([np.cos(u), np.sin(u), np.zeros_like(u)])
+    frac = sensors.in_earth_shadow(r, np.array([1.0, 0.0, 0.0])).mean()
+    GRID = 2.0 / u.size  # one grid cell at each shadow boundary
+    assert abs(frac - np.arcsin(EARTH / a) / np.pi) < GRID
+
+
+def test_sun_sensor_is_invalid_in_eclipse_and_outside_its_field_of_view():
+    rng = np.random.default_rng(2)
+    sun = np.array([1.0, 0.0, 0.0])
+    r = np.array([[7e6, 0, 0], [-7e6, 0, 0], [-7e6, 0, 0]])
+    q = np.array([[1.0, 0, 0, 0], [1.0, 0, 0, 0], list(qt.from_axis_angle([0, 0, 1], np.pi / 2))])
+    s_b, valid = sensors.sun_sensor(q, sun, r, [1, 0, 0], np.radians(60.0), 0.0, rng)
+    assert valid.tolist() == [True, False, False]
+    r2 = np.array([7e6, 0, 0])
+    s_out, v_out = sensors.sun_sensor(q[2], sun, r2, [1, 0, 0], np.radians(60.0), 0.0, rng)
+    assert not v_out and np.allclose(s_out, [0, -1, 0], atol=EXACT)
+    for k in range(3):
+        s1, v1 = sensors.sun_sensor_1(q[k], sun, r[k].astype(float), np.array([1.0, 0, 0]), np.cos(np.radians(60.0)), 0.0, np.zeros(3))
+        assert v1 == valid[k] and np.allclose(s1, s_b[k], atol=EXACT)
+
+
+def test_sun_sensor_angular_error_matches_noise_sigma():
+    rng = np.random.default_rng(6)
+    sigma = np.radians(0.1)
+    q = qt.normalize(rng.normal(size=(N_SAMPLES, 4)))
+    sun = np.array([0.3, -0.5, 0.8])
+    s_b, _ = sensors.sun_sensor(q, sun, np.array([7e6, 0, 0]), [1, 0, 0], np.pi, sigma, rng)
+    truth = Rotation.from_quat(q, scalar_first=True).inv().apply(sun / np.linalg.norm(sun))
+    ang = np.arccos(np.clip(np.sum(s_b * truth, axis=-1), -1.0, 1.0))
+    # two perpendicular axes of N(0, σ²) move a direction by a Rayleigh angle: E[ang²] = 2σ²
+    assert abs(np.mean(ang**2) / (2 * sigma**2) - 1.0) < STAT_SIGMAS * np.sqrt(1.0 / N_SAMPLES)
+
+
+def test_tachometer_quantisation_error_is_uniform_within_half_a_step():
+    q_step = 2.0 * np.pi / 1024 / 0.1  # 1024 counts per revolution counted over 0.1 s
+    speed = np.random.default_rng(1).uniform(-600.0, 600.0, N_SAMPLES)
+    meas, valid = sensors.wheel_tachometer(speed, q_step, 650.0)
+    err = meas - speed
+    assert valid.all()
+    assert np.abs(err).max() <= 0.5 * q_step * (1 + EXACT)
+    # uniform on ±q/2: std q/√12; the sample variance of a uniform has relative error √(0.8/n)
+    assert abs(err.std() / (q_step / np.sqrt(12.0)) - 1.0) < STAT_SIGMAS * np.sqrt(0.8 / N_SAMPLES) / 2.0
+    k, kv = sensors.wheel_tachometer_1(np.array([speed[0], 700.0]), q_step, 650.0)
+    assert k[0] == meas[0] and kv.tolist() == [True, False]
+
+
+def test_gps_noise_and_dropout_rate_match_their_parameters():
+    rng = np.random.default_rng(3)
+    r = np.tile([7e6, 0.0, 0.0], (N_SAMPLES, 1))
+    v = np.tile([0.0, 7.5e3, 0.0], (N_SAMPLES, 1))
+    p = 0.05
+    r_m, v_m, valid = sensors.gps_receiver(r, v, 10.0, 0.1, p, rng)
+    assert abs((1 - valid.mean()) - p) < STAT_SIGMAS * np.sqrt(p * (1 - p) / N_SAMPLES)
+    assert np.all(np.abs((r_m - r).std(axis=0) / 10.0 - 1) < STAT_SIGMAS * _std_error_of_variance(N_SAMPLES) / 2)
+    assert np.all(np.abs((v_m - v).std(axis=0) / 0.1 - 1) < STAT_SIGMAS * _std_error_of_variance(N_SAMPLES) / 2)
