@@ -1,0 +1,158 @@
+"""Archive store on SQLite and PostgreSQL: real NOAA-20 packets, duplicates, order, gaps, atomicity."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import ccsdspy
+import numpy as np
+import pytest
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import inspect
+
+from telemetry.archive import Archive, PacketBatch, upgrade
+from telemetry.archive.engine import create_archive_engine
+from telemetry.archive.migrate import alembic_config
+from telemetry.archive.models import Base
+from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
+
+NOAA_DIR = Path("real/noaa20_jpss1_apid11")
+NOAA_APID = 11
+CDS_EPOCH_UNIX_DAYS = -4_383  # 1958-01-01 is 4,383 days before 1970-01-01 (CCSDS 301.0-B-4 §3.3)
+NS_PER_DAY = 86_400 * 10**9
+ONE_MICROSECOND_NS = 1_000  # the decoded CSV prints times to the microsecond
+POSITIONS = ("ADGPSPOSX", "ADGPSPOSY", "ADGPSPOSZ")
+SAT = "NOAA-20"
+
+
+def noaa20_batch(shared_data: Path) -> tuple[PacketBatch, bytes]:
+    """The real NOAA-20 file decoded independently with ccsdspy (not our decoder) + its raw bytes."""
+    folder = shared_data / NOAA_DIR
+    data_file = folder / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
+    fields = ccsdspy.FixedLength.from_file(folder / "ccsdspy_jpss1_geolocation.csv").load(data_file, include_primary_header=True)
+    days = fields["DOY"].astype(np.int64) + CDS_EPOCH_UNIX_DAYS
+    t_ns = days * NS_PER_DAY + fields["MSEC"].astype(np.int64) * 10**6 + fields["USEC"].astype(np.int64) * 10**3
+    raw = data_file.read_bytes()
+    packets = ccsdspy.utils.split_packet_bytes(str(data_file))
+    values = {name: fields[name] for name in (*POSITIONS, "ADCFAQ4")}
+    return PacketBatch.from_packets(NOAA_APID, t_ns, fields["CCSDS_SEQUENCE_COUNT"], packets, values), raw
+
+
+def decoded_csv(shared_data: Path) -> dict[str, np.ndarray]:
+    """Columns of the reference decoded CSV (times as UTC ns via numpy datetime64[us])."""
+    with open(shared_data / NOAA_DIR / "jpss1_apid11_decoded.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    t = np.array([r["pkt_time_utc_cds"] for r in rows], dtype="datetime64[us]").astype(np.int64) * 1_000
+    return {"t_ns": t, **{k: np.array([float(r[k]) for r in rows]) for k in ("pos_x_m", "pos_y_m", "pos_z_m", "q4")}}
+
+
+def synthetic_batch(n: int, seq0: int = 0, t0_ns: int = 1_700_000_000 * 10**9, period_ns: int = 250_000_000) -> PacketBatch:
+    """n packets of APID 100 at 4 Hz, one value column equal to the packet index."""
+    index = np.arange(n)
+    packets = [bytes([0x08, 0x64]) + int(i).to_bytes(4, "big") for i in index]
+    return PacketBatch.from_packets(100, t0_ns + index * period_ns, (seq0 + index) % 16_384, packets, {"index": index.astype(np.float64)})
+
+
+def test_upgrade_creates_every_model_table_at_head_and_is_idempotent(archive_url: str) -> None:
+    upgrade(archive_url)
+    upgrade(archive_url)
+    engine = create_archive_engine(archive_url)
+    with engine.connect() as conn:
+        current = MigrationContext.configure(conn).get_current_revision()
+        tables = set(inspect(conn).get_table_names())
+    engine.dispose()
+    assert current == ScriptDirectory.from_config(alembic_config(archive_url)).get_current_head()
+    assert set(Base.metadata.tables) <= tables
+
+
+def test_real_noaa20_file_round_trips_to_the_decoded_csv_and_replays_byte_exact(archive: Archive, shared_data: Path) -> None:
+    batch, raw = noaa20_batch(shared_data)
+    truth = decoded_csv(shared_data)
+    result = archive.ingest(SAT, [batch], source="J01_G011.DAT1", uploaded_by="tester")
+    assert result.packets_accepted == 7_200 and result.samples_accepted == 7_200 * 4
+    t, x = archive.read_parameter(SAT, "ADGPSPOSX", int(truth["t_ns"][0]), int(truth["t_ns"][-1]))
+    np.testing.assert_allclose(t, truth["t_ns"], rtol=0, atol=ONE_MICROSECOND_NS)
+    np.testing.assert_array_equal(x, truth["pos_x_m"].astype(np.float32))
+    _, q4 = archive.read_parameter(SAT, "ADCFAQ4", int(t[0]), int(t[-1]))
+    np.testing.assert_array_equal(q4, truth["q4"].astype(np.float32))
+    replayed = archive.replay(SAT, int(t[0]), int(t[-1]))
+    assert b"".join(p for _, p in replayed) == raw
+
+
+def test_same_file_twice_is_a_reported_no_op(archive: Archive) -> None:
+    batch = synthetic_batch(500)
+    first = archive.ingest(SAT, [batch], source="a.bin", uploaded_by="tester", sha256="ab" * 32)
+    second = archive.ingest(SAT, [batch], source="a-again.bin", uploaded_by="tester", sha256="ab" * 32)
+    assert second.duplicate_upload and second.upload_id == first.upload_id and second.packets_accepted == 0
+    assert len(archive.uploads(SAT)) == 1
+    assert archive.upload_contents(first.upload_id) == (500, 500)
+
+
+def test_overlapping_upload_keeps_each_packet_once(archive: Archive) -> None:
+    whole = synthetic_batch(900)
+    archive.ingest(SAT, [whole.take(np.arange(0, 600))], source="first", uploaded_by="tester")
+    second = archive.ingest(SAT, [whole.take(np.arange(300, 900))], source="second", uploaded_by="tester")
+    assert (second.packets_accepted, second.packets_duplicate) == (300, 300)
+    t, v = archive.read_parameter(SAT, "index", int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
+    np.testing.assert_array_equal(v, np.arange(900.0))
+    np.testing.assert_array_equal(t, whole.t_utc_ns)
+
+
+def test_duplicates_inside_one_upload_are_dropped(archive: Archive) -> None:
+    whole = synthetic_batch(50)
+    result = archive.ingest(SAT, [whole.take(np.r_[np.arange(50), np.arange(10, 20)])], source="dup", uploaded_by="tester")
+    assert (result.packets_accepted, result.packets_duplicate) == (50, 10)
+
+
+def test_out_of_order_data_is_accepted_and_read_back_in_time_order(archive: Archive) -> None:
+    whole = synthetic_batch(20_000)
+    shuffled = whole.take(np.random.default_rng(7).permutation(20_000))
+    archive.ingest(SAT, [shuffled.take(np.arange(10_000, 20_000))], source="late", uploaded_by="tester")
+    archive.ingest(SAT, [shuffled.take(np.arange(0, 10_000))], source="early", uploaded_by="tester")
+    t, v = archive.read_parameter(SAT, "index", int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
+    np.testing.assert_array_equal(t, whole.t_utc_ns)
+    np.testing.assert_array_equal(v, np.arange(20_000.0))
+    replayed = archive.replay(SAT, int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
+    assert [p for _, p in replayed] == whole.packets()
+
+
+def test_gaps_are_counted_from_sequence_counts_across_the_14_bit_wrap(archive: Archive) -> None:
+    whole = synthetic_batch(12, seq0=16_378)  # counts 16378..16383, 0..5
+    kept = np.array([0, 1, 2, 5, 6, 7, 11])  # drops 16381, 16382 (before the wrap), 2, 3, 4 (after)
+    result = archive.ingest(SAT, [whole.take(kept)], source="gappy", uploaded_by="tester")
+    assert [(g.after_t_ns, g.before_t_ns, g.missing) for g in result.gaps] == [
+        (int(whole.t_utc_ns[2]), int(whole.t_utc_ns[5]), 2),
+        (int(whole.t_utc_ns[7]), int(whole.t_utc_ns[11]), 3),
+    ]
+    assert archive.uploads(SAT)[0].report["gaps"][1]["missing"] == 3
+
+
+def test_a_failing_upload_leaves_nothing_behind(archive: Archive) -> None:
+    good = synthetic_batch(100)
+    clash = PacketBatch.from_packets(101, good.t_utc_ns, good.seq_count, good.packets(), {"index": np.zeros(100)})
+    archive.satellite_id(SAT)
+    with pytest.raises(ValueError, match="index"):
+        archive.ingest(SAT, [good, clash], source="bad", uploaded_by="tester")
+    assert archive.uploads(SAT) == []
+    assert archive.parameters(SAT) == {}
+    assert archive.packet_keys(SAT, 0, 2**62) == {}
+
+
+def test_latest_values_are_the_newest_samples(archive: Archive) -> None:
+    whole = synthetic_batch(30)
+    archive.ingest(SAT, [whole.take(np.arange(20, 30)), ], source="b", uploaded_by="tester")
+    archive.ingest(SAT, [whole.take(np.arange(0, 20))], source="a", uploaded_by="tester")
+    assert archive.latest_values(SAT) == {"index": (int(whole.t_utc_ns[-1]), 29.0)}
+
+
+def test_bad_input_names_the_field(archive: Archive) -> None:
+    with pytest.raises(ValueError, match="seq_count"):
+        PacketBatch.from_packets(1, np.arange(3), np.array([0, 1, 20_000]), [b"a", b"b", b"c"], {})
+    with pytest.raises(ValueError, match="uploaded_by"):
+        archive.ingest(SAT, [synthetic_batch(3)], source="x", uploaded_by="")
+    with pytest.raises(ValueError, match="name"):
+        archive.read_parameter(SAT, "no-such-parameter", 0, 1)
+    with pytest.raises(ValueError, match="url"):
+        Archive("mysql://nowhere/db")
