@@ -1,0 +1,310 @@
+"""Reference frames: ECI (GCRS), TEME, ECEF (ITRS), WGS84 geodetic and the orbital frame ORF.
+
+Conventions (written once here and in docs/conventions.md):
+
+* Time is UTC as float64 seconds since the Unix epoch (``t_unix_s``); UT1 = UTC + DUT1 from the
+  IERS table that skyfield ships (``load.timescale(builtin=True)``, offline).
+* ECI is the GCRS (≈ J2000 to 23 mas). ECEF is the ITRS without polar motion (the ignored pole
+  offset is ≤ 0.5″, ≤ 17 m at LEO radius), i.e. ECEF = R3(ERA) · C · ECI with ERA the IAU 2000 Earth
+  rotation angle of UT1 and C the IAU 2000A/2006 celestial-to-intermediate (precession-nutation)
+  matrix, taken from skyfield on an hourly grid and interpolated (interpolation error < 1e-10 rad).
+* TEME (SGP4 output, AIAA 2006-6753 App. C) → GCRS uses skyfield's TEME rotation
+  (GMST 1982 minus GAST, then the true-of-date → GCRS matrix), accuracy at the mas level.
+* ORF (seed 000 §2, DESIGN.md): x^o toward nadir (−r̂), y^o along the orbital velocity (the part of
+  v normal to r), z^o = x^o × y^o (= −orbit normal). Λ_o(t) rotates ORF vectors into ECI; the body
+  attitude relative to the ORF is Λ^o = Λ̃_o ∘ Λ.
+* Kernels (``*_1``) are numba functions on float64 arrays for the engine loop; for them the
+  precession-nutation matrix and DUT1 are frozen at the scenario start (drift < 1e-6 rad per day).
+"""
+
+from __future__ import annotations
+
+import functools
+import warnings
+
+import numpy as np
+from numba import njit
+
+from sim_core import quaternion
+
+__all__ = [
+    "WGS84_A_M",
+    "WGS84_F",
+    "EARTH_ROTATION_RATE_RAD_S",
+    "ut1_minus_utc_s",
+    "earth_rotation_angle_rad",
+    "celestial_to_intermediate",
+    "eci_to_ecef_matrix",
+    "eci_to_ecef",
+    "ecef_to_eci",
+    "teme_to_eci",
+    "geodetic_to_ecef",
+    "ecef_to_geodetic",
+    "orf_axes",
+    "orf_quaternion",
+    "orf_rate_rad_s",
+    "earth_orientation_frozen",
+    "earth_rotation_angle_1",
+    "eci_to_ecef_1",
+    "ecef_to_eci_1",
+    "orf_quaternion_1",
+]
+
+WGS84_A_M = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+EARTH_ROTATION_RATE_RAD_S = 2.0 * np.pi * 1.00273781191135448 / 86400.0  # dERA/dt (IERS 2010)
+_J2000_UNIX_S = 946728000.0  # 2000-01-01T12:00:00 UTC (ERA epoch JD 2451545.0 of UT1)
+_GRID_STEP_S = 3600.0  # precession-nutation sampling step (nutation curvature error < 1e-10 rad)
+_GEODETIC_ITERATIONS = 6  # Bowring/Newton: sub-micrometre for |h| < 1e5 km
+
+
+@functools.lru_cache(maxsize=1)
+def _timescale():
+    """skyfield's built-in timescale (leap seconds, DUT1), loaded once, offline."""
+    from skyfield.api import load
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*has expired.*")
+        return load.timescale(builtin=True)
+
+
+def _times(t_unix_s: np.ndarray | float, name: str = "t_unix_s") -> np.ndarray:
+    t = np.asarray(t_unix_s, dtype=float)
+    if not np.all(np.isfinite(t)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return t
+
+
+def _vectors(v: np.ndarray, name: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"{name}: expected shape (..., 3), got {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return v
+
+
+def _skyfield_time(t_unix_s: np.ndarray):
+    """skyfield Time of Unix UTC seconds (days split off so leap seconds are not double-counted)."""
+    days = np.floor(t_unix_s / 86400.0)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*has expired.*")
+        return _timescale().utc(1970, 1, 1 + days.astype(np.int64), 0, 0, t_unix_s - days * 86400.0)
+
+
+def ut1_minus_utc_s(t_unix_s: np.ndarray | float) -> np.ndarray:
+    """DUT1 = UT1 − UTC (s) from the IERS table shipped with skyfield (held constant past its end)."""
+    t = _times(t_unix_s)
+    return np.asarray(_skyfield_time(np.atleast_1d(t)).dut1, dtype=float).reshape(t.shape)
+
+
+def earth_rotation_angle_rad(t_ut1_unix_s: np.ndarray | float) -> np.ndarray:
+    """IAU 2000 Earth rotation angle θ = 2π(0.7790572732640 + 1.00273781191135448 Tu), Tu in UT1 days."""
+    tu = (_times(t_ut1_unix_s, "t_ut1_unix_s") - _J2000_UNIX_S) / 86400.0
+    turns = 0.7790572732640 + 0.00273781191135448 * tu + np.mod(tu, 1.0)
+    return 2.0 * np.pi * np.mod(turns, 1.0)
+
+
+def _rot3(angle_rad: np.ndarray) -> np.ndarray:
+    """Passive rotation matrices R3(θ) (frame turned by θ about z), shape (..., 3, 3)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    r = np.zeros(np.shape(angle_rad) + (3, 3))
+    r[..., 0, 0], r[..., 0, 1], r[..., 1, 0], r[..., 1, 1], r[..., 2, 2] = c, s, -s, c, 1.0
+    return r
+
+
+def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """GCRS→CIRS (C) and GCRS→TEME matrices at flat times, interpolated from an hourly grid."""
+    t0, t1 = float(np.min(t_unix_s)), float(np.max(t_unix_s))
+    n = max(2, int(np.ceil((t1 - t0) / _GRID_STEP_S)) + 1)
+    grid = t0 + _GRID_STEP_S * np.arange(n)
+    sky = _skyfield_time(grid)
+    era = earth_rotation_angle_rad(grid + np.asarray(sky.dut1, dtype=float))
+    gast = np.asarray(sky.gast, dtype=float) * (2.0 * np.pi / 24.0)
+    m_tod = np.moveaxis(np.asarray(sky.M), -1, 0)  # GCRS → true equator and equinox of date
+    c_grid = _rot3(gast - era) @ m_tod  # R3(ERA)·C = R3(GAST)·M
+    from skyfield.sgp4lib import TEME
+
+    teme_grid = np.moveaxis(np.asarray(TEME.rotation_at(sky)), -1, 0)
+    w = (t_unix_s - t0) / _GRID_STEP_S
+    k = np.clip(np.floor(w).astype(int), 0, n - 2)
+    f = (w - k)[:, None, None]
+    c = (1.0 - f) * c_grid[k] + f * c_grid[k + 1]
+    teme = (1.0 - f) * teme_grid[k] + f * teme_grid[k + 1]
+    return c, teme
+
+
+def celestial_to_intermediate(t_unix_s: np.ndarray | float) -> np.ndarray:
+    """Precession-nutation matrix C (GCRS → CIRS, IAU 2000A/2006 via skyfield), shape (..., 3, 3)."""
+    t = _times(t_unix_s)
+    c, _ = _slow_matrices(np.atleast_1d(t).ravel())
+    return c.reshape(t.shape + (3, 3))
+
+
+def eci_to_ecef_matrix(t_unix_s: np.ndarray | float) -> np.ndarray:
+    """Rotation ECI (GCRS) → ECEF (ITRS, no polar motion): R3(ERA(UT1)) · C, shape (..., 3, 3)."""
+    t = _times(t_unix_s)
+    flat = np.atleast_1d(t).ravel()
+    c, _ = _slow_matrices(flat)
+    era = earth_rotation_angle_rad(flat + ut1_minus_utc_s(flat))
+    return (_rot3(era) @ c).reshape(t.shape + (3, 3))
+
+
+def eci_to_ecef(
+    r_eci_m: np.ndarray, v_eci_m_s: np.ndarray, t_unix_s: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """ECI → ECEF position and velocity: r_e = R r_i, v_e = R v_i − ω⊕ × r_e (Vallado eq 3-80)."""
+    r, v = _vectors(r_eci_m, "r_eci_m"), _vectors(v_eci_m_s, "v_eci_m_s")
+    m = eci_to_ecef_matrix(t_unix_s)
+    r_e = np.einsum("...ij,...j->...i", m, r)
+    omega = np.array([0.0, 0.0, EARTH_ROTATION_RATE_RAD_S])
+    return r_e, np.einsum("...ij,...j->...i", m, v) - np.cross(omega, r_e)
+
+
+def ecef_to_eci(
+    r_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray, t_unix_s: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """ECEF → ECI position and velocity: r_i = Rᵗ r_e, v_i = Rᵗ (v_e + ω⊕ × r_e) (Vallado eq 3-80)."""
+    r, v = _vectors(r_ecef_m, "r_ecef_m"), _vectors(v_ecef_m_s, "v_ecef_m_s")
+    mt = np.swapaxes(eci_to_ecef_matrix(t_unix_s), -1, -2)
+    omega = np.array([0.0, 0.0, EARTH_ROTATION_RATE_RAD_S])
+    return np.einsum("...ij,...j->...i", mt, r), np.einsum("...ij,...j->...i", mt, v + np.cross(omega, r))
+
+
+def teme_to_eci(
+    r_teme_m: np.ndarray, v_teme_m_s: np.ndarray, t_unix_s: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """TEME (SGP4 output, AIAA 2006-6753 App. C) → ECI (GCRS) position and velocity."""
+    r, v = _vectors(r_teme_m, "r_teme_m"), _vectors(v_teme_m_s, "v_teme_m_s")
+    t = _times(t_unix_s)
+    _, teme = _slow_matrices(np.atleast_1d(t).ravel())
+    mt = np.swapaxes(teme, -1, -2).reshape(t.shape + (3, 3))
+    return np.einsum("...ij,...j->...i", mt, r), np.einsum("...ij,...j->...i", mt, v)
+
+
+def geodetic_to_ecef(
+    lat_deg: np.ndarray | float, lon_deg: np.ndarray | float, alt_m: np.ndarray | float
+) -> np.ndarray:
+    """WGS84 geodetic latitude, longitude, ellipsoidal height → ECEF (m), shape (..., 3)."""
+    lat = np.radians(_times(lat_deg, "lat_deg"))
+    lon = np.radians(_times(lon_deg, "lon_deg"))
+    h = _times(alt_m, "alt_m")
+    if np.any(np.abs(lat) > np.pi / 2):
+        raise ValueError("lat_deg: must lie in [-90, 90]")
+    n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+    return np.stack(
+        np.broadcast_arrays(
+            (n + h) * np.cos(lat) * np.cos(lon),
+            (n + h) * np.cos(lat) * np.sin(lon),
+            (n * (1.0 - WGS84_E2) + h) * np.sin(lat),
+        ),
+        axis=-1,
+    )
+
+
+def ecef_to_geodetic(r_ecef_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ECEF (m) → WGS84 geodetic (lat_deg, lon_deg, alt_m) by Newton iteration on latitude."""
+    r = _vectors(r_ecef_m, "r_ecef_m")
+    x, y, z = r[..., 0], r[..., 1], r[..., 2]
+    p = np.hypot(x, y)
+    lat = np.arctan2(z, p * (1.0 - WGS84_E2))
+    for _ in range(_GEODETIC_ITERATIONS):
+        n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+        lat = np.arctan2(z + WGS84_E2 * n * np.sin(lat), p)
+    n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+    cos_lat, sin_lat = np.cos(lat), np.sin(lat)
+    alt = p * cos_lat + z * sin_lat - n * (1.0 - WGS84_E2 * sin_lat**2)
+    return np.degrees(lat), np.degrees(np.arctan2(y, x)), alt
+
+
+def orf_axes(r_eci_m: np.ndarray, v_eci_m_s: np.ndarray) -> np.ndarray:
+    """ORF axes in ECI as matrix columns [x^o y^o z^o]: x^o = −r̂, z^o = x^o×v̂/|·|, y^o = z^o×x^o (seed 000 §2)."""
+    r, v = _vectors(r_eci_m, "r_eci_m"), _vectors(v_eci_m_s, "v_eci_m_s")
+    x = -r / np.linalg.norm(r, axis=-1, keepdims=True)
+    z = np.cross(x, v)
+    nz = np.linalg.norm(z, axis=-1, keepdims=True)
+    if np.any(nz == 0.0):
+        raise ValueError("v_eci_m_s: velocity parallel to position leaves the ORF undefined")
+    z = z / nz
+    return np.stack([x, np.cross(z, x), z], axis=-1)
+
+
+def orf_quaternion(r_eci_m: np.ndarray, v_eci_m_s: np.ndarray) -> np.ndarray:
+    """ORF quaternion Λ_o(t) (rotates ORF vectors into ECI; seed 000 §2 Λ^o = Λ̃_o ∘ Λ), shape (..., 4)."""
+    return quaternion.from_dcm(orf_axes(r_eci_m, v_eci_m_s))
+
+
+def orf_rate_rad_s(r_eci_m: np.ndarray, v_eci_m_s: np.ndarray) -> np.ndarray:
+    """Angular velocity of the ORF in ECI, ω_o = (r × v)/r² (exact for central-force motion)."""
+    r, v = _vectors(r_eci_m, "r_eci_m"), _vectors(v_eci_m_s, "v_eci_m_s")
+    return np.cross(r, v) / np.sum(r * r, axis=-1, keepdims=True)
+
+
+def earth_orientation_frozen(t0_unix_s: float) -> tuple[np.ndarray, float]:
+    """Precession-nutation matrix C (3, 3) and DUT1 (s) at t0, frozen for the ``*_1`` kernels."""
+    t0 = float(_times(t0_unix_s, "t0_unix_s"))
+    return celestial_to_intermediate(t0), float(ut1_minus_utc_s(t0))
+
+
+@njit(cache=True)
+def earth_rotation_angle_1(t_ut1_unix_s: float) -> float:
+    """IAU 2000 Earth rotation angle (rad) of one UT1 instant (compiled kernel)."""
+    tu = (t_ut1_unix_s - _J2000_UNIX_S) / 86400.0
+    turns = 0.7790572732640 + 0.00273781191135448 * tu + (tu - np.floor(tu))
+    return 2.0 * np.pi * (turns - np.floor(turns))
+
+
+@njit(cache=True)
+def eci_to_ecef_1(v_eci: np.ndarray, c_pn: np.ndarray, era_rad: float) -> np.ndarray:
+    """Rotate one ECI vector into ECEF: R3(ERA) · C · v (compiled kernel, no velocity transport)."""
+    w = c_pn @ v_eci
+    c, s = np.cos(era_rad), np.sin(era_rad)
+    out = np.empty(3)
+    out[0] = c * w[0] + s * w[1]
+    out[1] = -s * w[0] + c * w[1]
+    out[2] = w[2]
+    return out
+
+
+@njit(cache=True)
+def ecef_to_eci_1(v_ecef: np.ndarray, c_pn: np.ndarray, era_rad: float) -> np.ndarray:
+    """Rotate one ECEF vector into ECI: Cᵗ · R3(−ERA) · v (compiled kernel, no velocity transport)."""
+    c, s = np.cos(era_rad), np.sin(era_rad)
+    w = np.empty(3)
+    w[0] = c * v_ecef[0] - s * v_ecef[1]
+    w[1] = s * v_ecef[0] + c * v_ecef[1]
+    w[2] = v_ecef[2]
+    return c_pn.T @ w
+
+
+@njit(cache=True)
+def orf_quaternion_1(r_eci: np.ndarray, v_eci: np.ndarray) -> np.ndarray:
+    """ORF quaternion Λ_o of one position/velocity (compiled kernel, Shepperd's method, λ0 ≥ 0)."""
+    x = -r_eci / np.sqrt(r_eci @ r_eci)
+    z = np.cross(x, v_eci)
+    z = z / np.sqrt(z @ z)
+    y = np.cross(z, x)
+    m = np.empty((3, 3))
+    m[:, 0], m[:, 1], m[:, 2] = x, y, z
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    q = np.empty(4)
+    if tr >= m[0, 0] and tr >= m[1, 1] and tr >= m[2, 2]:
+        q[0] = 0.5 * np.sqrt(1.0 + tr)
+        f = 0.25 / q[0]
+        q[1], q[2], q[3] = (m[2, 1] - m[1, 2]) * f, (m[0, 2] - m[2, 0]) * f, (m[1, 0] - m[0, 1]) * f
+    elif m[0, 0] >= m[1, 1] and m[0, 0] >= m[2, 2]:
+        q[1] = 0.5 * np.sqrt(1.0 + 2.0 * m[0, 0] - tr)
+        f = 0.25 / q[1]
+        q[0], q[2], q[3] = (m[2, 1] - m[1, 2]) * f, (m[0, 1] + m[1, 0]) * f, (m[0, 2] + m[2, 0]) * f
+    elif m[1, 1] >= m[2, 2]:
+        q[2] = 0.5 * np.sqrt(1.0 + 2.0 * m[1, 1] - tr)
+        f = 0.25 / q[2]
+        q[0], q[1], q[3] = (m[0, 2] - m[2, 0]) * f, (m[0, 1] + m[1, 0]) * f, (m[1, 2] + m[2, 1]) * f
+    else:
+        q[3] = 0.5 * np.sqrt(1.0 + 2.0 * m[2, 2] - tr)
+        f = 0.25 / q[3]
+        q[0], q[1], q[2] = (m[1, 0] - m[0, 1]) * f, (m[0, 2] + m[2, 0]) * f, (m[1, 2] + m[2, 1]) * f
+    if q[0] < 0.0:
+        q = -q
+    return q
