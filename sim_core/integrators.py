@@ -15,11 +15,40 @@ import numpy as np
 from numba import njit
 from scipy.integrate import solve_ivp
 
-from sim_core.spacecraft import PlantArrays, PlantParams, plant_derivative_1, state_size
+from sim_core.spacecraft import PlantArrays, PlantParams, plant_derivative_1, plant_derivative_into, state_size
 
-__all__ = ["rk4_step", "rk4_step_1", "rk4_propagate", "rk4_propagate_1", "reference_propagate"]
+__all__ = ["rk4_step", "rk4_step_1", "rk4_step_into", "rk4_propagate", "rk4_propagate_1", "reference_propagate"]
 
 REFERENCE_RTOL = 1e-12  # DOP853 tolerance of the reference path (near float64 round-off)
+
+
+@njit(cache=True)
+def rk4_step_into(
+    x: np.ndarray, dt: float, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays,
+    work: np.ndarray, out: np.ndarray,
+) -> None:
+    """RK4 step of seed 000 eq (1) into ``out`` (may alias x); ``work`` is scratch of shape (6, len(x))."""
+    n = x.shape[0]
+    force = work[5, : p.mass_inv.shape[0]]
+    k, stage, acc = work[0], work[1], work[2]
+    plant_derivative_into(x, wheel_motor_torque, ext_torque_b, p, force, k)
+    for i in range(n):
+        acc[i] = k[i]
+        stage[i] = x[i] + 0.5 * dt * k[i]
+    plant_derivative_into(stage, wheel_motor_torque, ext_torque_b, p, force, k)
+    for i in range(n):
+        acc[i] += 2.0 * k[i]
+        stage[i] = x[i] + 0.5 * dt * k[i]
+    plant_derivative_into(stage, wheel_motor_torque, ext_torque_b, p, force, k)
+    for i in range(n):
+        acc[i] += 2.0 * k[i]
+        stage[i] = x[i] + dt * k[i]
+    plant_derivative_into(stage, wheel_motor_torque, ext_torque_b, p, force, k)
+    for i in range(n):
+        out[i] = x[i] + (dt / 6.0) * (acc[i] + k[i])
+    norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3])
+    for i in range(4):
+        out[i] /= norm
 
 
 @njit(cache=True)
@@ -27,14 +56,8 @@ def rk4_step_1(
     x: np.ndarray, dt: float, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays
 ) -> np.ndarray:
     """One RK4 step of seed 000 eq (1) with held torques, Λ renormalised (compiled kernel)."""
-    k1 = plant_derivative_1(x, wheel_motor_torque, ext_torque_b, p)
-    k2 = plant_derivative_1(x + 0.5 * dt * k1, wheel_motor_torque, ext_torque_b, p)
-    k3 = plant_derivative_1(x + 0.5 * dt * k2, wheel_motor_torque, ext_torque_b, p)
-    k4 = plant_derivative_1(x + dt * k3, wheel_motor_torque, ext_torque_b, p)
-    out = x + (dt / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    norm = np.sqrt(out[0] * out[0] + out[1] * out[1] + out[2] * out[2] + out[3] * out[3])
-    for i in range(4):
-        out[i] /= norm
+    out = np.empty(x.shape[0])
+    rk4_step_into(x, dt, wheel_motor_torque, ext_torque_b, p, np.empty((6, x.shape[0])), out)
     return out
 
 
@@ -48,8 +71,9 @@ def rk4_propagate_1(
     out = np.empty((n_steps // every + 1, x0.shape[0]))
     out[0] = x0
     x = x0.copy()
+    work = np.empty((6, x0.shape[0]))
     for k in range(n_steps):
-        x = rk4_step_1(x, dt, wheel_motor_torque[k], ext_torque_b[k], p)
+        rk4_step_into(x, dt, wheel_motor_torque[k], ext_torque_b[k], p, work, x)
         if (k + 1) % every == 0:
             out[(k + 1) // every] = x
     return out

@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from sim_core.quaternion import rotate_1
-from sim_core.wheels import WheelParams, friction_torque_1
+from sim_core.wheels import WheelParams, friction_torque_one_wheel
 
 __all__ = [
     "PlantParams",
@@ -37,6 +37,7 @@ __all__ = [
     "pack_state",
     "plant_derivative",
     "plant_derivative_1",
+    "plant_derivative_into",
     "angular_momentum_b",
     "angular_momentum_b_1",
     "angular_momentum_i",
@@ -113,6 +114,8 @@ class PlantParams:
             "flex_log_decrement": self.flex_log_decrement,
         }
         for name, value in flex.items():
+            if value is None and nq and name != "flex_log_decrement":
+                raise ValueError(f"{name}: required for the {nq} flexible modes of flex_coupling")
             arr = _finite(np.zeros(nq) if value is None else value, name, (nq,))
             if np.any(arr < 0.0) or (name != "flex_log_decrement" and np.any(arr == 0.0)):
                 raise ValueError(f"{name}: must be positive (log decrement: non-negative), got {arr}")
@@ -206,44 +209,60 @@ def angular_momentum_b_1(x: np.ndarray, p: PlantArrays) -> np.ndarray:
 
 
 @njit(cache=True)
-def plant_derivative_1(
-    x: np.ndarray, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays
-) -> np.ndarray:
-    """ẋ of seed 000 eq (1): Λ̇ = ½Λ∘ω and {ω̇, q̈, Ω̇} = (A^o)^-1 {F^ω, F^q, F^r}."""
+def plant_derivative_into(
+    x: np.ndarray, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays,
+    force: np.ndarray, out: np.ndarray,
+) -> None:
+    """Write ẋ of seed 000 eq (1) into ``out`` using scratch ``force`` (3+n_q+n_w); no allocation."""
     nq = p.flex_mass.shape[0]
     nw = p.wheel_inertia.shape[0]
     n = 3 + nq + nw
-    g = angular_momentum_b_1(x, p)
     wx, wy, wz = x[4], x[5], x[6]
-    force = np.empty(n)
-    force[0] = -(wy * g[2] - wz * g[1]) + ext_torque_b[0]
-    force[1] = -(wz * g[0] - wx * g[2]) + ext_torque_b[1]
-    force[2] = -(wx * g[1] - wy * g[0]) + ext_torque_b[2]
+    g0 = p.inertia[0, 0] * wx + p.inertia[0, 1] * wy + p.inertia[0, 2] * wz
+    g1 = p.inertia[1, 0] * wx + p.inertia[1, 1] * wy + p.inertia[1, 2] * wz
+    g2 = p.inertia[2, 0] * wx + p.inertia[2, 1] * wy + p.inertia[2, 2] * wz
     for j in range(nq):
+        qd = x[7 + nq + j]
+        g0 += p.flex_coupling[0, j] * qd
+        g1 += p.flex_coupling[1, j] * qd
+        g2 += p.flex_coupling[2, j] * qd
         om = p.flex_freq[j]
-        force[3 + j] = -p.flex_mass[j] * (p.flex_decrement[j] / np.pi * om * x[7 + nq + j] + om * om * x[7 + j])
-    friction = friction_torque_1(x[7 + 2 * nq :], p.friction)
+        force[3 + j] = -p.flex_mass[j] * (p.flex_decrement[j] / np.pi * om * qd + om * om * x[7 + j])
+        out[7 + j] = qd
     for w in range(nw):
-        force[3 + nq + w] = wheel_motor_torque[w] - friction[w]
-    xdot = np.empty(x.shape[0])
+        speed = x[7 + 2 * nq + w]
+        h = p.wheel_inertia[w] * speed
+        g0 += p.wheel_axes[0, w] * h
+        g1 += p.wheel_axes[1, w] * h
+        g2 += p.wheel_axes[2, w] * h
+        force[3 + nq + w] = wheel_motor_torque[w] - friction_torque_one_wheel(speed, p.friction, w)
+    force[0] = wz * g1 - wy * g2 + ext_torque_b[0]
+    force[1] = wx * g2 - wz * g0 + ext_torque_b[1]
+    force[2] = wy * g0 - wx * g1 + ext_torque_b[2]
     q0, q1, q2, q3 = x[0], x[1], x[2], x[3]
-    xdot[0] = 0.5 * (-q1 * wx - q2 * wy - q3 * wz)
-    xdot[1] = 0.5 * (q0 * wx + q2 * wz - q3 * wy)
-    xdot[2] = 0.5 * (q0 * wy + q3 * wx - q1 * wz)
-    xdot[3] = 0.5 * (q0 * wz + q1 * wy - q2 * wx)
-    for j in range(nq):
-        xdot[7 + j] = x[7 + nq + j]
+    out[0] = 0.5 * (-q1 * wx - q2 * wy - q3 * wz)
+    out[1] = 0.5 * (q0 * wx + q2 * wz - q3 * wy)
+    out[2] = 0.5 * (q0 * wy + q3 * wx - q1 * wz)
+    out[3] = 0.5 * (q0 * wz + q1 * wy - q2 * wx)
     for r in range(n):
         acc = 0.0
         for c in range(n):
             acc += p.mass_inv[r, c] * force[c]
         if r < 3:
-            xdot[4 + r] = acc
-        elif r < 3 + nq:
-            xdot[7 + nq + (r - 3)] = acc
+            out[4 + r] = acc
         else:
-            xdot[7 + 2 * nq + (r - 3 - nq)] = acc
-    return xdot
+            out[4 + nq + r] = acc  # q̈ at 7+nq+(r−3), Ω̇ at 7+2nq+(r−3−nq): both 4+nq+r
+
+
+@njit(cache=True)
+def plant_derivative_1(
+    x: np.ndarray, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays
+) -> np.ndarray:
+    """ẋ of seed 000 eq (1): Λ̇ = ½Λ∘ω and {ω̇, q̈, Ω̇} = (A^o)^-1 {F^ω, F^q, F^r} (compiled kernel)."""
+    out = np.empty(x.shape[0])
+    force = np.empty(p.mass_inv.shape[0])
+    plant_derivative_into(x, wheel_motor_torque, ext_torque_b, p, force, out)
+    return out
 
 
 @njit(cache=True)

@@ -41,6 +41,7 @@ __all__ = [
     "ge_normalized_momentum",
     "friction_torque",
     "friction_torque_1",
+    "friction_torque_one_wheel",
     "limited_motor_torque",
     "limited_motor_torque_1",
     "aero_drag_torque",
@@ -191,18 +192,24 @@ def ge_normalized_momentum(h_nms: np.ndarray, max_momentum_nms: float, gamma_rad
 
 
 @njit(cache=True)
+def friction_torque_one_wheel(speed_rad_s: float, friction: np.ndarray, p: int) -> float:
+    """Resisting torque of wheel p: m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω√|Ω| (seed 000 eq 1, seed 002 eq 4)."""
+    w = speed_rad_s
+    sat_speed = friction[1, p]
+    if sat_speed > 0.0:
+        dry = min(1.0, max(-1.0, w / sat_speed))
+    else:
+        dry = 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
+    return friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w))
+
+
+@njit(cache=True)
 def friction_torque_1(speed_rad_s: np.ndarray, friction: np.ndarray) -> np.ndarray:
-    """Resisting torque m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω√|Ω| per wheel (seed 000 eq 1, seed 002 eq 4)."""
+    """Resisting friction torque of every wheel (seed 000 eq 1 m^f, seed 002 eq 4), compiled kernel."""
     n = speed_rad_s.shape[0]
     out = np.empty(n)
     for p in range(n):
-        w = speed_rad_s[p]
-        sat_speed = friction[1, p]
-        if sat_speed > 0.0:
-            dry = min(1.0, max(-1.0, w / sat_speed))
-        else:
-            dry = 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
-        out[p] = friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w))
+        out[p] = friction_torque_one_wheel(speed_rad_s[p], friction, p)
     return out
 
 
