@@ -1,0 +1,23 @@
+"""Min/max downsampling keeps every extreme and respects max_points."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from backend.downsampling import minmax_indices
+
+
+def test_global_extremes_of_every_column_survive() -> None:
+    rng = np.random.default_rng(7)
+    y = rng.normal(size=(100_003, 2))
+    keep = minmax_indices(y, 1000)
+    assert len(keep) <= 1000 and np.all(np.diff(keep) > 0)
+    for c in range(2):
+        assert np.argmax(y[:, c]) in keep and np.argmin(y[:, c]) in keep
+
+
+def test_short_series_is_returned_whole_and_bad_max_points_named() -> None:
+    assert np.array_equal(minmax_indices(np.arange(5.0), 10), np.arange(5))
+    with pytest.raises(ValueError, match="max_points"):
+        minmax_indices(np.arange(5.0), 1)

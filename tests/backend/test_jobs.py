@@ -1,0 +1,96 @@
+"""Simulation jobs through the API: real worker processes, limits, queue bound, cancel, restart."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from fastapi.testclient import TestClient
+
+from backend.app import create_app
+from backend.auth import Role
+from backend.repositories.jobs import JobRepository
+from backend.services import build_services
+from tests.backend.conftest import bearer, make_settings
+
+JOB_TIMEOUT_S = 60.0  # spawn start-up (~1-2 s on these 2 cores) plus the run, with margin
+ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level
+SHORT_SPIN = {"kind": "rigid-spin", "duration_s": 2.0, "dt_s": 0.01,
+              "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
+              "omega0_rad_s": [[0.01, -0.02, 0.03], [0.05, -0.04, 0.07]]}
+LONG_SPIN = {"kind": "rigid-spin", "duration_s": 2000.0, "dt_s": 0.001}
+
+
+def _wait(client: TestClient, job_id: str, token: str, states: tuple[str, ...]) -> dict:
+    deadline = time.monotonic() + JOB_TIMEOUT_S
+    while time.monotonic() < deadline:
+        job = client.get(f"/api/v1/simulations/{job_id}", headers=bearer(token)).json()
+        if job["status"] in states:
+            return job
+        time.sleep(0.1)
+    raise AssertionError(f"job {job_id} never reached {states}: {job}")
+
+
+def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
+        client: TestClient, tokens: dict[str, str]) -> None:
+    answer = client.post("/api/v1/simulations", json=SHORT_SPIN, headers=bearer(tokens["operator"]))
+    assert answer.status_code == 202
+    job = _wait(client, answer.json()["id"], tokens["viewer"], ("succeeded", "failed"))
+    assert job["status"] == "succeeded", job["error"]
+    assert job["progress"] == 1.0
+    assert max(job["summary"]["energy_rel_drift"]) < ENERGY_DRIFT_TOLERANCE
+    files = client.get(f"/api/v1/simulations/{job['id']}/files", headers=bearer(tokens["viewer"])).json()
+    assert {f["name"] for f in files} == {"scenario.json", "summary.json", "trajectory.npz"}
+    series = client.get(f"/api/v1/simulations/{job['id']}/series/omega_b_rad_s?member=1&max_points=12",
+                        headers=bearer(tokens["viewer"])).json()
+    assert series["total_points"] == 201 and len(series["t_s"]) <= 12
+    assert np.allclose(series["values"][0], SHORT_SPIN["omega0_rad_s"][1])
+    audit = client.get("/api/v1/audit?action=simulation.create", headers=bearer(tokens["admin"])).json()
+    assert audit[0]["target"] == f"simulation/{job['id']}"
+
+
+def test_over_a_limit_is_422_naming_the_limit(tmp_path: Path, database_url: str) -> None:
+    settings = make_settings(tmp_path, database_url, max_sim_duration_s=100.0, max_batch_size=2,
+                             max_output_mb=1.0)
+    with TestClient(create_app(settings)) as client:
+        token = client.app.state.services.auth.issue("op", Role.operator)[1]
+        cases = {"max_sim_duration_s": {"kind": "rigid-spin", "duration_s": 101.0},
+                 "max_batch_size": {"kind": "rigid-spin", "inertia_kg_m2": [[1, 2, 3]] * 3,
+                                    "omega0_rad_s": [[0, 0, 1]] * 3},
+                 "max_output_mb": {"kind": "rigid-spin", "duration_s": 99.0, "dt_s": 0.001}}
+        for limit, body in cases.items():
+            answer = client.post("/api/v1/simulations", json=body, headers=bearer(token))
+            assert answer.status_code == 422 and answer.json()["field"] == limit, answer.json()
+
+
+def test_full_queue_is_429_with_retry_after_and_cancel_stops_the_worker(
+        client: TestClient, tokens: dict[str, str]) -> None:
+    operator = bearer(tokens["operator"])
+    first = client.post("/api/v1/simulations", json=LONG_SPIN, headers=operator).json()["id"]
+    second = client.post("/api/v1/simulations", json=LONG_SPIN, headers=operator).json()["id"]
+    refused = client.post("/api/v1/simulations", json=LONG_SPIN, headers=operator)
+    assert refused.status_code == 429 and int(refused.headers["Retry-After"]) > 0
+    assert refused.json()["field"] == "job_queue_size"
+    running = _wait(client, first, tokens["viewer"], ("running",))
+    handle = client.app.state.services.jobs._active[first]
+    assert client.delete(f"/api/v1/simulations/{second}", headers=operator).json()["status"] == "cancelled"
+    assert client.delete(f"/api/v1/simulations/{first}", headers=operator).json()["status"] == "cancelled"
+    deadline = time.monotonic() + JOB_TIMEOUT_S
+    while handle.process is not None and handle.process.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert running["status"] == "running" and not handle.process.is_alive()
+    again = client.delete(f"/api/v1/simulations/{first}", headers=operator)
+    assert again.status_code == 409
+    assert client.post("/api/v1/simulations", json=SHORT_SPIN, headers=operator).status_code == 202
+
+
+def test_jobs_left_running_by_a_dead_server_are_marked_interrupted(tmp_path: Path, database_url: str) -> None:
+    settings = make_settings(tmp_path, database_url)
+    crashed = build_services(settings)
+    JobRepository(crashed.sessions).add("deadbeef", {"kind": "rigid-spin"}, "op")
+    JobRepository(crashed.sessions).mark_running("deadbeef", str(tmp_path))
+    crashed.engine.dispose()
+    with TestClient(create_app(settings)) as client:
+        row = client.app.state.services.job_repo.get("deadbeef")
+    assert row.status == "interrupted" and "restarted" in row.error
