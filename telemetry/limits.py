@@ -10,10 +10,24 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-__all__ = ["NOMINAL", "YELLOW", "RED", "SEVERITY_NAMES", "LimitSet", "limit_levels", "level_changes"]
+if TYPE_CHECKING:
+    from telemetry.dictionary import Dictionary
+
+__all__ = [
+    "NOMINAL",
+    "YELLOW",
+    "RED",
+    "SEVERITY_NAMES",
+    "LimitSet",
+    "limit_levels",
+    "level_changes",
+    "limit_set",
+    "dictionary_limits",
+]
 
 NOMINAL, YELLOW, RED = 0, 1, 2
 SEVERITY_NAMES = ("nominal", "yellow", "red")
@@ -55,3 +69,23 @@ def level_changes(levels: np.ndarray, initial_level: int = NOMINAL) -> np.ndarra
         raise ValueError(f"initial_level: expected 0, 1 or 2, got {initial_level}")
     previous = np.concatenate(([np.int8(initial_level)], lv[:-1]))
     return np.flatnonzero(lv != previous)
+
+
+def limit_set(red_low: float | None, yellow_low: float | None, yellow_high: float | None, red_high: float | None) -> LimitSet:
+    """LimitSet from optional bounds (None = none); a missing yellow bound falls back to the red one."""
+    rl = -math.inf if red_low is None else float(red_low)
+    rh = math.inf if red_high is None else float(red_high)
+    yl = rl if yellow_low is None else float(yellow_low)
+    yh = rh if yellow_high is None else float(yellow_high)
+    return LimitSet(yellow_low=yl, yellow_high=yh, red_low=rl, red_high=rh)
+
+
+def dictionary_limits(dictionary: Dictionary) -> dict[str, LimitSet]:
+    """Limits of every limited parameter of a telemetry dictionary (telemetry.dictionary.Dictionary)."""
+    limits: dict[str, LimitSet] = {}
+    for packet in dictionary.packets.values():
+        for parameter in (*packet.parameters, *packet.derived):
+            b = parameter.limits
+            if any(v is not None for v in (b.red_low, b.yellow_low, b.yellow_high, b.red_high)):
+                limits[parameter.name] = limit_set(b.red_low, b.yellow_low, b.yellow_high, b.red_high)
+    return limits
