@@ -1,0 +1,406 @@
+"""Distribution of the required body torque between reaction wheels and the magnetic driver (seed 000 §3).
+
+Sign convention (seed 000 eq 5): ``A M = −M^r``. ``A`` (3 × n) holds the wheel spin axes in body
+axes as columns, ``M`` the motor torques on the wheels (N·m, they change the wheel momenta,
+ḣ_p = m_p) and ``M^r`` the torque required on the body; the wheels' reaction on the body is −A M.
+The magnetic driver (MD) adds the torque L × B (seed 003 eq 26) of its dipole L (A·m²).
+
+The availability mask selects the law: four wheels → the GE explicit distribution law (6) or the
+minimum-norm pseudo-inverse; any three → the square inverse; any two → wheels + MD. Every law
+exists as a numba kernel (``allocate_1``) for the engine and as a vectorised API (``allocate``).
+
+Seed defects corrected here (DESIGN.md, and found while deriving):
+- κ ≡ ⟨e^m, b⟩ is identically zero; we use κ = ⟨e_pq, b⟩ and allow the MD where |κ| ≤ 1/2.
+- e^m = b × e_pq is a unit vector only when b ⊥ e_pq: we normalise it, so m^m is the MD torque.
+- M^m = −L × B contradicts L = (m^m/B)(b × e^m) (that L gives L × B = +m^m e^m): we keep the
+  physical torque L × B of seed 003 eq (26), which with seed 000's L yields M^m = e^m m^m.
+- |κ| ≤ 1/2 does not guarantee that {a_p, a_q, −e^m} is invertible (its determinant is
+  ∝ ⟨b, a_p − a_q⟩): a pair is also refused when e^m covers less than ``MIN_MD_PLANE_COVER``
+  of the pair plane's normal.
+- The row a_f printed in the seed is not the gradient of f_ρ (wrong power of q_s, h_2 for h_1 in
+  a_f2, and the sign of a_f3,4, which can make {A, a_f} singular). We use the exact gradient, so
+  that df_ρ/dt = −Sat(μ_ρ f_ρ, φ_ρ) holds; ``Sat(φ_ρ, μ_ρ f_ρ)`` is read as μ_ρ f_ρ clipped at ±φ_ρ.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "STATUS_OK",
+    "STATUS_MD_SATURATED",
+    "STATUS_KAPPA_REFUSED",
+    "STATUS_SINGULAR",
+    "STATUS_TOO_FEW_WHEELS",
+    "LAW_GE_DISTRIBUTION",
+    "LAW_PSEUDO_INVERSE",
+    "KAPPA_MAX",
+    "MIN_MD_PLANE_COVER",
+    "AllocationConfig",
+    "ge_axes",
+    "tuning_function",
+    "tuning_gradient",
+    "distribute_momentum",
+    "allocate",
+    "tuning_function_1",
+    "tuning_gradient_1",
+    "distribute_momentum_1",
+    "allocate_1",
+]
+
+STATUS_OK = 0  # M^r reproduced exactly
+STATUS_MD_SATURATED = 1  # rods at |l_i| = l^m: wheels and MD command scaled down together
+STATUS_KAPPA_REFUSED = 2  # |κ| > 1/2: MD refused, the two wheels give the in-plane part only
+STATUS_SINGULAR = 3  # wheel (or wheel + MD) geometry singular: least-squares wheel torques only
+STATUS_TOO_FEW_WHEELS = 4  # fewer than two wheels: no torque
+
+LAW_GE_DISTRIBUTION = 0
+LAW_PSEUDO_INVERSE = 1
+
+KAPPA_MAX = 0.5  # seed 000 §3: cos(π/3)
+MIN_MD_PLANE_COVER = 0.05  # |⟨e^m, n_pq⟩| below this needs an MD torque > 20× the out-of-plane demand
+_SINGULAR_PIVOT = 1e-9  # relative pivot below which a small system is treated as singular
+
+# Layout of the float64 parameter vector of the kernels (AllocationConfig.as_array).
+P_LAW4, P_GAMMA, P_RHO, P_MU_RHO, P_PHI_RHO, P_H_MAX, P_L_MAX = range(7)
+
+
+@dataclass(frozen=True)
+class AllocationConfig:
+    """Parameters of the allocation laws (seed 000 eq 6 and §3, SI units).
+
+    Defaults: γ = 30° as in the peer GE cluster of DESIGN.md (the seed gives no γ; γ < 45° keeps
+    q_s real over the whole momentum box); ρ = 0.5 inside the seed's 0 < ρ < 1; μ_ρ = 0.05 s⁻¹
+    tunes f_ρ in ~20 s, far slower than the 2 s control period; φ_ρ = 0.002 s⁻¹ caps the null-motion
+    torque to h^m φ_ρ ≈ 0.024 N·m, 12 % of an HR12's 0.2 N·m; h^m = 12 N·m·s (HR12);
+    l^m = 25 A·m² (seed 000 §5).
+    """
+
+    law4: int = LAW_GE_DISTRIBUTION
+    gamma_rad: float = np.deg2rad(30.0)
+    rho: float = 0.5
+    mu_rho_per_s: float = 0.05
+    phi_rho_per_s: float = 0.002
+    h_max_nms: float = 12.0
+    l_max_am2: float = 25.0
+
+    def __post_init__(self) -> None:
+        if self.law4 not in (LAW_GE_DISTRIBUTION, LAW_PSEUDO_INVERSE):
+            raise ValueError("law4: use LAW_GE_DISTRIBUTION (0) or LAW_PSEUDO_INVERSE (1)")
+        if not 0.0 < self.gamma_rad < np.pi / 4:
+            raise ValueError("gamma_rad: GE half-angle must lie in (0, π/4) so that q_s stays real")
+        if not 0.0 < self.rho < 1.0:
+            raise ValueError("rho: seed 000 requires 0 < ρ < 1")
+        for name in ("mu_rho_per_s", "phi_rho_per_s", "h_max_nms", "l_max_am2"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name}: must be positive")
+
+    def as_array(self) -> np.ndarray:
+        """Parameter vector for the kernels, indexed by the P_* constants."""
+        return np.array(
+            [self.law4, self.gamma_rad, self.rho, self.mu_rho_per_s, self.phi_rho_per_s, self.h_max_nms, self.l_max_am2],
+            dtype=np.float64,
+        )
+
+
+def ge_axes(gamma_rad: float, drf_roll_rad: float = np.pi / 4) -> np.ndarray:
+    """Spin axes A = [π/4]_1^t A^d of the GE cluster in body axes, 3 × 4 (seed 000 eq 1)."""
+    if not 0.0 < gamma_rad < np.pi / 2:
+        raise ValueError("gamma_rad: must lie in (0, π/2)")
+    c, s = np.cos(gamma_rad), np.sin(gamma_rad)
+    a_d = np.array([[c, c, c, c], [s, -s, 0.0, 0.0], [0.0, 0.0, s, -s]])
+    cr, sr = np.cos(drf_roll_rad), np.sin(drf_roll_rad)
+    turn_1 = np.array([[1.0, 0.0, 0.0], [0.0, cr, sr], [0.0, -sr, cr]])  # passive [φ]_1
+    return turn_1.T @ a_d
+
+
+@njit(cache=True)
+def _pair_terms(h1: float, h2: float, c: float, s: float) -> tuple[float, float, float, float]:
+    """x̃ of one wheel pair and its partial derivatives ∂x̃/∂h_1, ∂x̃/∂h_2 (seed 000 eq 6)."""
+    d = h1 - h2
+    q2 = 4.0 * c * c - s * s * d * d
+    q = np.sqrt(q2)
+    xt = c * (h1 + h2) / q
+    q3 = q2 * q
+    return xt, 2.0 * c * (2.0 * c * c + s * s * h2 * d) / q3, 2.0 * c * (2.0 * c * c - s * s * h1 * d) / q3, q2
+
+
+@njit(cache=True)
+def tuning_function_1(h_norm: np.ndarray, gamma: float, rho: float) -> float:
+    """Cluster tuning function f_ρ(h) = x̃1 − x̃2 + ρ(x̃1 x̃2 − 1), h = h_p/h^m (seed 000 eq 6)."""
+    c, s = np.cos(gamma), np.sin(gamma)
+    x1t = _pair_terms(h_norm[0], h_norm[1], c, s)[0]
+    x2t = _pair_terms(h_norm[2], h_norm[3], c, s)[0]
+    return x1t - x2t + rho * (x1t * x2t - 1.0)
+
+
+@njit(cache=True)
+def tuning_gradient_1(h_norm: np.ndarray, gamma: float, rho: float) -> np.ndarray:
+    """Row a_f = ∂f_ρ/∂h_p of the distribution law (seed 000 eq 6, exact gradient)."""
+    c, s = np.cos(gamma), np.sin(gamma)
+    x1t, d11, d12, _ = _pair_terms(h_norm[0], h_norm[1], c, s)
+    x2t, d23, d24, _ = _pair_terms(h_norm[2], h_norm[3], c, s)
+    a_f = np.empty(4)
+    a_f[0] = d11 * (1.0 + rho * x2t)
+    a_f[1] = d12 * (1.0 + rho * x2t)
+    a_f[2] = -d23 * (1.0 - rho * x1t)
+    a_f[3] = -d24 * (1.0 - rho * x1t)
+    return a_f
+
+
+@njit(cache=True)
+def distribute_momentum_1(h_drf_norm: np.ndarray, gamma: float, rho: float) -> np.ndarray:
+    """Wheel momenta h_p/h^m from the normed DRF cluster momentum (x, y, z) by seed 000 eq 6 (i)–(ii)."""
+    c, s = np.cos(gamma), np.sin(gamma)
+    x, y, z = h_drf_norm[0], h_drf_norm[1], h_drf_norm[2]
+    qy = np.sqrt(4.0 * c * c - y * y)
+    qz = np.sqrt(4.0 * c * c - z * z)
+    q = qy + qz
+    inner = (qy - qz) * (0.5 * x) + rho * (qy * qz - 0.25 * x * x)
+    delta = (q / rho) * (1.0 - np.sqrt(1.0 - 4.0 * rho * inner / (q * q)))
+    x1, x2 = 0.5 * (x + delta), 0.5 * (x - delta)
+    h = np.empty(4)
+    h[0] = 0.5 * (x1 / c + y / s)
+    h[1] = 0.5 * (x1 / c - y / s)
+    h[2] = 0.5 * (x2 / c + z / s)
+    h[3] = 0.5 * (x2 / c - z / s)
+    return h
+
+
+@njit(cache=True)
+def _solve(m: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Solve the small square system m x = rhs by Gaussian elimination with partial pivoting."""
+    n = rhs.shape[0]
+    a = m.copy()
+    x = rhs.copy()
+    scale = np.max(np.abs(a))
+    for col in range(n):
+        piv = col + np.argmax(np.abs(a[col:, col]))
+        if abs(a[piv, col]) <= _SINGULAR_PIVOT * scale:
+            return x, False
+        if piv != col:
+            for j in range(n):
+                a[col, j], a[piv, j] = a[piv, j], a[col, j]
+            x[col], x[piv] = x[piv], x[col]
+        for r in range(col + 1, n):
+            f = a[r, col] / a[col, col]
+            for j in range(col, n):
+                a[r, j] -= f * a[col, j]
+            x[r] -= f * x[col]
+    for r in range(n - 1, -1, -1):
+        acc = x[r]
+        for j in range(r + 1, n):
+            acc -= a[r, j] * x[j]
+        x[r] = acc / a[r, r]
+    return x, True
+
+
+@njit(cache=True)
+def _min_norm(axes: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Minimum-norm solution M = −A^t (A A^t)^{-1} M^r (seed 000 §3, Basilisk rwMotorTorque)."""
+    y, ok = _solve(axes @ axes.T, torque)
+    return -(axes.T @ y), ok
+
+
+@njit(cache=True)
+def _ge_law(axes: np.ndarray, torque: np.ndarray, h_wheels: np.ndarray, params: np.ndarray) -> tuple[np.ndarray, bool]:
+    """GE explicit law M = {A, a_f}^{-1}{−M^r, −h^m Sat(μ_ρ f_ρ, φ_ρ)} (seed 000 eq 6)."""
+    h_max = params[P_H_MAX]
+    h_norm = h_wheels / h_max
+    gamma, rho = params[P_GAMMA], params[P_RHO]
+    m4 = np.empty((4, 4))
+    m4[:3, :] = axes
+    m4[3, :] = tuning_gradient_1(h_norm, gamma, rho)
+    rhs = np.empty(4)
+    rhs[:3] = -torque
+    drive = params[P_MU_RHO] * tuning_function_1(h_norm, gamma, rho)
+    cap = params[P_PHI_RHO]
+    rhs[3] = -h_max * min(max(drive, -cap), cap)
+    return _solve(m4, rhs)
+
+
+@njit(cache=True)
+def _pair_least_squares(ap: np.ndarray, aq: np.ndarray, torque: np.ndarray) -> tuple[float, float]:
+    """Wheel torques of a pair minimising |a_p m_p + a_q m_q + M^r| (in-plane part of M^r)."""
+    g = np.empty((2, 2))
+    g[0, 0], g[0, 1], g[1, 1] = ap @ ap, ap @ aq, aq @ aq
+    g[1, 0] = g[0, 1]
+    rhs = np.empty(2)
+    rhs[0], rhs[1] = -(ap @ torque), -(aq @ torque)
+    m, ok = _solve(g, rhs)
+    if not ok:
+        return 0.0, 0.0
+    return m[0], m[1]
+
+
+@njit(cache=True)
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    r = np.empty(3)
+    r[0] = u[1] * v[2] - u[2] * v[1]
+    r[1] = u[2] * v[0] - u[0] * v[2]
+    r[2] = u[0] * v[1] - u[1] * v[0]
+    return r
+
+
+@njit(cache=True)
+def _two_wheels_md(
+    ap: np.ndarray, aq: np.ndarray, torque: np.ndarray, b_field: np.ndarray, l_max: float
+) -> tuple[float, float, np.ndarray, int]:
+    """Two wheels + MD: A^m_pq {m_p, m_q, m^m} = −M^r, L = (m^m/B)(b × e^m) (seed 000 §3)."""
+    b_norm = np.sqrt(b_field @ b_field)
+    dipole = np.zeros(3)
+    if b_norm == 0.0:
+        mp, mq = _pair_least_squares(ap, aq, torque)
+        return mp, mq, dipole, STATUS_SINGULAR
+    b = b_field / b_norm
+    s = ap + aq
+    e_pq = s / np.sqrt(s @ s)
+    if abs(e_pq @ b) > KAPPA_MAX:
+        mp, mq = _pair_least_squares(ap, aq, torque)
+        return mp, mq, dipole, STATUS_KAPPA_REFUSED
+    e_m = _cross(b, e_pq)
+    e_m /= np.sqrt(e_m @ e_m)
+    normal = _cross(ap, aq)
+    normal /= np.sqrt(normal @ normal)
+    if abs(e_m @ normal) < MIN_MD_PLANE_COVER:
+        mp, mq = _pair_least_squares(ap, aq, torque)
+        return mp, mq, dipole, STATUS_SINGULAR
+    a_m = np.empty((3, 3))
+    a_m[:, 0], a_m[:, 1], a_m[:, 2] = ap, aq, -e_m
+    sol, _ = _solve(a_m, -torque)
+    dipole = (sol[2] / b_norm) * _cross(b, e_m)
+    peak = np.max(np.abs(dipole))
+    if peak > l_max:
+        k = l_max / peak
+        return sol[0] * k, sol[1] * k, dipole * k, STATUS_MD_SATURATED
+    return sol[0], sol[1], dipole, STATUS_OK
+
+
+@njit(cache=True)
+def allocate_1(
+    torque_req_b: np.ndarray,
+    axes_b: np.ndarray,
+    available: np.ndarray,
+    h_wheels_nms: np.ndarray,
+    b_field_b_t: np.ndarray,
+    params: np.ndarray,
+    wheel_torque_out: np.ndarray,
+    dipole_out: np.ndarray,
+) -> int:
+    """Wheel torques and MD dipole for M^r by the law the mask selects (seed 000 eqs 5–6, §3); returns a status."""
+    n = axes_b.shape[1]
+    idx = np.flatnonzero(available)
+    wheel_torque_out[:] = 0.0
+    dipole_out[:] = 0.0
+    n_on = idx.shape[0]
+    if n_on < 2:
+        return STATUS_TOO_FEW_WHEELS
+    if n_on == 2:
+        mp, mq, dip, status = _two_wheels_md(
+            axes_b[:, idx[0]].copy(), axes_b[:, idx[1]].copy(), torque_req_b, b_field_b_t, params[P_L_MAX]
+        )
+        wheel_torque_out[idx[0]], wheel_torque_out[idx[1]] = mp, mq
+        dipole_out[:] = dip
+        return status
+    sub = np.empty((3, n_on))
+    for j in range(n_on):
+        sub[:, j] = axes_b[:, idx[j]]
+    if n_on == 3:
+        m, ok = _solve(sub, -torque_req_b)
+    elif n == 4 and int(params[P_LAW4]) == LAW_GE_DISTRIBUTION:
+        m, ok = _ge_law(sub, torque_req_b, h_wheels_nms, params)
+    else:
+        m, ok = _min_norm(sub, torque_req_b)
+    if not ok:
+        m, ok = _min_norm(sub, torque_req_b)
+    if not ok:
+        return STATUS_SINGULAR
+    for j in range(n_on):
+        wheel_torque_out[idx[j]] = m[j]
+    return STATUS_OK
+
+
+def _as_field(x: np.ndarray, name: str, last: int) -> np.ndarray:
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.shape[-1:] != (last,):
+        raise ValueError(f"{name}: expected shape (..., {last}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: contains NaN or infinite values")
+    return arr
+
+
+def _check_ge_axes(axes: np.ndarray, gamma_rad: float) -> None:
+    """The GE law needs A = R A^d for a rotation R, i.e. the Gram matrix AᵗA of A^d."""
+    gram_ge = ge_axes(gamma_rad).T @ ge_axes(gamma_rad)
+    if axes.shape != (3, 4) or not np.allclose(axes.T @ axes, gram_ge, atol=1e-9):
+        raise ValueError(
+            "axes_b: the GE law needs four unit axes ordered as seed 000's A^d (pairs 1–2 and 3–4) with "
+            "half-angle gamma_rad; build them with ge_axes() or use law4=LAW_PSEUDO_INVERSE"
+        )
+
+
+def tuning_function(h_wheels_nms: np.ndarray, config: AllocationConfig = AllocationConfig()) -> np.ndarray:
+    """f_ρ of wheel momenta (..., 4) in N·m·s (seed 000 eq 6)."""
+    h = _as_field(h_wheels_nms, "h_wheels_nms", 4) / config.h_max_nms
+    flat = h.reshape(-1, 4)
+    out = np.array([tuning_function_1(row, config.gamma_rad, config.rho) for row in flat])
+    return out.reshape(h.shape[:-1])
+
+
+def tuning_gradient(h_wheels_nms: np.ndarray, config: AllocationConfig = AllocationConfig()) -> np.ndarray:
+    """Row a_f = ∂f_ρ/∂(h_p/h^m) for wheel momenta (..., 4) in N·m·s (seed 000 eq 6)."""
+    h = _as_field(h_wheels_nms, "h_wheels_nms", 4) / config.h_max_nms
+    flat = h.reshape(-1, 4)
+    out = np.array([tuning_gradient_1(row, config.gamma_rad, config.rho) for row in flat])
+    return out.reshape(h.shape)
+
+
+def distribute_momentum(
+    momentum_b_nms: np.ndarray, axes_b: np.ndarray, config: AllocationConfig = AllocationConfig()
+) -> np.ndarray:
+    """Wheel momenta (..., 4) in N·m·s with A h = H and f_ρ(h) = 0 (seed 000 eq 6 (i)–(ii))."""
+    momentum = _as_field(momentum_b_nms, "momentum_b_nms", 3)
+    axes = _as_field(axes_b, "axes_b", 4)
+    _check_ge_axes(axes, config.gamma_rad)
+    a_d = ge_axes(config.gamma_rad, 0.0)
+    rot = axes @ np.linalg.pinv(a_d)  # A = R A^d
+    drf = (momentum / config.h_max_nms) @ rot  # R^t H per row
+    flat = drf.reshape(-1, 3)
+    out = np.array([distribute_momentum_1(row, config.gamma_rad, config.rho) for row in flat])
+    return out.reshape(momentum.shape[:-1] + (4,)) * config.h_max_nms
+
+
+def allocate(
+    torque_req_b_nm: np.ndarray,
+    axes_b: np.ndarray,
+    available: np.ndarray,
+    h_wheels_nms: np.ndarray,
+    b_field_b_t: np.ndarray,
+    config: AllocationConfig = AllocationConfig(),
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vectorised allocation (seed 000 eqs 5–6, §3): wheel torques (..., n) N·m, dipole (..., 3) A·m², status (...)."""
+    torque = _as_field(torque_req_b_nm, "torque_req_b_nm", 3)
+    axes = np.asarray(axes_b, dtype=np.float64)
+    if axes.ndim != 2 or axes.shape[0] != 3:
+        raise ValueError(f"axes_b: expected shape (3, n_wheels), got {axes.shape}")
+    n = axes.shape[1]
+    mask = np.asarray(available, dtype=bool)
+    h = _as_field(h_wheels_nms, "h_wheels_nms", n)
+    b = _as_field(b_field_b_t, "b_field_b_t", 3)
+    if mask.shape[-1:] != (n,):
+        raise ValueError(f"available: expected shape (..., {n}), got {mask.shape}")
+    if config.law4 == LAW_GE_DISTRIBUTION and n == 4:
+        _check_ge_axes(axes, config.gamma_rad)
+    shape = np.broadcast_shapes(torque.shape[:-1], mask.shape[:-1], h.shape[:-1], b.shape[:-1])
+    torque, mask, h, b = (np.broadcast_to(v, shape + v.shape[-1:]).reshape(-1, v.shape[-1]) for v in (torque, mask, h, b))
+    params = config.as_array()
+    wheel = np.zeros((torque.shape[0], n))
+    dipole = np.zeros((torque.shape[0], 3))
+    status = np.empty(torque.shape[0], dtype=np.int64)
+    axes_c = np.ascontiguousarray(axes)
+    for i in range(torque.shape[0]):
+        status[i] = allocate_1(torque[i].copy(), axes_c, mask[i].copy(), h[i].copy(), b[i].copy(), params, wheel[i], dipole[i])
+    return wheel.reshape(shape + (n,)), dipole.reshape(shape + (3,)), status.reshape(shape)

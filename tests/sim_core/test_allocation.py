@@ -1,0 +1,173 @@
+"""Wheel and magnetic-driver allocation (seed 000 §3, eqs 5–6) against Basilisk's truth, exact
+derivatives and the defining equations A M = −M^r, f_ρ → 0, L × B."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sim_core import allocation as al
+
+EXACT = 1e-10  # float64 round-off of 3×3 and 4×4 solves on O(1) matrices
+FD_STEP = 1e-6  # central-difference step on normalised momenta: truncation ~1e-12, round-off ~1e-10
+FD_TOL = 1e-7
+BASILISK_DIGITS = 1e-7  # Basilisk's truth is printed with 7 decimals
+M_MAX_NM = 0.2  # HR12 wheel torque limit, the feasible box of the property tests
+B_EARTH_T = 3e-5  # typical field magnitude at 600 km
+
+CONFIG = al.AllocationConfig()
+AXES = al.ge_axes(CONFIG.gamma_rad)
+PAIRS = [(p, q) for p in range(4) for q in range(p + 1, 4)]
+
+unit = st.tuples(*[st.floats(-1.0, 1.0)] * 3).map(np.array).filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
+wheel_box = st.tuples(*[st.floats(-M_MAX_NM, M_MAX_NM)] * 4).map(np.array)
+momentum_box = st.tuples(*[st.floats(-0.95, 0.95)] * 4).map(lambda h: np.array(h) * CONFIG.h_max_nms)
+
+
+def test_min_norm_matches_basilisk_truth():
+    gs = np.array([[1, 0, 0, 1 / np.sqrt(3)], [0, 1, 0, 1 / np.sqrt(3)], [0, 0, 1, 1 / np.sqrt(3)]])
+    cfg = al.AllocationConfig(law4=al.LAW_PSEUDO_INVERSE)
+    wheel, dipole, status = al.allocate([1.0, -0.5, 0.7], gs, [True] * 4, np.zeros(4), [B_EARTH_T, 0, 0], cfg)
+    assert status == al.STATUS_OK
+    assert np.allclose(wheel, [-0.8, 0.7, -0.5, -0.3464102], atol=BASILISK_DIGITS)
+    assert np.all(dipole == 0.0)
+
+
+def test_min_norm_equals_numpy_pseudo_inverse():
+    cfg = al.AllocationConfig(law4=al.LAW_PSEUDO_INVERSE)
+    torque = np.random.default_rng(4).normal(size=(20, 3)) * 0.05
+    wheel, _, _ = al.allocate(torque, AXES, [True] * 4, np.zeros(4), [B_EARTH_T, 0, 0], cfg)
+    assert np.allclose(wheel, -(np.linalg.pinv(AXES) @ torque.T).T, atol=EXACT)
+
+
+@given(momentum_box)
+def test_tuning_row_is_the_gradient_of_f_rho(h):
+    grad = np.empty(4)
+    for i in range(4):
+        dh = np.zeros(4)
+        dh[i] = FD_STEP * CONFIG.h_max_nms
+        grad[i] = (al.tuning_function(h + dh) - al.tuning_function(h - dh)) / (2 * FD_STEP)
+    assert np.allclose(al.tuning_gradient(h), grad, atol=FD_TOL)
+
+
+@given(st.tuples(*[st.floats(-1.2, 1.2)] * 3).map(np.array))
+def test_momentum_distribution_reproduces_cluster_momentum_on_tuning_surface(h_norm_b):
+    momentum = h_norm_b * CONFIG.h_max_nms
+    h = al.distribute_momentum(momentum, AXES)
+    assert np.allclose(AXES @ h, momentum, atol=EXACT * CONFIG.h_max_nms)
+    assert abs(al.tuning_function(h)) < EXACT
+
+
+@settings(max_examples=200)
+@given(wheel_box, momentum_box, st.sampled_from([al.LAW_GE_DISTRIBUTION, al.LAW_PSEUDO_INVERSE]), st.integers(-1, 3))
+def test_every_feasible_torque_is_reproduced_by_four_and_three_wheel_laws(m0, h, law, failed):
+    mask = np.ones(4, dtype=bool)
+    if failed >= 0:
+        mask[failed] = False
+    m0 = np.where(mask, m0, 0.0)
+    torque_req = -AXES @ m0  # feasible by construction: some admissible wheel torques produce it
+    wheel, dipole, status = al.allocate(torque_req, AXES, mask, h, [B_EARTH_T, 0, 0], al.AllocationConfig(law4=law))
+    assert status == al.STATUS_OK
+    assert np.all(wheel[~mask] == 0.0)
+    assert np.allclose(AXES @ wheel, -torque_req, atol=EXACT)
+    assert np.all(dipole == 0.0)
+
+
+@given(momentum_box)
+def test_distribution_law_row_sets_the_tuning_rate(h):
+    wheel, _, _ = al.allocate([0.01, -0.02, 0.005], AXES, [True] * 4, h, [B_EARTH_T, 0, 0])
+    f = al.tuning_function(h)
+    f_dot = al.tuning_gradient(h) @ wheel / CONFIG.h_max_nms  # ḣ_p = m_p
+    expected = -np.clip(CONFIG.mu_rho_per_s * f, -CONFIG.phi_rho_per_s, CONFIG.phi_rho_per_s)
+    assert f_dot == pytest.approx(expected, abs=EXACT)
+
+
+def test_distribution_law_drives_f_rho_to_zero_while_delivering_torque():
+    h = np.array([6.0, -3.0, 8.0, 2.0])  # far from the tuning surface
+    torque_req = np.array([2e-3, -1e-3, 1.5e-3])
+    dt, f_start = 0.5, al.tuning_function(h)
+    for _ in range(2400):  # 1200 s ≈ 60 time constants 1/μ_ρ
+        wheel, _, status = al.allocate(torque_req, AXES, [True] * 4, h, [B_EARTH_T, 0, 0])
+        assert status == al.STATUS_OK and np.allclose(AXES @ wheel, -torque_req, atol=EXACT)
+        h = h + wheel * dt
+    assert abs(f_start) > 0.5
+    assert abs(al.tuning_function(h)) < 1e-6
+
+
+@settings(max_examples=300)
+@given(st.sampled_from(PAIRS), unit, unit, st.floats(1e-5, 1e-3))
+def test_two_wheels_and_md_reproduce_torque_where_kappa_allows(pair, b_dir, torque_dir, torque_nm):
+    mask = np.zeros(4, dtype=bool)
+    mask[list(pair)] = True
+    b_field = B_EARTH_T * b_dir
+    torque_req = torque_nm * torque_dir
+    wheel, dipole, status = al.allocate(torque_req, AXES, mask, np.zeros(4), b_field)
+    s = AXES[:, pair[0]] + AXES[:, pair[1]]
+    kappa = s @ b_dir / np.linalg.norm(s)
+    if abs(kappa) > al.KAPPA_MAX:
+        assert status == al.STATUS_KAPPA_REFUSED and np.all(dipole == 0.0)
+        return
+    if status == al.STATUS_SINGULAR:  # e^m nearly in the pair plane: covered by the next test
+        normal = np.cross(AXES[:, pair[0]], AXES[:, pair[1]])
+        e_m = np.cross(b_dir, s)
+        assert abs(e_m @ normal) / np.linalg.norm(e_m) / np.linalg.norm(normal) < al.MIN_MD_PLANE_COVER
+        return
+    achieved = -AXES @ wheel + np.cross(dipole, b_field)
+    assert abs(dipole @ b_field) <= EXACT * np.linalg.norm(dipole) * B_EARTH_T
+    if status == al.STATUS_OK:
+        assert np.allclose(achieved, torque_req, atol=EXACT * torque_nm)
+        assert np.max(np.abs(dipole)) <= CONFIG.l_max_am2
+    else:
+        assert status == al.STATUS_MD_SATURATED
+        assert np.max(np.abs(dipole)) == pytest.approx(CONFIG.l_max_am2)
+        scale = achieved @ torque_req / torque_nm**2
+        assert 0.0 < scale < 1.0 and np.allclose(achieved, scale * torque_req, atol=EXACT * torque_nm)
+
+
+def test_md_refused_when_field_lies_along_pair_direction():
+    mask = np.array([True, True, False, False])
+    e_pq = (AXES[:, 0] + AXES[:, 1]) / np.linalg.norm(AXES[:, 0] + AXES[:, 1])
+    wheel, dipole, status = al.allocate([1e-4, 2e-4, -1e-4], AXES, mask, np.zeros(4), B_EARTH_T * e_pq)
+    assert status == al.STATUS_KAPPA_REFUSED and np.all(dipole == 0.0)
+    plane = AXES[:, :2]
+    achieved = -plane @ wheel[:2]
+    residual = np.array([1e-4, 2e-4, -1e-4]) - achieved
+    assert np.allclose(plane.T @ residual, 0.0, atol=EXACT)  # least squares: residual ⟂ pair plane
+
+
+def test_md_refused_when_its_torque_cannot_leave_the_pair_plane():
+    mask = np.array([True, True, False, False])
+    a1, a2 = AXES[:, 0], AXES[:, 1]
+    e_pq = (a1 + a2) / np.linalg.norm(a1 + a2)
+    normal = np.cross(a1, a2) / np.linalg.norm(np.cross(a1, a2))
+    b_dir = 0.3 * e_pq + np.sqrt(1 - 0.09) * normal  # |κ| = 0.3 ≤ 1/2 but b × e_pq lies in the plane
+    _, dipole, status = al.allocate([1e-4, 2e-4, -1e-4], AXES, mask, np.zeros(4), B_EARTH_T * b_dir)
+    assert status == al.STATUS_SINGULAR and np.all(dipole == 0.0)
+
+
+def test_fewer_than_two_wheels_gives_no_torque_and_a_status():
+    wheel, dipole, status = al.allocate([1e-3, 0, 0], AXES, [False, False, True, False], np.zeros(4), [B_EARTH_T, 0, 0])
+    assert status == al.STATUS_TOO_FEW_WHEELS and np.all(wheel == 0.0) and np.all(dipole == 0.0)
+
+
+def test_batch_axis_matches_single_calls():
+    rng = np.random.default_rng(7)
+    torque = rng.normal(size=(5, 3)) * 1e-3
+    masks = np.array([[1, 1, 1, 1], [1, 1, 1, 0], [0, 1, 1, 1], [1, 0, 0, 1], [0, 1, 0, 1]], dtype=bool)
+    b_field = rng.normal(size=(5, 3)) * B_EARTH_T
+    h = rng.uniform(-5, 5, size=(5, 4))
+    wheel, dipole, status = al.allocate(torque, AXES, masks, h, b_field)
+    for i in range(5):
+        w1, d1, s1 = al.allocate(torque[i], AXES, masks[i], h[i], b_field[i])
+        assert np.array_equal(w1, wheel[i]) and np.array_equal(d1, dipole[i]) and s1 == status[i]
+
+
+def test_bad_inputs_name_the_field():
+    with pytest.raises(ValueError, match="torque_req_b_nm"):
+        al.allocate([1.0, 2.0], AXES, [True] * 4, np.zeros(4), [B_EARTH_T, 0, 0])
+    with pytest.raises(ValueError, match="b_field_b_t"):
+        al.allocate([1.0, 2.0, 3.0], AXES, [True] * 4, np.zeros(4), [np.nan, 0, 0])
+    with pytest.raises(ValueError, match="axes_b"):
+        al.allocate([1.0, 2.0, 3.0], np.eye(3, 4), [True] * 4, np.zeros(4), [B_EARTH_T, 0, 0])
+    with pytest.raises(ValueError, match="rho"):
+        al.AllocationConfig(rho=1.5)
