@@ -1,0 +1,375 @@
+"""CCSDS space packets: primary header, secondary-header time codes, CRC, and stream framing.
+
+Primary header per CCSDS 133.0-B-2 §4.1.3 (6 octets, big-endian): packet version number (3 bits,
+'000', §4.1.3.2), packet type (1 bit, 0 = telemetry, §4.1.3.3.2), secondary header flag (1 bit,
+§4.1.3.3.3), APID (11 bits, §4.1.3.3.4; '11111111111' = idle packet, §4.1.3.3.4.4), sequence flags
+(2 bits, §4.1.3.4.2: 3 = unsegmented), packet sequence count (14 bits, modulo 16384, §4.1.3.4.3) and
+packet data length (16 bits = octets in the data field − 1, §4.1.3.5).
+Time codes per CCSDS 301.0-B-4: CUC (§3.2, coarse seconds + binary fraction) and CDS (§3.3, days,
+milliseconds of day, optional µs or ps of millisecond). All times leave this module as int64
+nanoseconds of UTC since the Unix epoch (DESIGN.md). The packet error control field is
+CRC-16/CCITT (poly 0x1021, preset 0xFFFF) over the whole packet but its last two octets
+(ECSS-E-ST-70-41C §7.4.1 / CCSDS 132.0-B-3 §4.1.4.2).
+Framing a mixed-APID stream is sequential (each length field locates the next packet), so it runs
+as a numba kernel; everything after framing is vectorised over packets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "PRIMARY_HEADER_OCTETS",
+    "SEQUENCE_COUNT_MODULUS",
+    "IDLE_APID",
+    "FrameCode",
+    "TimeCode",
+    "PrimaryHeaders",
+    "parse_primary_headers",
+    "encode_primary_headers",
+    "decode_time",
+    "encode_time",
+    "crc16_ccitt",
+    "frame_stream",
+    "Frames",
+]
+
+PRIMARY_HEADER_OCTETS = 6
+SEQUENCE_COUNT_MODULUS = 1 << 14
+IDLE_APID = 0x7FF
+APID_COUNT = 1 << 11
+SEQUENCE_FLAGS_UNSEGMENTED = 3
+NS_PER_S = 1_000_000_000
+NS_PER_DAY = 86_400 * NS_PER_S
+CCSDS_EPOCH_UTC_NS = -4383 * NS_PER_DAY  # 1958-01-01 (CCSDS 301.0-B-4 §3.2.2.1.1 level 1 epoch)
+
+
+_OK, _BAD_HEADER, _UNKNOWN_APID, _BAD_LENGTH, _TRUNCATED, _CRC_FAILURE, _IDLE = range(7)
+
+
+class FrameCode:
+    """Outcome codes of framing one stretch of a byte stream (0 = a packet to decode)."""
+
+    OK = _OK
+    BAD_HEADER = _BAD_HEADER
+    UNKNOWN_APID = _UNKNOWN_APID
+    BAD_LENGTH = _BAD_LENGTH
+    TRUNCATED = _TRUNCATED
+    CRC_FAILURE = _CRC_FAILURE
+    IDLE = _IDLE
+    NAMES = ("ok", "bad_header", "unknown_apid", "bad_length", "truncated", "crc_failure", "idle")
+
+
+@dataclass(frozen=True)
+class TimeCode:
+    """A CUC or CDS time code layout (CCSDS 301.0-B-4 §3.2, §3.3) and its epoch in UTC ns."""
+
+    format: str
+    coarse_octets: int = 4
+    fine_octets: int = 2
+    day_octets: int = 2
+    submillisecond_octets: int = 2
+    epoch_utc_ns: int = CCSDS_EPOCH_UTC_NS
+
+    def __post_init__(self) -> None:
+        if self.format not in ("CUC", "CDS"):
+            raise ValueError(f"time_code.format: expected 'CUC' or 'CDS', got {self.format!r}")
+        if self.format == "CUC" and not (1 <= self.coarse_octets <= 4 and 0 <= self.fine_octets <= 3):
+            raise ValueError("time_code: CUC needs 1-4 coarse and 0-3 fine octets (301.0-B-4 §3.2.1)")
+        if self.format == "CDS" and (self.day_octets not in (2, 3) or self.submillisecond_octets not in (0, 2, 4)):
+            raise ValueError("time_code: CDS needs 2 or 3 day octets and 0, 2 or 4 sub-ms octets (§3.3.1)")
+
+    @property
+    def octets(self) -> int:
+        """Length of the time code's T-field in octets."""
+        if self.format == "CUC":
+            return self.coarse_octets + self.fine_octets
+        return self.day_octets + 4 + self.submillisecond_octets
+
+
+@dataclass(frozen=True)
+class PrimaryHeaders:
+    """Fields of N primary headers as arrays (CCSDS 133.0-B-2 §4.1.3)."""
+
+    version: np.ndarray
+    packet_type: np.ndarray
+    secondary_header_flag: np.ndarray
+    apid: np.ndarray
+    sequence_flags: np.ndarray
+    sequence_count: np.ndarray
+    packet_octets: np.ndarray
+
+
+def _big_endian_uint(octets: np.ndarray) -> np.ndarray:
+    """Unsigned big-endian integers of the rows of an (n, k ≤ 8) uint8 array, as uint64."""
+    value = np.zeros(octets.shape[0], dtype=np.uint64)
+    for k in range(octets.shape[1]):
+        value = (value << np.uint64(8)) | octets[:, k].astype(np.uint64)
+    return value
+
+
+def parse_primary_headers(headers: np.ndarray) -> PrimaryHeaders:
+    """Primary header fields of an (n, ≥6) uint8 array of packets (CCSDS 133.0-B-2 §4.1.3)."""
+    h = np.asarray(headers)
+    if h.dtype != np.uint8 or h.ndim != 2 or h.shape[1] < PRIMARY_HEADER_OCTETS:
+        raise ValueError(f"headers: expected (n, >=6) uint8, got {h.dtype} {h.shape}")
+    w0 = (h[:, 0].astype(np.uint16) << 8) | h[:, 1]
+    w1 = (h[:, 2].astype(np.uint16) << 8) | h[:, 3]
+    w2 = (h[:, 4].astype(np.int64) << 8) | h[:, 5]
+    return PrimaryHeaders(
+        version=(w0 >> 13).astype(np.uint8),
+        packet_type=((w0 >> 12) & 1).astype(np.uint8),
+        secondary_header_flag=((w0 >> 11) & 1).astype(np.uint8),
+        apid=(w0 & 0x7FF).astype(np.uint16),
+        sequence_flags=(w1 >> 14).astype(np.uint8),
+        sequence_count=(w1 & 0x3FFF).astype(np.uint16),
+        packet_octets=w2 + PRIMARY_HEADER_OCTETS + 1,
+    )
+
+
+def encode_primary_headers(
+    apid: np.ndarray | int,
+    sequence_count: np.ndarray,
+    packet_octets: int,
+    secondary_header: bool = True,
+) -> np.ndarray:
+    """(n, 6) uint8 telemetry primary headers, unsegmented (CCSDS 133.0-B-2 §4.1.3)."""
+    count = np.asarray(sequence_count, dtype=np.int64)
+    apid_arr = np.broadcast_to(np.asarray(apid, dtype=np.int64), count.shape)
+    if np.any((apid_arr < 0) | (apid_arr >= APID_COUNT)):
+        raise ValueError("apid: must lie in 0..2047 (11 bits)")
+    if packet_octets < PRIMARY_HEADER_OCTETS + 1 or packet_octets > PRIMARY_HEADER_OCTETS + 65536:
+        raise ValueError(f"packet_octets: must lie in 7..65542, got {packet_octets}")
+    w0 = (int(secondary_header) << 11) | apid_arr
+    w1 = (SEQUENCE_FLAGS_UNSEGMENTED << 14) | (count % SEQUENCE_COUNT_MODULUS)
+    w2 = np.full(count.shape, packet_octets - PRIMARY_HEADER_OCTETS - 1, dtype=np.int64)
+    words = np.stack([w0, w1, w2], axis=-1).astype(">u2")
+    return words.view(np.uint8).reshape(count.shape + (6,))
+
+
+def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
+    """UTC ns since the Unix epoch of (n, k) CUC or CDS T-fields (CCSDS 301.0-B-4 §3.2.1, §3.3.1)."""
+    t = np.asarray(octets)
+    if t.dtype != np.uint8 or t.ndim != 2 or t.shape[1] != code.octets:
+        raise ValueError(f"octets: expected (n, {code.octets}) uint8 for {code}, got {t.dtype} {t.shape}")
+    if code.format == "CUC":
+        coarse = _big_endian_uint(t[:, : code.coarse_octets]).astype(np.int64)
+        fine = _big_endian_uint(t[:, code.coarse_octets :]).astype(np.int64)
+        bits = 8 * code.fine_octets
+        fine_ns = (fine * NS_PER_S + (1 << bits >> 1)) >> bits if bits else 0
+        return code.epoch_utc_ns + coarse * NS_PER_S + fine_ns
+    day = _big_endian_uint(t[:, : code.day_octets]).astype(np.int64)
+    ms = _big_endian_uint(t[:, code.day_octets : code.day_octets + 4]).astype(np.int64)
+    sub = _big_endian_uint(t[:, code.day_octets + 4 :]).astype(np.int64)
+    sub_ns = {0: 0, 2: sub * 1_000, 4: sub // 1_000}[code.submillisecond_octets]
+    return code.epoch_utc_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns
+
+
+def _to_octets(value: np.ndarray, n_octets: int) -> np.ndarray:
+    """(n, n_octets) big-endian uint8 of non-negative int64 values."""
+    shifts = 8 * np.arange(n_octets - 1, -1, -1, dtype=np.int64)
+    return ((value[:, None] >> shifts) & 0xFF).astype(np.uint8)
+
+
+def encode_time(t_utc_ns: np.ndarray, code: TimeCode) -> np.ndarray:
+    """(n, k) T-fields of UTC ns times, nearest code tick (CCSDS 301.0-B-4 §3.2.1, §3.3.1)."""
+    dt = np.asarray(t_utc_ns, dtype=np.int64).reshape(-1) - code.epoch_utc_ns
+    if np.any(dt < 0):
+        raise ValueError("t_utc_ns: times before the time code's epoch cannot be encoded")
+    if code.format == "CUC":
+        bits = 8 * code.fine_octets
+        coarse, ns = np.divmod(dt, NS_PER_S)
+        fine = ((ns << bits) + NS_PER_S // 2) // NS_PER_S
+        carry = fine >> bits
+        coarse, fine = coarse + carry, fine & ((1 << bits) - 1)
+        if np.any(coarse >= 1 << (8 * code.coarse_octets)):
+            raise ValueError("t_utc_ns: beyond the range of the CUC coarse time")
+        return np.concatenate([_to_octets(coarse, code.coarse_octets), _to_octets(fine, code.fine_octets)], axis=1)
+    sub_unit = {0: 1_000_000, 2: 1_000, 4: 1}[code.submillisecond_octets]
+    day, ns_of_day = np.divmod(dt, NS_PER_DAY)
+    ms, sub_ns = np.divmod(ns_of_day, 1_000_000)
+    sub = sub_ns // sub_unit if code.submillisecond_octets != 4 else sub_ns * 1_000
+    parts = [_to_octets(day, code.day_octets), _to_octets(ms, 4)]
+    if code.submillisecond_octets:
+        parts.append(_to_octets(sub, code.submillisecond_octets))
+    return np.concatenate(parts, axis=1)
+
+
+def _crc16_table() -> np.ndarray:
+    """256-entry table of CRC-16/CCITT (polynomial 0x1021), MSB first."""
+    table = np.zeros(256, dtype=np.uint16)
+    for byte in range(256):
+        crc = byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else crc << 1
+        table[byte] = crc & 0xFFFF
+    return table
+
+
+_CRC_TABLE = _crc16_table()
+
+
+@njit(cache=True)
+def _crc16_1(buf: np.ndarray, start: int, stop: int, table: np.ndarray) -> int:
+    """CRC-16/CCITT (preset 0xFFFF) of buf[start:stop] (compiled kernel)."""
+    crc = 0xFFFF
+    for i in range(start, stop):
+        crc = ((crc << 8) & 0xFFFF) ^ table[((crc >> 8) ^ buf[i]) & 0xFF]
+    return crc
+
+
+def crc16_ccitt(data: bytes | np.ndarray) -> np.ndarray | int:
+    """CRC-16/CCITT-FALSE of a byte string, or of each row of an (n, k) uint8 array (ECSS-E-ST-70-41C §B.1)."""
+    arr = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray)) else np.asarray(data)
+    if arr.dtype != np.uint8:
+        raise ValueError(f"data: expected bytes or uint8 array, got {arr.dtype}")
+    if arr.ndim == 1:
+        return int(_crc16_1(arr, 0, arr.shape[0], _CRC_TABLE))
+    crc = np.full(arr.shape[0], 0xFFFF, dtype=np.uint16)
+    for k in range(arr.shape[1]):
+        crc = (crc << np.uint16(8)) ^ _CRC_TABLE[((crc >> np.uint16(8)) ^ arr[:, k]) & 0xFF]
+    return crc
+
+
+@njit(cache=True)
+def _header_fits(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """True when a known, right-length, complete packet (CRC valid where defined) starts at p."""
+    n = buf.shape[0]
+    if p + PRIMARY_HEADER_OCTETS > n or (buf[p] >> 5) != 0:
+        return False
+    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
+    size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+    if lengths[apid] <= 0 or size != lengths[apid] or p + size > n:
+        return False
+    if crc[apid]:
+        return _crc16_1(buf, p, p + size - 2, table) == ((np.int64(buf[p + size - 2]) << 8) | buf[p + size - 1])
+    return True
+
+
+@njit(cache=True)
+def _anchored(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """A packet starts at p and is confirmed: by its CRC, or by a packet (or the end) right after it."""
+    if not _header_fits(buf, p, lengths, crc, table):
+        return False
+    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
+    if crc[apid]:
+        return True
+    q = p + lengths[apid]
+    return q == buf.shape[0] or _header_fits(buf, q, lengths, crc, table)
+
+
+@njit(cache=True)
+def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
+    """Why no confirmed packet starts at p (a FrameCode)."""
+    n = buf.shape[0]
+    if p + PRIMARY_HEADER_OCTETS > n:
+        return _TRUNCATED
+    if (buf[p] >> 5) != 0:
+        return _BAD_HEADER
+    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
+    size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+    if lengths[apid] == 0:
+        return _UNKNOWN_APID
+    if lengths[apid] > 0 and size != lengths[apid]:
+        return _BAD_LENGTH
+    if p + size > n:
+        return _TRUNCATED
+    if crc[apid] and not _header_fits(buf, p, lengths, crc, table):
+        return _CRC_FAILURE
+    return _TRUNCATED
+
+
+@njit(cache=True)
+def _unknown_in_sync(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
+    """Length of a well-formed packet of an unknown (or idle) APID at p that a confirmed packet or the end follows, else 0."""
+    n = buf.shape[0]
+    if p + PRIMARY_HEADER_OCTETS > n or (buf[p] >> 5) != 0:
+        return 0
+    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
+    size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+    if lengths[apid] != 0 and apid != IDLE_APID:
+        return 0
+    q = p + size
+    if q == n or (q < n and _anchored(buf, q, lengths, crc, table)):
+        return size
+    return 0
+
+
+@njit(cache=True)
+def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray):
+    """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them."""
+    n = buf.shape[0]
+    offsets = np.empty(n // PRIMARY_HEADER_OCTETS + 2, dtype=np.int64)
+    sizes = np.empty_like(offsets)
+    codes = np.empty(offsets.shape[0], dtype=np.uint8)
+    k = 0
+    p = 0
+    while p < n:
+        if _anchored(buf, p, lengths, crc, table):
+            size = lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]]
+            offsets[k], sizes[k], codes[k] = p, size, _OK
+            k += 1
+            p += size
+            continue
+        size = _unknown_in_sync(buf, p, lengths, crc, table)
+        if size > 0:
+            apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
+            offsets[k], sizes[k] = p, size
+            codes[k] = _IDLE if apid == IDLE_APID else _UNKNOWN_APID
+            k += 1
+            p += size
+            continue
+        q = p + 1
+        while q < n and not _anchored(buf, q, lengths, crc, table):
+            q += 1
+        fits = _header_fits(buf, p, lengths, crc, table)
+        size = lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]] if fits else 0
+        if fits and q >= p + size:  # a complete packet followed by unconfirmed bytes
+            offsets[k], sizes[k], codes[k] = p, size, _OK
+            k += 1
+            p += size
+            if q > p:
+                offsets[k], sizes[k], codes[k] = p, q - p, _classify(buf, p, lengths, crc, table)
+                k += 1
+        else:
+            offsets[k], sizes[k], codes[k] = p, q - p, _classify(buf, p, lengths, crc, table)
+            k += 1
+        p = q
+    return offsets[:k], sizes[:k], codes[:k]
+
+
+@dataclass(frozen=True)
+class Frames:
+    """Segments of a byte stream: offset and length in octets, and a FrameCode each."""
+
+    offset: np.ndarray
+    length: np.ndarray
+    code: np.ndarray
+
+
+def frame_stream(
+    data: bytes | np.ndarray, packet_octets_by_apid: dict[int, int], crc_apids: frozenset[int] = frozenset()
+) -> Frames:
+    """Split a mixed-APID packet stream by its length fields (CCSDS 133.0-B-2 §4.1.3.5), resynchronising on damage.
+
+    A packet is taken when its version is 0, its APID is known, its length is the dictionary's and
+    its CRC holds (or, without a CRC, a confirmed packet or the end of data follows it). Damaged
+    stretches become quarantined segments and the scan resumes at the next confirmed packet.
+    """
+    buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
+    if buf.dtype != np.uint8 or buf.ndim != 1:
+        raise ValueError("data: expected bytes or a 1-D uint8 array")
+    lengths = np.zeros(APID_COUNT, dtype=np.int64)
+    crc = np.zeros(APID_COUNT, dtype=np.bool_)
+    for apid, size in packet_octets_by_apid.items():
+        if not 0 <= apid < IDLE_APID:
+            raise ValueError(f"packet_octets_by_apid: APID {apid} outside 0..2046")
+        if size < PRIMARY_HEADER_OCTETS + 1:
+            raise ValueError(f"packet_octets_by_apid: APID {apid} length {size} < 7 octets")
+        lengths[apid] = size
+        crc[apid] = apid in crc_apids
+    offset, length, code = _frame_kernel(buf, lengths, crc, _CRC_TABLE)
+    return Frames(offset=offset, length=length, code=code)

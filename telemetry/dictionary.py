@@ -1,0 +1,431 @@
+"""Telemetry dictionary: packets (APID, layout, time code, CRC), parameters, limits and derived parameters.
+
+Three sources load into one model: our YAML format (``telemetry/dictionaries/*.yaml``), ccsdspy CSV
+definitions (``name,data_type,bit_length``) and XTCE (read with ``space-packet-parser``; the bulk
+decode is ours, :mod:`telemetry.decoding`). Packets are fixed-length; every parameter carries its bit
+offset from the first octet of the packet, so layouts from all three sources decode identically.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from telemetry.ccsds import APID_COUNT, IDLE_APID, PRIMARY_HEADER_OCTETS, TimeCode
+
+__all__ = [
+    "Limits",
+    "Parameter",
+    "DerivedParameter",
+    "PacketDefinition",
+    "Dictionary",
+    "DERIVED_KINDS",
+    "DATA_TYPES",
+    "load_dictionary",
+    "load_yaml",
+    "load_ccsdspy_csv",
+    "load_xtce",
+    "parse_time_code",
+    "parse_utc_ns",
+]
+
+PRIMARY_HEADER_BITS = 8 * PRIMARY_HEADER_OCTETS
+CRC_OCTETS = 2
+DATA_TYPES = ("uint", "int", "float")
+DERIVED_KINDS = {"attitude_error_angle": 8, "cds_time": 3, "alias": 1}
+SHIPPED = Path(__file__).with_name("dictionaries")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Yellow (warning) and red (alarm) low/high limits in engineering units; None = no limit."""
+
+    red_low: float | None = None
+    yellow_low: float | None = None
+    yellow_high: float | None = None
+    red_high: float | None = None
+
+    def __post_init__(self) -> None:
+        ordered = [v for v in (self.red_low, self.yellow_low, self.yellow_high, self.red_high) if v is not None]
+        if ordered != sorted(ordered):
+            raise ValueError(f"limits: expected red_low <= yellow_low <= yellow_high <= red_high, got {self}")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A raw field of a packet: where it sits, how it is encoded, and how to calibrate it."""
+
+    name: str
+    data_type: str
+    bit_offset: int
+    bit_length: int
+    units: str = ""
+    description: str = ""
+    polynomial: tuple[float, ...] = ()
+    enumeration: dict[int, str] = field(default_factory=dict)
+    limits: Limits = Limits()
+
+    def __post_init__(self) -> None:
+        if self.data_type not in DATA_TYPES:
+            raise ValueError(f"{self.name}.data_type: expected one of {DATA_TYPES}, got {self.data_type!r}")
+        if self.data_type == "float" and self.bit_length not in (32, 64):
+            raise ValueError(f"{self.name}.bit_length: floats are IEEE 754 binary32 or binary64, got {self.bit_length}")
+        if not 1 <= self.bit_length <= 64:
+            raise ValueError(f"{self.name}.bit_length: expected 1..64, got {self.bit_length}")
+        if self.bit_offset % 8 + self.bit_length > 64:
+            raise ValueError(f"{self.name}.bit_offset: a field may span at most 8 octets")
+        if self.polynomial and self.enumeration:
+            raise ValueError(f"{self.name}.calibration: polynomial and enumeration are exclusive")
+
+
+@dataclass(frozen=True)
+class DerivedParameter:
+    """A parameter computed from other parameters of the same packet (kind in DERIVED_KINDS)."""
+
+    name: str
+    kind: str
+    inputs: tuple[str, ...]
+    units: str = ""
+    description: str = ""
+    limits: Limits = Limits()
+
+    def __post_init__(self) -> None:
+        if self.kind not in DERIVED_KINDS:
+            raise ValueError(f"{self.name}.kind: expected one of {sorted(DERIVED_KINDS)}, got {self.kind!r}")
+        if len(self.inputs) != DERIVED_KINDS[self.kind]:
+            raise ValueError(f"{self.name}.inputs: {self.kind} needs {DERIVED_KINDS[self.kind]} inputs")
+
+
+@dataclass(frozen=True)
+class PacketDefinition:
+    """A fixed-length telemetry packet type: APID, total length, secondary-header time code, CRC, fields."""
+
+    name: str
+    apid: int
+    packet_octets: int
+    parameters: tuple[Parameter, ...]
+    time_code: TimeCode | None = None
+    crc: bool = False
+    period_s: float | None = None
+    description: str = ""
+    derived: tuple[DerivedParameter, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.apid < IDLE_APID:
+            raise ValueError(f"{self.name}.apid: expected 0..2046, got {self.apid}")
+        body_end = 8 * (self.packet_octets - (CRC_OCTETS if self.crc else 0))
+        for p in self.parameters:
+            if p.bit_offset < PRIMARY_HEADER_BITS or p.bit_offset + p.bit_length > body_end:
+                raise ValueError(f"{self.name}.{p.name}: bits {p.bit_offset}+{p.bit_length} outside the packet body")
+        names = [p.name for p in self.parameters] + [d.name for d in self.derived]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{self.name}.parameters: duplicate names")
+        known = set(names)
+        for d in self.derived:
+            missing = [i for i in d.inputs if i not in known]
+            if missing:
+                raise ValueError(f"{self.name}.{d.name}.inputs: unknown parameters {missing}")
+        if self.time_code and PRIMARY_HEADER_OCTETS + self.time_code.octets > self.packet_octets:
+            raise ValueError(f"{self.name}.time_code: longer than the packet")
+
+
+@dataclass(frozen=True)
+class Dictionary:
+    """All packet types of one spacecraft, by APID, and the window of plausible packet times."""
+
+    name: str
+    packets: dict[int, PacketDefinition]
+    valid_from_utc_ns: int | None = None
+    valid_until_utc_ns: int | None = None
+    description: str = ""
+
+    def packet_octets_by_apid(self) -> dict[int, int]:
+        """Total packet length (octets) of every known APID, for stream framing."""
+        return {apid: p.packet_octets for apid, p in self.packets.items()}
+
+    def crc_apids(self) -> frozenset[int]:
+        """APIDs whose packets end with a CRC-16 packet error control field."""
+        return frozenset(apid for apid, p in self.packets.items() if p.crc)
+
+    def parameter(self, name: str) -> tuple[PacketDefinition, Parameter | DerivedParameter]:
+        """The packet and the (raw or derived) parameter of that name."""
+        for packet in self.packets.values():
+            for p in (*packet.parameters, *packet.derived):
+                if p.name == name:
+                    return packet, p
+        raise ValueError(f"name: no parameter {name!r} in dictionary {self.name!r}")
+
+
+def parse_utc_ns(text: str | int) -> int:
+    """UTC ns since the Unix epoch of an ISO 8601 string (``Z`` or no zone = UTC) or an int of ns."""
+    if isinstance(text, (int, np.integer)):
+        return int(text)
+    stamp = str(text).strip().removesuffix("Z").removesuffix("+00:00")
+    try:
+        return int(np.datetime64(stamp, "ns").astype(np.int64))
+    except ValueError as exc:
+        raise ValueError(f"time: cannot read {text!r} as ISO 8601 UTC") from exc
+
+
+def parse_time_code(spec: str | dict[str, Any] | None) -> TimeCode | None:
+    """A TimeCode from a YAML mapping or a short name ("CDS", "CDS-ms", "CUC-4-2"), epoch 1958 unless given."""
+    if spec is None:
+        return None
+    if isinstance(spec, str):
+        parts = spec.upper().split("-")
+        if parts[0] == "CDS" and len(parts) == 1:
+            return TimeCode("CDS")
+        if parts == ["CDS", "MS"]:
+            return TimeCode("CDS", submillisecond_octets=0)
+        if parts[0] == "CUC" and len(parts) == 3 and all(x.isdigit() for x in parts[1:]):
+            return TimeCode("CUC", coarse_octets=int(parts[1]), fine_octets=int(parts[2]))
+        raise ValueError(f"time_code: unknown short name {spec!r} (use CDS, CDS-ms or CUC-<coarse>-<fine>)")
+    spec = dict(spec)
+    epoch = spec.pop("epoch_utc", None)
+    kwargs = {k: spec.pop(k) for k in ("coarse_octets", "fine_octets", "day_octets", "submillisecond_octets") if k in spec}
+    fmt = spec.pop("format", None)
+    if spec:
+        raise ValueError(f"time_code: unknown keys {sorted(spec)}")
+    if epoch is not None:
+        kwargs["epoch_utc_ns"] = parse_utc_ns(epoch)
+    return TimeCode(str(fmt), **kwargs)
+
+
+def _limits(spec: dict[str, Any] | None) -> Limits:
+    """Limits from a YAML mapping with keys red_low, yellow_low, yellow_high, red_high."""
+    spec = dict(spec or {})
+    unknown = set(spec) - {"red_low", "yellow_low", "yellow_high", "red_high"}
+    if unknown:
+        raise ValueError(f"limits: unknown keys {sorted(unknown)}")
+    return Limits(**{k: float(v) for k, v in spec.items()})
+
+
+def _derived(specs: list[dict[str, Any]] | None) -> tuple[DerivedParameter, ...]:
+    """Derived parameters from YAML mappings (name, kind, inputs, units, description, limits)."""
+    return tuple(
+        DerivedParameter(
+            name=str(s["name"]),
+            kind=str(s["kind"]),
+            inputs=tuple(str(i) for i in s["inputs"]),
+            units=str(s.get("units", "")),
+            description=str(s.get("description", "")),
+            limits=_limits(s.get("limits")),
+        )
+        for s in specs or []
+    )
+
+
+def _yaml_parameters(specs: list[dict[str, Any]], first_bit: int) -> tuple[tuple[Parameter, ...], int]:
+    """Parameters laid out back to back from first_bit, and the bit after the last one."""
+    params, bit = [], first_bit
+    for s in specs:
+        unknown = set(s) - {"name", "type", "bits", "units", "description", "polynomial", "enumeration", "limits"}
+        if unknown:
+            raise ValueError(f"{s.get('name')}: unknown keys {sorted(unknown)}")
+        enum = {int(k): str(v) for k, v in (s.get("enumeration") or {}).items()}
+        params.append(
+            Parameter(
+                name=str(s["name"]),
+                data_type=str(s["type"]),
+                bit_offset=bit,
+                bit_length=int(s["bits"]),
+                units=str(s.get("units", "")),
+                description=str(s.get("description", "")),
+                polynomial=tuple(float(c) for c in s.get("polynomial") or ()),
+                enumeration=enum,
+                limits=_limits(s.get("limits")),
+            )
+        )
+        bit += int(s["bits"])
+    return tuple(params), bit
+
+
+def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
+    """One packet definition from our YAML format (layout inline or taken from an XTCE/CSV file)."""
+    name, apid = str(spec["name"]), int(spec["apid"])
+    time_code = parse_time_code(spec.get("time_code"))
+    crc = bool(spec.get("crc", False))
+    common = dict(
+        time_code=time_code,
+        period_s=float(spec["period_s"]) if spec.get("period_s") is not None else None,
+        description=str(spec.get("description", "")),
+        derived=_derived(spec.get("derived")),
+    )
+    source = spec.get("layout_from")
+    if source:
+        if set(source) == {"xtce"}:
+            base = load_xtce(folder / source["xtce"]).packets.get(apid)
+        elif set(source) == {"ccsdspy_csv"}:
+            base = load_ccsdspy_csv(folder / source["ccsdspy_csv"], apid=apid, name=name).packets.get(apid)
+        else:
+            raise ValueError(f"{name}.layout_from: expected {{xtce: FILE}} or {{ccsdspy_csv: FILE}}, got {source}")
+        if base is None:
+            raise ValueError(f"{name}.layout_from: no packet with APID {apid} in {source}")
+        return replace(base, name=name, crc=crc, **common)
+    first = PRIMARY_HEADER_BITS + 8 * (time_code.octets if time_code else 0)
+    params, end_bit = _yaml_parameters(spec["parameters"], first)
+    if end_bit % 8:
+        raise ValueError(f"{name}.parameters: layout ends at bit {end_bit}, not on an octet boundary")
+    octets = end_bit // 8 + (CRC_OCTETS if crc else 0)
+    declared = spec.get("packet_octets")
+    if declared is not None and int(declared) != octets:
+        raise ValueError(f"{name}.packet_octets: declared {declared}, layout gives {octets}")
+    return PacketDefinition(name=name, apid=apid, packet_octets=octets, parameters=params, crc=crc, **common)
+
+
+def load_yaml(path: str | Path) -> Dictionary:
+    """A dictionary in our YAML format (see telemetry/dictionaries/reference_satellite.yaml)."""
+    path = Path(path)
+    doc = yaml.safe_load(path.read_text())
+    if not isinstance(doc, dict) or "packets" not in doc:
+        raise ValueError(f"{path}: expected a mapping with a 'packets' list")
+    packets = [_yaml_packet(p, path.parent) for p in doc["packets"]]
+    by_apid = {p.apid: p for p in packets}
+    if len(by_apid) != len(packets):
+        raise ValueError(f"{path}: packets: two packets share an APID")
+    valid = doc.get("valid_time_utc") or {}
+    return Dictionary(
+        name=str(doc.get("name", path.stem)),
+        packets=by_apid,
+        valid_from_utc_ns=parse_utc_ns(valid["from"]) if "from" in valid else None,
+        valid_until_utc_ns=parse_utc_ns(valid["until"]) if "until" in valid else None,
+        description=str(doc.get("description", "")),
+    )
+
+
+def load_ccsdspy_csv(
+    path: str | Path, apid: int, name: str | None = None, time_code: TimeCode | None = None
+) -> Dictionary:
+    """A one-packet dictionary from a ccsdspy CSV (``name,data_type,bit_length``, fields after the primary header)."""
+    path = Path(path)
+    with path.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows or set(rows[0]) != {"name", "data_type", "bit_length"}:
+        raise ValueError(f"{path}: expected the header name,data_type,bit_length")
+    params, bit = [], PRIMARY_HEADER_BITS
+    for row in rows:
+        params.append(Parameter(row["name"], row["data_type"], bit, int(row["bit_length"])))
+        bit += int(row["bit_length"])
+    if bit % 8:
+        raise ValueError(f"{path}: layout ends at bit {bit}, not on an octet boundary")
+    packet = PacketDefinition(
+        name=name or path.stem, apid=apid, packet_octets=bit // 8, parameters=tuple(params), time_code=time_code
+    )
+    return Dictionary(name=path.stem, packets={apid: packet})
+
+
+def _xtce_entries(container: Any) -> list[Any]:
+    """Parameters of an XTCE container in packet order: base container first, container refs inlined."""
+    from space_packet_parser.xtce.containers import SequenceContainer
+
+    out: list[Any] = []
+    for entry in container.entry_list:
+        out.extend(_xtce_entries(entry) if isinstance(entry, SequenceContainer) else [entry])
+    return out
+
+
+def _xtce_parameter(param: Any, bit: int) -> Parameter:
+    """Our Parameter from a space-packet-parser XTCE parameter at a bit offset."""
+    from space_packet_parser.xtce import calibrators, encodings, parameter_types
+
+    ptype, enc = param.parameter_type, param.parameter_type.encoding
+    if getattr(enc, "byte_order", "mostSignificantByteFirst") != "mostSignificantByteFirst":
+        raise ValueError(f"{param.name}: only big-endian XTCE encodings are supported")
+    if isinstance(enc, encodings.FloatDataEncoding):
+        data_type = "float"
+    elif isinstance(enc, encodings.IntegerDataEncoding):
+        data_type = "uint" if enc.encoding == "unsigned" else "int"
+    else:
+        raise ValueError(f"{param.name}: XTCE encoding {type(enc).__name__} is not supported in bulk decode")
+    poly: tuple[float, ...] = ()
+    if isinstance(enc.default_calibrator, calibrators.PolynomialCalibrator):
+        order = max(c.exponent for c in enc.default_calibrator.coefficients)
+        coeffs = np.zeros(int(order) + 1)
+        for c in enc.default_calibrator.coefficients:
+            coeffs[int(c.exponent)] = float(c.coefficient)
+        poly = tuple(coeffs)
+    elif enc.default_calibrator is not None:
+        raise ValueError(f"{param.name}: XTCE calibrator {type(enc.default_calibrator).__name__} not supported")
+    enum = {}
+    if isinstance(ptype, parameter_types.EnumeratedParameterType):
+        enum = {int(v): str(k) for k, v in ptype.enumeration.items()}
+    unit = ptype.unit if isinstance(ptype.unit, str) or ptype.unit is None else " ".join(ptype.unit)
+    return Parameter(
+        name=param.name,
+        data_type=data_type,
+        bit_offset=bit,
+        bit_length=int(enc.size_in_bits),
+        units=unit or "",
+        description=param.short_description or param.long_description or "",
+        polynomial=poly,
+        enumeration=enum,
+    )
+
+
+def _xtce_apid(definition: Any, container: Any) -> int | None:
+    """The APID a container's restriction criteria (or its bases') select, if any."""
+    while container is not None:
+        for comparison in container.restriction_criteria:
+            if getattr(comparison, "referenced_parameter", None) in ("PKT_APID", "APID", "CCSDS_APID"):
+                return int(comparison.required_value)
+        base = container.base_container_name
+        container = definition.containers.get(base) if base else None
+    return None
+
+
+def load_xtce(path: str | Path, time_code: TimeCode | None = None) -> Dictionary:
+    """A dictionary of the concrete, APID-selected containers of an XTCE file (space-packet-parser reads it)."""
+    import space_packet_parser as spp
+
+    definition = spp.load_xtce(Path(path))
+    packets = {}
+    for container in definition.containers.values():
+        apid = _xtce_apid(definition, container)
+        if container.abstract or apid is None:
+            continue
+        chain, c = [], container
+        while c is not None:
+            chain.insert(0, c)
+            c = definition.containers.get(c.base_container_name) if c.base_container_name else None
+        params, bit = [], 0
+        for entry in (e for c in chain for e in _xtce_entries(c)):
+            if bit >= PRIMARY_HEADER_BITS:
+                params.append(_xtce_parameter(entry, bit))
+            bit += int(entry.parameter_type.encoding.size_in_bits)
+        if bit % 8:
+            raise ValueError(f"{container.name}: layout ends at bit {bit}, not on an octet boundary")
+        packets[apid] = PacketDefinition(
+            name=container.name,
+            apid=apid,
+            packet_octets=bit // 8,
+            parameters=tuple(params),
+            time_code=time_code,
+            description=container.short_description or container.long_description or "",
+        )
+    if not packets:
+        raise ValueError(f"{path}: no concrete container selects an APID")
+    return Dictionary(name=definition.space_system_name or Path(path).stem, packets=packets)
+
+
+def load_dictionary(path: str | Path, apid: int | None = None, time_code: str | None = None) -> Dictionary:
+    """Any supported dictionary by file suffix (.yaml/.yml, .csv, .xml); a bare name means a shipped one."""
+    path = Path(path)
+    if not path.exists() and (SHIPPED / path).exists():
+        path = SHIPPED / path
+    if not path.exists():
+        raise ValueError(f"dictionary: no file {path} (shipped: {sorted(p.name for p in SHIPPED.glob('*.yaml'))})")
+    suffix = path.suffix.lower()
+    if suffix in (".yaml", ".yml"):
+        return load_yaml(path)
+    if suffix == ".xml":
+        return load_xtce(path, time_code=parse_time_code(time_code))
+    if suffix == ".csv":
+        if apid is None or not 0 <= apid < APID_COUNT:
+            raise ValueError("apid: a ccsdspy CSV definition needs the APID (0..2046) of its packets")
+        return load_ccsdspy_csv(path, apid=apid, time_code=parse_time_code(time_code))
+    raise ValueError(f"dictionary: unknown suffix {suffix!r} (use .yaml, .xml or .csv)")

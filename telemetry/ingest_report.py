@@ -1,0 +1,140 @@
+"""The ingest report: what a decode/validation run accepted, quarantined (why, where), and found missing.
+
+The seam to the archive (telemetry/archive): ``telemetry.decoding.decode_stream`` and
+``telemetry.ground_files.read_ground_file`` return an :class:`IngestResult` — time-ordered
+:class:`SampleBatch` es (one per packet type) plus this report; the archive stores the batches
+and keeps ``report.to_dict()`` as the upload's JSON report.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+__all__ = ["QuarantineRecord", "SequenceGap", "ApidSummary", "IngestReport", "SampleBatch", "IngestResult", "REASONS"]
+
+REASONS = (
+    "bad_header",
+    "unknown_apid",
+    "bad_length",
+    "truncated",
+    "crc_failure",
+    "time_out_of_range",
+    "non_monotonic_sequence",
+    "bad_row",
+    "unknown_parameter",
+)
+
+
+@dataclass(frozen=True)
+class QuarantineRecord:
+    """One rejected stretch of input: its byte offset and length, the reason, and what is known of it."""
+
+    offset: int
+    length: int
+    reason: str
+    apid: int | None = None
+    sequence_count: int | None = None
+    line: int | None = None
+    detail: str = ""
+
+    def __post_init__(self) -> None:
+        if self.reason not in REASONS:
+            raise ValueError(f"reason: expected one of {REASONS}, got {self.reason!r}")
+
+
+@dataclass(frozen=True)
+class SequenceGap:
+    """Packets missing between two accepted packets of one APID (missing = -1: the counter restarted)."""
+
+    apid: int
+    after_count: int
+    before_count: int
+    missing: int
+    t_after_utc_ns: int
+    t_before_utc_ns: int
+
+
+@dataclass
+class ApidSummary:
+    """Per-APID tallies of one ingest."""
+
+    apid: int
+    packet: str
+    accepted: int = 0
+    duplicates: int = 0
+    missing: int = 0
+    gaps: list[SequenceGap] = field(default_factory=list)
+    t_first_utc_ns: int | None = None
+    t_last_utc_ns: int | None = None
+
+
+@dataclass
+class IngestReport:
+    """Outcome of decoding and validating one input (file, upload or live batch)."""
+
+    source: str
+    octets: int = 0
+    packets_accepted: int = 0
+    samples_accepted: int = 0
+    duplicates: int = 0
+    idle_packets: int = 0
+    quarantined: list[QuarantineRecord] = field(default_factory=list)
+    apids: dict[int, ApidSummary] = field(default_factory=dict)
+
+    def reason_counts(self) -> dict[str, int]:
+        """Number of quarantined stretches per reason."""
+        return dict(Counter(q.reason for q in self.quarantined))
+
+    def to_dict(self) -> dict:
+        """JSON-ready mapping (what ``acs-twin ingest`` prints and the archive stores)."""
+        return {
+            "source": self.source,
+            "octets": self.octets,
+            "packets_accepted": self.packets_accepted,
+            "samples_accepted": self.samples_accepted,
+            "duplicates": self.duplicates,
+            "idle_packets": self.idle_packets,
+            "quarantined_count": len(self.quarantined),
+            "quarantine_reasons": self.reason_counts(),
+            "quarantined": [asdict(q) for q in self.quarantined],
+            "apids": {str(a): asdict(s) for a, s in sorted(self.apids.items())},
+        }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The report as JSON text."""
+        return json.dumps(self.to_dict(), indent=indent)
+
+
+@dataclass(frozen=True)
+class SampleBatch:
+    """Accepted samples of one packet type, in time order: times, counts, raw packets and values by parameter.
+
+    ``t_utc_ns`` int64 (n,); ``sequence_count`` uint16 (n,) (zeros for ground files);
+    ``packets`` (n, L) uint8 byte-exact raw packets (None for ground files);
+    ``values`` parameter name → (n,) engineering values (float64, or int64 for uncalibrated integers
+    and enumeration codes), derived parameters included.
+    """
+
+    packet: str
+    apid: int
+    t_utc_ns: np.ndarray
+    sequence_count: np.ndarray
+    values: dict[str, np.ndarray]
+    packets: np.ndarray | None = None
+
+    @property
+    def n_samples(self) -> int:
+        """Number of parameter samples (packets × parameters)."""
+        return len(self.t_utc_ns) * len(self.values)
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """Decoded, validated batches and the report of one input."""
+
+    batches: list[SampleBatch]
+    report: IngestReport

@@ -1,0 +1,113 @@
+"""Per-packet validation of one APID: time window, duplicates, sequence-count order and gaps.
+
+Framing problems (bad header, unknown APID, bad length, truncation, CRC) are found by
+:func:`telemetry.ccsds.frame_stream`; this module judges the framed packets of one APID:
+times outside the mission window are quarantined, exact repeats (same sequence count and time)
+are counted as duplicates and dropped, and in time order the 14-bit source sequence count
+(CCSDS 133.0-B-2 §4.1.3.4.3, modulo 16384) must advance by 1..8191 from the last accepted packet:
+a repeat or a step back is ``non_monotonic_sequence`` unless the next packet continues from it
+(a counter restart, accepted and reported as a gap of unknown size); a step of d > 1 is a gap
+of d − 1 packets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from telemetry.ccsds import SEQUENCE_COUNT_MODULUS
+from telemetry.ingest_report import QuarantineRecord, SequenceGap
+
+__all__ = ["PacketVerdict", "validate_packets", "ACCEPTED", "NON_MONOTONIC", "RESTART"]
+
+ACCEPTED = 0
+NON_MONOTONIC = 1
+RESTART = -1
+HALF_RANGE = SEQUENCE_COUNT_MODULUS // 2
+
+
+@dataclass(frozen=True)
+class PacketVerdict:
+    """Indices (into the input arrays) of accepted packets in time order, and what was rejected."""
+
+    accepted: np.ndarray
+    quarantined: list[QuarantineRecord]
+    duplicates: int
+    gaps: list[SequenceGap]
+
+
+@njit(cache=True)
+def _forward(a: int, b: int) -> int:
+    """Steps from count a forward to count b, modulo 2^14."""
+    return (b - a) % SEQUENCE_COUNT_MODULUS
+
+
+@njit(cache=True)
+def _sequence_kernel(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Status (ACCEPTED / NON_MONOTONIC) and missing-before count (RESTART = −1) of time-ordered counts."""
+    n = count.shape[0]
+    status = np.zeros(n, dtype=np.int8)
+    missing = np.zeros(n, dtype=np.int64)
+    last = -1
+    for i in range(n):
+        if last < 0:
+            last = count[i]
+            continue
+        d = _forward(last, count[i])
+        if 1 <= d < HALF_RANGE:
+            missing[i] = d - 1
+            last = count[i]
+            continue
+        follows = i + 1 < n and 1 <= _forward(count[i], count[i + 1]) < HALF_RANGE
+        resumes = i + 1 < n and 1 <= _forward(last, count[i + 1]) < HALF_RANGE
+        if follows and not resumes:
+            missing[i] = RESTART
+            last = count[i]
+        else:
+            status[i] = NON_MONOTONIC
+    return status, missing
+
+
+def validate_packets(
+    apid: int,
+    offset: np.ndarray,
+    sequence_count: np.ndarray,
+    t_utc_ns: np.ndarray,
+    packet_octets: int,
+    valid_from_utc_ns: int | None,
+    valid_until_utc_ns: int | None,
+) -> PacketVerdict:
+    """Judge the framed packets of one APID (CCSDS 133.0-B-2 §4.1.3.4.3 sequence counts), vectorised."""
+    offset = np.asarray(offset, dtype=np.int64)
+    count = np.asarray(sequence_count, dtype=np.int64)
+    t = np.asarray(t_utc_ns, dtype=np.int64)
+    if not offset.shape == count.shape == t.shape:
+        raise ValueError("offset, sequence_count, t_utc_ns: expected arrays of one length")
+    low = np.iinfo(np.int64).min if valid_from_utc_ns is None else valid_from_utc_ns
+    high = np.iinfo(np.int64).max if valid_until_utc_ns is None else valid_until_utc_ns
+    in_window = (t >= low) & (t <= high)
+    quarantined = [
+        QuarantineRecord(int(offset[i]), packet_octets, "time_out_of_range", apid, int(count[i]),
+                         detail=f"t_utc_ns={int(t[i])}")
+        for i in np.flatnonzero(~in_window)
+    ]
+    idx = np.flatnonzero(in_window)
+    idx = idx[np.lexsort((count[idx], t[idx]))]
+    repeat = np.zeros(idx.shape, dtype=bool)
+    repeat[1:] = (t[idx[1:]] == t[idx[:-1]]) & (count[idx[1:]] == count[idx[:-1]])
+    idx = idx[~repeat]
+    status, missing = _sequence_kernel(count[idx])
+    quarantined += [
+        QuarantineRecord(int(offset[i]), packet_octets, "non_monotonic_sequence", apid, int(count[i]))
+        for i in idx[status == NON_MONOTONIC]
+    ]
+    kept, missing = idx[status == ACCEPTED], missing[status == ACCEPTED]
+    gaps = [
+        SequenceGap(apid, int(count[kept[j - 1]]), int(count[kept[j]]), int(missing[j]),
+                    int(t[kept[j - 1]]), int(t[kept[j]]))
+        for j in np.flatnonzero(missing != 0)
+    ]
+    quarantined.sort(key=lambda q: q.offset)
+    return PacketVerdict(accepted=kept, quarantined=quarantined, duplicates=int(repeat.sum()), gaps=gaps)
