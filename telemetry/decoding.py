@@ -15,7 +15,7 @@ import numpy as np
 from sim_core import quaternion
 from telemetry import ccsds
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
-from telemetry.ingest_report import ApidSummary, IngestReport, IngestResult, QuarantineRecord, SampleBatch
+from telemetry.ingest_report import ApidSummary, IngestReport, DecodeResult, QuarantineRecord, SampleBatch
 from telemetry.validation import validate_packets
 
 __all__ = [
@@ -173,7 +173,7 @@ def _decode_apid(
 
 def decode_stream(
     data: bytes | np.ndarray, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None
-) -> IngestResult:
+) -> DecodeResult:
     """Frame, validate and decode a mixed-APID packet stream (CCSDS 133.0-B-2 §4.1) into time-ordered batches."""
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
     frames = ccsds.frame_stream(buf, dictionary.packet_octets_by_apid(), dictionary.crc_apids())
@@ -189,4 +189,4 @@ def decode_stream(
     report.quarantined.sort(key=lambda q: q.offset)
     report.packets_accepted = sum(len(b.t_utc_ns) for b in batches)
     report.samples_accepted = sum(b.n_samples for b in batches)
-    return IngestResult(batches=batches, report=report)
+    return DecodeResult(batches=batches, report=report)

@@ -1,7 +1,7 @@
 """The ingest report: what a decode/validation run accepted, quarantined (why, where), and found missing.
 
 The seam to the archive (telemetry/archive): ``telemetry.decoding.decode_stream`` and
-``telemetry.ground_files.read_ground_file`` return an :class:`IngestResult` — time-ordered
+``telemetry.ground_files.read_ground_file`` return an :class:`DecodeResult` — time-ordered
 :class:`SampleBatch` es (one per packet type) plus this report; the archive stores the batches
 and keeps ``report.to_dict()`` as the upload's JSON report.
 """
@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-__all__ = ["QuarantineRecord", "SequenceGap", "ApidSummary", "IngestReport", "SampleBatch", "IngestResult", "REASONS"]
+__all__ = ["QuarantineRecord", "SequenceGap", "ApidSummary", "IngestReport", "SampleBatch", "DecodeResult", "REASONS"]
 
 REASONS = (
     "bad_header",
@@ -133,7 +133,7 @@ class SampleBatch:
 
 
 @dataclass(frozen=True)
-class IngestResult:
+class DecodeResult:
     """Decoded, validated batches and the report of one input."""
 
     batches: list[SampleBatch]
