@@ -4,23 +4,25 @@ Conventions (written once here and in docs/conventions.md):
 
 * Time is UTC as float64 seconds since the Unix epoch (``t_unix_s``); UT1 = UTC + DUT1 from the
   IERS table that skyfield ships (``load.timescale(builtin=True)``, offline).
-* ECI is the GCRS (≈ J2000 to 23 mas). ECEF is the ITRS without polar motion (the ignored pole
-  offset is ≤ 0.5″, ≤ 17 m at LEO radius), i.e. ECEF = R3(ERA) · C · ECI with ERA the IAU 2000 Earth
-  rotation angle of UT1 and C the IAU 2000A/2006 celestial-to-intermediate (precession-nutation)
-  matrix, taken from skyfield on an hourly grid and interpolated (interpolation error < 1e-10 rad).
+* ECI is the GCRS (≈ J2000 to 23 mas). ECEF is the ITRS: ECEF = W · R3(ERA) · C · ECI with ERA the
+  IAU 2000 Earth rotation angle of UT1, C the IAU 2000A/2006 celestial-to-intermediate
+  (precession-nutation) matrix and W the polar motion (IERS finals2000A.all shipped by skyfield-data),
+  C and W taken from skyfield on an hourly grid and interpolated (error < 1e-10 rad). Against
+  Vallado's AIAA 2006-6753 example the chain TEME → GCRS → ITRS is good to a few millimetres.
 * TEME (SGP4 output, AIAA 2006-6753 App. C) → GCRS uses skyfield's TEME rotation
   (GMST 1982 minus GAST, then the true-of-date → GCRS matrix), accuracy at the mas level.
 * ORF (seed 000 §2, DESIGN.md): x^o toward nadir (−r̂), y^o along the orbital velocity (the part of
   v normal to r), z^o = x^o × y^o (= −orbit normal). Λ_o(t) rotates ORF vectors into ECI; the body
   attitude relative to the ORF is Λ^o = Λ̃_o ∘ Λ.
-* Kernels (``*_1``) are numba functions on float64 arrays for the engine loop; for them the
-  precession-nutation matrix and DUT1 are frozen at the scenario start (drift < 1e-6 rad per day).
+* Kernels (``*_1``) are numba functions on float64 arrays for the engine loop; for them C, W and
+  DUT1 are frozen at the scenario start (drift < 1e-6 rad per day).
 """
 
 from __future__ import annotations
 
 import functools
 import warnings
+from pathlib import Path
 
 import numpy as np
 from numba import njit
@@ -34,6 +36,7 @@ __all__ = [
     "ut1_minus_utc_s",
     "earth_rotation_angle_rad",
     "celestial_to_intermediate",
+    "polar_motion",
     "eci_to_ecef_matrix",
     "eci_to_ecef",
     "ecef_to_eci",
@@ -62,11 +65,16 @@ _GEODETIC_ITERATIONS = 6  # Bowring/Newton: sub-micrometre for |h| < 1e5 km
 @functools.lru_cache(maxsize=1)
 def _timescale():
     """skyfield's built-in timescale (leap seconds, DUT1), loaded once, offline."""
+    import skyfield_data
     from skyfield.api import load
+    from skyfield.data import iers
 
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*has expired.*")
-        return load.timescale(builtin=True)
+        ts = load.timescale(builtin=True)
+    with open(Path(skyfield_data.get_skyfield_data_path()) / "finals2000A.all", "rb") as finals:
+        iers.install_polar_motion_table(ts, iers.parse_x_y_dut1_from_finals_all(finals))
+    return ts
 
 
 def _times(t_unix_s: np.ndarray | float, name: str = "t_unix_s") -> np.ndarray:
@@ -114,8 +122,8 @@ def _rot3(angle_rad: np.ndarray) -> np.ndarray:
     return r
 
 
-def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """GCRS→CIRS (C) and GCRS→TEME matrices at flat times, interpolated from an hourly grid."""
+def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GCRS→CIRS (C), polar motion (W) and GCRS→TEME matrices at flat times, from an hourly grid."""
     t0, t1 = float(np.min(t_unix_s)), float(np.max(t_unix_s))
     n = max(2, int(np.ceil((t1 - t0) / _GRID_STEP_S)) + 1)
     grid = t0 + _GRID_STEP_S * np.arange(n)
@@ -127,28 +135,37 @@ def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     from skyfield.sgp4lib import TEME
 
     teme_grid = np.moveaxis(np.asarray(TEME.rotation_at(sky)), -1, 0)
+    w_grid = np.moveaxis(np.asarray(sky.polar_motion_matrix()), -1, 0)
     w = (t_unix_s - t0) / _GRID_STEP_S
     k = np.clip(np.floor(w).astype(int), 0, n - 2)
     f = (w - k)[:, None, None]
     c = (1.0 - f) * c_grid[k] + f * c_grid[k + 1]
     teme = (1.0 - f) * teme_grid[k] + f * teme_grid[k + 1]
-    return c, teme
+    w = (1.0 - f) * w_grid[k] + f * w_grid[k + 1]
+    return c, w, teme
 
 
 def celestial_to_intermediate(t_unix_s: np.ndarray | float) -> np.ndarray:
     """Precession-nutation matrix C (GCRS → CIRS, IAU 2000A/2006 via skyfield), shape (..., 3, 3)."""
     t = _times(t_unix_s)
-    c, _ = _slow_matrices(np.atleast_1d(t).ravel())
+    c, _, _ = _slow_matrices(np.atleast_1d(t).ravel())
     return c.reshape(t.shape + (3, 3))
 
 
+def polar_motion(t_unix_s: np.ndarray | float) -> np.ndarray:
+    """Polar-motion matrix W (TIRS → ITRS, IERS x_p, y_p, s′ via skyfield), shape (..., 3, 3)."""
+    t = _times(t_unix_s)
+    _, w, _ = _slow_matrices(np.atleast_1d(t).ravel())
+    return w.reshape(t.shape + (3, 3))
+
+
 def eci_to_ecef_matrix(t_unix_s: np.ndarray | float) -> np.ndarray:
-    """Rotation ECI (GCRS) → ECEF (ITRS, no polar motion): R3(ERA(UT1)) · C, shape (..., 3, 3)."""
+    """Rotation ECI (GCRS) → ECEF (ITRS): W · R3(ERA(UT1)) · C (IERS 2010 eq 5.1), shape (..., 3, 3)."""
     t = _times(t_unix_s)
     flat = np.atleast_1d(t).ravel()
-    c, _ = _slow_matrices(flat)
+    c, w, _ = _slow_matrices(flat)
     era = earth_rotation_angle_rad(flat + ut1_minus_utc_s(flat))
-    return (_rot3(era) @ c).reshape(t.shape + (3, 3))
+    return (w @ _rot3(era) @ c).reshape(t.shape + (3, 3))
 
 
 def eci_to_ecef(
@@ -178,7 +195,7 @@ def teme_to_eci(
     """TEME (SGP4 output, AIAA 2006-6753 App. C) → ECI (GCRS) position and velocity."""
     r, v = _vectors(r_teme_m, "r_teme_m"), _vectors(v_teme_m_s, "v_teme_m_s")
     t = _times(t_unix_s)
-    _, teme = _slow_matrices(np.atleast_1d(t).ravel())
+    _, _, teme = _slow_matrices(np.atleast_1d(t).ravel())
     mt = np.swapaxes(teme, -1, -2).reshape(t.shape + (3, 3))
     return np.einsum("...ij,...j->...i", mt, r), np.einsum("...ij,...j->...i", mt, v)
 
@@ -241,10 +258,10 @@ def orf_rate_rad_s(r_eci_m: np.ndarray, v_eci_m_s: np.ndarray) -> np.ndarray:
     return np.cross(r, v) / np.sum(r * r, axis=-1, keepdims=True)
 
 
-def earth_orientation_frozen(t0_unix_s: float) -> tuple[np.ndarray, float]:
-    """Precession-nutation matrix C (3, 3) and DUT1 (s) at t0, frozen for the ``*_1`` kernels."""
+def earth_orientation_frozen(t0_unix_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """Precession-nutation C (3, 3), polar motion W (3, 3) and DUT1 (s) at t0, for the ``*_1`` kernels."""
     t0 = float(_times(t0_unix_s, "t0_unix_s"))
-    return celestial_to_intermediate(t0), float(ut1_minus_utc_s(t0))
+    return celestial_to_intermediate(t0), polar_motion(t0), float(ut1_minus_utc_s(t0))
 
 
 @njit(cache=True)
@@ -256,25 +273,26 @@ def earth_rotation_angle_1(t_ut1_unix_s: float) -> float:
 
 
 @njit(cache=True)
-def eci_to_ecef_1(v_eci: np.ndarray, c_pn: np.ndarray, era_rad: float) -> np.ndarray:
-    """Rotate one ECI vector into ECEF: R3(ERA) · C · v (compiled kernel, no velocity transport)."""
+def eci_to_ecef_1(v_eci: np.ndarray, c_pn: np.ndarray, w_pm: np.ndarray, era_rad: float) -> np.ndarray:
+    """Rotate one ECI vector into ECEF: W · R3(ERA) · C · v (compiled kernel, no velocity transport)."""
     w = c_pn @ v_eci
     c, s = np.cos(era_rad), np.sin(era_rad)
     out = np.empty(3)
     out[0] = c * w[0] + s * w[1]
     out[1] = -s * w[0] + c * w[1]
     out[2] = w[2]
-    return out
+    return w_pm @ out
 
 
 @njit(cache=True)
-def ecef_to_eci_1(v_ecef: np.ndarray, c_pn: np.ndarray, era_rad: float) -> np.ndarray:
-    """Rotate one ECEF vector into ECI: Cᵗ · R3(−ERA) · v (compiled kernel, no velocity transport)."""
+def ecef_to_eci_1(v_ecef: np.ndarray, c_pn: np.ndarray, w_pm: np.ndarray, era_rad: float) -> np.ndarray:
+    """Rotate one ECEF vector into ECI: Cᵗ · R3(−ERA) · Wᵗ · v (compiled kernel, no velocity transport)."""
+    u = w_pm.T @ v_ecef
     c, s = np.cos(era_rad), np.sin(era_rad)
     w = np.empty(3)
-    w[0] = c * v_ecef[0] - s * v_ecef[1]
-    w[1] = s * v_ecef[0] + c * v_ecef[1]
-    w[2] = v_ecef[2]
+    w[0] = c * u[0] - s * u[1]
+    w[1] = s * u[0] + c * u[1]
+    w[2] = u[2]
     return c_pn.T @ w
 
 
