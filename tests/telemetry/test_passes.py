@@ -1,0 +1,99 @@
+"""Pass prediction against skyfield's find_events, and received data assigned to passes."""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+import pytest
+from skyfield.api import EarthSatellite, load, wgs84
+
+from telemetry.archive import Archive, PacketBatch
+from telemetry.passes import assign_to_passes, elevation_deg, predict_passes, record_reception
+from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
+
+SKYFIELD_EVENT_TOLERANCE_S = 1.0  # find_events refines rise/set/culmination to half a second
+MAX_ELEVATION_TOLERANCE_DEG = 0.01  # 0.5 s off culmination changes elevation by < 1e-3 deg
+STATIONS = {  # name: (lat_deg, lon_deg, alt_m, min_elevation_deg)
+    "Svalbard": (78.2298, 15.4078, 458.0, 5.0),
+    "Toulouse": (43.5617, 1.4811, 150.0, 0.0),
+    "Fairbanks": (64.8594, -147.8542, 200.0, 10.0),
+}
+START_UTC = datetime(2021, 3, 7, tzinfo=timezone.utc)
+START_NS = int(START_UTC.timestamp()) * 10**9
+DAYS = 2.0
+
+
+def noaa20_tle(shared_data: Path) -> tuple[str, str]:
+    """The first NOAA-20 element set of the shared real TLE file (epoch 2021-03-06)."""
+    lines = (shared_data / "tle" / "real_sso_smallsats.tle").read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith("NOAA 20"))
+    return lines[k + 1], lines[k + 2]
+
+
+def skyfield_passes(line1: str, line2: str, station: tuple[float, float, float, float]) -> np.ndarray:
+    """(aos, culmination, los) UTC seconds of complete passes from skyfield's find_events."""
+    ts = load.timescale(builtin=True)
+    lat, lon, alt, min_el = station
+    t0 = ts.from_datetime(START_UTC)
+    t1 = ts.tt_jd(t0.tt + DAYS)
+    times, events = EarthSatellite(line1, line2, ts=ts).find_events(wgs84.latlon(lat, lon, elevation_m=alt), t0, t1, altitude_degrees=min_el)
+    unix = np.array([t.utc_datetime().timestamp() for t in times])
+    out, rise, peak = [], None, None
+    for t, event in zip(unix, events):
+        if event == 0:
+            rise, peak = t, None
+        elif event == 1 and rise is not None and peak is None:
+            peak = t
+        elif event == 2 and rise is not None and peak is not None:
+            out.append((rise, peak, t))
+            rise = None
+    return np.array(out)
+
+
+@pytest.mark.parametrize("name", sorted(STATIONS))
+def test_noaa20_passes_match_skyfield_find_events(shared_data: Path, name: str) -> None:
+    line1, line2 = noaa20_tle(shared_data)
+    lat, lon, alt, min_el = STATIONS[name]
+    ours = predict_passes(line1, line2, lat, lon, alt, min_el, START_NS, DAYS)
+    truth = skyfield_passes(line1, line2, STATIONS[name])
+    assert ours.aos_ns.size == truth.shape[0] > 0
+    np.testing.assert_allclose(ours.aos_ns / 1e9, truth[:, 0], atol=SKYFIELD_EVENT_TOLERANCE_S, rtol=0)
+    np.testing.assert_allclose(ours.max_elevation_ns / 1e9, truth[:, 1], atol=SKYFIELD_EVENT_TOLERANCE_S, rtol=0)
+    np.testing.assert_allclose(ours.los_ns / 1e9, truth[:, 2], atol=SKYFIELD_EVENT_TOLERANCE_S, rtol=0)
+    sky_el = elevation_deg(line1, line2, lat, lon, alt, truth[:, 1])
+    np.testing.assert_allclose(ours.max_elevation_deg, sky_el, atol=MAX_ELEVATION_TOLERANCE_DEG, rtol=0)
+    np.testing.assert_allclose(elevation_deg(line1, line2, lat, lon, alt, ours.aos_ns / 1e9), min_el, atol=1e-3)
+
+
+def test_assign_to_passes_is_inclusive_and_minus_one_outside() -> None:
+    aos, los = np.array([10, 100]), np.array([20, 150])
+    t = np.array([5, 10, 15, 20, 21, 99, 100, 150, 151])
+    np.testing.assert_array_equal(assign_to_passes(t, aos, los), [-1, 0, 0, 0, -1, -1, 1, 1, -1])
+    with pytest.raises(ValueError, match="aos_ns"):
+        assign_to_passes(t, np.array([10, 15]), np.array([20, 30]))
+
+
+def test_bad_window_names_the_field(shared_data: Path) -> None:
+    line1, line2 = noaa20_tle(shared_data)
+    with pytest.raises(ValueError, match="days"):
+        predict_passes(line1, line2, 0.0, 0.0, 0.0, 5.0, 0, 0.0)
+
+
+def test_received_packets_give_pass_span_and_completeness(archive: Archive, shared_data: Path) -> None:
+    line1, line2 = noaa20_tle(shared_data)
+    lat, lon, alt, min_el = STATIONS["Svalbard"]
+    archive.add_ground_station("Svalbard", lat, lon, alt, min_el)
+    predicted = predict_passes(line1, line2, lat, lon, alt, min_el, START_NS, 0.3)
+    archive.save_passes("NOAA-20", "Svalbard", predicted.rows())
+    first = archive.passes("NOAA-20", 0, 2**62)[0]
+    t = np.arange(first.aos_ns, first.los_ns, 10**9)  # 1 Hz over the pass
+    kept = np.setdiff1d(np.arange(t.size), [5, 6, 7, 100])  # 4 packets lost on the link
+    batch = PacketBatch.from_packets(11, t, np.arange(t.size) % 16_384, [b"\x00" * 8] * t.size, {"x": np.zeros(t.size)})
+    archive.ingest("NOAA-20", [batch.take(kept)], source="pass", uploaded_by="tester")
+    (updated, *_) = record_reception(archive, "NOAA-20", archive.passes("NOAA-20", 0, 2**62))
+    assert (updated.packets_received, updated.packets_missing) == (t.size - 4, 4)
+    assert (updated.received_start_ns, updated.received_end_ns) == (int(t[0]), int(t[-1]))
+    assert updated.completeness == pytest.approx((t.size - 4) / t.size)
+    assert archive.passes("NOAA-20", 0, 2**62)[0] == updated
