@@ -14,8 +14,12 @@ and aerodynamic terms, seed 003 eq 34's k_e Ω and M_df sgn Ω). Seed 000 eq (1)
 J_r (aᵗω̇ + Ω̇) = m − m^f. Noise M_x and imbalance M_d are added to the delivered motor torque.
 
 Motor electrics (seed 002 eq 2–3): L di/dt + R i + K_e Ω = u, M = K_m i.
-Speed loop (seed 003 eq 35–37): M_w = −(k_Ω + k_e)(Ω − Ω_0) − k_T T_c, first order with time
-constant T_w = J_r / (k_Ω + k_e).
+Speed integration (seed 002 eq 5, Ω = J_c⁻¹∫M dt) is row 3 of seed 000 eq (1) in ``spacecraft``.
+Speed loop (seed 003 eq 35–37): M_w = −k_w(Ω − Ω_0) − k_T T_c with k_w = k_Ω + k_e, first order
+with time constant T_w = J_r / k_w. T_c is the torque requested *on the body*, which the wheel
+delivers by the opposite motor torque, hence −k_T T_c as in eq (35); seed 003's eq (36)–(37) carry
++T_c, a sign slip we do not copy. k_w already contains the motor's back-EMF damping k_e, so a wheel
+run by the speed loop should not also get k_e as ``viscous_nm_s``.
 
 Limits (seed 000 eq 2): |m_p| ≤ m^m and |h_p| ≤ h^m; a wheel at its momentum limit accepts no
 torque that would drive it further.
@@ -50,6 +54,8 @@ __all__ = [
     "delivered_torque_1",
     "motor_current_derivative",
     "motor_current_derivative_1",
+    "motor_current_step",
+    "motor_current_step_1",
     "motor_torque",
     "speed_loop_torque",
     "speed_loop_torque_1",
@@ -257,6 +263,21 @@ def motor_current_derivative_1(
 
 
 @njit(cache=True)
+def motor_current_step_1(
+    current_a: np.ndarray, voltage_v: np.ndarray, speed_rad_s: np.ndarray, dt: float,
+    inductance_h: float, resistance_ohm: float, back_emf_v_s: float,
+) -> np.ndarray:
+    """Exact armature current after dt with u and Ω held: i_∞ + (i − i_∞) e^{−R dt/L} (seed 002 eq 2–3).
+
+    The electrical time constant L/R (≈ ms) is far below the 0.1 s plant step, so the current is
+    advanced by this zero-order-hold solution instead of an explicit integrator (stable for any dt).
+    """
+    decay = np.exp(-resistance_ohm * dt / inductance_h)
+    i_inf = (voltage_v - back_emf_v_s * speed_rad_s) / resistance_ohm
+    return i_inf + (current_a - i_inf) * decay
+
+
+@njit(cache=True)
 def speed_loop_torque_1(
     speed_rad_s: np.ndarray, speed_set_rad_s: np.ndarray, torque_request_nm: np.ndarray,
     loop_gain_nm_s: np.ndarray, torque_gain: np.ndarray,
@@ -317,6 +338,17 @@ def motor_current_derivative(motor: MotorParams, current_a, voltage_v, speed_rad
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name}: contains NaN or infinite values")
     return motor_current_derivative_1(i, u, w, motor.inductance_h, motor.resistance_ohm, motor.back_emf_v_s)
+
+
+def motor_current_step(motor: MotorParams, current_a, voltage_v, speed_rad_s, dt_s: float) -> np.ndarray:
+    """Armature current after dt_s with voltage and speed held, A (seed 002 eq 2–3, exact ZOH)."""
+    i, u, w = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (current_a, voltage_v, speed_rad_s))
+    for name, a in (("current_a", i), ("voltage_v", u), ("speed_rad_s", w)):
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name}: contains NaN or infinite values")
+    if not np.isfinite(dt_s) or dt_s < 0.0:
+        raise ValueError(f"dt_s: must be finite and non-negative, got {dt_s}")
+    return motor_current_step_1(i, u, w, float(dt_s), motor.inductance_h, motor.resistance_ohm, motor.back_emf_v_s)
 
 
 def motor_torque(motor: MotorParams, current_a) -> np.ndarray:
