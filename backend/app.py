@@ -22,9 +22,10 @@ Errors are JSON `{"message", "field", "status"}`."""
 
 
 def _routers() -> list:
-    from backend.routes import health, live, simulations, tokens
+    from backend.routes import alarms, health, live, parameters, passes, simulations, telemetry, tokens
 
-    return [health.router, tokens.router, simulations.router, live.router]
+    return [health.router, tokens.router, telemetry.router, parameters.router, passes.router,
+            alarms.router, simulations.router, live.router]
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

@@ -87,6 +87,10 @@ class LiveHub:
             if sub.wants(topic):
                 sub.offer(topic, data)
 
+    def wants_any(self, topic: str) -> bool:
+        """True if some subscription matches ``topic`` (lets publishers skip building items)."""
+        return any(sub.wants(topic) for sub in self._subscriptions)
+
     @property
     def subscriber_count(self) -> int:
         """Number of connected subscriptions."""

@@ -53,4 +53,4 @@ def build_services(settings: Settings) -> Services:
     return Services(settings=settings, engine=engine, sessions=sessions, tokens=tokens,
                     audit=AuditRepository(sessions), job_repo=job_repo,
                     jobs=JobManager(settings, job_repo), auth=Authenticator(tokens, settings.auth_enabled),
-                    hub=hub, telemetry=TelemetryGateway(settings, engine, hub))
+                    hub=hub, telemetry=TelemetryGateway(settings, hub))

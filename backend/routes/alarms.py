@@ -1,0 +1,61 @@
+"""Alarms: list, events, acknowledge, shelve, unshelve (operator actions are audited)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict
+from typing import Any
+
+from fastapi import APIRouter, Query
+from pydantic import BaseModel, Field
+
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.errors import ERROR_RESPONSES
+
+router = APIRouter(tags=["alarms"], responses=ERROR_RESPONSES)
+
+
+class ShelveRequest(BaseModel):
+    """Shelve an alarm for a while (it comes back by itself when the time is over)."""
+
+    duration_s: float = Field(gt=0, le=30 * 86_400, examples=[3600.0])
+
+
+@router.get("/alarms", summary="Alarms of a satellite")
+def list_alarms(services: ServicesDep, _: ViewerDep,
+                satellite: str = Query("NOAA-20", min_length=1, max_length=100),
+                include_cleared: bool = False) -> list[dict[str, Any]]:
+    """Active (and optionally cleared) alarms with state, severity and level."""
+    return [asdict(a) for a in services.telemetry.archive.alarms(satellite, include_cleared=include_cleared)]
+
+
+@router.get("/alarms/{alarm_id}/events", summary="History of one alarm")
+def alarm_events(alarm_id: int, services: ServicesDep, _: ViewerDep) -> list[dict[str, Any]]:
+    """Enter, leave, acknowledge, shelve … events in order."""
+    return [asdict(e) for e in services.telemetry.archive.alarm_events(alarm_id)]
+
+
+def _act(services: Any, principal: Any, alarm_id: int, action: str, until_ns: int | None = None) -> dict[str, Any]:
+    services.telemetry.archive.alarm_action(alarm_id, action, principal.name, shelved_until_ns=until_ns)
+    services.audit.record(principal.name, f"alarm.{action}", f"alarm/{alarm_id}",
+                          {"shelved_until_ns": until_ns} if until_ns else {})
+    services.hub.publish("alarms", {"alarm_id": alarm_id, "action": action, "actor": principal.name})
+    return {"alarm_id": alarm_id, "action": action}
+
+
+@router.post("/alarms/{alarm_id}/acknowledge", summary="Acknowledge an alarm")
+def acknowledge(alarm_id: int, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+    """Mark the alarm seen by the operator."""
+    return _act(services, principal, alarm_id, "acknowledge")
+
+
+@router.post("/alarms/{alarm_id}/shelve", summary="Shelve an alarm for duration_s")
+def shelve(alarm_id: int, body: ShelveRequest, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+    """Hide the alarm until now + duration_s."""
+    return _act(services, principal, alarm_id, "shelve", time.time_ns() + int(body.duration_s * 1e9))
+
+
+@router.post("/alarms/{alarm_id}/unshelve", summary="Unshelve an alarm")
+def unshelve(alarm_id: int, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+    """Bring a shelved alarm back now."""
+    return _act(services, principal, alarm_id, "unshelve")

@@ -1,0 +1,101 @@
+"""Archived parameters: list, latest values, downsampled samples and CSV/Parquet exports."""
+
+from __future__ import annotations
+
+import io
+from datetime import datetime
+from typing import Any, Literal
+
+import numpy as np
+from fastapi import APIRouter, Query
+from fastapi.responses import Response
+from pydantic import BaseModel
+
+from backend.deps import ServicesDep, ViewerDep
+from backend.errors import ERROR_RESPONSES, ApiError
+from backend.timebase import EARLIEST_NS, LATEST_NS, utc_ns
+
+router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
+
+SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, examples=["NOAA-20"])
+MAX_EXPORT_PARAMETERS = 200
+
+
+class SamplesPublic(BaseModel):
+    """Samples of one parameter: UTC ns times and values, downsampled keeping bucket min/max."""
+
+    satellite: str
+    name: str
+    total_points: int
+    t_utc_ns: list[int]
+    values: list[float]
+
+
+def _window(start: datetime | None, end: datetime | None) -> tuple[int, int]:
+    t0, t1 = utc_ns(start, EARLIEST_NS), utc_ns(end, LATEST_NS)
+    if t1 < t0:
+        raise ApiError(422, "end: before start", "end")
+    return t0, t1
+
+
+@router.get("/parameters", response_model=dict[str, int], summary="Archived parameters and their APID")
+def list_parameters(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, int]:
+    """Every parameter name archived for the satellite."""
+    return services.telemetry.archive.parameters(satellite)
+
+
+@router.get("/parameters/latest", summary="Newest value of each parameter")
+def latest_values(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
+    """{name: {t_utc_ns, value}} for every archived parameter."""
+    latest = services.telemetry.archive.latest_values(satellite)
+    return {name: {"t_utc_ns": t, "value": v} for name, (t, v) in latest.items()}
+
+
+@router.get("/parameters/{name}/samples", response_model=SamplesPublic, summary="Samples of one parameter")
+def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
+            start: datetime | None = Query(None, examples=["2021-04-09T00:00:00Z"]),
+            end: datetime | None = Query(None, examples=["2021-04-09T02:00:00Z"]),
+            max_points: int = Query(1000, ge=2, le=100_000)) -> dict[str, Any]:
+    """Samples in [start, end] (ISO 8601 UTC), min/max-bucket downsampled to at most max_points."""
+    t0, t1 = _window(start, end)
+    return services.telemetry.samples(satellite, name, t0, t1, min(max_points, services.settings.max_points))
+
+
+def _columns(services: Any, satellite: str, names: list[str], t0: int, t1: int) -> dict[str, np.ndarray]:
+    rows: dict[str, list] = {"t_utc_ns": [], "parameter": [], "value": []}
+    for name in names:
+        t, v = services.telemetry.archive.read_parameter(satellite, name, t0, t1)
+        rows["t_utc_ns"].append(t)
+        rows["parameter"].append(np.full(t.size, name, dtype=object))
+        rows["value"].append(np.asarray(v, dtype=float))
+    return {k: np.concatenate(v) if v else np.empty(0) for k, v in rows.items()}
+
+
+@router.get("/exports/samples", summary="Export samples as CSV or Parquet (long format)",
+            response_class=Response, responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}})
+def export_samples(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
+                   names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"],
+                                      description="Comma-separated parameter names."),
+                   start: datetime | None = None, end: datetime | None = None,
+                   format: Literal["csv", "parquet"] = "csv") -> Response:
+    """Rows (t_utc_ns, parameter, value) of the named parameters in [start, end]."""
+    wanted = [n.strip() for n in names.split(",") if n.strip()]
+    if not wanted or len(wanted) > MAX_EXPORT_PARAMETERS:
+        raise ApiError(422, f"names: give 1..{MAX_EXPORT_PARAMETERS} parameter names", "names")
+    t0, t1 = _window(start, end)
+    columns = _columns(services, satellite, wanted, t0, t1)
+    filename = f"{satellite}-samples.{format}"
+    headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
+    if format == "csv":
+        lines = ["t_utc_ns,parameter,value"] + [f"{int(t)},{p},{float(v)!r}" for t, p, v in
+                                                zip(columns["t_utc_ns"], columns["parameter"], columns["value"])]
+        return Response("\n".join(lines) + "\n", media_type="text/csv", headers=headers)
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.table({"t_utc_ns": pa.array(columns["t_utc_ns"].astype(np.int64)),
+                      "parameter": pa.array(columns["parameter"].astype(str)),
+                      "value": pa.array(columns["value"].astype(float))})
+    sink = io.BytesIO()
+    pq.write_table(table, sink)
+    return Response(sink.getvalue(), media_type="application/vnd.apache.parquet", headers=headers)

@@ -1,0 +1,91 @@
+"""Telemetry uploads (CCSDS / CSV / JSONL, streamed, size-limited) and telemetry dictionaries."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from fastapi import APIRouter, Query, Request
+from starlette.concurrency import run_in_threadpool
+
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.errors import ERROR_RESPONSES, ApiError
+
+router = APIRouter(tags=["telemetry"], responses=ERROR_RESPONSES)
+
+BINARY_BODY = {"requestBody": {"required": True, "content": {
+    "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
+    "text/csv": {"schema": {"type": "string"}},
+    "application/x-ndjson": {"schema": {"type": "string"}}}}}
+DEFINITION_BODY = {"requestBody": {"required": True, "content": {
+    "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}}
+
+
+async def read_limited(request: Request, max_bytes: int) -> bytes:
+    """The request body read as a stream, 413 naming max_upload_mb once it grows past max_bytes."""
+    declared = request.headers.get("content-length")
+    if declared and declared.isdigit() and int(declared) > max_bytes:
+        raise ApiError(413, f"body of {int(declared)} bytes over max_upload_mb", "max_upload_mb")
+    body = bytearray()
+    async for chunk in request.stream():
+        body.extend(chunk)
+        if len(body) > max_bytes:
+            raise ApiError(413, f"body over max_upload_mb ({max_bytes} bytes)", "max_upload_mb")
+    if not body:
+        raise ApiError(422, "body: empty upload", "body")
+    return bytes(body)
+
+
+def _parse_failure(exc: Exception, field: str) -> ApiError:
+    return ApiError(422, f"{field}: could not be read: {exc}", field)
+
+
+@router.post("/telemetry/uploads", summary="Upload telemetry (CCSDS packets, CSV or JSONL)",
+             openapi_extra=BINARY_BODY, responses={413: ERROR_RESPONSES[422] | {"description": "Too large"}})
+async def upload_telemetry(
+    request: Request, services: ServicesDep, principal: OperatorDep,
+    satellite: str = Query("NOAA-20", min_length=1, max_length=100, examples=["NOAA-20"]),
+    dictionary: str = Query("noaa20_apid11_ccsdspy.yaml", examples=["noaa20_apid11_ccsdspy.yaml"]),
+    format: Literal["ccsds", "csv", "jsonl"] = Query("ccsds"),
+    source: str = Query("upload", max_length=200),
+) -> dict[str, Any]:
+    """Decode, validate, archive (limits checked, duplicates dropped) and return the ingest report."""
+    services.telemetry.require("archive")
+    data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
+    gateway = services.telemetry
+    if format == "ccsds":
+        report = await run_in_threadpool(gateway.ingest_packets, satellite, data, dictionary, source,
+                                         principal.name)
+    else:
+        report = await run_in_threadpool(gateway.ingest_ground_file, satellite, data, format, dictionary,
+                                         source, principal.name)
+    services.audit.record(principal.name, "telemetry.upload", f"satellite/{satellite}",
+                          {"bytes": len(data), "format": format, "upload_id": report["archive"]["upload_id"],
+                           "packets_accepted": report["archive"]["packets_accepted"]})
+    return report
+
+
+@router.get("/dictionaries", response_model=list[str], summary="Known telemetry dictionaries")
+def list_dictionaries(services: ServicesDep, _: ViewerDep) -> list[str]:
+    """File names usable as ``dictionary=`` in uploads (shipped and uploaded)."""
+    services.telemetry.require("dictionary")
+    return services.telemetry.dictionaries.names()
+
+
+@router.post("/dictionaries/{name}", status_code=201, summary="Upload a dictionary (YAML, XTCE, ccsdspy CSV)",
+             openapi_extra=DEFINITION_BODY)
+async def upload_dictionary(
+    name: str, request: Request, services: ServicesDep, principal: OperatorDep,
+    apid: int | None = Query(None, ge=0, le=2046, description="APID of a ccsdspy CSV layout."),
+    time_code: str | None = Query(None, max_length=200, description="Time code spec for CSV/XTCE."),
+) -> dict[str, Any]:
+    """Store a definition for a new spacecraft or APID once it loads; lists its packets."""
+    services.telemetry.require("dictionary")
+    data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
+    try:
+        loaded = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code)
+    except ValueError:
+        raise
+    except Exception as exc:  # a malformed XML/YAML file raises its parser's own errors
+        raise _parse_failure(exc, "body") from exc
+    services.audit.record(principal.name, "dictionary.upload", f"dictionary/{name}", {"bytes": len(data)})
+    return {"name": name, "packets": {str(a): p.name for a, p in loaded.packets.items()}}
