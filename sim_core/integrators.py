@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 from scipy.integrate import solve_ivp
 
 from sim_core.spacecraft import PlantArrays, PlantParams, plant_derivative_1, plant_derivative_into, state_size
@@ -86,7 +87,7 @@ def _check_dt(dt_s: float) -> float:
     return dt
 
 
-def _check_x(x, params: PlantParams) -> np.ndarray:
+def _check_x(x: ArrayLike, params: PlantParams) -> np.ndarray:
     n = state_size(params.n_modes, params.n_wheels)
     xs = np.ascontiguousarray(np.asarray(x, dtype=float))
     if xs.shape != (n,) or not np.all(np.isfinite(xs)):
@@ -94,23 +95,30 @@ def _check_x(x, params: PlantParams) -> np.ndarray:
     return xs
 
 
-def rk4_step(x, dt_s: float, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantParams) -> np.ndarray:
+def _torque(value: ArrayLike, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.ascontiguousarray(np.asarray(value, dtype=float))
+    if arr.shape != shape or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite shape {shape}, got {arr.shape}")
+    return arr
+
+
+def rk4_step(
+    x: ArrayLike, dt_s: float, wheel_motor_torque_nm: ArrayLike, ext_torque_b_nm: ArrayLike, params: PlantParams
+) -> np.ndarray:
     """One RK4 step of seed 000 eq (1) with held torques (validated wrapper of ``rk4_step_1``)."""
-    m = np.ascontiguousarray(np.asarray(wheel_motor_torque_nm, dtype=float).reshape(params.n_wheels))
-    t = np.ascontiguousarray(np.asarray(ext_torque_b_nm, dtype=float).reshape(3))
+    m = _torque(wheel_motor_torque_nm, "wheel_motor_torque_nm", (params.n_wheels,))
+    t = _torque(ext_torque_b_nm, "ext_torque_b_nm", (3,))
     return rk4_step_1(_check_x(x, params), _check_dt(dt_s), m, t, params.pack())
 
 
 def rk4_propagate(
-    x0, dt_s: float, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantParams, every: int = 1
+    x0: ArrayLike, dt_s: float, wheel_motor_torque_nm: ArrayLike, ext_torque_b_nm: ArrayLike,
+    params: PlantParams, every: int = 1,
 ) -> np.ndarray:
     """States every ``every`` RK4 steps under per-step torques of shape (n_steps, n_w) and (n_steps, 3)."""
-    m = np.ascontiguousarray(np.asarray(wheel_motor_torque_nm, dtype=float))
-    t = np.ascontiguousarray(np.asarray(ext_torque_b_nm, dtype=float))
-    if m.ndim != 2 or m.shape[1] != params.n_wheels or not np.all(np.isfinite(m)):
-        raise ValueError(f"wheel_motor_torque_nm: expected finite shape (n_steps, {params.n_wheels}), got {m.shape}")
-    if t.shape != (m.shape[0], 3) or not np.all(np.isfinite(t)):
-        raise ValueError(f"ext_torque_b_nm: expected finite shape ({m.shape[0]}, 3), got {t.shape}")
+    n_steps = np.shape(wheel_motor_torque_nm)[0] if np.ndim(wheel_motor_torque_nm) == 2 else -1
+    m = _torque(wheel_motor_torque_nm, "wheel_motor_torque_nm", (n_steps, params.n_wheels))
+    t = _torque(ext_torque_b_nm, "ext_torque_b_nm", (n_steps, 3))
     if int(every) < 1:
         raise ValueError(f"every: must be a positive integer, got {every}")
     return rk4_propagate_1(_check_x(x0, params), _check_dt(dt_s), m, t, params.pack(), int(every))
@@ -120,7 +128,7 @@ TorqueFn = Callable[[float], np.ndarray]
 
 
 def reference_propagate(
-    x0,
+    x0: ArrayLike,
     t_eval_s: Sequence[float],
     params: PlantParams,
     wheel_motor_torque_fn: TorqueFn | None = None,

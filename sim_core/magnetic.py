@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 __all__ = [
     "magnetic_torque",
@@ -60,7 +61,7 @@ def moment_for_torque_1(torque_b: np.ndarray, field_b: np.ndarray) -> np.ndarray
     return out
 
 
-def _vec3(value, name: str) -> np.ndarray:
+def _vec3(value: ArrayLike, name: str) -> np.ndarray:
     arr = np.ascontiguousarray(np.asarray(value, dtype=float))
     if arr.shape[-1:] != (3,):
         raise ValueError(f"{name}: expected shape (..., 3), got {arr.shape}")
@@ -69,12 +70,12 @@ def _vec3(value, name: str) -> np.ndarray:
     return arr
 
 
-def magnetic_torque(moment_b_am2, field_b_t) -> np.ndarray:
+def magnetic_torque(moment_b_am2: ArrayLike, field_b_t: ArrayLike) -> np.ndarray:
     """Torque L × B, N·m, batch over leading axes (seed 003 eq 26; seed 000 M^m with the physical sign)."""
     return np.cross(_vec3(moment_b_am2, "moment_b_am2"), _vec3(field_b_t, "field_b_t"))
 
 
-def saturate_moment(moment_b_am2, max_moment_am2: float) -> np.ndarray:
+def saturate_moment(moment_b_am2: ArrayLike, max_moment_am2: float) -> np.ndarray:
     """Rod moments clipped to |l_i| ≤ l^m, A·m² (seed 000 §2)."""
     l_max = float(max_moment_am2)
     if not np.isfinite(l_max) or l_max <= 0.0:
@@ -82,7 +83,7 @@ def saturate_moment(moment_b_am2, max_moment_am2: float) -> np.ndarray:
     return np.clip(_vec3(moment_b_am2, "moment_b_am2"), -l_max, l_max)
 
 
-def moment_for_torque(torque_b_nm, field_b_t) -> np.ndarray:
+def moment_for_torque(torque_b_nm: ArrayLike, field_b_t: ArrayLike) -> np.ndarray:
     """Minimum-norm dipole L = B × T / B², A·m² (seed 003 eq 29); raises where B = 0."""
     t, b = _vec3(torque_b_nm, "torque_b_nm"), _vec3(field_b_t, "field_b_t")
     b2 = np.sum(b * b, axis=-1, keepdims=True)
@@ -91,7 +92,7 @@ def moment_for_torque(torque_b_nm, field_b_t) -> np.ndarray:
     return np.cross(b, t) / b2
 
 
-def moment_for_driver_torque(torque_mag_nm, torque_dir_b, field_b_t) -> np.ndarray:
+def moment_for_driver_torque(torque_mag_nm: ArrayLike, torque_dir_b: ArrayLike, field_b_t: ArrayLike) -> np.ndarray:
     """Seed 000 §3 MD command L = (m^m/B)(b × e^m) for the torque m^m e^m, e^m ⟂ b, A·m²."""
     e_m, b = _vec3(torque_dir_b, "torque_dir_b"), _vec3(field_b_t, "field_b_t")
     b_norm = np.linalg.norm(b, axis=-1, keepdims=True)

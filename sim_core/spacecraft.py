@@ -26,6 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 from sim_core.quaternion import rotate_1
 from sim_core.wheels import WheelParams, friction_torque_one_wheel
@@ -41,6 +42,8 @@ __all__ = [
     "angular_momentum_b",
     "angular_momentum_b_1",
     "angular_momentum_i",
+    "wheel_momentum",
+    "wheel_momentum_1",
     "kinetic_energy",
     "kinetic_energy_1",
     "mechanical_energy",
@@ -64,7 +67,7 @@ class PlantArrays(NamedTuple):
     flex_decrement: np.ndarray  # δ^q (nq,)
 
 
-def _finite(value, name: str, shape: tuple[int, ...]) -> np.ndarray:
+def _finite(value: ArrayLike, name: str, shape: tuple[int, ...]) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.shape != shape:
         raise ValueError(f"{name}: expected shape {shape}, got {arr.shape}")
@@ -171,7 +174,14 @@ def state_size(n_modes: int, n_wheels: int) -> int:
     return 7 + 2 * n_modes + n_wheels
 
 
-def pack_state(params: PlantParams, q_ib, omega_b_rad_s, wheel_speed_rad_s=None, flex_q=None, flex_qdot=None):
+def pack_state(
+    params: PlantParams,
+    q_ib: ArrayLike,
+    omega_b_rad_s: ArrayLike,
+    wheel_speed_rad_s: ArrayLike | None = None,
+    flex_q: ArrayLike | None = None,
+    flex_qdot: ArrayLike | None = None,
+) -> np.ndarray:
     """State x = [Λ, ω, q, q̇, Ω] from its parts, validated (layout of seed 000 eq 1)."""
     nq, nw = params.n_modes, params.n_wheels
     q = _finite(q_ib, "q_ib", (4,))
@@ -266,6 +276,13 @@ def plant_derivative_1(
 
 
 @njit(cache=True)
+def wheel_momentum_1(x: np.ndarray, p: PlantArrays) -> np.ndarray:
+    """Relative wheel momenta h = J_r Ω, N·m·s, what the tachometers report (seed 000 eq 1)."""
+    nq = p.flex_mass.shape[0]
+    return p.wheel_inertia * x[7 + 2 * nq :]
+
+
+@njit(cache=True)
 def kinetic_energy_1(x: np.ndarray, p: PlantArrays) -> float:
     """Kinetic energy ½ vᵀ A^o v, v = {ω, q̇, Ω}, J (seed 000 eq 1)."""
     nq = p.flex_mass.shape[0]
@@ -297,12 +314,14 @@ def mechanical_energy_1(x: np.ndarray, p: PlantArrays) -> float:
 # --- friendly numpy API -------------------------------------------------------------------------
 
 
-def _state(x, params: PlantParams) -> np.ndarray:
+def _state(x: ArrayLike, params: PlantParams) -> np.ndarray:
     n = state_size(params.n_modes, params.n_wheels)
     return _finite(x, "x", (n,))
 
 
-def plant_derivative(x, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantParams) -> np.ndarray:
+def plant_derivative(
+    x: ArrayLike, wheel_motor_torque_nm: ArrayLike | None, ext_torque_b_nm: ArrayLike | None, params: PlantParams
+) -> np.ndarray:
     """ẋ of seed 000 eq (1) for one state (validated wrapper of ``plant_derivative_1``)."""
     m = _finite(np.zeros(params.n_wheels) if wheel_motor_torque_nm is None else wheel_motor_torque_nm,
                 "wheel_motor_torque_nm", (params.n_wheels,))
@@ -310,22 +329,27 @@ def plant_derivative(x, wheel_motor_torque_nm, ext_torque_b_nm, params: PlantPar
     return plant_derivative_1(_state(x, params), m, t, params.pack())
 
 
-def angular_momentum_b(x, params: PlantParams) -> np.ndarray:
+def angular_momentum_b(x: ArrayLike, params: PlantParams) -> np.ndarray:
     """Total angular momentum G in body axes, N·m·s (seed 000 eq 1)."""
     return angular_momentum_b_1(_state(x, params), params.pack())
 
 
-def angular_momentum_i(x, params: PlantParams) -> np.ndarray:
+def angular_momentum_i(x: ArrayLike, params: PlantParams) -> np.ndarray:
     """Total angular momentum Λ ∘ G ∘ Λ̃ in inertial axes, N·m·s (conserved without M^o)."""
     xs = _state(x, params)
     return rotate_1(xs[:4], angular_momentum_b_1(xs, params.pack()))
 
 
-def kinetic_energy(x, params: PlantParams) -> float:
+def wheel_momentum(x: ArrayLike, params: PlantParams) -> np.ndarray:
+    """Relative wheel momenta h = J_r Ω, N·m·s (seed 000 eq 1); the cluster's is A h."""
+    return wheel_momentum_1(_state(x, params), params.pack())
+
+
+def kinetic_energy(x: ArrayLike, params: PlantParams) -> float:
     """Kinetic energy ½ vᵀ A^o v, J (seed 000 eq 1)."""
     return float(kinetic_energy_1(_state(x, params), params.pack()))
 
 
-def mechanical_energy(x, params: PlantParams) -> float:
+def mechanical_energy(x: ArrayLike, params: PlantParams) -> float:
     """Kinetic plus modal strain energy, J (seed 000 eq 1)."""
     return float(mechanical_energy_1(_state(x, params), params.pack()))

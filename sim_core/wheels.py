@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+from numpy.typing import ArrayLike
 
 __all__ = [
     "WheelParams",
@@ -62,7 +63,7 @@ __all__ = [
 ]
 
 
-def _per_wheel(value, n: int, name: str, lower: float, strict: bool, allow_inf: bool) -> np.ndarray:
+def _per_wheel(value: ArrayLike, n: int, name: str, lower: float, strict: bool, allow_inf: bool) -> np.ndarray:
     """Broadcast a scalar or per-wheel array to shape (n,) and check its range, naming the field."""
     arr = np.asarray(value, dtype=float)
     if arr.ndim == 0:
@@ -178,7 +179,7 @@ def skew_3plus1_axes() -> np.ndarray:
     return np.column_stack([np.eye(3), np.full(3, 1.0 / np.sqrt(3.0))])
 
 
-def ge_normalized_momentum(h_nms: np.ndarray, max_momentum_nms: float, gamma_rad: float) -> np.ndarray:
+def ge_normalized_momentum(h_nms: ArrayLike, max_momentum_nms: float, gamma_rad: float) -> np.ndarray:
     """Normalised GE cluster momentum {x, y, z} = A^d h / h^m written out as seed 000 eq (4)."""
     h = np.asarray(h_nms, dtype=float)
     if h.shape[-1:] != (4,) or not np.all(np.isfinite(h)):
@@ -293,7 +294,7 @@ def speed_loop_torque_1(
 # --- friendly numpy API (tests, tools) ----------------------------------------------------------
 
 
-def _speeds(speed_rad_s: np.ndarray, n: int, name: str = "speed_rad_s") -> np.ndarray:
+def _speeds(speed_rad_s: ArrayLike, n: int, name: str = "speed_rad_s") -> np.ndarray:
     w = np.ascontiguousarray(np.atleast_1d(np.asarray(speed_rad_s, dtype=float)))
     if w.shape != (n,):
         raise ValueError(f"{name}: expected shape ({n},), got {w.shape}")
@@ -302,18 +303,18 @@ def _speeds(speed_rad_s: np.ndarray, n: int, name: str = "speed_rad_s") -> np.nd
     return w
 
 
-def friction_torque(wheels: WheelParams, speed_rad_s: np.ndarray) -> np.ndarray:
+def friction_torque(wheels: WheelParams, speed_rad_s: ArrayLike) -> np.ndarray:
     """Resisting friction torque per wheel, N·m (seed 000 eq 1 m^f, seed 002 eq 4 M_f + M_a)."""
     return friction_torque_1(_speeds(speed_rad_s, wheels.n), wheels.friction_table())
 
 
-def aero_drag_torque(wheels: WheelParams, speed_rad_s: np.ndarray) -> np.ndarray:
+def aero_drag_torque(wheels: WheelParams, speed_rad_s: ArrayLike) -> np.ndarray:
     """Aerodynamic drag K_a Ω √|Ω| per wheel, N·m (seed 002 eq 4 M_a)."""
     w = _speeds(speed_rad_s, wheels.n)
     return wheels.aero_drag_nm_s15 * w * np.sqrt(np.abs(w))
 
 
-def imbalance_torque(wheels: WheelParams, speed_rad_s: np.ndarray, t_s: float) -> np.ndarray:
+def imbalance_torque(wheels: WheelParams, speed_rad_s: ArrayLike, t_s: float) -> np.ndarray:
     """Dynamic-imbalance torque K_d Ω² sin(Ωt) per wheel, N·m (seed 002 eq 4 M_d)."""
     w = _speeds(speed_rad_s, wheels.n)
     return wheels.imbalance_nm_s2 * w * w * np.sin(w * float(t_s))
@@ -324,47 +325,61 @@ def noise_torque(wheels: WheelParams, rng: np.random.Generator) -> np.ndarray:
     return wheels.noise_nm * rng.uniform(-1.0, 1.0, wheels.n)
 
 
-def limited_motor_torque(wheels: WheelParams, torque_cmd_nm: np.ndarray, speed_rad_s: np.ndarray) -> np.ndarray:
+def limited_motor_torque(wheels: WheelParams, torque_cmd_nm: ArrayLike, speed_rad_s: ArrayLike) -> np.ndarray:
     """Commanded motor torque clipped to m^m and cut at the momentum limit h^m (seed 000 eq 2)."""
     m = _speeds(torque_cmd_nm, wheels.n, "torque_cmd_nm")
     w = _speeds(speed_rad_s, wheels.n)
     return limited_motor_torque_1(m, w, wheels.inertia_kg_m2, wheels.max_torque_nm, wheels.max_momentum_nms)
 
 
-def motor_current_derivative(motor: MotorParams, current_a, voltage_v, speed_rad_s) -> np.ndarray:
-    """Armature current rate di/dt = (u − R i − K_e Ω)/L, A/s (seed 002 eq 2)."""
-    i, u, w = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (current_a, voltage_v, speed_rad_s))
-    for name, a in (("current_a", i), ("voltage_v", u), ("speed_rad_s", w)):
-        if not np.all(np.isfinite(a)):
+def _finite_arrays(**named: ArrayLike) -> list[np.ndarray]:
+    """1-D float arrays of the named inputs, each checked finite (ValueError names the field)."""
+    out = []
+    for name, value in named.items():
+        arr = np.ascontiguousarray(np.atleast_1d(np.asarray(value, dtype=float)))
+        if not np.all(np.isfinite(arr)):
             raise ValueError(f"{name}: contains NaN or infinite values")
+        out.append(arr)
+    return out
+
+
+def motor_current_derivative(
+    motor: MotorParams, current_a: ArrayLike, voltage_v: ArrayLike, speed_rad_s: ArrayLike
+) -> np.ndarray:
+    """Armature current rate di/dt = (u − R i − K_e Ω)/L, A/s (seed 002 eq 2)."""
+    i, u, w = _finite_arrays(current_a=current_a, voltage_v=voltage_v, speed_rad_s=speed_rad_s)
     return motor_current_derivative_1(i, u, w, motor.inductance_h, motor.resistance_ohm, motor.back_emf_v_s)
 
 
-def motor_current_step(motor: MotorParams, current_a, voltage_v, speed_rad_s, dt_s: float) -> np.ndarray:
+def motor_current_step(
+    motor: MotorParams, current_a: ArrayLike, voltage_v: ArrayLike, speed_rad_s: ArrayLike, dt_s: float
+) -> np.ndarray:
     """Armature current after dt_s with voltage and speed held, A (seed 002 eq 2–3, exact ZOH)."""
-    i, u, w = (np.atleast_1d(np.asarray(a, dtype=float)) for a in (current_a, voltage_v, speed_rad_s))
-    for name, a in (("current_a", i), ("voltage_v", u), ("speed_rad_s", w)):
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name}: contains NaN or infinite values")
+    i, u, w = _finite_arrays(current_a=current_a, voltage_v=voltage_v, speed_rad_s=speed_rad_s)
     if not np.isfinite(dt_s) or dt_s < 0.0:
         raise ValueError(f"dt_s: must be finite and non-negative, got {dt_s}")
     return motor_current_step_1(i, u, w, float(dt_s), motor.inductance_h, motor.resistance_ohm, motor.back_emf_v_s)
 
 
-def motor_torque(motor: MotorParams, current_a) -> np.ndarray:
+def motor_torque(motor: MotorParams, current_a: ArrayLike) -> np.ndarray:
     """Motor torque M = K_m i, N·m (seed 002 eq 2)."""
-    return motor.torque_constant_nm_a * np.asarray(current_a, dtype=float)
+    return motor.torque_constant_nm_a * _finite_arrays(current_a=current_a)[0]
 
 
 def speed_loop_torque(
-    speed_rad_s, speed_set_rad_s, torque_request_nm, loop_gain_nm_s, torque_gain=1.0
+    speed_rad_s: ArrayLike,
+    speed_set_rad_s: ArrayLike,
+    torque_request_nm: ArrayLike,
+    loop_gain_nm_s: ArrayLike,
+    torque_gain: ArrayLike = 1.0,
 ) -> np.ndarray:
-    """Speed-loop motor torque −(k_Ω + k_e)(Ω − Ω_0) − k_T T_c, N·m (seed 003 eq 35)."""
-    arrays = [np.atleast_1d(np.asarray(a, dtype=float)) for a in (speed_rad_s, speed_set_rad_s, torque_request_nm)]
+    """Speed-loop motor torque −k_w(Ω − Ω_0) − k_T T_c, N·m (seed 003 eq 35, k_w = k_Ω + k_e)."""
+    arrays = _finite_arrays(speed_rad_s=speed_rad_s, speed_set_rad_s=speed_set_rad_s,
+                            torque_request_nm=torque_request_nm)
     n = arrays[0].shape[0]
+    for name, a in zip(("speed_set_rad_s", "torque_request_nm"), arrays[1:]):
+        if a.shape != (n,):
+            raise ValueError(f"{name}: expected shape ({n},), got {a.shape}")
     gain = _per_wheel(loop_gain_nm_s, n, "loop_gain_nm_s", 0.0, True, False)
     k_t = _per_wheel(torque_gain, n, "torque_gain", 0.0, False, False)
-    for name, a in zip(("speed_rad_s", "speed_set_rad_s", "torque_request_nm"), arrays):
-        if a.shape != (n,) or not np.all(np.isfinite(a)):
-            raise ValueError(f"{name}: expected finite shape ({n},), got {a.shape}")
-    return speed_loop_torque_1(*arrays, gain, k_t)
+    return speed_loop_torque_1(arrays[0], arrays[1], arrays[2], gain, k_t)

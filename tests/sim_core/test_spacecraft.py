@@ -15,6 +15,7 @@ from sim_core.spacecraft import (
     mechanical_energy,
     pack_state,
     plant_derivative,
+    wheel_momentum,
 )
 from sim_core.wheels import WheelParams, ge_scheme_axes
 
@@ -222,6 +223,8 @@ def test_momentum_and_energy_are_the_quadratic_forms_of_the_mass_matrix():
     a_o = params.mass_matrix()
     assert np.allclose(angular_momentum_b(x, params), (a_o @ v)[:3], rtol=ROUNDOFF_RTOL)
     assert kinetic_energy(x, params) == pytest.approx(0.5 * v @ a_o @ v, rel=ROUNDOFF_RTOL)
+    assert np.allclose(params.wheel_axes_b @ wheel_momentum(x, params), angular_momentum_b(x, params)
+                       - SPACECRAFT_J @ x[4:7] - FLEX_D @ x[9:11], rtol=1e-12, atol=1e-15)
     strain = 0.5 * np.sum((np.array([3.0, 7.0]) * x[7:9]) ** 2)
     assert mechanical_energy(x, params) == pytest.approx(kinetic_energy(x, params) + strain, rel=ROUNDOFF_RTOL)
 
