@@ -8,8 +8,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from telemetry.ingest_report import SampleBatch
 
 __all__ = ["PacketBatch", "SEQUENCE_COUNT_MODULUS", "sequence_gaps"]
 
@@ -60,6 +64,16 @@ class PacketBatch:
         """Batch from a list of raw packets (each ``bytes``) and their decoded columns."""
         lengths = np.fromiter((len(p) for p in packets), dtype=np.int64, count=len(packets))
         return cls(apid, np.asarray(t_utc_ns), np.asarray(seq_count), b"".join(packets), lengths, values)
+
+    @classmethod
+    def from_sample_batch(cls, batch: SampleBatch) -> PacketBatch:
+        """Batch from the decoder's SampleBatch ((n, L) packet matrix; ground files carry no bytes)."""
+        n = len(batch.t_utc_ns)
+        if batch.packets is None:
+            return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, b"", np.zeros(n, dtype=np.int64), batch.values)
+        packets = np.ascontiguousarray(batch.packets, dtype=np.uint8)
+        lengths = np.full(n, packets.shape[1] if packets.ndim == 2 else 0, dtype=np.int64)
+        return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, packets.tobytes(), lengths, batch.values)
 
     @property
     def n_packets(self) -> int:

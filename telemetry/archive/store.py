@@ -12,6 +12,7 @@ import hashlib
 import json
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from sqlalchemy import Connection, func, insert, select, update
@@ -43,6 +44,9 @@ from telemetry.archive.records import (
     UploadRecord,
 )
 from telemetry.limits import LimitSet, level_changes, limit_levels
+
+if TYPE_CHECKING:
+    from telemetry.ingest_report import DecodeResult
 
 __all__ = ["Archive", "CHUNK_PACKETS"]
 
@@ -143,7 +147,7 @@ class Archive:
         uploaded_by: str,
         sha256: str | None = None,
         limits: Mapping[str, LimitSet] | None = None,
-        extra_report: Mapping[str, object] | None = None,
+        decode_report: Mapping[str, object] | None = None,
     ) -> IngestResult:
         """Commit decoded batches atomically as one upload (duplicates dropped, limits checked)."""
         if not uploaded_by:
@@ -158,7 +162,7 @@ class Archive:
                 return IngestResult(upload_id=int(existing), duplicate_upload=True)
             upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, checksum)
             result = self._write_batches(conn, sat_id, upload_id, _merge_by_apid(batches), limits or {})
-            report = {**result.as_report(), **dict(extra_report or {})}
+            report = {**result.as_report(), "decode": dict(decode_report or {})}
             conn.execute(
                 update(UPLOAD).where(UPLOAD.c.id == upload_id).values(
                     packets_accepted=result.packets_accepted,
@@ -167,6 +171,20 @@ class Archive:
                 )
             )
         return result
+
+    def ingest_decoded(
+        self,
+        satellite: str,
+        decoded: DecodeResult,
+        *,
+        uploaded_by: str,
+        sha256: str | None = None,
+        limits: Mapping[str, LimitSet] | None = None,
+    ) -> IngestResult:
+        """Commit a decoder result (telemetry.decoding) as one upload, keeping its report."""
+        batches = [PacketBatch.from_sample_batch(b) for b in decoded.batches]
+        return self.ingest(satellite, batches, source=decoded.report.source, uploaded_by=uploaded_by, sha256=sha256,
+                           limits=limits, decode_report=decoded.report.to_dict())
 
     def _lock_satellite(self, conn: Connection, sat_id: int) -> None:
         if self._is_postgres:
