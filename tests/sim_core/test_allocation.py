@@ -40,6 +40,7 @@ def test_min_norm_equals_numpy_pseudo_inverse():
     assert np.allclose(wheel, -(np.linalg.pinv(AXES) @ torque.T).T, atol=EXACT)
 
 
+@settings(deadline=None)  # first call loads compiled numba kernels
 @given(momentum_box)
 def test_tuning_row_is_the_gradient_of_f_rho(h):
     grad = np.empty(4)
@@ -50,6 +51,7 @@ def test_tuning_row_is_the_gradient_of_f_rho(h):
     assert np.allclose(al.tuning_gradient(h), grad, atol=FD_TOL)
 
 
+@settings(deadline=None)  # first call loads compiled numba kernels
 @given(st.tuples(*[st.floats(-1.2, 1.2)] * 3).map(np.array))
 def test_momentum_distribution_reproduces_cluster_momentum_on_tuning_surface(h_norm_b):
     momentum = h_norm_b * CONFIG.h_max_nms
@@ -58,7 +60,7 @@ def test_momentum_distribution_reproduces_cluster_momentum_on_tuning_surface(h_n
     assert abs(al.tuning_function(h)) < EXACT
 
 
-@settings(max_examples=200)
+@settings(max_examples=200, deadline=None)
 @given(wheel_box, momentum_box, st.sampled_from([al.LAW_GE_DISTRIBUTION, al.LAW_PSEUDO_INVERSE]), st.integers(-1, 3))
 def test_every_feasible_torque_is_reproduced_by_four_and_three_wheel_laws(m0, h, law, failed):
     mask = np.ones(4, dtype=bool)
@@ -73,6 +75,7 @@ def test_every_feasible_torque_is_reproduced_by_four_and_three_wheel_laws(m0, h,
     assert np.all(dipole == 0.0)
 
 
+@settings(deadline=None)  # first call loads compiled numba kernels
 @given(momentum_box)
 def test_distribution_law_row_sets_the_tuning_rate(h):
     wheel, _, _ = al.allocate([0.01, -0.02, 0.005], AXES, [True] * 4, h, [B_EARTH_T, 0, 0])
@@ -94,7 +97,7 @@ def test_distribution_law_drives_f_rho_to_zero_while_delivering_torque():
     assert abs(al.tuning_function(h)) < 1e-6
 
 
-@settings(max_examples=300)
+@settings(max_examples=300, deadline=None)
 @given(st.sampled_from(PAIRS), unit, unit, st.floats(1e-5, 1e-3))
 def test_two_wheels_and_md_reproduce_torque_where_kappa_allows(pair, b_dir, torque_dir, torque_nm):
     mask = np.zeros(4, dtype=bool)

@@ -1,0 +1,275 @@
+"""Control laws against independent truths: scipy's Tustin and ZOH discretisations, closed-loop
+eigenvalues, scipy's frequency response, scipy's rotations, Lyapunov functions and energy dissipation."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import signal
+from scipy.spatial.transform import Rotation
+
+from sim_core import control as ctl
+from sim_core import quaternion as qt
+
+EXACT = 1e-12  # float64 round-off on O(1) quantities
+POLY_TOL = 1e-9  # roots of a 3rd/4th-degree polynomial vs eigenvalues: conditioning of clustered roots
+STABILITY_MARGIN = 0.05  # every closed-loop eigenvalue at least this far inside the unit circle
+GAIN_MARGIN_MIN = 2.0  # 6 dB: classical requirement for a digital attitude loop
+PHASE_MARGIN_MIN = np.deg2rad(30.0)  # classical requirement
+ARCSEC = np.deg2rad(1.0 / 3600.0)
+GAINS = ctl.DigitalLawGains()
+J = ctl.SOMOV_INERTIA_KG_M2
+
+unit = st.tuples(*[st.floats(-1.0, 1.0)] * 3).map(np.array).filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
+
+
+def _controller_tf(gains=GAINS):
+    """Seed 000's k(1 + τ1 s)/(1 + τ2 s) discretised by scipy's bilinear (Tustin) transform."""
+    num, den, _ = signal.cont2discrete(([gains.k_per_s2 * gains.tau1_s, gains.k_per_s2], [gains.tau2_s, 1.0]), gains.t_u_s, method="bilinear")
+    return np.ravel(num), np.ravel(den)
+
+
+def _plant_tf(t_u):
+    """Double integrator 1/s² with zero-order hold at T_u, discretised by scipy."""
+    num, den, _ = signal.cont2discrete(([1.0], [1.0, 0.0, 0.0]), t_u, method="zoh")
+    return np.trim_zeros(np.ravel(num), "f"), np.ravel(den)
+
+
+def _characteristic_roots(delay, gains=GAINS):
+    """Roots of den_C den_P z^d + num_C num_P = 0 (negative feedback, ε = −φ)."""
+    nc, dc = _controller_tf(gains)
+    npl, dpl = _plant_tf(gains.t_u_s)
+    lhs = np.polymul(np.polymul(dc, dpl), np.r_[1.0, np.zeros(delay)])
+    return np.roots(np.polyadd(lhs, np.polymul(nc, npl)))
+
+
+def test_lead_lag_coefficients_match_scipy_tustin():
+    a, b, p, _ = ctl.lead_lag_coefficients(GAINS.tau1_s, GAINS.tau2_s, GAINS.t_u_s)
+    num, den = _controller_tf()
+    assert np.allclose(num / den[0], GAINS.k_per_s2 * p * np.array([1.0, -a]), atol=EXACT)
+    assert np.allclose(den / den[0], [1.0, -b], atol=EXACT)
+
+
+def test_lead_lag_recursion_matches_scipy_lfilter():
+    eps = np.random.default_rng(2).normal(size=200)
+    k, p, b, c = GAINS.as_array()
+    g, out = 0.0, []
+    for e in eps:  # seed 000 eq (8), one axis
+        out.append(k * (g + p * e))
+        g = b * g + c * e
+    num, den = _controller_tf()
+    assert np.allclose(out, signal.lfilter(num, den, eps), atol=EXACT)
+
+
+@pytest.mark.parametrize("delay", [0, 1])
+def test_closed_loop_eigenvalues_inside_unit_circle_with_margin(delay):
+    eig = np.linalg.eigvals(ctl.closed_loop_matrix(GAINS, delay))
+    roots = _characteristic_roots(delay)
+    assert np.allclose(np.sort_complex(eig), np.sort_complex(roots), atol=POLY_TOL)
+    print(f"delay {delay} T_u: closed-loop |z| = {np.round(np.sort(np.abs(eig)), 4)}")
+    assert np.max(np.abs(eig)) < 1.0 - STABILITY_MARGIN
+
+
+@pytest.mark.parametrize("delay", [0, 1])
+def test_margins_meet_requirements_and_agree_with_scipy_freqz(delay):
+    gain_margin, phase_margin, w_c = ctl.loop_margins(GAINS, delay)
+    print(f"delay {delay} T_u: GM = {20 * np.log10(gain_margin):.1f} dB, PM = {np.degrees(phase_margin):.1f} deg, crossover {w_c:.4f} rad/s")
+    assert gain_margin > GAIN_MARGIN_MIN and phase_margin > PHASE_MARGIN_MIN
+    nc, dc = _controller_tf()
+    npl, dpl = _plant_tf(GAINS.t_u_s)
+    num, den = np.polymul(nc, npl), np.polymul(np.polymul(dc, dpl), np.r_[1.0, np.zeros(delay)])
+    num = np.r_[np.zeros(den.size - num.size), num]  # freqz reads coefficients of z^0, z^-1, …
+    _, resp = signal.freqz(num, den, worN=[w_c * GAINS.t_u_s])
+    assert abs(resp[0]) == pytest.approx(1.0, abs=1e-9)
+    assert np.angle(resp[0]) == pytest.approx(phase_margin - np.pi, abs=1e-9)
+
+
+@pytest.mark.parametrize("delay", [0, 1])
+def test_gain_margin_puts_the_loop_on_the_unit_circle(delay):
+    gain_margin, _, _ = ctl.loop_margins(GAINS, delay)
+    at_limit = ctl.DigitalLawGains(GAINS.k_per_s2 * gain_margin, GAINS.tau1_s, GAINS.tau2_s, GAINS.t_u_s)
+    assert np.max(np.abs(np.linalg.eigvals(ctl.closed_loop_matrix(at_limit, delay)))) == pytest.approx(1.0, abs=1e-8)
+
+
+@settings(deadline=None)  # first call loads compiled numba kernels
+@given(unit, st.floats(0.0, 3.0))
+def test_error_matrix_is_the_passive_matrix_of_the_error_quaternion(axis, angle):
+    e = qt.from_axis_angle(axis, angle)
+    expected = Rotation.from_quat(e, scalar_first=True).as_matrix().T
+    assert np.allclose(ctl.error_matrix(e), expected, atol=EXACT)
+
+
+@settings(deadline=None)  # first call loads compiled numba kernels
+@given(unit, st.floats(-3.0, 3.0))
+def test_mismatch_is_minus_sine_of_error_angle_for_either_quaternion_sign(axis, angle):
+    q_p = qt.normalize(np.array([0.3, -0.2, 0.9, 0.1]))
+    q = qt.multiply(q_p, qt.from_axis_angle(axis, angle))  # body turned by `angle` about `axis` from program
+    e = ctl.error_quaternion(q_p, q)
+    assert np.allclose(ctl.mismatch_vector(e), -np.sin(angle) * axis, atol=EXACT)
+    assert np.allclose(ctl.mismatch_vector(-e), -np.sin(angle) * axis, atol=EXACT)
+
+
+def _rk4(f, x, dt):
+    k1 = f(x)
+    k2 = f(x + 0.5 * dt * k1)
+    k3 = f(x + 0.5 * dt * k2)
+    k4 = f(x + dt * k3)
+    return x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
+def _rigid_body(torque, inertia):
+    """State (q, ω): Λ̇ = ½ Λ ∘ ω, J ω̇ = −ω × Jω + M (seed 000 eq 1 without wheels)."""
+    inv = np.linalg.inv(inertia)
+
+    def f(x):
+        q, w = x[:4], x[4:]
+        return np.concatenate([qt.derivative(q, w), inv @ (torque - np.cross(w, inertia @ w))])
+
+    return f
+
+
+def test_digital_law_brings_nonlinear_body_onto_rotating_program():
+    """Asymptotic stability predicted by the eigenvalues, on the nonlinear plant with ZOH at T_u."""
+    orbit_rate = 2 * np.pi / 5801.0  # SSO 600 km: program = ORF turning about body y
+    w_p = np.array([0.0, orbit_rate, 0.0])
+    q_p0 = np.array([1.0, 0.0, 0.0, 0.0])
+    q = qt.multiply(q_p0, qt.from_axis_angle([1.0, -2.0, 0.5], np.deg2rad(0.5)))
+    x = np.concatenate([q, w_p + np.deg2rad([0.01, -0.02, 0.01])])
+    g, dt, t_u = np.zeros(3), 0.1, GAINS.t_u_s
+    errors = []
+    for k in range(300):  # 600 s
+        t = k * t_u
+        q_p = qt.multiply(q_p0, qt.from_axis_angle([0.0, 1.0, 0.0], orbit_rate * t))
+        torque, g = ctl.digital_law(x[:4], x[4:], q_p, w_p, np.zeros(3), g, J, GAINS)
+        errors.append(qt.angle(ctl.error_quaternion(q_p, x[:4])))
+        f = _rigid_body(torque, J)
+        for _ in range(round(t_u / dt)):
+            x = _rk4(f, x, dt)
+            x[:4] /= np.linalg.norm(x[:4])
+    assert errors[0] == pytest.approx(np.deg2rad(0.5), rel=1e-9)
+    assert errors[-1] < 0.1 * ARCSEC
+    assert max(errors[150:]) < 1.0 * ARCSEC
+
+
+def test_wheel_torque_command_quantises_then_saturates():
+    m = np.array([0.01234, -0.01234, 0.0125, -0.0125, 0.5, -0.5, 0.0])
+    got = ctl.wheel_torque_command(m, 0.001, 0.2)
+    assert np.allclose(got, [0.012, -0.012, 0.013, -0.013, 0.2, -0.2, 0.0], atol=EXACT)
+    assert np.array_equal(ctl.wheel_torque_command(m, 0.0, 0.2), np.clip(m, -0.2, 0.2))
+    assert ctl.wheel_torque_command_1(0.0125, 0.001, 0.2) == pytest.approx(0.013, abs=EXACT)
+
+
+def test_quaternion_pd_lyapunov_function_decreases_to_rest():
+    """V = ½ωᵀJω + 2K_p(1 − q_e0) has dV/dt = −K_d|ω|² under seed 002 eq (18) (Wie's PD theorem)."""
+    kp, kd, dt = 0.5, 5.0, 0.05
+    q_d = qt.normalize(np.array([0.9, 0.1, -0.3, 0.2]))
+    x = np.concatenate([qt.normalize(np.array([0.2, 0.7, 0.1, -0.6])), np.deg2rad([1.0, -2.0, 0.5])])
+
+    def lyapunov(x):
+        e0 = abs(ctl.error_quaternion(q_d, x[:4])[0])
+        return 0.5 * x[4:] @ J @ x[4:] + 2.0 * kp * (1.0 - e0)
+
+    values = [lyapunov(x)]
+    for _ in range(4000):  # 200 s, torque re-evaluated each step (continuous law)
+        torque = ctl.quaternion_pd(x[:4], x[4:], q_d, np.zeros(3), kp, kd)
+        x = _rk4(_rigid_body(torque, J), x, dt)
+        x[:4] /= np.linalg.norm(x[:4])
+        values.append(lyapunov(x))
+    assert np.all(np.diff(values) <= 1e-9 * values[0])  # ZOH over dt: dissipation up to O(dt²)
+    assert values[-1] < 1e-3 * values[0]
+
+
+def _dipole_field_t(r_m):
+    """Earth's centred dipole, B = (μ0/4π)(3(m·r̂)r̂ − m)/r³ with m along −z, 8e22 A·m²."""
+    m = np.array([0.0, 0.0, -8.0e22])
+    r = np.linalg.norm(r_m)
+    rh = r_m / r
+    return 1e-7 * (3.0 * (m @ rh) * rh - m) / r**3
+
+
+def test_bdot_dissipates_rotational_energy_in_a_dipole_field():
+    inertia = np.diag([3.0, 2.5, 2.0])  # a 30 kg microsatellite tumbling after separation
+    radius, n_orbit = 6_978_137.0, 2 * np.pi / 5801.0
+    gain, l_max, t_mag, dt = 2e6, 5.0, 1.0, 0.1
+    x = np.concatenate([[1.0, 0.0, 0.0, 0.0], np.deg2rad([3.0, -2.0, 4.0])])
+
+    def b_body(x, t):
+        r = radius * np.array([np.cos(n_orbit * t), 0.0, np.sin(n_orbit * t)])  # polar orbit
+        return qt.rotate(qt.conjugate(x[:4]), _dipole_field_t(r))
+
+    energy = [0.5 * x[4:] @ inertia @ x[4:]]
+    b_prev = b_body(x, 0.0)
+    for k in range(1, 1201):  # 1200 s, magnetometer at 1 Hz
+        b_now = b_body(x, k * t_mag)
+        dipole = ctl.bdot_dipole(b_now, b_prev, t_mag, gain, l_max)
+        b_prev = b_now
+        for i in range(round(t_mag / dt)):
+            t = k * t_mag + i * dt
+            x = _rk4(lambda s: _rigid_body(np.cross(dipole, b_body(s, t)), inertia)(s), x, dt)
+            x[:4] /= np.linalg.norm(x[:4])
+        energy.append(0.5 * x[4:] @ inertia @ x[4:])
+    assert np.max(np.abs(dipole)) <= l_max
+    assert energy[-1] < 0.5 * energy[0]
+    assert np.max(np.diff(energy)) < 1e-3 * energy[0]  # per-second increments only from the 1 s sample lag
+
+
+@settings(max_examples=200, deadline=None)
+@given(unit, unit, st.floats(0.1, 10.0))
+def test_unloading_torque_is_perpendicular_to_field_and_reduces_momentum(b_dir, h_dir, h_nms):
+    b_field = 3e-5 * b_dir
+    h = h_nms * h_dir
+    dipole = ctl.unloading_dipole(b_field, h, np.zeros(3), 1e-3, 25.0)
+    torque = np.cross(dipole, b_field)
+    assert abs(torque @ b_field) <= EXACT * np.linalg.norm(torque) * 3e-5 + 1e-30
+    t_req = -1e-3 * h
+    assert h @ torque <= EXACT * h_nms * np.linalg.norm(t_req)  # d|H|²/dt = 2 H · T_m ≤ 0
+    assert np.max(np.abs(dipole)) <= 25.0 * (1 + EXACT)
+    if np.max(np.abs(dipole)) < 25.0 * (1 - EXACT):  # unsaturated: the part of −kH across B is exact
+        assert np.allclose(torque, t_req - (t_req @ b_dir) * b_dir, atol=EXACT * np.linalg.norm(t_req))
+
+
+def test_mrp_feedback_matches_basilisk_unit_test_reference():
+    """Inputs and reference formula of Basilisk's test_mrpFeedback.py (Ki < 0, 4 wheels, known torque 0)."""
+    sigma, w_br, w_rn, dw_rn = np.array([0.3, -0.5, 0.7]), np.array([0.010, -0.020, 0.015]), np.array([-0.02, -0.01, 0.005]), np.array([0.0002, 0.0003, 0.0001])
+    inertia = np.diag([1000.0, 800.0, 800.0])
+    gs = np.array([[1.0, 0, 0, 0.577350269190], [0, 1.0, 0, 0.577350269190], [0, 0, 1.0, 0.577350269190]])
+    js, speeds, k, p = np.full(4, 0.1), np.array([10.0, 25.0, 50.0, 100.0]), 0.15, 150.0
+    w_bn = w_br + w_rn
+    gs_hs = sum(gs[:, i] * js[i] * (w_bn @ gs[:, i] + speeds[i]) for i in range(4))
+    lr = k * sigma + p * w_br - np.cross(w_rn, inertia @ w_bn + gs_hs) + inertia @ (-dw_rn + np.cross(w_bn, w_rn))
+    got = ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, [True] * 4, k, p)
+    assert np.allclose(got, -lr, atol=1e-8)  # Basilisk's accuracy in that test
+    without_wheel_2 = ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js * [1, 0, 1, 1], speeds, [True] * 4, k, p)
+    assert np.allclose(ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, [True, False, True, True], k, p), without_wheel_2, atol=EXACT)
+
+
+def test_mrp_feedback_lyapunov_function_decreases_in_regulation():
+    """V = ½ωᵀIω + 2K ln(1 + σ²) has dV/dt = −P|ω|² for the rigid body under the law (Schaub & Junkins)."""
+    k, p, dt = 2.0, 12.0, 0.05
+    x = np.concatenate([qt.normalize(np.array([0.6, 0.5, -0.4, 0.3])), np.deg2rad([2.0, -1.0, 1.5])])
+    empty = np.zeros((3, 0))
+
+    def lyapunov(x):
+        s = qt.to_mrp(x[:4])
+        return 0.5 * x[4:] @ J @ x[4:] + 2.0 * k * np.log1p(s @ s)
+
+    values = [lyapunov(x)]
+    for _ in range(3000):  # 150 s
+        sigma = qt.to_mrp(x[:4])
+        torque = ctl.mrp_feedback(sigma, x[4:], np.zeros(3), np.zeros(3), J, empty, np.zeros(0), np.zeros(0), np.zeros(0, bool), k, p, 1)
+        x = _rk4(_rigid_body(torque, J), x, dt)
+        x[:4] /= np.linalg.norm(x[:4])
+        values.append(lyapunov(x))
+    assert np.all(np.diff(values) <= 1e-9 * values[0])
+    assert values[-1] < 1e-3 * values[0]
+
+
+def test_bad_inputs_name_the_field():
+    with pytest.raises(ValueError, match="q_ib"):
+        ctl.digital_law([1.0, 0.0, 0.0], np.zeros(3), [1.0, 0, 0, 0], np.zeros(3), np.zeros(3), np.zeros(3))
+    with pytest.raises(ValueError, match="tau2_s"):
+        ctl.DigitalLawGains(tau2_s=-1.0)
+    with pytest.raises(ValueError, match="dt_s"):
+        ctl.bdot_dipole(np.ones(3), np.ones(3), 0.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match="inertia_kg_m2"):
+        ctl.digital_law([1.0, 0, 0, 0], np.zeros(3), [1.0, 0, 0, 0], np.zeros(3), np.zeros(3), np.zeros(3), -np.eye(3))
