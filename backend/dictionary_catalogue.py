@@ -38,7 +38,8 @@ class DictionaryCatalogue:
 
         found = {p.name for p in SHIPPED.iterdir() if p.suffix in DICTIONARY_SUFFIXES}
         if self._folder.is_dir():
-            found |= {p.name for p in self._folder.iterdir() if p.suffix in DICTIONARY_SUFFIXES}
+            found |= {p.name for p in self._folder.iterdir()
+                      if p.suffix in DICTIONARY_SUFFIXES and not p.name.startswith(".")}
         return sorted(found)
 
     def load(self, name: str) -> Any:
@@ -64,8 +65,8 @@ class DictionaryCatalogue:
         from telemetry.dictionary import load_dictionary
 
         _check_name(name)
-        staging = self._folder / "staging" / name
-        staging.parent.mkdir(parents=True, exist_ok=True)
+        self._folder.mkdir(parents=True, exist_ok=True)
+        staging = self._folder / f".staging.{name}"  # same folder: layout_from paths resolve
         staging.write_bytes(content)
         try:
             dictionary = load_dictionary(staging, apid=apid, time_code=time_code)
