@@ -1,0 +1,116 @@
+"""Files of a simulation result: npz, CSV, Parquet and PNG plots like seed 000 Figs 4–7."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from sim_core import quaternion
+from sim_core.trajectory import ARCSEC_PER_RAD, Trajectory
+
+__all__ = ["write_npz", "read_npz", "columns", "write_csv", "write_parquet", "write_plots", "write_all"]
+
+
+def write_npz(traj: Trajectory, path: Path) -> Path:
+    """All series (variant, sample, …), the time axis and the events as one compressed npz."""
+    meta = {"scenario": traj.scenario_name, "variants": traj.variant_names, "events": traj.events,
+            "wall_time_s": traj.wall_time_s, "simulated_time_s": traj.simulated_time_s, **traj.extra}
+    np.savez_compressed(path, t_s=traj.t_s, wheel_inertia_kg_m2=traj.wheel_inertia_kg_m2,
+                        meta=np.array(json.dumps(meta)), **traj.series)
+    return path
+
+
+def read_npz(path: Path) -> Trajectory:
+    """Trajectory back from :func:`write_npz`."""
+    with np.load(path) as data:
+        meta = json.loads(str(data["meta"]))
+        series = {k: data[k] for k in data.files if k not in ("t_s", "wheel_inertia_kg_m2", "meta")}
+        t, jr = data["t_s"], data["wheel_inertia_kg_m2"]
+    events = [[tuple(e) for e in ev] for ev in meta.pop("events")]
+    return Trajectory(meta.pop("scenario"), meta.pop("variants"), t, series, events, jr,
+                      meta.pop("wall_time_s"), meta.pop("simulated_time_s"), meta)
+
+
+def columns(traj: Trajectory, variant: int = 0) -> dict[str, np.ndarray]:
+    """Flat named columns of one variant (units in the names), with the seed-000 ORF angles and errors."""
+    out: dict[str, np.ndarray] = {"t_s": traj.t_s}
+    for name, arr in traj.series.items():
+        a = arr[variant]
+        if a.ndim == 1:
+            out[name] = a
+        else:
+            for i in range(a.shape[-1]):
+                out[f"{name}_{i}"] = a[:, i]
+    out["pointing_error_arcsec"] = traj.pointing_error_rad()[variant] * ARCSEC_PER_RAD
+    return out
+
+
+def write_csv(traj: Trajectory, path: Path, variant: int = 0) -> Path:
+    """One variant as CSV with a header row."""
+    cols = columns(traj, variant)
+    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
+               fmt="%.10g")
+    return path
+
+
+def write_parquet(traj: Trajectory, path: Path) -> Path:
+    """Every variant as Parquet rows with a ``variant`` column."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    tables = []
+    for v, name in enumerate(traj.variant_names):
+        cols = columns(traj, v)
+        cols["variant"] = np.full(traj.t_s.size, name)
+        tables.append(pa.table(cols))
+    pq.write_table(pa.concat_tables(tables), path)
+    return path
+
+
+def write_plots(traj: Trajectory, out_dir: Path, variant: int = 0) -> list[Path]:
+    """PNG plots like seed 000 Figs 4–7: program angles and rates, errors, wheel torques and momenta, MD moments."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = traj.t_s
+    s = {k: v[variant] for k, v in traj.series.items()}
+    e = quaternion.multiply(quaternion.conjugate(s["q_prog_ib"]), s["q_ib"])
+    e = np.where(e[:, :1] < 0, -e, e)
+    err_arcsec = 2.0 * e[:, 1:] * ARCSEC_PER_RAD
+    rate_err = np.degrees(s["omega_b_rad_s"] - s["omega_prog_b_rad_s"])
+    figures = {
+        "program_rates": (np.degrees(s["omega_prog_b_rad_s"]), "program rate ω^p (deg/s)"),
+        "attitude_errors": (err_arcsec, "attitude error δφ (arcsec)"),
+        "rate_errors": (rate_err, "rate error δω (deg/s)"),
+        "wheel_torques": (s["wheel_torque_nm"], "wheel torque m_p (N·m)"),
+        "wheel_momenta": (s["wheel_speed_rad_s"] * traj.wheel_inertia_kg_m2, "wheel momentum h_p (N·m·s)"),
+        "md_moments": (s["md_dipole_am2"], "MD moment l_i (A·m²)"),
+    }
+    paths = []
+    for name, (y, label) in figures.items():
+        fig, ax = plt.subplots(figsize=(8, 3.2), dpi=110)
+        ax.plot(t, y, lw=0.8)
+        ax.set_xlabel("t (s)")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.set_title(f"{traj.scenario_name} / {traj.variant_names[variant]}")
+        fig.tight_layout()
+        path = out_dir / f"{name}.png"
+        fig.savefig(path)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def write_all(traj: Trajectory, out_dir: Path) -> list[Path]:
+    """npz + Parquet of the batch, CSV and plots of variant 0, and the summary JSON of each variant."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [write_npz(traj, out_dir / "trajectory.npz"), write_parquet(traj, out_dir / "trajectory.parquet"),
+             write_csv(traj, out_dir / "trajectory.csv")]
+    summary = out_dir / "summary.json"
+    summary.write_text(json.dumps([traj.summary(v) for v in range(traj.n_variants)], indent=2))
+    return paths + [summary] + write_plots(traj, out_dir)

@@ -1,0 +1,426 @@
+"""The onboard-equivalent closed loop in one compiled function: the whole block diagram of the ACS.
+
+sensors (T_q) → estimator (T_q) → guidance (T_u) → control law (T_u) → allocation (T_u) →
+actuators (zero-order hold, seed 000 eq 3) → plant (RK4 at dt, seed 000 eq 1), with the faults of the
+variant applied where they act. One call flies one variant; :func:`run_batch` flies all of them in
+parallel (one variant per thread, its own random stream seeded at its start, so results do not depend
+on the thread count). Everything is plain float64/int64 arrays; :mod:`sim_core.engine` packs them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from sim_core import allocation, control, environment, guidance, mekf, sensors
+from sim_core.integrators import rk4_step_into
+from sim_core.quaternion import conjugate_rotate_1, multiply_1, rotate_1
+from sim_core.spacecraft import PlantArrays
+from sim_core.wheels import limited_motor_torque_1
+
+# Guidance kinds.
+PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
+# Control laws.
+LAW_SEED000, LAW_MRP_FEEDBACK, LAW_QUATERNION_PD = 0, 1, 2
+# Estimators.
+ESTIMATOR_TRUTH, ESTIMATOR_STAR_TRACKER, ESTIMATOR_MEKF = 0, 1, 2
+
+# Fault table columns and codes (sim_core.engine builds the table from FaultSpec).
+F_TARGET, F_INDEX, F_TYPE, F_ONSET, F_END, F_GAIN, F_VALUE, F_PERIOD, F_DUTY = range(9)
+FAULT_COLUMNS = 9
+TARGET_CODES = {"wheel": 0, "gyro": 1, "star_tracker": 2, "earth_sensor": 3, "magnetometer": 4,
+                "sun_sensor": 5, "controller": 6, "md_rod": 7}
+TYPE_CODES = {"failure": 0, "stuck": 1, "gain": 2, "bias": 3, "drift": 4, "intermittent": 5,
+              "noise": 6, "friction": 7, "frozen": 8}
+T_WHEEL, T_GYRO, T_STAR, T_EARTH, T_MAG, T_SUN, T_CTRL, T_ROD = range(8)
+Y_FAIL, Y_STUCK, Y_GAIN, Y_BIAS, Y_DRIFT, Y_INTERMITTENT, Y_NOISE, Y_FRICTION, Y_FROZEN = range(9)
+
+# Event codes (sim_core.trajectory.EVENT_NAMES).
+EV_FAULT_ONSET, EV_FAULT_CLEARED, EV_ALLOCATION, EV_MD_SATURATED = 2, 3, 7, 8
+
+# Output channels of the float record (columns of ``rec``), per sample.
+R_Q, R_W, R_QE, R_WE, R_QP, R_WP = 0, 4, 7, 11, 15, 19
+R_MD, R_TORQUE, R_R, R_OBS, R_STATUS, R_FAULTS = 22, 25, 28, 31, 32, 33
+R_WHEELS = 34  # then: speeds (nw), commands (nw), delivered torques (nw)
+
+
+def record_width(n_wheels: int) -> int:
+    """Number of float channels per output sample for n_wheels wheels."""
+    return R_WHEELS + 3 * n_wheels
+
+
+@njit(cache=True)
+def hermite_orbit_1(table: np.ndarray, t0: float, step: float, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ECI r, v, a at t from a table of rows (r, v, a) every ``step`` s by cubic Hermite interpolation."""
+    u = (t - t0) / step
+    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
+    s = u - i
+    s2, s3 = s * s, s * s * s
+    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
+    d00, d10, d01, d11 = (6 * s2 - 6 * s) / step, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / step, 3 * s2 - 2 * s
+    a, b = table[i], table[i + 1]
+    r, v, acc = np.empty(3), np.empty(3), np.empty(3)
+    for j in range(3):
+        r[j] = h00 * a[j] + h10 * step * a[3 + j] + h01 * b[j] + h11 * step * b[3 + j]
+        v[j] = d00 * a[j] + d10 * a[3 + j] + d01 * b[j] + d11 * b[3 + j]
+        acc[j] = (1 - s) * a[6 + j] + s * b[6 + j]
+    return r, v, acc
+
+
+@njit(cache=True)
+def linear_1(table: np.ndarray, t0: float, step: float, t: float) -> np.ndarray:
+    """Row of ``table`` (sampled every ``step`` s from t0) linearly interpolated at t."""
+    u = (t - t0) / step
+    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
+    s = u - i
+    return (1.0 - s) * table[i] + s * table[i + 1]
+
+
+@njit(cache=True)
+def fault_active_1(row: np.ndarray, t: float) -> bool:
+    """Whether a fault row acts at t: inside [onset, end) and, if intermittent, in an on-window."""
+    if t < row[F_ONSET] or t >= row[F_END]:
+        return False
+    if int(row[F_TYPE]) == Y_INTERMITTENT and row[F_PERIOD] > 0.0:
+        phase = (t - row[F_ONSET]) % row[F_PERIOD]
+        return phase < row[F_DUTY] * row[F_PERIOD]
+    return True
+
+
+@njit(cache=True)
+def _program_1(kind: int, steps_t: np.ndarray, steps_q: np.ndarray, route: np.ndarray, t: float,
+               t0_unix: float, r: np.ndarray, v: np.ndarray, a: np.ndarray, c_pn: np.ndarray, dut1: float):
+    """Λ^p, ω^p, ω̇^p (program axes) and the observing flag at t (seed 000 §2, seed 001)."""
+    if kind == PROGRAM_INERTIAL:
+        k = 0
+        while k + 1 < steps_t.shape[0] and t >= steps_t[k + 1]:
+            k += 1
+        return steps_q[k].copy(), np.zeros(3), np.zeros(3), False
+    return guidance.route_1(route, t0_unix + t, r, v, a, c_pn, dut1)
+
+
+@njit(cache=True)
+def _sensor_faults_1(faults: np.ndarray, target: int, t: float, value: np.ndarray, frozen: np.ndarray,
+                     sigma: float, normals: np.ndarray) -> bool:
+    """Apply the variant's faults of one sensor to its sample in place; returns validity."""
+    valid = True
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) != target or not fault_active_1(row, t):
+            continue
+        kind, i = int(row[F_TYPE]), int(row[F_INDEX])
+        axis = i if i < value.shape[0] else 0
+        if kind == Y_FAIL:
+            valid = False
+        elif kind == Y_FROZEN:
+            value[:] = frozen
+        elif kind == Y_GAIN:
+            value[axis] *= row[F_GAIN]
+        elif kind == Y_BIAS or kind == Y_INTERMITTENT:
+            value[axis] += row[F_VALUE]
+        elif kind == Y_DRIFT:
+            value[axis] += row[F_VALUE] * (t - row[F_ONSET])
+        elif kind == Y_NOISE:
+            value[axis] += (row[F_VALUE] - 1.0) * sigma * normals[axis]
+    return valid
+
+
+@njit(cache=True)
+def _fault_of_type_1(faults: np.ndarray, target: int, kind: int, t: float) -> bool:
+    """Whether a fault of this target and type acts at t."""
+    for f in range(faults.shape[0]):
+        if int(faults[f, F_TARGET]) == target and int(faults[f, F_TYPE]) == kind and fault_active_1(faults[f], t):
+            return True
+    return False
+
+
+@njit(cache=True)
+def _rotation_1(rot: np.ndarray) -> np.ndarray:
+    """Quaternion of a small rotation vector (rad)."""
+    ang = np.sqrt(rot @ rot)
+    dq = np.empty(4)
+    dq[0] = np.cos(0.5 * ang)
+    dq[1:] = np.sin(0.5 * ang) * rot / ang
+    return dq
+
+
+@njit(cache=True)
+def _wheel_commands_1(faults: np.ndarray, t: float, cmd: np.ndarray, frozen_cmd: np.ndarray, out: np.ndarray) -> None:
+    """Torque the wheel motors deliver for the held command under the variant's wheel faults."""
+    out[:] = cmd
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) != T_WHEEL or not fault_active_1(row, t):
+            continue
+        kind, p = int(row[F_TYPE]), int(row[F_INDEX])
+        if kind == Y_FAIL or kind == Y_INTERMITTENT or kind == Y_STUCK:
+            out[p] = 0.0
+        elif kind == Y_GAIN:
+            out[p] *= row[F_GAIN]
+        elif kind == Y_BIAS:
+            out[p] += row[F_VALUE]
+        elif kind == Y_FROZEN:
+            out[p] = frozen_cmd[p]
+
+
+@njit(cache=True)
+def _lock_stuck_wheels_1(faults: np.ndarray, t: float, x: np.ndarray, p: PlantArrays, j_inv: np.ndarray) -> None:
+    """Seized wheels: Ω_p = 0 with the body taking the momentum (H conserved, seed 000 eq 1)."""
+    nq = p.flex_mass.shape[0]
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) != T_WHEEL or int(row[F_TYPE]) != Y_STUCK or not fault_active_1(row, t):
+            continue
+        w = int(row[F_INDEX])
+        i = 7 + 2 * nq + w
+        h = p.wheel_inertia[w] * x[i]
+        for r in range(3):
+            for c in range(3):
+                x[4 + r] += j_inv[r, c] * p.wheel_axes[c, w] * h
+        x[i] = 0.0
+
+
+@njit(cache=True)
+def _extra_friction(faults: np.ndarray, t: float, friction: np.ndarray, base: np.ndarray) -> None:
+    """Coulomb friction table with the variant's 'increased friction' faults added (N·m)."""
+    friction[:, :] = base
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) == T_WHEEL and int(row[F_TYPE]) == Y_FRICTION and fault_active_1(row, t):
+            friction[0, int(row[F_INDEX])] += row[F_VALUE]
+
+
+@njit(cache=True)
+def _controller_faults_1(faults: np.ndarray, t: float, torque: np.ndarray, frozen: np.ndarray) -> None:
+    """Controller-output faults (seed 002 §3.2: intermittent and abrupt) applied in place."""
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) != T_CTRL or not fault_active_1(row, t):
+            continue
+        kind, axis = int(row[F_TYPE]), min(int(row[F_INDEX]), 2)
+        if kind == Y_FAIL or kind == Y_INTERMITTENT:
+            torque[:] = 0.0
+        elif kind == Y_GAIN:
+            torque *= row[F_GAIN]
+        elif kind == Y_BIAS:
+            torque[axis] += row[F_VALUE]
+        elif kind == Y_FROZEN:
+            torque[:] = frozen
+
+
+@njit(cache=True)
+def _rod_faults_1(faults: np.ndarray, t: float, dipole: np.ndarray) -> None:
+    """Magnetic-driver rod faults applied to the commanded dipole in place."""
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) != T_ROD or not fault_active_1(row, t):
+            continue
+        kind, i = int(row[F_TYPE]), min(int(row[F_INDEX]), 2)
+        if kind == Y_FAIL or kind == Y_STUCK:
+            dipole[i] = 0.0
+        elif kind == Y_GAIN:
+            dipole[i] *= row[F_GAIN]
+        elif kind == Y_BIAS:
+            dipole[i] += row[F_VALUE]
+
+
+@njit(cache=True)
+def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> None:
+    if n_ev[0] < ev.shape[0]:
+        ev[n_ev[0], 0], ev[n_ev[0], 1], ev[n_ev[0], 2] = t, code, arg
+        n_ev[0] += 1
+
+
+@njit(cache=True)
+def fly_variant(
+    x0, p: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
+    available, faults, seed, rec, ev, n_ev, shared, slot,
+) -> None:
+    """Fly one variant and fill its output record ``rec`` (samples × channels) and events ``ev``.
+
+    ``wheel_limits``: rows max torque, max momentum, torque quantum, per wheel.
+    ``steps``: [n_steps, meas_every, ctrl_every, out_every, law_kind, estimator_kind, program_kind,
+    gravity_gradient_on, mrp_law_type]; ``times``: [dt, t0_unix, md_max, dut1, st_sigma,
+    gyro_noise, mag_noise, tach_quantum, pd_kp, pd_kd, mrp_k, mrp_p, gyro_tau].
+    ``program``: (steps_t, steps_q, route); ``orbit``: (table, t0, step); ``env``: (B table, t0,
+    step, c_pn); ``est``: gyro bias (3,). ``shared[0]`` non-zero cancels the run (checked each T_u);
+    ``shared[slot]`` receives the number of steps done, for progress reports from another thread.
+    """
+    np.random.seed(seed)
+    n_steps, meas_every, ctrl_every, out_every = steps[0], steps[1], steps[2], steps[3]
+    law_kind, est_kind, prog_kind, gg_on, mrp_law = steps[4], steps[5], steps[6], steps[7], steps[8]
+    dt, t0_unix, md_max, dut1 = times[0], times[1], times[2], times[3]
+    st_sigma, gyro_noise, mag_noise, tach_q = times[4], times[5], times[6], times[7]
+    pd_kp, pd_kd, mrp_k, mrp_p = times[8], times[9], times[10], times[11]
+    steps_t, steps_q, route = program
+    orbit_tab, orbit_t0, orbit_step = orbit
+    b_tab, b_t0, b_step, c_pn = env
+    nw = p.wheel_inertia.shape[0]
+    nq = p.flex_mass.shape[0]
+    n = x0.shape[0]
+
+    x = x0.copy()
+    work = np.zeros((6, n + 3 + nq + nw))
+    j_inv = np.linalg.inv(p.inertia)
+    base_friction = p.friction.copy()
+    friction = p.friction.copy()
+    plant = PlantArrays(p.inertia, p.mass_inv, p.wheel_axes, p.wheel_inertia, friction,
+                        p.flex_coupling, p.flex_mass, p.flex_freq, p.flex_decrement)
+    g = np.zeros(3)  # lead-lag state of seed 000 eq (8)
+    cmd = np.zeros(nw)
+    frozen_cmd = np.zeros(nw)
+    delivered = np.zeros(nw)
+    dipole = np.zeros(3)
+    body_torque = np.zeros(3)
+    frozen_torque = np.zeros(3)
+    available = available.copy()
+    wheel_out = np.zeros(nw)
+    dip_out = np.zeros(3)
+    ext = np.zeros(3)
+    q_est = x[0:4].copy()
+    w_est = x[4:7].copy()
+    bias_est = np.zeros(3)
+    p_cov = mekf.initial_covariance(1e-3, 1e-5)
+    st_frozen = q_est.copy()
+    gyro_frozen = np.zeros(3)
+    w_meas = np.zeros(3)
+    q_p = x[0:4].copy()
+    w_p = np.zeros(3)
+    wd_p = np.zeros(3)
+    observing = False
+    status = 0
+    fault_state = np.zeros(faults.shape[0], dtype=np.bool_)
+    mag = np.zeros(3)
+    out_i = 0
+
+    for k in range(n_steps):
+        t = k * dt
+        r, v, a = hermite_orbit_1(orbit_tab, orbit_t0, orbit_step, t)
+        b_eci = linear_1(b_tab, b_t0, b_step, t)
+        b_body = conjugate_rotate_1(x[0:4], b_eci)
+        flags = 0
+        for f in range(faults.shape[0]):
+            on = fault_active_1(faults[f], t)
+            if on:
+                flags |= 1 << min(f, 30)
+            if on != fault_state[f]:
+                _event(ev, n_ev, t, EV_FAULT_ONSET if on else EV_FAULT_CLEARED, f)
+                if on:
+                    frozen_cmd[:] = cmd
+                    frozen_torque[:] = body_torque
+                    gyro_frozen[:] = w_meas
+                fault_state[f] = on
+
+        if k % meas_every == 0:
+            normals = np.random.standard_normal(6)
+            w_meas = x[4:7] + est[0:3] + gyro_noise * normals[0:3]
+            gyro_ok = _sensor_faults_1(faults, T_GYRO, t, w_meas, gyro_frozen, gyro_noise, normals[0:3])
+            sig3 = np.full(3, st_sigma)
+            q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, 1e9, normals[3:6])
+            rot = np.zeros(3)
+            st_ok = _sensor_faults_1(faults, T_STAR, t, rot, rot, st_sigma, normals[3:6]) and st_ok
+            if rot[0] != 0.0 or rot[1] != 0.0 or rot[2] != 0.0:
+                q_m = multiply_1(q_m, _rotation_1(rot))
+            if _fault_of_type_1(faults, T_STAR, Y_FROZEN, t):
+                q_m[:] = st_frozen
+            else:
+                st_frozen[:] = q_m
+            if est_kind == ESTIMATOR_TRUTH:
+                q_est[:] = x[0:4]
+                w_est[:] = x[4:7]
+            elif est_kind == ESTIMATOR_STAR_TRACKER:
+                if st_ok:
+                    q_est[:] = q_m
+                if gyro_ok:
+                    w_est[:] = w_meas
+            else:
+                if k > 0 and gyro_ok:
+                    mekf.mekf_propagate_1(q_est, bias_est, p_cov, w_meas, meas_every * dt, gyro_noise * np.sqrt(meas_every * dt), 1e-9)
+                if st_ok:
+                    mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
+                w_est[:] = w_meas - bias_est
+            mag[:] = b_body + mag_noise * np.random.standard_normal(3)
+            _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
+
+        if k % ctrl_every == 0:
+            shared[slot] = k
+            if shared[0] != 0:
+                break
+            q_p, w_p, wd_p, observing = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
+            speeds = x[7 + 2 * nq: 7 + 2 * nq + nw].copy()
+            if tach_q > 0.0:
+                speeds = tach_q * np.floor(speeds / tach_q + 0.5)
+            h_wheels = p.wheel_inertia * speeds
+            if law_kind == LAW_SEED000:
+                body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
+            elif law_kind == LAW_MRP_FEEDBACK:
+                qpc = q_p.copy()
+                qpc[1:] = -qpc[1:]
+                e = multiply_1(qpc, q_est)
+                if e[0] < 0.0:
+                    e = -e
+                sigma = e[1:] / (1.0 + e[0])
+                w_rn_b = conjugate_rotate_1(e, w_p)
+                wd_rn_b = conjugate_rotate_1(e, wd_p)
+                body_torque = control.mrp_feedback_step(sigma, w_est - w_rn_b, w_rn_b, wd_rn_b, p.inertia,
+                                                        p.wheel_axes, p.wheel_inertia, speeds, available,
+                                                        mrp_k, mrp_p, mrp_law)
+            else:
+                body_torque = control.quaternion_pd_step(q_est, w_est, q_p, w_p, pd_kp, pd_kd)
+            _controller_faults_1(faults, t, body_torque, frozen_torque)
+            status = allocation.allocate_1(body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params,
+                                           wheel_out, dip_out)
+            for w in range(nw):
+                cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
+            dipole[:] = dip_out
+            _rod_faults_1(faults, t, dipole)
+            for i in range(3):
+                dipole[i] = min(max(dipole[i], -md_max), md_max)
+
+        if k % out_every == 0 and out_i < rec.shape[0]:
+            row = rec[out_i]
+            row[R_Q:R_Q + 4] = x[0:4]
+            row[R_W:R_W + 3] = x[4:7]
+            row[R_QE:R_QE + 4] = q_est
+            row[R_WE:R_WE + 3] = w_est
+            row[R_QP:R_QP + 4] = q_p
+            e = multiply_1(np.array([q_p[0], -q_p[1], -q_p[2], -q_p[3]]), x[0:4])
+            row[R_WP:R_WP + 3] = conjugate_rotate_1(e, w_p)
+            row[R_MD:R_MD + 3] = dipole
+            row[R_TORQUE:R_TORQUE + 3] = body_torque
+            row[R_R:R_R + 3] = r
+            row[R_OBS] = 1.0 if observing else 0.0
+            row[R_STATUS] = status
+            row[R_FAULTS] = flags
+            row[R_WHEELS:R_WHEELS + nw] = x[7 + 2 * nq: 7 + 2 * nq + nw]
+            row[R_WHEELS + nw:R_WHEELS + 2 * nw] = cmd
+            row[R_WHEELS + 2 * nw:R_WHEELS + 3 * nw] = delivered
+            out_i += 1
+
+        _wheel_commands_1(faults, t, cmd, frozen_cmd, delivered)
+        speeds_now = x[7 + 2 * nq: 7 + 2 * nq + nw]
+        delivered[:] = limited_motor_torque_1(delivered, speeds_now, p.wheel_inertia, wheel_limits[0], wheel_limits[1])
+        _extra_friction(faults, t, friction, base_friction)
+        m_md = np.empty(3)
+        m_md[0] = dipole[1] * b_body[2] - dipole[2] * b_body[1]
+        m_md[1] = dipole[2] * b_body[0] - dipole[0] * b_body[2]
+        m_md[2] = dipole[0] * b_body[1] - dipole[1] * b_body[0]
+        ext[:] = m_md
+        if gg_on:
+            ext += environment.gravity_gradient_torque_1(conjugate_rotate_1(x[0:4], r), p.inertia)
+        rk4_step_into(x, dt, delivered, ext, plant, work, x)
+        _lock_stuck_wheels_1(faults, t + dt, x, p, j_inv)
+    else:
+        shared[slot] = n_steps
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
+              available, faults, n_faults, seeds, rec, ev, n_ev, shared) -> None:
+    """Fly every variant (axis 0 of x0, available, faults, seeds, rec, ev) in parallel, one thread each.
+
+    Releases the GIL: the caller may poll ``shared`` (progress, cancel flag) from another thread.
+    """
+    for v in prange(x0.shape[0]):
+        fly_variant(x0[v], p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
+                    available[v], faults[v, : n_faults[v]], seeds[v], rec[v], ev[v], n_ev[v], shared, 1 + v)

@@ -1,0 +1,312 @@
+"""The batch engine: turns a :class:`~sim_core.scenario.Scenario` into arrays, flies every variant
+through :func:`sim_core.closed_loop.run_batch` and returns a :class:`~sim_core.trajectory.Trajectory`.
+
+Multi-rate (seed 000 §4): dynamics at ``dynamics_dt_s`` (RK4), measurements and estimation at
+``measurement_dt_s`` (T_q), guidance, control and allocation at ``control_dt_s`` (T_u), output at
+``output_dt_s``. The orbit and the magnetic field are tabulated once per batch (orbit every
+``ORBIT_TABLE_STEP_S`` with velocity and acceleration for cubic Hermite interpolation, field every
+``FIELD_TABLE_STEP_S``) so that the compiled loop needs no ephemeris calls.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from datetime import datetime
+
+import numpy as np
+
+from sim_core import allocation, closed_loop, environment, frames, guidance, orbit, quaternion, wheels
+from sim_core.control import DigitalLawGains
+from sim_core.scenario import Scenario
+from sim_core.spacecraft import PlantParams, pack_state
+from sim_core.trajectory import EVENT_NAMES, Trajectory
+
+__all__ = ["simulate", "plant_params", "orbit_state", "MAX_EVENTS"]
+
+ORBIT_TABLE_STEP_S = 10.0  # Hermite error ~ (ωh)⁴ r / 384 ≈ 0.2 mm at LEO
+FIELD_TABLE_STEP_S = 30.0  # linear error ~ (2ω h)² B / 8 ≈ 1e-4 B (a few nT)
+MAX_EVENTS = 256
+ARCSEC = np.pi / 180.0 / 3600.0
+PROGRESS_POLL_S = 0.2
+
+
+def _epoch_unix_s(text: str) -> float:
+    try:
+        return datetime.fromisoformat(text.replace("Z", "+00:00")).timestamp()
+    except ValueError as exc:
+        raise ValueError(f"orbit.epoch_utc: not an ISO-8601 time ({text!r})") from exc
+
+
+def cluster_axes(s: Scenario) -> np.ndarray:
+    """Wheel spin axes (3, n_w) in body axes for the scenario's cluster geometry (seed 000 §2)."""
+    c = s.spacecraft.cluster
+    if c.geometry == "ge":
+        return allocation.ge_axes(np.radians(c.gamma_deg))
+    if c.geometry == "orthogonal3":
+        return wheels.orthogonal_axes()
+    if c.geometry == "skew4":
+        return wheels.skew_3plus1_axes()
+    axes = np.asarray(c.axes_b, dtype=float).T
+    return axes / np.linalg.norm(axes, axis=0)
+
+
+def plant_params(s: Scenario) -> PlantParams:
+    """Plant of seed 000 eq (1) from the scenario; hub inertia gets the wheels added if asked."""
+    axes = cluster_axes(s)
+    ws = s.spacecraft.cluster.wheels
+    jr = np.array([w.inertia_kg_m2 for w in ws])
+    j = np.asarray(s.spacecraft.inertia_kg_m2, dtype=float)
+    if not s.spacecraft.inertia_includes_wheels:
+        # Basilisk's balanced wheel: J_s along the spin axis, J_t = J_s/2 across it.
+        for col, js in zip(axes.T, jr):
+            gg = np.outer(col, col)
+            j = j + js * gg + 0.5 * js * (np.eye(3) - gg)
+    modes = s.spacecraft.flex_modes
+    return PlantParams(
+        inertia_kg_m2=j,
+        wheel_axes_b=axes,
+        wheels=wheels.WheelParams(
+            inertia_kg_m2=jr,
+            max_torque_nm=np.array([w.max_torque_nm for w in ws]),
+            max_momentum_nms=np.array([w.max_momentum_nms for w in ws]),
+            coulomb_nm=np.array([w.coulomb_nm for w in ws]),
+            coulomb_sat_speed_rad_s=np.array([w.coulomb_sat_speed_rad_s for w in ws]),
+            viscous_nm_s=np.array([w.viscous_nm_s for w in ws]),
+        ),
+        flex_coupling=np.array([m.coupling_b for m in modes]).T if modes else None,
+        flex_modal_mass=np.array([m.modal_mass for m in modes]) if modes else None,
+        flex_freq_rad_s=np.array([2 * np.pi * m.freq_hz for m in modes]) if modes else None,
+        flex_log_decrement=np.array([m.log_decrement for m in modes]) if modes else None,
+    )
+
+
+def orbit_state(s: Scenario) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Callable t_unix_s → ECI r, v, a of the scenario's orbit (circular, J2 or SGP4)."""
+    o = s.orbit
+    t0 = _epoch_unix_s(o.epoch_utc)
+    inc = o.inclination_deg if o.inclination_deg is not None else float(orbit.sun_synchronous_inclination_deg(o.altitude_m))
+    if o.kind == "tle":
+        sat = orbit.parse_tle(o.tle_line1, o.tle_line2)
+
+        def state(t):
+            r, v = orbit.propagate_tle(sat, t)
+            return r, v, orbit.j2_acceleration(r)
+
+        return state
+    if o.kind == "circular":
+        def state(t):
+            r, v = orbit.circular_orbit(np.asarray(t) - t0, o.altitude_m, inc, o.raan_deg, o.arg_latitude_deg)
+            rn = np.linalg.norm(r, axis=-1, keepdims=True)
+            return r, v, -orbit.MU_EARTH_M3_S2 * r / rn**3
+
+        return state
+    r0, v0 = orbit.circular_orbit(np.array([0.0]), o.altitude_m, inc, o.raan_deg, o.arg_latitude_deg)
+
+    def state(t):
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        order = np.argsort(t)
+        r, v = np.empty((t.size, 3)), np.empty((t.size, 3))
+        rr, vv = orbit.propagate_j2(r0[0], v0[0], np.maximum(t[order] - t0, 0.0))
+        r[order], v[order] = rr, vv
+        return r, v, orbit.j2_acceleration(r)
+
+    return state
+
+
+def _orbit_table(state, t0: float, duration_s: float) -> tuple[np.ndarray, float, float]:
+    t = np.arange(-ORBIT_TABLE_STEP_S, duration_s + 3 * ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S)
+    r, v, a = state(t0 + t)
+    return np.ascontiguousarray(np.hstack([r, v, a])), float(t[0]), ORBIT_TABLE_STEP_S
+
+
+def _field_table(state, t0: float, duration_s: float) -> tuple[np.ndarray, float, float]:
+    t = np.arange(-FIELD_TABLE_STEP_S, duration_s + 3 * FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S)
+    r, _, _ = state(t0 + t)
+    return np.ascontiguousarray(environment.magnetic_field_eci(r, t0 + t)), float(t[0]), FIELD_TABLE_STEP_S
+
+
+def _route_segments(s: Scenario) -> list:
+    g = s.guidance
+    segs: list = [guidance.OrfHold(g.route_start_s)] if g.route_start_s > 0 else []
+    for seg in g.route:
+        if seg.kind == "turn":
+            segs.append(guidance.Turn(seg.duration_s))
+        else:
+            segs.append(guidance.OrfHold(seg.duration_s, seg.yaw_deg, seg.roll_deg, seg.pitch_deg, seg.observing))
+    used = sum(x.duration_s for x in segs)
+    tail = s.duration_s + 2 * s.control_dt_s - used
+    if tail > 0:
+        last = g.route[-1]
+        segs.append(guidance.OrfHold(tail, last.yaw_deg, last.roll_deg, last.pitch_deg))
+    return segs
+
+
+def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, dut1: float):
+    g = s.guidance
+    if g.kind == "inertial":
+        steps_t = np.array([t for t, _ in g.inertial_steps], dtype=float)
+        steps_q = quaternion.normalize(np.array([q for _, q in g.inertial_steps], dtype=float))
+        order = np.argsort(steps_t)
+        return closed_loop.PROGRAM_INERTIAL, (steps_t[order], steps_q[order], np.zeros((1, guidance.ROW_SIZE)))
+    if g.kind == "orf":
+        segs = [guidance.OrfHold(s.duration_s + 2 * s.control_dt_s)]
+    else:
+        segs = _route_segments(s)
+    route = guidance.compile_route(segs, t0, state, c_pn, dut1)
+    return closed_loop.PROGRAM_ROUTE, (np.zeros(1), np.array([[1.0, 0, 0, 0]]), np.ascontiguousarray(route))
+
+
+def _fault_tables(s: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    n_max = max(1, max(len(v.faults) for v in s.variants))
+    table = np.zeros((len(s.variants), n_max, closed_loop.FAULT_COLUMNS))
+    counts = np.zeros(len(s.variants), dtype=np.int64)
+    for i, v in enumerate(s.variants):
+        for j, f in enumerate(v.faults):
+            end = np.inf if f.duration_s is None else f.onset_s + f.duration_s
+            table[i, j] = [
+                closed_loop.TARGET_CODES[f.target], f.index, closed_loop.TYPE_CODES[f.type], f.onset_s, end,
+                f.gain, f.value, f.period_s or 0.0, f.duty,
+            ]
+        counts[i] = len(v.faults)
+    return table, counts
+
+
+class Cancelled(RuntimeError):
+    """The run was cancelled through its ``cancel`` callback."""
+
+
+def simulate(
+    scenario: Scenario,
+    progress: Callable[[float], None] | None = None,
+    wheel_available: np.ndarray | None = None,
+    cancel: Callable[[], bool] | None = None,
+) -> Trajectory:
+    """Fly every variant of the scenario and return the batch trajectory (seed 000 §7 twin).
+
+    ``wheel_available`` (variants × wheels, optional): which wheels the onboard allocation may use
+    from the start (a reconfigured cluster); default all. ``progress`` gets the fraction done every
+    ``PROGRESS_POLL_S``; ``cancel`` returning True stops the run and raises :class:`Cancelled`.
+    """
+    s = scenario
+    start = time.perf_counter()
+    params = plant_params(s)
+    packed = params.pack()
+    nw, nv = params.n_wheels, len(s.variants)
+    t0 = _epoch_unix_s(s.orbit.epoch_utc)
+    state = orbit_state(s)
+    c_pn, dut1 = frames.earth_orientation_frozen(t0)
+    prog_kind, program = _program(s, state, t0, c_pn, dut1)
+
+    r0, v0, a0 = state(np.array([t0]))
+    q_p0, w_p0, _, _ = closed_loop._program_1(prog_kind, *program, 0.0, t0, r0[0], v0[0], a0[0], c_pn, dut1)
+    q_init = q_p0 if s.initial_q_ib is None else quaternion.normalize(np.array(s.initial_q_ib))
+    w_init = w_p0 if s.initial_omega_b_rad_s is None else np.array(s.initial_omega_b_rad_s)
+    speeds = np.array([w.initial_speed_rpm for w in s.spacecraft.cluster.wheels]) * np.pi / 30.0
+    x0 = pack_state(params, q_init, w_init, speeds)
+
+    dt = s.dynamics_dt_s
+    n_steps = int(round(s.duration_s / dt))
+    every = [int(round(getattr(s, name) / dt)) for name in ("measurement_dt_s", "control_dt_s", "output_dt_s")]
+    n_out = -(-n_steps // every[2])
+    law = {"seed000": closed_loop.LAW_SEED000, "mrp_feedback": closed_loop.LAW_MRP_FEEDBACK,
+           "quaternion_pd": closed_loop.LAW_QUATERNION_PD}[s.controller.kind]
+    est = {"truth": closed_loop.ESTIMATOR_TRUTH, "star_tracker": closed_loop.ESTIMATOR_STAR_TRACKER,
+           "mekf": closed_loop.ESTIMATOR_MEKF}[s.estimator.kind]
+    steps = np.array([n_steps, *every, law, est, prog_kind, int(s.gravity_gradient), 0], dtype=np.int64)
+    c = s.controller
+    sn = s.sensors
+    times = np.array([
+        dt, t0, s.spacecraft.md_max_dipole_am2, dut1, sn.star_tracker_sigma_arcsec * ARCSEC, sn.gyro_noise_rad_s,
+        sn.magnetometer_noise_t, sn.tachometer_quantum_rad_s, c.pd_kp_nm, c.pd_kd_nms, c.mrp_k_nm, c.mrp_p_nms,
+        sn.gyro_drift_density_rad_s_sqrt_s,
+    ])
+    ws = s.spacecraft.cluster.wheels
+    wheel_limits = np.array([[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws],
+                             [w.torque_quantum_nm for w in ws]])
+    gains = DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array()
+    a = s.allocation
+    law4 = allocation.LAW_GE_DISTRIBUTION if (a.kind == "ge_explicit" and s.spacecraft.cluster.geometry == "ge") \
+        else allocation.LAW_PSEUDO_INVERSE
+    alloc = allocation.AllocationConfig(
+        law4=law4, gamma_rad=np.radians(min(s.spacecraft.cluster.gamma_deg, 44.9)), rho=a.rho,
+        mu_rho_per_s=a.mu_rho_per_s, phi_rho_per_s=a.phi_rho_per_s,
+        h_max_nms=min(w.max_momentum_nms for w in ws), l_max_am2=max(s.spacecraft.md_max_dipole_am2, 1e-9),
+    ).as_array()
+    avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)
+    if avail.shape != (nv, nw):
+        raise ValueError(f"wheel_available: expected shape ({nv}, {nw}), got {avail.shape}")
+    faults, n_faults = _fault_tables(s)
+    seeds = np.array([s.seed * 1000 + i * 7919 + v.seed_offset for i, v in enumerate(s.variants)], dtype=np.int64)
+    orbit_tab = _orbit_table(state, t0, s.duration_s)
+    field_tab = _field_table(state, t0, s.duration_s)
+    env = (field_tab[0], field_tab[1], field_tab[2], np.ascontiguousarray(c_pn))
+
+    rec = np.zeros((nv, n_out, closed_loop.record_width(nw)))
+    ev = np.zeros((nv, MAX_EVENTS, 3))
+    n_ev = np.zeros((nv, 1), dtype=np.int64)
+    x0s = np.repeat(x0[None], nv, axis=0)
+    bias = np.array(sn.gyro_bias_rad_s, dtype=float)
+    shared = np.zeros(nv + 1, dtype=np.int64)
+    args = (x0s, packed, wheel_limits, steps, times, program, orbit_tab, env, gains, bias, alloc,
+            avail, faults, n_faults, seeds, rec, ev, n_ev, shared)
+    _run_watched(args, shared, n_steps, progress, cancel)
+    return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)
+
+
+def _run_watched(args: tuple, shared: np.ndarray, n_steps: int, progress, cancel) -> None:
+    """Run the compiled batch; if watched, in a thread while this one reports progress and polls cancel."""
+    if progress is None and cancel is None:
+        closed_loop.run_batch(*args)
+        return
+    import threading
+
+    worker = threading.Thread(target=closed_loop.run_batch, args=args, daemon=True)
+    worker.start()
+    while worker.is_alive():
+        worker.join(PROGRESS_POLL_S)
+        if cancel is not None and cancel():
+            shared[0] = 1
+        if progress is not None:
+            progress(float(shared[1:].min()) / max(n_steps, 1))
+    if shared[0]:
+        raise Cancelled("simulation cancelled")
+
+
+def _trajectory(s: Scenario, rec, ev, n_ev, nw: int, span: float, params: PlantParams, wall: float) -> Trajectory:
+    cl = closed_loop
+    w0 = cl.R_WHEELS
+    series = {
+        "q_ib": rec[..., cl.R_Q:cl.R_Q + 4],
+        "omega_b_rad_s": rec[..., cl.R_W:cl.R_W + 3],
+        "q_est_ib": rec[..., cl.R_QE:cl.R_QE + 4],
+        "omega_est_b_rad_s": rec[..., cl.R_WE:cl.R_WE + 3],
+        "q_prog_ib": rec[..., cl.R_QP:cl.R_QP + 4],
+        "omega_prog_b_rad_s": rec[..., cl.R_WP:cl.R_WP + 3],
+        "md_dipole_am2": rec[..., cl.R_MD:cl.R_MD + 3],
+        "control_torque_b_nm": rec[..., cl.R_TORQUE:cl.R_TORQUE + 3],
+        "r_eci_m": rec[..., cl.R_R:cl.R_R + 3],
+        "observing": rec[..., cl.R_OBS],
+        "allocation_status": rec[..., cl.R_STATUS].astype(np.int64),
+        "fault_flags": rec[..., cl.R_FAULTS].astype(np.int64),
+        "wheel_speed_rad_s": rec[..., w0:w0 + nw],
+        "wheel_torque_cmd_nm": rec[..., w0 + nw:w0 + 2 * nw],
+        "wheel_torque_nm": rec[..., w0 + 2 * nw:w0 + 3 * nw],
+    }
+    events = [
+        [(float(ev[v, i, 0]), EVENT_NAMES.get(int(ev[v, i, 1]), str(int(ev[v, i, 1]))), int(ev[v, i, 2]))
+         for i in range(int(n_ev[v, 0]))]
+        for v in range(len(s.variants))
+    ]
+    t = np.arange(rec.shape[1]) * s.output_dt_s
+    return Trajectory(
+        scenario_name=s.name,
+        variant_names=[v.name for v in s.variants],
+        t_s=t,
+        series=series,
+        events=events,
+        wheel_inertia_kg_m2=params.wheels.inertia_kg_m2.copy(),
+        wall_time_s=wall,
+        simulated_time_s=float(min(span, s.duration_s)),
+        extra={"epoch_unix_s": _epoch_unix_s(s.orbit.epoch_utc)},
+    )

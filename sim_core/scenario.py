@@ -1,0 +1,306 @@
+"""The ``Scenario`` schema: everything one simulation (or one batch of fault variants) needs.
+
+Seed 000 §7: the twin runs "with the same values of parameters, initial conditions and variants of
+possible faults" as the spacecraft, so every parameter of the plant, sensors, estimator, guidance,
+controller, allocation and faults is a field here, validated at the edge (``ValueError`` /
+pydantic ``ValidationError`` naming the field). Units are in the field names.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+__all__ = [
+    "WheelSpec",
+    "ClusterSpec",
+    "FlexModeSpec",
+    "SpacecraftSpec",
+    "OrbitSpec",
+    "SensorsSpec",
+    "EstimatorSpec",
+    "RouteSegmentSpec",
+    "GuidanceSpec",
+    "ControllerSpec",
+    "AllocationSpec",
+    "FaultSpec",
+    "VariantSpec",
+    "Scenario",
+    "apply_overrides",
+]
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0.0, allow_inf_nan=False)]
+Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+Quaternion = Annotated[list[Finite], Field(min_length=4, max_length=4)]
+
+
+class _Spec(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+class WheelSpec(_Spec):
+    """One reaction wheel (seed 000 eq 1–2, seed 002 eq 1–4)."""
+
+    inertia_kg_m2: Positive = 0.0191
+    max_torque_nm: Positive = 0.2
+    max_momentum_nms: Positive = 12.0
+    torque_quantum_nm: NonNegative = 0.0
+    coulomb_nm: NonNegative = 0.0
+    coulomb_sat_speed_rad_s: NonNegative = 0.0
+    viscous_nm_s: NonNegative = 0.0
+    initial_speed_rpm: Finite = 0.0
+
+
+class ClusterSpec(_Spec):
+    """Wheel geometry: seed 000's GE scheme (angle γ), three orthogonal, 3+1 skew, or explicit axes."""
+
+    geometry: Literal["ge", "orthogonal3", "skew4", "custom"] = "ge"
+    gamma_deg: Annotated[float, Field(gt=0.0, lt=45.0)] = 30.0  # GE half-angle; < 45° keeps eq (6) real
+    axes_b: list[Vector3] | None = None
+    wheels: list[WheelSpec] = Field(default_factory=lambda: [WheelSpec() for _ in range(4)])
+
+    @model_validator(mode="after")
+    def _axes_match_wheels(self) -> "ClusterSpec":
+        expected = {"ge": 4, "orthogonal3": 3, "skew4": 4}.get(self.geometry)
+        if self.geometry == "custom":
+            if not self.axes_b:
+                raise ValueError("spacecraft.cluster.axes_b: required when geometry is 'custom'")
+            expected = len(self.axes_b)
+            if any(math.fsum(c * c for c in a) == 0.0 for a in self.axes_b):
+                raise ValueError("spacecraft.cluster.axes_b: a zero vector has no direction")
+        if len(self.wheels) != expected:
+            raise ValueError(f"spacecraft.cluster.wheels: geometry {self.geometry!r} needs {expected} wheels, got {len(self.wheels)}")
+        return self
+
+
+class FlexModeSpec(_Spec):
+    """One flexible mode of seed 000 eq (1): coupling D_q column, modal mass a^q, Ω^q, δ^q."""
+
+    coupling_b: Vector3
+    modal_mass: Positive = 1.0
+    freq_hz: Positive = 1.0
+    log_decrement: NonNegative = 0.02
+
+
+class SpacecraftSpec(_Spec):
+    """Mass properties, wheels, flexible modes and the magnetic driver of the spacecraft."""
+
+    inertia_kg_m2: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = Field(
+        default_factory=lambda: [[35.0, 0.0, 0.0], [0.0, 30.0, 0.0], [0.0, 0.0, 25.0]]
+    )
+    inertia_includes_wheels: bool = True
+    cluster: ClusterSpec = Field(default_factory=ClusterSpec)
+    flex_modes: list[FlexModeSpec] = Field(default_factory=list)
+    md_max_dipole_am2: NonNegative = 25.0
+    residual_dipole_am2: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+
+class OrbitSpec(_Spec):
+    """Orbit: circular elements, full Keplerian elements with J2, or a TLE through SGP4."""
+
+    kind: Literal["circular", "j2", "tle"] = "circular"
+    epoch_utc: str = "2026-03-20T00:00:00Z"
+    altitude_m: Positive = 600e3
+    inclination_deg: Annotated[float, Field(ge=0.0, le=180.0)] | None = None  # None: Sun-synchronous
+    raan_deg: Finite = 0.0
+    arg_latitude_deg: Finite = 0.0
+    tle_line1: str | None = None
+    tle_line2: str | None = None
+
+    @model_validator(mode="after")
+    def _tle_given(self) -> "OrbitSpec":
+        if self.kind == "tle" and not (self.tle_line1 and self.tle_line2):
+            raise ValueError("orbit.tle_line1/tle_line2: both lines are required when kind is 'tle'")
+        return self
+
+
+class SensorsSpec(_Spec):
+    """Sensor noise and periods (seed 000 §4, seed 002 eq 13–14, seed 003 §3.2.3.1)."""
+
+    star_tracker_sigma_arcsec: NonNegative = 3.0
+    gyro_drift_density_rad_s_sqrt_s: NonNegative = 1e-9
+    gyro_noise_rad_s: NonNegative = 1e-6
+    gyro_bias_rad_s: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    gyro_markov_sigma_rad_s: NonNegative = 0.0
+    gyro_markov_tau_s: Positive = 300.0
+    magnetometer_noise_t: NonNegative = 50e-9
+    tachometer_quantum_rad_s: NonNegative = 0.0
+
+
+class EstimatorSpec(_Spec):
+    """Attitude determination feeding the control law."""
+
+    kind: Literal["truth", "star_tracker", "mekf"] = "truth"
+
+
+class RouteSegmentSpec(_Spec):
+    """One segment of a trace-scanning route: hold an ORF attitude, or a seed 001 turn to the next hold."""
+
+    kind: Literal["hold", "turn"] = "hold"
+    duration_s: Positive
+    yaw_deg: Finite = 0.0
+    roll_deg: Finite = 0.0
+    pitch_deg: Finite = 0.0
+    observing: bool = False
+
+
+class GuidanceSpec(_Spec):
+    """Programmed motion Λ^p(t): inertial hold with timed steps, ORF hold, or a scanning route."""
+
+    kind: Literal["inertial", "orf", "route"] = "orf"
+    inertial_steps: list[tuple[NonNegative, Quaternion]] = Field(default_factory=list)
+    route_start_s: NonNegative = 0.0
+    route: list[RouteSegmentSpec] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _has_program(self) -> "GuidanceSpec":
+        if self.kind == "inertial" and not self.inertial_steps:
+            raise ValueError("guidance.inertial_steps: at least one (time_s, q_ib) step is required")
+        if self.kind == "route":
+            if not self.route:
+                raise ValueError("guidance.route: at least one segment is required")
+            kinds = [s.kind for s in self.route]
+            if kinds[0] == "turn" or kinds[-1] == "turn" or any(a == b == "turn" for a, b in zip(kinds, kinds[1:])):
+                raise ValueError("guidance.route: a turn must sit between two hold segments")
+        for q_step in self.inertial_steps:
+            if abs(math.sqrt(math.fsum(c * c for c in q_step[1])) - 1.0) > 1e-6:
+                raise ValueError("guidance.inertial_steps: every quaternion must be unit")
+        return self
+
+
+class ControllerSpec(_Spec):
+    """Control law: seed 000 digital law (7)–(8), MRP feedback (peer), or quaternion PD (seed 002)."""
+
+    kind: Literal["seed000", "mrp_feedback", "quaternion_pd"] = "seed000"
+    gain_k_per_s2: Positive = 4.0e-3  # control.DigitalLawGains: crossover ≈ 0.12 rad/s at T_u = 2 s
+    tau1_s: Positive = 30.0
+    tau2_s: Positive = 2.5
+    mrp_k_nm: Positive = 2.7
+    mrp_p_nms: Positive = 9.0
+    pd_kp_nm: Positive = 1.0
+    pd_kd_nms: Positive = 10.0
+
+
+class AllocationSpec(_Spec):
+    """Wheel torque distribution: seed 000 eq (6) explicit law, or the minimum-norm pseudo-inverse."""
+
+    kind: Literal["ge_explicit", "pseudo_inverse"] = "ge_explicit"
+    rho: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.5
+    mu_rho_per_s: Positive = 0.05
+    phi_rho_per_s: Positive = 0.002
+
+
+FAULT_TARGETS = ("wheel", "gyro", "star_tracker", "earth_sensor", "magnetometer", "sun_sensor", "controller", "md_rod")
+FAULT_TYPES = (
+    "failure",
+    "stuck",
+    "gain",
+    "bias",
+    "drift",
+    "intermittent",
+    "noise",
+    "friction",
+    "frozen",
+)
+
+
+class FaultSpec(_Spec):
+    """One injected fault: target (and index), type, onset, duration and parameters."""
+
+    target: Literal[FAULT_TARGETS]  # type: ignore[valid-type]
+    index: Annotated[int, Field(ge=0)] = 0
+    type: Literal[FAULT_TYPES]  # type: ignore[valid-type]
+    onset_s: NonNegative = 0.0
+    duration_s: Positive | None = None
+    gain: Annotated[float, Field(ge=0.0, le=2.0)] = 1.0
+    value: Finite = 0.0
+    period_s: Positive | None = None
+    duty: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+
+
+class VariantSpec(_Spec):
+    """One batch variant: a name, its fault set and its random-seed offset."""
+
+    name: str
+    faults: list[FaultSpec] = Field(default_factory=list)
+    seed_offset: Annotated[int, Field(ge=0)] = 0
+
+
+class Scenario(_Spec):
+    """A complete simulation case; ``variants`` run as one batch (default: one nominal variant)."""
+
+    name: str = "custom"
+    description: str = ""
+    spacecraft: SpacecraftSpec = Field(default_factory=SpacecraftSpec)
+    orbit: OrbitSpec = Field(default_factory=OrbitSpec)
+    initial_q_ib: Quaternion | None = None  # None: aligned with the program at t = 0
+    initial_omega_b_rad_s: Vector3 | None = None
+    sensors: SensorsSpec = Field(default_factory=SensorsSpec)
+    estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
+    guidance: GuidanceSpec = Field(default_factory=GuidanceSpec)
+    controller: ControllerSpec = Field(default_factory=ControllerSpec)
+    allocation: AllocationSpec = Field(default_factory=AllocationSpec)
+    gravity_gradient: bool = True
+    duration_s: Positive = 5801.0
+    dynamics_dt_s: Positive = 0.05
+    measurement_dt_s: Positive = 0.25
+    control_dt_s: Positive = 2.0
+    output_dt_s: Positive = 1.0
+    seed: Annotated[int, Field(ge=0)] = 0
+    variants: list[VariantSpec] = Field(default_factory=lambda: [VariantSpec(name="nominal")])
+
+    @field_validator("initial_q_ib")
+    @classmethod
+    def _unit(cls, q: list[float] | None) -> list[float] | None:
+        if q is not None and abs(math.sqrt(math.fsum(c * c for c in q)) - 1.0) > 1e-6:
+            raise ValueError("initial_q_ib: not a unit quaternion")
+        return q
+
+    @model_validator(mode="after")
+    def _rates_nest(self) -> "Scenario":
+        for name in ("measurement_dt_s", "control_dt_s", "output_dt_s"):
+            ratio = getattr(self, name) / self.dynamics_dt_s
+            if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+                raise ValueError(f"{name}: must be a whole multiple of dynamics_dt_s ({self.dynamics_dt_s} s)")
+        if not self.variants:
+            raise ValueError("variants: at least one variant is required")
+        n_wheels = len(self.spacecraft.cluster.wheels)
+        for v in self.variants:
+            for f in v.faults:
+                if f.target == "wheel" and f.index >= n_wheels:
+                    raise ValueError(f"variants[{v.name}].faults.index: wheel {f.index} does not exist (n = {n_wheels})")
+        return self
+
+
+def apply_overrides(scenario: Scenario, assignments: list[str]) -> Scenario:
+    """Return a copy with ``path.to.field=value`` assignments applied (values parsed as JSON, else text)."""
+    import json
+
+    data: dict[str, Any] = scenario.model_dump()
+    for item in assignments:
+        path, sep, raw = item.partition("=")
+        if not sep or not path:
+            raise ValueError(f"--set {item!r}: expected path.to.field=value")
+        try:
+            value = json.loads(raw)
+        except json.JSONDecodeError:
+            value = raw
+        node: Any = data
+        keys = path.split(".")
+        for depth, key in enumerate(keys):
+            last = depth == len(keys) - 1
+            if isinstance(node, list):
+                if not key.isdigit() or int(key) >= len(node):
+                    raise ValueError(f"--set {path}: {'.'.join(keys[:depth + 1])} is not an index of a list of {len(node)}")
+                key = int(key)  # type: ignore[assignment]
+            elif not isinstance(node, dict) or key not in node:
+                raise ValueError(f"--set {path}: unknown field {'.'.join(keys[:depth + 1])!r}")
+            if last:
+                node[key] = value
+            else:
+                node = node[key]
+    return Scenario.model_validate(data)
