@@ -250,20 +250,17 @@ def _header_fits(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, 
 
 
 @njit(cache=True)
-def _anchored(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
-    """A packet starts at p and is confirmed: by its CRC, or by a packet (or the end) right after it."""
-    if not _header_fits(buf, p, lengths, crc, table):
+def _well_formed(buf: np.ndarray, p: int) -> bool:
+    """A version-0 header at p whose packet ends within buf (any APID)."""
+    n = buf.shape[0]
+    if p + PRIMARY_HEADER_OCTETS > n or (buf[p] >> 5) != 0:
         return False
-    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-    if crc[apid]:
-        return True
-    q = p + lengths[apid]
-    return q == buf.shape[0] or _header_fits(buf, q, lengths, crc, table)
+    return p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 <= n
 
 
 @njit(cache=True)
 def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
-    """Why no confirmed packet starts at p (a FrameCode)."""
+    """Why no packet of the dictionary starts at p (a FrameCode)."""
     n = buf.shape[0]
     if p + PRIMARY_HEADER_OCTETS > n:
         return _TRUNCATED
@@ -273,7 +270,7 @@ def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, tab
     size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
     if lengths[apid] == 0:
         return _UNKNOWN_APID
-    if lengths[apid] > 0 and size != lengths[apid]:
+    if size != lengths[apid]:
         return _BAD_LENGTH
     if p + size > n:
         return _TRUNCATED
@@ -283,24 +280,24 @@ def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, tab
 
 
 @njit(cache=True)
-def _unknown_in_sync(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
-    """Length of a well-formed packet of an unknown (or idle) APID at p that a confirmed packet or the end follows, else 0."""
-    n = buf.shape[0]
-    if p + PRIMARY_HEADER_OCTETS > n or (buf[p] >> 5) != 0:
-        return 0
-    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-    size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
-    if lengths[apid] != 0 and apid != IDLE_APID:
-        return 0
-    q = p + size
-    if q == n or (q < n and _anchored(buf, q, lengths, crc, table)):
-        return size
-    return 0
+def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
+    """First q in [start, stop) where a dictionary packet fits, else stop."""
+    q = start
+    while q < stop and not _header_fits(buf, q, lengths, crc, table):
+        q += 1
+    return q
 
 
 @njit(cache=True)
 def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray):
-    """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them."""
+    """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them.
+
+    A dictionary packet that fits at p (known APID, its length, CRC where defined) is taken when its
+    CRC confirms it or the next octets start another well-formed packet (or the data ends); an
+    unconfirmed one is cut short (truncated) at the first packet that fits inside it. A well-formed
+    packet of an unknown APID is skipped in sync when a well-formed packet follows it. Anything else
+    is quarantined up to the next octet where a dictionary packet fits.
+    """
     n = buf.shape[0]
     offsets = np.empty(n // PRIMARY_HEADER_OCTETS + 2, dtype=np.int64)
     sizes = np.empty_like(offsets)
@@ -308,35 +305,29 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
     k = 0
     p = 0
     while p < n:
-        if _anchored(buf, p, lengths, crc, table):
-            size = lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]]
-            offsets[k], sizes[k], codes[k] = p, size, _OK
-            k += 1
-            p += size
-            continue
-        size = _unknown_in_sync(buf, p, lengths, crc, table)
-        if size > 0:
+        if _header_fits(buf, p, lengths, crc, table):
             apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-            offsets[k], sizes[k] = p, size
-            codes[k] = _IDLE if apid == IDLE_APID else _UNKNOWN_APID
+            size = lengths[apid]
+            q = p + size
+            if not (crc[apid] or q == n or _well_formed(buf, q)):
+                q = _next_fit(buf, p + 1, p + size, lengths, crc, table)
+            offsets[k], sizes[k] = p, q - p
+            codes[k] = _OK if q == p + size else _TRUNCATED
             k += 1
-            p += size
+            p = q
             continue
-        q = p + 1
-        while q < n and not _anchored(buf, q, lengths, crc, table):
-            q += 1
-        fits = _header_fits(buf, p, lengths, crc, table)
-        size = lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]] if fits else 0
-        if fits and q >= p + size:  # a complete packet followed by unconfirmed bytes
-            offsets[k], sizes[k], codes[k] = p, size, _OK
-            k += 1
-            p += size
-            if q > p:
-                offsets[k], sizes[k], codes[k] = p, q - p, _classify(buf, p, lengths, crc, table)
+        apid = ((np.int64(buf[p]) & 7) << 8) | buf[min(p + 1, n - 1)]
+        if _well_formed(buf, p) and lengths[apid] == 0:
+            q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+            if q == n or _well_formed(buf, q):
+                offsets[k], sizes[k] = p, q - p
+                codes[k] = _IDLE if apid == IDLE_APID else _UNKNOWN_APID
                 k += 1
-        else:
-            offsets[k], sizes[k], codes[k] = p, q - p, _classify(buf, p, lengths, crc, table)
-            k += 1
+                p = q
+                continue
+        q = _next_fit(buf, p + 1, n, lengths, crc, table)
+        offsets[k], sizes[k], codes[k] = p, q - p, _classify(buf, p, lengths, crc, table)
+        k += 1
         p = q
     return offsets[:k], sizes[:k], codes[:k]
 
@@ -356,8 +347,8 @@ def frame_stream(
     """Split a mixed-APID packet stream by its length fields (CCSDS 133.0-B-2 §4.1.3.5), resynchronising on damage.
 
     A packet is taken when its version is 0, its APID is known, its length is the dictionary's and
-    its CRC holds (or, without a CRC, a confirmed packet or the end of data follows it). Damaged
-    stretches become quarantined segments and the scan resumes at the next confirmed packet.
+    its CRC holds (or, without a CRC, a well-formed packet or the end of data follows it). Damaged
+    stretches become quarantined segments and the scan resumes where a dictionary packet fits.
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
     if buf.dtype != np.uint8 or buf.ndim != 1:

@@ -353,7 +353,7 @@ def _xtce_parameter(param: Any, bit: int) -> Parameter:
         raise ValueError(f"{param.name}: XTCE calibrator {type(enc.default_calibrator).__name__} not supported")
     enum = {}
     if isinstance(ptype, parameter_types.EnumeratedParameterType):
-        enum = {int(v): str(k) for k, v in ptype.enumeration.items()}
+        enum = {int(k): str(v) for k, v in ptype.enumeration.items()}  # spp maps value -> label
     unit = ptype.unit if isinstance(ptype.unit, str) or ptype.unit is None else " ".join(ptype.unit)
     return Parameter(
         name=param.name,

@@ -1,0 +1,174 @@
+"""CCSDS packet layer: primary header (133.0-B-2 §4.1.3), time codes (301.0-B-4 §3.2–3.3), CRC, framing.
+
+Truths: byte-level vectors worked from the clauses, the independent libraries ccsdspy and
+spacepackets, the published CRC-16/CCITT-FALSE check value, and exact rational arithmetic.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from fractions import Fraction
+from io import BytesIO
+from pathlib import Path
+
+import ccsdspy
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from spacepackets.ccsds import PacketType, SpacePacketHeader
+from spacepackets.ccsds.time import CdsShortTimestamp
+
+from telemetry import ccsds
+from telemetry.ccsds import FrameCode, TimeCode
+
+NOAA = Path("real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1")
+NOAA_LEN = 71
+CRC_CHECK_123456789 = 0x29B1  # CRC-16/CCITT-FALSE check value (Greg Cook's CRC catalogue)
+HALF_NS = 0.5  # decode rounds a CUC fraction to the nearest nanosecond
+UNIX_EPOCH = dt.datetime(1970, 1, 1, tzinfo=dt.timezone.utc)
+CCSDS_EPOCH = dt.datetime(1958, 1, 1, tzinfo=dt.timezone.utc)
+
+
+def test_primary_header_clause_4_1_3_byte_vector() -> None:
+    """First NOAA-20 header 08 0B CA 2E 00 40, worked by hand from the clause's bit layout."""
+    h = ccsds.parse_primary_headers(np.array([[0x08, 0x0B, 0xCA, 0x2E, 0x00, 0x40]], dtype=np.uint8))
+    assert (h.version[0], h.packet_type[0], h.secondary_header_flag[0]) == (0, 0, 1)
+    assert (h.apid[0], h.sequence_flags[0], h.sequence_count[0], h.packet_octets[0]) == (11, 3, 0x0A2E, 0x40 + 7)
+
+
+def test_primary_headers_match_ccsdspy_on_noaa20(shared_data: Path) -> None:
+    raw = (shared_data / NOAA).read_bytes()
+    theirs = ccsdspy.utils.read_primary_headers(BytesIO(raw))
+    h = ccsds.parse_primary_headers(np.frombuffer(raw, dtype=np.uint8).reshape(-1, NOAA_LEN))
+    np.testing.assert_array_equal(h.apid, theirs["CCSDS_APID"])
+    np.testing.assert_array_equal(h.sequence_count, theirs["CCSDS_SEQUENCE_COUNT"])
+    np.testing.assert_array_equal(h.packet_octets - 7, theirs["CCSDS_PACKET_LENGTH"])
+    np.testing.assert_array_equal(h.sequence_flags, theirs["CCSDS_SEQUENCE_FLAG"])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2046), st.integers(0, 16383), st.integers(7, 65542))
+def test_encoded_header_matches_spacepackets(apid: int, count: int, octets: int) -> None:
+    ours = ccsds.encode_primary_headers(apid, np.array([count]), octets)[0].tobytes()
+    theirs = SpacePacketHeader(PacketType.TM, apid, count, data_len=octets - 7, sec_header_flag=True).pack()
+    assert ours == bytes(theirs)
+    back = SpacePacketHeader.unpack(ours)
+    assert (back.apid, back.seq_count, back.packet_len) == (apid, count, octets)
+
+
+def test_encode_header_rejects_bad_apid_naming_field() -> None:
+    with pytest.raises(ValueError, match="apid"):
+        ccsds.encode_primary_headers(2048, np.array([0]), 10)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**16 - 1), st.integers(0, 86_399_999))
+def test_cds_decode_matches_calendar_arithmetic(day: int, ms_of_day: int) -> None:
+    """Days since 1958-01-01 and ms of day, counted with the standard library's exact calendar."""
+    code = TimeCode("CDS", submillisecond_octets=0)
+    t_field = day.to_bytes(2, "big") + ms_of_day.to_bytes(4, "big")
+    ours = int(ccsds.decode_time(np.frombuffer(t_field, np.uint8)[None, :], code)[0])
+    theirs = CCSDS_EPOCH + dt.timedelta(days=day, milliseconds=ms_of_day)
+    assert ours == (theirs - UNIX_EPOCH) // dt.timedelta(microseconds=1) * 1_000
+
+
+def test_cds_short_timestamp_of_spacepackets_parses_our_t_field() -> None:
+    """spacepackets reads our CDS 2+4 T-field (with its P-field 0x40) back to the same day and ms."""
+    code = TimeCode("CDS", submillisecond_octets=0)
+    t_ns = np.array([1_617_926_400_007_000_000])  # 2021-04-09T00:00:00.007Z
+    stamp = CdsShortTimestamp.unpack(bytes([0x40]) + ccsds.encode_time(t_ns, code)[0].tobytes())
+    assert (stamp.ccsds_days, stamp.ms_of_day) == (23_109, 7)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(0, 2**16 - 1))
+def test_cuc_4_2_decode_is_exact_binary_fraction(coarse: int, fine: int) -> None:
+    code = TimeCode("CUC", 4, 2, epoch_utc_ns=946_684_800 * 10**9)
+    t_field = np.frombuffer(coarse.to_bytes(4, "big") + fine.to_bytes(2, "big"), np.uint8)[None, :]
+    ours = int(ccsds.decode_time(t_field, code)[0])
+    exact_ns = Fraction(code.epoch_utc_ns) + (coarse + Fraction(fine, 2**16)) * 10**9
+    assert abs(ours - exact_ns) <= HALF_NS
+
+
+@pytest.mark.parametrize("code", [TimeCode("CUC", 4, 2), TimeCode("CUC", 2, 3), TimeCode("CDS"),
+                                  TimeCode("CDS", day_octets=3, submillisecond_octets=4)])
+def test_time_code_round_trip_within_half_a_tick(code: TimeCode) -> None:
+    rng = np.random.default_rng(7)
+    span_ns = (2**16 - 1) * 10**9 if code.format == "CUC" and code.coarse_octets == 2 else 60 * 365 * 86_400 * 10**9
+    t = code.epoch_utc_ns + rng.integers(0, span_ns, 1000)
+    back = ccsds.decode_time(ccsds.encode_time(t, code), code)
+    tick_ns = {("CUC", 2): 10**9 / 2**16, ("CUC", 3): 10**9 / 2**24}.get((code.format, code.fine_octets))
+    if code.format == "CDS":
+        tick_ns = {0: 10**6, 2: 10**3, 4: 1}[code.submillisecond_octets]
+        assert np.all((t - back >= 0) & (t - back < tick_ns))  # CDS truncates to its unit
+    else:
+        assert np.max(np.abs(back - t)) <= tick_ns / 2 + 1
+
+
+def test_time_code_rejects_bad_layout_naming_field() -> None:
+    with pytest.raises(ValueError, match="time_code"):
+        TimeCode("CUC", coarse_octets=5)
+    with pytest.raises(ValueError, match="time_code.format"):
+        TimeCode("GPS")
+
+
+def test_crc16_published_check_value_and_fastcrc() -> None:
+    from fastcrc import crc16
+
+    assert ccsds.crc16_ccitt(b"123456789") == CRC_CHECK_123456789
+    rows = np.random.default_rng(3).integers(0, 256, (50, 40), dtype=np.uint8)
+    np.testing.assert_array_equal(ccsds.crc16_ccitt(rows), [crc16.ibm_3740(r.tobytes()) for r in rows])
+
+
+def _packet(apid: int, count: int, size: int, fill: int) -> bytes:
+    """A packet of the given APID and length whose data field is one repeated octet."""
+    return ccsds.encode_primary_headers(apid, np.array([count]), size)[0].tobytes() + bytes([fill]) * (size - 6)
+
+
+def test_mixed_apid_stream_splits_like_ccsdspy() -> None:
+    rng = np.random.default_rng(5)
+    sizes = {100: 20, 200: 33, 300: 9}
+    apids = rng.choice(list(sizes), 500)
+    stream = b"".join(_packet(int(a), i, sizes[int(a)], i % 256) for i, a in enumerate(apids))
+    frames = ccsds.frame_stream(stream, sizes)
+    assert np.all(frames.code == FrameCode.OK)
+    by_apid = ccsdspy.utils.split_by_apid(BytesIO(stream))
+    for apid, size in sizes.items():
+        ours = b"".join(stream[o : o + size] for o in frames.offset[apids == apid])
+        assert ours == by_apid[apid].read()
+
+
+def test_framing_quarantines_damage_and_recovers_neighbours() -> None:
+    sizes = {100: 20}
+    good = [_packet(100, i, 20, i) for i in range(6)]
+    bad_length = bytearray(good[2])
+    bad_length[5] += 3
+    stream = good[0] + good[1] + bytes(bad_length) + good[3] + b"\xff\x00\x13" + good[4] + good[5][:11]
+    frames = ccsds.frame_stream(stream, sizes, crc_apids=frozenset())
+    codes = [FrameCode.NAMES[c] for c in frames.code]
+    assert codes == ["ok", "ok", "bad_length", "ok", "bad_header", "ok", "truncated"]
+    assert frames.offset.tolist() == [0, 20, 40, 60, 80, 83, 103]
+
+
+def test_framing_with_crc_quarantines_corrupt_payload() -> None:
+    from telemetry.dictionary import load_dictionary
+    from telemetry.encoding import encode_packets
+
+    hk = load_dictionary("reference_satellite.yaml").packets[256]
+    values = {p.name: np.zeros(3) for p in hk.parameters}
+    packets = encode_packets(hk, 1_700_000_000 * 10**9 + np.arange(3) * 250_000_000, np.arange(3), values)
+    packets[1, 50] ^= 0x10
+    frames = ccsds.frame_stream(packets.tobytes(), {256: hk.packet_octets}, frozenset({256}))
+    assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "crc_failure", "ok"]
+
+
+def test_unknown_and_idle_apids_are_skipped_in_sync() -> None:
+    stream = _packet(100, 0, 20, 1) + _packet(555, 0, 14, 2) + _packet(ccsds.IDLE_APID, 0, 10, 0) + _packet(100, 1, 20, 3)
+    frames = ccsds.frame_stream(stream, {100: 20})
+    assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "unknown_apid", "idle", "ok"]
+
+
+def test_frame_stream_rejects_bad_dictionary_naming_field() -> None:
+    with pytest.raises(ValueError, match="packet_octets_by_apid"):
+        ccsds.frame_stream(b"", {2047: 10})
