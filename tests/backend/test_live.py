@@ -1,0 +1,97 @@
+"""Live fan-out: non-blocking publish, thinning of slow clients, ≤ rate_hz batches, WebSocket auth."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from backend.live_hub import LiveHub
+from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
+from tests.backend.conftest import bearer
+
+PUBLISH_BUDGET_S = 1.0  # 100k publishes to a stalled subscriber: must not wait on it (≈ 0.1 s here)
+
+
+def test_publish_never_waits_and_a_full_subscriber_keeps_the_newest_items() -> None:
+    hub = LiveHub(capacity=10)
+    stalled = hub.subscribe(["parameters/*"])
+    other = hub.subscribe(["alarms"])
+    started = time.perf_counter()
+    for i in range(100_000):
+        hub.publish("parameters/q", i)
+    assert time.perf_counter() - started < PUBLISH_BUDGET_S
+    assert stalled.dropped == 100_000 - 10
+    assert [item["data"] for item in stalled.drain()] == list(range(99_990, 100_000))
+    assert other.drain() == []
+
+
+def test_bad_topic_names_the_field() -> None:
+    with pytest.raises(ValueError, match="topics"):
+        LiveHub(10).subscribe(["wheels"])
+
+
+class _StalledSocket:
+    def __init__(self) -> None:
+        self.closed_with: int | None = None
+
+    async def send_json(self, _: object) -> None:
+        await asyncio.sleep(10)
+
+    async def close(self, code: int, reason: str = "") -> None:
+        self.closed_with = code
+
+
+def test_a_client_that_stalls_a_send_is_dropped() -> None:
+    hub = LiveHub(10)
+    sub = hub.subscribe(["twin"])
+    hub.publish("twin", {"residual_deg": 0.1})
+    socket = _StalledSocket()
+    asyncio.run(asyncio.wait_for(_send_batches(socket, sub, 0.01, 0.05), 2.0))  # type: ignore[arg-type]
+    assert socket.closed_with == CLOSE_TOO_SLOW
+
+
+def test_websocket_batches_at_most_rate_hz_and_needs_a_token(client: TestClient, tokens: dict[str, str]) -> None:
+    with pytest.raises(WebSocketDisconnect) as refused:
+        with client.websocket_connect("/api/v1/ws") as ws:
+            ws.receive_json()
+    assert refused.value.code == CLOSE_UNAUTHORIZED
+    hub = client.app.state.services.hub
+    rate_hz = client.app.state.services.settings.ws_rate_hz
+    with client.websocket_connect(f"/api/v1/ws?token={tokens['viewer']}") as ws:
+        ws.send_json({"op": "subscribe", "topics": ["parameters/x", "bogus"]})
+        assert ws.receive_json()["field"] == "topics"
+        ws.send_json({"op": "subscribe", "topics": ["parameters/x"]})
+        deadline = time.monotonic() + 2.0
+        while hub.subscriber_count == 0 or not hub.wants_any("parameters/x"):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        started = time.monotonic()
+        received, batches = 0, 0
+        for i in range(50):
+            hub.publish("parameters/x", i)
+            time.sleep(0.01)
+        while received < 50:
+            message = ws.receive_json()
+            batches, received = batches + 1, received + len(message["items"])
+        elapsed = time.monotonic() - started
+        assert batches <= rate_hz * elapsed + 1
+
+
+def test_uploaded_packets_reach_a_websocket_subscriber(client: TestClient, tokens: dict[str, str],
+                                                       shared_data: Path) -> None:
+    data = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
+    with client.websocket_connect("/api/v1/ws", headers=bearer(tokens["viewer"])) as ws:
+        ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
+        hub = client.app.state.services.hub
+        deadline = time.monotonic() + 2.0
+        while not hub.wants_any("parameters/q_ib_0"):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        client.post("/api/v1/telemetry/uploads", content=data, headers=bearer(tokens["operator"]))
+        item = ws.receive_json()["items"][0]
+    assert item["topic"] == "parameters/q_ib_0" and len(item["data"]["values"]) == 7200
