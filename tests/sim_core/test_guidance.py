@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from sim_core import frames
 from sim_core import guidance as gd
 from sim_core import quaternion as qt
 
@@ -13,6 +14,7 @@ EARTH_RATE = 7.292115146706979e-5  # rad/s, IERS sidereal rate, the truth target
 ROUND_OFF = 1e-12  # float64 round-off on unit quaternions and unit vectors
 RATE_ROUND_OFF = 1e-15  # rad/s: round-off on ORF rates of order 1e-3 rad/s
 KINEMATIC_CONSISTENCY = 1e-8  # issue 3: ω^p = 2 Λ̃∘Λ̇, ω̇^p = dω^p/dt (rad/s, rad/s²)
+ANGLE_STENCIL_RELATIVE = 1e-9  # 5-point stencil in ERA with h = 1e-3 rad: h⁴ ~ 1e-12, round-off ~1e-13
 FD_STEP_S = 0.05  # 5-point stencil: truncation h⁴|x⁽⁵⁾| < 1e-11 for LEO rates, round-off ~1e-15/h
 
 
@@ -195,14 +197,40 @@ def test_roll_manoeuvre_takes_the_orf_roll_from_0_to_20_degrees():
     assert np.all(np.diff(roll[300:421]) >= -1e-9)  # seed 000 Fig. 4: a monotone roll
 
 
-def test_route_through_a_ground_target_is_continuous():
-    r0 = _orbit_from_epoch(np.array([T0 + 400.0]))[0][0]
-    target = 6378137.0 * r0 / np.linalg.norm(r0) + np.array([5e4, -3e4, 2e4])  # near the track, non-rotating Earth
+def _ecef_of_eci(r_eci, t_unix_s):
+    """ECEF = R3(ERA) · ECI with the precession-nutation matrix taken as identity (c_pn = I, DUT1 = 0)."""
+    era = float(frames.earth_rotation_angle_rad(t_unix_s))
+    c, s = np.cos(era), np.sin(era)
+    return np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ r_eci
+
+
+def test_ground_target_state_is_the_derivative_of_its_eci_position():
+    """v = ω⊕ dr/dERA and a = ω⊕ dv/dERA by a 5-point stencil in the rotation angle itself."""
+    c_pn = qt.to_dcm(qt.from_axis_angle([0.3, 0.1, 1.0], 1e-3))  # a small precession-nutation tilt
+    r_e = np.array([3.9e6, 1.2e6, 4.8e6])
+    era = np.array([0.3, 2.0, 5.9])
+    h = 1e-3  # rad
+    state = lambda k, e: np.array([gd.ground_target_state_1(r_e, c_pn, ei)[k] for ei in e])  # noqa: E731
+    d_dera = lambda k: (state(k, era - 2 * h) - 8 * state(k, era - h) + 8 * state(k, era + h) - state(k, era + 2 * h)) / (12 * h)  # noqa: E731
+    w = frames.EARTH_ROTATION_RATE_RAD_S
+    assert np.max(np.abs(w * d_dera(0) - state(1, era))) < ANGLE_STENCIL_RELATIVE * np.max(np.abs(state(1, era)))
+    assert np.max(np.abs(w * d_dera(1) - state(2, era))) < ANGLE_STENCIL_RELATIVE * np.max(np.abs(state(2, era)))
+
+
+def test_route_through_a_ground_target_is_continuous_and_points_at_it():
+    t_mid = T0 + 420.0
+    r_mid, v_mid, _ = _orbit_from_epoch(np.array([t_mid]))
+    cross = np.cross(r_mid[0], v_mid[0])
+    target_eci = 6378137.0 * r_mid[0] / np.linalg.norm(r_mid[0]) + 8e4 * cross / np.linalg.norm(cross)
+    target = _ecef_of_eci(target_eci, t_mid)  # 80 km across track at mid-segment
     segments = [gd.OrfHold(300.0), gd.Turn(90.0), gd.GroundTarget(60.0, tuple(target)), gd.Turn(90.0), gd.OrfHold(300.0)]
     route = gd.compile_route(segments, T0, _orbit_from_epoch, c_pn=np.eye(3), dut1_s=0.0)
     for t_join in route[1:, gd.COL_T0]:
         dq, dw = _join_mismatch(route, t_join)
-        assert dq < ROUND_OFF and dw < 1e-12
+        assert dq < ROUND_OFF and dw < ROUND_OFF
+    q, _, _, obs = gd.route_program(route, np.array([t_mid]), *_orbit_from_epoch(np.array([t_mid])))
+    los = target_eci - r_mid[0]
+    assert obs[0] and np.max(np.abs(qt.rotate(q[0], [1.0, 0, 0]) - los / np.linalg.norm(los))) < ROUND_OFF
 
 
 @pytest.mark.parametrize(
