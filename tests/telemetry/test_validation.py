@@ -1,0 +1,109 @@
+"""Per-packet validation: duplicates, order, 14-bit sequence gaps and wrap, outliers, restarts, time window.
+
+Truth: the packets each test builds — which counts it dropped, repeated, shuffled or corrupted —
+and the modulo-16384 count of CCSDS 133.0-B-2 §4.1.3.4.3.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from telemetry.decoding import decode_stream
+from telemetry.validation import validate_packets
+from tests.telemetry.packet_streams import NOW_UTC_NS, T0_UTC_NS, packets, reference
+
+HK = 256
+PERIOD_NS = 250_000_000
+
+
+def _ingest(rows: np.ndarray):
+    return decode_stream(rows.tobytes(), reference(), source="test", now_utc_ns=NOW_UTC_NS)
+
+
+def test_duplicate_packets_are_counted_once_and_not_quarantined() -> None:
+    rows = packets(reference().packets[HK], 40)
+    result = _ingest(np.concatenate([rows, rows[10:20]]))
+    assert result.report.packets_accepted == 40 and result.report.duplicates == 10
+    assert result.report.quarantined == []
+
+
+def test_out_of_order_packets_are_accepted_in_time_order() -> None:
+    rows = packets(reference().packets[HK], 64)
+    shuffled = rows[np.random.default_rng(2).permutation(64)]
+    (batch,) = _ingest(shuffled).batches
+    np.testing.assert_array_equal(batch.t_utc_ns, T0_UTC_NS + np.arange(64) * PERIOD_NS)
+    np.testing.assert_array_equal(batch.packets, rows)
+
+
+def test_gap_in_sequence_counts_is_reported_with_its_size() -> None:
+    rows = packets(reference().packets[HK], 50)
+    result = _ingest(np.concatenate([rows[:10], rows[15:]]))
+    summary = result.report.apids[HK]
+    assert summary.missing == 5 and len(summary.gaps) == 1
+    gap = summary.gaps[0]
+    assert (gap.after_count, gap.before_count, gap.missing) == (9, 15, 5)
+
+
+def test_sequence_count_wrap_at_16384_is_not_a_gap() -> None:
+    rows = packets(reference().packets[HK], 12, first_count=16_380)
+    result = _ingest(rows)
+    assert result.report.apids[HK].gaps == [] and result.report.quarantined == []
+    assert result.batches[0].sequence_count.tolist() == [16_380, 16_381, 16_382, 16_383] + list(range(8))
+
+
+def test_single_count_outlier_is_quarantined_without_a_false_gap() -> None:
+    count = np.arange(30)
+    count[12] = 9_000
+    t = T0_UTC_NS + np.arange(30) * PERIOD_NS
+    verdict = validate_packets(HK, np.arange(30) * 126, count, t, 126, None, None)
+    assert [(q.reason, q.offset, q.sequence_count) for q in verdict.quarantined] == [
+        ("non_monotonic_sequence", 12 * 126, 9_000)]
+    assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 13, 1)]
+
+
+def test_counter_restart_is_accepted_and_reported_as_unknown_gap() -> None:
+    count = np.concatenate([np.arange(3_000, 3_020), np.arange(0, 20)])
+    t = T0_UTC_NS + np.arange(40) * PERIOD_NS
+    verdict = validate_packets(HK, np.arange(40), count, t, 126, None, None)
+    assert verdict.quarantined == [] and len(verdict.accepted) == 40
+    assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(3_019, 0, -1)]
+
+
+def test_times_outside_the_mission_window_are_quarantined_at_their_offset() -> None:
+    hk = reference().packets[HK]
+    rows = packets(hk, 20)
+    early = packets(hk, 1, first_count=20)
+    from telemetry.ccsds import encode_time
+
+    early[0, 6:12] = encode_time(np.array([1_500_000_000 * 10**9]), hk.time_code)[0]  # 2017: before mission start
+    late = packets(hk, 1, first_count=21)
+    late[0, 6:12] = encode_time(np.array([NOW_UTC_NS + 3 * 86_400 * 10**9]), hk.time_code)[0]
+    from telemetry.ccsds import crc16_ccitt
+
+    for row in (early, late):
+        c = int(crc16_ccitt(row[:, :-2])[0])
+        row[0, -2:] = [c >> 8, c & 0xFF]
+    result = _ingest(np.concatenate([rows[:5], early, rows[5:10], late, rows[10:]]))
+    reasons = [(q.reason, q.offset) for q in result.report.quarantined]
+    assert reasons == [("time_out_of_range", 5 * 126), ("time_out_of_range", 11 * 126)]
+    assert result.report.packets_accepted == 20
+
+
+def test_report_json_lists_reasons_offsets_and_gaps() -> None:
+    rows = packets(reference().packets[HK], 30)
+    damaged = rows.copy()
+    damaged[7, 40] ^= 0x01
+    stream = np.concatenate([damaged[:20], damaged[22:]]).tobytes() + rows[29, :50].tobytes()
+    report = json.loads(decode_stream(stream, reference(), now_utc_ns=NOW_UTC_NS).report.to_json())
+    assert report["quarantine_reasons"] == {"crc_failure": 1, "truncated": 1}
+    assert [q["offset"] for q in report["quarantined"]] == [7 * 126, 28 * 126]
+    assert report["apids"]["256"]["missing"] == 3  # count 7 (CRC) and 20, 21 (dropped)
+    assert report["packets_accepted"] == 27
+
+
+def test_validate_packets_rejects_mismatched_arrays_naming_fields() -> None:
+    with pytest.raises(ValueError, match="offset, sequence_count, t_utc_ns"):
+        validate_packets(HK, np.arange(3), np.arange(4), np.arange(3), 126, None, None)
