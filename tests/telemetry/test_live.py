@@ -1,0 +1,150 @@
+"""Live TCP stream: framing by the length field, bounded subscribers that report drops, archiving."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from telemetry.archive import Archive
+from telemetry.decoding import decode_stream
+from telemetry.live import LiveMessage, LiveStream, Subscriber, complete_prefix
+from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
+from tests.telemetry.packet_streams import T0_UTC_NS, engineering_values, packets, reference
+
+HK_APID = 256
+SETTLE_S = 0.3  # > DECODE_INTERVAL_S: lets the listener decode what was sent before we look
+
+
+async def send(port: int, data: bytes, piece_sizes: np.ndarray | None = None, pause_s: float = 0.0) -> None:
+    """Open a connection, send ``data`` in the given piece sizes (default: at once), close."""
+    _, writer = await asyncio.open_connection("127.0.0.1", port)
+    sizes = [len(data)] if piece_sizes is None else piece_sizes.tolist()
+    at = 0
+    for size in sizes:
+        if at >= len(data):
+            break
+        writer.write(data[at : at + size])
+        at += size
+        await writer.drain()
+        if pause_s:
+            await asyncio.sleep(pause_s)
+    writer.write(data[at:])
+    await writer.drain()
+    writer.close()
+    await writer.wait_closed()
+
+
+def drain(subscriber: Subscriber) -> list[LiveMessage]:
+    """Every message waiting in a subscriber's queue."""
+    out = []
+    while subscriber.pending:
+        out.append(subscriber.get_nowait())
+    return out
+
+
+def test_complete_prefix_walks_the_packet_length_fields() -> None:
+    packet_7 = bytes([0x08, 0x01, 0xC0, 0x00, 0x00, 0x00, 0xAA])  # data length field 0 -> 7 octets
+    packet_9 = bytes([0x08, 0x02, 0xC0, 0x01, 0x00, 0x02, 1, 2, 3])  # field 2 -> 9 octets
+    stream = packet_7 + packet_9
+    assert [complete_prefix(stream[:k]) for k in (0, 5, 7, 8, 15, 16)] == [0, 0, 7, 7, 7, 16]
+
+
+def test_packets_cut_at_arbitrary_boundaries_arrive_as_decoded_offline() -> None:
+    dictionary = reference()
+    hk = dictionary.packets[HK_APID]
+    raw = packets(hk, 400, seed=1)
+    offline = decode_stream(raw.tobytes(), dictionary)
+    pieces = np.random.default_rng(5).integers(1, 300, 400)
+
+    async def scenario() -> list[LiveMessage]:
+        stream = LiveStream(dictionary)
+        subscriber = stream.subscribe(max_messages=10_000)
+        port = await stream.start()
+        await send(port, raw.tobytes(), pieces, pause_s=0.001)
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        return drain(subscriber)
+
+    messages = asyncio.run(scenario())
+    assert len(messages) > 1  # the stream really was decoded in several batches
+    live_t = np.concatenate([m.batch.t_utc_ns for m in messages])
+    np.testing.assert_array_equal(live_t, offline.batches[0].t_utc_ns)
+    for name, column in offline.batches[0].values.items():
+        np.testing.assert_array_equal(np.concatenate([m.batch.values[name] for m in messages]), column)
+    np.testing.assert_array_equal(np.concatenate([m.batch.values["wheel_speed_rad_s_1"] for m in messages]),
+                                  engineering_values(hk, 400, seed=1)["wheel_speed_rad_s_1"])
+    assert all(m.dropped_packets == 0 for m in messages)
+
+
+def test_slow_subscriber_never_stalls_the_stream_and_is_told_what_it_dropped() -> None:
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 2_001, seed=2)
+
+    async def scenario() -> tuple[list[LiveMessage], Subscriber, LiveMessage]:
+        stream = LiveStream(dictionary)
+        fast, slow = stream.subscribe(max_messages=10_000), stream.subscribe(max_messages=1)
+        port = await stream.start()
+        await send(port, raw[:2_000].tobytes(), np.full(20, 100 * raw.shape[1]), pause_s=0.03)
+        await asyncio.sleep(SETTLE_S)
+        fast_messages = drain(fast)
+        first_slow = slow.get_nowait()
+        await send(port, raw[2_000:].tobytes())
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        assert first_slow.dropped_packets == 0
+        return fast_messages, slow, slow.get_nowait()
+
+    fast_messages, slow, late = asyncio.run(scenario())
+    assert sum(len(m.batch.t_utc_ns) for m in fast_messages) == 2_000
+    assert slow.dropped_packets_total > 0
+    assert late.dropped_packets == slow.dropped_packets_total
+    assert int(late.batch.sequence_count[0]) == 2_000
+
+
+def test_corrupt_packet_is_quarantined_and_its_neighbours_delivered() -> None:
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 50, seed=3)
+    raw[25, 40] ^= 0xFF  # breaks packet 25's CRC-16 (ECSS-E-ST-70-41C §7.4.1)
+
+    async def scenario() -> tuple[list[LiveMessage], int]:
+        stream = LiveStream(dictionary)
+        subscriber = stream.subscribe()
+        port = await stream.start()
+        await send(port, raw.tobytes())
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        return drain(subscriber), stream.stats.stretches_quarantined
+
+    messages, quarantined = asyncio.run(scenario())
+    counts = np.concatenate([m.batch.sequence_count for m in messages])
+    np.testing.assert_array_equal(counts, np.delete(np.arange(50), 25))
+    assert quarantined == 1
+
+
+def test_stream_is_archived_in_batches(archive: Archive) -> None:
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 600, seed=4)
+
+    async def scenario() -> int:
+        stream = LiveStream(dictionary, archive=archive, satellite="REF", archive_interval_s=0.05)
+        port = await stream.start()
+        await send(port, raw.tobytes(), np.full(6, 100 * raw.shape[1]), pause_s=0.1)
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        return stream.stats.packets_archived
+
+    assert asyncio.run(scenario()) == 600
+    assert len(archive.uploads("REF")) > 1
+    t, v = archive.read_parameter("REF", "wheel_speed_rad_s_2", T0_UTC_NS, T0_UTC_NS + 10**12)
+    assert t.size == 600
+    np.testing.assert_array_equal(v, engineering_values(dictionary.packets[HK_APID], 600, seed=4)["wheel_speed_rad_s_2"])
+    assert b"".join(p for _, p in archive.replay("REF", T0_UTC_NS, T0_UTC_NS + 10**12)) == raw.tobytes()
+
+
+def test_archived_stream_needs_a_satellite_and_subscribers_a_positive_queue() -> None:
+    with pytest.raises(ValueError, match="satellite"):
+        LiveStream(reference(), archive=object())  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="max_messages"):
+        Subscriber(0)
