@@ -43,7 +43,6 @@ __all__ = [
     "angular_momentum_b_1",
     "angular_momentum_i",
     "wheel_momentum",
-    "wheel_momentum_1",
     "kinetic_energy",
     "kinetic_energy_1",
     "mechanical_energy",
@@ -276,13 +275,6 @@ def plant_derivative_1(
 
 
 @njit(cache=True)
-def wheel_momentum_1(x: np.ndarray, p: PlantArrays) -> np.ndarray:
-    """Relative wheel momenta h = J_r Ω, N·m·s, what the tachometers report (seed 000 eq 1)."""
-    nq = p.flex_mass.shape[0]
-    return p.wheel_inertia * x[7 + 2 * nq :]
-
-
-@njit(cache=True)
 def kinetic_energy_1(x: np.ndarray, p: PlantArrays) -> float:
     """Kinetic energy ½ vᵀ A^o v, v = {ω, q̇, Ω}, J (seed 000 eq 1)."""
     nq = p.flex_mass.shape[0]
@@ -329,27 +321,48 @@ def plant_derivative(
     return plant_derivative_1(_state(x, params), m, t, params.pack())
 
 
+def _rows(x: ArrayLike, params: PlantParams) -> tuple[np.ndarray, tuple[int, ...]]:
+    """States of shape (..., n) as contiguous rows (m, n) plus the leading shape."""
+    n = state_size(params.n_modes, params.n_wheels)
+    arr = np.asarray(x, dtype=float)
+    if arr.ndim == 0 or arr.shape[-1] != n:
+        raise ValueError(f"x: expected shape (..., {n}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("x: contains NaN or infinite values")
+    return np.ascontiguousarray(arr.reshape(-1, n)), arr.shape[:-1]
+
+
 def angular_momentum_b(x: ArrayLike, params: PlantParams) -> np.ndarray:
-    """Total angular momentum G in body axes, N·m·s (seed 000 eq 1)."""
-    return angular_momentum_b_1(_state(x, params), params.pack())
+    """Total angular momentum G in body axes, N·m·s, for states of shape (..., n) (seed 000 eq 1)."""
+    rows, lead = _rows(x, params)
+    p = params.pack()
+    return np.array([angular_momentum_b_1(r, p) for r in rows]).reshape(lead + (3,))
 
 
 def angular_momentum_i(x: ArrayLike, params: PlantParams) -> np.ndarray:
-    """Total angular momentum Λ ∘ G ∘ Λ̃ in inertial axes, N·m·s (conserved without M^o)."""
-    xs = _state(x, params)
-    return rotate_1(xs[:4], angular_momentum_b_1(xs, params.pack()))
+    """Total angular momentum Λ ∘ G ∘ Λ̃ in inertial axes, N·m·s (conserved without M^o), shape (..., 3)."""
+    rows, lead = _rows(x, params)
+    p = params.pack()
+    return np.array([rotate_1(r[:4], angular_momentum_b_1(r, p)) for r in rows]).reshape(lead + (3,))
 
 
 def wheel_momentum(x: ArrayLike, params: PlantParams) -> np.ndarray:
-    """Relative wheel momenta h = J_r Ω, N·m·s (seed 000 eq 1); the cluster's is A h."""
-    return wheel_momentum_1(_state(x, params), params.pack())
+    """Relative wheel momenta h = J_r Ω, N·m·s, shape (..., n_w) (seed 000 eq 1); the cluster's is A h."""
+    rows, lead = _rows(x, params)
+    return (rows[:, 7 + 2 * params.n_modes :] * params.wheels.inertia_kg_m2).reshape(lead + (params.n_wheels,))
 
 
-def kinetic_energy(x: ArrayLike, params: PlantParams) -> float:
-    """Kinetic energy ½ vᵀ A^o v, J (seed 000 eq 1)."""
-    return float(kinetic_energy_1(_state(x, params), params.pack()))
+def kinetic_energy(x: ArrayLike, params: PlantParams) -> float | np.ndarray:
+    """Kinetic energy ½ vᵀ A^o v, J, for states of shape (..., n) (seed 000 eq 1)."""
+    rows, lead = _rows(x, params)
+    p = params.pack()
+    e = np.array([kinetic_energy_1(r, p) for r in rows]).reshape(lead)
+    return float(e) if e.ndim == 0 else e
 
 
-def mechanical_energy(x: ArrayLike, params: PlantParams) -> float:
-    """Kinetic plus modal strain energy, J (seed 000 eq 1)."""
-    return float(mechanical_energy_1(_state(x, params), params.pack()))
+def mechanical_energy(x: ArrayLike, params: PlantParams) -> float | np.ndarray:
+    """Kinetic plus modal strain energy, J, for states of shape (..., n) (seed 000 eq 1)."""
+    rows, lead = _rows(x, params)
+    p = params.pack()
+    e = np.array([mechanical_energy_1(r, p) for r in rows]).reshape(lead)
+    return float(e) if e.ndim == 0 else e

@@ -52,9 +52,7 @@ def _spinning_state(params: PlantParams) -> np.ndarray:
 def _history(params: PlantParams, x0: np.ndarray, dt: float, duration: float, samples: int = 400):
     n = int(round(duration / dt))
     traj = rk4_propagate(x0, dt, np.zeros((n, params.n_wheels)), np.zeros((n, 3)), params, every=n // samples)
-    h = np.array([angular_momentum_i(x, params) for x in traj])
-    e = np.array([mechanical_energy(x, params) for x in traj])
-    return h, e
+    return angular_momentum_i(traj, params), mechanical_energy(traj, params)
 
 
 # --- exact torque-free motion (Landau & Lifshitz, Mechanics §37) -----------------------------------

@@ -14,6 +14,7 @@ from sim_core.spacecraft import PlantParams, pack_state
 EXACT = 1e-15  # hand-derived values, float64 round-off
 SPIN_DOWN_RTOL = 1e-9  # RK4 at 1 ms on an exponential with time constant ≥ 10 s
 ODE_RTOL = 1e-9  # solve_ivp at rtol 1e-12 vs closed form
+VOLTAGE_DRIVE_RTOL = 5e-4  # one-step (1 ms) ZOH lag on a 2.2 s response, ≤ dt/τ_m; measured 7e-5
 SQRT3_2, HALF, INV_SQRT2 = np.sqrt(3.0) / 2.0, 0.5, 1.0 / np.sqrt(2.0)
 
 
@@ -59,7 +60,7 @@ def test_normalized_momentum_of_seed_000_eq_4_by_hand():
 
 def _single_wheel_plant(wheels: wh.WheelParams, hub_z: float = 2.0) -> tuple[PlantParams, float]:
     j_r = float(wheels.inertia_kg_m2[0])
-    params = PlantParams(np.diag([3.0, 3.0, hub_z + j_r]), np.array([[0.0], [0.0], [1.0]]), wheels)
+    params = PlantParams(np.diag([hub_z, hub_z, hub_z + j_r]), np.array([[0.0], [0.0], [1.0]]), wheels)
     return params, j_r * hub_z / (hub_z + j_r)  # effective inertia of the relative spin
 
 
@@ -190,3 +191,44 @@ def test_bad_geometry_and_motor_inputs_are_rejected_naming_the_field():
         wh.friction_torque(wh.WheelParams([0.01]), [np.nan])
     with pytest.raises(ValueError, match="loop_gain_nm_s"):
         wh.speed_loop_torque([1.0], [0.0], [0.0], 0.0)
+
+
+# --- the wheel model driving the plant -------------------------------------------------------------
+
+
+def test_momentum_limit_stops_a_wheel_pushed_by_a_constant_command():
+    """Seed 000 eq 2: commanding +m^m forever parks the wheel at h^m (within one step's increment)."""
+    wheels = wh.WheelParams([0.01], max_torque_nm=0.05, max_momentum_nms=0.5)
+    params, _ = _single_wheel_plant(wheels, hub_z=50.0)
+    x = pack_state(params, [1, 0, 0, 0], [0.0, 0.0, 0.0], [0.0])
+    for _ in range(200):  # 20 s at 0.1 s; unlimited, 0.05 N·m would reach 1 N·m·s
+        torque = wh.limited_motor_torque(wheels, [1.0], x[7:8])
+        x = rk4_propagate(x, 0.1, torque[None, :], np.zeros((1, 3)), params)[-1]
+    h_final = 0.01 * x[7]
+    assert 0.5 <= h_final <= 0.5 + 0.05 * 0.1 * 1.01
+
+
+def test_voltage_driven_wheel_in_the_plant_follows_the_exact_linear_motor_solution():
+    """Seed 002 eq 2 + seed 000 eq 1: [i, Ω]˙ = [[−R/L, −K_e/L], [K_m/J, 0]] [i, Ω] + [u/L, 0].
+
+    The ZOH current kernel and RK4 plant, stepped at 1 ms, against scipy.linalg.expm of this
+    linear system (J the relative-spin inertia). The plant sees the current sampled at each step
+    start (zero-order hold), a one-step lag bounded by dt/τ_m relative to the response.
+    """
+    from scipy.linalg import expm
+
+    wheels = wh.WheelParams([0.002])  # mechanical time constant J R/(K_m K_e) ≈ 2.2 s
+    params, j_eff = _single_wheel_plant(wheels)
+    volts, dt, n = 3.0, 1e-3, 3000
+    x = pack_state(params, [1, 0, 0, 0], [0.0, 0.0, 0.0], [0.0])
+    current = np.zeros(1)
+    for _ in range(n):
+        x = rk4_propagate(x, dt, MOTOR.torque_constant_nm_a * current[None, :], np.zeros((1, 3)), params)[-1]
+        current = wh.motor_current_step(MOTOR, current, [volts], x[7:8], dt)
+    a = np.array([[-MOTOR.resistance_ohm / MOTOR.inductance_h, -MOTOR.back_emf_v_s / MOTOR.inductance_h],
+                  [MOTOR.torque_constant_nm_a / j_eff, 0.0]])
+    aug = np.zeros((3, 3))
+    aug[:2, :2], aug[0, 2] = a, volts / MOTOR.inductance_h
+    exact_speed = (expm(aug * n * dt) @ np.array([0.0, 0.0, 1.0]))[1]
+    assert x[7] == pytest.approx(exact_speed, rel=VOLTAGE_DRIVE_RTOL)
+    assert exact_speed > 0.5 * volts / MOTOR.back_emf_v_s  # well into the response toward Ω = u/K_e
