@@ -7,7 +7,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel
+from pydantic import BaseModel, ValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 __all__ = ["ApiError", "ErrorBody", "install_error_handlers", "ERROR_RESPONSES"]
@@ -65,6 +65,13 @@ async def _on_http(_: Request, exc: Exception) -> JSONResponse:
     return _json(exc.status_code, str(exc.detail), None, getattr(exc, "headers", None))
 
 
+async def _on_pydantic(_: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, ValidationError)
+    first = exc.errors()[0]
+    field = _field_of(first.get("loc", ())) or exc.title
+    return _json(422, f"{field}: {first.get('msg')}", field)
+
+
 async def _on_value_error(_: Request, exc: Exception) -> JSONResponse:
     message = str(exc)
     field = message.split(":", 1)[0] if ":" in message else None
@@ -72,8 +79,9 @@ async def _on_value_error(_: Request, exc: Exception) -> JSONResponse:
 
 
 def install_error_handlers(app: FastAPI) -> None:
-    """Route ApiError, validation errors, HTTP errors and ValueError to JSON bodies."""
+    """Route ApiError, request/pydantic validation errors, HTTP errors and ValueError to JSON bodies."""
     app.add_exception_handler(ApiError, _on_api_error)
     app.add_exception_handler(RequestValidationError, _on_validation)
     app.add_exception_handler(StarletteHTTPException, _on_http)
+    app.add_exception_handler(ValidationError, _on_pydantic)
     app.add_exception_handler(ValueError, _on_value_error)

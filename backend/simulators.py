@@ -1,12 +1,13 @@
-"""Which simulation a job runs: the sim_core engine when present, else the built-in rigid spin.
+"""Which simulation a job runs: the sim_core engine, or the built-in rigid spin (``kind: rigid-spin``).
 
-Each scenario is validated in the API process (so limits are checked before queueing) and run in
-a worker process by :func:`run_in_worker`, which writes ``trajectory.npz`` and ``summary.json``.
+A body is either a full sim_core Scenario, a library scenario ``{"library": NAME, "set": [...]}``
+(``acs-twin scenarios`` lists them), or a rigid-spin scenario. It is validated in the API process
+(limits are checked before queueing) and run in a worker process by :func:`run_in_worker`, which
+writes ``trajectory.npz`` and ``summary.json`` (or ``error.txt``).
 """
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import traceback
 from collections.abc import Callable
@@ -14,7 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["JobCost", "validate_scenario", "run_in_worker", "engine_available", "JobCancelled"]
+__all__ = ["JobCost", "validate_scenario", "run_in_worker", "JobCancelled", "library_names"]
+
+FLOAT_BYTES = 8
 
 
 class JobCancelled(Exception):
@@ -30,46 +33,75 @@ class JobCost:
     output_bytes: int
 
 
-def engine_available() -> bool:
-    """True once sim_core.engine and sim_core.scenario exist (the lead's engine has landed)."""
-    return all(importlib.util.find_spec(m) is not None
-               for m in ("sim_core.engine", "sim_core.scenario"))
-
-
 def _is_rigid_spin(body: dict[str, Any]) -> bool:
-    return body.get("kind") == "rigid-spin" or not engine_available()
+    return body.get("kind") == "rigid-spin"
+
+
+def library_names() -> list[str]:
+    """Names of the sim_core library scenarios."""
+    from sim_core import scenario_library
+
+    return scenario_library.names()
+
+
+def _engine_scenario(body: dict[str, Any]) -> Any:
+    from sim_core import scenario_library
+    from sim_core.scenario import Scenario, apply_overrides
+
+    if "library" not in body:
+        return Scenario.model_validate(body)
+    unknown = set(body) - {"library", "set"}
+    if unknown:
+        raise ValueError(f"{sorted(unknown)[0]}: a library body has only 'library' and 'set'")
+    if body["library"] not in scenario_library.names():
+        raise ValueError(f"library: unknown scenario {body['library']!r}; one of {scenario_library.names()}")
+    sets = body.get("set", [])
+    if not isinstance(sets, list) or not all(isinstance(s, str) for s in sets):
+        raise ValueError("set: expected a list of 'path.to.field=value' strings")
+    return apply_overrides(scenario_library.get(body["library"]), sets)
+
+
+def _engine_cost(scenario: Any) -> JobCost:
+    from sim_core.closed_loop import record_width
+
+    n_out = -(-int(round(scenario.duration_s / scenario.dynamics_dt_s))
+              // int(round(scenario.output_dt_s / scenario.dynamics_dt_s)))
+    n_wheels = len(scenario.spacecraft.cluster.wheels)
+    batch = len(scenario.variants)
+    return JobCost(scenario.duration_s, batch, n_out * batch * record_width(n_wheels) * FLOAT_BYTES)
 
 
 def validate_scenario(body: dict[str, Any]) -> tuple[dict[str, Any], JobCost]:
-    """Parse a scenario body (ValueError naming the field) and estimate its cost."""
+    """Parse a scenario body (ValueError/ValidationError naming the field) and estimate its cost."""
     if _is_rigid_spin(body):
         from backend.rigid_spin import RigidSpinScenario
 
         spin = RigidSpinScenario.model_validate(body)
         return spin.model_dump(), JobCost(spin.duration_s, spin.batch_size, spin.output_bytes())
-    from sim_core.scenario import Scenario  # type: ignore[import-not-found]
-
-    scenario = Scenario.model_validate(body)
+    scenario = _engine_scenario(body)
     return scenario.model_dump(mode="json"), _engine_cost(scenario)
 
 
-def _engine_cost(scenario: Any) -> JobCost:
-    duration_s = float(scenario.duration_s)
-    batch = int(getattr(scenario, "batch_size", 1))
-    estimate = getattr(scenario, "output_bytes", None)
-    output = int(estimate()) if callable(estimate) else int(duration_s / 0.5 * batch * 8 * 64)
-    return JobCost(duration_s, batch, output)
+def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], None], cancelled: Callable[[], bool]) -> None:
+    from backend.trajectory_files import write_npz
+    from sim_core.engine import Cancelled, simulate
+    from sim_core.scenario import Scenario
+
+    try:
+        trajectory = simulate(Scenario.model_validate(body), progress=progress, cancel=cancelled)
+    except Cancelled:
+        raise JobCancelled from None
+    write_npz(trajectory, out / "trajectory.npz")
+    summary = {"variants": [trajectory.summary(v) for v in range(trajectory.n_variants)]}
+    (out / "summary.json").write_text(json.dumps(summary))
 
 
-def _simulate(body: dict[str, Any], progress: Callable[[float], None]) -> Any:
-    if _is_rigid_spin(body):
-        from backend import rigid_spin
+def _run_rigid_spin(body: dict[str, Any], out: Path, progress: Callable[[float], None]) -> None:
+    from backend import rigid_spin
 
-        return rigid_spin.simulate(rigid_spin.RigidSpinScenario.model_validate(body), progress)
-    from sim_core.engine import simulate  # type: ignore[import-not-found]
-    from sim_core.scenario import Scenario  # type: ignore[import-not-found]
-
-    return simulate(Scenario.model_validate(body), progress=progress)
+    trajectory = rigid_spin.simulate(rigid_spin.RigidSpinScenario.model_validate(body), progress)
+    trajectory.to_npz(out / "trajectory.npz")
+    (out / "summary.json").write_text(json.dumps(trajectory.summary()))
 
 
 def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any) -> None:
@@ -83,9 +115,10 @@ def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cance
             raise JobCancelled
 
     try:
-        trajectory = _simulate(body, progress)
-        trajectory.to_npz(out / "trajectory.npz")
-        (out / "summary.json").write_text(json.dumps(trajectory.summary()))
+        if _is_rigid_spin(body):
+            _run_rigid_spin(body, out, progress)
+        else:
+            _run_engine(body, out, progress, cancel_event.is_set)
     except JobCancelled:
         (out / "cancelled").touch()
         raise SystemExit(3) from None

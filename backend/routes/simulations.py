@@ -23,9 +23,13 @@ SCENARIO_EXAMPLES = {
                   "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
                   "omega0_rad_s": [[0.01, -0.02, 0.03], [0.5, -0.4, 0.7]]},
     },
-    "engine": {
-        "summary": "sim_core Scenario with defaults (when the engine is installed)",
-        "value": {"duration_s": 600.0},
+    "library": {
+        "summary": "A library scenario with overrides (GET /api/v1/scenarios lists them)",
+        "value": {"library": "somov-ge4-scan", "set": ["duration_s=600"]},
+    },
+    "scenario": {
+        "summary": "A full sim_core Scenario (defaults for every omitted field)",
+        "value": {"name": "short-hold", "duration_s": 120.0},
     },
 }
 
@@ -39,6 +43,14 @@ def _job(services: Any, job_id: str) -> JobPublic:
     if live is not None and job.status == "running":
         job.progress = min(max(live, 0.0), 1.0)
     return job
+
+
+@router.get("/scenarios", response_model=list[str], summary="Library scenarios")
+def list_scenarios(_: ViewerDep) -> list[str]:
+    """Names usable as ``{"library": NAME}`` in POST /simulations."""
+    from backend.simulators import library_names
+
+    return library_names()
 
 
 @router.post("/simulations", response_model=JobAccepted, status_code=202,

@@ -1,0 +1,65 @@
+"""``acs-twin serve``: start the control centre (REST + WebSocket API) on the embedded default.
+
+First start creates an admin token (stored hashed) and prints it once; later starts print none.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``serve`` subcommand (flags override ACS_TWIN_* environment variables)."""
+    p = sub.add_parser("serve", help="start the control-centre server (API, live stream, jobs)")
+    p.add_argument("--host", help="interface to bind (default 127.0.0.1, env ACS_TWIN_HOST)")
+    p.add_argument("--port", type=int, help="API port (default 8000, env ACS_TWIN_PORT)")
+    p.add_argument("--data-dir", type=Path, help="data directory (default ./data, env ACS_TWIN_DATA_DIR)")
+    p.add_argument("--database-url", help="SQLAlchemy URL (default SQLite in the data directory)")
+    p.add_argument("--no-auth", action="store_true", help="disable tokens (local development only)")
+    p.add_argument("--job-workers", type=int, help="simulation worker processes (default 1)")
+    p.set_defaults(handler=run)
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    values = {"host": args.host, "port": args.port, "data_dir": args.data_dir,
+              "database_url": args.database_url, "job_workers": args.job_workers}
+    out = {k: v for k, v in values.items() if v is not None}
+    if args.no_auth:
+        out["auth_enabled"] = False
+    return out
+
+
+def first_admin_token(services: Any) -> str | None:
+    """Issue an admin token when none is active (first start); the plain token, else None."""
+    from backend.auth import Role
+
+    if not services.settings.auth_enabled or services.tokens.count_active_admins() > 0:
+        return None
+    token_id, token = services.auth.issue("admin (first start)", Role.admin)
+    services.audit.record("acs-twin serve", "token.create", f"token/{token_id}", {"role": "admin"})
+    return token
+
+
+def run(args: argparse.Namespace) -> int:
+    """Build the app from Settings, print URLs (and a first admin token), serve until stopped."""
+    import uvicorn
+
+    from backend.app import create_app
+    from backend.settings import Settings
+
+    settings = Settings(**_overrides(args))
+    app = create_app(settings)
+    token = first_admin_token(app.state.services)
+    base = f"http://{settings.host}:{settings.port}"
+    print(f"acs-twin control centre, data in {settings.data_dir.resolve()}")
+    print(f"  API       {base}/api/v1   (OpenAPI {base}/openapi.json, docs {base}/docs)")
+    print(f"  live      ws://{settings.host}:{settings.port}/api/v1/ws")
+    if token:
+        print(f"  admin token (shown once, stored hashed): {token}")
+    elif not settings.auth_enabled:
+        print("  auth DISABLED: every caller is admin")
+    print("", flush=True)
+    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning")
+    return 0
