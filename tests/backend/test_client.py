@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -16,17 +15,11 @@ from backend.app import create_app
 from backend.auth import Role
 from backend.client import Client, ClientError
 from backend.settings import Settings
+from tests.backend.conftest import free_port
 
 STARTUP_TIMEOUT_S = 20.0
 DIARY = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level
-
-
-def free_port() -> int:
-    """A TCP port free on loopback right now."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 @pytest.fixture
