@@ -33,6 +33,8 @@ __all__ = [
     "WGS84_A_M",
     "WGS84_F",
     "EARTH_ROTATION_RATE_RAD_S",
+    "skyfield_time",
+    "skyfield_data_path",
     "ut1_minus_utc_s",
     "earth_rotation_angle_rad",
     "celestial_to_intermediate",
@@ -62,17 +64,29 @@ _GRID_STEP_S = 3600.0  # precession-nutation sampling step (nutation curvature e
 _GEODETIC_ITERATIONS = 6  # Bowring/Newton: sub-micrometre for |h| < 1e5 km
 
 
+def skyfield_data_path() -> Path:
+    """Folder of skyfield-data's offline files (DE421, finals2000A.all), its expiry warning silenced.
+
+    Past the end of finals2000A.all, skyfield holds DUT1 and polar motion at their last predictions
+    (a stale DUT1 of 0.1 s moves ECEF by ~50 m at LEO radius; angles by 7e-6 rad).
+    """
+    import skyfield_data
+
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*has expired.*")
+        return Path(skyfield_data.get_skyfield_data_path())
+
+
 @functools.lru_cache(maxsize=1)
 def _timescale():
     """skyfield's built-in timescale (leap seconds, DUT1), loaded once, offline."""
-    import skyfield_data
     from skyfield.api import load
     from skyfield.data import iers
 
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*has expired.*")
         ts = load.timescale(builtin=True)
-    with open(Path(skyfield_data.get_skyfield_data_path()) / "finals2000A.all", "rb") as finals:
+    with open(skyfield_data_path() / "finals2000A.all", "rb") as finals:
         iers.install_polar_motion_table(ts, iers.parse_x_y_dut1_from_finals_all(finals))
     return ts
 
@@ -93,8 +107,8 @@ def _vectors(v: np.ndarray, name: str) -> np.ndarray:
     return v
 
 
-def _skyfield_time(t_unix_s: np.ndarray):
-    """skyfield Time of Unix UTC seconds (days split off so leap seconds are not double-counted)."""
+def skyfield_time(t_unix_s: np.ndarray):
+    """skyfield Time of Unix UTC seconds, for skyfield-backed models (days split off so leap seconds are not double-counted)."""
     days = np.floor(t_unix_s / 86400.0)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*has expired.*")
@@ -104,7 +118,7 @@ def _skyfield_time(t_unix_s: np.ndarray):
 def ut1_minus_utc_s(t_unix_s: np.ndarray | float) -> np.ndarray:
     """DUT1 = UT1 − UTC (s) from the IERS table shipped with skyfield (held constant past its end)."""
     t = _times(t_unix_s)
-    return np.asarray(_skyfield_time(np.atleast_1d(t)).dut1, dtype=float).reshape(t.shape)
+    return np.asarray(skyfield_time(np.atleast_1d(t)).dut1, dtype=float).reshape(t.shape)
 
 
 def earth_rotation_angle_rad(t_ut1_unix_s: np.ndarray | float) -> np.ndarray:
@@ -127,7 +141,7 @@ def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     t0, t1 = float(np.min(t_unix_s)), float(np.max(t_unix_s))
     n = max(2, int(np.ceil((t1 - t0) / _GRID_STEP_S)) + 1)
     grid = t0 + _GRID_STEP_S * np.arange(n)
-    sky = _skyfield_time(grid)
+    sky = skyfield_time(grid)
     era = earth_rotation_angle_rad(grid + np.asarray(sky.dut1, dtype=float))
     gast = np.asarray(sky.gast, dtype=float) * (2.0 * np.pi / 24.0)
     m_tod = np.moveaxis(np.asarray(sky.M), -1, 0)  # GCRS → true equator and equinox of date
