@@ -105,28 +105,26 @@ class PlantParams:
         axes = _finite(self.wheel_axes_b, "wheel_axes_b", (3, nw))
         if nw and not np.allclose(np.linalg.norm(axes, axis=0), 1.0, atol=1e-12):
             raise ValueError("wheel_axes_b: every column must be a unit vector")
+        object.__setattr__(self, "inertia_kg_m2", j)
+        object.__setattr__(self, "wheel_axes_b", axes)
+        self._set_flex_modes()
+        if np.linalg.eigvalsh(self.mass_matrix())[0] <= 0.0:
+            raise ValueError("inertia_kg_m2: mass matrix A^o not positive definite (wheel or flex coupling too large)")
+
+    def _set_flex_modes(self) -> None:
         coupling = np.zeros((3, 0)) if self.flex_coupling is None else np.asarray(self.flex_coupling, float)
         if coupling.ndim != 2:
             raise ValueError(f"flex_coupling: expected shape (3, n_modes), got {coupling.shape}")
         nq = coupling.shape[1]
-        coupling = _finite(coupling, "flex_coupling", (3, nq))
-        flex = {
-            "flex_modal_mass": self.flex_modal_mass,
-            "flex_freq_rad_s": self.flex_freq_rad_s,
-            "flex_log_decrement": self.flex_log_decrement,
-        }
-        for name, value in flex.items():
+        object.__setattr__(self, "flex_coupling", _finite(coupling, "flex_coupling", (3, nq)))
+        for name in ("flex_modal_mass", "flex_freq_rad_s", "flex_log_decrement"):
+            value = getattr(self, name)
             if value is None and nq and name != "flex_log_decrement":
                 raise ValueError(f"{name}: required for the {nq} flexible modes of flex_coupling")
             arr = _finite(np.zeros(nq) if value is None else value, name, (nq,))
             if np.any(arr < 0.0) or (name != "flex_log_decrement" and np.any(arr == 0.0)):
                 raise ValueError(f"{name}: must be positive (log decrement: non-negative), got {arr}")
             object.__setattr__(self, name, arr)
-        object.__setattr__(self, "inertia_kg_m2", j)
-        object.__setattr__(self, "wheel_axes_b", axes)
-        object.__setattr__(self, "flex_coupling", coupling)
-        if np.linalg.eigvalsh(self.mass_matrix())[0] <= 0.0:
-            raise ValueError("inertia_kg_m2: mass matrix A^o not positive definite (wheel or flex coupling too large)")
 
     @property
     def n_modes(self) -> int:

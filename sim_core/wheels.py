@@ -49,7 +49,6 @@ __all__ = [
     "friction_torque_one_wheel",
     "limited_motor_torque",
     "limited_motor_torque_1",
-    "aero_drag_torque",
     "imbalance_torque",
     "noise_torque",
     "delivered_torque_1",
@@ -306,12 +305,6 @@ def _speeds(speed_rad_s: ArrayLike, n: int, name: str = "speed_rad_s") -> np.nda
 def friction_torque(wheels: WheelParams, speed_rad_s: ArrayLike) -> np.ndarray:
     """Resisting friction torque per wheel, N·m (seed 000 eq 1 m^f, seed 002 eq 4 M_f + M_a)."""
     return friction_torque_1(_speeds(speed_rad_s, wheels.n), wheels.friction_table())
-
-
-def aero_drag_torque(wheels: WheelParams, speed_rad_s: ArrayLike) -> np.ndarray:
-    """Aerodynamic drag K_a Ω √|Ω| per wheel, N·m (seed 002 eq 4 M_a)."""
-    w = _speeds(speed_rad_s, wheels.n)
-    return wheels.aero_drag_nm_s15 * w * np.sqrt(np.abs(w))
 
 
 def imbalance_torque(wheels: WheelParams, speed_rad_s: ArrayLike, t_s: float) -> np.ndarray:
