@@ -26,7 +26,7 @@ import numpy as np
 from numba import njit
 
 from sim_core import frames, quaternion
-from sim_core.quaternion import conjugate_rotate_1, multiply_1
+from sim_core.quaternion import multiply_1
 from sim_core.scheduled_turn import PLAN_SIZE, plan_scheduled_turn, scheduled_turn_1
 
 __all__ = [
@@ -69,18 +69,23 @@ OrbitState = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 @njit(cache=True)
-def orf_rates_1(r_eci: np.ndarray, v_eci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """ORF rate ω_o and its derivative in ORF axes: (0, 0, −h/r²), (0, 0, 2h(r·v)/r⁴) (seed 000 §2 ORF)."""
+def _orf_rate_z_1(r_eci: np.ndarray, v_eci: np.ndarray) -> tuple[float, float]:
+    """z^o components of ω_o and ω̇_o: −h/r² and 2h(r·v)/r⁴ (central-force motion)."""
     hx = r_eci[1] * v_eci[2] - r_eci[2] * v_eci[1]
     hy = r_eci[2] * v_eci[0] - r_eci[0] * v_eci[2]
     hz = r_eci[0] * v_eci[1] - r_eci[1] * v_eci[0]
     h = np.sqrt(hx * hx + hy * hy + hz * hz)
     r2 = r_eci[0] ** 2 + r_eci[1] ** 2 + r_eci[2] ** 2
     rv = r_eci[0] * v_eci[0] + r_eci[1] * v_eci[1] + r_eci[2] * v_eci[2]
-    w = np.zeros(3)
-    wd = np.zeros(3)
-    w[2] = -h / r2
-    wd[2] = 2.0 * h * rv / (r2 * r2)
+    return -h / r2, 2.0 * h * rv / (r2 * r2)
+
+
+@njit(cache=True)
+def orf_rates_1(r_eci: np.ndarray, v_eci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ORF rate ω_o and its derivative in ORF axes: (0, 0, −h/r²), (0, 0, 2h(r·v)/r⁴) (seed 000 §2 ORF)."""
+    wz, wdz = _orf_rate_z_1(r_eci, v_eci)
+    w, wd = np.zeros(3), np.zeros(3)
+    w[2], wd[2] = wz, wdz
     return w, wd
 
 
@@ -89,9 +94,13 @@ def orf_hold_1(
     q_offset: np.ndarray, r_eci: np.ndarray, v_eci: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ORF stabilisation Λ^p = Λ_o ∘ Λ^o_d, ω^p = Λ̃^o_d ∘ ω_o ∘ Λ^o_d, ω̇^p likewise (seed 000 §2)."""
-    w_o, wd_o = orf_rates_1(r_eci, v_eci)
-    q = multiply_1(frames.orf_quaternion_1(r_eci, v_eci), q_offset)
-    return q, conjugate_rotate_1(q_offset, w_o), conjugate_rotate_1(q_offset, wd_o)
+    wz, wdz = _orf_rate_z_1(r_eci, v_eci)
+    q0, q1, q2, q3 = q_offset[0], q_offset[1], q_offset[2], q_offset[3]
+    z_b = np.empty(3)  # z^o in body axes: third row of R(Λ^o_d)
+    z_b[0] = 2.0 * (q1 * q3 - q0 * q2)
+    z_b[1] = 2.0 * (q2 * q3 + q0 * q1)
+    z_b[2] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+    return multiply_1(frames.orf_quaternion_1(r_eci, v_eci), q_offset), wz * z_b, wdz * z_b
 
 
 @njit(cache=True)
@@ -161,7 +170,7 @@ def ground_target_state_1(
     r_ecef: np.ndarray, c_pn: np.ndarray, era_rad: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ECI position, velocity ω⊕ × r, acceleration ω⊕ × (ω⊕ × r) of an Earth-fixed point (frozen C)."""
-    r = frames.ecef_to_eci_1(r_ecef, c_pn, era_rad)
+    r = frames.ecef_to_eci_1(r_ecef, c_pn, np.eye(3), era_rad)  # polar motion ≤ 0.5″ (≤ 17 m) ignored here
     spin = frames.EARTH_ROTATION_RATE_RAD_S * c_pn[2, :]  # CIP axis in ECI: Cᵗ e_z
     v = np.cross(spin, r)
     return r, v, np.cross(spin, v)
