@@ -280,6 +280,14 @@ def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, tab
 
 
 @njit(cache=True)
+def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
+    """True when exactly one idle packet (APID 2047, CCSDS 133.0-B-2 §4.1.3.3.4.4) spans [p, q)."""
+    if not _well_formed(buf, p) or (((np.int64(buf[p]) & 7) << 8) | buf[p + 1]) != IDLE_APID:
+        return False
+    return p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 == q
+
+
+@njit(cache=True)
 def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
     """First q in [start, stop) where a dictionary packet fits, else stop."""
     q = start
@@ -294,9 +302,10 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
 
     A dictionary packet that fits at p (known APID, its length, CRC where defined) is taken when its
     CRC confirms it or the next octets start another well-formed packet (or the data ends); an
-    unconfirmed one is cut short (truncated) at the first packet that fits inside it. A well-formed
-    packet of an unknown APID is skipped in sync when a well-formed packet follows it. Anything else
-    is quarantined up to the next octet where a dictionary packet fits.
+    unconfirmed one is cut short (truncated) at the first packet that fits inside it. Anything else
+    (unknown APIDs included: their length field is never trusted, so garbage cannot hide packets)
+    is quarantined up to the next octet where a dictionary packet fits; an idle packet spanning
+    exactly that stretch is counted as idle.
     """
     n = buf.shape[0]
     offsets = np.empty(n // PRIMARY_HEADER_OCTETS + 2, dtype=np.int64)
@@ -316,17 +325,9 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
             k += 1
             p = q
             continue
-        apid = ((np.int64(buf[p]) & 7) << 8) | buf[min(p + 1, n - 1)]
-        if _well_formed(buf, p) and lengths[apid] == 0:
-            q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
-            if q == n or _well_formed(buf, q):
-                offsets[k], sizes[k] = p, q - p
-                codes[k] = _IDLE if apid == IDLE_APID else _UNKNOWN_APID
-                k += 1
-                p = q
-                continue
         q = _next_fit(buf, p + 1, n, lengths, crc, table)
-        offsets[k], sizes[k], codes[k] = p, q - p, _classify(buf, p, lengths, crc, table)
+        offsets[k], sizes[k] = p, q - p
+        codes[k] = _IDLE if _idle_until(buf, p, q) else _classify(buf, p, lengths, crc, table)
         k += 1
         p = q
     return offsets[:k], sizes[:k], codes[:k]

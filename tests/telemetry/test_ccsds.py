@@ -163,10 +163,10 @@ def test_framing_with_crc_quarantines_corrupt_payload() -> None:
     assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "crc_failure", "ok"]
 
 
-def test_unknown_and_idle_apids_are_skipped_in_sync() -> None:
-    stream = _packet(100, 0, 20, 1) + _packet(555, 0, 14, 2) + _packet(ccsds.IDLE_APID, 0, 10, 0) + _packet(100, 1, 20, 3)
+def test_unknown_apid_is_quarantined_and_idle_packet_counted() -> None:
+    stream = _packet(100, 0, 20, 1) + _packet(555, 0, 14, 2) + _packet(100, 1, 20, 3) + _packet(ccsds.IDLE_APID, 0, 10, 0) + _packet(100, 2, 20, 3)
     frames = ccsds.frame_stream(stream, {100: 20})
-    assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "unknown_apid", "idle", "ok"]
+    assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "unknown_apid", "ok", "idle", "ok"]
 
 
 def test_frame_stream_rejects_bad_dictionary_naming_field() -> None:
