@@ -223,3 +223,25 @@ def test_times_before_the_start_are_refused():
         stn.scheduled_turn(plan, plan[stn.T_START] - 1.0)
     with pytest.raises(ValueError, match="plan"):
         stn.scheduled_turn(plan[:10], 0.0)
+
+
+def test_seed_acceleration_sum_misses_the_transport_terms_we_add():
+    """Seed 001 ε_пр (three relative accelerations only) differs from dω^p/dt when the axes differ."""
+    plan = _random_plan(31, 300.0, rate_scale=0.03)
+    t = _smooth_times(plan, 20, seed=4)
+    tt, tau = t - plan[stn.T_START], plan[stn.TAU]
+    e1, e2, e3 = plan[stn.E1:stn.E1 + 3], plan[stn.E2:stn.E2 + 3], plan[stn.E3:stn.E3 + 3]
+    w_start, w_end, acc = plan[stn.RATE_START], plan[stn.RATE_END], plan[stn.ACC2]
+    segment = stn.turn_segment(plan, t)
+    phi2 = np.where(segment == stn.SEGMENT_A, 0.5 * acc * tt**2,
+                    np.where(segment == stn.SEGMENT_B, plan[stn.ANGLE2_T1] + plan[stn.RATE2] * (tt - plan[stn.T1]),
+                             plan[stn.ANGLE2] - 0.5 * acc * (tau - tt) ** 2))
+    eps2 = np.select([segment == stn.SEGMENT_A, segment == stn.SEGMENT_B], [acc, 0.0], -acc)
+    lam3 = qt.from_axis_angle(np.broadcast_to(e3, (t.size, 3)), 0.5 * w_end * tt**2 / tau)
+    lam23 = qt.multiply(qt.from_axis_angle(np.broadcast_to(e2, (t.size, 3)), phi2), lam3)
+    seed_eps = (qt.rotate(qt.conjugate(lam23), np.broadcast_to(-w_start / tau * e1, (t.size, 3)))
+                + qt.rotate(qt.conjugate(lam3), eps2[:, None] * e2) + w_end / tau * e3)
+    wd_true = _five_point(lambda s: stn.scheduled_turn(plan, s)[1], t)
+    _, _, wd = stn.scheduled_turn(plan, t)
+    assert np.max(np.abs(wd - wd_true)) < KINEMATIC_CONSISTENCY
+    assert np.max(np.abs(seed_eps - wd_true)) > 1e3 * KINEMATIC_CONSISTENCY, np.max(np.abs(seed_eps - wd_true))
