@@ -285,3 +285,23 @@ def test_bad_state_and_torques_are_rejected_naming_the_field():
         plant_derivative(x, np.zeros(3), np.zeros(3), params)
     with pytest.raises(ValueError, match="^x"):
         plant_derivative(x[:-1], np.zeros(4), np.zeros(3), params)
+
+
+def test_orthogonal_wheels_satisfy_seed_003_eq_32_and_33():
+    """Seed 003: J ω̇ + ω × Jω = −ḣ − ω × h + T (32); eq (33) along each spin axis: I(ω̇_p + Ω̇_p) = M_w − M^f.
+
+    The ω̆ h_w term of (33) is perpendicular to each wheel's own axis, so it drops from the projection.
+    """
+    j_r = np.array([0.02, 0.03, 0.04])
+    wheels = WheelParams(j_r, coulomb_nm=0.003, coulomb_sat_speed_rad_s=0.5, viscous_nm_s=1e-5)
+    params = PlantParams(SPACECRAFT_J, np.eye(3), wheels)
+    x = pack_state(params, qt.normalize([0.3, -0.2, 0.8, 0.1]), [0.05, -0.1, 0.2], [300.0, -150.0, 40.0])
+    motor, ext = np.array([0.02, -0.01, 0.05]), np.array([1e-3, 2e-4, -5e-4])
+    xdot = plant_derivative(x, motor, ext, params)
+    w, wdot, speed, speed_dot = x[4:7], xdot[4:7], x[7:10], xdot[7:10]
+    h, hdot = j_r * speed, j_r * speed_dot
+    eq32 = SPACECRAFT_J @ wdot + np.cross(w, SPACECRAFT_J @ w) + hdot + np.cross(w, h) - ext
+    friction = 0.003 * np.clip(speed / 0.5, -1.0, 1.0) + 1e-5 * speed
+    eq33 = j_r * (wdot + speed_dot) - (motor - friction)
+    assert np.allclose(eq32, 0.0, atol=1e-12)
+    assert np.allclose(eq33, 0.0, atol=1e-12)
