@@ -112,7 +112,7 @@ def star_tracker_lsm(
             raise ValueError("stars_b: star directions are collinear; the attitude about them is unobservable")
         alpha = np.linalg.solve(hth, h.T @ (r_m - r_r).reshape(-1))
         q = qt.normalize(qt.multiply(q, np.concatenate([[1.0], 0.5 * alpha])))
-        if np.linalg.norm(alpha) < 1e-15:
+        if np.linalg.norm(alpha) < 1e-14:  # below float64 resolution of a unit quaternion
             break
     return q, noise_var * np.linalg.inv(hth)
 

@@ -44,7 +44,7 @@ def process_noise_from_gyro(noise_std_rad_s: float, dt_s: float, drift_density_r
 
 
 def initial_covariance(sigma_attitude_rad: float, sigma_bias_rad_s: float) -> np.ndarray:
-    """Diagonal initial error covariance diag(σ_θ² I, σ_b² I) of the MEKF error state (δθ, Δb)."""
+    """Initial covariance diag(σ_θ² I, σ_b² I) of the error state (δθ, Δb) (seed 003 §3.2.1.2.4 MSU errors)."""
     if not (sigma_attitude_rad > 0.0 and sigma_bias_rad_s > 0.0):
         raise ValueError("sigma_attitude_rad, sigma_bias_rad_s: must be > 0")
     return np.diag([sigma_attitude_rad**2] * 3 + [sigma_bias_rad_s**2] * 3)

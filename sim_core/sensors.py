@@ -4,12 +4,13 @@ Every sensor returns its sample and a validity flag (the "data bad/good" flag of
 §3.2.3.1). SI units inside: rad, rad/s, tesla, metres. Quaternions are scalar-first ``q_ib``
 (body → inertial, DESIGN.md).
 
-Determinism: noise never comes from numba's own generator (its state is global per thread and
-shared by every kernel, so it would couple batch variants). The caller draws standard normals
-from a ``numpy.random.Generator`` — one Generator per batch variant, from
-:func:`variant_generators` (``SeedSequence(seed).spawn``) — and passes them in: the ``*_1``
-kernels take one pre-drawn row, the vectorised functions take the Generator. The same seed and
-variant index therefore give the same noise whatever the batch size or the order of variants.
+Determinism: the ``*_1`` kernels never draw noise themselves; they take pre-drawn standard
+normals, so the caller owns the random stream of each batch variant. Two ways keep a variant's
+noise independent of the batch size, the thread count and the order of variants: draw from a
+``numpy.random.Generator`` per variant (:func:`variant_generators`, ``SeedSequence(seed).spawn``;
+the vectorised functions here take such a Generator), or — inside a compiled loop — seed numba's
+per-thread ``np.random`` with the variant's own seed at the start of that variant's run and fly
+each variant start to finish on one thread (what ``sim_core.closed_loop`` does).
 """
 
 from __future__ import annotations
@@ -288,7 +289,7 @@ def magnetometer_1(
 
 
 def in_earth_shadow(r_i_m: np.ndarray, sun_i: np.ndarray) -> np.ndarray:
-    """True where the spacecraft at r_i is inside Earth's cylindrical shadow opposite the Sun direction.
+    """True where r_i is in Earth's cylindrical shadow, the eclipse of seed 003 §1 (sun sensor data bad).
 
     Cylindrical model: behind the Earth (⟨r, ŝ⟩ < 0) and within one Earth radius of the Sun line.
     """

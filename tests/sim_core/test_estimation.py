@@ -117,7 +117,7 @@ def test_lsm_error_covariance_matches_r_inverse_hth():
     q = qt.normalize(rng.normal(size=4))
     stars_b, stars_i = _star_field(rng, 5, q)
     sigma = 5 * sensors.ARCSEC
-    n = 3000
+    n = 1500
     errs = np.empty((n, 3))
     for k in range(n):
         q_hat, cov = est.star_tracker_lsm(_perturb(stars_b, sigma, rng), stars_i, q, sigma**2)
