@@ -290,7 +290,8 @@ def test_bad_state_and_torques_are_rejected_naming_the_field():
 def test_orthogonal_wheels_satisfy_seed_003_eq_32_and_33():
     """Seed 003: J ω̇ + ω × Jω = −ḣ − ω × h + T (32); eq (33) along each spin axis: I(ω̇_p + Ω̇_p) = M_w − M^f.
 
-    The ω̆ h_w term of (33) is perpendicular to each wheel's own axis, so it drops from the projection.
+    Per wheel, ω × (h_p a_p) ⟂ a_p, so the spin-axis equation has no gyroscopic term; seed 003's
+    vector ω̆ h_w mixes the wheels and is carried by the bearings into the body equation (32).
     """
     j_r = np.array([0.02, 0.03, 0.04])
     wheels = WheelParams(j_r, coulomb_nm=0.003, coulomb_sat_speed_rad_s=0.5, viscous_nm_s=1e-5)
