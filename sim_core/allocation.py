@@ -176,9 +176,15 @@ def _solve(m: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
     n = rhs.shape[0]
     a = m.copy()
     x = rhs.copy()
-    scale = np.max(np.abs(a))
+    scale = 0.0
+    for i in range(n):
+        for j in range(n):
+            scale = max(scale, abs(a[i, j]))
     for col in range(n):
-        piv = col + np.argmax(np.abs(a[col:, col]))
+        piv = col
+        for r in range(col + 1, n):
+            if abs(a[r, col]) > abs(a[piv, col]):
+                piv = r
         if abs(a[piv, col]) <= _SINGULAR_PIVOT * scale:
             return x, False
         if piv != col:
@@ -199,41 +205,8 @@ def _solve(m: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
 
 
 @njit(cache=True)
-def _min_norm(axes: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Minimum-norm solution M = −A^t (A A^t)^{-1} M^r (seed 000 §3, Basilisk rwMotorTorque)."""
-    y, ok = _solve(axes @ axes.T, torque)
-    return -(axes.T @ y), ok
-
-
-@njit(cache=True)
-def _ge_law(axes: np.ndarray, torque: np.ndarray, h_wheels: np.ndarray, params: np.ndarray) -> tuple[np.ndarray, bool]:
-    """GE explicit law M = {A, a_f}^{-1}{−M^r, −h^m Sat(μ_ρ f_ρ, φ_ρ)} (seed 000 eq 6)."""
-    h_max = params[P_H_MAX]
-    h_norm = h_wheels / h_max
-    gamma, rho = params[P_GAMMA], params[P_RHO]
-    m4 = np.empty((4, 4))
-    m4[:3, :] = axes
-    m4[3, :] = tuning_gradient_1(h_norm, gamma, rho)
-    rhs = np.empty(4)
-    rhs[:3] = -torque
-    drive = params[P_MU_RHO] * tuning_function_1(h_norm, gamma, rho)
-    cap = params[P_PHI_RHO]
-    rhs[3] = -h_max * min(max(drive, -cap), cap)
-    return _solve(m4, rhs)
-
-
-@njit(cache=True)
-def _pair_least_squares(ap: np.ndarray, aq: np.ndarray, torque: np.ndarray) -> tuple[float, float]:
-    """Wheel torques of a pair minimising |a_p m_p + a_q m_q + M^r| (in-plane part of M^r)."""
-    g = np.empty((2, 2))
-    g[0, 0], g[0, 1], g[1, 1] = ap @ ap, ap @ aq, aq @ aq
-    g[1, 0] = g[0, 1]
-    rhs = np.empty(2)
-    rhs[0], rhs[1] = -(ap @ torque), -(aq @ torque)
-    m, ok = _solve(g, rhs)
-    if not ok:
-        return 0.0, 0.0
-    return m[0], m[1]
+def _dot3(u: np.ndarray, v: np.ndarray) -> float:
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
 
 
 @njit(cache=True)
@@ -246,33 +219,103 @@ def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
+def _solve3(m: np.ndarray, i0: int, i1: int, i2: int, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Solve [m_{i0} m_{i1} m_{i2}] x = rhs for three columns of m by Cramer's rule (no temporaries)."""
+    c0 = (m[0, i0], m[1, i0], m[2, i0])
+    c1 = (m[0, i1], m[1, i1], m[2, i1])
+    c2 = (m[0, i2], m[1, i2], m[2, i2])
+    r = (rhs[0], rhs[1], rhs[2])
+    det = _triple(c0, c1, c2)
+    x = np.zeros(3)
+    norms = np.sqrt((c0[0] ** 2 + c0[1] ** 2 + c0[2] ** 2) * (c1[0] ** 2 + c1[1] ** 2 + c1[2] ** 2) * (c2[0] ** 2 + c2[1] ** 2 + c2[2] ** 2))
+    if abs(det) <= _SINGULAR_PIVOT * norms:
+        return x, False
+    x[0] = _triple(r, c1, c2) / det
+    x[1] = _triple(c0, r, c2) / det
+    x[2] = _triple(c0, c1, r) / det
+    return x, True
+
+
+@njit(cache=True)
+def _triple(u: tuple, v: tuple, w: tuple) -> float:
+    """Scalar triple product u · (v × w)."""
+    return u[0] * (v[1] * w[2] - v[2] * w[1]) + u[1] * (v[2] * w[0] - v[0] * w[2]) + u[2] * (v[0] * w[1] - v[1] * w[0])
+
+
+@njit(cache=True)
+def _min_norm(axes: np.ndarray, idx: np.ndarray, n_on: int, torque: np.ndarray, out: np.ndarray) -> bool:
+    """Minimum-norm M = −A^t (A A^t)^{-1} M^r over the available columns (seed 000 §3, Basilisk rwMotorTorque)."""
+    gram = np.zeros((3, 3))
+    for k in range(n_on):
+        p = idx[k]
+        for i in range(3):
+            for j in range(3):
+                gram[i, j] += axes[i, p] * axes[j, p]
+    y, ok = _solve3(gram, 0, 1, 2, torque)
+    for k in range(n_on):
+        p = idx[k]
+        out[p] = -(axes[0, p] * y[0] + axes[1, p] * y[1] + axes[2, p] * y[2])
+    return ok
+
+
+@njit(cache=True)
+def _ge_law(axes: np.ndarray, torque: np.ndarray, h_wheels: np.ndarray, params: np.ndarray) -> tuple[np.ndarray, bool]:
+    """GE explicit law M = {A, a_f}^{-1}{−M^r, −h^m Sat(μ_ρ f_ρ, φ_ρ)} (seed 000 eq 6)."""
+    h_max = params[P_H_MAX]
+    h_norm = h_wheels / h_max
+    gamma, rho = params[P_GAMMA], params[P_RHO]
+    a_f = tuning_gradient_1(h_norm, gamma, rho)
+    m4 = np.empty((4, 4))
+    rhs = np.empty(4)
+    for j in range(4):
+        m4[0, j], m4[1, j], m4[2, j], m4[3, j] = axes[0, j], axes[1, j], axes[2, j], a_f[j]
+    rhs[0], rhs[1], rhs[2] = -torque[0], -torque[1], -torque[2]
+    drive = params[P_MU_RHO] * tuning_function_1(h_norm, gamma, rho)
+    cap = params[P_PHI_RHO]
+    rhs[3] = -h_max * min(max(drive, -cap), cap)
+    return _solve(m4, rhs)
+
+
+@njit(cache=True)
+def _pair_least_squares(ap: np.ndarray, aq: np.ndarray, torque: np.ndarray) -> tuple[float, float]:
+    """Wheel torques of a pair minimising |a_p m_p + a_q m_q + M^r| (in-plane part of M^r)."""
+    g00, g01, g11 = _dot3(ap, ap), _dot3(ap, aq), _dot3(aq, aq)
+    det = g00 * g11 - g01 * g01
+    if det <= _SINGULAR_PIVOT * g00 * g11:
+        return 0.0, 0.0
+    r0, r1 = -_dot3(ap, torque), -_dot3(aq, torque)
+    return (g11 * r0 - g01 * r1) / det, (g00 * r1 - g01 * r0) / det
+
+
+@njit(cache=True)
 def _two_wheels_md(
     ap: np.ndarray, aq: np.ndarray, torque: np.ndarray, b_field: np.ndarray, l_max: float
 ) -> tuple[float, float, np.ndarray, int]:
     """Two wheels + MD: A^m_pq {m_p, m_q, m^m} = −M^r, L = (m^m/B)(b × e^m) (seed 000 §3)."""
-    b_norm = np.sqrt(b_field @ b_field)
+    b_norm = np.sqrt(_dot3(b_field, b_field))
     dipole = np.zeros(3)
     if b_norm == 0.0:
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_SINGULAR
     b = b_field / b_norm
     s = ap + aq
-    e_pq = s / np.sqrt(s @ s)
-    if abs(e_pq @ b) > KAPPA_MAX:
+    e_pq = s / np.sqrt(_dot3(s, s))
+    if abs(_dot3(e_pq, b)) > KAPPA_MAX:
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_KAPPA_REFUSED
     e_m = _cross(b, e_pq)
-    e_m /= np.sqrt(e_m @ e_m)
+    e_m /= np.sqrt(_dot3(e_m, e_m))
     normal = _cross(ap, aq)
-    normal /= np.sqrt(normal @ normal)
-    if abs(e_m @ normal) < MIN_MD_PLANE_COVER:
+    normal /= np.sqrt(_dot3(normal, normal))
+    if abs(_dot3(e_m, normal)) < MIN_MD_PLANE_COVER:
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_SINGULAR
     a_m = np.empty((3, 3))
-    a_m[:, 0], a_m[:, 1], a_m[:, 2] = ap, aq, -e_m
-    sol, _ = _solve(a_m, -torque)
+    for i in range(3):
+        a_m[i, 0], a_m[i, 1], a_m[i, 2] = ap[i], aq[i], -e_m[i]
+    sol, _ = _solve3(a_m, 0, 1, 2, -torque)
     dipole = (sol[2] / b_norm) * _cross(b, e_m)
-    peak = np.max(np.abs(dipole))
+    peak = max(abs(dipole[0]), abs(dipole[1]), abs(dipole[2]))
     if peak > l_max:
         k = l_max / peak
         return sol[0] * k, sol[1] * k, dipole * k, STATUS_MD_SATURATED
@@ -292,10 +335,14 @@ def allocate_1(
 ) -> int:
     """Wheel torques and MD dipole for M^r by the law the mask selects (seed 000 eqs 5–6, §3); returns a status."""
     n = axes_b.shape[1]
-    idx = np.flatnonzero(available)
-    wheel_torque_out[:] = 0.0
+    idx = np.empty(n, dtype=np.int64)
+    n_on = 0
+    for j in range(n):
+        wheel_torque_out[j] = 0.0
+        if available[j]:
+            idx[n_on] = j
+            n_on += 1
     dipole_out[:] = 0.0
-    n_on = idx.shape[0]
     if n_on < 2:
         return STATUS_TOO_FEW_WHEELS
     if n_on == 2:
@@ -305,21 +352,22 @@ def allocate_1(
         wheel_torque_out[idx[0]], wheel_torque_out[idx[1]] = mp, mq
         dipole_out[:] = dip
         return status
-    sub = np.empty((3, n_on))
-    for j in range(n_on):
-        sub[:, j] = axes_b[:, idx[j]]
     if n_on == 3:
-        m, ok = _solve(sub, -torque_req_b)
-    elif n == 4 and int(params[P_LAW4]) == LAW_GE_DISTRIBUTION:
-        m, ok = _ge_law(sub, torque_req_b, h_wheels_nms, params)
+        m, ok = _solve3(axes_b, idx[0], idx[1], idx[2], -torque_req_b)
+        if ok:
+            for k in range(3):
+                wheel_torque_out[idx[k]] = m[k]
+    elif n_on == 4 and n == 4 and int(params[P_LAW4]) == LAW_GE_DISTRIBUTION:
+        m, ok = _ge_law(axes_b, torque_req_b, h_wheels_nms, params)
+        if ok:
+            wheel_torque_out[:] = m
+        else:
+            ok = _min_norm(axes_b, idx, n_on, torque_req_b, wheel_torque_out)
     else:
-        m, ok = _min_norm(sub, torque_req_b)
+        ok = _min_norm(axes_b, idx, n_on, torque_req_b, wheel_torque_out)
     if not ok:
-        m, ok = _min_norm(sub, torque_req_b)
-    if not ok:
+        wheel_torque_out[:] = 0.0
         return STATUS_SINGULAR
-    for j in range(n_on):
-        wheel_torque_out[idx[j]] = m[j]
     return STATUS_OK
 
 

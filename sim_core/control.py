@@ -132,12 +132,36 @@ def mismatch_vector(e: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def error_matrix_1(e: np.ndarray) -> np.ndarray:
-    """C_e = I − 2[e×]Q_eᵗ, Q_e = I e0 + [e×] (seed 000 §2): program-frame → body components."""
-    ex = np.zeros((3, 3))
-    ex[0, 1], ex[0, 2], ex[1, 2] = -e[3], e[2], -e[1]
-    ex[1, 0], ex[2, 0], ex[2, 1] = e[3], -e[2], e[1]
-    q_t = e[0] * np.eye(3) - ex
-    return np.eye(3) - 2.0 * (ex @ q_t)
+    """C_e = I − 2[e×]Q_eᵗ, Q_e = I e0 + [e×] (seed 000 §2): program-frame → body components.
+
+    Expanded as (1 − 2|e|²) I + 2 e eᵗ − 2 e0 [e×], element by element for the compiled loop.
+    """
+    e0, e1, e2, e3 = e[0], e[1], e[2], e[3]
+    d = 1.0 - 2.0 * (e1 * e1 + e2 * e2 + e3 * e3)
+    c = np.empty((3, 3))
+    c[0, 0], c[1, 1], c[2, 2] = d + 2.0 * e1 * e1, d + 2.0 * e2 * e2, d + 2.0 * e3 * e3
+    c[0, 1], c[1, 0] = 2.0 * (e1 * e2 + e0 * e3), 2.0 * (e1 * e2 - e0 * e3)
+    c[0, 2], c[2, 0] = 2.0 * (e1 * e3 - e0 * e2), 2.0 * (e1 * e3 + e0 * e2)
+    c[1, 2], c[2, 1] = 2.0 * (e2 * e3 + e0 * e1), 2.0 * (e2 * e3 - e0 * e1)
+    return c
+
+
+@njit(cache=True)
+def _mv3(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """3 × 3 matrix times 3-vector without a BLAS call (small-size speed in compiled loops)."""
+    r = np.empty(3)
+    for i in range(3):
+        r[i] = m[i, 0] * v[0] + m[i, 1] * v[1] + m[i, 2] * v[2]
+    return r
+
+
+@njit(cache=True)
+def _cross3(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    r = np.empty(3)
+    r[0] = u[1] * v[2] - u[2] * v[1]
+    r[1] = u[2] * v[0] - u[0] * v[2]
+    r[2] = u[0] * v[1] - u[1] * v[0]
+    return r
 
 
 def error_matrix(e: np.ndarray) -> np.ndarray:
@@ -163,21 +187,31 @@ def digital_law_step(
     ``q_ib``: filtered attitude; ``omega_f_b``: filtered body rate (rad/s, body); ``omega_p_p``,
     ``omega_dot_p_p``: program rate and acceleration in program axes; ``g`` (3,) is updated in place.
     """
-    qpc = np.empty(4)
-    qpc[0] = q_p[0]
-    qpc[1:] = -q_p[1:]
-    e = multiply_1(qpc, q_ib)
-    eps = -2.0 * e[0] * e[1:]
+    p0, p1, p2, p3 = q_p[0], -q_p[1], -q_p[2], -q_p[3]
+    q0, q1, q2, q3 = q_ib[0], q_ib[1], q_ib[2], q_ib[3]
+    e = np.empty(4)  # E = Λ̃^p ∘ Λ, the Hamilton product of multiply_1 written out
+    e[0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+    e[1] = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+    e[2] = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+    e[3] = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
     c_e = error_matrix_1(e)
     k, p, b, c = gains[G_K], gains[G_P], gains[G_B], gains[G_C]
-    m_tilde = k * (g + p * eps)
-    w_p = c_e @ omega_p_p
-    cross = np.empty(3)
-    cross[0] = w_p[1] * omega_f_b[2] - w_p[2] * omega_f_b[1]
-    cross[1] = w_p[2] * omega_f_b[0] - w_p[0] * omega_f_b[2]
-    cross[2] = w_p[0] * omega_f_b[1] - w_p[1] * omega_f_b[0]
-    g[:] = b * g + c * eps
-    return inertia @ (c_e @ omega_dot_p_p + cross + m_tilde)
+    wx = c_e[0, 0] * omega_p_p[0] + c_e[0, 1] * omega_p_p[1] + c_e[0, 2] * omega_p_p[2]  # C_e ω^p
+    wy = c_e[1, 0] * omega_p_p[0] + c_e[1, 1] * omega_p_p[1] + c_e[1, 2] * omega_p_p[2]
+    wz = c_e[2, 0] * omega_p_p[0] + c_e[2, 1] * omega_p_p[1] + c_e[2, 2] * omega_p_p[2]
+    accel = np.empty(3)  # C_e ω̇^p + C_e ω^p × ω^f + m̃
+    accel[0] = wy * omega_f_b[2] - wz * omega_f_b[1]
+    accel[1] = wz * omega_f_b[0] - wx * omega_f_b[2]
+    accel[2] = wx * omega_f_b[1] - wy * omega_f_b[0]
+    for i in range(3):
+        eps = -2.0 * e[0] * e[i + 1]
+        accel[i] += c_e[i, 0] * omega_dot_p_p[0] + c_e[i, 1] * omega_dot_p_p[1] + c_e[i, 2] * omega_dot_p_p[2]
+        accel[i] += k * (g[i] + p * eps)
+        g[i] = b * g[i] + c * eps
+    torque = np.empty(3)
+    for i in range(3):
+        torque[i] = inertia[i, 0] * accel[0] + inertia[i, 1] * accel[1] + inertia[i, 2] * accel[2]
+    return torque
 
 
 def digital_law(
@@ -292,7 +326,7 @@ def quaternion_pd_step(
     e = multiply_1(qdc, q_ib)
     if e[0] < 0.0:
         e = -e
-    omega_e = omega_b - error_matrix_1(e) @ omega_d_d
+    omega_e = omega_b - _mv3(error_matrix_1(e), omega_d_d)
     return -kp_nm * e[1:] - kd_nms * omega_e
 
 
@@ -355,11 +389,7 @@ def unloading_dipole_step(
     b2 = b_b_t @ b_b_t
     if b2 == 0.0:
         return np.zeros(3)
-    t = -gain_per_s * (h_wheels_b_nms - h_target_b_nms)
-    dipole = np.empty(3)
-    dipole[0] = b_b_t[1] * t[2] - b_b_t[2] * t[1]
-    dipole[1] = b_b_t[2] * t[0] - b_b_t[0] * t[2]
-    dipole[2] = b_b_t[0] * t[1] - b_b_t[1] * t[0]
+    dipole = _cross3(b_b_t, -gain_per_s * (h_wheels_b_nms - h_target_b_nms))
     return _limit_dipole(dipole / b2, l_max_am2)
 
 
@@ -405,22 +435,15 @@ def mrp_feedback_step(
     are left out of the momentum sum, as Basilisk's RWAvailabilityMsg does; no known torque.
     """
     omega = omega_br_b + omega_rn_b
-    h = inertia @ omega
+    h = _mv3(inertia, omega)
     for i in range(gs_b.shape[1]):
         if available[i]:
             spin = js_kg_m2[i] * (omega[0] * gs_b[0, i] + omega[1] * gs_b[1, i] + omega[2] * gs_b[2, i] + wheel_speed_rad_s[i])
             for r in range(3):
                 h[r] += spin * gs_b[r, i]
-    v = omega_rn_b if law_type == 0 else omega
-    gyro = np.empty(3)
-    gyro[0] = v[1] * h[2] - v[2] * h[1]
-    gyro[1] = v[2] * h[0] - v[0] * h[2]
-    gyro[2] = v[0] * h[1] - v[1] * h[0]
-    w_x_wr = np.empty(3)
-    w_x_wr[0] = omega[1] * omega_rn_b[2] - omega[2] * omega_rn_b[1]
-    w_x_wr[1] = omega[2] * omega_rn_b[0] - omega[0] * omega_rn_b[2]
-    w_x_wr[2] = omega[0] * omega_rn_b[1] - omega[1] * omega_rn_b[0]
-    return -k_nm * sigma_br - p_nms * omega_br_b + gyro - inertia @ (w_x_wr - domega_rn_b)
+    gyro = _cross3(omega_rn_b if law_type == 0 else omega, h)
+    feed = _mv3(inertia, _cross3(omega, omega_rn_b) - domega_rn_b)
+    return -k_nm * sigma_br - p_nms * omega_br_b + gyro - feed
 
 
 def mrp_feedback(
