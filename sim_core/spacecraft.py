@@ -101,6 +101,8 @@ class PlantParams:
     def __post_init__(self) -> None:
         j = _finite(self.inertia_kg_m2, "inertia_kg_m2", (3, 3))
         _check_inertia(j)
+        if not isinstance(self.wheels, WheelParams):
+            raise ValueError(f"wheels: expected WheelParams, got {type(self.wheels).__name__}")
         nw = self.wheels.n
         axes = _finite(self.wheel_axes_b, "wheel_axes_b", (3, nw))
         if nw and not np.allclose(np.linalg.norm(axes, axis=0), 1.0, atol=1e-12):

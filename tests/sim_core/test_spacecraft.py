@@ -265,6 +265,8 @@ def test_bad_wheels_and_modes_are_rejected_naming_the_field():
         PlantParams(np.eye(3), np.eye(3)[:, :1], WheelParams([1.5]))  # wheel heavier than the spacecraft
     with pytest.raises(ValueError, match="inertia_kg_m2"):
         WheelParams([-0.01])
+    with pytest.raises(ValueError, match="wheels"):
+        PlantParams(np.eye(3), np.zeros((3, 0)), None)
     with pytest.raises(ValueError, match="flex_freq_rad_s"):
         PlantParams(np.eye(3), np.zeros((3, 0)), _no_wheels(), flex_coupling=np.zeros((3, 1)),
                     flex_modal_mass=[1.0], flex_freq_rad_s=[-1.0])
