@@ -19,7 +19,7 @@ from sqlalchemy import Connection, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
 from telemetry.archive.batch import PacketBatch, sequence_gaps
-from telemetry.archive.chunks import decode_raw, decode_times, decode_values, encode_raw, encode_times, encode_values
+from telemetry.archive.chunks import decode_int64, decode_raw, decode_values, encode_int64, encode_raw, encode_values
 from telemetry.archive.engine import create_archive_engine
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
@@ -238,8 +238,8 @@ class Archive:
         ).all()
         if not rows:
             return np.empty(0, np.int64), np.empty(0, np.int64)
-        return (np.concatenate([decode_times(r[0]) for r in rows]),
-                np.concatenate([decode_values("<i8", r[1]) for r in rows]))
+        return (np.concatenate([decode_int64(r[0]) for r in rows]),
+                np.concatenate([decode_int64(r[1]) for r in rows]))
 
     def _write_chunks(self, conn: Connection, sat_id: int, upload_id: int, batch: PacketBatch) -> None:
         param_ids = self._parameter_ids(conn, sat_id, batch.apid, list(batch.values))
@@ -251,9 +251,9 @@ class Archive:
             chunk_rows.append({
                 "satellite_id": sat_id, "upload_id": upload_id, "apid": batch.apid,
                 "t_start_ns": int(batch.t_utc_ns[lo]), "t_end_ns": int(batch.t_utc_ns[hi - 1]), "n_packets": hi - lo,
-                "t_blob": encode_times(batch.t_utc_ns[lo:hi]),
-                "seq_blob": encode_values(batch.seq_count[lo:hi])[1],
-                "length_blob": encode_values(batch.raw_lengths[lo:hi])[1],
+                "t_blob": encode_int64(batch.t_utc_ns[lo:hi]),
+                "seq_blob": encode_int64(batch.seq_count[lo:hi]),
+                "length_blob": encode_int64(batch.raw_lengths[lo:hi]),
                 "raw_blob": encode_raw(raw[byte_ends[lo]:byte_ends[hi]].tobytes()),
             })
         chunk_ids = conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
@@ -302,7 +302,7 @@ class Archive:
             ).all()
         if not rows:
             return np.empty(0, np.int64), np.empty(0, np.float64)
-        t = np.concatenate([decode_times(r[0]) for r in rows])
+        t = np.concatenate([decode_int64(r[0]) for r in rows])
         v = np.concatenate([decode_values(r[1], r[2]) for r in rows])
         return _ordered_window(t, v, t0_ns, t1_ns)
 
@@ -320,7 +320,7 @@ class Archive:
                     select(CHUNK.c.t_blob, VALUE.c.dtype, VALUE.c.v_blob).join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
                     .where(VALUE.c.parameter_id == param_id).order_by(CHUNK.c.t_end_ns.desc()).limit(1)
                 ).one()
-                t, v = decode_times(row[0]), decode_values(row[1], row[2])
+                t, v = decode_int64(row[0]), decode_values(row[1], row[2])
                 i = int(np.argmax(t))
                 latest[name] = (int(t[i]), v[i].item())
         if names is not None and (unknown := set(names) - set(latest)):
@@ -338,7 +338,7 @@ class Archive:
             rows = conn.execute(query.order_by(CHUNK.c.apid, CHUNK.c.t_start_ns)).all()
         per_apid: dict[int, list] = {}
         for row_apid, t_blob, seq_blob in rows:
-            per_apid.setdefault(int(row_apid), []).append((decode_times(t_blob), decode_values("<i8", seq_blob)))
+            per_apid.setdefault(int(row_apid), []).append((decode_int64(t_blob), decode_int64(seq_blob)))
         return {a: _ordered_window(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), t0_ns, t1_ns)
                 for a, parts in per_apid.items()}
 
@@ -352,7 +352,7 @@ class Archive:
         out: list[tuple[int, bytes]] = []
         with self.engine.connect() as conn:
             for t_blob, length_blob, raw_blob in conn.execute(query):
-                t, lengths, raw = decode_times(t_blob), decode_values("<i8", length_blob), decode_raw(raw_blob)
+                t, lengths, raw = decode_int64(t_blob), decode_int64(length_blob), decode_raw(raw_blob)
                 ends = np.cumsum(lengths)
                 out.extend((int(ti), raw[e - n:e]) for ti, e, n in zip(t.tolist(), ends.tolist(), lengths.tolist()) if t0_ns <= ti <= t1_ns)
         out.sort(key=lambda item: item[0])
