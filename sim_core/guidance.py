@@ -27,7 +27,7 @@ from numba import njit
 
 from sim_core import frames, quaternion
 from sim_core.quaternion import multiply_1
-from sim_core.scheduled_turn import PLAN_SIZE, plan_scheduled_turn, scheduled_turn_1
+from sim_core.scheduled_turn import PLAN_SIZE, TurnEnvelope, plan_scheduled_turn, scheduled_turn_1, turn_envelope
 
 __all__ = [
     "OrfHold",
@@ -48,6 +48,7 @@ __all__ = [
     "route_1",
     "compile_route",
     "route_program",
+    "turn_envelopes",
     "two_course_scan",
 ]
 
@@ -246,6 +247,10 @@ def _check_segments(segments: Sequence[Segment]) -> None:
             raise ValueError(f"segments[{i}]: expected OrfHold, GroundTarget or Turn, got {type(seg).__name__}")
         if not (np.isfinite(seg.duration_s) and seg.duration_s > 0.0):
             raise ValueError(f"segments[{i}].duration_s: must be positive, got {seg.duration_s!r}")
+        if isinstance(seg, OrfHold):
+            for name in ("yaw_deg", "roll_deg", "pitch_deg"):
+                if not np.isfinite(getattr(seg, name)):
+                    raise ValueError(f"segments[{i}].{name}: must be a finite angle in degrees")
         is_turn = isinstance(seg, Turn)
         if is_turn and (i == 0 or i == len(segments) - 1 or isinstance(segments[i - 1], Turn)
                         or isinstance(segments[i + 1], Turn)):
@@ -304,6 +309,20 @@ def compile_route(
     return route
 
 
+def turn_envelopes(route: np.ndarray) -> list[tuple[int, TurnEnvelope]]:
+    """(segment index, seed 001 envelope) of every turn of a compiled route, for feasibility checks."""
+    route = _route_array(route)
+    return [(i, turn_envelope(row[COL_PLAN : COL_PLAN + PLAN_SIZE])) for i, row in enumerate(route)
+            if int(row[COL_KIND]) == KIND_TURN]
+
+
+def _route_array(route: np.ndarray) -> np.ndarray:
+    route = np.asarray(route, dtype=float)
+    if route.ndim != 2 or route.shape[1] != ROW_SIZE:
+        raise ValueError(f"route: expected a compiled route of shape (n, {ROW_SIZE}), got {route.shape}")
+    return route
+
+
 @njit(cache=True)
 def _route_many(route, t, r, v, a, c_pn, dut1):
     n = t.shape[0]
@@ -334,9 +353,7 @@ def route_program(
     dut1_s: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Λ^p (n,4), ω^p (n,3), ω̇^p (n,3), observing (n,) of a compiled route along an orbit (seed 000 §5)."""
-    route = np.asarray(route, dtype=float)
-    if route.ndim != 2 or route.shape[1] != ROW_SIZE:
-        raise ValueError(f"route: expected a compiled route of shape (n, {ROW_SIZE}), got {route.shape}")
+    route = _route_array(route)
     t = np.atleast_1d(np.asarray(t_unix_s, dtype=float))
     if t.ndim != 1 or not np.all(np.isfinite(t)):
         raise ValueError("t_unix_s: expected a finite 1-D array of times")

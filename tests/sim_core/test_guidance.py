@@ -186,6 +186,15 @@ def test_two_course_scan_is_continuous_at_joins_and_observes_only_on_courses():
     assert obs.tolist() == [True, True, False, False, True, True]
 
 
+def test_turn_envelopes_report_the_roll_manoeuvre():
+    """A 20° roll between ORF holds in 120 s: transition ≈ 20° (the ORF rate carries the rest), no plateau."""
+    route = gd.compile_route(gd.two_course_scan(course_s=300.0, turn_s=120.0), T0, _orbit_from_epoch)
+    [(index, env)] = gd.turn_envelopes(route)
+    assert index == 1 and env.duration_s == 120.0
+    assert abs(np.degrees(env.transition_angle_rad) - 20.0) < 0.5
+    assert env.transition_rate_rad_s == pytest.approx(env.transition_angle_rad / 60.0, rel=1e-12)
+
+
 def test_roll_manoeuvre_takes_the_orf_roll_from_0_to_20_degrees():
     route = gd.compile_route(gd.two_course_scan(course_s=300.0, turn_s=120.0), T0, _orbit_from_epoch)
     t = T0 + np.linspace(0.0, 720.0, 721)
@@ -240,6 +249,7 @@ def test_route_through_a_ground_target_is_continuous_and_points_at_it():
         ([gd.Turn(10.0), gd.OrfHold(10.0)], r"segments\[0\]"),
         ([gd.OrfHold(10.0), gd.Turn(10.0), gd.Turn(10.0), gd.OrfHold(1.0)], r"segments\[1\]"),
         ([gd.OrfHold(-1.0)], r"segments\[0\].duration_s"),
+        ([gd.OrfHold(1.0, roll_deg=np.nan)], r"segments\[0\].roll_deg"),
         ([gd.GroundTarget(10.0, (1.0, 2.0))], "target_ecef_m"),
     ],
 )
