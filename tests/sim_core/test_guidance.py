@@ -187,11 +187,12 @@ def test_two_course_scan_is_continuous_at_joins_and_observes_only_on_courses():
 
 
 def test_turn_envelopes_report_the_roll_manoeuvre():
-    """A 20° roll between ORF holds in 120 s: transition ≈ 20° (the ORF rate carries the rest), no plateau."""
+    """A 20° roll between ORF holds in 120 s: λ1 and λ3 both turn about the orbit normal and carry the
+    ORF's own turn nτ exactly (nτ/2 each), so λ2 is the pure 20° roll; τ < 144 s: no plateau."""
     route = gd.compile_route(gd.two_course_scan(course_s=300.0, turn_s=120.0), T0, _orbit_from_epoch)
     [(index, env)] = gd.turn_envelopes(route)
     assert index == 1 and env.duration_s == 120.0
-    assert abs(np.degrees(env.transition_angle_rad) - 20.0) < 0.5
+    assert abs(env.transition_angle_rad - np.radians(20.0)) < ROUND_OFF
     assert env.transition_rate_rad_s == pytest.approx(env.transition_angle_rad / 60.0, rel=1e-12)
 
 
