@@ -34,6 +34,7 @@ __all__ = [
     "error_quaternion_from_mismatch",
     "mismatch_filter_step_1",
     "error_quaternion_from_mismatch_1",
+    "filtered_attitude_1",
 ]
 
 _SDA_TOLERANCE = 1e-14  # relative change of the Riccati iterate at which doubling stops
@@ -170,3 +171,15 @@ def mismatch_filter_step_1(
         res = -2.0 * e[0] * e[1 + i] - state9[i]
         state9[i] += k_alpha * res
         state9[3 + i] += k_omega * res
+
+
+@njit(cache=True)
+def filtered_attitude_1(state9: np.ndarray, q_prog_ib: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Filtered attitude Λ^f = Λ^p ∘ E^f(ε^f) and rate ω^f read from state9 at a T_u instant (seed 000 §4).
+
+    Lets a control law that takes an attitude estimate consume the filtered mismatch: it
+    recomputes E^f = Λ̃^p ∘ Λ^f exactly.
+    """
+    e = error_quaternion_from_mismatch_1(state9[0:3])
+    q = qt.normalize_1(qt.multiply_1(q_prog_ib, e))
+    return q, state9[6:9].copy()

@@ -105,6 +105,18 @@ def test_mismatch_filter_tracks_a_ramp_exactly_without_noise():
     assert np.allclose(out[-1, 3:6], 2e-6 * np.array([0.6, 0.0, -0.8]), atol=EXACT)
 
 
+def test_filtered_attitude_reproduces_a_constant_offset_from_the_program_exactly():
+    dt, n = 0.25, 400
+    k_a, k_w = af.discrete_gains(1e-6, 1e-9, dt)
+    q_p = qt.normalize(np.array([0.7, -0.1, 0.4, 0.2]))
+    q_true = qt.multiply(q_p, qt.from_axis_angle(np.array([1.0, 2.0, -1.0]), np.radians(0.5)))
+    omega = np.array([1e-3, -2e-3, 5e-4])
+    out = _run_mismatch_filter(q_p, np.tile(q_true, (n, 1)), np.tile(omega, (n, 1)), k_a, k_w, 0.2, dt)
+    q_f, w_f = af.filtered_attitude_1(out[-1], q_p)
+    assert qt.angle(qt.multiply(qt.conjugate(q_true), q_f)) < EXACT
+    assert np.allclose(w_f, omega, atol=EXACT)
+
+
 def test_rate_smoothing_step_response_is_geometric():
     beta, n = 0.2, 30
     out = _run_mismatch_filter(np.array([1.0, 0, 0, 0]), np.tile([1.0, 0, 0, 0], (n, 1)), np.ones((n, 3)), 0.5, 0.1, beta, 0.25)
