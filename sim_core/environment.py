@@ -47,6 +47,7 @@ __all__ = [
     "atmosphere_density_kg_m3",
     "gravity_gradient_torque_nm",
     "magnetic_dipole_1",
+    "magnetic_dipole_eci_1",
     "sun_position_1",
     "illumination_1",
     "atmosphere_density_1",
@@ -155,9 +156,7 @@ def magnetic_field_ecef_t(r_ecef_m: np.ndarray, t_unix_s: np.ndarray | float, mo
         idx = np.flatnonzero(chunk == c)
         t_mid = float(0.5 * (t[idx].min() + t[idx].max()))
         if model == "dipole":
-            g = dipole_coefficients_t(t_mid)
-            for k in idx:
-                out[k] = magnetic_dipole_1(r[k], g)
+            out[idx] = _dipole_many(np.ascontiguousarray(r[idx]), dipole_coefficients_t(t_mid))
             continue
         for part in np.array_split(idx, max(1, int(np.ceil(idx.size / _IGRF_POINTS_PER_CALL)))):
             out[part] = _igrf_ecef_t(r[part], t_mid)
@@ -184,10 +183,31 @@ def magnetic_field_body_t(
 @njit(cache=True)
 def magnetic_dipole_1(r_ecef_m: np.ndarray, g_t: np.ndarray) -> np.ndarray:
     """Centred tilted dipole B = (a/r)³ [3 (g·r̂) r̂ − g] in ECEF (T), g = (g11, h11, g10) (compiled)."""
-    r = np.sqrt(r_ecef_m @ r_ecef_m)
-    u = r_ecef_m / r
+    r = np.sqrt(r_ecef_m[0] ** 2 + r_ecef_m[1] ** 2 + r_ecef_m[2] ** 2)
     k = (IGRF_REFERENCE_RADIUS_M / r) ** 3
-    return k * (3.0 * (g_t @ u) * u - g_t)
+    gu3 = 3.0 * (g_t[0] * r_ecef_m[0] + g_t[1] * r_ecef_m[1] + g_t[2] * r_ecef_m[2]) / (r * r)
+    b = np.empty(3)
+    for i in range(3):
+        b[i] = k * (gu3 * r_ecef_m[i] - g_t[i])
+    return b
+
+
+@njit(cache=True)
+def magnetic_dipole_eci_1(
+    r_eci_m: np.ndarray, t_ut1_unix_s: float, g_t: np.ndarray, c_pn: np.ndarray, w_pm: np.ndarray
+) -> np.ndarray:
+    """Tilted-dipole B (T) in ECI at an ECI position: ECI → ECEF (frozen C, W), dipole, back (compiled)."""
+    era = frames.earth_rotation_angle_1(t_ut1_unix_s)
+    b_ecef = magnetic_dipole_1(frames.eci_to_ecef_1(r_eci_m, c_pn, w_pm, era), g_t)
+    return frames.ecef_to_eci_1(b_ecef, c_pn, w_pm, era)
+
+
+@njit(cache=True)
+def _dipole_many(r_ecef_m: np.ndarray, g_t: np.ndarray) -> np.ndarray:
+    out = np.empty_like(r_ecef_m)
+    for k in range(r_ecef_m.shape[0]):
+        out[k] = magnetic_dipole_1(r_ecef_m[k], g_t)
+    return out
 
 
 # --- Sun ------------------------------------------------------------------------------------------
@@ -214,27 +234,24 @@ def sun_position_eci_m(t_unix_s: np.ndarray | float) -> np.ndarray:
 def sun_position_1(t_unix_s: float) -> np.ndarray:
     """Low-precision Sun (Astronomical Almanac C5, ≈ 0.01°) in GCRS (m): mean of date → J2000 by IAU 1976 precession."""
     n = (t_unix_s - 946728000.0) / 86400.0  # days from J2000.0 (UTC ≈ TT to 69 s: 3e-5°)
-    mean_lon = np.radians((280.460 + 0.9856474 * n) % 360.0)
-    g = np.radians((357.528 + 0.9856003 * n) % 360.0)
-    lam = mean_lon + np.radians(1.915) * np.sin(g) + np.radians(0.020) * np.sin(2.0 * g)
-    eps = np.radians(23.439 - 0.0000004 * n)
+    deg = np.pi / 180.0
+    g = ((357.528 + 0.9856003 * n) % 360.0) * deg
+    lam = ((280.460 + 0.9856474 * n) % 360.0) * deg + 1.915 * deg * np.sin(g) + 0.020 * deg * np.sin(2.0 * g)
+    eps = (23.439 - 0.0000004 * n) * deg
     dist = AU_M * (1.00014 - 0.01671 * np.cos(g) - 0.00014 * np.cos(2.0 * g))
-    u = np.array([np.cos(lam), np.cos(eps) * np.sin(lam), np.sin(eps) * np.sin(lam)])
+    u0, u1, u2 = np.cos(lam), np.cos(eps) * np.sin(lam), np.sin(eps) * np.sin(lam)
     big_t = n / 36525.0
-    arcsec = np.pi / (180.0 * 3600.0)
+    arcsec = deg / 3600.0
     zeta = (2306.2181 + (0.30188 + 0.017998 * big_t) * big_t) * big_t * arcsec
     z = (2306.2181 + (1.09468 + 0.018203 * big_t) * big_t) * big_t * arcsec
     theta = (2004.3109 - (0.42665 + 0.041833 * big_t) * big_t) * big_t * arcsec
-    # r_date = R3(−z) R2(θ) R3(−ζ) r_J2000 (Lieske 1977); apply the transpose.
+    # r_date = P r_J2000 with P = R3(−z) R2(θ) R3(−ζ) (Lieske 1977): r_J2000 = Pᵗ r_date.
     cz, sz, ct, st, cs, ss = np.cos(z), np.sin(z), np.cos(theta), np.sin(theta), np.cos(zeta), np.sin(zeta)
-    p = np.array(
-        [
-            [cz * ct * cs - sz * ss, -cz * ct * ss - sz * cs, -cz * st],
-            [sz * ct * cs + cz * ss, -sz * ct * ss + cz * cs, -sz * st],
-            [st * cs, -st * ss, ct],
-        ]
-    )
-    return dist * (p.T @ u)
+    out = np.empty(3)
+    out[0] = dist * ((cz * ct * cs - sz * ss) * u0 + (sz * ct * cs + cz * ss) * u1 + st * cs * u2)
+    out[1] = dist * ((-cz * ct * ss - sz * cs) * u0 + (-sz * ct * ss + cz * cs) * u1 - st * ss * u2)
+    out[2] = dist * (-cz * st * u0 - sz * st * u1 + ct * u2)
+    return out
 
 
 # --- eclipse --------------------------------------------------------------------------------------
@@ -243,11 +260,15 @@ def sun_position_1(t_unix_s: float) -> np.ndarray:
 @njit(cache=True)
 def illumination_1(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> float:
     """Sunlit fraction ν ∈ [0, 1] of the solar disk seen from the spacecraft, conical shadow (M&G §3.4.2)."""
-    d = r_sun_eci_m - r_sat_eci_m
-    rs, dn = np.sqrt(r_sat_eci_m @ r_sat_eci_m), np.sqrt(d @ d)
+    d0, d1, d2 = r_sun_eci_m[0] - r_sat_eci_m[0], r_sun_eci_m[1] - r_sat_eci_m[1], r_sun_eci_m[2] - r_sat_eci_m[2]
+    rs = np.sqrt(r_sat_eci_m[0] ** 2 + r_sat_eci_m[1] ** 2 + r_sat_eci_m[2] ** 2)
+    dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     a = np.arcsin(min(1.0, R_SUN_M / dn))
     b = np.arcsin(min(1.0, _R_EARTH_M / rs))
-    c = np.arccos(max(-1.0, min(1.0, -(r_sat_eci_m @ d) / (rs * dn))))
+    cos_c = -(r_sat_eci_m[0] * d0 + r_sat_eci_m[1] * d1 + r_sat_eci_m[2] * d2) / (rs * dn)
+    if cos_c <= np.cos(a + b):
+        return 1.0
+    c = np.arccos(max(-1.0, min(1.0, cos_c)))
     if c >= a + b:
         return 1.0
     if c <= b - a:
@@ -265,8 +286,16 @@ def illumination_1(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> float:
 def illumination_fraction(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> np.ndarray:
     """Sunlit fraction of the solar disk (0 umbra, 1 full Sun) along an orbit, conical shadow, shape (N,)."""
     r = _vectors(r_sat_eci_m, "r_sat_eci_m").reshape(-1, 3)
-    s = np.broadcast_to(_vectors(r_sun_eci_m, "r_sun_eci_m").reshape(-1, 3), r.shape)
-    return np.array([illumination_1(r[k], s[k]) for k in range(r.shape[0])])
+    s = np.ascontiguousarray(np.broadcast_to(_vectors(r_sun_eci_m, "r_sun_eci_m").reshape(-1, 3), r.shape))
+    return _illumination_many(np.ascontiguousarray(r), s)
+
+
+@njit(cache=True)
+def _illumination_many(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> np.ndarray:
+    out = np.empty(r_sat_eci_m.shape[0])
+    for k in range(out.size):
+        out[k] = illumination_1(r_sat_eci_m[k], r_sun_eci_m[k])
+    return out
 
 
 # --- atmosphere -----------------------------------------------------------------------------------
@@ -296,9 +325,25 @@ def atmosphere_density_kg_m3(alt_m: np.ndarray | float) -> np.ndarray:
 @njit(cache=True)
 def gravity_gradient_torque_1(r_b_m: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:
     """Gravity-gradient torque 3μ/r³ r̂ × (J r̂) (N·m), r = position in body axes (Wertz eq 17-38)."""
-    r = np.sqrt(r_b_m @ r_b_m)
-    u = r_b_m / r
-    return (3.0 * MU_EARTH_M3_S2 / r**3) * np.cross(u, inertia_kg_m2 @ u)
+    r2 = r_b_m[0] ** 2 + r_b_m[1] ** 2 + r_b_m[2] ** 2
+    k = 3.0 * MU_EARTH_M3_S2 / (r2 * r2 * np.sqrt(r2))  # 3μ/r⁵ with r (not r̂) in the products
+    j = inertia_kg_m2
+    j0 = j[0, 0] * r_b_m[0] + j[0, 1] * r_b_m[1] + j[0, 2] * r_b_m[2]
+    j1 = j[1, 0] * r_b_m[0] + j[1, 1] * r_b_m[1] + j[1, 2] * r_b_m[2]
+    j2 = j[2, 0] * r_b_m[0] + j[2, 1] * r_b_m[1] + j[2, 2] * r_b_m[2]
+    out = np.empty(3)
+    out[0] = k * (r_b_m[1] * j2 - r_b_m[2] * j1)
+    out[1] = k * (r_b_m[2] * j0 - r_b_m[0] * j2)
+    out[2] = k * (r_b_m[0] * j1 - r_b_m[1] * j0)
+    return out
+
+
+@njit(cache=True)
+def _gravity_gradient_many(r_b_m: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:
+    out = np.empty_like(r_b_m)
+    for k in range(r_b_m.shape[0]):
+        out[k] = gravity_gradient_torque_1(r_b_m[k], inertia_kg_m2)
+    return out
 
 
 def gravity_gradient_torque_nm(r_eci_m: np.ndarray, q_ib: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:
@@ -309,8 +354,8 @@ def gravity_gradient_torque_nm(r_eci_m: np.ndarray, q_ib: np.ndarray, inertia_kg
         raise ValueError("inertia_kg_m2: expected a finite symmetric (3, 3) matrix")
     if np.any(np.linalg.eigvalsh(j) <= 0.0):
         raise ValueError("inertia_kg_m2: must be positive definite")
-    r_b = quaternion.rotate(quaternion.conjugate(quaternion.normalize(q_ib)), r).reshape(-1, 3)
-    return np.array([gravity_gradient_torque_1(p, j) for p in r_b]).reshape(np.shape(r_b))
+    r_b = quaternion.rotate(quaternion.conjugate(quaternion.normalize(q_ib)), r)
+    return _gravity_gradient_many(np.ascontiguousarray(r_b.reshape(-1, 3)), j).reshape(r_b.shape)
 
 
 @njit(cache=True)

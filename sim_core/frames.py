@@ -289,54 +289,62 @@ def earth_rotation_angle_1(t_ut1_unix_s: float) -> float:
 @njit(cache=True)
 def eci_to_ecef_1(v_eci: np.ndarray, c_pn: np.ndarray, w_pm: np.ndarray, era_rad: float) -> np.ndarray:
     """Rotate one ECI vector into ECEF: W · R3(ERA) · C · v (compiled kernel, no velocity transport)."""
-    w = c_pn @ v_eci
+    w0 = c_pn[0, 0] * v_eci[0] + c_pn[0, 1] * v_eci[1] + c_pn[0, 2] * v_eci[2]
+    w1 = c_pn[1, 0] * v_eci[0] + c_pn[1, 1] * v_eci[1] + c_pn[1, 2] * v_eci[2]
+    w2 = c_pn[2, 0] * v_eci[0] + c_pn[2, 1] * v_eci[1] + c_pn[2, 2] * v_eci[2]
     c, s = np.cos(era_rad), np.sin(era_rad)
+    u0, u1 = c * w0 + s * w1, c * w1 - s * w0
     out = np.empty(3)
-    out[0] = c * w[0] + s * w[1]
-    out[1] = -s * w[0] + c * w[1]
-    out[2] = w[2]
-    return w_pm @ out
+    for i in range(3):
+        out[i] = w_pm[i, 0] * u0 + w_pm[i, 1] * u1 + w_pm[i, 2] * w2
+    return out
 
 
 @njit(cache=True)
 def ecef_to_eci_1(v_ecef: np.ndarray, c_pn: np.ndarray, w_pm: np.ndarray, era_rad: float) -> np.ndarray:
     """Rotate one ECEF vector into ECI: Cᵗ · R3(−ERA) · Wᵗ · v (compiled kernel, no velocity transport)."""
-    u = w_pm.T @ v_ecef
+    u0 = w_pm[0, 0] * v_ecef[0] + w_pm[1, 0] * v_ecef[1] + w_pm[2, 0] * v_ecef[2]
+    u1 = w_pm[0, 1] * v_ecef[0] + w_pm[1, 1] * v_ecef[1] + w_pm[2, 1] * v_ecef[2]
+    u2 = w_pm[0, 2] * v_ecef[0] + w_pm[1, 2] * v_ecef[1] + w_pm[2, 2] * v_ecef[2]
     c, s = np.cos(era_rad), np.sin(era_rad)
-    w = np.empty(3)
-    w[0] = c * u[0] - s * u[1]
-    w[1] = s * u[0] + c * u[1]
-    w[2] = u[2]
-    return c_pn.T @ w
+    w0, w1 = c * u0 - s * u1, s * u0 + c * u1
+    out = np.empty(3)
+    for i in range(3):
+        out[i] = c_pn[0, i] * w0 + c_pn[1, i] * w1 + c_pn[2, i] * u2
+    return out
 
 
 @njit(cache=True)
 def orf_quaternion_1(r_eci: np.ndarray, v_eci: np.ndarray) -> np.ndarray:
     """ORF quaternion Λ_o of one position/velocity (compiled kernel, Shepperd's method, λ0 ≥ 0)."""
-    x = -r_eci / np.sqrt(r_eci @ r_eci)
-    z = np.cross(x, v_eci)
-    z = z / np.sqrt(z @ z)
-    y = np.cross(z, x)
-    m = np.empty((3, 3))
-    m[:, 0], m[:, 1], m[:, 2] = x, y, z
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    rn = np.sqrt(r_eci[0] ** 2 + r_eci[1] ** 2 + r_eci[2] ** 2)
+    x0, x1, x2 = -r_eci[0] / rn, -r_eci[1] / rn, -r_eci[2] / rn
+    z0 = x1 * v_eci[2] - x2 * v_eci[1]
+    z1 = x2 * v_eci[0] - x0 * v_eci[2]
+    z2 = x0 * v_eci[1] - x1 * v_eci[0]
+    zn = np.sqrt(z0 * z0 + z1 * z1 + z2 * z2)
+    z0, z1, z2 = z0 / zn, z1 / zn, z2 / zn
+    y0, y1, y2 = z1 * x2 - z2 * x1, z2 * x0 - z0 * x2, z0 * x1 - z1 * x0
+    # DCM columns x, y, z: m[i][j] = axis_j[i]
+    tr = x0 + y1 + z2
     q = np.empty(4)
-    if tr >= m[0, 0] and tr >= m[1, 1] and tr >= m[2, 2]:
+    if tr >= x0 and tr >= y1 and tr >= z2:
         q[0] = 0.5 * np.sqrt(1.0 + tr)
         f = 0.25 / q[0]
-        q[1], q[2], q[3] = (m[2, 1] - m[1, 2]) * f, (m[0, 2] - m[2, 0]) * f, (m[1, 0] - m[0, 1]) * f
-    elif m[0, 0] >= m[1, 1] and m[0, 0] >= m[2, 2]:
-        q[1] = 0.5 * np.sqrt(1.0 + 2.0 * m[0, 0] - tr)
+        q[1], q[2], q[3] = (y2 - z1) * f, (z0 - x2) * f, (x1 - y0) * f
+    elif x0 >= y1 and x0 >= z2:
+        q[1] = 0.5 * np.sqrt(1.0 + 2.0 * x0 - tr)
         f = 0.25 / q[1]
-        q[0], q[2], q[3] = (m[2, 1] - m[1, 2]) * f, (m[0, 1] + m[1, 0]) * f, (m[0, 2] + m[2, 0]) * f
-    elif m[1, 1] >= m[2, 2]:
-        q[2] = 0.5 * np.sqrt(1.0 + 2.0 * m[1, 1] - tr)
+        q[0], q[2], q[3] = (y2 - z1) * f, (y0 + x1) * f, (z0 + x2) * f
+    elif y1 >= z2:
+        q[2] = 0.5 * np.sqrt(1.0 + 2.0 * y1 - tr)
         f = 0.25 / q[2]
-        q[0], q[1], q[3] = (m[0, 2] - m[2, 0]) * f, (m[0, 1] + m[1, 0]) * f, (m[1, 2] + m[2, 1]) * f
+        q[0], q[1], q[3] = (z0 - x2) * f, (y0 + x1) * f, (z1 + y2) * f
     else:
-        q[3] = 0.5 * np.sqrt(1.0 + 2.0 * m[2, 2] - tr)
+        q[3] = 0.5 * np.sqrt(1.0 + 2.0 * z2 - tr)
         f = 0.25 / q[3]
-        q[0], q[1], q[2] = (m[1, 0] - m[0, 1]) * f, (m[0, 2] + m[2, 0]) * f, (m[1, 2] + m[2, 1]) * f
+        q[0], q[1], q[2] = (x1 - y0) * f, (z0 + x2) * f, (z1 + y2) * f
     if q[0] < 0.0:
-        q = -q
+        for i in range(4):
+            q[i] = -q[i]
     return q

@@ -69,13 +69,15 @@ def circular_orbit(
         _finite(value, name)
     if altitude_m <= -R_EARTH_M:
         raise ValueError("altitude_m: orbit radius must be positive")
-    r = np.empty((t.size, 3))
-    v = np.empty((t.size, 3))
     a = R_EARTH_M + float(altitude_m)
+    n = np.sqrt(MU_EARTH_M3_S2 / a**3)
     inc, raan, u0 = np.radians([inclination_deg, raan_deg, arg_latitude0_deg])
-    for k in range(t.size):
-        r[k], v[k] = circular_orbit_1(t[k], a, inc, raan, u0)
-    return r, v
+    u = u0 + n * t
+    node = np.array([np.cos(raan), np.sin(raan), 0.0])  # ascending node direction
+    normal_in_plane = np.array([-np.sin(raan) * np.cos(inc), np.cos(raan) * np.cos(inc), np.sin(inc)])
+    r_hat = np.cos(u)[:, None] * node + np.sin(u)[:, None] * normal_in_plane
+    t_hat = -np.sin(u)[:, None] * node + np.cos(u)[:, None] * normal_in_plane
+    return a * r_hat, (a * n) * t_hat
 
 
 def j2_acceleration(r_eci_m: np.ndarray) -> np.ndarray:
@@ -83,8 +85,11 @@ def j2_acceleration(r_eci_m: np.ndarray) -> np.ndarray:
     r = _finite(r_eci_m, "r_eci_m")
     if r.shape[-1:] != (3,):
         raise ValueError(f"r_eci_m: expected shape (..., 3), got {r.shape}")
-    flat = r.reshape(-1, 3)
-    return np.array([j2_acceleration_1(p) for p in flat]).reshape(r.shape)
+    r2 = np.sum(r * r, axis=-1, keepdims=True)
+    z2 = 5.0 * r[..., 2:3] ** 2 / r2
+    k = -1.5 * J2_EARTH * MU_EARTH_M3_S2 * R_EARTH_M**2 / (r2 * r2 * np.sqrt(r2))
+    zonal = np.concatenate([1.0 - z2, 1.0 - z2, 3.0 - z2], axis=-1)
+    return (-MU_EARTH_M3_S2 / (r2 * np.sqrt(r2)) + k * zonal) * r
 
 
 def propagate_j2(
@@ -242,22 +247,25 @@ def circular_orbit_1(t_s: float, a_m: float, inc_rad: float, raan_rad: float, u0
     n = np.sqrt(MU_EARTH_M3_S2 / a_m**3)
     u = u0_rad + n * t_s
     cu, su, ci, si, co, so = np.cos(u), np.sin(u), np.cos(inc_rad), np.sin(inc_rad), np.cos(raan_rad), np.sin(raan_rad)
-    p = np.array([co * cu - so * ci * su, so * cu + co * ci * su, si * su])  # r̂
-    q = np.array([-co * su - so * ci * cu, -so * su + co * ci * cu, si * cu])  # along-track
-    return a_m * p, (a_m * n) * q
+    speed = a_m * n
+    r, v = np.empty(3), np.empty(3)
+    r[0], r[1], r[2] = a_m * (co * cu - so * ci * su), a_m * (so * cu + co * ci * su), a_m * si * su
+    v[0], v[1], v[2] = speed * (-co * su - so * ci * cu), speed * (-so * su + co * ci * cu), speed * si * cu
+    return r, v
 
 
 @njit(cache=True)
 def j2_acceleration_1(r: np.ndarray) -> np.ndarray:
     """Two-body + J2 acceleration of one ECI position (Vallado eq 8-30), compiled kernel."""
-    r2 = r @ r
+    r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
     rn = np.sqrt(r2)
     k = -1.5 * J2_EARTH * MU_EARTH_M3_S2 * R_EARTH_M**2 / (r2 * r2 * rn)
     z2 = 5.0 * r[2] * r[2] / r2
-    a = -MU_EARTH_M3_S2 / (r2 * rn) * r
-    a[0] += k * r[0] * (1.0 - z2)
-    a[1] += k * r[1] * (1.0 - z2)
-    a[2] += k * r[2] * (3.0 - z2)
+    g = -MU_EARTH_M3_S2 / (r2 * rn)
+    a = np.empty(3)
+    a[0] = (g + k * (1.0 - z2)) * r[0]
+    a[1] = (g + k * (1.0 - z2)) * r[1]
+    a[2] = (g + k * (3.0 - z2)) * r[2]
     return a
 
 

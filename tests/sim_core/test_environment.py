@@ -62,6 +62,23 @@ def test_tilted_dipole_equals_ppigrf_degree_one_synthesis():
     np.testing.assert_allclose(np.sum(b_nt * e_phi, axis=1), b_phi, rtol=0, atol=DIPOLE_VS_PPIGRF_TOL_NT)
 
 
+# The engine's kernel freezes precession-nutation and polar motion at t0 (< 1.5e-6 rad per day):
+# over two hours the field direction moves < 1e-7 rad, i.e. < 1e-7 |B| ≈ 5e-12 T.
+DIPOLE_KERNEL_TOL_T = 1e-11
+
+
+def test_engine_dipole_kernel_matches_vectorised_dipole_along_an_orbit():
+    t0 = 1.7e9
+    t = t0 + np.linspace(0.0, 7200.0, 25)
+    r, _ = orbit.circular_orbit(t - t0, 600e3, 97.8, 20.0, 0.0)
+    expected = environment.magnetic_field_eci_t(r, t, "dipole")
+    c, w, dut1 = frames.earth_orientation_frozen(t0)
+    g = environment.dipole_coefficients_t(t0)
+    for k in range(t.size):
+        got = environment.magnetic_dipole_eci_1(r[k], t[k] + dut1, g, c, w)
+        np.testing.assert_allclose(got, expected[k], rtol=0, atol=DIPOLE_KERNEL_TOL_T)
+
+
 def test_body_field_is_the_eci_field_seen_from_the_body():
     sat = orbit.parse_tle(
         "1 43013U 17073A   21065.76936730  .00000007  00000-0  24183-4 0  9993",

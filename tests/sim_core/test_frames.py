@@ -132,8 +132,12 @@ def test_orf_quaternion_rotates_orf_axes_into_eci_and_kernel_agrees():
     m = frames.orf_axes(r, v)
     for k, e in enumerate(np.eye(3)):
         np.testing.assert_allclose(quaternion.rotate(q, np.broadcast_to(e, r.shape)), m[..., k], atol=1e-14)
-    for k in range(len(r)):
-        np.testing.assert_allclose(frames.orf_quaternion_1(r[k], v[k]), q[k], atol=1e-14)
+    rng = np.random.default_rng(3)  # isotropic states reach all four branches of Shepperd's method
+    r_any, v_any = rng.normal(size=(400, 3)) * 7e6, rng.normal(size=(400, 3)) * 7e3
+    q_any = frames.orf_quaternion(r_any, v_any)
+    assert len({int(np.argmax(np.abs(qk))) for qk in q_any}) == 4
+    for k in range(len(r_any)):
+        np.testing.assert_allclose(frames.orf_quaternion_1(r_any[k], v_any[k]), q_any[k], atol=1e-14)
 
 
 # Kinematics Λ̇_o = ½ Λ_o ∘ ω_o(ORF axes): central difference over ±0.5 s on a Keplerian orbit,

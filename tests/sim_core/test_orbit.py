@@ -196,6 +196,17 @@ def test_circular_orbit_is_a_two_body_solution():
     np.testing.assert_allclose(accel_cd, -orbit.MU_EARTH_M3_S2 * r[1] / a**3, rtol=0, atol=1e-7)
 
 
+def test_circular_orbit_kernel_and_j2_kernel_agree_with_vectorised_api():
+    t = np.linspace(0.0, 6000.0, 13)
+    r, v = orbit.circular_orbit(t, 650e3, 97.9, 123.0, 45.0)
+    a, inc, raan, u0 = orbit.R_EARTH_M + 650e3, *np.radians([97.9, 123.0, 45.0])
+    for k in range(t.size):
+        rk, vk = orbit.circular_orbit_1(t[k], a, inc, raan, u0)
+        np.testing.assert_allclose(rk, r[k], rtol=0, atol=1e-7)
+        np.testing.assert_allclose(vk, v[k], rtol=0, atol=1e-10)
+        np.testing.assert_allclose(orbit.j2_acceleration_1(rk), orbit.j2_acceleration(rk), rtol=1e-14)
+
+
 def test_j2_refuses_nan_state_and_backward_times():
     r0, v0 = _state0(600e3, 97.8)
     with pytest.raises(ValueError, match="r0_eci_m"):
