@@ -56,11 +56,12 @@ def test_intact_packets_around_corrupt_ones_are_all_recovered(corruptions: list,
     picks = [POOL[int(a)][int(rng.integers(0, len(POOL[int(a)])))] for a in apids]
     rows = list(dict.fromkeys(r.tobytes() for r in picks))  # distinct packets: each has one fate
     pieces: list[bytes] = list(rows)
+    noise = [b""] * len(rows)  # inserted before each packet
     intact = set(range(len(rows)))
     for kind, where, extra in corruptions:
         i = where % len(rows)
         if kind == "insert":
-            pieces[i] = extra + pieces[i]
+            noise[i] = extra + noise[i]
             continue
         if i not in intact:
             continue
@@ -74,7 +75,12 @@ def test_intact_packets_around_corrupt_ones_are_all_recovered(corruptions: list,
             pieces[i] = pieces[i][: where % len(rows[i])]
         else:
             pieces[i] = b""
-    result = decode_stream(b"".join(pieces), DICTIONARY, now_utc_ns=NOW_UTC_NS)
+    stream = b"".join(n + p for n, p in zip(noise, pieces))
+    result = decode_stream(stream, DICTIONARY, now_utc_ns=NOW_UTC_NS)
     accepted = {r.tobytes() for b in result.batches for r in b.packets}
-    assert accepted == {rows[i] for i in intact}
+    kept = {rows[i] for i in intact}
+    assert kept <= accepted
+    # a damaged packet may only come back if the stream still holds its exact bytes (inserted
+    # noise can, by chance, restore a truncated tail)
+    assert all(r in stream for r in accepted - kept)
     assert {q.reason for q in result.report.quarantined} <= set(REASONS)
