@@ -2,6 +2,8 @@
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from sim_core import estimation as est
@@ -140,3 +142,20 @@ def test_lsm_error_covariance_matches_r_inverse_hth():
 def test_bad_input_names_the_field(call, field):
     with pytest.raises(ValueError, match=field):
         call()
+
+
+unit_quaternions = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1)
+vectors = st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3).filter(lambda v: np.linalg.norm(v) > 1e-3)
+MIN_SEPARATION = np.radians(1.0)  # TRIAD's error grows as 1/sin(angle between U and V)
+
+
+@settings(max_examples=200, deadline=None)
+@given(unit_quaternions, vectors, vectors)
+def test_triad_is_exact_for_any_attitude_and_distinct_vector_pair(q, u_i, v_i):
+    u_i, v_i = np.array(u_i), np.array(v_i)
+    sin_sep = np.linalg.norm(np.cross(u_i, v_i)) / (np.linalg.norm(u_i) * np.linalg.norm(v_i))
+    assume(sin_sep > np.sin(MIN_SEPARATION))
+    q = qt.normalize(np.array(q))
+    u_b, v_b = qt.rotate(qt.conjugate(q), u_i), qt.rotate(qt.conjugate(q), v_i)
+    # round-off is amplified by 1/sin(separation) in the auxiliary direction
+    assert _quat_error(q, est.triad(u_b, v_b, u_i, v_i)) < EXACT / sin_sep
