@@ -63,7 +63,8 @@ COL_OFFSET = 4  # ORF hold: Λ^o_d (4)
 COL_PLAN = 8  # turn: scheduled-turn plan (PLAN_SIZE)
 COL_TARGET = COL_PLAN + PLAN_SIZE  # target: ECEF position, m (3)
 COL_YAW_REF = COL_TARGET + 3  # target: inertial yaw-reference direction u (3)
-ROW_SIZE = COL_YAW_REF + 3
+COL_POLAR = COL_YAW_REF + 3  # target: frozen polar-motion matrix W (TIRS → ITRS), row-major (9)
+ROW_SIZE = COL_POLAR + 9
 
 OrbitState = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 """Callable t_unix_s (n,) → ECI r (n,3) m, v (n,3) m/s, a (n,3) m/s² of the spacecraft centre."""
@@ -168,10 +169,10 @@ def target_pointing_1(
 
 @njit(cache=True)
 def ground_target_state_1(
-    r_ecef: np.ndarray, c_pn: np.ndarray, era_rad: float
+    r_ecef: np.ndarray, c_pn: np.ndarray, w_pm: np.ndarray, era_rad: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ECI position, velocity ω⊕ × r, acceleration ω⊕ × (ω⊕ × r) of an Earth-fixed point (frozen C)."""
-    r = frames.ecef_to_eci_1(r_ecef, c_pn, np.eye(3), era_rad)  # polar motion ≤ 0.5″ (≤ 17 m) ignored here
+    """ECI position, velocity ω⊕ × r, acceleration ω⊕ × (ω⊕ × r) of an Earth-fixed point (frozen C, W)."""
+    r = frames.ecef_to_eci_1(r_ecef, c_pn, w_pm, era_rad)
     spin = frames.EARTH_ROTATION_RATE_RAD_S * c_pn[2, :]  # CIP axis in ECI: Cᵗ e_z
     v = np.cross(spin, r)
     return r, v, np.cross(spin, v)
@@ -187,8 +188,12 @@ def segment_program_1(
         return scheduled_turn_1(row[COL_PLAN : COL_PLAN + PLAN_SIZE], t)
     if kind == KIND_ORF_HOLD:
         return orf_hold_1(row[COL_OFFSET : COL_OFFSET + 4], r_eci, v_eci)
+    w_pm = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            w_pm[i, j] = row[COL_POLAR + 3 * i + j]
     era = frames.earth_rotation_angle_1(t + dut1)
-    r_t, v_t, a_t = ground_target_state_1(row[COL_TARGET : COL_TARGET + 3], c_pn, era)
+    r_t, v_t, a_t = ground_target_state_1(row[COL_TARGET : COL_TARGET + 3], c_pn, w_pm, era)
     return target_pointing_1(r_eci, v_eci, a_eci, r_t, v_t, a_t, row[COL_YAW_REF : COL_YAW_REF + 3])
 
 
@@ -257,7 +262,7 @@ def _check_segments(segments: Sequence[Segment]) -> None:
             raise ValueError(f"segments[{i}]: a Turn must sit between two non-turn segments")
 
 
-def _static_row(seg: Segment, t0: float, t1: float, state0: tuple[np.ndarray, ...]) -> np.ndarray:
+def _static_row(seg: Segment, t0: float, t1: float, state0: tuple[np.ndarray, ...], w_pm: np.ndarray) -> np.ndarray:
     row = np.zeros(ROW_SIZE)
     row[COL_T0], row[COL_T1], row[COL_OBSERVING] = t0, t1, float(getattr(seg, "observing", False))
     if isinstance(seg, OrfHold):
@@ -274,6 +279,7 @@ def _static_row(seg: Segment, t0: float, t1: float, state0: tuple[np.ndarray, ..
         if u.shape != (3,) or not np.all(np.isfinite(u)) or np.linalg.norm(u) == 0.0:
             raise ValueError("yaw_ref_eci: expected a non-zero finite ECI direction")
         row[COL_YAW_REF : COL_YAW_REF + 3] = u / np.linalg.norm(u)
+        row[COL_POLAR : COL_POLAR + 9] = w_pm.ravel()
     return row
 
 
@@ -283,22 +289,26 @@ def compile_route(
     orbit_state: OrbitState,
     c_pn: np.ndarray | None = None,
     dut1_s: float = 0.0,
+    w_pm: np.ndarray | None = None,
 ) -> np.ndarray:
     """Route array (n_segments, ROW_SIZE) with each turn planned between its neighbours (seed 000 §5, seed 001).
 
     ``orbit_state`` gives the spacecraft's ECI r, v, a at the segment joins (the same orbit the engine
-    flies, so the joins are continuous); ``c_pn``, ``dut1_s`` are the frozen Earth orientation
-    (``frames.earth_orientation_frozen``) that the kernel uses for ground targets.
+    flies, so the joins are continuous); ``c_pn``, ``dut1_s``, ``w_pm`` are the frozen Earth
+    orientation (``frames.earth_orientation_frozen``) that the kernel uses for ground targets
+    (identity C and W when omitted; W is stored in the target rows).
     """
     _check_segments(segments)
     if not np.isfinite(t_start_unix_s):
         raise ValueError(f"t_start_unix_s: must be finite, got {t_start_unix_s!r}")
     c_pn = np.eye(3) if c_pn is None else np.asarray(c_pn, dtype=float)
-    if c_pn.shape != (3, 3):
-        raise ValueError(f"c_pn: expected a 3×3 precession-nutation matrix, got shape {c_pn.shape}")
+    w_pm = np.eye(3) if w_pm is None else np.asarray(w_pm, dtype=float)
+    for name, m in (("c_pn", c_pn), ("w_pm", w_pm)):
+        if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+            raise ValueError(f"{name}: expected a finite 3×3 rotation matrix, got shape {m.shape}")
     bounds = t_start_unix_s + np.concatenate([[0.0], np.cumsum([s.duration_s for s in segments])])
     r, v, a = (np.asarray(x, dtype=float) for x in orbit_state(bounds))
-    route = np.stack([_static_row(s, bounds[i], bounds[i + 1], (r[i], v[i])) for i, s in enumerate(segments)])
+    route = np.stack([_static_row(s, bounds[i], bounds[i + 1], (r[i], v[i]), w_pm) for i, s in enumerate(segments)])
     for i, seg in enumerate(segments):
         if isinstance(seg, Turn):
             j = i + 1

@@ -15,6 +15,7 @@ ROUND_OFF = 1e-12  # float64 round-off on unit quaternions and unit vectors
 RATE_ROUND_OFF = 1e-15  # rad/s: round-off on ORF rates of order 1e-3 rad/s
 KINEMATIC_CONSISTENCY = 1e-8  # issue 3: ω^p = 2 Λ̃∘Λ̇, ω̇^p = dω^p/dt (rad/s, rad/s²)
 ANGLE_STENCIL_RELATIVE = 1e-9  # 5-point stencil in ERA with h = 1e-3 rad: h⁴ ~ 1e-12, round-off ~1e-13
+FRAMES_INTERPOLATION_RAD = 1e-9  # frames interpolates C hourly (< 1e-10 rad) and DUT1: LOS direction error
 FD_STEP_S = 0.05  # 5-point stencil: truncation h⁴|x⁽⁵⁾| < 1e-11 for LEO rates, round-off ~1e-15/h
 
 
@@ -217,10 +218,11 @@ def _ecef_of_eci(r_eci, t_unix_s):
 def test_ground_target_state_is_the_derivative_of_its_eci_position():
     """v = ω⊕ dr/dERA and a = ω⊕ dv/dERA by a 5-point stencil in the rotation angle itself."""
     c_pn = qt.to_dcm(qt.from_axis_angle([0.3, 0.1, 1.0], 1e-3))  # a small precession-nutation tilt
+    w_pm = qt.to_dcm(qt.from_axis_angle([1.0, -0.5, 0.0], 2e-6))  # a polar-motion-sized tilt
     r_e = np.array([3.9e6, 1.2e6, 4.8e6])
     era = np.array([0.3, 2.0, 5.9])
     h = 1e-3  # rad
-    state = lambda k, e: np.array([gd.ground_target_state_1(r_e, c_pn, ei)[k] for ei in e])  # noqa: E731
+    state = lambda k, e: np.array([gd.ground_target_state_1(r_e, c_pn, w_pm, ei)[k] for ei in e])  # noqa: E731
     d_dera = lambda k: (state(k, era - 2 * h) - 8 * state(k, era - h) + 8 * state(k, era + h) - state(k, era + 2 * h)) / (12 * h)  # noqa: E731
     w = frames.EARTH_ROTATION_RATE_RAD_S
     assert np.max(np.abs(w * d_dera(0) - state(1, era))) < ANGLE_STENCIL_RELATIVE * np.max(np.abs(state(1, era)))
@@ -241,6 +243,20 @@ def test_route_through_a_ground_target_is_continuous_and_points_at_it():
     q, _, _, obs = gd.route_program(route, np.array([t_mid]), *_orbit_from_epoch(np.array([t_mid])))
     los = target_eci - r_mid[0]
     assert obs[0] and np.max(np.abs(qt.rotate(q[0], [1.0, 0, 0]) - los / np.linalg.norm(los))) < ROUND_OFF
+
+
+def test_ground_target_route_agrees_with_the_frames_earth_orientation():
+    """Boresight at frames.eci_to_ecef_matrix(t)ᵗ r_ecef when C, W, DUT1 are frozen at that t (IERS chain)."""
+    t_mid = T0 + 420.0
+    c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t_mid)
+    r_mid = _orbit_from_epoch(np.array([t_mid]))[0][0]
+    target_ecef = frames.eci_to_ecef_matrix(t_mid) @ (6378137.0 * r_mid / np.linalg.norm(r_mid))
+    target_ecef = target_ecef + np.array([3e4, -2e4, 1e4])
+    segments = [gd.OrfHold(300.0), gd.Turn(90.0), gd.GroundTarget(60.0, tuple(target_ecef))]
+    route = gd.compile_route(segments, T0, _orbit_from_epoch, c_pn=c_pn, dut1_s=dut1, w_pm=w_pm)
+    q, _, _, _ = gd.route_program(route, np.array([t_mid]), *_orbit_from_epoch(np.array([t_mid])), c_pn=c_pn, dut1_s=dut1)
+    los = frames.eci_to_ecef_matrix(t_mid).T @ target_ecef - r_mid
+    assert np.max(np.abs(qt.rotate(q[0], [1.0, 0, 0]) - los / np.linalg.norm(los))) < FRAMES_INTERPOLATION_RAD
 
 
 @pytest.mark.parametrize(
