@@ -32,8 +32,10 @@ class ApiError(Exception):
 
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorBody, "description": text}
-    for code, text in [(401, "Missing or unknown token"), (403, "Role too low"),
-                       (422, "Invalid input or over a limit")]
+    for code, text in [(401, "Missing or unknown token"), (403, "Role too low"), (404, "Not found"),
+                       (409, "Conflicts with the current state"), (413, "Body over max_upload_mb"),
+                       (422, "Invalid input or over a limit"), (429, "Job queue full (see Retry-After)"),
+                       (503, "A telemetry component is not available in this build")]
 }
 
 

@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
-from datetime import datetime
-from typing import Any, Literal
+from datetime import datetime, timezone
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 __all__ = ["Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
            "JobPublic", "SeriesPublic", "FilePublic"]
+
+
+def _as_utc(moment: datetime) -> datetime:
+    """SQLite drops the zone of stored UTC times: put it back so answers are RFC 3339."""
+    return moment.replace(tzinfo=timezone.utc) if moment.tzinfo is None else moment
+
+
+UtcDatetime = Annotated[datetime, AfterValidator(_as_utc)]
 
 
 class Health(BaseModel):
@@ -35,8 +43,8 @@ class TokenPublic(BaseModel):
     id: int
     name: str
     role: str
-    created_at: datetime
-    revoked_at: datetime | None = None
+    created_at: UtcDatetime
+    revoked_at: UtcDatetime | None = None
 
 
 class TokenIssued(TokenPublic):
@@ -50,7 +58,7 @@ class AuditPublic(BaseModel):
 
     model_config = ConfigDict(from_attributes=True)
     id: int
-    at: datetime
+    at: UtcDatetime
     actor: str
     action: str
     target: str
@@ -75,9 +83,9 @@ class JobPublic(BaseModel):
     summary: dict[str, Any] | None = None
     error: str | None = None
     created_by: str
-    created_at: datetime
-    started_at: datetime | None = None
-    finished_at: datetime | None = None
+    created_at: UtcDatetime
+    started_at: UtcDatetime | None = None
+    finished_at: UtcDatetime | None = None
 
 
 class SeriesPublic(BaseModel):

@@ -54,7 +54,7 @@ def list_scenarios(_: ViewerDep) -> list[str]:
 
 
 @router.post("/simulations", response_model=JobAccepted, status_code=202,
-             summary="Queue a simulation", responses={429: ERROR_RESPONSES[422] | {"description": "Queue full"}})
+             summary="Queue a simulation")
 def create_simulation(request: Request, services: ServicesDep, principal: OperatorDep,
                       scenario: dict[str, Any] = Body(..., openapi_examples=SCENARIO_EXAMPLES)) -> JobAccepted:
     """Validate the scenario and its limits, queue it; poll the returned URL."""

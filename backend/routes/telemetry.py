@@ -40,7 +40,7 @@ def _parse_failure(exc: Exception, field: str) -> ApiError:
 
 
 @router.post("/telemetry/uploads", summary="Upload telemetry (CCSDS packets, CSV or JSONL)",
-             openapi_extra=BINARY_BODY, responses={413: ERROR_RESPONSES[422] | {"description": "Too large"}})
+             openapi_extra=BINARY_BODY)
 async def upload_telemetry(
     request: Request, services: ServicesDep, principal: OperatorDep,
     satellite: str = Query("NOAA-20", min_length=1, max_length=100, examples=["NOAA-20"]),
