@@ -29,15 +29,24 @@ def _sqlite_begin_immediate(conn: Any) -> None:
     conn.exec_driver_sql("BEGIN IMMEDIATE")
 
 
-def create_archive_engine(url: str) -> Engine:
-    """Engine for an archive URL (``sqlite:///path`` or ``postgresql+psycopg://...``)."""
+def _sqlite_begin_deferred(conn: Any) -> None:
+    """Plain BEGIN: a read snapshot that never waits for writers (WAL)."""
+    conn.exec_driver_sql("BEGIN")
+
+
+def create_archive_engine(url: str, *, writer: bool = True) -> Engine:
+    """Engine for an archive URL (``sqlite:///path`` or ``postgresql+psycopg://...``).
+
+    On SQLite a *writer* engine takes the write lock at BEGIN; a reader engine's transactions
+    stay deferred, so reads run beside a bulk upload (WAL) instead of queueing behind it.
+    """
     if not isinstance(url, str) or not url:
         raise ValueError("url: expected a SQLAlchemy database URL such as sqlite:///archive.sqlite")
     parsed = make_url(url)
     if parsed.get_backend_name() == "sqlite":
         engine = create_engine(url, connect_args={"check_same_thread": False})
         event.listen(engine, "connect", _sqlite_pragmas)
-        event.listen(engine, "begin", _sqlite_begin_immediate)
+        event.listen(engine, "begin", _sqlite_begin_immediate if writer else _sqlite_begin_deferred)
         return engine
     if parsed.get_backend_name() == "postgresql":
         return create_engine(url, pool_pre_ping=True)

@@ -65,14 +65,17 @@ class Archive:
 
     def __init__(self, url: str, *, migrate: bool = True) -> None:
         self.url = url
-        self.engine = create_archive_engine(url)
-        self._is_postgres = self.engine.dialect.name == "postgresql"
+        self._writer = create_archive_engine(url)
+        self._is_postgres = self._writer.dialect.name == "postgresql"
+        self.engine = self._writer if self._is_postgres else create_archive_engine(url, writer=False)
+        self._satellite_ids: dict[str, int] = {}
         if migrate:
-            upgrade(url, self.engine)
+            upgrade(url, self._writer)
 
     def close(self) -> None:
         """Release the database connections."""
         self.engine.dispose()
+        self._writer.dispose()
 
     def __enter__(self) -> Archive:
         return self
@@ -85,11 +88,25 @@ class Archive:
         """Id of the satellite called ``name``, registering it on first use."""
         if not name:
             raise ValueError("satellite: a satellite name is required")
-        with self.engine.begin() as conn:
+        if name in self._satellite_ids:
+            return self._satellite_ids[name]
+        with self._writer.begin() as conn:
             found = conn.execute(select(SAT.c.id).where(SAT.c.name == name)).scalar()
-            if found is not None:
-                return int(found)
-            return int(conn.execute(insert(SAT).values(name=name, norad_id=norad_id).returning(SAT.c.id)).scalar_one())
+            if found is None:
+                found = conn.execute(insert(SAT).values(name=name, norad_id=norad_id).returning(SAT.c.id)).scalar_one()
+        self._satellite_ids[name] = int(found)
+        return int(found)
+
+    def _known_satellite(self, name: str) -> int:
+        """Id of an archived satellite (reads never create one)."""
+        if name in self._satellite_ids:
+            return self._satellite_ids[name]
+        with self.engine.connect() as conn:
+            found = conn.execute(select(SAT.c.id).where(SAT.c.name == name)).scalar()
+        if found is None:
+            raise ValueError(f"satellite: nothing archived for a satellite named {name!r}")
+        self._satellite_ids[name] = int(found)
+        return int(found)
 
     def add_ground_station(self, name: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float) -> int:
         """Register (or update) a ground station; returns its id."""
@@ -100,7 +117,7 @@ class Archive:
         if not -90.0 <= min_elevation_deg < 90.0:
             raise ValueError(f"min_elevation_deg: {min_elevation_deg} outside -90..90")
         values = {"lat_deg": lat_deg, "lon_deg": lon_deg, "alt_m": alt_m, "min_elevation_deg": min_elevation_deg}
-        with self.engine.begin() as conn:
+        with self._writer.begin() as conn:
             found = conn.execute(select(STATION.c.id).where(STATION.c.name == name)).scalar()
             if found is not None:
                 conn.execute(update(STATION).where(STATION.c.id == found).values(**values))
@@ -118,7 +135,7 @@ class Archive:
     def add_tle(self, satellite: str, line1: str, line2: str, epoch_ns: int) -> int:
         """Store a TLE of ``satellite`` (idempotent on its epoch); returns its id."""
         sat_id = self.satellite_id(satellite)
-        with self.engine.begin() as conn:
+        with self._writer.begin() as conn:
             found = conn.execute(select(TLE.c.id).where(TLE.c.satellite_id == sat_id, TLE.c.epoch_ns == epoch_ns)).scalar()
             if found is not None:
                 return int(found)
@@ -127,7 +144,7 @@ class Archive:
 
     def latest_tle(self, satellite: str, before_ns: int | None = None) -> tuple[int, str, str]:
         """(id, line1, line2) of the newest TLE of ``satellite`` (optionally with epoch <= before_ns)."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         query = select(TLE.c.id, TLE.c.line1, TLE.c.line2).where(TLE.c.satellite_id == sat_id)
         if before_ns is not None:
             query = query.where(TLE.c.epoch_ns <= before_ns)
@@ -155,7 +172,7 @@ class Archive:
         batches = list(batches)
         checksum = sha256 or _batches_sha256(batches)
         sat_id = self.satellite_id(satellite)
-        with self.engine.begin() as conn:
+        with self._writer.begin() as conn:
             self._lock_satellite(conn, sat_id)
             existing = conn.execute(select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == checksum)).scalar()
             if existing is not None:
@@ -280,7 +297,7 @@ class Archive:
     # --- reading -------------------------------------------------------------------------
     def parameters(self, satellite: str) -> dict[str, int]:
         """Archived parameter names of ``satellite`` with their APID."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             return dict(conn.execute(select(PARAM.c.name, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id)).all())
 
@@ -288,7 +305,7 @@ class Archive:
         """Time-ordered (t_utc_ns, values) of a parameter with t0_ns <= t <= t1_ns."""
         if t1_ns < t0_ns:
             raise ValueError(f"t1_ns: {t1_ns} is before t0_ns {t0_ns}")
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             param = conn.execute(select(PARAM.c.id, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id, PARAM.c.name == name)).one_or_none()
             if param is None:
@@ -308,7 +325,7 @@ class Archive:
 
     def latest_values(self, satellite: str, names: Sequence[str] | None = None) -> dict[str, tuple[int, float]]:
         """Newest (t_utc_ns, value) of each parameter (all archived ones by default)."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             query = select(PARAM.c.id, PARAM.c.name).where(PARAM.c.satellite_id == sat_id)
             if names is not None:
@@ -329,7 +346,7 @@ class Archive:
 
     def packet_keys(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Per APID, time-ordered (t_utc_ns, seq_count) of archived packets in [t0_ns, t1_ns]."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         query = select(CHUNK.c.apid, CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
             CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
         if apid is not None:
@@ -344,7 +361,7 @@ class Archive:
 
     def replay(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> list[tuple[int, bytes]]:
         """Archived raw packets (t_utc_ns, bytes) in [t0_ns, t1_ns], time-ordered, byte-exact."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         query = select(CHUNK.c.t_blob, CHUNK.c.length_blob, CHUNK.c.raw_blob).where(
             CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
         if apid is not None:
@@ -360,7 +377,7 @@ class Archive:
 
     def uploads(self, satellite: str) -> list[UploadRecord]:
         """Uploads of ``satellite``, oldest first."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             rows = conn.execute(select(UPLOAD).where(UPLOAD.c.satellite_id == sat_id).order_by(UPLOAD.c.id)).all()
         return [UploadRecord(r.id, r.uploaded_by, r.uploaded_at_ns, r.source, r.sha256, r.packets_accepted,
@@ -378,7 +395,7 @@ class Archive:
     # --- alarms --------------------------------------------------------------------------
     def alarms(self, satellite: str, *, now_ns: int | None = None, include_cleared: bool = False) -> list[AlarmRecord]:
         """Alarms of ``satellite``; shelved alarms whose shelf time passed are reported active."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         now = _now_ns() if now_ns is None else now_ns
         query = select(ALARM).where(ALARM.c.satellite_id == sat_id)
         if not include_cleared:
@@ -395,7 +412,7 @@ class Archive:
 
     def alarm_action(self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None) -> None:
         """Acknowledge, shelve (until ``shelved_until_ns``), unshelve or clear an alarm."""
-        with self.engine.begin() as conn:
+        with self._writer.begin() as conn:
             alarm_state.operator_action(conn, alarm_id, action, actor, _now_ns() if t_ns is None else t_ns, shelved_until_ns)
 
     # --- passes --------------------------------------------------------------------------
@@ -403,7 +420,7 @@ class Archive:
         """Store predicted passes (aos_ns, los_ns, max_elevation_ns, max_elevation_deg); idempotent on AOS."""
         sat_id, station_id = self.satellite_id(satellite), self.ground_station(station).id
         ids = []
-        with self.engine.begin() as conn:
+        with self._writer.begin() as conn:
             for aos_ns, los_ns, tmax_ns, max_el_deg in passes:
                 found = conn.execute(select(PASS.c.id).where(PASS.c.satellite_id == sat_id, PASS.c.station_id == station_id, PASS.c.aos_ns == int(aos_ns))).scalar()
                 if found is None:
@@ -415,7 +432,7 @@ class Archive:
 
     def passes(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
         """Passes of ``satellite`` overlapping [t0_ns, t1_ns], in AOS order."""
-        sat_id = self.satellite_id(satellite)
+        sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             rows = conn.execute(
                 select(PASS, STATION.c.name.label("station_name")).join(STATION, STATION.c.id == PASS.c.station_id)
@@ -425,7 +442,7 @@ class Archive:
 
     def record_reception(self, pass_id: int, received_start_ns: int | None, received_end_ns: int | None, packets_received: int, packets_missing: int) -> None:
         """Store what was received during a pass (span, packets, missing packets)."""
-        with self.engine.begin() as conn:
+        with self._writer.begin() as conn:
             conn.execute(update(PASS).where(PASS.c.id == pass_id).values(
                 received_start_ns=received_start_ns, received_end_ns=received_end_ns,
                 packets_received=int(packets_received), packets_missing=int(packets_missing)))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import time
 from pathlib import Path
 
 import ccsdspy
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from sqlalchemy import inspect
+from sqlalchemy import inspect, text
 
 from telemetry.archive import Archive, PacketBatch, upgrade
 from telemetry.archive.engine import create_archive_engine
@@ -152,7 +153,26 @@ def test_bad_input_names_the_field(archive: Archive) -> None:
         PacketBatch.from_packets(1, np.arange(3), np.array([0, 1, 20_000]), [b"a", b"b", b"c"], {})
     with pytest.raises(ValueError, match="uploaded_by"):
         archive.ingest(SAT, [synthetic_batch(3)], source="x", uploaded_by="")
+    with pytest.raises(ValueError, match="satellite"):
+        archive.read_parameter("NO-SUCH-SAT", "x", 0, 1)
+    archive.satellite_id(SAT)
     with pytest.raises(ValueError, match="name"):
         archive.read_parameter(SAT, "no-such-parameter", 0, 1)
     with pytest.raises(ValueError, match="url"):
         Archive("mysql://nowhere/db")
+
+
+READ_BESIDE_WRITER_S = 2.0  # a blocked read would wait for the 30 s busy timeout
+
+
+def test_reads_are_not_blocked_by_an_open_upload_transaction(archive: Archive, archive_url: str) -> None:
+    whole = synthetic_batch(100)
+    archive.ingest(SAT, [whole], source="first", uploaded_by="tester")
+    other_writer = create_archive_engine(archive_url)
+    with other_writer.begin() as conn:
+        conn.execute(text("UPDATE upload SET uploaded_by = 'someone-else'"))  # holds the write lock
+        start = time.perf_counter()
+        _, v = archive.read_parameter(SAT, "index", int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
+        elapsed = time.perf_counter() - start
+    other_writer.dispose()
+    assert v.size == 100 and elapsed < READ_BESIDE_WRITER_S
