@@ -29,6 +29,8 @@ __all__ = [
     "gauss_markov_drift",
     "gyro",
     "gyro_1",
+    "nadir_roll_pitch",
+    "nadir_roll_pitch_1",
     "earth_sensor",
     "earth_sensor_1",
     "magnetometer",
@@ -213,6 +215,26 @@ def gyro_1(
 
 
 # --- earth (horizon) sensor: φ_e = φ + φ_b + φ_n, θ_e = θ + θ_b + θ_n (seed 002 eq 14) ----------
+
+
+def nadir_roll_pitch(q_ib: np.ndarray, r_i_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Roll φ2 and pitch φ3 (rad) a horizon sensor sees: the nadir −r̂ in body axes (seed 002 eq 14 inputs).
+
+    With the DESIGN.md orbit frame (x^o to nadir) and C^o = [φ2]_2 [φ3]_3 [φ1]_1 the nadir in body
+    axes is n_b = (cos φ3 cos φ2, −sin φ3, cos φ3 sin φ2): roll = atan2(n_z, n_x), pitch = −asin n_y,
+    independent of yaw, velocity and the orbit frame's other axes.
+    """
+    r = _vectors(r_i_m, "r_i_m")
+    n_b = qt.rotate(qt.conjugate(qt.normalize(q_ib)), -r / np.linalg.norm(r, axis=-1, keepdims=True))
+    return np.arctan2(n_b[..., 2], n_b[..., 0]), np.arcsin(np.clip(-n_b[..., 1], -1.0, 1.0))
+
+
+@njit(cache=True)
+def nadir_roll_pitch_1(q_ib: np.ndarray, r_i: np.ndarray) -> tuple[float, float]:
+    """Compiled roll and pitch of the nadir direction in body axes (seed 002 eq 14 inputs)."""
+    rn = np.sqrt(r_i[0] ** 2 + r_i[1] ** 2 + r_i[2] ** 2)
+    n_b = qt.conjugate_rotate_1(q_ib, -r_i / rn)
+    return np.arctan2(n_b[2], n_b[0]), np.arcsin(min(max(-n_b[1], -1.0), 1.0))
 
 
 def earth_sensor(

@@ -134,6 +134,20 @@ def test_bad_input_names_the_field(call, field):
         call()
 
 
+def test_nadir_roll_pitch_are_the_132_angles_of_the_attitude_in_the_orbit_frame():
+    from sim_core import frames
+
+    rng = np.random.default_rng(12)
+    r = rng.normal(size=(200, 3)) * 7e6
+    v = rng.normal(size=(200, 3)) * 7e3
+    yaw, roll, pitch = (rng.uniform(-0.5, 0.5, 200) for _ in range(3))
+    q_ib = qt.multiply(frames.orf_quaternion(r, v), qt.from_euler_132(yaw, roll, pitch))
+    got_roll, got_pitch = sensors.nadir_roll_pitch(q_ib, r)
+    assert np.allclose(got_roll, roll, atol=EXACT) and np.allclose(got_pitch, pitch, atol=EXACT)
+    for k in range(5):
+        assert np.allclose(sensors.nadir_roll_pitch_1(q_ib[k], r[k]), (roll[k], pitch[k]), atol=EXACT)
+
+
 def test_earth_sensor_residual_is_constant_bias_plus_white_noise():
     rng = np.random.default_rng(21)
     roll, pitch = rng.uniform(-0.1, 0.1, N_SAMPLES), rng.uniform(-0.1, 0.1, N_SAMPLES)
