@@ -118,14 +118,14 @@ def ge_axes(gamma_rad: float, drf_roll_rad: float = np.pi / 4) -> np.ndarray:
 
 
 @njit(cache=True)
-def _pair_terms(h1: float, h2: float, c: float, s: float) -> tuple[float, float, float, float]:
+def _pair_terms(h1: float, h2: float, c: float, s: float) -> tuple[float, float, float]:
     """x̃ of one wheel pair and its partial derivatives ∂x̃/∂h_1, ∂x̃/∂h_2 (seed 000 eq 6)."""
     d = h1 - h2
     q2 = 4.0 * c * c - s * s * d * d
     q = np.sqrt(q2)
     xt = c * (h1 + h2) / q
     q3 = q2 * q
-    return xt, 2.0 * c * (2.0 * c * c + s * s * h2 * d) / q3, 2.0 * c * (2.0 * c * c - s * s * h1 * d) / q3, q2
+    return xt, 2.0 * c * (2.0 * c * c + s * s * h2 * d) / q3, 2.0 * c * (2.0 * c * c - s * s * h1 * d) / q3
 
 
 @njit(cache=True)
@@ -141,8 +141,8 @@ def tuning_function_1(h_norm: np.ndarray, gamma: float, rho: float) -> float:
 def tuning_gradient_1(h_norm: np.ndarray, gamma: float, rho: float) -> np.ndarray:
     """Row a_f = ∂f_ρ/∂h_p of the distribution law (seed 000 eq 6, exact gradient)."""
     c, s = np.cos(gamma), np.sin(gamma)
-    x1t, d11, d12, _ = _pair_terms(h_norm[0], h_norm[1], c, s)
-    x2t, d23, d24, _ = _pair_terms(h_norm[2], h_norm[3], c, s)
+    x1t, d11, d12 = _pair_terms(h_norm[0], h_norm[1], c, s)
+    x2t, d23, d24 = _pair_terms(h_norm[2], h_norm[3], c, s)
     a_f = np.empty(4)
     a_f[0] = d11 * (1.0 + rho * x2t)
     a_f[1] = d12 * (1.0 + rho * x2t)
@@ -265,12 +265,15 @@ def _ge_law(axes: np.ndarray, torque: np.ndarray, h_wheels: np.ndarray, params: 
     h_norm = h_wheels / h_max
     gamma, rho = params[P_GAMMA], params[P_RHO]
     a_f = tuning_gradient_1(h_norm, gamma, rho)
+    f_rho = tuning_function_1(h_norm, gamma, rho)
+    if not np.isfinite(f_rho):  # momenta so far outside the box that q_s is imaginary
+        return np.zeros(4), False
     m4 = np.empty((4, 4))
     rhs = np.empty(4)
     for j in range(4):
         m4[0, j], m4[1, j], m4[2, j], m4[3, j] = axes[0, j], axes[1, j], axes[2, j], a_f[j]
     rhs[0], rhs[1], rhs[2] = -torque[0], -torque[1], -torque[2]
-    drive = params[P_MU_RHO] * tuning_function_1(h_norm, gamma, rho)
+    drive = params[P_MU_RHO] * f_rho
     cap = params[P_PHI_RHO]
     rhs[3] = -h_max * min(max(drive, -cap), cap)
     return _solve(m4, rhs)

@@ -97,6 +97,15 @@ def test_distribution_law_drives_f_rho_to_zero_while_delivering_torque():
     assert abs(al.tuning_function(h)) < 1e-6
 
 
+def test_ge_law_falls_back_to_min_norm_where_f_rho_is_undefined():
+    h = np.array([2.5, -2.5, 0.0, 0.0]) * CONFIG.h_max_nms  # q_y² = 4C² − S²(h1 − h2)² < 0 at γ = 30°
+    assert not np.isfinite(al.tuning_function(h))
+    torque_req = np.array([1e-3, -2e-3, 5e-4])
+    wheel, _, status = al.allocate(torque_req, AXES, [True] * 4, h, [B_EARTH_T, 0, 0])
+    assert status == al.STATUS_OK
+    assert np.allclose(wheel, -np.linalg.pinv(AXES) @ torque_req, atol=EXACT)
+
+
 @settings(max_examples=300, deadline=None)
 @given(st.sampled_from(PAIRS), unit, unit, st.floats(1e-5, 1e-3))
 def test_two_wheels_and_md_reproduce_torque_where_kappa_allows(pair, b_dir, torque_dir, torque_nm):
