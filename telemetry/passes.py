@@ -12,18 +12,19 @@ Only passes whose AOS and LOS both fall inside the searched window are returned.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from sim_core import frames, orbit
-from telemetry.archive import Archive, PassRecord, sequence_gaps
+from telemetry.archive import Archive, PassRecord, StationRecord, sequence_gaps
 
 __all__ = [
     "PredictedPasses",
     "elevation_deg",
     "predict_passes",
+    "predict_station_passes",
     "assign_to_passes",
     "record_reception",
     "COARSE_STEP_S",
@@ -49,6 +50,12 @@ class PredictedPasses:
     def rows(self) -> list[tuple[int, int, int, float]]:
         """(aos_ns, los_ns, max_elevation_ns, max_elevation_deg) tuples for ``Archive.save_passes``."""
         return list(zip(self.aos_ns.tolist(), self.los_ns.tolist(), self.max_elevation_ns.tolist(), self.max_elevation_deg.tolist()))
+
+    def __iter__(self) -> Iterator[tuple[int, int, int, float]]:
+        return iter(self.rows())
+
+    def __len__(self) -> int:
+        return int(self.aos_ns.size)
 
 
 def elevation_deg(line1: str, line2: str, lat_deg: float, lon_deg: float, alt_m: float, t_unix_s: np.ndarray) -> np.ndarray:
@@ -82,7 +89,8 @@ def predict_passes(
         raise ValueError(f"min_elevation_deg: {min_elevation_deg} outside [-90, 90)")
     elevation = _elevation_function(line1, line2, lat_deg, lon_deg, alt_m)
     t0 = start_utc_ns / NS_PER_S
-    t = t0 + np.arange(0.0, days * SECONDS_PER_DAY + COARSE_STEP_S, COARSE_STEP_S)
+    t_end = t0 + days * SECONDS_PER_DAY
+    t = np.append(np.arange(t0, t_end, COARSE_STEP_S), t_end)
     el = elevation(t)
     peaks = np.flatnonzero((el[1:-1] >= el[:-2]) & (el[1:-1] > el[2:])) + 1
     t_max = _golden_maximum(elevation, t[peaks - 1], t[peaks + 1])
@@ -105,6 +113,14 @@ def predict_passes(
         np.round(t_max[unique] * NS_PER_S).astype(np.int64),
         el_max[unique],
     )
+
+
+def predict_station_passes(line1: str, line2: str, station: StationRecord, t0_ns: int, t1_ns: int) -> PredictedPasses:
+    """Passes over an archived ground station with AOS and LOS inside [t0_ns, t1_ns] (see predict_passes)."""
+    if t1_ns <= t0_ns:
+        raise ValueError(f"t1_ns: {t1_ns} must be after t0_ns {t0_ns}")
+    days = (t1_ns - t0_ns) / (SECONDS_PER_DAY * NS_PER_S)
+    return predict_passes(line1, line2, station.lat_deg, station.lon_deg, station.alt_m, station.min_elevation_deg, t0_ns, days)
 
 
 def _golden_maximum(f: Callable[[np.ndarray], np.ndarray], a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ import pytest
 from skyfield.api import EarthSatellite, load, wgs84
 
 from telemetry.archive import Archive, PacketBatch
-from telemetry.passes import assign_to_passes, elevation_deg, predict_passes, record_reception
+from telemetry.passes import assign_to_passes, elevation_deg, predict_passes, predict_station_passes, record_reception
 from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
 
 SKYFIELD_EVENT_TOLERANCE_S = 1.0  # find_events refines rise/set/culmination to half a second
@@ -65,6 +65,16 @@ def test_noaa20_passes_match_skyfield_find_events(shared_data: Path, name: str) 
     sky_el = elevation_deg(line1, line2, lat, lon, alt, truth[:, 1])
     np.testing.assert_allclose(ours.max_elevation_deg, sky_el, atol=MAX_ELEVATION_TOLERANCE_DEG, rtol=0)
     np.testing.assert_allclose(elevation_deg(line1, line2, lat, lon, alt, ours.aos_ns / 1e9), min_el, atol=1e-3)
+
+
+def test_station_record_window_gives_the_same_passes(archive: Archive, shared_data: Path) -> None:
+    line1, line2 = noaa20_tle(shared_data)
+    archive.add_ground_station("Toulouse", *STATIONS["Toulouse"])
+    end_ns = START_NS + int(DAYS * 86_400) * 10**9
+    ours = predict_station_passes(line1, line2, archive.ground_station("Toulouse"), START_NS, end_ns)
+    direct = predict_passes(line1, line2, *STATIONS["Toulouse"], START_NS, DAYS)
+    assert list(ours) == direct.rows() and len(ours) == len(direct) > 0
+    assert ours.aos_ns[0] >= START_NS and ours.los_ns[-1] <= end_ns
 
 
 def test_assign_to_passes_is_inclusive_and_minus_one_outside() -> None:
