@@ -25,6 +25,8 @@ __all__ = [
     "rotation_noise_quaternion",
     "star_tracker",
     "star_tracker_1",
+    "star_tracker_blinded",
+    "star_tracker_blinded_1",
     "GaussMarkovDrift",
     "gauss_markov_drift",
     "gyro",
@@ -123,6 +125,30 @@ def star_tracker_1(
         qm = -qm
     rate = np.sqrt(omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2)
     return qm, rate <= max_rate
+
+
+def star_tracker_blinded(
+    q_ib: np.ndarray, sun_i: np.ndarray, r_i_m: np.ndarray, boresight_b: np.ndarray, exclusion_rad: float
+) -> np.ndarray:
+    """True where the lit Sun lies inside the star tracker's exclusion cone (its data flagged bad, seed 003 §3.2.3.1)."""
+    s_i = _vectors(sun_i, "sun_i")
+    bore = _vectors(boresight_b, "boresight_b")
+    _positive(exclusion_rad, "exclusion_rad")
+    bore_i = qt.rotate(qt.normalize(q_ib), bore / np.linalg.norm(bore))
+    cos_sep = np.sum(bore_i * s_i, axis=-1) / np.linalg.norm(s_i, axis=-1)
+    return (cos_sep > np.cos(exclusion_rad)) & ~in_earth_shadow(r_i_m, s_i)
+
+
+@njit(cache=True)
+def star_tracker_blinded_1(q_ib: np.ndarray, sun_i: np.ndarray, r_i: np.ndarray, boresight_b: np.ndarray, cos_exclusion: float) -> bool:
+    """Compiled test of a lit Sun inside the star tracker's exclusion cone (seed 003 §3.2.3.1 data flag)."""
+    bore_i = qt.rotate_1(q_ib, boresight_b)
+    sn = np.sqrt(sun_i[0] ** 2 + sun_i[1] ** 2 + sun_i[2] ** 2)
+    along = (r_i[0] * sun_i[0] + r_i[1] * sun_i[1] + r_i[2] * sun_i[2]) / sn
+    p = r_i - along * sun_i / sn
+    shadow = along < 0.0 and np.sqrt(p[0] ** 2 + p[1] ** 2 + p[2] ** 2) < EARTH_RADIUS_M
+    cos_sep = (bore_i[0] * sun_i[0] + bore_i[1] * sun_i[1] + bore_i[2] * sun_i[2]) / sn
+    return cos_sep > cos_exclusion and not shadow
 
 
 # --- gyros: ω_g = ω + b + d + n_g, ḋ = −D d + n_d (seed 002 eq 13) ------------------------------

@@ -60,6 +60,18 @@ def test_star_tracker_flags_samples_above_tracking_rate():
     assert valid.tolist() == [True, False]
 
 
+def test_star_tracker_is_blinded_only_by_a_lit_sun_inside_its_exclusion_cone():
+    sun = np.array([1.0, 0.0, 0.0])
+    toward = qt.from_axis_angle([0, 1, 0], np.pi / 2)  # body +z boresight turned onto +x
+    q = np.stack([toward, qt.multiply(toward, qt.from_axis_angle([1, 0, 0], np.radians(31.0))), toward])
+    r = np.array([[7e6, 0, 0], [7e6, 0, 0], [-7e6, 0, 0]])  # the last one in eclipse
+    blinded = sensors.star_tracker_blinded(q, sun, r, [0, 0, 1], np.radians(30.0))
+    assert blinded.tolist() == [True, False, False]
+    for k in range(3):
+        got = sensors.star_tracker_blinded_1(q[k], sun, r[k].astype(float), np.array([0, 0, 1.0]), np.cos(np.radians(30.0)))
+        assert got == blinded[k]
+
+
 def test_markov_drift_matches_first_order_gauss_markov_statistics():
     dt, tau, density = 0.1, 2.0, 1e-4
     model = sensors.GaussMarkovDrift(tau, density, dt)
