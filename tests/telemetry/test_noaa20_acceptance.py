@@ -113,3 +113,30 @@ def test_noaa20_matches_space_packet_parser_per_packet_decode(raw_bytes: bytes) 
         parsed = definition.parse_bytes(raw_packet)
         for name in ("ADGPSPOSX", "ADGPSVELZ", "ADCFAQ4", "ADAET1MS", "USEC"):
             assert batch.values[name][i] == parsed[name], (i, name)
+
+
+def test_acs_twin_ingest_command_stores_noaa20_once(shared_data: Path, tmp_path: Path, capsys) -> None:
+    """The CLI prints the joined JSON report; the same file again is a reported no-op."""
+    import json
+
+    from backend.cli import main
+
+    url = f"sqlite:///{tmp_path / 'archive.sqlite'}"
+    argv = ["ingest", str(shared_data / NOAA / PACKETS), "--dictionary", "noaa20_apid11_xtce.yaml", "--db", url,
+            "--user", "tester"]
+    assert main(argv) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert first["decode"]["packets_accepted"] == N_PACKETS
+    assert first["archive"]["packets_accepted"] == N_PACKETS and not first["archive"]["duplicate_upload"]
+    assert main(argv) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["archive"]["duplicate_upload"] and again["archive"]["packets_accepted"] == 0
+
+
+def test_acs_twin_ingest_command_reports_bad_input_as_json(capsys) -> None:
+    import json
+
+    from backend.cli import main
+
+    assert main(["ingest", "/no/such/file", "--dictionary", "noaa20_apid11_xtce.yaml", "--dry-run"]) == 2
+    assert "path" in json.loads(capsys.readouterr().out)["error"]
