@@ -90,6 +90,32 @@ def bench_bulk(scales: list[int], workdir: Path) -> None:
               f"{samples / (t2 - t1) / 1e6:>15.2f} {samples / (t2 - t0) / 1e6:>19.2f} {size_mb:>7.1f}")
 
 
+def bench_row_layout(workdir: Path) -> None:
+    """The layout we did not choose: one SQLite row per sample (parameter, time, value)."""
+    import sqlite3
+
+    n_packets, n_params = 28_800, 48
+    t = 1_750_000_000 * 10**9 + np.arange(n_packets, dtype=np.int64) * 250_000_000
+    values = np.random.default_rng(3).normal(size=(n_params, n_packets))
+    db = sqlite3.connect(workdir / "rows.sqlite", isolation_level=None)
+    db.execute("PRAGMA journal_mode=WAL")
+    db.execute("PRAGMA synchronous=FULL")
+    db.execute("CREATE TABLE sample (parameter INTEGER, t_ns INTEGER, value REAL, PRIMARY KEY (parameter, t_ns)) WITHOUT ROWID")
+    start = time.perf_counter()
+    db.execute("BEGIN IMMEDIATE")
+    for k in range(n_params):
+        db.executemany("INSERT INTO sample VALUES (?, ?, ?)", zip([k] * n_packets, t.tolist(), values[k].tolist()))
+    db.execute("COMMIT")
+    insert_s = time.perf_counter() - start
+    start = time.perf_counter()
+    rows = db.execute("SELECT t_ns, value FROM sample WHERE parameter = 3 AND t_ns BETWEEN ? AND ?", (int(t[0]), int(t[-1]))).fetchall()
+    np.array(rows)
+    query_s = time.perf_counter() - start
+    db.close()
+    print(f"row-per-sample layout (not used): insert {n_packets * n_params / insert_s / 1e6:.2f} M samples/s, "
+          f"reading one 2-h parameter {query_s * 1e3:.1f} ms")
+
+
 def bench_query(workdir: Path) -> None:
     """Downsample a 2-hour, 4 Hz parameter to 1,000 points."""
     dictionary = reference_dictionary()
@@ -188,6 +214,7 @@ def main() -> None:
         workdir = Path(tmp)
         bench_bulk([int(s) for s in args.scales.split(",")], workdir)
         bench_query(workdir)
+        bench_row_layout(workdir)
         if not args.skip_live:
             bench_live(args.live_seconds, workdir)
 

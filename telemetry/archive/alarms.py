@@ -4,6 +4,8 @@ Out of limits opens an alarm (state *active*, event *enter*); back in limits rec
 *acknowledged* alarm back in limits is *cleared* automatically, an unacknowledged one stays
 active until acknowledged.  Escalation (yellow -> red) of an acknowledged alarm re-activates it.
 *Shelved* alarms keep recording events and come back as active when the shelf time passes.
+Limits are checked per upload in time order, starting from the level the parameter's open alarm
+holds; back-filled (older) data is checked against that level and does not rewrite history.
 All functions run on a connection inside the caller's transaction.
 """
 

@@ -68,6 +68,23 @@ def test_upgrade_creates_every_model_table_at_head_and_is_idempotent(archive_url
     assert set(Base.metadata.tables) <= tables
 
 
+def test_migrations_downgrade_to_base_and_upgrade_again(archive_url: str) -> None:
+    from alembic import command
+
+    upgrade(archive_url)
+    engine = create_archive_engine(archive_url)
+    with engine.begin() as conn:
+        config = alembic_config(archive_url)
+        config.attributes["connection"] = conn
+        command.downgrade(config, "base")
+    with engine.connect() as conn:
+        assert not set(Base.metadata.tables) & set(inspect(conn).get_table_names())
+    engine.dispose()
+    upgrade(archive_url)
+    with Archive(archive_url) as store:
+        assert store.ingest(SAT, [synthetic_batch(5)], source="after", uploaded_by="tester").packets_accepted == 5
+
+
 def test_real_noaa20_file_round_trips_to_the_decoded_csv_and_replays_byte_exact(archive: Archive, shared_data: Path) -> None:
     batch, raw = noaa20_batch(shared_data)
     truth = decoded_csv(shared_data)
