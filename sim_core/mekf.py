@@ -26,6 +26,7 @@ __all__ = [
     "initial_covariance",
     "mekf_propagate_1",
     "mekf_update_1",
+    "mekf_vector_update_1",
     "mekf_run",
 ]
 
@@ -188,6 +189,45 @@ def mekf_update_1(q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, q_mea
         for j in range(3):
             nis += z[i] * s_inv[i, j] * z[j]
     return nis
+
+
+@njit(cache=True)
+def mekf_vector_update_1(
+    q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, v_meas_b: np.ndarray, v_ref_i: np.ndarray, sigma: float
+) -> float:
+    """Unit-vector update in place (sun sensor, magnetometer direction; seed 003 §3.2.1.2.1 VMD); returns NIS.
+
+    Predicted b̂ = Λ̂̃ ∘ r ∘ Λ̂; with q = q̂ ∘ δq the measurement is b = b̂ + [b̂×]δθ + v, so
+    H = [[b̂×], 0] and R = σ² I (Shuster's measurement model, rank-2 in effect).
+    """
+    rn = np.sqrt(v_ref_i[0] ** 2 + v_ref_i[1] ** 2 + v_ref_i[2] ** 2)
+    mn = np.sqrt(v_meas_b[0] ** 2 + v_meas_b[1] ** 2 + v_meas_b[2] ** 2)
+    bh = qt.conjugate_rotate_1(q_ib, v_ref_i / rn)
+    z = v_meas_b / mn - bh
+    h = np.zeros((3, 6))
+    h[0, 1], h[0, 2] = -bh[2], bh[1]
+    h[1, 0], h[1, 2] = bh[2], -bh[0]
+    h[2, 0], h[2, 1] = -bh[1], bh[0]
+    ph = p_cov @ h.T  # (6, 3)
+    s = h @ ph
+    for i in range(3):
+        s[i, i] += sigma * sigma
+    s_inv = _inverse3(s)
+    k = ph @ s_inv
+    dx = k @ z
+    corr = np.array([1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]])
+    q_new = qt.normalize_1(qt.multiply_1(q_ib, corr))
+    if q_new[0] < 0.0:
+        q_new = -q_new
+    q_ib[:] = q_new
+    for i in range(3):
+        bias_b[i] += dx[3 + i]
+    ikh = np.eye(6) - k @ h
+    p_new = _sandwich6(ikh, p_cov) + sigma * sigma * (k @ k.T)
+    for i in range(6):
+        for j in range(6):
+            p_cov[i, j] = 0.5 * (p_new[i, j] + p_new[j, i])
+    return float(z @ s_inv @ z)
 
 
 @njit(cache=True)
