@@ -10,8 +10,10 @@ x = (δθ, Δb): the true attitude is q = q̂ ∘ δq(δθ) (body-frame error, r
 against the filter's time constant behaves as this random walk (:func:`process_noise_from_gyro`).
 Error dynamics δθ̇ = −[ω̂×]δθ − Δb − n_v, Δḃ = n_u, ω̂ = ω_g − b̂.
 
-The two ``*_1`` kernels work in place on plain float64 arrays (views of the engine's batch
-arrays); :func:`mekf_run` is the friendly driver over a whole series.
+Units of the kernels: dt in s, σ_v (angle random walk) in rad/√s, σ_u (bias random walk) in
+rad/s^{3/2}, measurement σ in rad. The ``*_1`` kernels work in place on plain float64 arrays
+(contiguous views of the engine's batch arrays, e.g. ``q[i]`` of an (N, 4) array);
+:func:`mekf_run` is the friendly driver over a whole series.
 """
 
 from __future__ import annotations
