@@ -39,6 +39,13 @@ __all__ = [
     "LAW_PSEUDO_INVERSE",
     "KAPPA_MAX",
     "MIN_MD_PLANE_COVER",
+    "P_LAW4",
+    "P_GAMMA",
+    "P_RHO",
+    "P_MU_RHO",
+    "P_PHI_RHO",
+    "P_H_MAX",
+    "P_L_MAX",
     "AllocationConfig",
     "ge_axes",
     "tuning_function",
@@ -421,6 +428,8 @@ def distribute_momentum(
     drf = (momentum / config.h_max_nms) @ rot  # R^t H per row
     flat = drf.reshape(-1, 3)
     out = np.array([distribute_momentum_1(row, config.gamma_rad, config.rho) for row in flat])
+    if not np.all(np.isfinite(out)):
+        raise ValueError("momentum_b_nms: outside the domain of the distribution law (|y|, |z| < 2 cos γ · h^m in DRF axes)")
     return out.reshape(momentum.shape[:-1] + (4,)) * config.h_max_nms
 
 

@@ -21,6 +21,10 @@ from sim_core.quaternion import multiply_1
 
 __all__ = [
     "SOMOV_INERTIA_KG_M2",
+    "G_K",
+    "G_P",
+    "G_B",
+    "G_C",
     "DigitalLawGains",
     "lead_lag_coefficients",
     "error_quaternion",

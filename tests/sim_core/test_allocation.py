@@ -181,5 +181,7 @@ def test_bad_inputs_name_the_field():
         al.allocate([1.0, 2.0, 3.0], AXES, [True] * 4, np.zeros(4), [np.nan, 0, 0])
     with pytest.raises(ValueError, match="axes_b"):
         al.allocate([1.0, 2.0, 3.0], np.eye(3, 4), [True] * 4, np.zeros(4), [B_EARTH_T, 0, 0])
+    with pytest.raises(ValueError, match="momentum_b_nms"):
+        al.distribute_momentum([0.0, 4.0 * CONFIG.h_max_nms, 0.0], AXES)
     with pytest.raises(ValueError, match="rho"):
         al.AllocationConfig(rho=1.5)

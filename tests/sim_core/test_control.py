@@ -151,6 +151,41 @@ def test_digital_law_brings_nonlinear_body_onto_rotating_program():
     assert max(errors[150:]) < 1.0 * ARCSEC
 
 
+def test_feed_forward_of_eq7_flies_a_principal_axis_roll_exactly():
+    """20° roll about body y (seed 000 §5) with accelerations constant over each T_u: the held
+    feed-forward J C_e ω̇^p is then the exact torque, so a body started on the program stays on it
+    (ω ∥ y keeps the uncompensated ω × Jω at zero)."""
+    alpha = np.deg2rad(20.0) / (20.0 * 40.0)  # roll angle = α t1 (t1/2 + coast + t1/2) = α · 20 s · 40 s
+    axis = np.array([0.0, 1.0, 0.0])
+
+    def program(t):  # trapezoid: +α for 20 s, coast 20 s, −α for 20 s, then hold
+        t1, t2, t3 = 20.0, 40.0, 60.0
+        w_max = alpha * t1
+        if t < t1:
+            ang, rate, acc = 0.5 * alpha * t * t, alpha * t, alpha
+        elif t < t2:
+            ang, rate, acc = 0.5 * w_max * t1 + w_max * (t - t1), w_max, 0.0
+        elif t < t3:
+            tau = t - t2
+            ang, rate, acc = 0.5 * w_max * t1 + w_max * (t2 - t1) + w_max * tau - 0.5 * alpha * tau * tau, w_max - alpha * tau, -alpha
+        else:
+            ang, rate, acc = np.deg2rad(20.0), 0.0, 0.0
+        return qt.from_axis_angle(axis, ang), rate * axis, acc * axis
+
+    x = np.concatenate([[1.0, 0.0, 0.0, 0.0], np.zeros(3)])
+    g, dt, t_u, worst = np.zeros(3), 0.1, GAINS.t_u_s, 0.0
+    for k in range(40):  # 80 s: the roll and 20 s of hold
+        q_p, w_p, wd_p = program(k * t_u)
+        worst = max(worst, float(qt.angle(ctl.error_quaternion(q_p, x[:4]))))
+        torque, g = ctl.digital_law(x[:4], x[4:], q_p, w_p, wd_p, g, J, GAINS)
+        f = _rigid_body(torque, J)
+        for _ in range(round(t_u / dt)):
+            x = _rk4(f, x, dt)
+            x[:4] /= np.linalg.norm(x[:4])
+    final = qt.angle(ctl.error_quaternion(program(80.0)[0], x[:4]))
+    assert worst < 1e-3 * ARCSEC and final < 1e-3 * ARCSEC  # RK4 truncation only
+
+
 def test_wheel_torque_command_quantises_then_saturates():
     m = np.array([0.01234, -0.01234, 0.0125, -0.0125, 0.5, -0.5, 0.0])
     got = ctl.wheel_torque_command(m, 0.001, 0.2)
