@@ -32,6 +32,7 @@ from sim_core import quaternion
 __all__ = [
     "WGS84_A_M",
     "WGS84_F",
+    "WGS84_E2",
     "EARTH_ROTATION_RATE_RAD_S",
     "skyfield_time",
     "skyfield_data_path",

@@ -41,7 +41,7 @@ __all__ = [
 MU_EARTH_M3_S2 = 3.986004418e14  # EGM2008 / IERS 2010
 J2_EARTH = 1.08262668e-3  # EGM96 unnormalised C20 sign-flipped
 R_EARTH_M = frames.WGS84_A_M
-_SIDEREAL_YEAR_S = 365.256363004 * 86400.0  # the mean Sun's RAAN advances 2π per year (SSO rate)
+_SIDEREAL_YEAR_S = 365.256363004 * 86400.0  # the mean Sun turns 2π per sidereal year in inertial space
 _J2_MAX_STEP_S = 5.0  # RK4 step: energy drift < 1e-10 and < 3 cm along-track per day at LEO
 _SGP4_ERRORS = {
     1: "mean eccentricity outside [0, 1)",

@@ -104,6 +104,20 @@ def test_truncated_tle_and_mismatched_satellite_numbers_are_refused():
         orbit.parse_tle(NOAA20_L1, other)
 
 
+def test_propagate_tle_reports_sgp4_failure_with_time_and_reason(shared_data):
+    failing = [tle for satnum, tle, _ in _vallado_cases(shared_data) if satnum == VALLADO_FAILS_AT_EPOCH][0]
+    sat = orbit.parse_tle(*failing, verify_checksum=False)
+    with pytest.raises(ValueError, match=r"t_unix_s: SGP4 fails at t = .* satellite 33334"):
+        orbit.propagate_tle(sat, orbit.tle_epoch_unix_s(sat))
+
+
+def test_read_tle_file_names_three_line_sets(shared_data):
+    sets = orbit.read_tle_file((shared_data / "tle" / "real_sso_smallsats.tle").read_text())
+    assert [(name, sat.satnum) for name, sat in sets] == [
+        ("PROBA-1", 26958), ("OPS-SAT", 44878), ("OPS-SAT", 44878), ("NOAA 20 (JPSS-1)", 43013), ("NOAA 20 (JPSS-1)", 43013)
+    ]
+
+
 def test_propagate_tle_refuses_nan_times():
     sat = orbit.parse_tle(NOAA20_L1, NOAA20_L2)
     with pytest.raises(ValueError, match="t_unix_s"):
