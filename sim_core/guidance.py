@@ -10,8 +10,9 @@ close as possible to a fixed inertial direction (the yaw constraint).
 
 Conventions (DESIGN.md, sim_core.frames): ``q_ib`` quaternions, rates in body axes, ECI metres;
 route times are UTC seconds since the Unix epoch (``t_unix_s``) because ground targets turn with the
-Earth. ORF rates assume central-force orbital motion (|ω_o| = |r × v|/r², about −z^o); the J2 part
-(≈1e-3 of the along-normal acceleration) is left to the attitude loop.
+Earth. The ORF turns at ω_o = (−r (a·ĥ)/h, 0, −h/r²) in ORF axes (h = r × v; the x^o part is the
+orbit plane turning under out-of-plane forces, ≈4e-7 rad/s from J2 at 600 km); ω̇_o keeps the
+z^o part exactly and drops d/dt of the x^o part, which needs the jerk (≈ 2n·ω_x ≈ 1e-9 rad/s², J2).
 
 A route is compiled into a 2-D float64 array (one row per segment, layout below) that the kernel
 :func:`route_1` evaluates inside the engine loop.
@@ -71,38 +72,42 @@ OrbitState = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 @njit(cache=True)
-def _orf_rate_z_1(r_eci: np.ndarray, v_eci: np.ndarray) -> tuple[float, float]:
-    """z^o components of ω_o and ω̇_o: −h/r² and 2h(r·v)/r⁴ (central-force motion)."""
+def _orf_rate_1(r_eci: np.ndarray, v_eci: np.ndarray, a_eci: np.ndarray) -> tuple[float, float, float]:
+    """ω_o·x^o = −r (a·ĥ)/h, ω_o·z^o = −h/r² and d/dt(ω_o·z^o) = −ḣ/r² + 2h(r·v)/r⁴, ḣ = ĥ·(r × a)."""
     hx = r_eci[1] * v_eci[2] - r_eci[2] * v_eci[1]
     hy = r_eci[2] * v_eci[0] - r_eci[0] * v_eci[2]
     hz = r_eci[0] * v_eci[1] - r_eci[1] * v_eci[0]
     h = np.sqrt(hx * hx + hy * hy + hz * hz)
     r2 = r_eci[0] ** 2 + r_eci[1] ** 2 + r_eci[2] ** 2
     rv = r_eci[0] * v_eci[0] + r_eci[1] * v_eci[1] + r_eci[2] * v_eci[2]
-    return -h / r2, 2.0 * h * rv / (r2 * r2)
+    a_normal = (a_eci[0] * hx + a_eci[1] * hy + a_eci[2] * hz) / h
+    h_dot = (hx * (r_eci[1] * a_eci[2] - r_eci[2] * a_eci[1]) + hy * (r_eci[2] * a_eci[0] - r_eci[0] * a_eci[2])
+             + hz * (r_eci[0] * a_eci[1] - r_eci[1] * a_eci[0])) / h
+    return -np.sqrt(r2) * a_normal / h, -h / r2, -h_dot / r2 + 2.0 * h * rv / (r2 * r2)
 
 
 @njit(cache=True)
-def orf_rates_1(r_eci: np.ndarray, v_eci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """ORF rate ω_o and its derivative in ORF axes: (0, 0, −h/r²), (0, 0, 2h(r·v)/r⁴) (seed 000 §2 ORF)."""
-    wz, wdz = _orf_rate_z_1(r_eci, v_eci)
+def orf_rates_1(r_eci: np.ndarray, v_eci: np.ndarray, a_eci: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """ORF rate ω_o and ω̇_o in ORF axes from the orbital motion (seed 000 §2 ORF; see module notes)."""
+    wx, wz, wdz = _orf_rate_1(r_eci, v_eci, a_eci)
     w, wd = np.zeros(3), np.zeros(3)
-    w[2], wd[2] = wz, wdz
+    w[0], w[2], wd[2] = wx, wz, wdz
     return w, wd
 
 
 @njit(cache=True)
 def orf_hold_1(
-    q_offset: np.ndarray, r_eci: np.ndarray, v_eci: np.ndarray
+    q_offset: np.ndarray, r_eci: np.ndarray, v_eci: np.ndarray, a_eci: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """ORF stabilisation Λ^p = Λ_o ∘ Λ^o_d, ω^p = Λ̃^o_d ∘ ω_o ∘ Λ^o_d, ω̇^p likewise (seed 000 §2)."""
-    wz, wdz = _orf_rate_z_1(r_eci, v_eci)
+    wx, wz, wdz = _orf_rate_1(r_eci, v_eci, a_eci)
     q0, q1, q2, q3 = q_offset[0], q_offset[1], q_offset[2], q_offset[3]
-    z_b = np.empty(3)  # z^o in body axes: third row of R(Λ^o_d)
-    z_b[0] = 2.0 * (q1 * q3 - q0 * q2)
-    z_b[1] = 2.0 * (q2 * q3 + q0 * q1)
-    z_b[2] = 1.0 - 2.0 * (q1 * q1 + q2 * q2)
-    return multiply_1(frames.orf_quaternion_1(r_eci, v_eci), q_offset), wz * z_b, wdz * z_b
+    x_b0, x_b1, x_b2 = 1.0 - 2.0 * (q2 * q2 + q3 * q3), 2.0 * (q1 * q2 - q0 * q3), 2.0 * (q1 * q3 + q0 * q2)
+    z_b0, z_b1, z_b2 = 2.0 * (q1 * q3 - q0 * q2), 2.0 * (q2 * q3 + q0 * q1), 1.0 - 2.0 * (q1 * q1 + q2 * q2)
+    w, wd = np.empty(3), np.empty(3)  # x^o, z^o in body axes: first and third rows of R(Λ^o_d)
+    w[0], w[1], w[2] = wx * x_b0 + wz * z_b0, wx * x_b1 + wz * z_b1, wx * x_b2 + wz * z_b2
+    wd[0], wd[1], wd[2] = wdz * z_b0, wdz * z_b1, wdz * z_b2
+    return multiply_1(frames.orf_quaternion_1(r_eci, v_eci), q_offset), w, wd
 
 
 @njit(cache=True)
@@ -187,7 +192,7 @@ def segment_program_1(
     if kind == KIND_TURN:
         return scheduled_turn_1(row[COL_PLAN : COL_PLAN + PLAN_SIZE], t)
     if kind == KIND_ORF_HOLD:
-        return orf_hold_1(row[COL_OFFSET : COL_OFFSET + 4], r_eci, v_eci)
+        return orf_hold_1(row[COL_OFFSET : COL_OFFSET + 4], r_eci, v_eci, a_eci)
     w_pm = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
@@ -373,24 +378,33 @@ def route_program(
 
 
 @njit(cache=True)
-def _orf_many(q_offset, r, v):
+def _orf_many(q_offset, r, v, a):
     n = r.shape[0]
     q, w, wd = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
-        qi, wi, wdi = orf_hold_1(q_offset, r[i], v[i])
+        qi, wi, wdi = orf_hold_1(q_offset, r[i], v[i], a[i])
         q[i], w[i], wd[i] = qi, wi, wdi
     return q, w, wd
 
 
 def orf_hold_program(
-    r_eci_m: np.ndarray, v_eci_m_s: np.ndarray, yaw_deg: float = 0.0, roll_deg: float = 0.0, pitch_deg: float = 0.0
+    r_eci_m: np.ndarray,
+    v_eci_m_s: np.ndarray,
+    yaw_deg: float = 0.0,
+    roll_deg: float = 0.0,
+    pitch_deg: float = 0.0,
+    a_eci_m_s2: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ORF stabilisation program along an orbit (n,3): Λ_o ∘ Λ^o_d and its rates (seed 000 §2)."""
+    """ORF stabilisation program along an orbit (n,3): Λ_o ∘ Λ^o_d and its rates (seed 000 §2).
+
+    ``a_eci_m_s2`` (default: central gravity, i.e. no out-of-plane force) adds the orbit-plane turn.
+    """
     n = np.atleast_2d(r_eci_m).shape[0]
-    r, v = _state_arrays(n, r_eci_m=np.atleast_2d(r_eci_m), v_eci_m_s=np.atleast_2d(v_eci_m_s))
+    a = np.zeros((n, 3)) if a_eci_m_s2 is None else np.atleast_2d(a_eci_m_s2)
+    r, v, a = _state_arrays(n, r_eci_m=np.atleast_2d(r_eci_m), v_eci_m_s=np.atleast_2d(v_eci_m_s), a_eci_m_s2=a)
     if np.any(np.linalg.norm(np.cross(r, v), axis=1) == 0.0):
         raise ValueError("v_eci_m_s: velocity parallel to position leaves the ORF undefined")
-    return _orf_many(_offset_quaternion(OrfHold(1.0, yaw_deg, roll_deg, pitch_deg)), r, v)
+    return _orf_many(_offset_quaternion(OrfHold(1.0, yaw_deg, roll_deg, pitch_deg)), r, v, a)
 
 
 def target_pointing_program(

@@ -87,6 +87,59 @@ def test_orf_rate_matches_finite_differences_of_the_orf_quaternion_on_an_ellipse
     assert np.max(np.abs(wd_fd - wd)) < KINEMATIC_CONSISTENCY * 1e-3
 
 
+J2 = 1.08262668e-3  # EGM96 C20 (sign-flipped), the truth orbit's own constant
+ODE_RATE_NOISE = 1e-10  # rad/s: DOP853 at rtol 1e-13 leaves ~µm in r; a 1-s stencil turns it into < 1e-12
+J2_JERK_TERM = 2e-9  # rad/s²: d/dt of the x^o rate (needs the jerk) is left out, ≈ 2n·4e-7 ≈ 9e-10
+
+
+def _j2_acceleration(r):
+    r_norm = np.linalg.norm(r, axis=-1, keepdims=True)
+    z2 = (r[..., 2:3] / r_norm) ** 2
+    k = -1.5 * J2 * MU * 6378137.0**2 / r_norm**5
+    return -MU * r / r_norm**3 + k * r * np.concatenate([1 - 5 * z2, 1 - 5 * z2, 3 - 5 * z2], axis=-1)
+
+
+@pytest.fixture(scope="module")
+def j2_orbit():
+    """Dense J2 trajectory (scipy DOP853) of a slightly eccentric 600 km SSO-like orbit: t → r, v, a."""
+    from scipy.integrate import solve_ivp
+
+    r0, v0, _ = kepler_state(np.array([0.0]), a=R_ORBIT + 100e3, e=0.05, inc=np.radians(97.8))
+    sol = solve_ivp(lambda t, y: np.concatenate([y[3:], _j2_acceleration(y[:3])]), (0.0, 7000.0),
+                    np.concatenate([r0[0], v0[0]]), method="DOP853", rtol=1e-13, atol=1e-7, dense_output=True)
+
+    def state(t):
+        y = sol.sol(np.atleast_1d(t)).T
+        return y[:, :3], y[:, 3:], _j2_acceleration(y[:, :3])
+
+    return state
+
+
+def test_orf_rate_includes_the_orbit_plane_turn_under_j2(j2_orbit):
+    """Under J2 the ORF also turns about x^o (≈4e-7 rad/s): the program rate matches 2 Λ̃_o∘Λ̇_o."""
+    t, h = np.linspace(100.0, 6500.0, 33), 1.0
+
+    def orf_q(s):
+        r, v, _ = j2_orbit(s)
+        x = -r / np.linalg.norm(r, axis=1, keepdims=True)
+        z = np.cross(x, v)
+        z /= np.linalg.norm(z, axis=1, keepdims=True)
+        return qt.from_dcm(np.stack([x, np.cross(z, x), z], axis=-1))
+
+    stencil = np.stack([orf_q(t + k * h) for k in (-2, -1, 0, 1, 2)])
+    stencil = np.stack([_aligned(stencil[:, i]) for i in range(t.size)], axis=1)
+    q_dot = (stencil[0] - 8 * stencil[1] + 8 * stencil[3] - stencil[4]) / (12 * h)
+    w_truth = 2.0 * qt.multiply(qt.conjugate(stencil[2]), q_dot)[:, 1:]
+    r, v, a = j2_orbit(t)
+    _, w, wd = gd.orf_hold_program(r, v, a_eci_m_s2=a)
+    assert np.max(np.abs(w_truth[:, 0])) > 1e-7  # the x^o term (≈4e-7 rad/s) is really there
+    assert np.max(np.abs(w - w_truth)) < ODE_RATE_NOISE
+    w_of = lambda s: gd.orf_hold_program(*j2_orbit(s)[:2], a_eci_m_s2=j2_orbit(s)[2])[1]  # noqa: E731
+    wd_truth = (w_of(t - 2 * h) - 8 * w_of(t - h) + 8 * w_of(t + h) - w_of(t + 2 * h)) / (12 * h)
+    assert np.max(np.abs(wd[:, 2] - wd_truth[:, 2])) < ODE_RATE_NOISE / h
+    assert np.max(np.abs(wd - wd_truth)) < J2_JERK_TERM
+
+
 def test_orf_hold_with_offsets_is_kinematically_consistent():
     t = np.linspace(0.0, 6500.0, 25)
     program = lambda s: gd.orf_hold_program(*kepler_state(s)[:2], yaw_deg=5.0, roll_deg=20.0, pitch_deg=-7.0)  # noqa: E731
