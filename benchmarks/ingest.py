@@ -72,8 +72,10 @@ def bench_bulk(scales: list[int], workdir: Path) -> None:
     rng = np.random.default_rng(0)
     decode_stream(reference_stream(dictionary, 10, 1_750_000_000 * 10**9, rng), dictionary)  # compile kernels
     print("bulk ingest (SQLite, WAL, synchronous=FULL), one upload per file:")
-    print(f"{'scale':>6} {'packets':>9} {'samples':>11} {'decode s':>9} {'commit s':>9} "
-          f"{'commit Msamp/s':>15} {'end-to-end Msamp/s':>19} {'db MB':>7}")
+    print(
+        f"{'scale':>6} {'packets':>9} {'samples':>11} {'decode s':>9} {'commit s':>9} "
+        f"{'commit Msamp/s':>15} {'end-to-end Msamp/s':>19} {'db MB':>7}"
+    )
     for scale in scales:
         data = reference_stream(dictionary, BASE_SECONDS * scale, 1_750_000_000 * 10**9, rng)
         path = workdir / f"bulk_{scale}.sqlite"
@@ -86,8 +88,10 @@ def bench_bulk(scales: list[int], workdir: Path) -> None:
             t2 = time.perf_counter()
         samples = result.samples_accepted
         size_mb = sum(p.stat().st_size for p in workdir.glob(f"bulk_{scale}.sqlite*")) / 1e6
-        print(f"{scale:>5}x {result.packets_accepted:>9,} {samples:>11,} {t1 - t0:>9.3f} {t2 - t1:>9.3f} "
-              f"{samples / (t2 - t1) / 1e6:>15.2f} {samples / (t2 - t0) / 1e6:>19.2f} {size_mb:>7.1f}")
+        print(
+            f"{scale:>5}x {result.packets_accepted:>9,} {samples:>11,} {t1 - t0:>9.3f} {t2 - t1:>9.3f} "
+            f"{samples / (t2 - t1) / 1e6:>15.2f} {samples / (t2 - t0) / 1e6:>19.2f} {size_mb:>7.1f}"
+        )
 
 
 def bench_row_layout(workdir: Path) -> None:
@@ -100,7 +104,9 @@ def bench_row_layout(workdir: Path) -> None:
     db = sqlite3.connect(workdir / "rows.sqlite", isolation_level=None)
     db.execute("PRAGMA journal_mode=WAL")
     db.execute("PRAGMA synchronous=FULL")
-    db.execute("CREATE TABLE sample (parameter INTEGER, t_ns INTEGER, value REAL, PRIMARY KEY (parameter, t_ns)) WITHOUT ROWID")
+    db.execute(
+        "CREATE TABLE sample (parameter INTEGER, t_ns INTEGER, value REAL, PRIMARY KEY (parameter, t_ns)) WITHOUT ROWID"
+    )
     start = time.perf_counter()
     db.execute("BEGIN IMMEDIATE")
     for k in range(n_params):
@@ -108,12 +114,16 @@ def bench_row_layout(workdir: Path) -> None:
     db.execute("COMMIT")
     insert_s = time.perf_counter() - start
     start = time.perf_counter()
-    rows = db.execute("SELECT t_ns, value FROM sample WHERE parameter = 3 AND t_ns BETWEEN ? AND ?", (int(t[0]), int(t[-1]))).fetchall()
+    rows = db.execute(
+        "SELECT t_ns, value FROM sample WHERE parameter = 3 AND t_ns BETWEEN ? AND ?", (int(t[0]), int(t[-1]))
+    ).fetchall()
     np.array(rows)
     query_s = time.perf_counter() - start
     db.close()
-    print(f"row-per-sample layout (not used): insert {n_packets * n_params / insert_s / 1e6:.2f} M samples/s, "
-          f"reading one 2-h parameter {query_s * 1e3:.1f} ms")
+    print(
+        f"row-per-sample layout (not used): insert {n_packets * n_params / insert_s / 1e6:.2f} M samples/s, "
+        f"reading one 2-h parameter {query_s * 1e3:.1f} ms"
+    )
 
 
 def bench_query(workdir: Path) -> None:
@@ -124,7 +134,9 @@ def bench_query(workdir: Path) -> None:
     t0_ns = 1_750_000_000 * 10**9
     t = t0_ns + np.arange(n, dtype=np.int64) * 250_000_000
     rng = np.random.default_rng(1)
-    decoded = decode_stream(encode_packets(hk, t, np.arange(n) % 16_384, plausible_values(hk, n, rng)).tobytes(), dictionary)
+    decoded = decode_stream(
+        encode_packets(hk, t, np.arange(n) % 16_384, plausible_values(hk, n, rng)).tobytes(), dictionary
+    )
     with Archive(f"sqlite:///{workdir / 'query.sqlite'}") as archive:
         archive.ingest_decoded("REF", decoded, uploaded_by="bench")
         durations = []
@@ -133,8 +145,10 @@ def bench_query(workdir: Path) -> None:
             stats = downsample(archive, "REF", "omega_est_b_rad_s_x", int(t[0]), int(t[-1]), 1_000)
             durations.append(time.perf_counter() - start)
     ms = np.array(durations) * 1e3
-    print(f"query: {int(stats.count.sum()):,} samples (2 h at 4 Hz) -> 1,000 buckets: "
-          f"median {np.median(ms):.2f} ms, p95 {np.percentile(ms, 95):.2f} ms, max {ms.max():.2f} ms (target < 20 ms)")
+    print(
+        f"query: {int(stats.count.sum()):,} samples (2 h at 4 Hz) -> 1,000 buckets: "
+        f"median {np.median(ms):.2f} ms, p95 {np.percentile(ms, 95):.2f} ms, max {ms.max():.2f} ms (target < 20 ms)"
+    )
 
 
 def live_definition() -> Dictionary:
@@ -143,7 +157,9 @@ def live_definition() -> Dictionary:
     header_bits = 8 * (6 + reference.time_code.octets)
     params = tuple(Parameter(f"p{k:02d}", "float", header_bits + 32 * k, 32) for k in range(LIVE_PARAMETERS))
     octets = (header_bits + 32 * LIVE_PARAMETERS) // 8 + 2
-    return Dictionary("live-bench", {300: PacketDefinition("BENCH", 300, octets, params, reference.time_code, crc=True)})
+    return Dictionary(
+        "live-bench", {300: PacketDefinition("BENCH", 300, octets, params, reference.time_code, crc=True)}
+    )
 
 
 def live_sender(port: int, seconds: float) -> None:
@@ -188,7 +204,12 @@ async def live_run(seconds: float, workdir: Path) -> tuple[np.ndarray, int, int,
     consumer.cancel()
     archive.close()
     received = sum(a.size for a in latencies)
-    return np.concatenate(latencies) if latencies else np.zeros(0), received, subscriber.dropped_packets_total, stream.stats.packets_archived
+    return (
+        np.concatenate(latencies) if latencies else np.zeros(0),
+        received,
+        subscriber.dropped_packets_total,
+        stream.stats.packets_archived,
+    )
 
 
 def bench_live(seconds: float, workdir: Path) -> None:
@@ -196,11 +217,15 @@ def bench_live(seconds: float, workdir: Path) -> None:
     decode_stream(b"", live_definition())
     latency_ms, received, dropped, archived = asyncio.run(live_run(seconds, workdir))
     sent = int(seconds / (LIVE_BURST / LIVE_RATE_HZ)) * LIVE_BURST
-    print(f"live: {LIVE_RATE_HZ:,} packets/s x {LIVE_PARAMETERS} parameters for {seconds:.0f} s: sent {sent:,}, "
-          f"delivered {received:,}, dropped {dropped}, archived {archived:,}")
+    print(
+        f"live: {LIVE_RATE_HZ:,} packets/s x {LIVE_PARAMETERS} parameters for {seconds:.0f} s: sent {sent:,}, "
+        f"delivered {received:,}, dropped {dropped}, archived {archived:,}"
+    )
     if latency_ms.size:
-        print(f"      packet-to-subscriber latency: p50 {np.percentile(latency_ms, 50):.1f} ms, "
-              f"p99 {np.percentile(latency_ms, 99):.1f} ms, max {latency_ms.max():.1f} ms (target p99 < 100 ms)")
+        print(
+            f"      packet-to-subscriber latency: p50 {np.percentile(latency_ms, 50):.1f} ms, "
+            f"p99 {np.percentile(latency_ms, 99):.1f} ms, max {latency_ms.max():.1f} ms (target p99 < 100 ms)"
+        )
 
 
 def main() -> None:

@@ -47,9 +47,7 @@ class LimitSet:
         if any(math.isnan(b) for b in bounds):
             raise ValueError("limits: a limit is NaN (use +/-inf for 'no limit')")
         if not self.red_low <= self.yellow_low <= self.yellow_high <= self.red_high:
-            raise ValueError(
-                f"limits: need red_low <= yellow_low <= yellow_high <= red_high, got {bounds}"
-            )
+            raise ValueError(f"limits: need red_low <= yellow_low <= yellow_high <= red_high, got {bounds}")
 
 
 def limit_levels(values: np.ndarray, limits: LimitSet) -> np.ndarray:
@@ -71,7 +69,9 @@ def level_changes(levels: np.ndarray, initial_level: int = NOMINAL) -> np.ndarra
     return np.flatnonzero(lv != previous)
 
 
-def limit_set(red_low: float | None, yellow_low: float | None, yellow_high: float | None, red_high: float | None) -> LimitSet:
+def limit_set(
+    red_low: float | None, yellow_low: float | None, yellow_high: float | None, red_high: float | None
+) -> LimitSet:
     """LimitSet from optional bounds (None = none); a missing yellow bound falls back to the red one."""
     rl = -math.inf if red_low is None else float(red_low)
     rh = math.inf if red_high is None else float(red_high)

@@ -233,8 +233,13 @@ class LiveStream:
             source = f"live:{self._satellite}:{time.time_ns()}:{self._flush_count}"
             try:
                 result = await asyncio.to_thread(
-                    self._archive.ingest, self._satellite, packet_batches, source=source,
-                    uploaded_by=self._uploaded_by, limits=self._limits)
+                    self._archive.ingest,
+                    self._satellite,
+                    packet_batches,
+                    source=source,
+                    uploaded_by=self._uploaded_by,
+                    limits=self._limits,
+                )
             except Exception as error:  # the database may be away: keep the data, retry next time
                 self.stats.archive_errors += 1
                 self.stats.last_archive_error = repr(error)

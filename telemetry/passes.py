@@ -49,7 +49,14 @@ class PredictedPasses:
 
     def rows(self) -> list[tuple[int, int, int, float]]:
         """(aos_ns, los_ns, max_elevation_ns, max_elevation_deg) tuples for ``Archive.save_passes``."""
-        return list(zip(self.aos_ns.tolist(), self.los_ns.tolist(), self.max_elevation_ns.tolist(), self.max_elevation_deg.tolist()))
+        return list(
+            zip(
+                self.aos_ns.tolist(),
+                self.los_ns.tolist(),
+                self.max_elevation_ns.tolist(),
+                self.max_elevation_deg.tolist(),
+            )
+        )
 
     def __iter__(self) -> Iterator[tuple[int, int, int, float]]:
         return iter(self.rows())
@@ -58,12 +65,16 @@ class PredictedPasses:
         return int(self.aos_ns.size)
 
 
-def elevation_deg(line1: str, line2: str, lat_deg: float, lon_deg: float, alt_m: float, t_unix_s: np.ndarray) -> np.ndarray:
+def elevation_deg(
+    line1: str, line2: str, lat_deg: float, lon_deg: float, alt_m: float, t_unix_s: np.ndarray
+) -> np.ndarray:
     """Geometric elevation (deg) of the TLE's satellite seen from a WGS84 site (SGP4, AIAA 2006-6753)."""
     return _elevation_function(line1, line2, lat_deg, lon_deg, alt_m)(np.asarray(t_unix_s, dtype=float))
 
 
-def _elevation_function(line1: str, line2: str, lat_deg: float, lon_deg: float, alt_m: float) -> Callable[[np.ndarray], np.ndarray]:
+def _elevation_function(
+    line1: str, line2: str, lat_deg: float, lon_deg: float, alt_m: float
+) -> Callable[[np.ndarray], np.ndarray]:
     satrec = orbit.parse_tle(line1, line2)
     site = frames.geodetic_to_ecef(lat_deg, lon_deg, alt_m)
     lat, lon = np.radians(lat_deg), np.radians(lon_deg)
@@ -80,7 +91,14 @@ def _elevation_function(line1: str, line2: str, lat_deg: float, lon_deg: float, 
 
 
 def predict_passes(
-    line1: str, line2: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float, start_utc_ns: int, days: float
+    line1: str,
+    line2: str,
+    lat_deg: float,
+    lon_deg: float,
+    alt_m: float,
+    min_elevation_deg: float,
+    start_utc_ns: int,
+    days: float,
 ) -> PredictedPasses:
     """Passes with AOS and LOS inside [start, start + days] (SGP4, AIAA 2006-6753; skyfield's method)."""
     if not days > 0.0:
@@ -100,9 +118,16 @@ def predict_passes(
     below = el < min_elevation_deg
     position = np.searchsorted(t, t_max)
     last_below = np.maximum.accumulate(np.where(below, np.arange(t.size), -1))[position - 1]
-    next_below = np.minimum.accumulate(np.where(below, np.arange(t.size), t.size)[::-1])[::-1][np.minimum(position, t.size - 1)]
+    next_below = np.minimum.accumulate(np.where(below, np.arange(t.size), t.size)[::-1])[::-1][
+        np.minimum(position, t.size - 1)
+    ]
     complete = (last_below >= 0) & (next_below < t.size)
-    t_max, el_max, last_below, next_below = t_max[complete], el_max[complete], last_below[complete], next_below[complete]
+    t_max, el_max, last_below, next_below = (
+        t_max[complete],
+        el_max[complete],
+        last_below[complete],
+        next_below[complete],
+    )
     crossing = lambda s: elevation(s) - min_elevation_deg  # noqa: E731
     aos = _bisect_crossing(crossing, t[last_below], t_max)
     los = _bisect_crossing(crossing, t[next_below], t_max)
@@ -120,7 +145,9 @@ def predict_station_passes(line1: str, line2: str, station: StationRecord, t0_ns
     if t1_ns <= t0_ns:
         raise ValueError(f"t1_ns: {t1_ns} must be after t0_ns {t0_ns}")
     days = (t1_ns - t0_ns) / (SECONDS_PER_DAY * NS_PER_S)
-    return predict_passes(line1, line2, station.lat_deg, station.lon_deg, station.alt_m, station.min_elevation_deg, t0_ns, days)
+    return predict_passes(
+        line1, line2, station.lat_deg, station.lon_deg, station.alt_m, station.min_elevation_deg, t0_ns, days
+    )
 
 
 def _golden_maximum(f: Callable[[np.ndarray], np.ndarray], a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -133,7 +160,12 @@ def _golden_maximum(f: Callable[[np.ndarray], np.ndarray], a: np.ndarray, b: np.
         a, b = np.where(left, a, c), np.where(left, d, b)
         new = np.where(left, b - GOLDEN * (b - a), a + GOLDEN * (b - a))
         f_new = f(new)
-        c, d, fc, fd = (np.where(left, new, d), np.where(left, c, new), np.where(left, f_new, fd), np.where(left, fc, f_new))
+        c, d, fc, fd = (
+            np.where(left, new, d),
+            np.where(left, c, new),
+            np.where(left, f_new, fd),
+            np.where(left, fc, f_new),
+        )
     return 0.5 * (a + b)
 
 
@@ -168,5 +200,18 @@ def record_reception(archive: Archive, satellite: str, passes: list[PassRecord])
         ends = [int(t[-1]) for t, _ in keys.values() if t.size]
         span = (min(starts), max(ends)) if starts else (None, None)
         archive.record_reception(p.id, span[0], span[1], received, missing)
-        updated.append(PassRecord(p.id, p.station, p.aos_ns, p.los_ns, p.max_elevation_ns, p.max_elevation_deg, span[0], span[1], received, missing))
+        updated.append(
+            PassRecord(
+                p.id,
+                p.station,
+                p.aos_ns,
+                p.los_ns,
+                p.max_elevation_ns,
+                p.max_elevation_deg,
+                span[0],
+                span[1],
+                received,
+                missing,
+            )
+        )
     return updated

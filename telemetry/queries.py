@@ -19,7 +19,16 @@ import pyarrow.parquet as pq
 
 from telemetry.archive import Archive
 
-__all__ = ["Downsampled", "bucket_statistics", "downsample", "latest_values", "pass_summary", "export_table", "export_csv", "export_parquet"]
+__all__ = [
+    "Downsampled",
+    "bucket_statistics",
+    "downsample",
+    "latest_values",
+    "pass_summary",
+    "export_table",
+    "export_csv",
+    "export_parquet",
+]
 
 
 @dataclass(frozen=True)
@@ -82,8 +91,17 @@ def pass_summary(archive: Archive, satellite: str, pass_id: int) -> dict[str, An
         _, v = archive.read_parameter(satellite, name, record.aos_ns, record.los_ns)
         if v.size:
             vf = v.astype(np.float64)
-            parameters[name] = {"count": int(v.size), "min": float(np.nanmin(vf)), "max": float(np.nanmax(vf)), "mean": float(np.nanmean(vf))}
-    alarms = [a for a in archive.alarms(satellite, include_cleared=True) if a.first_t_ns <= record.los_ns and a.last_t_ns >= record.aos_ns]
+            parameters[name] = {
+                "count": int(v.size),
+                "min": float(np.nanmin(vf)),
+                "max": float(np.nanmax(vf)),
+                "mean": float(np.nanmean(vf)),
+            }
+    alarms = [
+        a
+        for a in archive.alarms(satellite, include_cleared=True)
+        if a.first_t_ns <= record.los_ns and a.last_t_ns >= record.aos_ns
+    ]
     return {
         "pass": record,
         "completeness": record.completeness,

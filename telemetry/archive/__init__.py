@@ -2,7 +2,15 @@
 
 from telemetry.archive.batch import PacketBatch, sequence_gaps
 from telemetry.archive.migrate import upgrade
-from telemetry.archive.records import AlarmEventRecord, AlarmRecord, Gap, IngestResult, PassRecord, StationRecord, UploadRecord
+from telemetry.archive.records import (
+    AlarmEventRecord,
+    AlarmRecord,
+    Gap,
+    IngestResult,
+    PassRecord,
+    StationRecord,
+    UploadRecord,
+)
 from telemetry.archive.store import Archive
 
 __all__ = [

@@ -63,15 +63,26 @@ def apply_level_changes(conn: Connection, satellite_id: int, upload_id: int, cha
 
 
 def _apply_parameter(
-    conn: Connection, satellite_id: int, upload_id: int, name: str, changes: list[LevelChange], open_alarm: tuple[int, int] | None
+    conn: Connection,
+    satellite_id: int,
+    upload_id: int,
+    name: str,
+    changes: list[LevelChange],
+    open_alarm: tuple[int, int] | None,
 ) -> list[dict]:
     events: list[dict] = []
     alarm = _load(conn, open_alarm[0]) if open_alarm else None
     for change in changes:
         severity = SEVERITY_NAMES[change.level]
         if change.level > NOMINAL and alarm is None:
-            alarm = {"id": None, "state": "active", "severity": severity, "level": change.level,
-                     "first_t_ns": change.t_ns, "last_t_ns": change.t_ns}
+            alarm = {
+                "id": None,
+                "state": "active",
+                "severity": severity,
+                "level": change.level,
+                "first_t_ns": change.t_ns,
+                "last_t_ns": change.t_ns,
+            }
             alarm["id"] = _create(conn, satellite_id, name, alarm)
         elif alarm is None:
             continue
@@ -94,15 +105,20 @@ def _apply_parameter(
 
 def _load(conn: Connection, alarm_id: int) -> dict:
     row = conn.execute(
-        select(ALARM.c.id, ALARM.c.state, ALARM.c.severity, ALARM.c.level, ALARM.c.first_t_ns, ALARM.c.last_t_ns)
-        .where(ALARM.c.id == alarm_id)
+        select(ALARM.c.id, ALARM.c.state, ALARM.c.severity, ALARM.c.level, ALARM.c.first_t_ns, ALARM.c.last_t_ns).where(
+            ALARM.c.id == alarm_id
+        )
     ).one()
     return dict(row._mapping)
 
 
 def _create(conn: Connection, satellite_id: int, name: str, alarm: dict) -> int:
     values = {k: v for k, v in alarm.items() if k != "id"}
-    return int(conn.execute(insert(ALARM).values(satellite_id=satellite_id, parameter=name, **values).returning(ALARM.c.id)).scalar_one())
+    return int(
+        conn.execute(
+            insert(ALARM).values(satellite_id=satellite_id, parameter=name, **values).returning(ALARM.c.id)
+        ).scalar_one()
+    )
 
 
 def _save(conn: Connection, alarm: dict) -> None:
@@ -110,13 +126,30 @@ def _save(conn: Connection, alarm: dict) -> None:
     conn.execute(update(ALARM).where(ALARM.c.id == alarm["id"]).values(**values))
 
 
-def _event(alarm_id: int, upload_id: int | None, t_ns: int, kind: str, severity: str | None, value: float | None, actor: str | None) -> dict:
+def _event(
+    alarm_id: int,
+    upload_id: int | None,
+    t_ns: int,
+    kind: str,
+    severity: str | None,
+    value: float | None,
+    actor: str | None,
+) -> dict:
     value_f = None if value is None or not np.isfinite(value) else float(value)
-    return {"alarm_id": alarm_id, "upload_id": upload_id, "t_ns": int(t_ns), "kind": kind,
-            "severity": severity, "value": value_f, "actor": actor}
+    return {
+        "alarm_id": alarm_id,
+        "upload_id": upload_id,
+        "t_ns": int(t_ns),
+        "kind": kind,
+        "severity": severity,
+        "value": value_f,
+        "actor": actor,
+    }
 
 
-def operator_action(conn: Connection, alarm_id: int, action: str, actor: str, t_ns: int, shelved_until_ns: int | None = None) -> None:
+def operator_action(
+    conn: Connection, alarm_id: int, action: str, actor: str, t_ns: int, shelved_until_ns: int | None = None
+) -> None:
     """Acknowledge, shelve, unshelve or clear an alarm on behalf of ``actor``."""
     if not actor:
         raise ValueError("actor: an operator name is required for alarm actions")

@@ -95,7 +95,9 @@ class PacketBatch:
         byte_index = np.repeat(starts[index] - out_starts, lengths) + np.arange(int(lengths.sum()))
         joined = np.frombuffer(self.raw, dtype=np.uint8)[byte_index].tobytes()
         values = {name: np.asarray(col)[index] for name, col in self.values.items()}
-        return PacketBatch(self.apid, self.t_utc_ns[index], self.seq_count[index], joined, self.raw_lengths[index], values)
+        return PacketBatch(
+            self.apid, self.t_utc_ns[index], self.seq_count[index], joined, self.raw_lengths[index], values
+        )
 
 
 def sequence_gaps(seq_count: np.ndarray) -> np.ndarray:

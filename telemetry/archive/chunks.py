@@ -1,8 +1,10 @@
 """Column codecs of the archive: numpy arrays <-> compressed bytes (zstd level 1).
 
-Integer columns (times, sequence counts, lengths) are delta-encoded before compression (a 1 Hz stream compresses ~10,000:1); values are
-stored in their native dtype.  zstd level 1 compresses float64 at ~80 M samples/s here, zlib
-level 1 at ~5 M samples/s, which is why the archive depends on ``zstandard``.
+Integer columns (times, sequence counts, lengths) are delta-encoded before compression (a 1 Hz
+stream compresses ~10,000:1); values are stored in the narrowest dtype that holds them exactly
+and read back in the dtype they were given in.  zstd level 1 compresses float64 at ~80 M
+samples/s here, zlib level 1 at ~5 M samples/s, which is why the archive depends on
+``zstandard``.
 """
 
 from __future__ import annotations
@@ -10,7 +12,15 @@ from __future__ import annotations
 import numpy as np
 import zstandard
 
-__all__ = ["narrowest_exact", "encode_int64", "decode_int64", "encode_values", "decode_values", "encode_raw", "decode_raw"]
+__all__ = [
+    "narrowest_exact",
+    "encode_int64",
+    "decode_int64",
+    "encode_values",
+    "decode_values",
+    "encode_raw",
+    "decode_raw",
+]
 
 ZSTD_LEVEL = 1  # fastest level: ingest throughput matters more than a few % of disk
 STORABLE_KINDS = "biuf"  # bool, signed, unsigned, float: what min/max and limits make sense on

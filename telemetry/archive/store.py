@@ -108,7 +108,9 @@ class Archive:
         self._satellite_ids[name] = int(found)
         return int(found)
 
-    def add_ground_station(self, name: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float) -> int:
+    def add_ground_station(
+        self, name: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float
+    ) -> int:
         """Register (or update) a ground station; returns its id."""
         if not -90.0 <= lat_deg <= 90.0:
             raise ValueError(f"lat_deg: {lat_deg} outside -90..90")
@@ -136,7 +138,9 @@ class Archive:
         """Store a TLE of ``satellite`` (idempotent on its epoch); returns its id."""
         sat_id = self.satellite_id(satellite)
         with self._writer.begin() as conn:
-            found = conn.execute(select(TLE.c.id).where(TLE.c.satellite_id == sat_id, TLE.c.epoch_ns == epoch_ns)).scalar()
+            found = conn.execute(
+                select(TLE.c.id).where(TLE.c.satellite_id == sat_id, TLE.c.epoch_ns == epoch_ns)
+            ).scalar()
             if found is not None:
                 return int(found)
             row = {"satellite_id": sat_id, "epoch_ns": int(epoch_ns), "line1": line1, "line2": line2}
@@ -174,14 +178,18 @@ class Archive:
         sat_id = self.satellite_id(satellite)
         with self._writer.begin() as conn:
             self._lock_satellite(conn, sat_id)
-            existing = conn.execute(select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == checksum)).scalar()
+            existing = conn.execute(
+                select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == checksum)
+            ).scalar()
             if existing is not None:
                 return IngestResult(upload_id=int(existing), duplicate_upload=True)
             upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, checksum)
             result = self._write_batches(conn, sat_id, upload_id, _merge_by_apid(batches), limits or {})
             report = {**result.as_report(), "decode": dict(decode_report or {})}
             conn.execute(
-                update(UPLOAD).where(UPLOAD.c.id == upload_id).values(
+                update(UPLOAD)
+                .where(UPLOAD.c.id == upload_id)
+                .values(
                     packets_accepted=result.packets_accepted,
                     samples_accepted=result.samples_accepted,
                     report_json=json.dumps(report),
@@ -200,16 +208,31 @@ class Archive:
     ) -> IngestResult:
         """Commit a decoder result (telemetry.decoding) as one upload, keeping its report."""
         batches = [PacketBatch.from_sample_batch(b) for b in decoded.batches]
-        return self.ingest(satellite, batches, source=decoded.report.source, uploaded_by=uploaded_by, sha256=sha256,
-                           limits=limits, decode_report=decoded.report.to_dict())
+        return self.ingest(
+            satellite,
+            batches,
+            source=decoded.report.source,
+            uploaded_by=uploaded_by,
+            sha256=sha256,
+            limits=limits,
+            decode_report=decoded.report.to_dict(),
+        )
 
     def _lock_satellite(self, conn: Connection, sat_id: int) -> None:
         if self._is_postgres:
             conn.execute(select(SAT.c.id).where(SAT.c.id == sat_id).with_for_update())
 
     def _insert_upload(self, conn: Connection, sat_id: int, source: str, uploaded_by: str, checksum: str) -> int:
-        row = {"satellite_id": sat_id, "uploaded_by": uploaded_by, "uploaded_at_ns": _now_ns(), "source": source,
-               "sha256": checksum, "packets_accepted": 0, "samples_accepted": 0, "report_json": "{}"}
+        row = {
+            "satellite_id": sat_id,
+            "uploaded_by": uploaded_by,
+            "uploaded_at_ns": _now_ns(),
+            "source": source,
+            "sha256": checksum,
+            "packets_accepted": 0,
+            "samples_accepted": 0,
+            "report_json": "{}",
+        }
         return int(conn.execute(insert(UPLOAD).values(**row).returning(UPLOAD.c.id)).scalar_one())
 
     def _write_batches(
@@ -247,16 +270,20 @@ class Archive:
         is_dup[candidates] = [(a, b) in archived for a, b in zip(t[candidates].tolist(), seq[candidates].tolist())]
         return batch.take(np.flatnonzero(~is_dup)), int(is_dup.sum())
 
-    def _packet_keys(self, conn: Connection, sat_id: int, apid: int, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    def _packet_keys(
+        self, conn: Connection, sat_id: int, apid: int, t0_ns: int, t1_ns: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         rows = conn.execute(
             select(CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
-                CHUNK.c.satellite_id == sat_id, CHUNK.c.apid == apid, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns
+                CHUNK.c.satellite_id == sat_id,
+                CHUNK.c.apid == apid,
+                CHUNK.c.t_start_ns <= t1_ns,
+                CHUNK.c.t_end_ns >= t0_ns,
             )
         ).all()
         if not rows:
             return np.empty(0, np.int64), np.empty(0, np.int64)
-        return (np.concatenate([decode_int64(r[0]) for r in rows]),
-                np.concatenate([decode_int64(r[1]) for r in rows]))
+        return (np.concatenate([decode_int64(r[0]) for r in rows]), np.concatenate([decode_int64(r[1]) for r in rows]))
 
     def _write_chunks(self, conn: Connection, sat_id: int, upload_id: int, batch: PacketBatch) -> None:
         param_ids = self._parameter_ids(conn, sat_id, batch.apid, list(batch.values))
@@ -265,15 +292,23 @@ class Archive:
         byte_ends = np.concatenate(([0], np.cumsum(batch.raw_lengths)))
         chunk_rows = []
         for lo, hi in zip(bounds[:-1], bounds[1:]):
-            chunk_rows.append({
-                "satellite_id": sat_id, "upload_id": upload_id, "apid": batch.apid,
-                "t_start_ns": int(batch.t_utc_ns[lo]), "t_end_ns": int(batch.t_utc_ns[hi - 1]), "n_packets": hi - lo,
-                "t_blob": encode_int64(batch.t_utc_ns[lo:hi]),
-                "seq_blob": encode_int64(batch.seq_count[lo:hi]),
-                "length_blob": encode_int64(batch.raw_lengths[lo:hi]),
-                "raw_blob": encode_raw(raw[byte_ends[lo]:byte_ends[hi]].tobytes()),
-            })
-        chunk_ids = conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
+            chunk_rows.append(
+                {
+                    "satellite_id": sat_id,
+                    "upload_id": upload_id,
+                    "apid": batch.apid,
+                    "t_start_ns": int(batch.t_utc_ns[lo]),
+                    "t_end_ns": int(batch.t_utc_ns[hi - 1]),
+                    "n_packets": hi - lo,
+                    "t_blob": encode_int64(batch.t_utc_ns[lo:hi]),
+                    "seq_blob": encode_int64(batch.seq_count[lo:hi]),
+                    "length_blob": encode_int64(batch.raw_lengths[lo:hi]),
+                    "raw_blob": encode_raw(raw[byte_ends[lo] : byte_ends[hi]].tobytes()),
+                }
+            )
+        chunk_ids = (
+            conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
+        )
         value_rows = []
         for name, column in batch.values.items():
             for chunk_id, lo, hi in zip(chunk_ids, bounds[:-1], bounds[1:]):
@@ -282,7 +317,11 @@ class Archive:
             conn.execute(insert(VALUE), value_rows)
 
     def _parameter_ids(self, conn: Connection, sat_id: int, apid: int, names: list[str]) -> dict[str, int]:
-        rows = conn.execute(select(PARAM.c.name, PARAM.c.id, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(names)))
+        rows = conn.execute(
+            select(PARAM.c.name, PARAM.c.id, PARAM.c.apid).where(
+                PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(names)
+            )
+        )
         ids = {}
         for name, param_id, param_apid in rows:
             if param_apid != apid:
@@ -290,7 +329,9 @@ class Archive:
             ids[name] = int(param_id)
         missing = [{"satellite_id": sat_id, "name": n, "apid": apid} for n in names if n not in ids]
         if missing:
-            new_ids = conn.execute(insert(PARAM).returning(PARAM.c.id, sort_by_parameter_order=True), missing).scalars().all()
+            new_ids = (
+                conn.execute(insert(PARAM).returning(PARAM.c.id, sort_by_parameter_order=True), missing).scalars().all()
+            )
             ids.update({row["name"]: int(i) for row, i in zip(missing, new_ids)})
         return ids
 
@@ -307,14 +348,21 @@ class Archive:
             raise ValueError(f"t1_ns: {t1_ns} is before t0_ns {t0_ns}")
         sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
-            param = conn.execute(select(PARAM.c.id, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id, PARAM.c.name == name)).one_or_none()
+            param = conn.execute(
+                select(PARAM.c.id, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id, PARAM.c.name == name)
+            ).one_or_none()
             if param is None:
                 raise ValueError(f"name: no parameter {name!r} archived for {satellite!r}")
             rows = conn.execute(
                 select(CHUNK.c.t_blob, VALUE.c.dtype, VALUE.c.v_blob)
                 .join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
-                .where(CHUNK.c.satellite_id == sat_id, CHUNK.c.apid == param.apid, VALUE.c.parameter_id == param.id,
-                       CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
+                .where(
+                    CHUNK.c.satellite_id == sat_id,
+                    CHUNK.c.apid == param.apid,
+                    VALUE.c.parameter_id == param.id,
+                    CHUNK.c.t_start_ns <= t1_ns,
+                    CHUNK.c.t_end_ns >= t0_ns,
+                )
                 .order_by(CHUNK.c.t_start_ns)
             ).all()
         if not rows:
@@ -334,8 +382,11 @@ class Archive:
             latest = {}
             for param_id, name in params:
                 row = conn.execute(
-                    select(CHUNK.c.t_blob, VALUE.c.dtype, VALUE.c.v_blob).join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
-                    .where(VALUE.c.parameter_id == param_id).order_by(CHUNK.c.t_end_ns.desc()).limit(1)
+                    select(CHUNK.c.t_blob, VALUE.c.dtype, VALUE.c.v_blob)
+                    .join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
+                    .where(VALUE.c.parameter_id == param_id)
+                    .order_by(CHUNK.c.t_end_ns.desc())
+                    .limit(1)
                 ).one()
                 t, v = decode_int64(row[0]), decode_values(row[1], row[2])
                 i = int(np.argmax(t))
@@ -344,11 +395,14 @@ class Archive:
             raise ValueError(f"names: not archived: {sorted(unknown)}")
         return latest
 
-    def packet_keys(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+    def packet_keys(
+        self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None
+    ) -> dict[int, tuple[np.ndarray, np.ndarray]]:
         """Per APID, time-ordered (t_utc_ns, seq_count) of archived packets in [t0_ns, t1_ns]."""
         sat_id = self._known_satellite(satellite)
         query = select(CHUNK.c.apid, CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
-            CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
+            CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns
+        )
         if apid is not None:
             query = query.where(CHUNK.c.apid == apid)
         with self.engine.connect() as conn:
@@ -356,14 +410,19 @@ class Archive:
         per_apid: dict[int, list] = {}
         for row_apid, t_blob, seq_blob in rows:
             per_apid.setdefault(int(row_apid), []).append((decode_int64(t_blob), decode_int64(seq_blob)))
-        return {a: _ordered_window(np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), t0_ns, t1_ns)
-                for a, parts in per_apid.items()}
+        return {
+            a: _ordered_window(
+                np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]), t0_ns, t1_ns
+            )
+            for a, parts in per_apid.items()
+        }
 
     def replay(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> list[tuple[int, bytes]]:
         """Archived raw packets (t_utc_ns, bytes) in [t0_ns, t1_ns], time-ordered, byte-exact."""
         sat_id = self._known_satellite(satellite)
         query = select(CHUNK.c.t_blob, CHUNK.c.length_blob, CHUNK.c.raw_blob).where(
-            CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns)
+            CHUNK.c.satellite_id == sat_id, CHUNK.c.t_start_ns <= t1_ns, CHUNK.c.t_end_ns >= t0_ns
+        )
         if apid is not None:
             query = query.where(CHUNK.c.apid == apid)
         out: list[tuple[int, bytes]] = []
@@ -371,7 +430,11 @@ class Archive:
             for t_blob, length_blob, raw_blob in conn.execute(query):
                 t, lengths, raw = decode_int64(t_blob), decode_int64(length_blob), decode_raw(raw_blob)
                 ends = np.cumsum(lengths)
-                out.extend((int(ti), raw[e - n:e]) for ti, e, n in zip(t.tolist(), ends.tolist(), lengths.tolist()) if t0_ns <= ti <= t1_ns)
+                out.extend(
+                    (int(ti), raw[e - n : e])
+                    for ti, e, n in zip(t.tolist(), ends.tolist(), lengths.tolist())
+                    if t0_ns <= ti <= t1_ns
+                )
         out.sort(key=lambda item: item[0])
         return out
 
@@ -380,16 +443,31 @@ class Archive:
         sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             rows = conn.execute(select(UPLOAD).where(UPLOAD.c.satellite_id == sat_id).order_by(UPLOAD.c.id)).all()
-        return [UploadRecord(r.id, r.uploaded_by, r.uploaded_at_ns, r.source, r.sha256, r.packets_accepted,
-                             r.samples_accepted, json.loads(r.report_json)) for r in rows]
+        return [
+            UploadRecord(
+                r.id,
+                r.uploaded_by,
+                r.uploaded_at_ns,
+                r.source,
+                r.sha256,
+                r.packets_accepted,
+                r.samples_accepted,
+                json.loads(r.report_json),
+            )
+            for r in rows
+        ]
 
     def upload_contents(self, upload_id: int) -> tuple[int, int]:
         """(packets, samples) actually stored for an upload (to audit it against its report)."""
         with self.engine.connect() as conn:
-            packets = conn.execute(select(func.coalesce(func.sum(CHUNK.c.n_packets), 0)).where(CHUNK.c.upload_id == upload_id)).scalar_one()
+            packets = conn.execute(
+                select(func.coalesce(func.sum(CHUNK.c.n_packets), 0)).where(CHUNK.c.upload_id == upload_id)
+            ).scalar_one()
             chunks = conn.execute(select(CHUNK.c.id, CHUNK.c.n_packets).where(CHUNK.c.upload_id == upload_id)).all()
             n_by_chunk = {cid: n for cid, n in chunks}
-            value_chunks = conn.execute(select(VALUE.c.chunk_id).where(VALUE.c.chunk_id.in_(list(n_by_chunk)))).scalars().all()
+            value_chunks = (
+                conn.execute(select(VALUE.c.chunk_id).where(VALUE.c.chunk_id.in_(list(n_by_chunk)))).scalars().all()
+            )
         return int(packets), int(sum(n_by_chunk[c] for c in value_chunks))
 
     # --- alarms --------------------------------------------------------------------------
@@ -407,25 +485,46 @@ class Archive:
     def alarm_events(self, alarm_id: int) -> list[AlarmEventRecord]:
         """Events of one alarm in the order they happened."""
         with self.engine.connect() as conn:
-            rows = conn.execute(select(EVENT).where(EVENT.c.alarm_id == alarm_id).order_by(EVENT.c.t_ns, EVENT.c.id)).all()
+            rows = conn.execute(
+                select(EVENT).where(EVENT.c.alarm_id == alarm_id).order_by(EVENT.c.t_ns, EVENT.c.id)
+            ).all()
         return [AlarmEventRecord(r.alarm_id, r.t_ns, r.kind, r.severity, r.value, r.actor) for r in rows]
 
-    def alarm_action(self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None) -> None:
+    def alarm_action(
+        self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None
+    ) -> None:
         """Acknowledge, shelve (until ``shelved_until_ns``), unshelve or clear an alarm."""
         with self._writer.begin() as conn:
-            alarm_state.operator_action(conn, alarm_id, action, actor, _now_ns() if t_ns is None else t_ns, shelved_until_ns)
+            alarm_state.operator_action(
+                conn, alarm_id, action, actor, _now_ns() if t_ns is None else t_ns, shelved_until_ns
+            )
 
     # --- passes --------------------------------------------------------------------------
-    def save_passes(self, satellite: str, station: str, passes: Iterable[tuple[int, int, int, float]], tle_id: int | None = None) -> list[int]:
+    def save_passes(
+        self, satellite: str, station: str, passes: Iterable[tuple[int, int, int, float]], tle_id: int | None = None
+    ) -> list[int]:
         """Store predicted passes (aos_ns, los_ns, max_elevation_ns, max_elevation_deg); idempotent on AOS."""
         sat_id, station_id = self.satellite_id(satellite), self.ground_station(station).id
         ids = []
         with self._writer.begin() as conn:
             for aos_ns, los_ns, tmax_ns, max_el_deg in passes:
-                found = conn.execute(select(PASS.c.id).where(PASS.c.satellite_id == sat_id, PASS.c.station_id == station_id, PASS.c.aos_ns == int(aos_ns))).scalar()
+                found = conn.execute(
+                    select(PASS.c.id).where(
+                        PASS.c.satellite_id == sat_id, PASS.c.station_id == station_id, PASS.c.aos_ns == int(aos_ns)
+                    )
+                ).scalar()
                 if found is None:
-                    row = {"satellite_id": sat_id, "station_id": station_id, "tle_id": tle_id, "aos_ns": int(aos_ns), "los_ns": int(los_ns),
-                           "max_elevation_ns": int(tmax_ns), "max_elevation_deg": float(max_el_deg), "packets_received": 0, "packets_missing": 0}
+                    row = {
+                        "satellite_id": sat_id,
+                        "station_id": station_id,
+                        "tle_id": tle_id,
+                        "aos_ns": int(aos_ns),
+                        "los_ns": int(los_ns),
+                        "max_elevation_ns": int(tmax_ns),
+                        "max_elevation_deg": float(max_el_deg),
+                        "packets_received": 0,
+                        "packets_missing": 0,
+                    }
                     found = conn.execute(insert(PASS).values(**row).returning(PASS.c.id)).scalar_one()
                 ids.append(int(found))
         return ids
@@ -435,17 +534,33 @@ class Archive:
         sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             rows = conn.execute(
-                select(PASS, STATION.c.name.label("station_name")).join(STATION, STATION.c.id == PASS.c.station_id)
-                .where(PASS.c.satellite_id == sat_id, PASS.c.aos_ns <= t1_ns, PASS.c.los_ns >= t0_ns).order_by(PASS.c.aos_ns)
+                select(PASS, STATION.c.name.label("station_name"))
+                .join(STATION, STATION.c.id == PASS.c.station_id)
+                .where(PASS.c.satellite_id == sat_id, PASS.c.aos_ns <= t1_ns, PASS.c.los_ns >= t0_ns)
+                .order_by(PASS.c.aos_ns)
             ).all()
         return [_pass_record(r) for r in rows]
 
-    def record_reception(self, pass_id: int, received_start_ns: int | None, received_end_ns: int | None, packets_received: int, packets_missing: int) -> None:
+    def record_reception(
+        self,
+        pass_id: int,
+        received_start_ns: int | None,
+        received_end_ns: int | None,
+        packets_received: int,
+        packets_missing: int,
+    ) -> None:
         """Store what was received during a pass (span, packets, missing packets)."""
         with self._writer.begin() as conn:
-            conn.execute(update(PASS).where(PASS.c.id == pass_id).values(
-                received_start_ns=received_start_ns, received_end_ns=received_end_ns,
-                packets_received=int(packets_received), packets_missing=int(packets_missing)))
+            conn.execute(
+                update(PASS)
+                .where(PASS.c.id == pass_id)
+                .values(
+                    received_start_ns=received_start_ns,
+                    received_end_ns=received_end_ns,
+                    packets_received=int(packets_received),
+                    packets_missing=int(packets_missing),
+                )
+            )
 
 
 def _batches_sha256(batches: Sequence[PacketBatch]) -> str:
@@ -494,7 +609,9 @@ def _gaps_of(batch: PacketBatch) -> list[Gap]:
     return [Gap(batch.apid, int(t[i - 1]), int(t[i]), int(missing[i])) for i in idx.tolist()]
 
 
-def _limit_changes(batch: PacketBatch, limits: Mapping[str, LimitSet], open_levels: dict[str, tuple[int, int]]) -> list[alarm_state.LevelChange]:
+def _limit_changes(
+    batch: PacketBatch, limits: Mapping[str, LimitSet], open_levels: dict[str, tuple[int, int]]
+) -> list[alarm_state.LevelChange]:
     changes = []
     for name, limit in limits.items():
         if name not in batch.values:
@@ -502,7 +619,10 @@ def _limit_changes(batch: PacketBatch, limits: Mapping[str, LimitSet], open_leve
         values = np.asarray(batch.values[name], dtype=np.float64)
         levels = limit_levels(values, limit)
         idx = level_changes(levels, open_levels.get(name, (0, 0))[1])
-        changes.extend(alarm_state.LevelChange(name, int(batch.t_utc_ns[i]), int(levels[i]), float(values[i])) for i in idx.tolist())
+        changes.extend(
+            alarm_state.LevelChange(name, int(batch.t_utc_ns[i]), int(levels[i]), float(values[i]))
+            for i in idx.tolist()
+        )
     return changes
 
 
@@ -511,7 +631,14 @@ def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict:
     as_float = values.astype(np.float64, copy=False)
     finite = as_float[np.isfinite(as_float)]
     v_min, v_max = (float(finite.min()), float(finite.max())) if finite.size else (None, None)
-    return {"parameter_id": param_id, "chunk_id": chunk_id, "dtype": dtype, "v_min": v_min, "v_max": v_max, "v_blob": blob}
+    return {
+        "parameter_id": param_id,
+        "chunk_id": chunk_id,
+        "dtype": dtype,
+        "v_min": v_min,
+        "v_max": v_max,
+        "v_blob": blob,
+    }
 
 
 def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
@@ -526,10 +653,29 @@ def _alarm_record(row: object, now_ns: int) -> AlarmRecord:
     state = row.state
     if state == "shelved" and row.shelved_until_ns is not None and row.shelved_until_ns <= now_ns:
         state = "active"
-    return AlarmRecord(row.id, row.parameter, state, row.severity, row.level, row.first_t_ns, row.last_t_ns,
-                       row.acknowledged_by, row.shelved_until_ns)
+    return AlarmRecord(
+        row.id,
+        row.parameter,
+        state,
+        row.severity,
+        row.level,
+        row.first_t_ns,
+        row.last_t_ns,
+        row.acknowledged_by,
+        row.shelved_until_ns,
+    )
 
 
 def _pass_record(row: object) -> PassRecord:
-    return PassRecord(row.id, row.station_name, row.aos_ns, row.los_ns, row.max_elevation_ns, row.max_elevation_deg,
-                      row.received_start_ns, row.received_end_ns, row.packets_received, row.packets_missing)
+    return PassRecord(
+        row.id,
+        row.station_name,
+        row.aos_ns,
+        row.los_ns,
+        row.max_elevation_ns,
+        row.max_elevation_deg,
+        row.received_start_ns,
+        row.received_end_ns,
+        row.packets_received,
+        row.packets_missing,
+    )

@@ -32,7 +32,9 @@ def noaa20_batch(shared_data: Path) -> tuple[PacketBatch, bytes]:
     """The real NOAA-20 file decoded independently with ccsdspy (not our decoder) + its raw bytes."""
     folder = shared_data / NOAA_DIR
     data_file = folder / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
-    fields = ccsdspy.FixedLength.from_file(folder / "ccsdspy_jpss1_geolocation.csv").load(data_file, include_primary_header=True)
+    fields = ccsdspy.FixedLength.from_file(folder / "ccsdspy_jpss1_geolocation.csv").load(
+        data_file, include_primary_header=True
+    )
     days = fields["DOY"].astype(np.int64) + CDS_EPOCH_UNIX_DAYS
     t_ns = days * NS_PER_DAY + fields["MSEC"].astype(np.int64) * 10**6 + fields["USEC"].astype(np.int64) * 10**3
     raw = data_file.read_bytes()
@@ -49,11 +51,15 @@ def decoded_csv(shared_data: Path) -> dict[str, np.ndarray]:
     return {"t_ns": t, **{k: np.array([float(r[k]) for r in rows]) for k in ("pos_x_m", "pos_y_m", "pos_z_m", "q4")}}
 
 
-def synthetic_batch(n: int, seq0: int = 0, t0_ns: int = 1_700_000_000 * 10**9, period_ns: int = 250_000_000) -> PacketBatch:
+def synthetic_batch(
+    n: int, seq0: int = 0, t0_ns: int = 1_700_000_000 * 10**9, period_ns: int = 250_000_000
+) -> PacketBatch:
     """n packets of APID 100 at 4 Hz, one value column equal to the packet index."""
     index = np.arange(n)
     packets = [bytes([0x08, 0x64]) + int(i).to_bytes(4, "big") for i in index]
-    return PacketBatch.from_packets(100, t0_ns + index * period_ns, (seq0 + index) % 16_384, packets, {"index": index.astype(np.float64)})
+    return PacketBatch.from_packets(
+        100, t0_ns + index * period_ns, (seq0 + index) % 16_384, packets, {"index": index.astype(np.float64)}
+    )
 
 
 def test_upgrade_creates_every_model_table_at_head_and_is_idempotent(archive_url: str) -> None:
@@ -85,7 +91,9 @@ def test_migrations_downgrade_to_base_and_upgrade_again(archive_url: str) -> Non
         assert store.ingest(SAT, [synthetic_batch(5)], source="after", uploaded_by="tester").packets_accepted == 5
 
 
-def test_real_noaa20_file_round_trips_to_the_decoded_csv_and_replays_byte_exact(archive: Archive, shared_data: Path) -> None:
+def test_real_noaa20_file_round_trips_to_the_decoded_csv_and_replays_byte_exact(
+    archive: Archive, shared_data: Path
+) -> None:
     batch, raw = noaa20_batch(shared_data)
     truth = decoded_csv(shared_data)
     result = archive.ingest(SAT, [batch], source="J01_G011.DAT1", uploaded_by="tester")
@@ -120,7 +128,9 @@ def test_overlapping_upload_keeps_each_packet_once(archive: Archive) -> None:
 
 def test_duplicates_inside_one_upload_are_dropped(archive: Archive) -> None:
     whole = synthetic_batch(50)
-    result = archive.ingest(SAT, [whole.take(np.r_[np.arange(50), np.arange(10, 20)])], source="dup", uploaded_by="tester")
+    result = archive.ingest(
+        SAT, [whole.take(np.r_[np.arange(50), np.arange(10, 20)])], source="dup", uploaded_by="tester"
+    )
     assert (result.packets_accepted, result.packets_duplicate) == (50, 10)
 
 
@@ -160,7 +170,14 @@ def test_a_failing_upload_leaves_nothing_behind(archive: Archive) -> None:
 
 def test_latest_values_are_the_newest_samples(archive: Archive) -> None:
     whole = synthetic_batch(30)
-    archive.ingest(SAT, [whole.take(np.arange(20, 30)), ], source="b", uploaded_by="tester")
+    archive.ingest(
+        SAT,
+        [
+            whole.take(np.arange(20, 30)),
+        ],
+        source="b",
+        uploaded_by="tester",
+    )
     archive.ingest(SAT, [whole.take(np.arange(0, 20))], source="a", uploaded_by="tester")
     assert archive.latest_values(SAT) == {"index": (int(whole.t_utc_ns[-1]), 29.0)}
 

@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from telemetry.archive.chunks import decode_int64, decode_raw, decode_values, encode_int64, encode_raw, encode_values, narrowest_exact
+from telemetry.archive.chunks import (
+    decode_int64,
+    decode_raw,
+    decode_values,
+    encode_int64,
+    encode_raw,
+    encode_values,
+    narrowest_exact,
+)
 
 COLUMNS = {
     "float32-valued float64": np.array([0.1, -2.5, np.nan, np.inf], dtype=np.float32).astype(np.float64),

@@ -2,9 +2,9 @@
 
 A forked child process commits uploads in a loop and writes ``ACK k`` to a pipe after each
 commit returns; the test kills it with SIGKILL at a random moment (seed printed on failure),
-forks a new one on the same database, and after all runs audits every upload: each acknowledged upload is present and every
-stored upload holds exactly the packets and samples its report claims, with the values it was
-given.  SQLite runs in WAL mode with synchronous=FULL (telemetry.archive.engine).
+forks a new one on the same database, and after all runs audits every upload: each
+acknowledged upload is present and every stored upload holds exactly the packets and samples
+its report claims, with the values it was given.  SQLite runs in WAL mode with synchronous=FULL (telemetry.archive.engine).
 """
 
 from __future__ import annotations
@@ -85,8 +85,11 @@ def test_kill_9_during_bulk_ingest_loses_nothing_acknowledged(archive_url: str) 
         assert not missing, f"acknowledged uploads lost (seed {seed}): {missing}"
         for source, upload in uploads.items():
             contents = store.upload_contents(upload.id)
-            assert contents == (PACKETS_PER_UPLOAD, PACKETS_PER_UPLOAD * PARAMETERS) == (
-                upload.packets_accepted, upload.samples_accepted), f"half-ingested {source} (seed {seed})"
+            assert (
+                contents
+                == (PACKETS_PER_UPLOAD, PACKETS_PER_UPLOAD * PARAMETERS)
+                == (upload.packets_accepted, upload.samples_accepted)
+            ), f"half-ingested {source} (seed {seed})"
         t, v = store.read_parameter(SATELLITE, "p07", T0_NS, T0_NS + 10**15)
         assert t.size == len(uploads) * PACKETS_PER_UPLOAD
         np.testing.assert_array_equal(v, (t - T0_NS) // PERIOD_NS * 8.0)

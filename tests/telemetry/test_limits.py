@@ -22,7 +22,9 @@ def wheel_batch(speeds_rpm: list[float], first: int = 0) -> PacketBatch:
     """One packet per second carrying ``wheel_rpm``."""
     index = np.arange(first, first + len(speeds_rpm))
     packets = [int(i).to_bytes(4, "big") for i in index]
-    return PacketBatch.from_packets(200, T0_NS + index * SECOND_NS, index % 16_384, packets, {"wheel_rpm": np.array(speeds_rpm)})
+    return PacketBatch.from_packets(
+        200, T0_NS + index * SECOND_NS, index % 16_384, packets, {"wheel_rpm": np.array(speeds_rpm)}
+    )
 
 
 def test_levels_match_the_hand_classified_boundaries() -> None:
@@ -74,11 +76,15 @@ def test_alarm_enters_escalates_leaves_and_is_cleared_by_acknowledgement(archive
 
 
 def test_acknowledged_alarm_clears_itself_on_leaving_and_reactivates_on_escalation(archive: Archive) -> None:
-    archive.ingest(SAT, [wheel_batch([5_500.0, 5_600.0])], source="a", uploaded_by="tester", limits={"wheel_rpm": WHEEL})
+    archive.ingest(
+        SAT, [wheel_batch([5_500.0, 5_600.0])], source="a", uploaded_by="tester", limits={"wheel_rpm": WHEEL}
+    )
     (alarm,) = archive.alarms(SAT)
     archive.alarm_action(alarm.id, "acknowledge", "operator", t_ns=T0_NS + 2 * SECOND_NS)
     assert archive.alarms(SAT)[0].state == "acknowledged"
-    archive.ingest(SAT, [wheel_batch([6_500.0], first=2)], source="b", uploaded_by="tester", limits={"wheel_rpm": WHEEL})
+    archive.ingest(
+        SAT, [wheel_batch([6_500.0], first=2)], source="b", uploaded_by="tester", limits={"wheel_rpm": WHEEL}
+    )
     assert archive.alarms(SAT)[0].state == "active"
     archive.alarm_action(alarm.id, "acknowledge", "operator", t_ns=T0_NS + 4 * SECOND_NS)
     archive.ingest(SAT, [wheel_batch([0.0], first=3)], source="c", uploaded_by="tester", limits={"wheel_rpm": WHEEL})

@@ -73,8 +73,10 @@ def test_packets_cut_at_arbitrary_boundaries_arrive_as_decoded_offline() -> None
     np.testing.assert_array_equal(live_t, offline.batches[0].t_utc_ns)
     for name, column in offline.batches[0].values.items():
         np.testing.assert_array_equal(np.concatenate([m.batch.values[name] for m in messages]), column)
-    np.testing.assert_array_equal(np.concatenate([m.batch.values["wheel_speed_rad_s_1"] for m in messages]),
-                                  engineering_values(hk, 400, seed=1)["wheel_speed_rad_s_1"])
+    np.testing.assert_array_equal(
+        np.concatenate([m.batch.values["wheel_speed_rad_s_1"] for m in messages]),
+        engineering_values(hk, 400, seed=1)["wheel_speed_rad_s_1"],
+    )
     assert all(m.dropped_packets == 0 for m in messages)
 
 
@@ -139,7 +141,9 @@ def test_stream_is_archived_in_batches(archive: Archive) -> None:
     assert len(archive.uploads("REF")) > 1
     t, v = archive.read_parameter("REF", "wheel_speed_rad_s_2", T0_UTC_NS, T0_UTC_NS + 10**12)
     assert t.size == 600
-    np.testing.assert_array_equal(v, engineering_values(dictionary.packets[HK_APID], 600, seed=4)["wheel_speed_rad_s_2"])
+    np.testing.assert_array_equal(
+        v, engineering_values(dictionary.packets[HK_APID], 600, seed=4)["wheel_speed_rad_s_2"]
+    )
     assert b"".join(p for _, p in archive.replay("REF", T0_UTC_NS, T0_UTC_NS + 10**12)) == raw.tobytes()
 
 

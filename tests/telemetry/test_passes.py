@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ STATIONS = {  # name: (lat_deg, lon_deg, alt_m, min_elevation_deg)
     "Toulouse": (43.5617, 1.4811, 150.0, 0.0),
     "Fairbanks": (64.8594, -147.8542, 200.0, 10.0),
 }
-START_UTC = datetime(2021, 3, 7, tzinfo=timezone.utc)
+START_UTC = datetime(2021, 3, 7, tzinfo=UTC)
 START_NS = int(START_UTC.timestamp()) * 10**9
 DAYS = 2.0
 
@@ -38,7 +38,9 @@ def skyfield_passes(line1: str, line2: str, station: tuple[float, float, float, 
     lat, lon, alt, min_el = station
     t0 = ts.from_datetime(START_UTC)
     t1 = ts.tt_jd(t0.tt + DAYS)
-    times, events = EarthSatellite(line1, line2, ts=ts).find_events(wgs84.latlon(lat, lon, elevation_m=alt), t0, t1, altitude_degrees=min_el)
+    times, events = EarthSatellite(line1, line2, ts=ts).find_events(
+        wgs84.latlon(lat, lon, elevation_m=alt), t0, t1, altitude_degrees=min_el
+    )
     unix = np.array([t.utc_datetime().timestamp() for t in times])
     out, rise, peak = [], None, None
     for t, event in zip(unix, events):

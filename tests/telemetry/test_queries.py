@@ -79,8 +79,13 @@ def test_two_hour_pass_at_4_hz_downsampled_to_1000_points_keeps_every_sample(arc
 
 def test_latest_values_and_pass_summary(archive: Archive) -> None:
     temps = np.array([20.0, 21.0, 45.0, 22.0, 23.0])
-    archive.ingest(SAT, [series_batch(10, "temp_c", temps, 10**9)], source="hk", uploaded_by="tester",
-                   limits={"temp_c": LimitSet(yellow_high=40.0, red_high=50.0)})
+    archive.ingest(
+        SAT,
+        [series_batch(10, "temp_c", temps, 10**9)],
+        source="hk",
+        uploaded_by="tester",
+        limits={"temp_c": LimitSet(yellow_high=40.0, red_high=50.0)},
+    )
     assert latest_values(archive, SAT) == {"temp_c": (T0_NS + 4 * 10**9, 23.0)}
     archive.add_ground_station("Kiruna", 67.857, 20.964, 400.0, 5.0)
     (pass_id,) = archive.save_passes(SAT, "Kiruna", [(T0_NS + 10**9, T0_NS + 3 * 10**9, T0_NS + 2 * 10**9, 42.0)])
@@ -94,8 +99,12 @@ def test_latest_values_and_pass_summary(archive: Archive) -> None:
 def test_csv_and_parquet_exports_read_back_to_the_archived_values(archive: Archive, tmp_path: Path) -> None:
     fast = np.arange(8, dtype=np.float64)
     slow = np.array([100, 200], dtype=np.int32)
-    archive.ingest(SAT, [series_batch(10, "fast", fast, QUARTER_SECOND_NS), series_batch(11, "slow", slow, 10**9)],
-                   source="two-rates", uploaded_by="tester")
+    archive.ingest(
+        SAT,
+        [series_batch(10, "fast", fast, QUARTER_SECOND_NS), series_batch(11, "slow", slow, 10**9)],
+        source="two-rates",
+        uploaded_by="tester",
+    )
     t1 = T0_NS + 2 * 10**9
     assert export_csv(archive, SAT, ["fast", "slow"], T0_NS, t1, tmp_path / "x.csv") == 8
     with open(tmp_path / "x.csv", newline="") as f:
