@@ -37,9 +37,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         services.jobs.start()
         services.telemetry.start()
+        await services.telemetry.start_live()
         try:
             yield
         finally:
+            await services.telemetry.stop_live()
             services.close()
 
     app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan)

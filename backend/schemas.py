@@ -27,6 +27,7 @@ class Health(BaseModel):
     database: str
     auth_enabled: bool
     components: dict[str, bool] = Field(description="Optional parts present in this build.")
+    live: dict[str, Any] = Field(description="Live TCP stream: port and tallies (empty when off).")
 
 
 class TokenCreate(BaseModel):

@@ -8,6 +8,7 @@ queries are cached per satellite until its next ingest.
 
 from __future__ import annotations
 
+import asyncio
 import importlib.util
 import threading
 from collections import OrderedDict
@@ -26,6 +27,7 @@ __all__ = ["TelemetryGateway", "COMPONENT_MODULES", "SAMPLE_CACHE_ENTRIES"]
 
 COMPONENT_MODULES = {
     "archive": "telemetry.archive.store",
+    "queries": "telemetry.queries",
     "decoding": "telemetry.decoding",
     "dictionary": "telemetry.dictionary",
     "limits": "telemetry.limits",
@@ -45,20 +47,6 @@ def _importable(module: str) -> bool:
         return False
 
 
-def packet_batches(sample_batches: list[Any]) -> list[Any]:
-    """Decoded SampleBatches → the archive's PacketBatches (raw packets kept byte-exact)."""
-    from telemetry.archive import PacketBatch
-
-    out = []
-    for b in sample_batches:
-        n = len(b.t_utc_ns)
-        raw = b.packets.tobytes() if b.packets is not None else b""
-        lengths = np.full(n, b.packets.shape[1] if b.packets is not None else 0, dtype=np.int64)
-        out.append(PacketBatch(b.apid, b.t_utc_ns, np.asarray(b.sequence_count, dtype=np.int64), raw,
-                               lengths, b.values))
-    return out
-
-
 class TelemetryGateway:
     """Reaches telemetry through one object; knows which parts are present."""
 
@@ -66,6 +54,9 @@ class TelemetryGateway:
         self._settings, self._hub = settings, hub
         self.dictionaries = DictionaryCatalogue(settings.data_dir / "dictionaries")
         self._archive: Any = None
+        self._live: Any = None
+        self._bridge: asyncio.Task | None = None
+        self.live_port: int | None = None
         self._cache: OrderedDict[tuple, dict[str, Any]] = OrderedDict()
         self._cache_lock = threading.Lock()
 
@@ -94,6 +85,39 @@ class TelemetryGateway:
 
             self._archive = Archive(self._settings.resolved_database_url())
 
+    async def start_live(self) -> None:
+        """Listen for the live CCSDS stream (telemetry.live): archive it, publish it to the hub."""
+        if not (self._settings.live_enabled and self._archive is not None and _importable(COMPONENT_MODULES["live"])):
+            return
+        from telemetry.limits import dictionary_limits
+        from telemetry.live import LiveStream
+
+        dictionary = self.dictionaries.load(self._settings.live_dictionary)
+        satellite = self._settings.live_satellite
+        self._live = LiveStream(dictionary, archive=self._archive, satellite=satellite,
+                                limits=dictionary_limits(dictionary))
+        self.live_port = await self._live.start(self._settings.host, self._settings.telemetry_port)
+        self._bridge = asyncio.create_task(self._forward(self._live.subscribe(), satellite))
+
+    async def _forward(self, subscriber: Any, satellite: str) -> None:
+        while True:
+            message = await subscriber.get()
+            self._invalidate(satellite)
+            self._publish(satellite, [message.batch], 0)
+
+    async def stop_live(self) -> None:
+        """Stop the listener (pending packets are archived) and the hub bridge."""
+        if self._bridge is not None:
+            self._bridge.cancel()
+            await asyncio.gather(self._bridge, return_exceptions=True)
+        if self._live is not None:
+            await self._live.stop()
+        self._live = self._bridge = None
+
+    def live_stats(self) -> dict[str, Any]:
+        """Tallies of the live stream (packets received/archived, errors), empty when off."""
+        return {} if self._live is None else {"port": self.live_port, **asdict(self._live.stats)}
+
     def close(self) -> None:
         """Release the archive's connections."""
         if self._archive is not None:
@@ -114,17 +138,19 @@ class TelemetryGateway:
                            source: str, uploaded_by: str) -> dict[str, Any]:
         """Archive a CSV or JSONL ground file (telemetry.ground_files) like a packet upload."""
         self.require("ground_files")
-        from telemetry import ground_files  # type: ignore[attr-defined]
+        from telemetry import ground_files
 
         dictionary = self.dictionaries.load(dictionary_name)
-        decoded = ground_files.read_ground_file(data, kind, dictionary, source=source)
+        read = ground_files.read_ground_csv if kind == "csv" else ground_files.read_ground_jsonl
+        decoded = read(data, dictionary, source=source)
         return self._archive_and_publish(satellite, decoded, dictionary, source, uploaded_by)
 
     def _archive_and_publish(self, satellite: str, decoded: Any, dictionary: Any, source: str,
                              uploaded_by: str) -> dict[str, Any]:
+        from telemetry.archive import PacketBatch
         from telemetry.limits import dictionary_limits
 
-        result = self.archive.ingest(satellite, packet_batches(decoded.batches), source=source,
+        result = self.archive.ingest(satellite, [PacketBatch.from_sample_batch(b) for b in decoded.batches], source=source,
                                      uploaded_by=uploaded_by, limits=dictionary_limits(dictionary))
         self._invalidate(satellite)
         if not result.duplicate_upload:
@@ -147,13 +173,37 @@ class TelemetryGateway:
     def predict_passes(self, satellite: str, station: str, t0_ns: int, t1_ns: int) -> list[Any]:
         """Passes from the newest TLE over ``station`` in [t0_ns, t1_ns] (telemetry.passes), stored."""
         self.require("passes")
-        from telemetry import passes  # type: ignore[attr-defined]
+        from telemetry import passes
 
+        if t1_ns <= t0_ns:
+            raise ValueError("end: must be after start")
         tle_id, line1, line2 = self.archive.latest_tle(satellite, before_ns=t1_ns)
         site = self.archive.ground_station(station)
-        predicted = passes.predict_passes(line1, line2, site, t0_ns, t1_ns)
-        ids = set(self.archive.save_passes(satellite, station, predicted, tle_id=tle_id))
+        predicted = passes.predict_passes(line1, line2, site.lat_deg, site.lon_deg, site.alt_m,
+                                          site.min_elevation_deg, t0_ns, (t1_ns - t0_ns) / 86_400e9)
+        ids = set(self.archive.save_passes(satellite, station, predicted.rows(), tle_id=tle_id))
         return [p for p in self.archive.passes(satellite, t0_ns, t1_ns) if p.id in ids]
+
+    def record_reception(self, satellite: str, t0_ns: int, t1_ns: int) -> list[Any]:
+        """Recount what was received in each pass of [t0_ns, t1_ns] (completeness from gaps)."""
+        self.require("passes")
+        from telemetry import passes
+
+        return passes.record_reception(self.archive, satellite, self.archive.passes(satellite, t0_ns, t1_ns))
+
+    def pass_summary(self, satellite: str, pass_id: int) -> dict[str, Any]:
+        """Reception, per-parameter statistics and alarms of one pass (telemetry.queries)."""
+        self.require("queries")
+        from telemetry import queries
+
+        return queries.pass_summary(self.archive, satellite, pass_id)
+
+    def export_table(self, satellite: str, names: list[str], t0_ns: int, t1_ns: int) -> Any:
+        """Wide pyarrow table of the parameters (telemetry.queries.export_table)."""
+        self.require("queries")
+        from telemetry import queries
+
+        return queries.export_table(self.archive, satellite, names, t0_ns, t1_ns)
 
     def _invalidate(self, satellite: str) -> None:
         with self._cache_lock:

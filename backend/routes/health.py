@@ -27,4 +27,4 @@ def health(services: ServicesDep) -> Health:
         connection.execute(text("SELECT 1"))
     return Health(version=_version(), database=services.engine.dialect.name,
                   auth_enabled=services.settings.auth_enabled,
-                  components=services.telemetry.components())
+                  components=services.telemetry.components(), live=services.telemetry.live_stats())

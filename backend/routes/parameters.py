@@ -6,7 +6,8 @@ import io
 from datetime import datetime
 from typing import Any, Literal
 
-import numpy as np
+import pyarrow.csv as pa_csv
+import pyarrow.parquet as pq
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 from pydantic import BaseModel
@@ -61,41 +62,25 @@ def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str = Sat
     return services.telemetry.samples(satellite, name, t0, t1, min(max_points, services.settings.max_points))
 
 
-def _columns(services: Any, satellite: str, names: list[str], t0: int, t1: int) -> dict[str, np.ndarray]:
-    rows: dict[str, list] = {"t_utc_ns": [], "parameter": [], "value": []}
-    for name in names:
-        t, v = services.telemetry.archive.read_parameter(satellite, name, t0, t1)
-        rows["t_utc_ns"].append(t)
-        rows["parameter"].append(np.full(t.size, name, dtype=object))
-        rows["value"].append(np.asarray(v, dtype=float))
-    return {k: np.concatenate(v) if v else np.empty(0) for k, v in rows.items()}
-
-
-@router.get("/exports/samples", summary="Export samples as CSV or Parquet (long format)",
+@router.get("/exports/samples", summary="Export samples as CSV or Parquet (one column per parameter)",
             response_class=Response, responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}})
 def export_samples(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
                    names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"],
                                       description="Comma-separated parameter names."),
                    start: datetime | None = None, end: datetime | None = None,
                    format: Literal["csv", "parquet"] = "csv") -> Response:
-    """Rows (t_utc_ns, parameter, value) of the named parameters in [start, end]."""
+    """Wide table: t_utc_ns, time_utc and one column per named parameter (empty where not sampled)."""
     wanted = [n.strip() for n in names.split(",") if n.strip()]
     if not wanted or len(wanted) > MAX_EXPORT_PARAMETERS:
         raise ApiError(422, f"names: give 1..{MAX_EXPORT_PARAMETERS} parameter names", "names")
     t0, t1 = _window(start, end)
-    columns = _columns(services, satellite, wanted, t0, t1)
-    filename = f"{satellite}-samples.{format}"
-    headers = {"Content-Disposition": f'attachment; filename="{filename}"'}
-    if format == "csv":
-        lines = ["t_utc_ns,parameter,value"] + [f"{int(t)},{p},{float(v)!r}" for t, p, v in
-                                                zip(columns["t_utc_ns"], columns["parameter"], columns["value"])]
-        return Response("\n".join(lines) + "\n", media_type="text/csv", headers=headers)
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    table = pa.table({"t_utc_ns": pa.array(columns["t_utc_ns"].astype(np.int64)),
-                      "parameter": pa.array(columns["parameter"].astype(str)),
-                      "value": pa.array(columns["value"].astype(float))})
+    table = services.telemetry.export_table(satellite, wanted, t0, t1)
     sink = io.BytesIO()
-    pq.write_table(table, sink)
-    return Response(sink.getvalue(), media_type="application/vnd.apache.parquet", headers=headers)
+    if format == "csv":
+        pa_csv.write_csv(table, sink)
+        media = "text/csv"
+    else:
+        pq.write_table(table, sink, compression="zstd")
+        media = "application/vnd.apache.parquet"
+    headers = {"Content-Disposition": f'attachment; filename="{satellite}-samples.{format}"'}
+    return Response(sink.getvalue(), media_type=media, headers=headers)

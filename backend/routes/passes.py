@@ -115,6 +115,22 @@ def get_pass(pass_id: int, services: ServicesDep, _: ViewerDep, satellite: str =
     raise ApiError(404, f"no pass {pass_id} for satellite {satellite!r}", "pass_id")
 
 
+@router.get("/passes/{pass_id}/summary", summary="Pass summary: reception, statistics, alarms")
+def pass_summary(pass_id: int, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
+    """Completeness, per-parameter count/min/max/mean and the alarms raised during the pass."""
+    summary = services.telemetry.pass_summary(satellite, pass_id)
+    return {**summary, "pass": _pass_public(summary["pass"]), "alarms": [asdict(a) for a in summary["alarms"]]}
+
+
+@router.post("/satellites/{name}/passes/reception", summary="Recount reception of passes in a window")
+def record_reception(name: str, services: ServicesDep, principal: OperatorDep,
+                     start: datetime | None = None, end: datetime | None = None) -> list[dict[str, Any]]:
+    """Per pass: received span, packets and missing packets (sequence-count gaps) → completeness."""
+    records = services.telemetry.record_reception(name, utc_ns(start, EARLIEST_NS), utc_ns(end, LATEST_NS))
+    services.audit.record(principal.name, "passes.reception", f"satellite/{name}", {"passes": len(records)})
+    return [_pass_public(r) for r in records]
+
+
 @router.post("/satellites/{name}/passes/predict", summary="Predict passes over a station from the TLE")
 def predict_passes(name: str, services: ServicesDep, principal: OperatorDep,
                    station: str = Query(..., min_length=1, max_length=100),

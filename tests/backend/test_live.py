@@ -95,3 +95,30 @@ def test_uploaded_packets_reach_a_websocket_subscriber(client: TestClient, token
         client.post("/api/v1/telemetry/uploads", content=data, headers=bearer(tokens["operator"]))
         item = ws.receive_json()["items"][0]
     assert item["topic"] == "parameters/q_ib_0" and len(item["data"]["values"]) == 7200
+
+
+def test_packets_streamed_over_tcp_are_archived_and_reach_a_websocket_subscriber(
+        client: TestClient, tokens: dict[str, str], shared_data: Path) -> None:
+    """End to end: TCP link (real NOAA-20 packets) → decode → archive and → WebSocket subscriber."""
+    import socket as sockets
+
+    packets = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
+    n_sent, packet_octets = 500, 71
+    live = client.get("/api/v1/health").json()["live"]
+    hub = client.app.state.services.hub
+    with client.websocket_connect(f"/api/v1/ws?token={tokens['viewer']}") as ws:
+        ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
+        deadline = time.monotonic() + 2.0
+        while not hub.wants_any("parameters/q_ib_0"):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        with sockets.create_connection(("127.0.0.1", live["port"])) as link:
+            link.sendall(packets[: n_sent * packet_octets])
+        seen = 0
+        while seen < n_sent:
+            seen += sum(len(item["data"]["values"]) for item in ws.receive_json()["items"])
+    assert seen == n_sent
+    deadline = time.monotonic() + 10.0
+    while client.get("/api/v1/parameters/q_ib_0/samples", headers=bearer(tokens["viewer"])).json().get("total_points", 0) < n_sent:
+        assert time.monotonic() < deadline, "live packets never reached the archive"
+        time.sleep(0.1)

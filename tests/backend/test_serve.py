@@ -18,7 +18,7 @@ START_TIMEOUT_S = 60.0  # cold imports of numpy/numba/sqlalchemy on a busy 2-cor
 
 
 def _serve(data_dir: Path, port: int) -> tuple[subprocess.Popen, list[str]]:
-    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir)}
+    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": "0"}
     env.pop("ACS_TWIN_DATABASE_URL", None)
     process = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(port)],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)

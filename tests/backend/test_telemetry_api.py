@@ -72,11 +72,11 @@ def test_parquet_and_csv_exports_round_trip(client: TestClient, tokens: dict[str
     viewer = bearer(tokens["viewer"])
     parquet = client.get("/api/v1/exports/samples?names=q_ib_0,q_ib_1&format=parquet", headers=viewer)
     table = pq.read_table(io.BytesIO(parquet.content)).to_pydict()
-    assert len(table["value"]) == 2 * N_PACKETS
-    q0 = np.array([v for v, p in zip(table["value"], table["parameter"]) if p == "q_ib_0"])
-    assert np.allclose(q0, _csv_q0(shared_data), rtol=FLOAT32_REL, atol=0)
-    rows = list(csv.DictReader(io.StringIO(client.get("/api/v1/exports/samples?names=q_ib_0", headers=viewer).text)))
-    assert len(rows) == N_PACKETS and float(rows[0]["value"]) == pytest.approx(q0[0])
+    assert len(table["t_utc_ns"]) == N_PACKETS
+    assert np.allclose(table["q_ib_0"], _csv_q0(shared_data), rtol=FLOAT32_REL, atol=0)
+    text = client.get("/api/v1/exports/samples?names=q_ib_0", headers=viewer).text
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert len(rows) == N_PACKETS and float(rows[0]["q_ib_0"]) == pytest.approx(table["q_ib_0"][0])
 
 
 def test_unknown_parameter_and_oversized_upload_name_the_field(tmp_path: Path, database_url: str) -> None:
