@@ -245,6 +245,35 @@ def test_surface_torques_vanish_on_a_centred_cube_and_equal_offset_cross_force(d
         np.testing.assert_allclose(srp, -np.cross(delta, -environment.SOLAR_PRESSURE_1AU_N_M2 * u), rtol=1e-12)
 
 
+# Equatorial prograde circular orbit at 600 km: the ellipsoidal height is exactly 600 km, the
+# co-rotating air comes head-on at √(μ/r) − ω⊕ r, so one flow-facing plate with its centroid offset
+# sideways gives the closed-form torque c × (−½ ρ C_D A v_rel² x̂) with Vallado's ρ(600 km).
+AERO_REL_TOL = 1e-9
+
+
+def test_drag_torque_on_an_equatorial_orbit_matches_closed_form():
+    r, v = orbit.circular_orbit(np.array([0.0, 1000.0]), 600e3, 0.0, 0.0, 0.0)
+    q_ib = frames.orf_quaternion(r, v)  # body y = flight direction (ORF y^o)
+    normal, centroid = np.array([[0.0, 1.0, 0.0]]), np.array([[0.3, 0.2, 0.0]])
+    torque = environment.aerodynamic_torque_nm(r, v, q_ib, normal, [2.0], centroid, drag_coefficient=2.2)
+    v_rel = np.sqrt(orbit.MU_EARTH_M3_S2 / R_LEO_M) - frames.EARTH_ROTATION_RATE_RAD_S * R_LEO_M
+    force = -0.5 * 1.454e-13 * 2.2 * 2.0 * v_rel**2 * np.array([0.0, 1.0, 0.0])
+    np.testing.assert_allclose(torque, np.broadcast_to(np.cross(centroid[0], force), torque.shape), rtol=AERO_REL_TOL)
+
+
+def test_solar_pressure_torque_is_zero_in_umbra_and_full_for_a_black_plate_in_sunlight():
+    t = dt.datetime(2024, 3, 20, 12, tzinfo=dt.timezone.utc).timestamp()
+    s_hat = environment.sun_position_1(t) / np.linalg.norm(environment.sun_position_1(t))
+    r = np.stack([R_LEO_M * s_hat, -R_LEO_M * s_hat])  # sub-solar point, then behind the Earth
+    q_ib = np.array([1.0, 0.0, 0.0, 0.0])
+    normal, centroid = s_hat[None, :], np.array([[0.0, 0.0, 0.5]])
+    torque = environment.solar_pressure_torque_nm(r, t, q_ib, normal, [1.5], centroid)
+    d_sun = np.linalg.norm(environment.sun_position_1(t) - r[0])
+    force = -environment.SOLAR_PRESSURE_1AU_N_M2 * (environment.AU_M / d_sun) ** 2 * 1.5 * s_hat
+    np.testing.assert_allclose(torque[0], np.cross(centroid[0], force), rtol=1e-6)
+    assert np.all(torque[1] == 0.0)
+
+
 # --- bad input -------------------------------------------------------------------------------------------
 
 
@@ -257,6 +286,12 @@ def test_surface_torques_vanish_on_a_centred_cube_and_equal_offset_cross_force(d
         (lambda: environment.magnetic_field_ecef_t(np.array([[7e6, 0.0, 0.0]]), 2.0e9), "t_unix_s"),
         (lambda: environment.sun_position_eci_m(np.array([1.7e9, np.inf])), "t_unix_s"),
         (lambda: environment.illumination_fraction(np.array([np.nan, 0.0, 0.0]), SUN_AT_1AU), "r_sat_eci_m"),
+        (lambda: environment.aerodynamic_torque_nm(
+            np.ones((1, 3)) * 4e6, np.ones((1, 3)), [1.0, 0, 0, 0], [[0.0, 2.0, 0.0]], [1.0], [[0.0, 0.0, 0.0]]),
+         "normals_b"),
+        (lambda: environment.solar_pressure_torque_nm(
+            np.ones((1, 3)) * 4e6, 1.7e9, [1.0, 0, 0, 0], [[0.0, 1.0, 0.0]], [1.0], [[0.0, 0.0, 0.0]], specular=1.5),
+         "specular"),
     ],
 )
 def test_bad_input_raises_value_error_naming_the_field(call, field):
