@@ -1,8 +1,9 @@
 """Bulk decoding of fixed-length CCSDS packets to numpy arrays, and the stream pipeline frame → validate → decode.
 
-Octet-aligned 8/16/32/64-bit fields are read through one numpy structured dtype over the (n, L)
-packet matrix (a strided view, no per-packet Python); other bit fields are gathered from their
-covering octets and shifted, vectorised over packets. Calibration: polynomial c0 + c1·x + …
+All fields of a packet type are read in one compiled pass over the (n, L) packet matrix (the
+covering octets of each field, big-endian, shifted and masked: any bit offset and length ≤ 64,
+spanning ≤ 8 octets); the bit patterns are then viewed as IEEE 754 floats or sign-extended
+integers, vectorised per field. No per-packet Python. Calibration: polynomial c0 + c1·x + …
 (XTCE PolynomialCalibrator semantics) or an enumeration (codes kept, labels in the dictionary).
 """
 
@@ -11,6 +12,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from numba import njit
 
 from sim_core import quaternion
 from telemetry import ccsds
@@ -30,58 +32,65 @@ __all__ = [
 ]
 
 DEFAULT_FUTURE_MARGIN_NS = 86_400 * ccsds.NS_PER_S  # packets stamped > 1 day after ingest are out of range
-_ALIGNED = {8, 16, 32, 64}
+
+
+@njit(cache=True)
+def _gather(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np.ndarray:
+    """Copy the packets starting at offset into rows of an (n, L) matrix (compiled kernel)."""
+    out = np.empty((offset.shape[0], packet_octets), dtype=np.uint8)
+    for i in range(offset.shape[0]):
+        out[i, :] = buf[offset[i] : offset[i] + packet_octets]
+    return out
 
 
 def packet_matrix(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np.ndarray:
     """(n, L) uint8 copy of the n packets of length L starting at the given offsets of buf."""
-    return buf[np.asarray(offset, dtype=np.int64)[:, None] + np.arange(packet_octets)]
+    offset = np.asarray(offset, dtype=np.int64)
+    if offset.size and (offset.min() < 0 or offset.max() + packet_octets > buf.shape[0]):
+        raise ValueError("offset: a packet would run past the end of the buffer")
+    return _gather(buf, offset, packet_octets)
 
 
-def _numpy_format(p: Parameter) -> str:
-    """Big-endian numpy format of an octet-aligned field."""
-    kind = {"uint": "u", "int": "i", "float": "f"}[p.data_type]
-    return f">{kind}{p.bit_length // 8}"
+@njit(cache=True)
+def _bit_patterns(packets: np.ndarray, bit_offset: np.ndarray, bit_length: np.ndarray) -> np.ndarray:
+    """(F, n) uint64 big-endian bit patterns of F fields in n packets, one pass over each packet (compiled kernel)."""
+    n, n_fields = packets.shape[0], bit_offset.shape[0]
+    out = np.empty((n_fields, n), dtype=np.uint64)
+    for i in range(n):
+        row = packets[i]
+        for f in range(n_fields):
+            first = bit_offset[f] // 8
+            last = (bit_offset[f] + bit_length[f] - 1) // 8
+            word = np.uint64(0)
+            for k in range(first, last + 1):
+                word = (word << np.uint64(8)) | np.uint64(row[k])
+            word >>= np.uint64(8 * (last + 1) - bit_offset[f] - bit_length[f])
+            if bit_length[f] < 64:
+                word &= (np.uint64(1) << np.uint64(bit_length[f])) - np.uint64(1)
+            out[f, i] = word
+    return out
 
 
-def _bit_field(packets: np.ndarray, p: Parameter) -> np.ndarray:
-    """Unaligned big-endian bit field (unsigned or two's complement) of every packet, as int64/uint64."""
-    first, last = p.bit_offset // 8, (p.bit_offset + p.bit_length - 1) // 8
-    word = np.zeros(packets.shape[0], dtype=np.uint64)
-    for k in range(first, last + 1):
-        word = (word << np.uint64(8)) | packets[:, k].astype(np.uint64)
-    shift = np.uint64(8 * (last + 1) - p.bit_offset - p.bit_length)
-    value = (word >> shift) & np.uint64((1 << p.bit_length) - 1)
+def _raw_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
+    """Raw value of a field's bit patterns: IEEE 754 float, two's-complement int, or unsigned."""
     if p.data_type == "float":
-        return value.astype(f"u{p.bit_length // 8}").view(f"f{p.bit_length // 8}")
+        return pattern.astype(np.uint32).view(np.float32) if p.bit_length == 32 else pattern.view(np.float64)
     if p.data_type == "int":
-        signed = value.astype(np.int64)
+        signed = pattern.view(np.int64)
+        if p.bit_length == 64:
+            return signed
         return np.where(signed >= 1 << (p.bit_length - 1), signed - (1 << p.bit_length), signed)
-    return value if p.bit_length == 64 else value.astype(np.int64)
+    return pattern if p.bit_length == 64 else pattern.view(np.int64)
 
 
 def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, np.ndarray]:
     """Raw (uncalibrated) values of every parameter of an (n, L) packet matrix (CCSDS 133.0-B-2 §4.1.4 user data)."""
     if packets.dtype != np.uint8 or packets.ndim != 2 or packets.shape[1] != definition.packet_octets:
         raise ValueError(f"packets: expected (n, {definition.packet_octets}) uint8, got {packets.dtype} {packets.shape}")
-    aligned = [p for p in definition.parameters if p.bit_offset % 8 == 0 and p.bit_length in _ALIGNED]
-    out: dict[str, np.ndarray] = {}
-    if aligned:
-        dtype = np.dtype(
-            {
-                "names": [p.name for p in aligned],
-                "formats": [_numpy_format(p) for p in aligned],
-                "offsets": [p.bit_offset // 8 for p in aligned],
-                "itemsize": definition.packet_octets,
-            }
-        )
-        records = np.ascontiguousarray(packets).view(dtype)[:, 0]
-        for p in aligned:
-            out[p.name] = records[p.name]
-    for p in definition.parameters:
-        if p.name not in out:
-            out[p.name] = _bit_field(packets, p)
-    return {p.name: out[p.name] for p in definition.parameters}
+    offsets = np.array([p.bit_offset for p in definition.parameters], dtype=np.int64)
+    lengths = np.array([p.bit_length for p in definition.parameters], dtype=np.int64)
+    patterns = _bit_patterns(np.ascontiguousarray(packets), offsets, lengths)
+    return {p.name: _raw_value(patterns[f], p) for f, p in enumerate(definition.parameters)}
 
 
 def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
@@ -105,9 +114,22 @@ def derive(d: DerivedParameter, values: dict[str, np.ndarray], time_code: ccsds.
         epoch = time_code.epoch_utc_ns if time_code and time_code.format == "CDS" else ccsds.CCSDS_EPOCH_UTC_NS
         day, ms, us = (values[name].astype(np.int64) for name in d.inputs)
         return epoch + day * ccsds.NS_PER_DAY + ms * 1_000_000 + us * 1_000
-    estimated = np.stack([values[name] for name in d.inputs[:4]], axis=-1)
-    program = np.stack([values[name] for name in d.inputs[4:]], axis=-1)
-    return quaternion.angle(quaternion.multiply(quaternion.conjugate(program), estimated))
+    estimated = np.stack([values[name] for name in d.inputs[:4]], axis=-1).astype(np.float64)
+    program = np.stack([values[name] for name in d.inputs[4:]], axis=-1).astype(np.float64)
+    return _error_angle(estimated, program)
+
+
+@njit(cache=True)
+def _error_angle(estimated: np.ndarray, program: np.ndarray) -> np.ndarray:
+    """Angle 2·atan2(|e|, |e0|) of E = Λ̃^p ∘ Λ per row (seed 000 §4), via sim_core.quaternion.multiply_1."""
+    out = np.empty(estimated.shape[0])
+    conj = np.empty(4)
+    for i in range(estimated.shape[0]):
+        conj[0] = program[i, 0]
+        conj[1:] = -program[i, 1:]
+        e = quaternion.multiply_1(conj, estimated[i])
+        out[i] = 2.0 * np.arctan2(np.sqrt(e[1] * e[1] + e[2] * e[2] + e[3] * e[3]), abs(e[0]))
+    return out
 
 
 def decode_packets(packets: np.ndarray, definition: PacketDefinition) -> dict[str, np.ndarray]:
