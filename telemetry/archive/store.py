@@ -250,7 +250,7 @@ class Archive:
             self._write_chunks(conn, sat_id, upload_id, fresh)
             accepted += fresh.n_packets
             samples += fresh.n_packets * len(fresh.values)
-            gaps.extend(_gaps_of(fresh))
+            gaps.extend(_gaps_of(fresh) if fresh.raw else [])  # ground files carry no sequence counts
             changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
         changes.sort(key=lambda c: c.t_ns)
         n_events = alarm_state.apply_level_changes(conn, sat_id, upload_id, changes) if changes else 0
@@ -564,9 +564,14 @@ class Archive:
 
 
 def _batches_sha256(batches: Sequence[PacketBatch]) -> str:
+    """Checksum of the raw bytes, or of times and values for batches without raw packets (ground files)."""
     digest = hashlib.sha256()
     for batch in batches:
         digest.update(batch.raw)
+        if not batch.raw:
+            digest.update(f"{batch.apid}".encode() + batch.t_utc_ns.tobytes() + batch.seq_count.tobytes())
+            for name in sorted(batch.values):
+                digest.update(name.encode() + np.ascontiguousarray(batch.values[name]).tobytes())
     return digest.hexdigest()
 
 

@@ -116,6 +116,17 @@ def test_same_file_twice_is_a_reported_no_op(archive: Archive) -> None:
     assert archive.upload_contents(first.upload_id) == (500, 500)
 
 
+def test_ground_files_without_raw_bytes_are_told_apart_by_their_values(archive: Archive) -> None:
+    t = 1_750_000_000 * 10**9 + np.arange(3) * 10**9
+    first = PacketBatch(7, t, np.zeros(3), b"", np.zeros(3), {"temp_c": np.array([1.0, 2.0, 3.0])})
+    second = PacketBatch(7, t + 3 * 10**9, np.zeros(3), b"", np.zeros(3), {"temp_c": np.array([4.0, 5.0, 6.0])})
+    result = archive.ingest(SAT, [first], source="a.csv", uploaded_by="tester")
+    assert not result.duplicate_upload and result.gaps == []
+    assert not archive.ingest(SAT, [second], source="b.csv", uploaded_by="tester").duplicate_upload
+    assert archive.ingest(SAT, [first], source="a-again.csv", uploaded_by="tester").duplicate_upload
+    np.testing.assert_array_equal(archive.read_parameter(SAT, "temp_c", int(t[0]), int(t[0]) + 10**10)[1], np.arange(1.0, 7.0))
+
+
 def test_overlapping_upload_keeps_each_packet_once(archive: Archive) -> None:
     whole = synthetic_batch(900)
     archive.ingest(SAT, [whole.take(np.arange(0, 600))], source="first", uploaded_by="tester")
