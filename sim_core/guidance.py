@@ -42,6 +42,7 @@ __all__ = [
     "orf_rates_1",
     "orf_hold_1",
     "orf_hold_program",
+    "orf_angles_deg",
     "target_pointing_1",
     "target_pointing_program",
     "ground_target_state_1",
@@ -405,6 +406,19 @@ def orf_hold_program(
     if np.any(np.linalg.norm(np.cross(r, v), axis=1) == 0.0):
         raise ValueError("v_eci_m_s: velocity parallel to position leaves the ORF undefined")
     return _orf_many(_offset_quaternion(OrfHold(1.0, yaw_deg, roll_deg, pitch_deg)), r, v, a)
+
+
+def orf_angles_deg(
+    q_ib: np.ndarray, r_eci_m: np.ndarray, v_eci_m_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Yaw φ1, roll φ2, pitch φ3 (deg) of Λ^o = Λ̃_o ∘ Λ, sequence 132: seed 000 Fig. 4's program angles."""
+    q = np.atleast_2d(np.asarray(q_ib, dtype=float))
+    if q.shape[-1] != 4 or not np.all(np.isfinite(q)):
+        raise ValueError(f"q_ib: expected finite quaternions of shape (n, 4), got {q.shape}")
+    r, v = _state_arrays(q.shape[0], r_eci_m=np.atleast_2d(r_eci_m), v_eci_m_s=np.atleast_2d(v_eci_m_s))
+    q_o = np.array([frames.orf_quaternion_1(r[i], v[i]) for i in range(q.shape[0])])
+    yaw, roll, pitch = quaternion.to_euler_132(quaternion.multiply(quaternion.conjugate(q_o), q))
+    return np.degrees(yaw), np.degrees(roll), np.degrees(pitch)
 
 
 def target_pointing_program(

@@ -12,6 +12,7 @@ R_ORBIT = 6378137.0 + 600e3  # seed 000 §5: 600 km orbit
 N_CIRC = np.sqrt(MU / R_ORBIT**3)
 EARTH_RATE = 7.292115146706979e-5  # rad/s, IERS sidereal rate, the truth target's spin
 ROUND_OFF = 1e-12  # float64 round-off on unit quaternions and unit vectors
+ANGLE_ROUND_OFF_DEG = 1e-9  # Euler angles through two quaternion products and asin/atan2 near 0 and 20°
 RATE_ROUND_OFF = 1e-15  # rad/s: round-off on ORF rates of order 1e-3 rad/s
 KINEMATIC_CONSISTENCY = 1e-8  # issue 3: ω^p = 2 Λ̃∘Λ̇, ω̇^p = dω^p/dt (rad/s, rad/s²)
 ANGLE_STENCIL_RELATIVE = 1e-9  # 5-point stencil in ERA with h = 1e-3 rad: h⁴ ~ 1e-12, round-off ~1e-13
@@ -250,15 +251,22 @@ def test_turn_envelopes_report_the_roll_manoeuvre():
     assert env.transition_rate_rad_s == pytest.approx(env.transition_angle_rad / 60.0, rel=1e-12)
 
 
+def test_orf_angles_recover_the_hold_offsets():
+    r, v, _ = kepler_state(np.linspace(0.0, 6000.0, 13))
+    q, _, _ = gd.orf_hold_program(r, v, yaw_deg=3.0, roll_deg=-20.0, pitch_deg=7.5)
+    yaw, roll, pitch = gd.orf_angles_deg(q, r, v)
+    assert np.max(np.abs(yaw - 3.0)) < ANGLE_ROUND_OFF_DEG and np.max(np.abs(roll + 20.0)) < ANGLE_ROUND_OFF_DEG
+    assert np.max(np.abs(pitch - 7.5)) < ANGLE_ROUND_OFF_DEG
+
+
 def test_roll_manoeuvre_takes_the_orf_roll_from_0_to_20_degrees():
     route = gd.compile_route(gd.two_course_scan(course_s=300.0, turn_s=120.0), T0, _orbit_from_epoch)
     t = T0 + np.linspace(0.0, 720.0, 721)
     r, v, a = _orbit_from_epoch(t)
     q, _, _, _ = gd.route_program(route, t, r, v, a)
-    q_o, _, _ = gd.orf_hold_program(r, v)
-    yaw, roll, pitch = (np.degrees(x) for x in qt.to_euler_132(qt.multiply(qt.conjugate(q_o), q)))
-    assert np.max(np.abs(roll[:301])) < 1e-9 and np.max(np.abs(roll[420:] - 20.0)) < 1e-9
-    assert np.all(np.diff(roll[300:421]) >= -1e-9)  # seed 000 Fig. 4: a monotone roll
+    yaw, roll, pitch = gd.orf_angles_deg(q, r, v)
+    assert np.max(np.abs(roll[:301])) < ANGLE_ROUND_OFF_DEG and np.max(np.abs(roll[420:] - 20.0)) < ANGLE_ROUND_OFF_DEG
+    assert np.all(np.diff(roll[300:421]) >= -ANGLE_ROUND_OFF_DEG)  # seed 000 Fig. 4: a monotone roll
 
 
 def _ecef_of_eci(r_eci, t_unix_s):
