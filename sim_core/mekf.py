@@ -144,16 +144,21 @@ def mekf_propagate_1(
 def mekf_update_1(q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, q_meas_ib: np.ndarray, sigma3: np.ndarray) -> float:
     """Star-tracker update in place (measurement Λ^m = Λ ∘ Λ^n, seed 000 §4); returns the innovation NIS.
 
-    Residual z = rotation vector of Λ̂̃ ∘ Λ^m, H = [I 0], Joseph-form covariance update. The
-    normalised innovation squared zᵀS⁻¹z is χ²(3) for a consistent filter (an FDIR residual).
+    Residual z = rotation vector of Λ̂̃ ∘ Λ^m, H = [I 0], Joseph-form covariance update
+    P = (I − KH) P (I − KH)ᵀ + K R Kᵀ. The normalised innovation squared zᵀS⁻¹z is χ²(3) for a
+    consistent filter (an FDIR residual).
     """
-    conj = np.array([q_ib[0], -q_ib[1], -q_ib[2], -q_ib[3]])
-    dq = qt.multiply_1(conj, q_meas_ib)
-    if dq[0] < 0.0:
-        dq = -dq
-    vn = np.sqrt(dq[1] ** 2 + dq[2] ** 2 + dq[3] ** 2)
-    scale = 2.0 * np.arctan2(vn, dq[0]) / vn if vn > 0.0 else 2.0
-    z = scale * dq[1:4]
+    a0, a1, a2, a3 = q_ib[0], -q_ib[1], -q_ib[2], -q_ib[3]
+    b0, b1, b2, b3 = q_meas_ib[0], q_meas_ib[1], q_meas_ib[2], q_meas_ib[3]
+    d0 = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+    d1 = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+    d2 = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+    d3 = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+    if d0 < 0.0:
+        d0, d1, d2, d3 = -d0, -d1, -d2, -d3
+    vn = np.sqrt(d1 * d1 + d2 * d2 + d3 * d3)
+    scale = 2.0 * np.arctan2(vn, d0) / vn if vn > 0.0 else 2.0
+    z = (scale * d1, scale * d2, scale * d3)
     s = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
@@ -161,36 +166,54 @@ def mekf_update_1(q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, q_mea
         s[i, i] += sigma3[i] * sigma3[i]
     s_inv = _inverse3(s)
     k = np.zeros((6, 3))
-    for i in range(6):
-        for j in range(3):
-            for m in range(3):
-                k[i, j] += p_cov[i, m] * s_inv[m, j]
     dx = np.zeros(6)
     for i in range(6):
-        dx[i] = k[i, 0] * z[0] + k[i, 1] * z[1] + k[i, 2] * z[2]
-    corr = np.array([1.0, 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]])
-    q_new = qt.normalize_1(qt.multiply_1(q_ib, corr))
-    if q_new[0] < 0.0:
-        q_new = -q_new
-    q_ib[:] = q_new
-    for i in range(3):
-        bias_b[i] += dx[3 + i]
-    ikh = np.eye(6)
-    for i in range(6):
         for j in range(3):
-            ikh[i, j] -= k[i, j]
-    p_new = _sandwich6(ikh, p_cov)
-    for i in range(6):
-        for j in range(6):
             acc = 0.0
             for m in range(3):
-                acc += k[i, m] * sigma3[m] * sigma3[m] * k[j, m]
-            p_cov[i, j] = p_new[i, j] + acc
+                acc += p_cov[i, m] * s_inv[m, j]
+            k[i, j] = acc
+            dx[i] += acc * z[j]
+    _correct(q_ib, bias_b, dx)
+    _joseph(p_cov, k, sigma3)
     nis = 0.0
     for i in range(3):
         for j in range(3):
             nis += z[i] * s_inv[i, j] * z[j]
     return nis
+
+
+@njit(cache=True)
+def _correct(q_ib: np.ndarray, bias_b: np.ndarray, dx: np.ndarray) -> None:
+    """Apply the error-state estimate: q ← q ∘ (1, δθ/2) normalised with λ0 ≥ 0, b ← b + Δb."""
+    e1, e2, e3 = 0.5 * dx[0], 0.5 * dx[1], 0.5 * dx[2]
+    a0, a1, a2, a3 = q_ib[0], q_ib[1], q_ib[2], q_ib[3]
+    r0 = a0 - a1 * e1 - a2 * e2 - a3 * e3
+    r1 = a0 * e1 + a1 + a2 * e3 - a3 * e2
+    r2 = a0 * e2 - a1 * e3 + a2 + a3 * e1
+    r3 = a0 * e3 + a1 * e2 - a2 * e1 + a3
+    inv = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    if r0 < 0.0:
+        inv = -inv
+    q_ib[0], q_ib[1], q_ib[2], q_ib[3] = r0 * inv, r1 * inv, r2 * inv, r3 * inv
+    for i in range(3):
+        bias_b[i] += dx[3 + i]
+
+
+@njit(cache=True)
+def _joseph(p_cov: np.ndarray, k: np.ndarray, sigma3: np.ndarray) -> None:
+    """P ← (I − KH) P (I − KH)ᵀ + K R Kᵀ in place for H = [I 0], R = diag(σ²)."""
+    a = np.empty((6, 6))  # (I − KH) P
+    for i in range(6):
+        for j in range(6):
+            a[i, j] = p_cov[i, j] - k[i, 0] * p_cov[0, j] - k[i, 1] * p_cov[1, j] - k[i, 2] * p_cov[2, j]
+    r0, r1, r2 = sigma3[0] ** 2, sigma3[1] ** 2, sigma3[2] ** 2
+    for i in range(6):
+        for j in range(i, 6):
+            v = a[i, j] - a[i, 0] * k[j, 0] - a[i, 1] * k[j, 1] - a[i, 2] * k[j, 2]
+            v += k[i, 0] * r0 * k[j, 0] + k[i, 1] * r1 * k[j, 1] + k[i, 2] * r2 * k[j, 2]
+            p_cov[i, j] = v
+            p_cov[j, i] = v
 
 
 @njit(cache=True)

@@ -114,15 +114,19 @@ def star_tracker_1(
     t1 = sigma3[1] * normal3[1]
     t2 = sigma3[2] * normal3[2]
     norm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
-    qn = np.empty(4)
-    qn[0] = np.cos(0.5 * norm)
-    s = np.sin(0.5 * norm) / norm if norm > 0.0 else 0.5
-    qn[1] = s * t0
-    qn[2] = s * t1
-    qn[3] = s * t2
-    qm = qt.normalize_1(qt.multiply_1(q_ib, qn))
-    if qm[0] < 0.0:
-        qm = -qm
+    n0 = np.cos(0.5 * norm)
+    k = np.sin(0.5 * norm) / norm if norm > 0.0 else 0.5
+    n1, n2, n3 = k * t0, k * t1, k * t2
+    a0, a1, a2, a3 = q_ib[0], q_ib[1], q_ib[2], q_ib[3]
+    r0 = a0 * n0 - a1 * n1 - a2 * n2 - a3 * n3
+    r1 = a0 * n1 + a1 * n0 + a2 * n3 - a3 * n2
+    r2 = a0 * n2 - a1 * n3 + a2 * n0 + a3 * n1
+    r3 = a0 * n3 + a1 * n2 - a2 * n1 + a3 * n0
+    inv = 1.0 / np.sqrt(r0 * r0 + r1 * r1 + r2 * r2 + r3 * r3)
+    if r0 < 0.0:
+        inv = -inv
+    qm = np.empty(4)
+    qm[0], qm[1], qm[2], qm[3] = r0 * inv, r1 * inv, r2 * inv, r3 * inv
     rate = np.sqrt(omega_b[0] ** 2 + omega_b[1] ** 2 + omega_b[2] ** 2)
     return qm, rate <= max_rate
 
