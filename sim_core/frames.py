@@ -138,10 +138,12 @@ def _rot3(angle_rad: np.ndarray) -> np.ndarray:
 
 
 def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """GCRS→CIRS (C), polar motion (W) and GCRS→TEME matrices at flat times, from an hourly grid."""
-    t0, t1 = float(np.min(t_unix_s)), float(np.max(t_unix_s))
-    n = max(2, int(np.ceil((t1 - t0) / _GRID_STEP_S)) + 1)
-    grid = t0 + _GRID_STEP_S * np.arange(n)
+    """GCRS→CIRS (C), polar motion (W) and GCRS→TEME matrices at flat times, linear between the
+    whole UTC hours that bracket them (only those hours are evaluated by skyfield)."""
+    hour = np.floor(t_unix_s / _GRID_STEP_S)
+    nodes, k = np.unique(np.concatenate([hour, hour + 1.0]), return_inverse=True)
+    k = k[: hour.size]
+    grid = nodes * _GRID_STEP_S
     sky = skyfield_time(grid)
     era = earth_rotation_angle_rad(grid + np.asarray(sky.dut1, dtype=float))
     gast = np.asarray(sky.gast, dtype=float) * (2.0 * np.pi / 24.0)
@@ -151,12 +153,11 @@ def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
 
     teme_grid = np.moveaxis(np.asarray(TEME.rotation_at(sky)), -1, 0)
     w_grid = np.moveaxis(np.asarray(sky.polar_motion_matrix()), -1, 0)
-    w = (t_unix_s - t0) / _GRID_STEP_S
-    k = np.clip(np.floor(w).astype(int), 0, n - 2)
-    f = (w - k)[:, None, None]
-    c = (1.0 - f) * c_grid[k] + f * c_grid[k + 1]
-    teme = (1.0 - f) * teme_grid[k] + f * teme_grid[k + 1]
-    w = (1.0 - f) * w_grid[k] + f * w_grid[k + 1]
+    k1 = np.searchsorted(nodes, hour + 1.0)
+    f = (t_unix_s / _GRID_STEP_S - hour)[:, None, None]
+    c = (1.0 - f) * c_grid[k] + f * c_grid[k1]
+    teme = (1.0 - f) * teme_grid[k] + f * teme_grid[k1]
+    w = (1.0 - f) * w_grid[k] + f * w_grid[k1]
     return c, w, teme
 
 

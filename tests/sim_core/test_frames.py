@@ -44,6 +44,22 @@ def test_eci_to_ecef_matches_vallado_appendix_c_itrf():
     np.testing.assert_allclose(v_back, VALLADO_V_GCRF_KM_S * 1e3, rtol=0, atol=1e-9)
 
 
+# Hourly interpolation of precession-nutation and polar motion: nutation's fastest terms curve by
+# < 1e-10 rad within an hour; skyfield's GAST route and our ERA route agree to rounding.
+INTERPOLATED_ORIENTATION_TOL_RAD = 1e-10
+
+
+def test_interpolated_earth_orientation_matches_skyfield_itrs_rotation():
+    from skyfield.framelib import itrs
+
+    t = 1.7e9 + np.array([0.0, 1234.5, 1800.0, 3599.9, 3.0 * 86400.0 + 77.0])
+    ours = frames.eci_to_ecef_matrix(t)
+    theirs = np.moveaxis(itrs.rotation_at(frames.skyfield_time(t)), -1, 0)
+    residual = ours @ np.swapaxes(theirs, -1, -2) - np.eye(3)
+    assert np.max(np.abs(residual)) < INTERPOLATED_ORIENTATION_TOL_RAD
+    np.testing.assert_array_equal(frames.eci_to_ecef_matrix(t[1:2])[0], ours[1])  # batch-independent
+
+
 # SOFA t_sofa_c.c, t_era00: eraEra00(2400000.5, 54388.0) = 0.4022837240028158102 rad, tol 1e-12.
 SOFA_ERA_JD_UT1 = 2400000.5 + 54388.0
 SOFA_ERA_RAD = 0.4022837240028158102
