@@ -154,7 +154,7 @@ def test_roll_about_y_moves_the_boresight_across_track():
     q, _, _ = gd.orf_hold_program(r, v, roll_deg=20.0)
     x_b = qt.rotate(q, [1.0, 0, 0])
     nadir = -r / np.linalg.norm(r, axis=1, keepdims=True)
-    assert np.allclose(np.degrees(np.arccos(np.sum(x_b * nadir, axis=1))), 20.0, atol=1e-9)
+    assert np.allclose(np.degrees(np.arccos(np.sum(x_b * nadir, axis=1))), 20.0, atol=ANGLE_ROUND_OFF_DEG)
     assert np.max(np.abs(np.sum(x_b * v, axis=1) / np.linalg.norm(v, axis=1))) < ROUND_OFF
 
 
