@@ -18,7 +18,7 @@ from sim_core import quaternion
 from telemetry import ccsds
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
 from telemetry.ingest_report import ApidSummary, IngestReport, DecodeResult, QuarantineRecord, SampleBatch
-from telemetry.validation import validate_packets
+from telemetry.validation import header_mismatch, validate_packets
 
 __all__ = [
     "packet_matrix",
@@ -170,6 +170,16 @@ def _decode_apid(
         raise ValueError(f"time_code: packet {definition.name} has no secondary-header time code to stamp samples")
     packets = packet_matrix(buf, offset, definition.packet_octets)
     headers = ccsds.parse_primary_headers(packets)
+    mismatch = header_mismatch(headers, secondary_header=True)
+    if any(mismatch):
+        bad = np.array([m != "" for m in mismatch])
+        report.quarantined.extend(
+            QuarantineRecord(int(offset[i]), definition.packet_octets, "bad_header", definition.apid,
+                             int(headers.sequence_count[i]), detail=mismatch[i])
+            for i in np.flatnonzero(bad)
+        )
+        offset, packets = offset[~bad], packets[~bad]
+        headers = ccsds.parse_primary_headers(packets)
     t0 = ccsds.PRIMARY_HEADER_OCTETS
     t = ccsds.decode_time(packets[:, t0 : t0 + definition.time_code.octets], definition.time_code)
     verdict = validate_packets(definition.apid, offset, headers.sequence_count, t,

@@ -1,7 +1,8 @@
 """Per-packet validation of one APID: time window, duplicates, sequence-count order and gaps.
 
 Framing problems (bad header, unknown APID, bad length, truncation, CRC) are found by
-:func:`telemetry.ccsds.frame_stream`; this module judges the framed packets of one APID:
+:func:`telemetry.ccsds.frame_stream`; this module judges the framed packets of one APID: a
+telecommand type, segmented sequence flags or a wrong secondary header flag is ``bad_header``;
 times outside the mission window are quarantined, exact repeats (same sequence count and time)
 are counted as duplicates and dropped, and in time order the 14-bit source sequence count
 (CCSDS 133.0-B-2 §4.1.3.4.3, modulo 16384) must advance by 1..8191 from the last accepted packet:
@@ -17,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from telemetry.ccsds import SEQUENCE_COUNT_MODULUS
+from telemetry.ccsds import SEQUENCE_COUNT_MODULUS, SEQUENCE_FLAGS_UNSEGMENTED, PrimaryHeaders
 from telemetry.ingest_report import QuarantineRecord, SequenceGap
 
-__all__ = ["PacketVerdict", "validate_packets", "ACCEPTED", "NON_MONOTONIC", "RESTART"]
+__all__ = ["PacketVerdict", "validate_packets", "header_mismatch", "ACCEPTED", "NON_MONOTONIC", "RESTART"]
 
 ACCEPTED = 0
 NON_MONOTONIC = 1
@@ -68,6 +69,19 @@ def _sequence_kernel(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         else:
             status[i] = NON_MONOTONIC
     return status, missing
+
+
+def header_mismatch(headers: PrimaryHeaders, secondary_header: bool) -> list[str]:
+    """Per packet, what in its header contradicts a fixed-length telemetry packet ("" = nothing).
+
+    Expected: packet type 0 = telemetry (CCSDS 133.0-B-2 §4.1.3.3.2), sequence flags 3 =
+    unsegmented (§4.1.3.4.2.2), secondary header flag set when the packet carries a time code (§4.1.3.3.3).
+    """
+    problems = np.full(headers.apid.shape, "", dtype=object)
+    problems[headers.secondary_header_flag != int(secondary_header)] = "secondary header flag"
+    problems[headers.sequence_flags != SEQUENCE_FLAGS_UNSEGMENTED] = "sequence flags (segmented)"
+    problems[headers.packet_type != 0] = "packet type (telecommand)"
+    return problems.tolist()
 
 
 def validate_packets(

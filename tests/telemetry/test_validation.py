@@ -107,3 +107,19 @@ def test_report_json_lists_reasons_offsets_and_gaps() -> None:
 def test_validate_packets_rejects_mismatched_arrays_naming_fields() -> None:
     with pytest.raises(ValueError, match="offset, sequence_count, t_utc_ns"):
         validate_packets(HK, np.arange(3), np.arange(4), np.arange(3), 126, None, None)
+
+
+@pytest.mark.parametrize(("octet", "xor", "detail"), [(0, 0x10, "packet type (telecommand)"),
+                                                     (2, 0x40, "sequence flags (segmented)"),
+                                                     (0, 0x08, "secondary header flag")])
+def test_header_fields_contradicting_a_telemetry_packet_are_bad_header(octet: int, xor: int, detail: str) -> None:
+    """Type, sequence-flag and secondary-header bits of §4.1.3, flipped with a CRC recomputed to match."""
+    from telemetry.ccsds import crc16_ccitt
+
+    rows = packets(reference().packets[HK], 10)
+    rows[4, octet] ^= xor
+    c = int(crc16_ccitt(rows[4:5, :-2])[0])
+    rows[4, -2:] = [c >> 8, c & 0xFF]
+    result = _ingest(rows)
+    assert [(q.reason, q.offset, q.detail) for q in result.report.quarantined] == [("bad_header", 4 * 126, detail)]
+    assert result.report.packets_accepted == 9
