@@ -57,7 +57,7 @@ def test_interpolated_earth_orientation_matches_skyfield_itrs_rotation():
     theirs = np.moveaxis(itrs.rotation_at(frames.skyfield_time(t)), -1, 0)
     residual = ours @ np.swapaxes(theirs, -1, -2) - np.eye(3)
     assert np.max(np.abs(residual)) < INTERPOLATED_ORIENTATION_TOL_RAD
-    np.testing.assert_array_equal(frames.eci_to_ecef_matrix(t[1:2])[0], ours[1])  # batch-independent
+    np.testing.assert_allclose(frames.eci_to_ecef_matrix(t[1:2])[0], ours[1], rtol=0, atol=1e-15)  # batch-independent
 
 
 # SOFA t_sofa_c.c, t_era00: eraEra00(2400000.5, 54388.0) = 0.4022837240028158102 rad, tol 1e-12.
