@@ -21,6 +21,8 @@ from numba import njit
 from sim_core import quaternion as qt
 
 __all__ = [
+    "ARCSEC",
+    "EARTH_RADIUS_M",
     "variant_generators",
     "rotation_noise_quaternion",
     "star_tracker",
