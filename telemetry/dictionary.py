@@ -32,6 +32,7 @@ __all__ = [
     "load_xtce",
     "parse_time_code",
     "parse_utc_ns",
+    "SHIPPED",
 ]
 
 PRIMARY_HEADER_BITS = 8 * PRIMARY_HEADER_OCTETS
