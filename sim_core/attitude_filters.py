@@ -7,6 +7,9 @@ densities q and r; ξ = q/r is the filterability index.
 Seed 003 eq (17) is garbled in print ("k22 = √(2ξ)√ξ"); the steady-state Riccati solution of
 this model — and the only reading that gives eq (19)'s d = √2/2 — is k12 = √ξ, k22 = √2 ξ^{1/4}.
 
+The multisensor unit of seed 003 §3.2.1.2.4 (eq 20 and the KF after it) is the same estimator
+with z = IMU attitude − star-tracker attitude and (q₁, r₁): :func:`body_rate_step_1` serves both.
+
 Seed 000 §4 does not print its filter. Our choice: the same model sampled at T_q, i.e. a
 per-axis discrete steady-state Kalman (α–β) filter on the mismatch ε_s (gains from the discrete
 algebraic Riccati equation, solved here by structured doubling), and a first-order recursive
