@@ -109,32 +109,35 @@ def _times(t: np.ndarray | float, name: str = "t_unix_s") -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1)
-def _igrf_coefficients():
-    """IGRF-14 Gauss coefficients g, h (nT) as ppigrf reads them (rows: epochs, cols: (n, m))."""
+def _igrf_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """IGRF-14 as ppigrf reads it: epochs (Unix s), g[e, n, m] and h[e, n, m] (T), loaded once."""
     from ppigrf.ppigrf import read_shc, shc_fn
 
-    return read_shc(shc_fn)
+    g_frame, h_frame = read_shc(shc_fn)
+    epochs = np.array([d.replace(tzinfo=dt.timezone.utc).timestamp() for d in g_frame.index])
+    size = 1 + max(n for n, _ in g_frame.columns)
+    g, h = np.zeros((epochs.size, size, size)), np.zeros((epochs.size, size, size))
+    for n, m in g_frame.columns:
+        g[:, n, m] = g_frame[(n, m)].to_numpy() * 1e-9
+        h[:, n, m] = h_frame[(n, m)].to_numpy() * 1e-9
+    return epochs, g, h
 
 
 def _check_igrf_span(t_unix_s: np.ndarray) -> None:
-    g, _ = _igrf_coefficients()
-    first, last = (d.replace(tzinfo=dt.timezone.utc).timestamp() for d in (g.index[0], g.index[-1]))
-    if np.any(t_unix_s < first) or np.any(t_unix_s > last):
-        raise ValueError(f"t_unix_s: IGRF-14 covers {g.index[0].date()} to {g.index[-1].date()}")
+    epochs = _igrf_table()[0]
+    if np.any(t_unix_s < epochs[0]) or np.any(t_unix_s > epochs[-1]):
+        first, last = (dt.datetime.fromtimestamp(e, dt.timezone.utc).date() for e in (epochs[0], epochs[-1]))
+        raise ValueError(f"t_unix_s: IGRF-14 covers {first} to {last}")
 
 
 def igrf_coefficients_t(t_unix_s: float) -> tuple[np.ndarray, np.ndarray]:
     """IGRF-14 Schmidt semi-normalised Gauss coefficients g[n, m], h[n, m] (T) at t, linear in time."""
     t = float(_times(t_unix_s))
     _check_igrf_span(np.array([t]))
-    g_table, h_table = _igrf_coefficients()
-    epochs = np.array([d.replace(tzinfo=dt.timezone.utc).timestamp() for d in g_table.index])
-    size = 1 + max(n for n, _ in g_table.columns)
-    g, h = np.zeros((size, size)), np.zeros((size, size))
-    for n, m in g_table.columns:
-        g[n, m] = np.interp(t, epochs, g_table[(n, m)].to_numpy()) * 1e-9
-        h[n, m] = np.interp(t, epochs, h_table[(n, m)].to_numpy()) * 1e-9
-    return g, h
+    epochs, g, h = _igrf_table()
+    k = int(np.clip(np.searchsorted(epochs, t, side="right") - 1, 0, epochs.size - 2))
+    f = (t - epochs[k]) / (epochs[k + 1] - epochs[k])
+    return (1.0 - f) * g[k] + f * g[k + 1], (1.0 - f) * h[k] + f * h[k + 1]
 
 
 def dipole_coefficients_t(t_unix_s: float) -> np.ndarray:
