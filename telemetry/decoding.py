@@ -156,7 +156,8 @@ def _frame_records(buf: np.ndarray, frames: ccsds.Frames) -> list[QuarantineReco
     records = []
     for i in bad:
         off, size = int(frames.offset[i]), int(frames.length[i])
-        apid = int(((buf[off] & 7) << 8) | buf[off + 1]) if size >= 2 else None
+        headed = size >= ccsds.PRIMARY_HEADER_OCTETS and int(buf[off]) >> 5 == 0
+        apid = ((int(buf[off]) & 7) << 8) | int(buf[off + 1]) if headed else None
         records.append(QuarantineRecord(off, size, ccsds.FrameCode.NAMES[frames.code[i]], apid))
     return records
 

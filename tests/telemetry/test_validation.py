@@ -123,3 +123,15 @@ def test_header_fields_contradicting_a_telemetry_packet_are_bad_header(octet: in
     result = _ingest(rows)
     assert [(q.reason, q.offset, q.detail) for q in result.report.quarantined] == [("bad_header", 4 * 126, detail)]
     assert result.report.packets_accepted == 9
+
+
+def test_quarantine_records_name_the_apid_of_a_version_0_header() -> None:
+    """Unknown APID 1,793 = 0x701 (uses the top APID bits) is reported as such; garbage has no APID."""
+    from telemetry.ccsds import encode_primary_headers
+
+    rows = packets(reference().packets[HK], 3)
+    stranger = encode_primary_headers(1_793, np.array([5]), 20)[0].tobytes() + bytes(14)
+    stream = rows[0].tobytes() + stranger + rows[1].tobytes() + b"\xff" * 9 + rows[2].tobytes()
+    result = decode_stream(stream, reference(), now_utc_ns=NOW_UTC_NS)
+    assert [(q.reason, q.apid, q.offset, q.length) for q in result.report.quarantined] == [
+        ("unknown_apid", 1_793, 126, 20), ("bad_header", None, 272, 9)]
