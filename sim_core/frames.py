@@ -22,12 +22,16 @@ from __future__ import annotations
 
 import functools
 import warnings
+from typing import TYPE_CHECKING
 from pathlib import Path
 
 import numpy as np
 from numba import njit
 
 from sim_core import quaternion
+
+if TYPE_CHECKING:
+    from skyfield.timelib import Time
 
 __all__ = [
     "WGS84_A_M",
@@ -108,7 +112,7 @@ def _vectors(v: np.ndarray, name: str) -> np.ndarray:
     return v
 
 
-def skyfield_time(t_unix_s: np.ndarray):
+def skyfield_time(t_unix_s: np.ndarray) -> "Time":
     """skyfield Time of Unix UTC seconds, for skyfield-backed models (days split off so leap seconds are not double-counted)."""
     days = np.floor(t_unix_s / 86400.0)
     with warnings.catch_warnings():

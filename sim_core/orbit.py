@@ -242,7 +242,9 @@ def propagate_tle(satrec: Satrec, t_unix_s: np.ndarray | float) -> tuple[np.ndar
 
 
 @njit(cache=True)
-def circular_orbit_1(t_s: float, a_m: float, inc_rad: float, raan_rad: float, u0_rad: float):
+def circular_orbit_1(
+    t_s: float, a_m: float, inc_rad: float, raan_rad: float, u0_rad: float
+) -> tuple[np.ndarray, np.ndarray]:
     """ECI r, v on a circular orbit at t_s after the epoch where the argument of latitude is u0."""
     n = np.sqrt(MU_EARTH_M3_S2 / a_m**3)
     u = u0_rad + n * t_s

@@ -4,11 +4,12 @@ WGS84, and kinematic identities (orthonormality, Λ̇ = ½ Λ ∘ ω, ECEF veloc
 from __future__ import annotations
 
 import datetime as dt
+import inspect
 
 import numpy as np
 import pytest
 
-from sim_core import frames, orbit, quaternion
+from sim_core import environment, frames, orbit, quaternion
 
 # --- Vallado, "Revisiting Spacetrack Report #3", AIAA 2006-6753 Rev 2, Appendix C (and Vallado
 # Fundamentals Example 3-15): one state at 2004-04-06 07:51:28.386009 UTC in TEME, GCRF and ITRF. ---
@@ -187,3 +188,15 @@ def test_orf_rate_satisfies_quaternion_kinematics():
 def test_bad_input_raises_value_error_naming_the_field(call, field):
     with pytest.raises(ValueError, match=field):
         call()
+
+
+@pytest.mark.parametrize("module", [frames, orbit, environment])
+def test_exported_members_exist_and_every_function_is_documented_and_typed(module):
+    for name in module.__all__:
+        member = getattr(module, name)
+        func = getattr(member, "py_func", member)  # numba dispatchers keep the Python function
+        if callable(func):
+            assert inspect.getdoc(func), f"{module.__name__}.{name} has no docstring"
+            params = inspect.signature(func).parameters.values()
+            assert all(p.annotation is not inspect.Parameter.empty for p in params), f"{module.__name__}.{name}"
+            assert inspect.signature(func).return_annotation is not inspect.Signature.empty, f"{module.__name__}.{name}"
