@@ -83,9 +83,7 @@ def latest_values(archive: Archive, satellite: str, names: list[str] | None = No
 
 def pass_summary(archive: Archive, satellite: str, pass_id: int) -> dict[str, Any]:
     """A pass with its reception, per-parameter count/min/max/mean and the alarms raised during it."""
-    record = next((p for p in archive.passes(satellite, 0, np.iinfo(np.int64).max) if p.id == pass_id), None)
-    if record is None:
-        raise ValueError(f"pass_id: no pass {pass_id} for {satellite!r}")
+    record = archive.pass_record(satellite, pass_id)
     parameters = {}
     for name in sorted(archive.parameters(satellite)):
         _, v = archive.read_parameter(satellite, name, record.aos_ns, record.los_ns)

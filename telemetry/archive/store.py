@@ -541,6 +541,19 @@ class Archive:
             ).all()
         return [_pass_record(r) for r in rows]
 
+    def pass_record(self, satellite: str, pass_id: int) -> PassRecord:
+        """One pass of ``satellite`` by id."""
+        sat_id = self._known_satellite(satellite)
+        with self.engine.connect() as conn:
+            row = conn.execute(
+                select(PASS, STATION.c.name.label("station_name"))
+                .join(STATION, STATION.c.id == PASS.c.station_id)
+                .where(PASS.c.satellite_id == sat_id, PASS.c.id == pass_id)
+            ).one_or_none()
+        if row is None:
+            raise ValueError(f"pass_id: no pass {pass_id} for {satellite!r}")
+        return _pass_record(row)
+
     def record_reception(
         self,
         pass_id: int,
