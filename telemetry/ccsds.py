@@ -198,26 +198,36 @@ def encode_time(t_utc_ns: np.ndarray, code: TimeCode) -> np.ndarray:
     return np.concatenate(parts, axis=1)
 
 
-def _crc16_table() -> np.ndarray:
-    """256-entry table of CRC-16/CCITT (polynomial 0x1021), MSB first."""
-    table = np.zeros(256, dtype=np.uint16)
+def _crc16_tables() -> np.ndarray:
+    """(4, 256) slicing tables of CRC-16/CCITT (polynomial 0x1021, MSB first): row j = CRC of an octet and j zero octets."""
+    tables = np.zeros((4, 256), dtype=np.int64)
     for byte in range(256):
         crc = byte << 8
         for _ in range(8):
             crc = ((crc << 1) ^ 0x1021) if crc & 0x8000 else crc << 1
-        table[byte] = crc & 0xFFFF
-    return table
+        tables[0, byte] = crc & 0xFFFF
+    for j in range(1, 4):
+        prev = tables[j - 1]
+        tables[j] = ((prev << 8) & 0xFFFF) ^ tables[0, prev >> 8]
+    return tables
 
 
-_CRC_TABLE = _crc16_table()
+_CRC_TABLES = _crc16_tables()
+_CRC_TABLE = _CRC_TABLES[0].astype(np.uint16)
 
 
 @njit(cache=True)
-def _crc16_1(buf: np.ndarray, start: int, stop: int, table: np.ndarray) -> int:
-    """CRC-16/CCITT (preset 0xFFFF) of buf[start:stop] (compiled kernel)."""
+def _crc16_1(buf: np.ndarray, start: int, stop: int, tables: np.ndarray) -> int:
+    """CRC-16/CCITT (preset 0xFFFF) of buf[start:stop], four octets per step by linearity (compiled kernel)."""
     crc = 0xFFFF
-    for i in range(start, stop):
-        crc = ((crc << 8) & 0xFFFF) ^ table[((crc >> 8) ^ buf[i]) & 0xFF]
+    i = start
+    while i + 4 <= stop:
+        crc = (tables[3, (crc >> 8) ^ buf[i]] ^ tables[2, (crc & 0xFF) ^ buf[i + 1]]
+               ^ tables[1, buf[i + 2]] ^ tables[0, buf[i + 3]])
+        i += 4
+    while i < stop:
+        crc = ((crc << 8) & 0xFFFF) ^ tables[0, ((crc >> 8) ^ buf[i]) & 0xFF]
+        i += 1
     return crc
 
 
@@ -227,7 +237,7 @@ def crc16_ccitt(data: bytes | np.ndarray) -> np.ndarray | int:
     if arr.dtype != np.uint8:
         raise ValueError(f"data: expected bytes or uint8 array, got {arr.dtype}")
     if arr.ndim == 1:
-        return int(_crc16_1(arr, 0, arr.shape[0], _CRC_TABLE))
+        return int(_crc16_1(arr, 0, arr.shape[0], _CRC_TABLES))
     crc = np.full(arr.shape[0], 0xFFFF, dtype=np.uint16)
     for k in range(arr.shape[1]):
         crc = (crc << np.uint16(8)) ^ _CRC_TABLE[((crc >> np.uint16(8)) ^ arr[:, k]) & 0xFF]
@@ -363,5 +373,5 @@ def frame_stream(
             raise ValueError(f"packet_octets_by_apid: APID {apid} length {size} < 7 octets")
         lengths[apid] = size
         crc[apid] = apid in crc_apids
-    offset, length, code = _frame_kernel(buf, lengths, crc, _CRC_TABLE)
+    offset, length, code = _frame_kernel(buf, lengths, crc, _CRC_TABLES)
     return Frames(offset=offset, length=length, code=code)

@@ -52,22 +52,20 @@ def packet_matrix(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np
 
 
 @njit(cache=True)
-def _bit_patterns(packets: np.ndarray, bit_offset: np.ndarray, bit_length: np.ndarray) -> np.ndarray:
-    """(F, n) uint64 big-endian bit patterns of F fields in n packets, one pass over each packet (compiled kernel)."""
-    n, n_fields = packets.shape[0], bit_offset.shape[0]
+def _bit_patterns(packets: np.ndarray, first: np.ndarray, last: np.ndarray, shift: np.ndarray,
+                  mask: np.ndarray) -> np.ndarray:
+    """(F, n) uint64 big-endian bit patterns of F fields in n packets, one pass over each packet (compiled kernel).
+
+    Field f covers octets first[f]..last[f]; its value is that big-endian word >> shift[f] & mask[f].
+    """
+    n, n_fields = packets.shape[0], first.shape[0]
     out = np.empty((n_fields, n), dtype=np.uint64)
     for i in range(n):
-        row = packets[i]
         for f in range(n_fields):
-            first = bit_offset[f] // 8
-            last = (bit_offset[f] + bit_length[f] - 1) // 8
             word = np.uint64(0)
-            for k in range(first, last + 1):
-                word = (word << np.uint64(8)) | np.uint64(row[k])
-            word >>= np.uint64(8 * (last + 1) - bit_offset[f] - bit_length[f])
-            if bit_length[f] < 64:
-                word &= (np.uint64(1) << np.uint64(bit_length[f])) - np.uint64(1)
-            out[f, i] = word
+            for k in range(first[f], last[f] + 1):
+                word = (word << np.uint64(8)) | np.uint64(packets[i, k])
+            out[f, i] = (word >> shift[f]) & mask[f]
     return out
 
 
@@ -87,9 +85,12 @@ def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, n
     """Raw (uncalibrated) values of every parameter of an (n, L) packet matrix (CCSDS 133.0-B-2 §4.1.4 user data)."""
     if packets.dtype != np.uint8 or packets.ndim != 2 or packets.shape[1] != definition.packet_octets:
         raise ValueError(f"packets: expected (n, {definition.packet_octets}) uint8, got {packets.dtype} {packets.shape}")
-    offsets = np.array([p.bit_offset for p in definition.parameters], dtype=np.int64)
-    lengths = np.array([p.bit_length for p in definition.parameters], dtype=np.int64)
-    patterns = _bit_patterns(np.ascontiguousarray(packets), offsets, lengths)
+    offset = np.array([p.bit_offset for p in definition.parameters], dtype=np.int64)
+    length = np.array([p.bit_length for p in definition.parameters], dtype=np.int64)
+    first, last = offset // 8, (offset + length - 1) // 8
+    shift = (8 * (last + 1) - offset - length).astype(np.uint64)
+    mask = np.array([(1 << b) - 1 for b in length.tolist()], dtype=np.uint64)
+    patterns = _bit_patterns(np.ascontiguousarray(packets), first, last, shift, mask)
     return {p.name: _raw_value(patterns[f], p) for f, p in enumerate(definition.parameters)}
 
 
