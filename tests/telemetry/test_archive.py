@@ -124,7 +124,9 @@ def test_ground_files_without_raw_bytes_are_told_apart_by_their_values(archive: 
     assert not result.duplicate_upload and result.gaps == []
     assert not archive.ingest(SAT, [second], source="b.csv", uploaded_by="tester").duplicate_upload
     assert archive.ingest(SAT, [first], source="a-again.csv", uploaded_by="tester").duplicate_upload
-    np.testing.assert_array_equal(archive.read_parameter(SAT, "temp_c", int(t[0]), int(t[0]) + 10**10)[1], np.arange(1.0, 7.0))
+    np.testing.assert_array_equal(
+        archive.read_parameter(SAT, "temp_c", int(t[0]), int(t[0]) + 10**10)[1], np.arange(1.0, 7.0)
+    )
 
 
 def test_overlapping_upload_keeps_each_packet_once(archive: Archive) -> None:
@@ -221,3 +223,43 @@ def test_reads_are_not_blocked_by_an_open_upload_transaction(archive: Archive, a
         elapsed = time.perf_counter() - start
     other_writer.dispose()
     assert v.size == 100 and elapsed < READ_BESIDE_WRITER_S
+
+
+def test_concurrent_overlapping_uploads_store_each_packet_once(archive: Archive, archive_url: str) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    whole = synthetic_batch(30_000)
+    parts = [whole.take(np.arange(0, 20_000)), whole.take(np.arange(10_000, 30_000))]
+    archive.satellite_id(SAT)
+    stores = [Archive(archive_url, migrate=False) for _ in parts]
+    with ThreadPoolExecutor(2) as pool:
+        results = list(
+            pool.map(lambda sp: sp[0].ingest(SAT, [sp[1]], source=f"{id(sp[1])}", uploaded_by="t"), zip(stores, parts))
+        )
+    for store in stores:
+        store.close()
+    assert sum(r.packets_accepted for r in results) == 30_000
+    assert sum(r.packets_duplicate for r in results) == 10_000
+    t, v = archive.read_parameter(SAT, "index", int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
+    np.testing.assert_array_equal(v, np.arange(30_000.0))
+
+
+def test_exported_members_are_the_documented_surface() -> None:
+    import telemetry.archive as package
+
+    assert sorted(package.__all__) == sorted(
+        [
+            "Archive",
+            "PacketBatch",
+            "sequence_gaps",
+            "upgrade",
+            "IngestResult",
+            "Gap",
+            "UploadRecord",
+            "AlarmRecord",
+            "AlarmEventRecord",
+            "PassRecord",
+            "StationRecord",
+        ]
+    )
+    assert all(hasattr(package, name) for name in package.__all__)
