@@ -107,6 +107,24 @@ def test_real_noaa20_file_round_trips_to_the_decoded_csv_and_replays_byte_exact(
     assert b"".join(p for _, p in replayed) == raw
 
 
+def test_real_noaa20_file_through_our_xtce_decoder_archives_to_the_decoded_csv(
+    archive: Archive, shared_data: Path
+) -> None:
+    from telemetry.decoding import decode_stream
+    from telemetry.dictionary import load_dictionary
+
+    raw = (shared_data / NOAA_DIR / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
+    truth = decoded_csv(shared_data)
+    decoded = decode_stream(raw, load_dictionary("noaa20_apid11_xtce.yaml"), source="J01_G011.DAT1")
+    result = archive.ingest_decoded(SAT, decoded, uploaded_by="tester")
+    assert result.packets_accepted == 7_200
+    t, q0 = archive.read_parameter(SAT, "q_ib_0", int(truth["t_ns"][0]), int(truth["t_ns"][-1]))
+    np.testing.assert_allclose(t, truth["t_ns"], rtol=0, atol=ONE_MICROSECOND_NS)
+    np.testing.assert_array_equal(q0, truth["q4"].astype(np.float32))
+    assert archive.uploads(SAT)[0].report["decode"]["packets_accepted"] == 7_200
+    assert b"".join(p for _, p in archive.replay(SAT, int(t[0]), int(t[-1]))) == raw
+
+
 def test_same_file_twice_is_a_reported_no_op(archive: Archive) -> None:
     batch = synthetic_batch(500)
     first = archive.ingest(SAT, [batch], source="a.bin", uploaded_by="tester", sha256="ab" * 32)
