@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from sim_core import control as ctl
 from sim_core import quaternion as qt
+from sim_core import scenario_library
 
 EXACT = 1e-12  # float64 round-off on O(1) quantities
 POLY_TOL = 1e-9  # roots of a 3rd/4th-degree polynomial vs eigenvalues: conditioning of clustered roots
@@ -94,6 +95,20 @@ def test_gain_margin_puts_the_loop_on_the_unit_circle(delay):
     gain_margin, _, _ = ctl.loop_margins(GAINS, delay)
     at_limit = ctl.DigitalLawGains(GAINS.k_per_s2 * gain_margin, GAINS.tau1_s, GAINS.tau2_s, GAINS.t_u_s)
     assert np.max(np.abs(np.linalg.eigvals(ctl.closed_loop_matrix(at_limit, delay)))) == pytest.approx(1.0, abs=1e-8)
+
+
+SEED000_SCENARIOS = [n for n in scenario_library.names() if scenario_library.get(n).controller.kind == "seed000"]
+
+
+@pytest.mark.parametrize("name", SEED000_SCENARIOS)
+def test_library_scenarios_fly_stable_seed000_gains(name):
+    """Whatever gains a library scenario picks for the seed 000 law, its linearised loop is stable
+    with the classical margins at the scenario's own control period."""
+    s = scenario_library.get(name)
+    gains = ctl.DigitalLawGains(s.controller.gain_k_per_s2, s.controller.tau1_s, s.controller.tau2_s, s.control_dt_s)
+    gain_margin, phase_margin, _ = ctl.loop_margins(gains)
+    assert np.max(np.abs(np.linalg.eigvals(ctl.closed_loop_matrix(gains)))) < 1.0 - STABILITY_MARGIN
+    assert gain_margin > GAIN_MARGIN_MIN and phase_margin > PHASE_MARGIN_MIN
 
 
 @settings(deadline=None)  # first call loads compiled numba kernels
