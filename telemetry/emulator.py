@@ -1,0 +1,454 @@
+"""Spacecraft emulator (issue 5): sim_core flies "the real satellite" and its telemetry goes out as CCSDS packets.
+
+Pipeline: scenario + hidden fault schedule → :func:`sim_core.engine.simulate` (one variant, output at
+the ACS_HK period T_q) → per-sample engineering values of every dictionary parameter
+(:func:`packet_series`) → fixed-length packets with primary headers, per-APID sequence counts and
+CUC secondary-header times (:func:`telemetry.encoding.encode_packets`, CCSDS 133.0-B-2 §4.1) merged
+in time order (:func:`encode_stream`) → a file (:func:`demo_pass_bytes`) or a paced TCP link with
+reconnect (:func:`send_stream`).
+
+Where the values come from (reference dictionary ``reference_satellite.yaml``):
+
+* straight from the trajectory: estimated and program quaternions, estimated rates, wheel speeds,
+  wheel torque commands, magnetic-driver moments, engine events;
+* drawn from truth with sim_core's sensor models, because the engine does not record raw sensor
+  samples: star tracker Λ^m = Λ ∘ Λ^n (seed 000 §4), gyro ω + b + d + n (seed 002 eq 13),
+  magnetometer Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG), GPS fix with noise (seed 003 §3.2.1.1), all with
+  the scenario's noise figures and a random stream of their own;
+* wheel motor current i = M / K_m (seed 002 eq 2) from the torque the wheel delivers;
+* mode from the guidance programme (PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise).
+
+A hidden fault stays hidden: the engine has no onboard FDIR, so the FDIR flags stay OK and the
+engine's fault onset/cleared events (ground truth, not something the satellite knows) are not sent;
+the fault shows only through its effects (a failed wheel stops accelerating and draws no current).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from pydantic import ValidationError
+
+from sim_core import environment, frames, quaternion, scenario_library, sensors
+from sim_core.engine import orbit_state, simulate
+from sim_core.scenario import FaultSpec, Scenario, VariantSpec
+from sim_core.trajectory import EVENT_NAMES, Trajectory
+from telemetry.ccsds import NS_PER_S, SEQUENCE_COUNT_MODULUS
+from telemetry.dictionary import Dictionary, PacketDefinition, load_dictionary, parse_utc_ns
+from telemetry.encoding import encode_packets
+
+__all__ = [
+    "DEFAULT_SCENARIO",
+    "REFERENCE_DICTIONARY",
+    "PacketSeries",
+    "PacketStream",
+    "SendReport",
+    "parse_fault",
+    "satellite_scenario",
+    "packet_series",
+    "encode_stream",
+    "emulate",
+    "demo_pass_bytes",
+    "gps_week_seconds",
+    "send_stream",
+]
+
+DEFAULT_SCENARIO = "somov-ge4-scan"
+REFERENCE_DICTIONARY = "reference_satellite.yaml"
+HK_PACKET, GPS_PACKET = "ACS_HK", "GPS_NAV"
+EMULATOR_STREAM = 5  # spawn key of the emulator's sensor noise, apart from the engine's own streams
+
+# GPS receiver: seed 003 §3.2.1.1 (SRG-10): position 15 m (2σ), velocity 1.5 m/s (2σ).
+GPS_SIGMA_R_M = 7.5
+GPS_SIGMA_V_M_S = 0.75
+GPS_SATELLITES_TRACKED = 8  # a healthy LEO receiver's typical count (≥ 4 needed for a 3-D fix, seed 003 eq 1)
+GPS_EPOCH_UTC_NS = parse_utc_ns("1980-01-06T00:00:00Z")
+TAI_MINUS_GPS_S = 19  # fixed since the GPS epoch (IS-GPS-200 §3.3.4)
+SECONDS_PER_WEEK = 604_800
+GYRO_RANGE_RAD_S = math.radians(20.0)  # measuring range of the emulated rate sensor (well above any turn)
+WHEEL_TORQUE_CONSTANT_NM_A = 0.1  # K_m: the HR12-class 0.2 N·m maximum draws 2 A, inside the 2.5 A yellow limit
+STAR_TRACKER_TRACKING_RATE_RAD_S = math.radians(2.0)  # validity is not telemetered; a typical tracking limit
+REWIND_S = 1.0  # on reconnect, re-send what went out in the last second (socket buffers lost with the link)
+RETRY_S = 0.5
+
+
+@dataclass(frozen=True)
+class PacketSeries:
+    """Engineering values of one packet type at its sample times (the satellite's truth before encoding)."""
+
+    definition: PacketDefinition
+    t_utc_ns: np.ndarray
+    values: dict[str, np.ndarray]
+
+
+@dataclass(frozen=True)
+class PacketStream:
+    """Packets of all APIDs in time order: bytes, each packet's end offset, time and APID."""
+
+    data: bytes
+    ends: np.ndarray
+    t_utc_ns: np.ndarray
+    apid: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.ends.shape[0])
+
+    def window(self, t_start_utc_ns: int, t_stop_utc_ns: int) -> "PacketStream":
+        """The packets stamped in [t_start, t_stop), counts and bytes unchanged."""
+        keep = np.flatnonzero((self.t_utc_ns >= t_start_utc_ns) & (self.t_utc_ns < t_stop_utc_ns))
+        if keep.size == 0:
+            return PacketStream(b"", np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
+        lo, hi = int(keep[0]), int(keep[-1]) + 1
+        starts = np.concatenate([[0], self.ends])
+        base = int(starts[lo])
+        return PacketStream(self.data[base : int(self.ends[hi - 1])], self.ends[lo:hi] - base,
+                            self.t_utc_ns[lo:hi], self.apid[lo:hi])
+
+
+@dataclass
+class SendReport:
+    """What a TCP send delivered: packets and octets written, connections opened, re-sent packets."""
+
+    packets_sent: int = 0
+    octets_sent: int = 0
+    connections: int = 0
+    packets_resent: int = 0
+
+
+def parse_fault(text: str) -> FaultSpec:
+    """A hidden fault from ``target:index:type@onset_s[+duration_s][,gain=G][,value=V]`` (sim_core FaultSpec).
+
+    ``index`` is sim_core's 0-based index (wheel 0 is the dictionary's ``wheel_*_1``).
+    >>> parse_fault("wheel:1:failure@600").model_dump(include={"target", "index", "type", "onset_s"})
+    {'target': 'wheel', 'index': 1, 'type': 'failure', 'onset_s': 600.0}
+    """
+    head, *options = text.split(",")
+    spec, _, timing = head.partition("@")
+    parts = spec.split(":")
+    if len(parts) != 3 or not timing:
+        raise ValueError(f"fault: expected target:index:type@onset_s[+duration_s][,key=value], got {text!r}")
+    onset, _, duration = timing.partition("+")
+    fields: dict = {"target": parts[0], "index": parts[1], "type": parts[2], "onset_s": onset}
+    if duration:
+        fields["duration_s"] = duration
+    for option in options:
+        key, sep, value = option.partition("=")
+        if not sep or key not in ("gain", "value", "period_s", "duty"):
+            raise ValueError(f"fault: option {option!r} is not gain=, value=, period_s= or duty=")
+        fields[key] = value
+    try:
+        return FaultSpec.model_validate(fields)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise ValueError(f"fault.{'.'.join(str(x) for x in err['loc'])}: {err['msg']} in {text!r}") from None
+
+
+def satellite_scenario(
+    scenario: str | Scenario = DEFAULT_SCENARIO,
+    faults: Sequence[FaultSpec] = (),
+    duration_s: float | None = None,
+    start_utc: str | None = None,
+    output_dt_s: float = 0.25,
+) -> Scenario:
+    """The scenario the emulated satellite flies: one variant with the hidden faults, output at T_q (seed 000 §5)."""
+    base = scenario_library.get(scenario) if isinstance(scenario, str) else scenario
+    data = base.model_dump()
+    data["variants"] = [VariantSpec(name="satellite", faults=list(faults)).model_dump()]
+    data["output_dt_s"] = output_dt_s
+    if duration_s is not None:
+        data["duration_s"] = duration_s
+    if start_utc is not None:
+        data["orbit"]["epoch_utc"] = start_utc
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise ValueError(f"scenario.{'.'.join(str(x) for x in err['loc'])}: {err['msg']}") from None
+
+
+def _stride(definition: PacketDefinition, output_dt_s: float) -> int:
+    """Output samples per packet period; ValueError if the period is not a whole multiple."""
+    period = definition.period_s or output_dt_s
+    ratio = period / output_dt_s
+    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+        raise ValueError(f"{definition.name}.period_s: {period} s is not a whole multiple of the output step {output_dt_s} s")
+    return int(round(ratio))
+
+
+def _codes(definition: PacketDefinition, name: str) -> dict[str, int]:
+    """Label → code of an enumerated parameter."""
+    for p in definition.parameters:
+        if p.name == name:
+            return {label: code for code, label in p.enumeration.items()}
+    raise ValueError(f"{definition.name}: dictionary has no parameter {name!r}")
+
+
+def _turn_windows(s: Scenario) -> list[tuple[float, float]]:
+    """[start, end) of every scheduled turn of the guidance route, s from the epoch (seed 001)."""
+    if s.guidance.kind != "route":
+        return []
+    windows, t = [], s.guidance.route_start_s
+    for seg in s.guidance.route:
+        if seg.kind == "turn":
+            windows.append((t, t + seg.duration_s))
+        t += seg.duration_s
+    return windows
+
+
+def _mode(s: Scenario, definition: PacketDefinition, t_s: np.ndarray) -> np.ndarray:
+    """Onboard mode code per sample: PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise (seed 001 modes)."""
+    codes = _codes(definition, "mode")
+    mode = np.full(t_s.shape, codes["THREE_AXIS"], dtype=np.int64)
+    for start, end in _turn_windows(s):
+        mode[(t_s >= start) & (t_s < end)] = codes["PROGRAM_TURN"]
+    return mode
+
+
+def _last_events(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Code and argument of the last onboard-known engine event at or before each sample (truth-only events left out)."""
+    codes = _codes(definition, "fdir_event")
+    hidden = {EVENT_NAMES[2], EVENT_NAMES[3]}  # fault onset/cleared: ground truth of the injection
+    known = [(t, codes[name.upper()], arg) for t, name, arg in traj.events[0] if name not in hidden]
+    event = np.full(t_s.shape, codes["NONE"], dtype=np.int64)
+    argument = np.zeros(t_s.shape, dtype=np.int64)
+    if known:
+        ev_t = np.array([k[0] for k in known])
+        at = np.searchsorted(ev_t, t_s, side="right") - 1
+        seen = at >= 0
+        event[seen] = np.array([k[1] for k in known])[at[seen]]
+        argument[seen] = np.clip(np.array([k[2] for k in known])[at[seen]], 0, 255)
+    return event, argument
+
+
+def _split(prefix: str, columns: np.ndarray, suffixes: Sequence[str]) -> dict[str, np.ndarray]:
+    """Named columns ``prefix_suffix`` of an (n, k) array."""
+    return {f"{prefix}_{sfx}": columns[:, k] for k, sfx in enumerate(suffixes)}
+
+
+def _hk_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray,
+               rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """ACS_HK engineering values at the trajectory rows (estimates, programme, actuators, sensor samples)."""
+    sr = {name: series[0, rows] for name, series in traj.series.items()}
+    t_s = traj.t_s[rows]
+    t_unix = traj.extra["epoch_unix_s"] + t_s
+    sn = s.sensors
+    q_st, _ = sensors.star_tracker(sr["q_ib"], sr["omega_b_rad_s"], sn.star_tracker_sigma_arcsec * sensors.ARCSEC,
+                                   STAR_TRACKER_TRACKING_RATE_RAD_S, rng)
+    drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, sn.gyro_drift_density_rad_s_sqrt_s, s.measurement_dt_s)
+    omega_g, _, _ = sensors.gyro(sr["omega_b_rad_s"], np.array(sn.gyro_bias_rad_s), drift, sn.gyro_noise_rad_s,
+                                 GYRO_RANGE_RAD_S, rng)
+    b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], t_unix, s.magnetic_model)
+    b_range = _representable(definition, "b_mag_b_t_x")
+    b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), sn.magnetometer_noise_t, b_range, rng)
+    wheels = [str(k + 1) for k in range(sr["wheel_speed_rad_s"].shape[-1])]
+    event, argument = _last_events(traj, definition, t_s)
+    values = {
+        **_split("q_st_ib", q_st, "0123"), **_split("q_est_ib", sr["q_est_ib"], "0123"),
+        **_split("q_prog_ib", sr["q_prog_ib"], "0123"), **_split("omega_est_b_rad_s", sr["omega_est_b_rad_s"], "xyz"),
+        **_split("omega_gyro_b_rad_s", omega_g, "xyz"), **_split("wheel_speed_rad_s", sr["wheel_speed_rad_s"], wheels),
+        **_split("wheel_torque_cmd_nm", sr["wheel_torque_cmd_nm"], wheels),
+        **_split("wheel_current_a", sr["wheel_torque_nm"] / WHEEL_TORQUE_CONSTANT_NM_A, wheels),
+        **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"), **_split("b_mag_b_t", b_b, "xyz"),
+        "mode": _mode(s, definition, t_s), "fdir_event": event, "fdir_event_argument": argument,
+    }
+    flags = [p.name for p in definition.parameters if p.name.startswith("fault_")]
+    values.update({name: np.zeros(t_s.shape, dtype=np.int64) for name in flags})  # no onboard FDIR in the engine
+    return values
+
+
+def _representable(definition: PacketDefinition, name: str) -> float:
+    """Largest magnitude a signed, linearly calibrated field can carry (engineering units)."""
+    p = next(p for p in definition.parameters if p.name == name)
+    return ((1 << (p.bit_length - 1)) - 1) * abs(p.polynomial[1])
+
+
+def gps_week_seconds(t_utc_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """GPS week (not rolled over) and seconds of week of UTC times: GPS = UTC + (TAI−UTC) − 19 s (IS-GPS-200 §3.3.4)."""
+    from skyfield.api import load
+
+    t = np.asarray(t_utc_ns, dtype=np.int64)
+    if np.any(t < GPS_EPOCH_UTC_NS):
+        raise ValueError("t_utc_ns: times before the GPS epoch 1980-01-06 have no GPS week")
+    ts = load.timescale(builtin=True)
+    jd_utc = 2440587.5 + t / (86_400.0 * NS_PER_S)
+    tai_minus_utc = ts.leap_offsets[np.searchsorted(ts.leap_dates, jd_utc, side="right") - 1]
+    gps_ns = t - GPS_EPOCH_UTC_NS + (tai_minus_utc.astype(np.int64) - TAI_MINUS_GPS_S) * NS_PER_S
+    week, ns = np.divmod(gps_ns, SECONDS_PER_WEEK * NS_PER_S)
+    return week, ns / NS_PER_S
+
+
+def _gps_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray,
+                t_utc_ns: np.ndarray, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """GPS_NAV engineering values: ECEF fix of the flown orbit with seed 003's receiver noise, GPS time."""
+    t_unix = traj.extra["epoch_unix_s"] + traj.t_s[rows]
+    r_eci = traj.series["r_eci_m"][0, rows]
+    _, v_eci, _ = orbit_state(s)(t_unix)
+    r_ecef, v_ecef = frames.eci_to_ecef(r_eci, v_eci, t_unix)
+    r_fix, v_fix, _ = sensors.gps_receiver(r_ecef, v_ecef, GPS_SIGMA_R_M, GPS_SIGMA_V_M_S, 0.0, rng)
+    week, seconds = gps_week_seconds(t_utc_ns)
+    n = rows.shape[0]
+    return {
+        **_split("r_ecef_m", r_fix, "xyz"), **_split("v_ecef_m_s", v_fix, "xyz"),
+        "gps_week": week, "gps_seconds_of_week": seconds,
+        "n_satellites": np.full(n, GPS_SATELLITES_TRACKED, dtype=np.int64),
+        "fix_type": np.full(n, _codes(definition, "fix_type")["FIX_3D"], dtype=np.int64),
+    }
+
+
+def packet_series(traj: Trajectory, s: Scenario, dictionary: Dictionary, seed: int = 0) -> dict[str, PacketSeries]:
+    """Engineering values of ACS_HK (every T_q) and GPS_NAV (every 1 s) from a flown trajectory (variant 0)."""
+    packets = {p.name: p for p in dictionary.packets.values()}
+    missing = {HK_PACKET, GPS_PACKET} - set(packets)
+    if missing:
+        raise ValueError(f"dictionary: the emulator needs packets {sorted(missing)} of the reference satellite")
+    output_dt = float(traj.t_s[1] - traj.t_s[0]) if traj.t_s.shape[0] > 1 else s.output_dt_s
+    epoch_ns = int(round(traj.extra["epoch_unix_s"] * NS_PER_S))
+    rng = np.random.default_rng(np.random.SeedSequence([s.seed, seed, EMULATOR_STREAM]))
+    out = {}
+    for name, build in ((HK_PACKET, _hk_values), (GPS_PACKET, _gps_values)):
+        definition = packets[name]
+        rows = np.arange(0, traj.t_s.shape[0], _stride(definition, output_dt))
+        t_ns = epoch_ns + np.rint(traj.t_s[rows] * NS_PER_S).astype(np.int64)
+        args = (t_ns, rng) if name == GPS_PACKET else (rng,)
+        out[name] = PacketSeries(definition, t_ns, build(traj, s, definition, rows, *args))
+    return out
+
+
+def encode_stream(series: dict[str, PacketSeries], first_count: int = 0) -> PacketStream:
+    """Packets of every series merged in time order, per-APID sequence counts mod 2^14 (CCSDS 133.0-B-2 §4.1.3.4)."""
+    blocks, times, apids, lengths = [], [], [], []
+    for item in series.values():
+        n = item.t_utc_ns.shape[0]
+        counts = (first_count + np.arange(n)) % SEQUENCE_COUNT_MODULUS
+        blocks.append(encode_packets(item.definition, item.t_utc_ns, counts, item.values))
+        times.append(item.t_utc_ns)
+        apids.append(np.full(n, item.definition.apid, dtype=np.int64))
+        lengths.append(np.full(n, item.definition.packet_octets, dtype=np.int64))
+    t, apid, size = np.concatenate(times), np.concatenate(apids), np.concatenate(lengths)
+    order = np.lexsort((apid, t))
+    starts = np.concatenate([[0], np.cumsum(size)[:-1]])
+    flat = np.concatenate([b.reshape(-1) for b in blocks])
+    pieces = [flat[a : a + n] for a, n in zip(starts[order], size[order])]
+    data = np.concatenate(pieces).tobytes() if pieces else b""
+    return PacketStream(data, np.cumsum(size[order]), t[order], apid[order])
+
+
+def emulate(
+    scenario: str | Scenario = DEFAULT_SCENARIO,
+    faults: Sequence[FaultSpec] = (),
+    duration_s: float | None = None,
+    start_utc: str | None = None,
+    dictionary: Dictionary | None = None,
+    seed: int = 0,
+) -> tuple[Trajectory, dict[str, PacketSeries], PacketStream]:
+    """Fly the satellite (hidden faults included) and packetise its telemetry: trajectory, values, packets."""
+    dictionary = dictionary or load_dictionary(REFERENCE_DICTIONARY)
+    hk = next((p for p in dictionary.packets.values() if p.name == HK_PACKET), None)
+    if hk is None or hk.period_s is None:
+        raise ValueError(f"dictionary: needs packet {HK_PACKET} with a period_s")
+    s = satellite_scenario(scenario, faults, duration_s, start_utc, hk.period_s)
+    traj = simulate(s)
+    series = packet_series(traj, s, dictionary, seed)
+    return traj, series, encode_stream(series)
+
+
+def demo_pass_bytes(
+    scenario: str | Scenario = DEFAULT_SCENARIO,
+    t_start_s: float = 0.0,
+    t_stop_s: float | None = None,
+    faults: Sequence[FaultSpec] = (),
+    start_utc: str | None = None,
+    seed: int = 0,
+) -> bytes:
+    """Packet file of a demo pass: the satellite's packets stamped in [t_start_s, t_stop_s) after the scenario epoch."""
+    if t_start_s < 0.0 or (t_stop_s is not None and t_stop_s <= t_start_s):
+        raise ValueError(f"t_start_s/t_stop_s: need 0 <= start < stop, got {t_start_s}, {t_stop_s}")
+    traj, _, stream = emulate(scenario, faults, t_stop_s, start_utc, seed=seed)
+    epoch_ns = int(round(traj.extra["epoch_unix_s"] * NS_PER_S))
+    stop_ns = epoch_ns + int(round((t_stop_s if t_stop_s is not None else traj.t_s[-1] + 1.0) * NS_PER_S))
+    return stream.window(epoch_ns + int(round(t_start_s * NS_PER_S)), stop_ns).data
+
+
+async def _connect(host: str, port: int, retry_s: float, attempts: int | None):
+    """Open a TCP connection, retrying every retry_s (attempts None = forever)."""
+    tried = 0
+    while True:
+        try:
+            return await asyncio.open_connection(host, port)
+        except OSError:
+            tried += 1
+            if attempts is not None and tried >= attempts:
+                raise
+            await asyncio.sleep(retry_s)
+
+
+async def send_stream(
+    stream: PacketStream,
+    host: str = "127.0.0.1",
+    port: int = 10025,
+    rate: float = 1.0,
+    retry_s: float = RETRY_S,
+    attempts: int | None = None,
+) -> SendReport:
+    """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting.
+
+    TCP gives no application acknowledgement, so after a lost link the packets written in the last
+    ``REWIND_S`` are sent again; the archive drops duplicates (same APID, count and time).
+    """
+    if not rate > 0.0:
+        raise ValueError(f"rate: must be > 0 (inf = unpaced), got {rate}")
+    if port <= 0 or port > 65535:
+        raise ValueError(f"port: expected 1..65535, got {port}")
+    report, n = SendReport(), len(stream)
+    if n == 0:
+        return report
+    starts = np.concatenate([[0], stream.ends[:-1]])
+    due_s = (stream.t_utc_ns - stream.t_utc_ns[0]) / NS_PER_S / rate
+    reader, writer = await _connect(host, port, retry_s, attempts)
+    report.connections += 1
+    wall0, i, recent = time.monotonic(), 0, deque()
+    try:
+        while i < n:
+            j = int(np.searchsorted(due_s, time.monotonic() - wall0, side="right"))
+            if j <= i:
+                await asyncio.sleep(due_s[i] - (time.monotonic() - wall0))
+                continue
+            try:
+                if reader.at_eof():
+                    raise ConnectionResetError("listener closed the connection")
+                writer.write(stream.data[int(starts[i]) : int(stream.ends[j - 1])])
+                await writer.drain()
+            except (ConnectionError, OSError):
+                writer.close()
+                resume = _rewind(recent, i)
+                report.packets_resent += i - resume
+                i = resume
+                reader, writer = await _connect(host, port, retry_s, attempts)
+                report.connections += 1
+                continue
+            recent.append((time.monotonic(), i))
+            while recent and recent[0][0] < time.monotonic() - REWIND_S:
+                recent.popleft()
+            report.packets_sent += j - i
+            report.octets_sent += int(stream.ends[j - 1] - starts[i])
+            i = j
+    finally:
+        writer.close()
+        try:
+            await writer.wait_closed()
+        except (ConnectionError, OSError):
+            pass
+    return report
+
+
+def _rewind(recent: deque, i: int) -> int:
+    """First packet index written within the last REWIND_S (i if none)."""
+    resume = recent[0][1] if recent else i
+    recent.clear()
+    return resume
