@@ -44,7 +44,8 @@ APID_COUNT = 1 << 11
 SEQUENCE_FLAGS_UNSEGMENTED = 3
 NS_PER_S = 1_000_000_000
 NS_PER_DAY = 86_400 * NS_PER_S
-CCSDS_EPOCH_UTC_NS = -4383 * NS_PER_DAY  # 1958-01-01 (CCSDS 301.0-B-4 §3.2.2.1.1 level 1 epoch)
+CCSDS_EPOCH_NS = -4383 * NS_PER_DAY  # 1958-01-01 (CCSDS 301.0-B-4 §3.2.2.1.1 level 1 epoch)
+TIME_SCALE_OFFSET_S = {"UTC": None, "TAI": 0, "GPS": -19}  # scale − TAI where leap seconds apply
 
 
 _OK, _BAD_HEADER, _UNKNOWN_APID, _BAD_LENGTH, _TRUNCATED, _CRC_FAILURE, _IDLE = range(7)
@@ -65,18 +66,26 @@ class FrameCode:
 
 @dataclass(frozen=True)
 class TimeCode:
-    """A CUC or CDS time code layout (CCSDS 301.0-B-4 §3.2, §3.3) and its epoch in UTC ns."""
+    """A CUC or CDS time code layout (CCSDS 301.0-B-4 §3.2, §3.3), its epoch and its time scale.
+
+    ``epoch_ns`` is the epoch's calendar date-time in the code's own time scale, as ns since
+    1970-01-01T00:00:00 of that scale; ``time_scale`` is UTC (elapsed time read as UTC without leap
+    seconds, POSIX style), TAI (CCSDS level-1 CUC, 301.0-B-4 §3.2.2.1.1) or GPS (TAI − 19 s).
+    """
 
     format: str
     coarse_octets: int = 4
     fine_octets: int = 2
     day_octets: int = 2
     submillisecond_octets: int = 2
-    epoch_utc_ns: int = CCSDS_EPOCH_UTC_NS
+    epoch_ns: int = CCSDS_EPOCH_NS
+    time_scale: str = "UTC"
 
     def __post_init__(self) -> None:
         if self.format not in ("CUC", "CDS"):
             raise ValueError(f"time_code.format: expected 'CUC' or 'CDS', got {self.format!r}")
+        if self.time_scale not in TIME_SCALE_OFFSET_S:
+            raise ValueError(f"time_code.time_scale: expected one of {sorted(TIME_SCALE_OFFSET_S)}, got {self.time_scale!r}")
         if self.format == "CUC" and not (1 <= self.coarse_octets <= 4 and 0 <= self.fine_octets <= 3):
             raise ValueError("time_code: CUC needs 1-4 coarse and 0-3 fine octets (301.0-B-4 §3.2.1)")
         if self.format == "CDS" and (self.day_octets not in (2, 3) or self.submillisecond_octets not in (0, 2, 4)):
@@ -150,6 +159,42 @@ def encode_primary_headers(
     return words.view(np.uint8).reshape(count.shape + (6,))
 
 
+def _leap_table() -> tuple[np.ndarray, np.ndarray]:
+    """UTC ns where TAI − UTC steps, and TAI − UTC in ns from then on (IERS Bulletin C, via skyfield's builtin table)."""
+    from skyfield.api import load
+
+    ts = load.timescale(builtin=True)
+    starts_ns = np.rint((np.asarray(ts.leap_dates) - 2_440_587.5) * 86_400).astype(np.int64) * NS_PER_S
+    return starts_ns, np.rint(np.asarray(ts.leap_offsets)).astype(np.int64) * NS_PER_S
+
+
+_LEAPS: list[tuple[np.ndarray, np.ndarray]] = []
+
+
+def _tai_minus_utc_ns(boundaries: str, t_ns: np.ndarray) -> np.ndarray:
+    """TAI − UTC (ns) at times given in UTC ('utc') or as TAI labels ('tai'); the 1972 value before 1972."""
+    if not _LEAPS:
+        _LEAPS.append(_leap_table())
+    starts_utc, offset = _LEAPS[0]
+    starts = starts_utc if boundaries == "utc" else starts_utc + offset
+    return offset[np.clip(np.searchsorted(starts, t_ns, side="right") - 1, 0, None)]
+
+
+def _scale_to_utc(t_scale_ns: np.ndarray, scale: str) -> np.ndarray:
+    """UTC ns of times labelled in a time scale (UTC, TAI, GPS)."""
+    if TIME_SCALE_OFFSET_S[scale] is None:
+        return t_scale_ns
+    t_tai = t_scale_ns - TIME_SCALE_OFFSET_S[scale] * NS_PER_S
+    return t_tai - _tai_minus_utc_ns("tai", t_tai)
+
+
+def _utc_to_scale(t_utc_ns: np.ndarray, scale: str) -> np.ndarray:
+    """Labels in a time scale (UTC, TAI, GPS) of UTC ns times."""
+    if TIME_SCALE_OFFSET_S[scale] is None:
+        return t_utc_ns
+    return t_utc_ns + _tai_minus_utc_ns("utc", t_utc_ns) + TIME_SCALE_OFFSET_S[scale] * NS_PER_S
+
+
 def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
     """UTC ns since the Unix epoch of (n, k) CUC or CDS T-fields (CCSDS 301.0-B-4 §3.2.1, §3.3.1)."""
     t = np.asarray(octets)
@@ -160,12 +205,12 @@ def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
         fine = _big_endian_uint(t[:, code.coarse_octets :]).astype(np.int64)
         bits = 8 * code.fine_octets
         fine_ns = (fine * NS_PER_S + (1 << bits >> 1)) >> bits if bits else 0
-        return code.epoch_utc_ns + coarse * NS_PER_S + fine_ns
+        return _scale_to_utc(code.epoch_ns + coarse * NS_PER_S + fine_ns, code.time_scale)
     day = _big_endian_uint(t[:, : code.day_octets]).astype(np.int64)
     ms = _big_endian_uint(t[:, code.day_octets : code.day_octets + 4]).astype(np.int64)
     sub = _big_endian_uint(t[:, code.day_octets + 4 :]).astype(np.int64)
     sub_ns = {0: 0, 2: sub * 1_000, 4: sub // 1_000}[code.submillisecond_octets]
-    return code.epoch_utc_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns
+    return _scale_to_utc(code.epoch_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns, code.time_scale)
 
 
 def _to_octets(value: np.ndarray, n_octets: int) -> np.ndarray:
@@ -176,7 +221,7 @@ def _to_octets(value: np.ndarray, n_octets: int) -> np.ndarray:
 
 def encode_time(t_utc_ns: np.ndarray, code: TimeCode) -> np.ndarray:
     """(n, k) T-fields of UTC ns times, nearest code tick (CCSDS 301.0-B-4 §3.2.1, §3.3.1)."""
-    dt = np.asarray(t_utc_ns, dtype=np.int64).reshape(-1) - code.epoch_utc_ns
+    dt = _utc_to_scale(np.asarray(t_utc_ns, dtype=np.int64).reshape(-1), code.time_scale) - code.epoch_ns
     if np.any(dt < 0):
         raise ValueError("t_utc_ns: times before the time code's epoch cannot be encoded")
     if code.format == "CUC":

@@ -112,7 +112,7 @@ def derive(d: DerivedParameter, values: dict[str, np.ndarray], time_code: ccsds.
     if d.kind == "alias":
         return values[d.inputs[0]]
     if d.kind == "cds_time":
-        epoch = time_code.epoch_utc_ns if time_code and time_code.format == "CDS" else ccsds.CCSDS_EPOCH_UTC_NS
+        epoch = time_code.epoch_ns if time_code and time_code.format == "CDS" else ccsds.CCSDS_EPOCH_NS
         day, ms, us = (values[name].astype(np.int64) for name in d.inputs)
         return epoch + day * ccsds.NS_PER_DAY + ms * 1_000_000 + us * 1_000
     estimated = np.stack([values[name] for name in d.inputs[:4]], axis=-1).astype(np.float64)

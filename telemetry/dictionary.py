@@ -174,7 +174,10 @@ def parse_utc_ns(text: str | int) -> int:
 
 
 def parse_time_code(spec: str | dict[str, Any] | None) -> TimeCode | None:
-    """A TimeCode from a YAML mapping or a short name ("CDS", "CDS-ms", "CUC-4-2"), epoch 1958 unless given."""
+    """A TimeCode from a YAML mapping (format, octets, epoch, time_scale) or a short name ("CDS", "CDS-ms", "CUC-4-2").
+
+    The epoch defaults to 1958-01-01 (CCSDS level 1) and is read on the calendar of the time scale.
+    """
     if spec is None:
         return None
     if isinstance(spec, str):
@@ -187,13 +190,14 @@ def parse_time_code(spec: str | dict[str, Any] | None) -> TimeCode | None:
             return TimeCode("CUC", coarse_octets=int(parts[1]), fine_octets=int(parts[2]))
         raise ValueError(f"time_code: unknown short name {spec!r} (use CDS, CDS-ms or CUC-<coarse>-<fine>)")
     spec = dict(spec)
-    epoch = spec.pop("epoch_utc", None)
-    kwargs = {k: spec.pop(k) for k in ("coarse_octets", "fine_octets", "day_octets", "submillisecond_octets") if k in spec}
+    epoch = spec.pop("epoch", None)
+    keys = ("coarse_octets", "fine_octets", "day_octets", "submillisecond_octets", "time_scale")
+    kwargs = {k: spec.pop(k) for k in keys if k in spec}
     fmt = spec.pop("format", None)
     if spec:
         raise ValueError(f"time_code: unknown keys {sorted(spec)}")
     if epoch is not None:
-        kwargs["epoch_utc_ns"] = parse_utc_ns(epoch)
+        kwargs["epoch_ns"] = parse_utc_ns(epoch)
     return TimeCode(str(fmt), **kwargs)
 
 

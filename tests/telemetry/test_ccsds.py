@@ -84,10 +84,10 @@ def test_cds_short_timestamp_of_spacepackets_parses_our_t_field() -> None:
 @settings(max_examples=200, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.integers(0, 2**16 - 1))
 def test_cuc_4_2_decode_is_exact_binary_fraction(coarse: int, fine: int) -> None:
-    code = TimeCode("CUC", 4, 2, epoch_utc_ns=946_684_800 * 10**9)
+    code = TimeCode("CUC", 4, 2, epoch_ns=946_684_800 * 10**9)
     t_field = np.frombuffer(coarse.to_bytes(4, "big") + fine.to_bytes(2, "big"), np.uint8)[None, :]
     ours = int(ccsds.decode_time(t_field, code)[0])
-    exact_ns = Fraction(code.epoch_utc_ns) + (coarse + Fraction(fine, 2**16)) * 10**9
+    exact_ns = Fraction(code.epoch_ns) + (coarse + Fraction(fine, 2**16)) * 10**9
     assert abs(ours - exact_ns) <= HALF_NS
 
 
@@ -96,7 +96,7 @@ def test_cuc_4_2_decode_is_exact_binary_fraction(coarse: int, fine: int) -> None
 def test_time_code_round_trip_within_half_a_tick(code: TimeCode) -> None:
     rng = np.random.default_rng(7)
     span_ns = (2**16 - 1) * 10**9 if code.format == "CUC" and code.coarse_octets == 2 else 60 * 365 * 86_400 * 10**9
-    t = code.epoch_utc_ns + rng.integers(0, span_ns, 1000)
+    t = code.epoch_ns + rng.integers(0, span_ns, 1000)
     back = ccsds.decode_time(ccsds.encode_time(t, code), code)
     tick_ns = {("CUC", 2): 10**9 / 2**16, ("CUC", 3): 10**9 / 2**24}.get((code.format, code.fine_octets))
     if code.format == "CDS":
@@ -172,3 +172,35 @@ def test_unknown_apid_is_quarantined_and_idle_packet_counted() -> None:
 def test_frame_stream_rejects_bad_dictionary_naming_field() -> None:
     with pytest.raises(ValueError, match="packet_octets_by_apid"):
         ccsds.frame_stream(b"", {2047: 10})
+
+
+@pytest.mark.parametrize("scale", ["TAI", "GPS"])
+def test_tai_and_gps_time_codes_follow_skyfield_leap_seconds(scale: str) -> None:
+    """CUC counted in TAI (level-1 epoch 1958) or GPS (epoch 1980-01-06) decodes to the UTC skyfield gives."""
+    from skyfield.api import load
+
+    ts = load.timescale(builtin=True)
+    epoch = {"TAI": ccsds.CCSDS_EPOCH_NS, "GPS": 3_657 * 86_400 * 10**9}[scale]
+    code = TimeCode("CUC", 4, 0, epoch_ns=epoch, time_scale=scale)
+    utc = [(1999, 1, 1, 0, 0, 0), (2016, 12, 31, 23, 59, 59), (2017, 1, 1, 0, 0, 0), (2021, 4, 9, 12, 0, 0)]
+    t = ts.utc(*np.array(utc).T)
+    tai_label_s = [(dt.datetime(*map(int, c[:5]), tzinfo=dt.timezone.utc) - UNIX_EPOCH).total_seconds() + c[5]
+                   for c in zip(*t.tai_calendar())]
+    coarse = np.rint(np.array(tai_label_s) - epoch / 1e9 + (-19 if scale == "GPS" else 0)).astype(np.int64)
+    t_field = np.stack([(coarse >> s) & 0xFF for s in (24, 16, 8, 0)], axis=1).astype(np.uint8)
+    expected = np.array([(dt.datetime(*c, tzinfo=dt.timezone.utc) - UNIX_EPOCH).total_seconds() for c in utc])
+    np.testing.assert_array_equal(ccsds.decode_time(t_field, code), expected.astype(np.int64) * 10**9)
+    np.testing.assert_array_equal(ccsds.encode_time(expected.astype(np.int64) * 10**9, code), t_field)
+
+
+def test_gps_minus_utc_is_18_s_since_2017() -> None:
+    """Published GPS − UTC = 18 s from 2017-01-01 (IERS Bulletin C 52 / GPS ICD)."""
+    gps = TimeCode("CUC", 4, 0, epoch_ns=0, time_scale="GPS")
+    utc = TimeCode("CUC", 4, 0, epoch_ns=0, time_scale="UTC")
+    t = np.array([1_700_000_000 * 10**9])
+    assert int(_coarse(ccsds.encode_time(t, gps)) - _coarse(ccsds.encode_time(t, utc))) == 18
+
+
+def _coarse(t_field: np.ndarray) -> int:
+    """The 4-octet coarse time of the first row."""
+    return int.from_bytes(t_field[0, :4].tobytes(), "big")

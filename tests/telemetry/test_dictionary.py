@@ -76,7 +76,7 @@ def test_reference_dictionary_carries_the_acs_housekeeping_of_issue_5() -> None:
         + [f"b_mag_b_t_{a}" for a in "xyz"] + ["mode", "fdir_event", "fault_wheel_1", "attitude_error_rad"]
     )
     assert set(required) <= names
-    assert hk.period_s == T_Q_S and hk.crc and hk.time_code == TimeCode("CUC", 4, 2, epoch_utc_ns=946_684_800 * 10**9)
+    assert hk.period_s == T_Q_S and hk.crc and hk.time_code == TimeCode("CUC", 4, 2, epoch_ns=946_684_800 * 10**9)
     assert {"r_ecef_m_x", "v_ecef_m_s_z", "gps_week", "gps_seconds_of_week"} <= {p.name for p in gps.parameters}
     _, md = d.parameter("md_dipole_am2_x")
     assert md.limits.red_high == MD_MOMENT_MAX_AM2 and md.limits.red_low == -MD_MOMENT_MAX_AM2
