@@ -18,7 +18,7 @@ Seed defects corrected here (DESIGN.md, and found while deriving):
   ∝ ⟨b, a_p − a_q⟩): a pair is also refused when e^m covers less than ``MIN_MD_PLANE_COVER``
   of the pair plane's normal.
 - The row a_f printed in the seed is not the gradient of f_ρ (wrong power of q_s, h_2 for h_1 in
-  a_f2, and the sign of a_f3,4, which can make {A, a_f} singular). We use the exact gradient, so
+  a_f2, and the sign of a_f3,4, which makes {A, a_f} singular at h = 0). We use the exact gradient, so
   that df_ρ/dt = −Sat(μ_ρ f_ρ, φ_ρ) holds; ``Sat(φ_ρ, μ_ρ f_ρ)`` is read as μ_ρ f_ρ clipped at ±φ_ρ.
 """
 
@@ -106,7 +106,7 @@ class AllocationConfig:
                 raise ValueError(f"{name}: must be positive")
 
     def as_array(self) -> np.ndarray:
-        """Parameter vector for the kernels, indexed by the P_* constants."""
+        """Parameter vector for the kernels of seed 000 eq (6) and §3, indexed by the P_* constants."""
         return np.array(
             [self.law4, self.gamma_rad, self.rho, self.mu_rho_per_s, self.phi_rho_per_s, self.h_max_nms, self.l_max_am2],
             dtype=np.float64,
@@ -167,7 +167,8 @@ def distribute_momentum_1(h_drf_norm: np.ndarray, gamma: float, rho: float) -> n
     qz = np.sqrt(4.0 * c * c - z * z)
     q = qy + qz
     inner = (qy - qz) * (0.5 * x) + rho * (qy * qz - 0.25 * x * x)
-    delta = (q / rho) * (1.0 - np.sqrt(1.0 - 4.0 * rho * inner / (q * q)))
+    u = 4.0 * rho * inner / (q * q)
+    delta = (q / rho) * u / (1.0 + np.sqrt(1.0 - u))  # = (q/ρ)(1 − √(1 − u)) without cancellation
     x1, x2 = 0.5 * (x + delta), 0.5 * (x - delta)
     h = np.empty(4)
     h[0] = 0.5 * (x1 / c + y / s)
