@@ -311,10 +311,12 @@ def loop_margins(gains: DigitalLawGains = DigitalLawGains(), delay_periods: int 
     nyquist = np.pi / gains.t_u_s
     grid = np.linspace(1e-5, nyquist * (1.0 - 1e-9), 20001)
     resp = loop_response(grid, gains, delay_periods)
-    mag = np.abs(resp) - 1.0
-    i = np.flatnonzero(np.diff(np.sign(mag)))[0]
+    crossings = np.flatnonzero(np.diff(np.sign(np.abs(resp) - 1.0)))
+    if crossings.size == 0:
+        raise ValueError("k_per_s2: the loop gain stays above 1 up to the Nyquist rate; lower k or T_u")
+    i = crossings[0]
     w_c = brentq(lambda w: abs(loop_response(w, gains, delay_periods)) - 1.0, grid[i], grid[i + 1])
-    phase_margin = np.pi + np.angle(loop_response(w_c, gains, delay_periods))
+    phase_margin = (np.angle(loop_response(w_c, gains, delay_periods)) + 2.0 * np.pi) % (2.0 * np.pi) - np.pi
     imag = resp.imag
     cross = [j for j in np.flatnonzero(np.diff(np.sign(imag))) if resp[j].real < 0.0]
     if not cross:

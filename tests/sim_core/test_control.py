@@ -97,6 +97,14 @@ def test_gain_margin_puts_the_loop_on_the_unit_circle(delay):
     assert np.max(np.abs(np.linalg.eigvals(ctl.closed_loop_matrix(at_limit, delay)))) == pytest.approx(1.0, abs=1e-8)
 
 
+@pytest.mark.parametrize("k, tau1", [(0.3, 20.0), (0.01, 2.0)])  # too stiff; too little lead
+def test_unstable_designs_show_negative_phase_margin_and_eigenvalues_outside(k, tau1):
+    bad = ctl.DigitalLawGains(k, tau1, GAINS.tau2_s, GAINS.t_u_s)
+    _, phase_margin, _ = ctl.loop_margins(bad)
+    assert phase_margin < 0.0
+    assert np.max(np.abs(np.linalg.eigvals(ctl.closed_loop_matrix(bad)))) > 1.0
+
+
 SEED000_SCENARIOS = [n for n in scenario_library.names() if scenario_library.get(n).controller.kind == "seed000"]
 
 
