@@ -326,6 +326,21 @@ def test_unloading_torque_is_perpendicular_to_field_and_reduces_momentum(b_dir, 
         assert np.allclose(torque, t_req - (t_req @ b_dir) * b_dir, atol=EXACT * np.linalg.norm(t_req))
 
 
+def test_unloading_over_an_orbit_dumps_momentum_in_every_direction():
+    """Body held inertially in a polar orbit: B sweeps a plane, so the torque ⟂ B reaches every axis
+    over an orbit and |H| of dH/dt = L × B decays monotonically (seed 003 eq 29)."""
+    radius, n_orbit, dt = 6_978_137.0, 2 * np.pi / 5801.0, 1.0
+    h = np.array([1.5, -2.0, 1.0])
+    norms = [np.linalg.norm(h)]
+    for k in range(5801):
+        r = radius * np.array([np.cos(n_orbit * k * dt), 0.0, np.sin(n_orbit * k * dt)])
+        b_field = _dipole_field_t(r)
+        h = h + dt * np.cross(ctl.unloading_dipole(b_field, h, np.zeros(3), 2e-3, 25.0), b_field)
+        norms.append(np.linalg.norm(h))
+    assert np.all(np.diff(norms) <= 0.0)
+    assert norms[-1] < 0.1 * norms[0]
+
+
 def test_mrp_feedback_matches_basilisk_unit_test_reference():
     """Inputs and reference formula of Basilisk's test_mrpFeedback.py (Ki < 0, 4 wheels, known torque 0)."""
     sigma, w_br, w_rn, dw_rn = np.array([0.3, -0.5, 0.7]), np.array([0.010, -0.020, 0.015]), np.array([-0.02, -0.01, 0.005]), np.array([0.0002, 0.0003, 0.0001])
