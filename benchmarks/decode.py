@@ -108,7 +108,8 @@ def main() -> None:
                                                                   dictionary.crc_apids()))
     packet = dictionary.packets[256]
     buf = np.frombuffer(stream, np.uint8)
-    gather_s, _ = best_of(args.repeats, lambda: packet_matrix(buf, np.arange(len(hk)) * packet.packet_octets, packet.packet_octets))
+    hk_offsets = np.arange(len(hk)) * packet.packet_octets
+    gather_s, _ = best_of(args.repeats, lambda: packet_matrix(buf, hk_offsets, packet.packet_octets))
     decode_s, _ = best_of(args.repeats, lambda: decode_packets(hk, packet))
     n_hk = len(hk) * (len(packet.parameters) + len(packet.derived))
     print(f"phases at the last scale: framing+CRC {frame_s:.3f} s ({len(stream) / frame_s / 1e6:.0f} MB/s); "

@@ -85,7 +85,9 @@ class TimeCode:
         if self.format not in ("CUC", "CDS"):
             raise ValueError(f"time_code.format: expected 'CUC' or 'CDS', got {self.format!r}")
         if self.time_scale not in TIME_SCALE_OFFSET_S:
-            raise ValueError(f"time_code.time_scale: expected one of {sorted(TIME_SCALE_OFFSET_S)}, got {self.time_scale!r}")
+            raise ValueError(
+                f"time_code.time_scale: expected one of {sorted(TIME_SCALE_OFFSET_S)}, got {self.time_scale!r}"
+            )
         if self.format == "CUC" and not (1 <= self.coarse_octets <= 4 and 0 <= self.fine_octets <= 3):
             raise ValueError("time_code: CUC needs 1-4 coarse and 0-3 fine octets (301.0-B-4 §3.2.1)")
         if self.format == "CDS" and (self.day_octets not in (2, 3) or self.submillisecond_octets not in (0, 2, 4)):
@@ -160,7 +162,7 @@ def encode_primary_headers(
 
 
 def _leap_table() -> tuple[np.ndarray, np.ndarray]:
-    """UTC ns where TAI − UTC steps, and TAI − UTC in ns from then on (IERS Bulletin C, via skyfield's builtin table)."""
+    """UTC ns where TAI − UTC steps, and TAI − UTC (ns) from then on (IERS Bulletin C, skyfield's builtin table)."""
     from skyfield.api import load
 
     ts = load.timescale(builtin=True)
@@ -244,7 +246,7 @@ def encode_time(t_utc_ns: np.ndarray, code: TimeCode) -> np.ndarray:
 
 
 def _crc16_tables() -> np.ndarray:
-    """(4, 256) slicing tables of CRC-16/CCITT (polynomial 0x1021, MSB first): row j = CRC of an octet and j zero octets."""
+    """(4, 256) slicing tables of CRC-16/CCITT (poly 0x1021, MSB first): row j = CRC of an octet + j zero octets."""
     tables = np.zeros((4, 256), dtype=np.int64)
     for byte in range(256):
         crc = byte << 8

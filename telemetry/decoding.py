@@ -9,8 +9,6 @@ integers, vectorised per field. No per-packet Python. Calibration: polynomial c0
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from numba import njit
 
@@ -28,10 +26,7 @@ __all__ = [
     "decode_packets",
     "decode_stream",
     "quaternion_of",
-    "DEFAULT_FUTURE_MARGIN_NS",
 ]
-
-DEFAULT_FUTURE_MARGIN_NS = 86_400 * ccsds.NS_PER_S  # packets stamped > 1 day after ingest are out of range
 
 
 @njit(cache=True)
@@ -84,7 +79,8 @@ def _raw_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
 def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, np.ndarray]:
     """Raw (uncalibrated) values of every parameter of an (n, L) packet matrix (CCSDS 133.0-B-2 §4.1.4 user data)."""
     if packets.dtype != np.uint8 or packets.ndim != 2 or packets.shape[1] != definition.packet_octets:
-        raise ValueError(f"packets: expected (n, {definition.packet_octets}) uint8, got {packets.dtype} {packets.shape}")
+        expected = f"(n, {definition.packet_octets}) uint8"
+        raise ValueError(f"packets: expected {expected}, got {packets.dtype} {packets.shape}")
     offset = np.array([p.bit_offset for p in definition.parameters], dtype=np.int64)
     length = np.array([p.bit_length for p in definition.parameters], dtype=np.int64)
     first, last = offset // 8, (offset + length - 1) // 8
@@ -216,10 +212,10 @@ def decode_stream(
     report.idle_packets = int(np.count_nonzero(frames.code == ccsds.FrameCode.IDLE))
     offset = frames.offset[frames.code == ccsds.FrameCode.OK]
     apid = ((buf[offset].astype(np.int64) & 7) << 8) | buf[offset + 1]
-    now = time.time_ns() if now_utc_ns is None else now_utc_ns
-    until = dictionary.valid_until_utc_ns if dictionary.valid_until_utc_ns is not None else now + DEFAULT_FUTURE_MARGIN_NS
-    window = (dictionary.valid_from_utc_ns, until)
-    batches = [_decode_apid(buf, offset[apid == a], dictionary.packets[int(a)], window, report) for a in np.unique(apid)]
+    window = dictionary.time_window(now_utc_ns)
+    batches = [
+        _decode_apid(buf, offset[apid == a], dictionary.packets[int(a)], window, report) for a in np.unique(apid)
+    ]
     report.quarantined.sort(key=lambda q: q.offset)
     report.packets_accepted = sum(len(b.t_utc_ns) for b in batches)
     report.samples_accepted = sum(b.n_samples for b in batches)

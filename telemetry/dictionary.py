@@ -9,6 +9,7 @@ offset from the first octet of the packet, so layouts from all three sources dec
 from __future__ import annotations
 
 import csv
+import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ __all__ = [
     "parse_time_code",
     "parse_utc_ns",
     "SHIPPED",
+    "FUTURE_MARGIN_NS",
 ]
 
 PRIMARY_HEADER_BITS = 8 * PRIMARY_HEADER_OCTETS
@@ -40,6 +42,7 @@ CRC_OCTETS = 2
 DATA_TYPES = ("uint", "int", "float")
 DERIVED_KINDS = {"attitude_error_angle": 8, "cds_time": 3, "alias": 1}
 SHIPPED = Path(__file__).with_name("dictionaries")
+FUTURE_MARGIN_NS = 86_400 * 10**9  # on-board clocks run ahead by less than a day; later stamps are corrupt
 
 
 @dataclass(frozen=True)
@@ -144,6 +147,13 @@ class Dictionary:
     valid_from_utc_ns: int | None = None
     valid_until_utc_ns: int | None = None
     description: str = ""
+
+    def time_window(self, now_utc_ns: int | None = None) -> tuple[int, int]:
+        """Plausible packet times [from, until] in UTC ns; without an 'until', ingest time + FUTURE_MARGIN_NS."""
+        now = time.time_ns() if now_utc_ns is None else now_utc_ns
+        low = self.valid_from_utc_ns if self.valid_from_utc_ns is not None else np.iinfo(np.int64).min
+        high = self.valid_until_utc_ns if self.valid_until_utc_ns is not None else now + FUTURE_MARGIN_NS
+        return low, high
 
     def packet_octets_by_apid(self) -> dict[int, int]:
         """Total packet length (octets) of every known APID, for stream framing."""

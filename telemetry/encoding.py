@@ -26,7 +26,8 @@ def raw_from_engineering(values: np.ndarray, p: Parameter) -> np.ndarray:
         return v.astype(np.float64)
     if not np.all(np.isfinite(v)):
         raise ValueError(f"{p.name}: NaN or infinite value cannot be encoded as an integer")
-    low, high = (0, (1 << p.bit_length) - 1) if p.data_type == "uint" else (-(1 << (p.bit_length - 1)), (1 << (p.bit_length - 1)) - 1)
+    half = 1 << (p.bit_length - 1)
+    low, high = (0, 2 * half - 1) if p.data_type == "uint" else (-half, half - 1)
     raw = np.asarray(v).astype(np.int64) if p.bit_length < 64 else np.asarray(v)
     if np.any((raw < low) | (raw > high)):
         raise ValueError(f"{p.name}: value outside the {p.bit_length}-bit {p.data_type} range after calibration")

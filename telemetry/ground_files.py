@@ -13,12 +13,10 @@ CSV lines are located by newline, so quoted fields must not contain line breaks.
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 
-from telemetry.decoding import DEFAULT_FUTURE_MARGIN_NS
 from telemetry.dictionary import Dictionary, PacketDefinition, parse_utc_ns
 from telemetry.ingest_report import ApidSummary, DecodeResult, IngestReport, QuarantineRecord, SampleBatch
 
@@ -87,9 +85,7 @@ def _validate_rows(
         values[name], bad_cells = _to_float(cells, getattr(param, "enumeration", {}))
         reasons[(reasons == "") & bad_cells] = "bad_row"
         owners.setdefault(packet.apid, []).append(name)
-    now = time.time_ns() if now_utc_ns is None else now_utc_ns
-    low = dictionary.valid_from_utc_ns if dictionary.valid_from_utc_ns is not None else np.iinfo(np.int64).min
-    high = dictionary.valid_until_utc_ns if dictionary.valid_until_utc_ns is not None else now + DEFAULT_FUTURE_MARGIN_NS
+    low, high = dictionary.time_window(now_utc_ns)
     reasons[(reasons == "") & ((t < low) | (t > high))] = "time_out_of_range"
     for i in np.flatnonzero(reasons != ""):
         report.quarantined.append(QuarantineRecord(int(row_offset[i]), int(row_length[i]), str(reasons[i]),
@@ -128,7 +124,9 @@ def _finish(report: IngestReport, batches: list[SampleBatch]) -> DecodeResult:
     return DecodeResult(batches=batches, report=report)
 
 
-def read_ground_csv(data: bytes, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None) -> DecodeResult:
+def read_ground_csv(
+    data: bytes, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None
+) -> DecodeResult:
     """Validated batches of a CSV of ground-processed values (header row of column names)."""
     import csv
     import io
@@ -152,7 +150,9 @@ def read_ground_csv(data: bytes, dictionary: Dictionary, source: str = "", now_u
     return _finish(report, batches)
 
 
-def read_ground_jsonl(data: bytes, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None) -> DecodeResult:
+def read_ground_jsonl(
+    data: bytes, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None
+) -> DecodeResult:
     """Validated batches of JSON Lines (one object of column → value per line) of ground-processed values."""
     report = IngestReport(source=source, octets=len(data))
     starts = _line_starts(data)

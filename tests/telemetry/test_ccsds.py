@@ -164,7 +164,8 @@ def test_framing_with_crc_quarantines_corrupt_payload() -> None:
 
 
 def test_unknown_apid_is_quarantined_and_idle_packet_counted() -> None:
-    stream = _packet(100, 0, 20, 1) + _packet(555, 0, 14, 2) + _packet(100, 1, 20, 3) + _packet(ccsds.IDLE_APID, 0, 10, 0) + _packet(100, 2, 20, 3)
+    stream = (_packet(100, 0, 20, 1) + _packet(555, 0, 14, 2) + _packet(100, 1, 20, 3)
+              + _packet(ccsds.IDLE_APID, 0, 10, 0) + _packet(100, 2, 20, 3))
     frames = ccsds.frame_stream(stream, {100: 20})
     assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "unknown_apid", "ok", "idle", "ok"]
 

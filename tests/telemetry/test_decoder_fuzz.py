@@ -45,7 +45,9 @@ def test_valid_packets_mixed_with_random_bytes_are_all_recovered(noise: bytes, s
     assert {r.tobytes() for r in rows} <= recovered
 
 
-corruption = st.tuples(st.sampled_from(["flip", "insert", "truncate", "delete"]), st.integers(0, 10**6), st.binary(min_size=1, max_size=150))
+corruption = st.tuples(
+    st.sampled_from(["flip", "insert", "truncate", "delete"]), st.integers(0, 10**6), st.binary(min_size=1, max_size=150)
+)
 
 
 @FUZZ

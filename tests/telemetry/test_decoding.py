@@ -1,6 +1,7 @@
 """Bulk decoding: bit fields, calibration, derived parameters and mixed-APID streams.
 
-Truths: a pure-Python big-integer decoder and ccsdspy decoding the same bytes with the same (deliberately unaligned) layout, numpy's
+Truths: a pure-Python big-integer decoder and ccsdspy decoding the same bytes with the same
+(deliberately unaligned) layout, numpy's
 polyval, scipy's Rotation for the attitude error angle (seed 000 §4, E = Λ̃^p ∘ Λ), and the values
 each test encoded.
 """
@@ -22,7 +23,8 @@ from tests.telemetry.packet_streams import NOW_UTC_NS, T0_UTC_NS, engineering_va
 
 ANGLE_TOLERANCE_RAD = 1e-9  # float64 angle of a product of unit quaternions vs scipy's own
 ODD_LAYOUT = [("u3", "uint", 3), ("i13", "int", 13), ("u1", "uint", 1), ("u7", "uint", 7), ("i5", "int", 5),
-              ("f32", "float", 32), ("u11", "uint", 11), ("u64", "uint", 64), ("i64", "int", 64), ("i2", "int", 2), ("u6", "uint", 6),
+              ("f32", "float", 32), ("u11", "uint", 11), ("u64", "uint", 64), ("i64", "int", 64), ("i2", "int", 2),
+              ("u6", "uint", 6),
               ("f64", "float", 64)]
 
 
@@ -75,7 +77,8 @@ def test_attitude_error_angle_matches_scipy_relative_rotation() -> None:
     prog = Rotation.random(200, random_state=rng)
     est_q, prog_q = est.as_quat(scalar_first=True), prog.as_quat(scalar_first=True)
     values = {f"e{k}": est_q[:, k] for k in range(4)} | {f"p{k}": prog_q[:, k] for k in range(4)}
-    d = DerivedParameter("err", "attitude_error_angle", tuple(f"e{k}" for k in range(4)) + tuple(f"p{k}" for k in range(4)))
+    inputs = tuple(f"e{k}" for k in range(4)) + tuple(f"p{k}" for k in range(4))
+    d = DerivedParameter("err", "attitude_error_angle", inputs)
     expected = (prog.inv() * est).magnitude()
     np.testing.assert_allclose(derive(d, values, None), expected, atol=ANGLE_TOLERANCE_RAD)
 

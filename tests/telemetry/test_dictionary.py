@@ -144,7 +144,8 @@ def test_xtce_polynomial_and_enumeration_match_space_packet_parser(tmp_path: Pat
     temp = next(p for p in packet.parameters if p.name == "TEMP")
     assert temp.polynomial == (273.15, 0.125, 0.001) and temp.bit_length == 12 and temp.data_type == "int"
     assert next(p for p in packet.parameters if p.name == "MODE").enumeration == {0: "SAFE", 3: "FINE"}
-    raw_rows = [bytes([0x08, 42, 0xC0, 0x00, 0x00, 0x01]) + ((t & 0xFFF) << 4 | 3).to_bytes(2, "big") for t in (-2048, -1, 0, 5, 2047)]
+    header = bytes([0x08, 42, 0xC0, 0x00, 0x00, 0x01])
+    raw_rows = [header + ((t & 0xFFF) << 4 | 3).to_bytes(2, "big") for t in (-2048, -1, 0, 5, 2047)]
     ours = decode_packets(np.frombuffer(b"".join(raw_rows), np.uint8).reshape(5, 8), packet)
     definition = spp.load_xtce(path)
     for i, row in enumerate(raw_rows):
