@@ -1,0 +1,73 @@
+"""``acs-twin emulate``: play the reference satellite, sending its CCSDS packets over TCP or writing a packet file."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+DEFAULT_PORT = 10025  # backend.settings.Settings.telemetry_port default
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``emulate`` subcommand."""
+    p = sub.add_parser("emulate", help="spacecraft emulator: fly a scenario and send its telemetry packets")
+    p.add_argument("--scenario", default="somov-ge4-scan", help="library scenario the satellite flies")
+    p.add_argument("--host", default="127.0.0.1", help="live listener host")
+    p.add_argument("--port", type=int, help=f"live listener TCP port (default {DEFAULT_PORT} unless only --out)")
+    p.add_argument("--rate", type=float, default=1.0, help="time acceleration (1 = real time, inf = unpaced)")
+    p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
+    p.add_argument("--fault", action="append", default=[], metavar="TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V]",
+                   help="hidden fault, e.g. wheel:1:failure@600 (0-based sim_core index: wheel 1 = wheel_*_2)")
+    p.add_argument("--start-utc", help="epoch of the flight, ISO 8601 or 'now' (default: the scenario's epoch)")
+    p.add_argument("--attempts", type=int, help="connection attempts before giving up (default: keep trying)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
+    p.add_argument("--out", type=Path, help="write the packets to this file (for upload) instead of only sending")
+    p.set_defaults(handler=run)
+
+
+def _start_utc(text: str | None) -> str | None:
+    """ISO time of the flight epoch; 'now' is the current whole UTC second."""
+    if text != "now":
+        return text
+    import time
+
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def run(args: argparse.Namespace) -> int:
+    """Fly, packetise, then write and/or send; exit 2 on bad input, 1 if the listener cannot be reached."""
+    import asyncio
+
+    from telemetry import emulator
+
+    try:
+        faults = [emulator.parse_fault(text) for text in args.fault]
+        if not args.rate > 0.0:
+            raise ValueError(f"rate: must be > 0 (inf = unpaced), got {args.rate}")
+        _, _, stream = emulator.emulate(args.scenario, faults, args.duration, _start_utc(args.start_utc), seed=args.seed)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"emulated {len(stream)} packets ({len(stream.data)} octets) of {args.scenario}")
+    if args.out:
+        args.out.write_bytes(stream.data)
+        print(f"wrote {args.out}")
+        if args.port is None:
+            return 0
+    port = DEFAULT_PORT if args.port is None else args.port
+    pace = "unpaced" if math.isinf(args.rate) else f"x{args.rate:g}"
+    print(f"sending to {args.host}:{port} ({pace})", flush=True)
+    try:
+        report = asyncio.run(emulator.send_stream(stream, args.host, port, args.rate, attempts=args.attempts))
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: cannot reach the listener at {args.host}:{port}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+    print(f"sent {report.packets_sent} packets, {report.octets_sent} octets over {report.connections} connection(s)")
+    return 0

@@ -1,0 +1,285 @@
+"""Spacecraft emulator: simulation → packets → decode round trip, the live TCP path, and a hidden wheel failure.
+
+Truths: the simulation's own series (values must come back to the dictionary's resolution),
+spacepackets parsing our primary headers, CUC seconds counted by hand from 2000-01-01, GPS time
+from calendar arithmetic and the published leap seconds, ppigrf's IGRF field magnitude, the
+rotation invariance of |r| between ECI and ECEF, and the scenario's sensor noise figures.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime as dt
+import time
+
+import numpy as np
+import ppigrf
+import pytest
+from spacepackets.ccsds import SpacePacketHeader
+
+from backend.cli import main
+from sim_core import frames, quaternion
+from telemetry import emulator
+from telemetry.decoding import decode_stream
+from telemetry.dictionary import load_dictionary
+from telemetry.live import LiveStream
+
+FAILED_WHEEL = 1  # sim_core index: the dictionary's wheel_*_2
+FAILURE_ONSET_S = 350.0  # during the observing hold, before the 20° turn (420–520 s)
+ARCSEC = np.pi / 180.0 / 3600.0
+FLOAT32_REL = 2.0**-23  # one unit in the last place of an IEEE 754 binary32 mantissa
+NOISE_STD_REL_TOL = 0.10  # 3,600 samples estimate a standard deviation to ~1.2 % (1σ); 10 % is > 8σ
+GPS_LEAP_S = 18  # GPS − UTC since 2017-01-01 (IERS Bulletin C: TAI − UTC = 37 s, GPS = TAI − 19 s)
+IGRF_NORM_TOL_T = 300e-9  # 6σ of the 50 nT magnetometer noise plus the 2 nT count and the 30 s field table
+SETTLE_S = 0.3  # > telemetry.live.DECODE_INTERVAL_S: lets the listener decode what arrived
+
+
+@pytest.fixture(scope="module")
+def dictionary():
+    return load_dictionary(emulator.REFERENCE_DICTIONARY)
+
+
+@pytest.fixture(scope="module")
+def nominal(dictionary):
+    return emulator.emulate(dictionary=dictionary)
+
+
+@pytest.fixture(scope="module")
+def wheel_failure(dictionary):
+    fault = emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S}")
+    return emulator.emulate(faults=[fault], dictionary=dictionary)
+
+
+@pytest.fixture(scope="module")
+def decoded(nominal, dictionary):
+    _, _, stream = nominal
+    result = decode_stream(stream.data, dictionary)
+    return {b.packet: b for b in result.batches}, result.report
+
+
+def test_every_packet_decodes_with_its_sequence_count_and_time(nominal, decoded) -> None:
+    _, series, stream = nominal
+    batches, report = decoded
+    assert report.quarantined == [] and report.packets_accepted == len(stream)
+    assert np.all(np.diff(stream.t_utc_ns) >= 0)  # one time-ordered stream of both APIDs
+    for name, item in series.items():
+        np.testing.assert_array_equal(batches[name].t_utc_ns, item.t_utc_ns)
+        np.testing.assert_array_equal(batches[name].sequence_count, np.arange(len(item.t_utc_ns)) % 16384)
+
+
+def test_primary_headers_and_cuc_times_read_by_independent_parsers(nominal, dictionary) -> None:
+    _, series, stream = nominal
+    starts = np.concatenate([[0], stream.ends[:-1]])
+    epoch_2000 = dt.datetime(2000, 1, 1, tzinfo=dt.timezone.utc)
+    counts: dict[int, int] = {}
+    for k in range(0, len(stream), 97):
+        packet = stream.data[starts[k] : stream.ends[k]]
+        header = SpacePacketHeader.unpack(packet)
+        definition = dictionary.packets[header.apid]
+        assert (header.packet_len, header.sec_header_flag, int(header.seq_flags)) == (definition.packet_octets, True, 3)
+        counts.setdefault(header.apid, 0)
+        stamp = epoch_2000 + dt.timedelta(seconds=int.from_bytes(packet[6:10], "big") + int.from_bytes(packet[10:12], "big") / 65536)
+        assert stamp.timestamp() * 1e9 == pytest.approx(stream.t_utc_ns[k], abs=1e3)
+    assert set(counts) == {256, 257}
+
+
+def test_decoded_values_equal_the_emulated_values_to_the_dictionary_resolution(nominal, decoded) -> None:
+    _, series, _ = nominal
+    batches, _ = decoded
+    for name, item in series.items():
+        for p in item.definition.parameters:
+            sent, got = np.asarray(item.values[p.name]), batches[name].values[p.name]
+            if p.polynomial:
+                np.testing.assert_allclose(got, sent, rtol=0, atol=0.5 * p.polynomial[1] * (1 + 1e-9), err_msg=p.name)
+            elif p.data_type == "float" and p.bit_length == 32:
+                np.testing.assert_array_equal(got, sent.astype(np.float32), err_msg=p.name)
+            else:
+                np.testing.assert_array_equal(got, sent, err_msg=p.name)
+
+
+def test_decoded_telemetry_equals_the_simulation_truth(nominal, decoded) -> None:
+    traj, series, _ = nominal
+    batches, _ = decoded
+    hk = batches["ACS_HK"].values
+    rows = np.arange(len(batches["ACS_HK"].t_utc_ns))
+    for prefix, key, suffixes in (("q_est_ib", "q_est_ib", "0123"), ("q_prog_ib", "q_prog_ib", "0123"),
+                                  ("omega_est_b_rad_s", "omega_est_b_rad_s", "xyz")):
+        truth = traj[key][0, rows]
+        for k, sfx in enumerate(suffixes):
+            np.testing.assert_allclose(hk[f"{prefix}_{sfx}"], truth[:, k], rtol=FLOAT32_REL, atol=1e-30)
+    for k in range(4):
+        np.testing.assert_allclose(hk[f"wheel_speed_rad_s_{k + 1}"], traj["wheel_speed_rad_s"][0, rows, k],
+                                   atol=0.5 * np.pi / 120.0 * (1 + 1e-9))  # half of 0.25 rpm
+        np.testing.assert_allclose(hk[f"wheel_torque_cmd_nm_{k + 1}"], traj["wheel_torque_cmd_nm"][0, rows, k],
+                                   atol=0.5e-5 * (1 + 1e-9))
+    e = quaternion.multiply(quaternion.conjugate(traj["q_prog_ib"][0, rows]), traj["q_est_ib"][0, rows])
+    np.testing.assert_allclose(hk["attitude_error_rad"], quaternion.angle(e), atol=1e-6)  # float32 quaternions
+
+
+def test_sensor_samples_scatter_about_truth_with_the_scenario_noise(nominal, decoded) -> None:
+    traj, _, _ = nominal
+    batches, _ = decoded
+    hk = batches["ACS_HK"].values
+    rows = np.arange(len(batches["ACS_HK"].t_utc_ns))
+    q_st = np.stack([hk[f"q_st_ib_{k}"] for k in range(4)], axis=-1).astype(np.float64)
+    err = quaternion.angle(quaternion.multiply(quaternion.conjugate(traj["q_ib"][0, rows]), q_st))
+    sigma_st = 3.0 * ARCSEC  # somov-ge4-scan: σ = 3″ per axis, so the angle's RMS is σ√3
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(sigma_st * np.sqrt(3.0), rel=NOISE_STD_REL_TOL)
+    gyro = np.stack([hk[f"omega_gyro_b_rad_s_{a}"] for a in "xyz"], axis=-1) - traj["omega_b_rad_s"][0, rows]
+    assert np.std(gyro) == pytest.approx(2e-6, rel=NOISE_STD_REL_TOL)  # somov-ge4-scan gyro_noise_rad_s
+
+
+def test_magnetometer_field_magnitude_matches_ppigrf(nominal, decoded) -> None:
+    traj, _, _ = nominal
+    batches, _ = decoded
+    hk = batches["ACS_HK"].values
+    rows = np.arange(0, len(batches["ACS_HK"].t_utc_ns), 40)
+    t_unix = traj.extra["epoch_unix_s"] + traj.t_s[rows]
+    r_ecef = np.einsum("nij,nj->ni", frames.eci_to_ecef_matrix(t_unix), traj["r_eci_m"][0, rows])
+    lat, lon, h = frames.ecef_to_geodetic(r_ecef)
+    date = dt.datetime.fromtimestamp(float(t_unix[0]), dt.timezone.utc).replace(tzinfo=None)
+    be, bn, bu = ppigrf.igrf(lon, lat, h / 1e3, date)
+    reference = np.sqrt(be**2 + bn**2 + bu**2).ravel() * 1e-9
+    sent = np.linalg.norm(np.stack([hk[f"b_mag_b_t_{a}"][rows] for a in "xyz"], axis=-1), axis=-1)
+    np.testing.assert_allclose(sent, reference, atol=IGRF_NORM_TOL_T)
+
+
+def test_gps_fix_keeps_the_orbit_radius_and_counts_gps_time(nominal, decoded) -> None:
+    traj, _, _ = nominal
+    gps = decoded[0]["GPS_NAV"]
+    rows = np.arange(len(gps.t_utc_ns)) * 4  # GPS every 1 s, trajectory every 0.25 s
+    r_fix = np.linalg.norm(np.stack([gps.values[f"r_ecef_m_{a}"] for a in "xyz"], axis=-1), axis=-1)
+    residual = r_fix - np.linalg.norm(traj["r_eci_m"][0, rows], axis=-1)  # |r| is frame-invariant
+    assert np.std(residual) == pytest.approx(emulator.GPS_SIGMA_R_M, rel=NOISE_STD_REL_TOL * 2)  # 900 fixes
+    first = dt.datetime.fromtimestamp(int(gps.t_utc_ns[0]) // 10**9, dt.timezone.utc)
+    days = (first.date() - dt.date(1980, 1, 6)).days
+    assert gps.values["gps_week"][0] == days // 7
+    seconds_of_day = first.hour * 3600 + first.minute * 60 + first.second
+    assert gps.values["gps_seconds_of_week"][0] == (days % 7) * 86_400 + seconds_of_day + GPS_LEAP_S
+
+
+def test_mode_reports_the_scheduled_turn_of_the_route(nominal, decoded) -> None:
+    traj, _, _ = nominal
+    hk = decoded[0]["ACS_HK"]
+    turn = (traj.t_s[: len(hk.t_utc_ns)] >= 420.0) & (traj.t_s[: len(hk.t_utc_ns)] < 520.0)  # 300 + 120 s, 100 s turn
+    assert np.all(hk.values["mode"][turn] == 4) and np.all(hk.values["mode"][~turn] == 3)  # PROGRAM_TURN, THREE_AXIS
+
+
+def test_hidden_wheel_failure_shows_in_wheel_speed_telemetry(nominal, wheel_failure, dictionary) -> None:
+    batches = {}
+    for label, (_, _, stream) in (("nominal", nominal), ("failed", wheel_failure)):
+        batches[label] = {b.packet: b for b in decode_stream(stream.data, dictionary).batches}["ACS_HK"]
+    t_s = (batches["failed"].t_utc_ns - batches["failed"].t_utc_ns[0]) / 1e9
+    before, after = t_s < FAILURE_ONSET_S, t_s >= FAILURE_ONSET_S
+    speed = f"wheel_speed_rad_s_{FAILED_WHEEL + 1}"
+    for name in ("wheel_speed_rad_s_1", speed, "q_est_ib_1"):  # same flight until the fault
+        np.testing.assert_array_equal(batches["failed"].values[name][before], batches["nominal"].values[name][before])
+    failed_speed = batches["failed"].values[speed][after]
+    nominal_swing = np.ptp(batches["nominal"].values[speed][after])
+    assert np.ptp(failed_speed) <= np.pi / 120.0 < 0.01 * nominal_swing  # frozen to one 0.25 rpm count
+    assert np.all(batches["failed"].values[f"wheel_current_a_{FAILED_WHEEL + 1}"][after] == 0.0)
+    flags = [n for n in batches["failed"].values if n.startswith("fault_")]
+    assert all(np.all(batches["failed"].values[n] == 0) for n in flags)  # hidden: no onboard FDIR flag
+    assert not np.any(batches["failed"].values["fdir_event"] == 2)  # FAULT_ONSET is ground truth, never sent
+
+
+def drain(subscriber) -> list:
+    out = []
+    while subscriber.pending:
+        out.append(subscriber.get_nowait())
+    return out
+
+
+def test_live_emulator_to_listener_delivers_decoded_samples_paced(nominal, decoded, dictionary) -> None:
+    _, _, stream = nominal
+    t0 = int(stream.t_utc_ns[0])
+    piece = stream.window(t0 + 10 * 10**9, t0 + 30 * 10**9)  # 20 s of flight
+    rate = 20.0
+
+    async def fly() -> tuple[list, emulator.SendReport, float]:
+        live = LiveStream(dictionary)
+        subscriber = live.subscribe(max_messages=10_000)
+        port = await live.start()
+        start = time.monotonic()
+        report = await emulator.send_stream(piece, "127.0.0.1", port, rate)
+        elapsed = time.monotonic() - start
+        await asyncio.sleep(SETTLE_S)
+        await live.stop()
+        return drain(subscriber), report, elapsed
+
+    messages, report, elapsed = asyncio.run(fly())
+    span_s = (piece.t_utc_ns[-1] - piece.t_utc_ns[0]) / 1e9
+    assert span_s / rate <= elapsed < span_s / rate + 0.5  # paced at ×20, not dumped at once
+    assert report.packets_sent == len(piece) and all(m.dropped_packets == 0 for m in messages)
+    hk = [m.batch for m in messages if m.batch.packet == "ACS_HK"]
+    live_t = np.concatenate([b.t_utc_ns for b in hk])
+    offline = decoded[0]["ACS_HK"]
+    sel = np.isin(offline.t_utc_ns, live_t)
+    assert sel.sum() == len(live_t) == 80  # 20 s at T_q = 0.25 s
+    for name in ("wheel_speed_rad_s_3", "q_est_ib_0", "attitude_error_rad"):
+        np.testing.assert_array_equal(np.concatenate([b.values[name] for b in hk]), offline.values[name][sel])
+
+
+def test_sender_reconnects_and_resends_after_the_link_drops(nominal, dictionary) -> None:
+    _, _, stream = nominal
+    t0 = int(stream.t_utc_ns[0])
+    piece = stream.window(t0, t0 + 20 * 10**9)
+    received: list[bytearray] = []
+
+    async def link() -> emulator.SendReport:
+        async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            buffer = bytearray()
+            received.append(buffer)
+            first = len(received) == 1
+            while data := await reader.read(4096):
+                buffer.extend(data)
+                if first and len(buffer) > 3000:  # drop the first link mid-stream
+                    break
+            writer.close()
+
+        server = await asyncio.start_server(handle, "127.0.0.1", 0)
+        port = server.sockets[0].getsockname()[1]
+        report = await emulator.send_stream(piece, "127.0.0.1", port, rate=40.0, retry_s=0.05)
+        await asyncio.sleep(SETTLE_S)
+        server.close()
+        await server.wait_closed()
+        return report
+
+    report = asyncio.run(link())
+    assert report.connections == 2 == len(received)
+    seen = set()
+    for buffer in received:
+        for batch in decode_stream(bytes(buffer), dictionary).batches:
+            seen.update(zip([batch.apid] * len(batch.t_utc_ns), batch.t_utc_ns.tolist()))
+    assert seen == set(zip(piece.apid.tolist(), piece.t_utc_ns.tolist()))  # nothing lost across the drop
+
+
+def test_demo_pass_file_holds_the_window_with_mission_sequence_counts(dictionary) -> None:
+    data = emulator.demo_pass_bytes(t_start_s=100.0, t_stop_s=130.0)
+    batches = {b.packet: b for b in decode_stream(data, dictionary).batches}
+    hk, gps = batches["ACS_HK"], batches["GPS_NAV"]
+    t_s = (hk.t_utc_ns - hk.t_utc_ns[0]) / 1e9
+    assert len(hk.t_utc_ns) == 120 and len(gps.t_utc_ns) == 30 and t_s[-1] == 29.75
+    assert hk.sequence_count[0] == 400 and gps.sequence_count[0] == 100  # counted from the start of the flight
+
+
+def test_bad_fault_and_scenario_raise_value_errors_naming_the_field() -> None:
+    with pytest.raises(ValueError, match="fault.type"):
+        emulator.parse_fault("wheel:1:explode@600")
+    with pytest.raises(ValueError, match="fault: expected"):
+        emulator.parse_fault("wheel:1:failure")
+    with pytest.raises(ValueError, match="scenario 'nope'"):
+        emulator.satellite_scenario("nope")
+    with pytest.raises(ValueError, match="faults.index"):
+        emulator.satellite_scenario(faults=[emulator.parse_fault("wheel:7:failure@1")])
+    with pytest.raises(ValueError, match="rate"):
+        asyncio.run(emulator.send_stream(emulator.PacketStream(b"", np.zeros(0), np.zeros(0), np.zeros(0)), rate=0.0))
+
+
+def test_cli_writes_a_packet_file_that_decodes(tmp_path, dictionary, capsys) -> None:
+    out = tmp_path / "pass.bin"
+    assert main(["emulate", "--duration", "20", "--fault", "wheel:0:failure@5", "--out", str(out)]) == 0
+    result = decode_stream(out.read_bytes(), dictionary)
+    assert result.report.quarantined == [] and result.report.packets_accepted == 80 + 20
+    assert main(["emulate", "--duration", "20", "--fault", "wheel:0:melt@5", "--out", str(out)]) == 2
+    assert "fault.type" in capsys.readouterr().err
