@@ -1,0 +1,446 @@
+"""Onboard fault detection, isolation and reconfiguration (FDIR) of wheels and attitude sensors.
+
+Wheels (seed 000 eq 1–3, seed 002 eq 1–4): each wheel obeys its own momentum equation
+ḣ_p = m_p − m^f_p(Ω_p), so a per-wheel residual over one control period T_u,
+
+    r_p = J_p (Ω̃_p(t_k) − Ω̃_p(t_{k−1})) − T_u (m_p − ½(m^f_p(Ω̃_p(t_{k−1})) + m^f_p(Ω̃_p(t_k)))),
+
+(Ω̃ the tachometer reading, m_p the held command limited as the motor limits it, seed 000 eq 2)
+isolates the wheel by construction. Its threshold is a *bound*, not a tuned number: the
+tachometer quantum q gives |error of J ΔΩ̃| ≤ J q, and friction is monotonic in speed, so the true
+mean friction over the period lies between m^f at the slowest and fastest speeds the readings
+allow (± q/2); the trapezoid estimate lies there too. r_p exceeding ``WHEEL_SAFETY`` × that bound
+is a detection; ``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
+availability mask, so that :func:`sim_core.allocation.allocate_1` passes 4 → 3 → 2 + MD; fewer
+than two wheels left is the fault mode (no wheel law exists). Periods where the motor's momentum
+limit may cut the torque are not tested (the residual is not defined there).
+
+Sensors (seed 000 §4 measurements, seed 003 §3.2 preprocessing flags):
+- star tracker: the normalised innovation squared against the MEKF prediction (χ²(3)) above the
+  ``FALSE_ALARM_PROBABILITY`` quantile is a jump; a reading bit-identical to the previous one is
+  frozen (noise never repeats). Rejected samples are not used (gyro-only propagation);
+- gyros: the rotation the gyros integrate (trapezoid) over ``GYRO_WINDOW_S`` against the
+  star tracker's relative rotation over the same window gives the mean rate error per axis; its
+  change from the calibration windows beyond the noise bound is drift; on isolation the MEKF's bias
+  process noise is widened to the observed drift, so the filter tracks it;
+- magnetometer: each axis against the onboard field model rotated by the estimated attitude;
+  spikes beyond the noise bound are replaced by the model field.
+
+Events (codes of :data:`sim_core.trajectory.EVENT_NAMES`): ``fault_detected``, ``fault_isolated``
+(argument: wheel index 0..3, or ``SENSOR_ARG + 10 · target code + axis`` for sensors, target codes
+of :data:`sim_core.closed_loop.TARGET_CODES`), ``reconfigured`` (argument: the new wheel
+availability bit mask, or ``SENSOR_ARG + 10 · target code`` for a sensor), ``mode_change``
+(argument: :data:`sim_core.modes.MODE_FAULT`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from scipy.stats import chi2, norm
+
+from sim_core.modes import MODE_FAULT
+from sim_core.wheels import friction_torque_one_wheel, limited_motor_torque_1
+
+__all__ = [
+    "WHEEL_SAFETY",
+    "CONFIRM_PERIODS",
+    "FALSE_ALARM_PROBABILITY",
+    "SENSOR_ARG",
+    "GYRO_WINDOW_S",
+    "GYRO_CALIBRATION_WINDOWS",
+    "WHEEL_STATE_ROWS",
+    "STAR_STATE_SIZE",
+    "GYRO_STATE_SIZE",
+    "MAG_STATE_SIZE",
+    "star_nis_threshold",
+    "gaussian_sigmas",
+    "wheel_state",
+    "star_state",
+    "gyro_state",
+    "mag_state",
+    "wheel_bound_1",
+    "wheel_residual_1",
+    "wheel_check_1",
+    "wheel_hold_1",
+    "star_tracker_check_1",
+    "gyro_drift_step_1",
+    "magnetometer_check_1",
+    "wheel_residuals",
+    "describe_event",
+]
+
+WHEEL_SAFETY = 2.0  # bound × 2: room for unmodelled speed reversals inside a period and RK4 error
+CONFIRM_PERIODS = 2  # two consecutive periods: one isolated exceedance is a transient, not a fault
+FALSE_ALARM_PROBABILITY = 1e-9  # per Gaussian test: 24 h × 4 Hz × 3 axes ≈ 1e6 tests → 1e-3 alarms expected
+SENSOR_ARG = 100  # event arguments ≥ this name a sensor (SENSOR_ARG + 10·target + axis)
+GYRO_WINDOW_S = 60.0  # ST noise 3″ → √2σ/W ≈ 3.5e-7 rad/s: drift of ~0.5°/h shows within a minute
+GYRO_CALIBRATION_WINDOWS = 3  # the first windows fix the reference bias (post-launch calibration)
+NUMERICAL_FLOOR_NMS = 1e-9  # momentum round-off of RK4 on N·m·s-sized states, a floor for perfect sensors
+MAG_MODEL_ERROR_T = 20e-9  # onboard field table vs truth: linear interpolation of a 30 s table, a few nT
+
+EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED = 1, 4, 5, 6
+T_GYRO, T_STAR, T_MAG = 1, 2, 4  # sim_core.closed_loop.TARGET_CODES
+
+# Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
+WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED = range(5)
+WHEEL_STATE_ROWS = 5
+# Star-tracker state.
+SS_PREV, SS_COUNT, SS_ISOLATED = 0, 4, 5
+STAR_STATE_SIZE = 6
+# Gyro state: integrated rotation, ST at window start, window start time, previous rate, reference
+# bias, windows seen, consecutive exceedances, isolated flag, bias process noise, calibration end time.
+GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF, GS_N, GS_COUNT, GS_ISOLATED, GS_SIGMA_U, GS_TREF = 0, 4, 8, 9, 12, 15, 16, 17, 18, 19
+GYRO_STATE_SIZE = 20
+# Magnetometer state: time of the last rejected sample (NaN: none yet).
+MS_LAST = 0
+MAG_STATE_SIZE = 1
+MAG_REARM_S = 60.0  # a new detection event only after a minute of clean samples (spikes come in bursts)
+
+
+def gaussian_sigmas(probability: float = FALSE_ALARM_PROBABILITY) -> float:
+    """Two-sided Gaussian threshold in σ for a per-test false-alarm probability (seed 002 noise model)."""
+    if not 0.0 < probability < 1.0:
+        raise ValueError("probability: must lie in (0, 1)")
+    return float(norm.isf(0.5 * probability))
+
+
+def star_nis_threshold(probability: float = FALSE_ALARM_PROBABILITY) -> float:
+    """χ²(3) quantile of the star-tracker innovation test (seed 000 §4 measurement noise)."""
+    if not 0.0 < probability < 1.0:
+        raise ValueError("probability: must lie in (0, 1)")
+    return float(chi2.isf(probability, 3))
+
+
+def wheel_state(n_wheels: int) -> np.ndarray:
+    """Fresh wheel FDIR state (rows WS_*, one column per wheel)."""
+    if n_wheels < 1:
+        raise ValueError("n_wheels: must be at least 1")
+    return np.zeros((WHEEL_STATE_ROWS, n_wheels))
+
+
+def star_state() -> np.ndarray:
+    """Fresh star-tracker FDIR state (no previous reading)."""
+    s = np.zeros(STAR_STATE_SIZE)
+    s[SS_PREV:SS_PREV + 4] = np.nan
+    return s
+
+
+def gyro_state(sigma_u: float) -> np.ndarray:
+    """Fresh gyro-drift FDIR state; ``sigma_u`` is the MEKF bias process noise (rad/s/√s)."""
+    if not sigma_u >= 0.0:
+        raise ValueError("sigma_u: must be non-negative")
+    s = np.zeros(GYRO_STATE_SIZE)
+    s[GS_T0] = np.nan
+    s[GS_SIGMA_U] = sigma_u
+    return s
+
+
+def mag_state() -> np.ndarray:
+    """Fresh magnetometer FDIR state."""
+    return np.full(MAG_STATE_SIZE, np.nan)
+
+
+@njit(cache=True)
+def _emit(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> None:
+    if n_ev[0] < ev.shape[0]:
+        ev[n_ev[0], 0], ev[n_ev[0], 1], ev[n_ev[0], 2] = t, code, arg
+        n_ev[0] += 1
+
+
+@njit(cache=True)
+def wheel_bound_1(inertia: float, speed_prev: float, speed_now: float, tach_q: float, t_u: float,
+                  friction: np.ndarray, p: int) -> float:
+    """Bound on |r_p| of a healthy wheel: J q + T_u (m^f(Ω_hi) − m^f(Ω_lo)) (seed 000 eq 1, seed 002 eq 4)."""
+    lo = min(speed_prev, speed_now) - 0.5 * tach_q
+    hi = max(speed_prev, speed_now) + 0.5 * tach_q
+    spread = friction_torque_one_wheel(hi, friction, p) - friction_torque_one_wheel(lo, friction, p)
+    return inertia * tach_q + t_u * abs(spread) + NUMERICAL_FLOOR_NMS
+
+
+@njit(cache=True)
+def wheel_residual_1(inertia: float, speed_prev: float, speed_now: float, torque: float, t_u: float,
+                     friction: np.ndarray, p: int) -> float:
+    """Momentum residual r_p of one wheel over one control period, N·m·s (seed 000 eq 1)."""
+    f_mean = 0.5 * (friction_torque_one_wheel(speed_prev, friction, p) + friction_torque_one_wheel(speed_now, friction, p))
+    return inertia * (speed_now - speed_prev) - t_u * (torque - f_mean)
+
+
+@njit(cache=True)
+def wheel_check_1(state: np.ndarray, speeds: np.ndarray, inertia: np.ndarray, max_momentum: np.ndarray,
+                  friction: np.ndarray, tach_q: float, t_u: float, available: np.ndarray,
+                  ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+    """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
+
+    ``speeds``: tachometer readings at t (rad/s); ``state`` holds the previous reading and the
+    limited torque held since (see :func:`wheel_hold_1`). Writes fault_detected / fault_isolated /
+    reconfigured / mode_change events (seed 000 §3 reconfiguration 4 → 3 → 2 + MD).
+    """
+    nw = speeds.shape[0]
+    changed = False
+    for p in range(nw):
+        if not available[p] or state[WS_VALID, p] == 0.0:
+            continue
+        torque = state[WS_TORQUE, p]
+        if abs(inertia[p] * state[WS_SPEED, p]) + abs(torque) * t_u >= max_momentum[p]:
+            state[WS_COUNT, p] = 0.0
+            continue  # the motor's momentum limit may cut the torque: residual undefined
+        r = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], torque, t_u, friction, p)
+        bound = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q, t_u, friction, p)
+        if abs(r) <= WHEEL_SAFETY * bound:
+            state[WS_COUNT, p] = 0.0
+            continue
+        state[WS_COUNT, p] += 1.0
+        if state[WS_COUNT, p] == 1.0:
+            _emit(ev, n_ev, t, EV_DETECTED, p)
+        if state[WS_COUNT, p] >= CONFIRM_PERIODS:
+            _emit(ev, n_ev, t, EV_ISOLATED, p)
+            available[p] = False
+            state[WS_ISOLATED, p] = 1.0
+            changed = True
+    n_on = 0
+    mask = 0
+    for p in range(nw):
+        if available[p]:
+            n_on += 1
+            mask |= 1 << p
+    if changed:
+        _emit(ev, n_ev, t, EV_RECONFIGURED, mask)
+        if n_on < 2:
+            _emit(ev, n_ev, t, EV_MODE, MODE_FAULT)
+    return n_on < 2
+
+
+@njit(cache=True)
+def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, cmd: np.ndarray, inertia: np.ndarray,
+                 max_torque: np.ndarray, max_momentum: np.ndarray) -> None:
+    """Remember the tachometer reading and the torque the motor will deliver for ``cmd`` (seed 000 eq 2–3)."""
+    limited = limited_motor_torque_1(cmd, speeds, inertia, max_torque, max_momentum)
+    for p in range(speeds.shape[0]):
+        state[WS_SPEED, p] = speeds[p]
+        state[WS_TORQUE, p] = limited[p]
+        state[WS_VALID, p] = 1.0
+
+
+@njit(cache=True)
+def _rotvec_between_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rotation vector of ã ∘ b (small-angle exact to second order via 2 atan2), rad."""
+    a0, a1, a2, a3 = a[0], -a[1], -a[2], -a[3]
+    d0 = a0 * b[0] - a1 * b[1] - a2 * b[2] - a3 * b[3]
+    d1 = a0 * b[1] + a1 * b[0] + a2 * b[3] - a3 * b[2]
+    d2 = a0 * b[2] - a1 * b[3] + a2 * b[0] + a3 * b[1]
+    d3 = a0 * b[3] + a1 * b[2] - a2 * b[1] + a3 * b[0]
+    if d0 < 0.0:
+        d0, d1, d2, d3 = -d0, -d1, -d2, -d3
+    s = np.sqrt(d1 * d1 + d2 * d2 + d3 * d3)
+    out = np.zeros(3)
+    if s > 0.0:
+        k = 2.0 * np.arctan2(s, d0) / s
+        out[0], out[1], out[2] = k * d1, k * d2, k * d3
+    return out
+
+
+@njit(cache=True)
+def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
+                         sigma3: np.ndarray, nis_max: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+    """Accept or reject one star-tracker sample: innovation χ² (jump) and exact repetition (freeze).
+
+    seed 000 §4: Λ^m = Λ ∘ Λ^n with σ per axis; the innovation z = rotvec(Λ̂̃ ∘ Λ^m) has covariance
+    S = P_θθ + diag(σ²). Returns True if the sample may update the filter.
+    """
+    z = _rotvec_between_1(q_est, q_meas)
+    s = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            s[i, j] = p_cov[i, j]
+        s[i, i] += sigma3[i] * sigma3[i]
+    nis = z @ np.linalg.solve(s, z)
+    frozen = sigma3[0] > 0.0 and q_meas[0] == state[SS_PREV] and q_meas[1] == state[SS_PREV + 1] \
+        and q_meas[2] == state[SS_PREV + 2] and q_meas[3] == state[SS_PREV + 3]
+    state[SS_PREV:SS_PREV + 4] = q_meas
+    if nis <= nis_max and not frozen:
+        state[SS_COUNT] = 0.0
+        return True
+    state[SS_COUNT] += 1.0
+    arg = SENSOR_ARG + 10 * T_STAR
+    if state[SS_COUNT] == 1.0 and state[SS_ISOLATED] == 0.0:
+        _emit(ev, n_ev, t, EV_DETECTED, arg)
+    if state[SS_COUNT] == CONFIRM_PERIODS and state[SS_ISOLATED] == 0.0:
+        state[SS_ISOLATED] = 1.0
+        _emit(ev, n_ev, t, EV_ISOLATED, arg)
+        _emit(ev, n_ev, t, EV_RECONFIGURED, arg)
+    return False
+
+
+@njit(cache=True)
+def _integrate_rate_1(q: np.ndarray, w: np.ndarray, dt: float) -> None:
+    """q ← q ∘ exp(½ w dt) in place (seed 000 eq 1 kinematics over one step of constant rate)."""
+    n = np.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+    c = np.cos(0.5 * n * dt)
+    k = np.sin(0.5 * n * dt) / n if n > 0.0 else 0.5 * dt
+    b0, b1, b2, b3 = c, k * w[0], k * w[1], k * w[2]
+    a0, a1, a2, a3 = q[0], q[1], q[2], q[3]
+    q[0] = a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3
+    q[1] = a0 * b1 + a1 * b0 + a2 * b3 - a3 * b2
+    q[2] = a0 * b2 - a1 * b3 + a2 * b0 + a3 * b1
+    q[3] = a0 * b3 + a1 * b2 - a2 * b1 + a3 * b0
+
+
+@njit(cache=True)
+def gyro_drift_step_1(state: np.ndarray, t: float, w_meas: np.ndarray, dt: float, q_star: np.ndarray,
+                      star_ok: bool, sigma_st: float, sigma_g: float, sigma_rw: float, n_sigma: float,
+                      ev: np.ndarray, n_ev: np.ndarray) -> float:
+    """One T_q step of the gyro-vs-star-tracker drift test; returns the MEKF bias process noise to use.
+
+    Seed 002 eq 13 gyro (bias + drift + noise) against seed 000 §4 star tracker: over a window W
+    the unexplained rotation d = rotvec((∫ω̃)̃ ∘ Λ̃^m_0 ∘ Λ^m) gives the mean rate error −d/W per
+    axis; its noise bound is n_σ √(2σ_st²/W² + σ_g² T_q/W + σ_rw² (t − t_ref)).
+    """
+    if np.isnan(state[GS_T0]):
+        if star_ok:
+            state[GS_QINT], state[GS_QINT + 1:GS_QINT + 4] = 1.0, 0.0
+            state[GS_QST0:GS_QST0 + 4] = q_star
+            state[GS_T0] = t
+            state[GS_WPREV:GS_WPREV + 3] = w_meas
+        return state[GS_SIGMA_U]
+    q_int = state[GS_QINT:GS_QINT + 4].copy()
+    w_mid = 0.5 * (w_meas + state[GS_WPREV:GS_WPREV + 3])
+    _integrate_rate_1(q_int, w_mid, dt)
+    state[GS_QINT:GS_QINT + 4] = q_int
+    state[GS_WPREV:GS_WPREV + 3] = w_meas
+    width = t - state[GS_T0]
+    if width < GYRO_WINDOW_S or not star_ok:
+        return state[GS_SIGMA_U]
+    rel_st = np.empty(4)
+    q0 = state[GS_QST0:GS_QST0 + 4]
+    rel_st[:] = _conj_mul_1(q0, q_star)
+    d = _rotvec_between_1(q_int, rel_st)
+    rate_err = -d / width
+    state[GS_QINT], state[GS_QINT + 1:GS_QINT + 4] = 1.0, 0.0
+    state[GS_QST0:GS_QST0 + 4] = q_star
+    state[GS_T0] = t
+    n = state[GS_N]
+    if n < GYRO_CALIBRATION_WINDOWS:
+        state[GS_BREF:GS_BREF + 3] = (state[GS_BREF:GS_BREF + 3] * n + rate_err) / (n + 1.0)
+        state[GS_N] = n + 1.0
+        state[GS_TREF] = t
+        return state[GS_SIGMA_U]
+    elapsed = t - state[GS_TREF]
+    noise = np.sqrt(2.0 * sigma_st * sigma_st / (width * width) + sigma_g * sigma_g * dt / width
+                    + sigma_rw * sigma_rw * elapsed + sigma_g * sigma_g * dt / (width * GYRO_CALIBRATION_WINDOWS))
+    change = rate_err - state[GS_BREF:GS_BREF + 3]
+    worst, axis = 0.0, 0
+    for i in range(3):
+        if abs(change[i]) > worst:
+            worst, axis = abs(change[i]), i
+    if worst <= n_sigma * noise:
+        state[GS_COUNT] = 0.0
+        return state[GS_SIGMA_U]
+    state[GS_COUNT] += 1.0
+    arg = SENSOR_ARG + 10 * T_GYRO + axis
+    if state[GS_COUNT] == 1.0 and state[GS_ISOLATED] == 0.0:
+        _emit(ev, n_ev, t, EV_DETECTED, arg)
+    if state[GS_COUNT] >= CONFIRM_PERIODS and state[GS_ISOLATED] == 0.0:
+        state[GS_ISOLATED] = 1.0
+        state[GS_SIGMA_U] = max(state[GS_SIGMA_U], worst / np.sqrt(max(elapsed, width)))
+        _emit(ev, n_ev, t, EV_ISOLATED, arg)
+        _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_GYRO)
+    return state[GS_SIGMA_U]
+
+
+@njit(cache=True)
+def _conj_mul_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """ã ∘ b for unit quaternions."""
+    a0, a1, a2, a3 = a[0], -a[1], -a[2], -a[3]
+    out = np.empty(4)
+    out[0] = a0 * b[0] - a1 * b[1] - a2 * b[2] - a3 * b[3]
+    out[1] = a0 * b[1] + a1 * b[0] + a2 * b[3] - a3 * b[2]
+    out[2] = a0 * b[2] - a1 * b[3] + a2 * b[0] + a3 * b[1]
+    out[3] = a0 * b[3] + a1 * b[2] - a2 * b[1] + a3 * b[0]
+    return out
+
+
+@njit(cache=True)
+def magnetometer_check_1(state: np.ndarray, b_meas: np.ndarray, b_model: np.ndarray, sigma_mag: float,
+                         att_sigma: float, n_sigma: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+    """Screen one magnetometer sample against the model field in body axes; replace spikes in place.
+
+    Seed 003 eq 26 field B in body axes: per-axis bound n_σ σ_mag + |B| σ_att + model error.
+    Returns True if the sample was accepted.
+    """
+    b_norm = np.sqrt(b_model[0] ** 2 + b_model[1] ** 2 + b_model[2] ** 2)
+    bound = n_sigma * sigma_mag + b_norm * att_sigma + MAG_MODEL_ERROR_T
+    worst, axis = 0.0, 0
+    for i in range(3):
+        d = abs(b_meas[i] - b_model[i])
+        if d > worst:
+            worst, axis = d, i
+    if worst <= bound:
+        return True
+    if np.isnan(state[MS_LAST]) or t - state[MS_LAST] > MAG_REARM_S:
+        arg = SENSOR_ARG + 10 * T_MAG + axis
+        _emit(ev, n_ev, t, EV_DETECTED, arg)
+        _emit(ev, n_ev, t, EV_ISOLATED, arg)
+        _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_MAG)
+    state[MS_LAST] = t
+    b_meas[:] = b_model
+    return False
+
+
+def wheel_residuals(
+    speed_rad_s: np.ndarray,
+    torque_nm: np.ndarray,
+    inertia_kg_m2: np.ndarray,
+    friction: np.ndarray,
+    tach_quantum_rad_s: float,
+    control_dt_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals r_p and their healthy bounds × WHEEL_SAFETY for sampled tachometer data (seed 000 eq 1).
+
+    ``speed_rad_s`` (n_samples, n_wheels) at the control instants, ``torque_nm`` (n_samples − 1,
+    n_wheels) the limited torque held over each period; ``friction`` the (4, n_wheels) table of
+    :meth:`sim_core.wheels.WheelParams.friction_table`. Returns two (n_samples − 1, n_wheels) arrays, N·m·s.
+    """
+    w = np.asarray(speed_rad_s, dtype=float)
+    m = np.asarray(torque_nm, dtype=float)
+    j = np.asarray(inertia_kg_m2, dtype=float)
+    f = np.ascontiguousarray(friction, dtype=float)
+    if w.ndim != 2 or w.shape[0] < 2:
+        raise ValueError("speed_rad_s: expected (n_samples ≥ 2, n_wheels)")
+    if m.shape != (w.shape[0] - 1, w.shape[1]):
+        raise ValueError(f"torque_nm: expected shape {(w.shape[0] - 1, w.shape[1])}, got {m.shape}")
+    if j.shape != (w.shape[1],) or np.any(j <= 0):
+        raise ValueError("inertia_kg_m2: expected one positive inertia per wheel")
+    if f.shape != (4, w.shape[1]):
+        raise ValueError("friction: expected the (4, n_wheels) friction table")
+    if not (tach_quantum_rad_s >= 0.0 and control_dt_s > 0.0):
+        raise ValueError("tach_quantum_rad_s, control_dt_s: must be ≥ 0 and > 0")
+    return _residual_table(w, m, j, f, float(tach_quantum_rad_s), float(control_dt_s))
+
+
+@njit(cache=True)
+def _residual_table(w, m, j, f, q, t_u):
+    n, nw = m.shape
+    r, b = np.empty((n, nw)), np.empty((n, nw))
+    for k in range(n):
+        for p in range(nw):
+            r[k, p] = wheel_residual_1(j[p], w[k, p], w[k + 1, p], m[k, p], t_u, f, p)
+            b[k, p] = WHEEL_SAFETY * wheel_bound_1(j[p], w[k, p], w[k + 1, p], q, t_u, f, p)
+    return r, b
+
+
+_TARGET_NAMES = {1: "gyro", 2: "star_tracker", 4: "magnetometer"}
+
+
+def describe_event(name: str, arg: int) -> str:
+    """Human-readable subject of an FDIR event argument (wheel index, sensor axis, or wheel mask)."""
+    if arg >= SENSOR_ARG:
+        code, axis = divmod(arg - SENSOR_ARG, 10)
+        sensor = _TARGET_NAMES.get(code, f"sensor {code}")
+        return sensor if name == "reconfigured" or code == T_STAR else f"{sensor} axis {'xyz'[axis]}"
+    if name == "reconfigured":
+        wheels = [str(p + 1) for p in range(8) if arg >> p & 1]
+        return "wheels " + ",".join(wheels) if wheels else "no wheels"
+    if name == "mode_change":
+        return f"mode {arg}"
+    return f"wheel {arg + 1}"
