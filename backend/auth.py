@@ -66,17 +66,21 @@ class Authenticator:
         self._cache: dict[str, Principal] = {}
         self._lock = threading.Lock()
 
-    def resolve(self, token: str | None) -> Principal | None:
-        """The principal owning ``token``; None when missing, unknown or revoked."""
+    def cached(self, token: str | None) -> Principal | None:
+        """The principal if known without a database lookup (auth off, or a cached token)."""
         if not self.enabled:
             return LOCAL_ADMIN
         if not token:
             return None
-        digest = token_sha256(token)
         with self._lock:
-            cached = self._cache.get(digest)
-        if cached is not None:
+            return self._cache.get(token_sha256(token))
+
+    def resolve(self, token: str | None) -> Principal | None:
+        """The principal owning ``token``; None when missing, unknown or revoked."""
+        cached = self.cached(token)
+        if cached is not None or not token:
             return cached
+        digest = token_sha256(token)
         row = self._tokens.find_active(digest)
         if row is None:
             return None

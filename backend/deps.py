@@ -7,6 +7,7 @@ from typing import Annotated
 
 from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from starlette.concurrency import run_in_threadpool
 
 from backend.auth import Principal, Role
 from backend.errors import ApiError
@@ -17,7 +18,7 @@ __all__ = ["get_services", "require", "ServicesDep", "ViewerDep", "OperatorDep",
 _bearer = HTTPBearer(auto_error=False, description="API token: `Authorization: Bearer acs_…`")
 
 
-def get_services(request: Request) -> Services:
+async def get_services(request: Request) -> Services:
     """The services container built by create_app."""
     return request.app.state.services
 
@@ -28,10 +29,12 @@ ServicesDep = Annotated[Services, Depends(get_services)]
 def require(role: Role) -> Callable[..., Principal]:
     """Dependency: the caller's principal, 401 without a valid token, 403 below ``role``."""
 
-    def check(services: ServicesDep,
-              credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> Principal:
+    async def check(services: ServicesDep,
+                    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> Principal:
         token = credentials.credentials if credentials else None
-        principal = services.auth.resolve(token)
+        principal = services.auth.cached(token)
+        if principal is None and token:
+            principal = await run_in_threadpool(services.auth.resolve, token)
         if principal is None:
             raise ApiError(401, "missing or unknown API token: send 'Authorization: Bearer <token>'",
                            "Authorization", headers={"WWW-Authenticate": "Bearer"})

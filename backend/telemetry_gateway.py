@@ -10,8 +10,12 @@ from __future__ import annotations
 
 import asyncio
 import importlib.util
+import json
+import multiprocessing as mp
+import queue
 import threading
-from collections import OrderedDict
+import time
+from collections import OrderedDict, deque
 from dataclasses import asdict
 from typing import Any
 
@@ -38,6 +42,9 @@ COMPONENT_MODULES = {
     "engine": "sim_core.engine",
 }
 SAMPLE_CACHE_ENTRIES = 4096  # distinct (parameter, window, max_points) answers kept between ingests
+LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
+LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
+HOT_S = 5.0  # live data younger than this may still wait for the archive flush (every 0.5 s): no caching
 
 
 def _importable(module: str) -> bool:
@@ -55,9 +62,14 @@ class TelemetryGateway:
         self.dictionaries = DictionaryCatalogue(settings.data_dir / "dictionaries")
         self._archive: Any = None
         self._live: Any = None
-        self._bridge: asyncio.Task | None = None
+        self._outbox: Any = None
+        self._stop_live: Any = None
+        self._relay: threading.Thread | None = None
+        self._live_stats: dict[str, Any] = {}
         self.live_port: int | None = None
-        self._cache: OrderedDict[tuple, dict[str, Any]] = OrderedDict()
+        self._cache: OrderedDict[tuple, bytes] = OrderedDict()
+        self._generation: dict[str, int] = {}
+        self._hot: deque[tuple[float, str, int]] = deque()
         self._cache_lock = threading.Lock()
 
     def components(self) -> dict[str, bool]:
@@ -86,37 +98,55 @@ class TelemetryGateway:
             self._archive = Archive(self._settings.resolved_database_url())
 
     async def start_live(self) -> None:
-        """Listen for the live CCSDS stream (telemetry.live): archive it, publish it to the hub."""
+        """Start the live-ingest process (telemetry.live) and the thread relaying it to the hub."""
         if not (self._settings.live_enabled and self._archive is not None and _importable(COMPONENT_MODULES["live"])):
             return
-        from telemetry.limits import dictionary_limits
-        from telemetry.live import LiveStream
+        from backend.live_ingest import OUTBOX_MESSAGES, run_ingest_process
 
-        dictionary = self.dictionaries.load(self._settings.live_dictionary)
+        self.dictionaries.load(self._settings.live_dictionary)  # fail here, naming the dictionary
+        ctx = mp.get_context("spawn")
+        self._outbox, self._stop_live = ctx.Queue(OUTBOX_MESSAGES), ctx.Event()
+        args = (self._settings.resolved_database_url(), str(self._settings.data_dir / "dictionaries"),
+                self._settings.live_dictionary, self._settings.live_satellite, self._settings.host,
+                self._settings.telemetry_port, self._outbox, self._stop_live)
+        self._live = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
+        self._live.start()
+        kind, port = await asyncio.to_thread(self._outbox.get, True, LIVE_START_TIMEOUT_S)
+        self.live_port = int(port)
+        self._relay = threading.Thread(target=self._relay_loop, name="live-relay", daemon=True)
+        self._relay.start()
+
+    def _relay_loop(self) -> None:
         satellite = self._settings.live_satellite
-        self._live = LiveStream(dictionary, archive=self._archive, satellite=satellite,
-                                limits=dictionary_limits(dictionary))
-        self.live_port = await self._live.start(self._settings.host, self._settings.telemetry_port)
-        self._bridge = asyncio.create_task(self._forward(self._live.subscribe(), satellite))
-
-    async def _forward(self, subscriber: Any, satellite: str) -> None:
         while True:
-            message = await subscriber.get()
-            self._invalidate(satellite)
-            self._publish(satellite, [message.batch], 0)
+            try:
+                kind, payload = self._outbox.get(timeout=0.2)
+            except queue.Empty:
+                if self._stop_live.is_set() and not self._live.is_alive():
+                    return
+                continue
+            if kind == "stats":
+                self._live_stats = payload
+                continue
+            if len(payload.t_utc_ns):
+                self._hot.append((time.monotonic(), satellite, int(payload.t_utc_ns.min())))
+            self._invalidate_batches(satellite, [payload])
+            self._publish(satellite, [payload], 0)
 
     async def stop_live(self) -> None:
-        """Stop the listener (pending packets are archived) and the hub bridge."""
-        if self._bridge is not None:
-            self._bridge.cancel()
-            await asyncio.gather(self._bridge, return_exceptions=True)
-        if self._live is not None:
-            await self._live.stop()
-        self._live = self._bridge = None
+        """Stop the ingest process (it archives what is pending first) and the relay thread."""
+        if self._live is None:
+            return
+        self._stop_live.set()
+        await asyncio.to_thread(self._live.join, LIVE_STOP_TIMEOUT_S)
+        if self._live.is_alive():
+            self._live.terminate()
+        await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
+        self._live = None
 
     def live_stats(self) -> dict[str, Any]:
         """Tallies of the live stream (packets received/archived, errors), empty when off."""
-        return {} if self._live is None else {"port": self.live_port, **asdict(self._live.stats)}
+        return {} if self._live is None else {"port": self.live_port, **self._live_stats}
 
     def close(self) -> None:
         """Release the archive's connections."""
@@ -152,7 +182,7 @@ class TelemetryGateway:
 
         result = self.archive.ingest(satellite, [PacketBatch.from_sample_batch(b) for b in decoded.batches], source=source,
                                      uploaded_by=uploaded_by, limits=dictionary_limits(dictionary))
-        self._invalidate(satellite)
+        self._invalidate_batches(satellite, decoded.batches)
         if not result.duplicate_upload:
             self._publish(satellite, decoded.batches, result.alarm_events)
         return {"satellite": satellite, "dictionary": dictionary_name_of(dictionary),
@@ -205,27 +235,53 @@ class TelemetryGateway:
 
         return queries.export_table(self.archive, satellite, names, t0_ns, t1_ns)
 
-    def _invalidate(self, satellite: str) -> None:
+    def _invalidate(self, satellite: str, t0_ns: int = -(2**63), t1_ns: int = 2**63 - 1) -> None:
+        """Forget cached answers of ``satellite`` whose window overlaps new data in [t0_ns, t1_ns]."""
         with self._cache_lock:
-            for key in [k for k in self._cache if k[0] == satellite]:
+            self._generation[satellite] = self._generation.get(satellite, 0) + 1
+            for key in [k for k in self._cache if k[0] == satellite and k[2] <= t1_ns and k[3] >= t0_ns]:
                 del self._cache[key]
 
-    def samples(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> dict[str, Any]:
-        """Samples of one parameter in [t0_ns, t1_ns], min/max-downsampled to max_points (cached)."""
+    def _invalidate_batches(self, satellite: str, batches: list[Any]) -> None:
+        spans = [(int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in batches if len(b.t_utc_ns)]
+        if spans:
+            self._invalidate(satellite, min(s[0] for s in spans), max(s[1] for s in spans))
+
+    def _hot_start_ns(self, satellite: str) -> int | None:
+        """Earliest time of live data of ``satellite`` received within HOT_S (maybe not archived yet)."""
+        while self._hot and time.monotonic() - self._hot[0][0] > HOT_S:
+            self._hot.popleft()
+        starts = [t for _, sat, t in list(self._hot) if sat == satellite]
+        return min(starts) if starts else None
+
+    def cached_samples(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes | None:
+        """The JSON answer of :meth:`samples_json` if cached (no database access; safe in the event loop)."""
         key = (satellite, name, t0_ns, t1_ns, max_points)
         with self._cache_lock:
             hit = self._cache.get(key)
             if hit is not None:
                 self._cache.move_to_end(key)
-                return hit
+            return hit
+
+    def samples_json(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes:
+        """JSON of one parameter's samples in [t0_ns, t1_ns], min/max-downsampled to max_points (cached)."""
+        hit = self.cached_samples(satellite, name, t0_ns, t1_ns, max_points)
+        if hit is not None:
+            return hit
+        with self._cache_lock:
+            generation = self._generation.get(satellite, 0)
         t, v = self.archive.read_parameter(satellite, name, t0_ns, t1_ns)
         keep = minmax_indices(v, max_points) if v.size else np.arange(0)
-        answer = {"satellite": satellite, "name": name, "total_points": int(t.size),
-                  "t_utc_ns": t[keep].tolist(), "values": np.asarray(v[keep], dtype=float).tolist()}
+        values = np.asarray(v[keep], dtype=float)
+        listed = values.tolist() if np.all(np.isfinite(values)) else [x if np.isfinite(x) else None for x in values]
+        answer = json.dumps({"satellite": satellite, "name": name, "total_points": int(t.size),
+                             "t_utc_ns": t[keep].tolist(), "values": listed}).encode()
+        hot = self._hot_start_ns(satellite)
         with self._cache_lock:
-            self._cache[key] = answer
-            if len(self._cache) > SAMPLE_CACHE_ENTRIES:
-                self._cache.popitem(last=False)
+            if self._generation.get(satellite, 0) == generation and (hot is None or t1_ns < hot):
+                self._cache[(satellite, name, t0_ns, t1_ns, max_points)] = answer
+                if len(self._cache) > SAMPLE_CACHE_ENTRIES:
+                    self._cache.popitem(last=False)
         return answer
 
 

@@ -11,6 +11,7 @@ import pyarrow.parquet as pq
 from fastapi import APIRouter, Query
 from fastapi.responses import Response
 from pydantic import BaseModel
+from starlette.concurrency import run_in_threadpool
 
 from backend.deps import ServicesDep, ViewerDep
 from backend.errors import ERROR_RESPONSES, ApiError
@@ -53,13 +54,20 @@ def latest_values(services: ServicesDep, _: ViewerDep, satellite: str = Satellit
 
 
 @router.get("/parameters/{name}/samples", response_model=SamplesPublic, summary="Samples of one parameter")
-def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
-            start: datetime | None = Query(None, examples=["2021-04-09T00:00:00Z"]),
-            end: datetime | None = Query(None, examples=["2021-04-09T02:00:00Z"]),
-            max_points: int = Query(1000, ge=2, le=100_000)) -> dict[str, Any]:
-    """Samples in [start, end] (ISO 8601 UTC), min/max-bucket downsampled to at most max_points."""
+async def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
+                  start: datetime | None = Query(None, examples=["2021-04-09T00:00:00Z"]),
+                  end: datetime | None = Query(None, examples=["2021-04-09T02:00:00Z"]),
+                  max_points: int = Query(1000, ge=2, le=100_000)) -> Response:
+    """Samples in [start, end] (ISO 8601 UTC), min/max-bucket downsampled to at most max_points.
+
+    Answers are cached per window until ingested data overlaps it; a hit never leaves the event loop.
+    """
     t0, t1 = _window(start, end)
-    return services.telemetry.samples(satellite, name, t0, t1, min(max_points, services.settings.max_points))
+    args = (satellite, name, t0, t1, min(max_points, services.settings.max_points))
+    body = services.telemetry.cached_samples(*args)
+    if body is None:
+        body = await run_in_threadpool(services.telemetry.samples_json, *args)
+    return Response(body, media_type="application/json")
 
 
 @router.get("/exports/samples", summary="Export samples as CSV or Parquet (one column per parameter)",

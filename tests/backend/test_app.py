@@ -52,7 +52,7 @@ def test_bad_setting_names_the_field(tmp_path: Path) -> None:
 
 
 def test_factory_creates_nothing_until_called_and_auth_off_acts_as_admin(tmp_path: Path) -> None:
-    settings = Settings(data_dir=tmp_path / "d", auth_enabled=False, telemetry_port=0)
+    settings = Settings(data_dir=tmp_path / "d", auth_enabled=False, telemetry_port=0, live_enabled=False)
     assert not settings.data_dir.exists()
     with TestClient(create_app(settings)) as client:
         assert (tmp_path / "d" / "acs-twin.sqlite").exists()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import socket
 import time
 from pathlib import Path
 
@@ -12,8 +13,11 @@ from starlette.websockets import WebSocketDisconnect
 
 from backend.live_hub import LiveHub
 from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
-from tests.backend.conftest import bearer
+from backend.app import create_app
+from backend.auth import Role
+from tests.backend.conftest import bearer, make_settings
 
+LIVE_ARCHIVE_TIMEOUT_S = 10.0  # archive flushes every 0.5 s; margin for a loaded machine
 PUBLISH_BUDGET_S = 1.0  # 100k publishes to a stalled subscriber: must not wait on it (≈ 0.1 s here)
 
 
@@ -98,27 +102,29 @@ def test_uploaded_packets_reach_a_websocket_subscriber(client: TestClient, token
 
 
 def test_packets_streamed_over_tcp_are_archived_and_reach_a_websocket_subscriber(
-        client: TestClient, tokens: dict[str, str], shared_data: Path) -> None:
-    """End to end: TCP link (real NOAA-20 packets) → decode → archive and → WebSocket subscriber."""
-    import socket as sockets
-
+        tmp_path: Path, database_url: str, shared_data: Path) -> None:
+    """End to end: TCP link (real NOAA-20 packets) → ingest process → archive and → WebSocket subscriber."""
     packets = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
     n_sent, packet_octets = 500, 71
-    live = client.get("/api/v1/health").json()["live"]
-    hub = client.app.state.services.hub
-    with client.websocket_connect(f"/api/v1/ws?token={tokens['viewer']}") as ws:
-        ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
-        deadline = time.monotonic() + 2.0
-        while not hub.wants_any("parameters/q_ib_0"):
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
-        with sockets.create_connection(("127.0.0.1", live["port"])) as link:
-            link.sendall(packets[: n_sent * packet_octets])
-        seen = 0
-        while seen < n_sent:
-            seen += sum(len(item["data"]["values"]) for item in ws.receive_json()["items"])
-    assert seen == n_sent
-    deadline = time.monotonic() + 10.0
-    while client.get("/api/v1/parameters/q_ib_0/samples", headers=bearer(tokens["viewer"])).json().get("total_points", 0) < n_sent:
-        assert time.monotonic() < deadline, "live packets never reached the archive"
-        time.sleep(0.1)
+    with TestClient(create_app(make_settings(tmp_path, database_url, live_enabled=True))) as client:
+        viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
+        port = client.get("/api/v1/health").json()["live"]["port"]
+        hub = client.app.state.services.hub
+        with client.websocket_connect(f"/api/v1/ws?token={viewer}") as ws:
+            ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
+            deadline = time.monotonic() + 2.0
+            while not hub.wants_any("parameters/q_ib_0"):
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            with socket.create_connection(("127.0.0.1", port)) as link:
+                link.sendall(packets[: n_sent * packet_octets])
+            seen = 0
+            while seen < n_sent:
+                seen += sum(len(item["data"]["values"]) for item in ws.receive_json()["items"])
+        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
+        while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < n_sent:
+            assert time.monotonic() < deadline, "live packets never reached the archive"
+            time.sleep(0.1)
+        samples = client.get("/api/v1/parameters/q_ib_0/samples", headers=bearer(viewer)).json()
+    assert seen == n_sent and samples["total_points"] == n_sent
+    assert not client.app.state.services.telemetry.live_stats()  # the ingest process has stopped

@@ -36,7 +36,7 @@ def _check(case: schemathesis.Case) -> None:
 
 def test_api_matches_its_openapi_document(tmp_path: Path) -> None:
     app = create_app(Settings(data_dir=tmp_path, auth_enabled=False, job_queue_size=2, max_upload_mb=1.0,
-                              telemetry_port=0))
+                              telemetry_port=0, live_enabled=False))
     with TestClient(app):
         schema = schemathesis.openapi.from_asgi("/openapi.json", app)
         operations = [result.ok() for result in schema.get_all_operations()]

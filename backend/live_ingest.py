@@ -1,0 +1,70 @@
+"""The live stream in its own process: TCP listener → decode → archive (telemetry.live).
+
+Ingest and the API never share a GIL, so neither slows the other; the ingest process forwards
+each decoded batch (raw packets stripped) and its tallies to the API process through a bounded
+queue, never waiting: when the API side falls behind, batches for the live hub are dropped and
+counted (they are archived regardless).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import queue
+from pathlib import Path
+from typing import Any
+
+__all__ = ["run_ingest_process", "STATS_PERIOD_S", "OUTBOX_MESSAGES"]
+
+STATS_PERIOD_S = 0.5
+OUTBOX_MESSAGES = 1_000  # ≈ 20 s of batches at the 50 decodes/s of telemetry.live
+STOP_POLL_S = 0.1
+
+
+def run_ingest_process(database_url: str, dictionaries_dir: str, dictionary: str, satellite: str, host: str,
+                       port: int, outbox: Any, stop: Any) -> None:
+    """Process entry: serve the live stream until ``stop`` is set; reports ("port", n) first."""
+    asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop))
+
+
+def _offer(outbox: Any, message: tuple, tally: dict[str, int]) -> None:
+    try:
+        outbox.put_nowait(message)
+    except queue.Full:
+        tally["forward_dropped"] += 1
+
+
+async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str, satellite: str, host: str,
+                 port: int, outbox: Any, stop: Any) -> None:
+    from backend.dictionary_catalogue import DictionaryCatalogue
+    from telemetry.archive import Archive
+    from telemetry.limits import dictionary_limits
+    from telemetry.live import LiveStream
+
+    archive = Archive(database_url, migrate=False)
+    dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
+    stream = LiveStream(dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary))
+    outbox.put(("port", await stream.start(host, port)))
+    subscriber = stream.subscribe(max_messages=OUTBOX_MESSAGES)
+    tally = {"forward_dropped": 0}
+
+    async def forward() -> None:
+        while True:
+            message = await subscriber.get()
+            _offer(outbox, ("batch", dataclasses.replace(message.batch, packets=None)), tally)
+
+    async def report() -> None:
+        while True:
+            await asyncio.sleep(STATS_PERIOD_S)
+            _offer(outbox, ("stats", {**dataclasses.asdict(stream.stats), **tally}), tally)
+
+    tasks = [asyncio.create_task(forward()), asyncio.create_task(report())]
+    try:
+        while not stop.is_set():
+            await asyncio.sleep(STOP_POLL_S)
+    finally:
+        await stream.stop()
+        for task in tasks:
+            task.cancel()
+        outbox.put(("stats", {**dataclasses.asdict(stream.stats), **tally}))
+        archive.close()
