@@ -31,6 +31,7 @@ __all__ = [
     "parse_primary_headers",
     "encode_primary_headers",
     "decode_time",
+    "time_fields_valid",
     "encode_time",
     "crc16_ccitt",
     "frame_stream",
@@ -45,6 +46,7 @@ SEQUENCE_FLAGS_UNSEGMENTED = 3
 NS_PER_S = 1_000_000_000
 NS_PER_DAY = 86_400 * NS_PER_S
 CCSDS_EPOCH_NS = -4383 * NS_PER_DAY  # 1958-01-01 (CCSDS 301.0-B-4 §3.2.2.1.1 level 1 epoch)
+MS_PER_DAY_WITH_LEAP = 86_401_000  # a UTC day with a positive leap second
 TIME_SCALE_OFFSET_S = {"UTC": None, "TAI": 0, "GPS": -19}  # scale − TAI where leap seconds apply
 
 
@@ -213,6 +215,18 @@ def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
     sub = _big_endian_uint(t[:, code.day_octets + 4 :]).astype(np.int64)
     sub_ns = {0: 0, 2: sub * 1_000, 4: sub // 1_000}[code.submillisecond_octets]
     return _scale_to_utc(code.epoch_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns, code.time_scale)
+
+
+def time_fields_valid(octets: np.ndarray, code: TimeCode) -> np.ndarray:
+    """Per T-field: False where a CDS sub-field exceeds its range (ms of day ≤ 86,400,999 with a leap second,
+    µs < 1,000, ps < 10⁹; CCSDS 301.0-B-4 §3.3.1); CUC fields are always well formed."""
+    t = np.asarray(octets)
+    if code.format == "CUC":
+        return np.ones(t.shape[0], dtype=bool)
+    ms = _big_endian_uint(t[:, code.day_octets : code.day_octets + 4])
+    sub = _big_endian_uint(t[:, code.day_octets + 4 :])
+    sub_limit = {0: 1, 2: 1_000, 4: 1_000_000_000}[code.submillisecond_octets]
+    return (ms < MS_PER_DAY_WITH_LEAP) & (sub < sub_limit)
 
 
 def _to_octets(value: np.ndarray, n_octets: int) -> np.ndarray:

@@ -179,7 +179,9 @@ def _decode_apid(
         offset, packets = offset[~bad], packets[~bad]
         headers = ccsds.parse_primary_headers(packets)
     t0 = ccsds.PRIMARY_HEADER_OCTETS
-    t = ccsds.decode_time(packets[:, t0 : t0 + definition.time_code.octets], definition.time_code)
+    t_fields = packets[:, t0 : t0 + definition.time_code.octets]
+    t = ccsds.decode_time(t_fields, definition.time_code)
+    t[~ccsds.time_fields_valid(t_fields, definition.time_code)] = np.iinfo(np.int64).min  # -> time_out_of_range
     verdict = validate_packets(definition.apid, offset, headers.sequence_count, t,
                                definition.packet_octets, *window)
     kept = packets[verdict.accepted]

@@ -205,3 +205,12 @@ def test_gps_minus_utc_is_18_s_since_2017() -> None:
 def _coarse(t_field: np.ndarray) -> int:
     """The 4-octet coarse time of the first row."""
     return int.from_bytes(t_field[0, :4].tobytes(), "big")
+
+
+def test_cds_sub_fields_beyond_their_range_are_invalid() -> None:
+    """ms of day ≤ 86,400,999 (a leap-second day) and µs of ms < 1,000 (CCSDS 301.0-B-4 §3.3.1)."""
+    code = TimeCode("CDS")
+    rows = [(23_109, 86_400_999, 999), (23_109, 86_401_000, 0), (23_109, 5, 1_000)]
+    fields = np.array([list(d.to_bytes(2, "big") + m.to_bytes(4, "big") + u.to_bytes(2, "big")) for d, m, u in rows],
+                      dtype=np.uint8)
+    assert ccsds.time_fields_valid(fields, code).tolist() == [True, False, False]

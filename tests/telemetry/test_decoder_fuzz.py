@@ -46,7 +46,9 @@ def test_valid_packets_mixed_with_random_bytes_are_all_recovered(noise: bytes, s
 
 
 corruption = st.tuples(
-    st.sampled_from(["flip", "insert", "truncate", "delete"]), st.integers(0, 10**6), st.binary(min_size=1, max_size=150)
+    st.sampled_from(["flip", "insert", "truncate", "delete"]),
+    st.integers(0, 10**6),
+    st.binary(min_size=1, max_size=150),
 )
 
 

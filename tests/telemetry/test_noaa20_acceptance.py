@@ -140,3 +140,12 @@ def test_acs_twin_ingest_command_reports_bad_input_as_json(capsys) -> None:
 
     assert main(["ingest", "/no/such/file", "--dictionary", "noaa20_apid11_xtce.yaml", "--dry-run"]) == 2
     assert "path" in json.loads(capsys.readouterr().out)["error"]
+
+
+def test_noaa20_packet_with_impossible_cds_time_is_quarantined(raw_bytes: bytes) -> None:
+    """Packet 100 given ms-of-day 90,000,000 (> one day): quarantined as time_out_of_range, neighbours kept."""
+    data = bytearray(raw_bytes[: 200 * 71])
+    data[100 * 71 + 8 : 100 * 71 + 12] = (90_000_000).to_bytes(4, "big")
+    result = decode_stream(bytes(data), load_dictionary("noaa20_apid11_xtce.yaml"))
+    assert [(q.reason, q.offset) for q in result.report.quarantined] == [("time_out_of_range", 100 * 71)]
+    assert result.report.packets_accepted == 199
