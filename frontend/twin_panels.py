@@ -1,0 +1,142 @@
+"""The control panel of one monitor: playback (time, timeline, play/pause, speed, live follow),
+camera presets, and the operator panels — attitude error (actual − simulated), wheel speeds, MD
+moment, mode and fault flags, active alarms (seed 000 §7 in-flight support).
+"""
+
+from __future__ import annotations
+
+import threading
+from datetime import datetime, timezone
+
+import numpy as np
+
+from frontend.feed import FeedWindow
+from frontend.globe import EARTH_CREDIT
+from frontend.playback import SPEEDS, PlaybackClock
+from frontend.twin_geometry import TwinFrame
+
+__all__ = ["TwinPanels", "CAMERA_PRESETS", "PLOT_WINDOW_S", "format_utc"]
+
+CAMERA_PRESETS = ("whole Earth", "chase", "line of sight")
+PLOT_WINDOW_S = 300.0
+RPM_PER_RAD_S = 30.0 / np.pi
+ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
+WHEEL_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#46f0f0")
+MD_COLOURS = ("#e6194b", "#3cb44b", "#4363d8")
+
+
+def format_utc(t_unix_s: float) -> str:
+    """ISO-8601 UTC with milliseconds, as the panels show time."""
+    return datetime.fromtimestamp(t_unix_s, tz=timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _plot_scales() -> dict:
+    """Plain seconds on x (not epoch time) over a fixed sliding window ending now."""
+    return {"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}}
+
+
+def _empty(n_series: int) -> tuple[np.ndarray, ...]:
+    """Initial plot data spanning the window: viser keeps the relative x zoom, a zero span breaks it."""
+    return (np.array([-PLOT_WINDOW_S, 0.0]),) + tuple(np.zeros(2) for _ in range(n_series))
+
+
+class TwinPanels:
+    """GUI of one viser server, bound to the shared clock; camera preset chosen per browser client."""
+
+    def __init__(self, server, role: str, clock: PlaybackClock, n_wheels: int) -> None:
+        self.server, self.role, self.clock = server, role, clock
+        self.camera_preset: dict[int, str] = {}
+        self._lock = threading.Lock()
+        gui = server.gui
+        gui.configure_theme(show_share_button=False, dark_mode=True, control_width="large",
+                            titlebar_content=None, show_logo=False)
+        gui.add_markdown(f"**acs-twin — {role} monitor**")
+        t0, t1 = clock.span_unix_s()
+        with gui.add_folder("Playback"):
+            self.time_text = gui.add_text("UTC", initial_value=format_utc(clock.t_unix_s), disabled=True)
+            self.slider = gui.add_slider("Timeline (s)", min=0.0, max=max(t1 - t0, 1.0), step=0.25,
+                                         initial_value=clock.t_unix_s - t0)
+            self.play = gui.add_button_group("Replay", ("play", "pause"))
+            self.speed = gui.add_dropdown("Speed", tuple(f"x{s:g}" for s in SPEEDS), initial_value=f"x{clock.speed:g}")
+            self.live = gui.add_checkbox("Live follow", initial_value=clock.live)
+            self.camera = gui.add_button_group("Camera", CAMERA_PRESETS)
+        with gui.add_folder("Attitude error (actual − simulated)"):
+            self.error_plot = gui.add_uplot(
+                data=_empty(1), series=({"label": "t − now (s)"},
+                                                       {"label": "error (arcsec)", "stroke": "#ff5050"}),
+                scales=_plot_scales(), aspect=2.0)
+        with gui.add_folder("Wheel speeds (rpm)"):
+            self.wheel_plot = gui.add_uplot(
+                data=_empty(n_wheels),
+                series=({"label": "t − now (s)"},) + tuple(
+                    {"label": f"RW{k + 1}", "stroke": WHEEL_COLOURS[k % len(WHEEL_COLOURS)]} for k in range(n_wheels)),
+                scales=_plot_scales(), aspect=2.0)
+        with gui.add_folder("MD moment (A·m²)"):
+            self.md_plot = gui.add_uplot(
+                data=_empty(3),
+                series=({"label": "t − now (s)"},) + tuple(
+                    {"label": f"m{'xyz'[k]}", "stroke": MD_COLOURS[k]} for k in range(3)),
+                scales=_plot_scales(), aspect=2.0)
+        with gui.add_folder("Mode and flags"):
+            self.flags = gui.add_markdown("—")
+        with gui.add_folder("Active alarms"):
+            self.alarms = gui.add_markdown("none")
+        gui.add_markdown(f"<small>{EARTH_CREDIT}</small>")
+        self._wire()
+
+    def _wire(self) -> None:
+        clock = self.clock
+
+        @self.slider.on_update
+        def _(event) -> None:
+            if event.client is not None:
+                clock.seek(clock.span_unix_s()[0] + float(self.slider.value))
+
+        @self.play.on_click
+        def _(event) -> None:
+            clock.play() if self.play.value == "play" else clock.pause()
+
+        @self.speed.on_update
+        def _(event) -> None:
+            if event.client is not None:
+                clock.set_speed(float(self.speed.value[1:]))
+
+        @self.live.on_update
+        def _(event) -> None:
+            if event.client is not None:
+                clock.follow_live(bool(self.live.value))
+
+        @self.camera.on_click
+        def _(event) -> None:
+            if event.client is not None:
+                with self._lock:
+                    self.camera_preset[event.client.client_id] = self.camera.value
+
+    def presets(self) -> dict[int, str]:
+        """Camera preset chosen by each connected client (default: whole Earth)."""
+        with self._lock:
+            return dict(self.camera_preset)
+
+    def show_time(self, f: TwinFrame) -> None:
+        """Time, timeline and control states, every frame (cheap: unchanged values are not sent)."""
+        t0, t1 = self.clock.span_unix_s()
+        self.time_text.value = format_utc(f.t_unix_s)
+        self.slider.max = max(t1 - t0, 1.0)
+        self.slider.value = float(np.round((f.t_unix_s - t0) * 4.0) / 4.0)
+        self.live.value = self.clock.live
+        self.speed.value = f"x{self.clock.speed:g}"
+
+    def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str]) -> None:
+        """Plots of the last PLOT_WINDOW_S, mode/flags and alarms (a few times per second)."""
+        x = w.t_unix_s - t_unix_s
+        if x.size >= 2:
+            self.error_plot.data = (x, w.error_angle_rad * ARCSEC_PER_RAD)
+            self.wheel_plot.data = (x,) + tuple(w.wheel_speed_rad_s[:, k] * RPM_PER_RAD_S
+                                                for k in range(w.wheel_speed_rad_s.shape[1]))
+            self.md_plot.data = (x,) + tuple(w.md_dipole_am2[:, k] for k in range(3))
+        if x.size:
+            self.flags.content = (
+                f"mode **{int(w.mode[-1])}** · fault flags **0x{int(w.fault_flags[-1]):04x}** · "
+                f"{'**scanning**' if w.observing[-1] else 'not scanning'} · "
+                f"error **{w.error_angle_rad[-1] * ARCSEC_PER_RAD:.1f}″**")
+        self.alarms.content = "\n".join(f"- {a}" for a in alarms) if alarms else "none"
