@@ -15,7 +15,7 @@ from numba import njit
 from sim_core import quaternion
 from telemetry import ccsds
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
-from telemetry.ingest_report import ApidSummary, IngestReport, DecodeResult, QuarantineRecord, SampleBatch
+from telemetry.ingest_report import ApidSummary, DecodeResult, IngestReport, QuarantineRecord, SampleBatch
 from telemetry.validation import header_mismatch, validate_packets
 
 __all__ = [
@@ -196,7 +196,7 @@ def _decode_apid(
     report.quarantined.extend(verdict.quarantined)
     report.duplicates += verdict.duplicates
     summary = ApidSummary(definition.apid, definition.name, len(kept), verdict.duplicates,
-                          sum(max(g.missing, 0) for g in verdict.gaps), verdict.gaps)
+                          missing=sum(max(g.missing, 0) for g in verdict.gaps), gaps=verdict.gaps)
     if len(kept):
         summary.t_first_utc_ns, summary.t_last_utc_ns = int(batch.t_utc_ns[0]), int(batch.t_utc_ns[-1])
     report.apids[definition.apid] = summary
@@ -219,6 +219,9 @@ def decode_stream(
         _decode_apid(buf, offset[apid == a], dictionary.packets[int(a)], window, report) for a in np.unique(apid)
     ]
     report.quarantined.sort(key=lambda q: q.offset)
+    for q in report.quarantined:
+        if q.apid in report.apids:
+            report.apids[q.apid].quarantined += 1
     report.packets_accepted = sum(len(b.t_utc_ns) for b in batches)
     report.samples_accepted = sum(b.n_samples for b in batches)
     return DecodeResult(batches=batches, report=report)

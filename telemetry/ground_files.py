@@ -108,7 +108,7 @@ def _packet_batch(
     batch = SampleBatch(packet=packet.name, apid=packet.apid, t_utc_ns=t[idx],
                         sequence_count=np.zeros(len(idx), dtype=np.uint16),
                         values={n: values[n][idx] for n in names})
-    summary = ApidSummary(packet.apid, packet.name, len(idx), int(repeat.sum()))
+    summary = ApidSummary(packet.apid, packet.name, len(idx), duplicates=int(repeat.sum()))
     if len(idx):
         summary.t_first_utc_ns, summary.t_last_utc_ns = int(batch.t_utc_ns[0]), int(batch.t_utc_ns[-1])
     report.apids[packet.apid] = summary

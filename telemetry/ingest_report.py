@@ -60,12 +60,13 @@ class SequenceGap:
 
 @dataclass
 class ApidSummary:
-    """Per-APID tallies of one ingest."""
+    """Per-APID tallies of one ingest (quarantined: rejected stretches whose header named this APID)."""
 
     apid: int
     packet: str
     accepted: int = 0
     duplicates: int = 0
+    quarantined: int = 0
     missing: int = 0
     gaps: list[SequenceGap] = field(default_factory=list)
     t_first_utc_ns: int | None = None

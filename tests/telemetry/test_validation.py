@@ -101,6 +101,7 @@ def test_report_json_lists_reasons_offsets_and_gaps() -> None:
     assert report["quarantine_reasons"] == {"crc_failure": 1, "truncated": 1}
     assert [q["offset"] for q in report["quarantined"]] == [7 * 126, 28 * 126]
     assert report["apids"]["256"]["missing"] == 3  # count 7 (CRC) and 20, 21 (dropped)
+    assert report["apids"]["256"]["quarantined"] == 2
     assert report["packets_accepted"] == 27
 
 
