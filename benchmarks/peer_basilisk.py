@@ -174,7 +174,8 @@ def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), rec
     sim.InitializeSimulation()
     start = time.perf_counter()
     switch = min(SECOND_SLEW_TIME_S, duration_s)
-    sim.ConfigureStopTime(macros.sec2nano(switch))
+    # Stop just before the switch so that the FSW tick at t = switch already sees the new reference.
+    sim.ConfigureStopTime(macros.sec2nano(switch - 0.5 * DYNAMICS_DT_S))
     sim.ExecuteSimulation()
     if duration_s > switch:
         ref.sigma_R0N = list(second)

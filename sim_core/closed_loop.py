@@ -9,14 +9,15 @@ on the thread count). Everything is plain float64/int64 arrays; :mod:`sim_core.e
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from sim_core import allocation, control, environment, guidance, mekf, sensors
 from sim_core.integrators import rk4_step_into
 from sim_core.quaternion import conjugate_rotate_1, multiply_1, rotate_1
 from sim_core.spacecraft import PlantArrays
-from sim_core.wheels import limited_motor_torque_1
 
 # Guidance kinds.
 PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
@@ -74,6 +75,83 @@ def linear_1(table: np.ndarray, t0: float, step: float, t: float) -> np.ndarray:
     i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
     s = u - i
     return (1.0 - s) * table[i] + s * table[i + 1]
+
+
+@njit(cache=True)
+def hermite_orbit_into(table: np.ndarray, t0: float, step: float, t: float, r: np.ndarray, v: np.ndarray,
+                       acc: np.ndarray) -> None:
+    """In-place :func:`hermite_orbit_1` (no allocation, for the per-step path)."""
+    u = (t - t0) / step
+    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
+    s = u - i
+    s2, s3 = s * s, s * s * s
+    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
+    d00, d10, d01, d11 = (6 * s2 - 6 * s) / step, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / step, 3 * s2 - 2 * s
+    for j in range(3):
+        r[j] = h00 * table[i, j] + h10 * step * table[i, 3 + j] + h01 * table[i + 1, j] + h11 * step * table[i + 1, 3 + j]
+        v[j] = d00 * table[i, j] + d10 * table[i, 3 + j] + d01 * table[i + 1, j] + d11 * table[i + 1, 3 + j]
+        acc[j] = (1 - s) * table[i, 6 + j] + s * table[i + 1, 6 + j]
+
+
+@njit(cache=True)
+def linear_into(table: np.ndarray, t0: float, step: float, t: float, out: np.ndarray) -> None:
+    """In-place :func:`linear_1`."""
+    u = (t - t0) / step
+    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
+    s = u - i
+    for j in range(out.shape[0]):
+        out[j] = (1.0 - s) * table[i, j] + s * table[i + 1, j]
+
+
+@njit(cache=True)
+def conjugate_rotate_into(x: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """Λ̃ ∘ v ∘ Λ with Λ = x[0:4] (inertial → body), written into ``out``."""
+    q0, q1, q2, q3 = x[0], -x[1], -x[2], -x[3]
+    tx = 2.0 * (q2 * v[2] - q3 * v[1])
+    ty = 2.0 * (q3 * v[0] - q1 * v[2])
+    tz = 2.0 * (q1 * v[1] - q2 * v[0])
+    out[0] = v[0] + q0 * tx + q2 * tz - q3 * ty
+    out[1] = v[1] + q0 * ty + q3 * tx - q1 * tz
+    out[2] = v[2] + q0 * tz + q1 * ty - q2 * tx
+
+
+@njit(cache=True)
+def add_gravity_gradient_into(x: np.ndarray, r_eci: np.ndarray, inertia: np.ndarray, ext: np.ndarray) -> None:
+    """ext += 3μ/r⁵ r_b × (J r_b) (environment.gravity_gradient_torque_1) without allocation."""
+    r_b = np.empty(3)
+    conjugate_rotate_into(x, r_eci, r_b)
+    tq = environment.gravity_gradient_torque_1(r_b, inertia)
+    ext[0] += tq[0]
+    ext[1] += tq[1]
+    ext[2] += tq[2]
+
+
+@njit(cache=True)
+def limit_motor_torque_into(m: np.ndarray, x: np.ndarray, i0: int, inertia: np.ndarray, max_torque: np.ndarray,
+                            max_momentum: np.ndarray) -> None:
+    """Seed 000 eq (2) on the delivered torques in place (as wheels.limited_motor_torque_1)."""
+    for p in range(m.shape[0]):
+        mm = min(max_torque[p], max(-max_torque[p], m[p]))
+        h = inertia[p] * x[i0 + p]
+        if (h >= max_momentum[p] and mm > 0.0) or (h <= -max_momentum[p] and mm < 0.0):
+            mm = 0.0
+        m[p] = mm
+
+
+@njit(cache=True)
+def _fault_transitions_1(faults: np.ndarray, t: float, state: np.ndarray, ev: np.ndarray, n_ev: np.ndarray) -> int:
+    """Active-fault bit flags at t, with onset/clear events; returns −flags−1 if a fault just began."""
+    flags = 0
+    began = False
+    for f in range(faults.shape[0]):
+        on = fault_active_1(faults[f], t)
+        if on:
+            flags |= 1 << min(f, 30)
+        if on != state[f]:
+            _event(ev, n_ev, t, EV_FAULT_ONSET if on else EV_FAULT_CLEARED, f)
+            began = began or on
+            state[f] = on
+    return -flags - 1 if began else flags
 
 
 @njit(cache=True)
@@ -231,7 +309,7 @@ def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> N
         n_ev[0] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def fly_variant(
     x0, p: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
     available, faults, seed, rec, ev, n_ev, shared, slot,
@@ -243,7 +321,7 @@ def fly_variant(
     gravity_gradient_on, mrp_law_type]; ``times``: [dt, t0_unix, md_max, dut1, st_sigma,
     gyro_noise, mag_noise, tach_quantum, pd_kp, pd_kd, mrp_k, mrp_p, gyro_tau].
     ``program``: (steps_t, steps_q, route); ``orbit``: (table, t0, step); ``env``: (B table, t0,
-    step, c_pn); ``est``: gyro bias (3,). ``shared[0]`` non-zero cancels the run (checked each T_u);
+    step, c_pn); ``est``: (true gyro bias (3,), initial MEKF covariance (6, 6)). ``shared[0]`` non-zero cancels the run (checked each T_u);
     ``shared[slot]`` receives the number of steps done, for progress reports from another thread.
     """
     np.random.seed(seed)
@@ -280,7 +358,8 @@ def fly_variant(
     q_est = x[0:4].copy()
     w_est = x[4:7].copy()
     bias_est = np.zeros(3)
-    p_cov = mekf.initial_covariance(1e-3, 1e-5)
+    gyro_bias, p_cov0 = est
+    p_cov = p_cov0.copy()
     st_frozen = q_est.copy()
     gyro_frozen = np.zeros(3)
     w_meas = np.zeros(3)
@@ -293,27 +372,30 @@ def fly_variant(
     mag = np.zeros(3)
     out_i = 0
 
+    r, v, a = hermite_orbit_1(orbit_tab, orbit_t0, orbit_step, 0.0)
+    b_eci = linear_1(b_tab, b_t0, b_step, 0.0)
+    b_body = conjugate_rotate_1(x[0:4], b_eci)
+    flags = 0
+    md_on = False
     for k in range(n_steps):
         t = k * dt
-        r, v, a = hermite_orbit_1(orbit_tab, orbit_t0, orbit_step, t)
-        b_eci = linear_1(b_tab, b_t0, b_step, t)
-        b_body = conjugate_rotate_1(x[0:4], b_eci)
-        flags = 0
-        for f in range(faults.shape[0]):
-            on = fault_active_1(faults[f], t)
-            if on:
-                flags |= 1 << min(f, 30)
-            if on != fault_state[f]:
-                _event(ev, n_ev, t, EV_FAULT_ONSET if on else EV_FAULT_CLEARED, f)
-                if on:
-                    frozen_cmd[:] = cmd
-                    frozen_torque[:] = body_torque
-                    gyro_frozen[:] = w_meas
-                fault_state[f] = on
+        control_tick = k % ctrl_every == 0
+        if gg_on or md_on or control_tick or k % meas_every == 0 or k % out_every == 0:
+            hermite_orbit_into(orbit_tab, orbit_t0, orbit_step, t, r, v, a)
+        if md_on or k % meas_every == 0:
+            linear_into(b_tab, b_t0, b_step, t, b_eci)
+            conjugate_rotate_into(x, b_eci, b_body)
+        if faults.shape[0] > 0:
+            flags = _fault_transitions_1(faults, t, fault_state, ev, n_ev)
+            if flags < 0:
+                flags = -flags - 1
+                frozen_cmd[:] = cmd
+                frozen_torque[:] = body_torque
+                gyro_frozen[:] = w_meas
 
         if k % meas_every == 0:
             normals = np.random.standard_normal(6)
-            w_meas = x[4:7] + est[0:3] + gyro_noise * normals[0:3]
+            w_meas = x[4:7] + gyro_bias + gyro_noise * normals[0:3]
             gyro_ok = _sensor_faults_1(faults, T_GYRO, t, w_meas, gyro_frozen, gyro_noise, normals[0:3])
             sig3 = np.full(3, st_sigma)
             q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, 1e9, normals[3:6])
@@ -335,7 +417,8 @@ def fly_variant(
                     w_est[:] = w_meas
             else:
                 if k > 0 and gyro_ok:
-                    mekf.mekf_propagate_1(q_est, bias_est, p_cov, w_meas, meas_every * dt, gyro_noise * np.sqrt(meas_every * dt), 1e-9)
+                    mekf.mekf_propagate_1(q_est, bias_est, p_cov, w_meas, meas_every * dt,
+                                          gyro_noise * np.sqrt(meas_every * dt), times[12])
                 if st_ok:
                     mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
                 w_est[:] = w_meas - bias_est
@@ -376,6 +459,7 @@ def fly_variant(
             _rod_faults_1(faults, t, dipole)
             for i in range(3):
                 dipole[i] = min(max(dipole[i], -md_max), md_max)
+            md_on = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
 
         if k % out_every == 0 and out_i < rec.shape[0]:
             row = rec[out_i]
@@ -383,13 +467,14 @@ def fly_variant(
             row[R_W:R_W + 3] = x[4:7]
             row[R_QE:R_QE + 4] = q_est
             row[R_WE:R_WE + 3] = w_est
-            row[R_QP:R_QP + 4] = q_p
-            e = multiply_1(np.array([q_p[0], -q_p[1], -q_p[2], -q_p[3]]), x[0:4])
-            row[R_WP:R_WP + 3] = conjugate_rotate_1(e, w_p)
+            q_now, w_now, _, obs_now = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
+            row[R_QP:R_QP + 4] = q_now
+            e = multiply_1(np.array([q_now[0], -q_now[1], -q_now[2], -q_now[3]]), x[0:4])
+            row[R_WP:R_WP + 3] = conjugate_rotate_1(e, w_now)
             row[R_MD:R_MD + 3] = dipole
             row[R_TORQUE:R_TORQUE + 3] = body_torque
             row[R_R:R_R + 3] = r
-            row[R_OBS] = 1.0 if observing else 0.0
+            row[R_OBS] = 1.0 if obs_now else 0.0
             row[R_STATUS] = status
             row[R_FAULTS] = flags
             row[R_WHEELS:R_WHEELS + nw] = x[7 + 2 * nq: 7 + 2 * nq + nw]
@@ -398,29 +483,37 @@ def fly_variant(
             out_i += 1
 
         _wheel_commands_1(faults, t, cmd, frozen_cmd, delivered)
-        speeds_now = x[7 + 2 * nq: 7 + 2 * nq + nw]
-        delivered[:] = limited_motor_torque_1(delivered, speeds_now, p.wheel_inertia, wheel_limits[0], wheel_limits[1])
-        _extra_friction(faults, t, friction, base_friction)
-        m_md = np.empty(3)
-        m_md[0] = dipole[1] * b_body[2] - dipole[2] * b_body[1]
-        m_md[1] = dipole[2] * b_body[0] - dipole[0] * b_body[2]
-        m_md[2] = dipole[0] * b_body[1] - dipole[1] * b_body[0]
-        ext[:] = m_md
+        limit_motor_torque_into(delivered, x, 7 + 2 * nq, p.wheel_inertia, wheel_limits[0], wheel_limits[1])
+        if faults.shape[0] > 0:
+            _extra_friction(faults, t, friction, base_friction)
+        ext[0] = dipole[1] * b_body[2] - dipole[2] * b_body[1]
+        ext[1] = dipole[2] * b_body[0] - dipole[0] * b_body[2]
+        ext[2] = dipole[0] * b_body[1] - dipole[1] * b_body[0]
         if gg_on:
-            ext += environment.gravity_gradient_torque_1(conjugate_rotate_1(x[0:4], r), p.inertia)
+            add_gravity_gradient_into(x, r, p.inertia, ext)
         rk4_step_into(x, dt, delivered, ext, plant, work, x)
-        _lock_stuck_wheels_1(faults, t + dt, x, p, j_inv)
+        if faults.shape[0] > 0:
+            _lock_stuck_wheels_1(faults, t + dt, x, p, j_inv)
     else:
         shared[slot] = n_steps
 
 
-@njit(cache=True, parallel=True, nogil=True)
 def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
               available, faults, n_faults, seeds, rec, ev, n_ev, shared) -> None:
-    """Fly every variant (axis 0 of x0, available, faults, seeds, rec, ev) in parallel, one thread each.
+    """Fly every variant (axis 0 of x0, available, faults, seeds, rec, ev), one thread per core.
 
-    Releases the GIL: the caller may poll ``shared`` (progress, cancel flag) from another thread.
+    ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
+    random stream, so results do not depend on the thread count or order.
     """
-    for v in prange(x0.shape[0]):
+    from concurrent.futures import ThreadPoolExecutor
+
+    def one(v: int) -> None:
         fly_variant(x0[v], p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
                     available[v], faults[v, : n_faults[v]], seeds[v], rec[v], ev[v], n_ev[v], shared, 1 + v)
+
+    n = x0.shape[0]
+    if n == 1:
+        one(0)
+        return
+    with ThreadPoolExecutor(max_workers=min(n, os.cpu_count() or 1)) as pool:
+        list(pool.map(one, range(n)))

@@ -16,7 +16,7 @@ from datetime import datetime
 
 import numpy as np
 
-from sim_core import allocation, closed_loop, environment, frames, guidance, orbit, quaternion, wheels
+from sim_core import allocation, closed_loop, environment, frames, guidance, mekf, orbit, quaternion, wheels
 from sim_core.control import DigitalLawGains
 from sim_core.scenario import Scenario
 from sim_core.spacecraft import PlantParams, pack_state
@@ -29,6 +29,8 @@ FIELD_TABLE_STEP_S = 30.0  # linear error ~ (2ω h)² B / 8 ≈ 1e-4 B (a few nT
 MAX_EVENTS = 256
 ARCSEC = np.pi / 180.0 / 3600.0
 PROGRESS_POLL_S = 0.2
+MEKF_SIGMA0_RAD = 1e-3  # initial attitude uncertainty of the MEKF (≈ 3.4′): the start is the program
+MEKF_BIAS0_RAD_S = 1e-5  # initial gyro-bias uncertainty (≈ 2°/h)
 
 
 def _epoch_unix_s(text: str) -> float:
@@ -120,10 +122,10 @@ def _orbit_table(state, t0: float, duration_s: float) -> tuple[np.ndarray, float
     return np.ascontiguousarray(np.hstack([r, v, a])), float(t[0]), ORBIT_TABLE_STEP_S
 
 
-def _field_table(state, t0: float, duration_s: float) -> tuple[np.ndarray, float, float]:
+def _field_table(state, t0: float, duration_s: float, model: str) -> tuple[np.ndarray, float, float]:
     t = np.arange(-FIELD_TABLE_STEP_S, duration_s + 3 * FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S)
     r, _, _ = state(t0 + t)
-    return np.ascontiguousarray(environment.magnetic_field_eci(r, t0 + t)), float(t[0]), FIELD_TABLE_STEP_S
+    return np.ascontiguousarray(environment.magnetic_field_eci_t(r, t0 + t, model)), float(t[0]), FIELD_TABLE_STEP_S
 
 
 def _route_segments(s: Scenario) -> list:
@@ -142,7 +144,7 @@ def _route_segments(s: Scenario) -> list:
     return segs
 
 
-def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, dut1: float):
+def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, dut1: float):
     g = s.guidance
     if g.kind == "inertial":
         steps_t = np.array([t for t, _ in g.inertial_steps], dtype=float)
@@ -153,7 +155,7 @@ def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, dut1: float):
         segs = [guidance.OrfHold(s.duration_s + 2 * s.control_dt_s)]
     else:
         segs = _route_segments(s)
-    route = guidance.compile_route(segs, t0, state, c_pn, dut1)
+    route = guidance.compile_route(segs, t0, state, c_pn, dut1, w_pm)
     return closed_loop.PROGRAM_ROUTE, (np.zeros(1), np.array([[1.0, 0, 0, 0]]), np.ascontiguousarray(route))
 
 
@@ -195,8 +197,8 @@ def simulate(
     nw, nv = params.n_wheels, len(s.variants)
     t0 = _epoch_unix_s(s.orbit.epoch_utc)
     state = orbit_state(s)
-    c_pn, dut1 = frames.earth_orientation_frozen(t0)
-    prog_kind, program = _program(s, state, t0, c_pn, dut1)
+    c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
+    prog_kind, program = _program(s, state, t0, c_pn, w_pm, dut1)
 
     r0, v0, a0 = state(np.array([t0]))
     q_p0, w_p0, _, _ = closed_loop._program_1(prog_kind, *program, 0.0, t0, r0[0], v0[0], a0[0], c_pn, dut1)
@@ -239,16 +241,16 @@ def simulate(
     faults, n_faults = _fault_tables(s)
     seeds = np.array([s.seed * 1000 + i * 7919 + v.seed_offset for i, v in enumerate(s.variants)], dtype=np.int64)
     orbit_tab = _orbit_table(state, t0, s.duration_s)
-    field_tab = _field_table(state, t0, s.duration_s)
+    field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
     env = (field_tab[0], field_tab[1], field_tab[2], np.ascontiguousarray(c_pn))
 
     rec = np.zeros((nv, n_out, closed_loop.record_width(nw)))
     ev = np.zeros((nv, MAX_EVENTS, 3))
     n_ev = np.zeros((nv, 1), dtype=np.int64)
     x0s = np.repeat(x0[None], nv, axis=0)
-    bias = np.array(sn.gyro_bias_rad_s, dtype=float)
+    est_init = (np.array(sn.gyro_bias_rad_s, dtype=float), mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S))
     shared = np.zeros(nv + 1, dtype=np.int64)
-    args = (x0s, packed, wheel_limits, steps, times, program, orbit_tab, env, gains, bias, alloc,
+    args = (x0s, packed, wheel_limits, steps, times, program, orbit_tab, env, gains, est_init, alloc,
             avail, faults, n_faults, seeds, rec, ev, n_ev, shared)
     _run_watched(args, shared, n_steps, progress, cancel)
     return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)

@@ -122,7 +122,7 @@ class SensorsSpec(_Spec):
     """Sensor noise and periods (seed 000 §4, seed 002 eq 13–14, seed 003 §3.2.3.1)."""
 
     star_tracker_sigma_arcsec: NonNegative = 3.0
-    gyro_drift_density_rad_s_sqrt_s: NonNegative = 1e-9
+    gyro_drift_density_rad_s_sqrt_s: NonNegative = 1e-9  # bias random walk the MEKF assumes (σ_u)
     gyro_noise_rad_s: NonNegative = 1e-6
     gyro_bias_rad_s: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
     gyro_markov_sigma_rad_s: NonNegative = 0.0
@@ -245,6 +245,7 @@ class Scenario(_Spec):
     controller: ControllerSpec = Field(default_factory=ControllerSpec)
     allocation: AllocationSpec = Field(default_factory=AllocationSpec)
     gravity_gradient: bool = True
+    magnetic_model: Literal["igrf", "dipole"] = "igrf"
     duration_s: Positive = 5801.0
     dynamics_dt_s: Positive = 0.05
     measurement_dt_s: Positive = 0.25
