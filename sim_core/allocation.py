@@ -20,6 +20,12 @@ Seed defects corrected here (DESIGN.md, and found while deriving):
 - The row a_f printed in the seed is not the gradient of f_ρ (wrong power of q_s, h_2 for h_1 in
   a_f2, and the sign of a_f3,4, which makes {A, a_f} singular at h = 0). We use the exact gradient, so
   that df_ρ/dt = −Sat(μ_ρ f_ρ, φ_ρ) holds; ``Sat(φ_ρ, μ_ρ f_ρ)`` is read as μ_ρ f_ρ clipped at ±φ_ρ.
+
+Opt-in beyond the seed (``md_law=MD_LAW_PAIR_NORMAL``, for what-if studies): the MD only has to
+supply the torque across the pair plane, and any direction ⟂ b will do; taking e^m as the part of
+the pair normal n_pq across b makes A^m_pq singular only when b ∥ n_pq, where the seed's choice
+e^m = b × e_pq with |κ| ≤ 1/2 leaves the MD usable within about ±16° of the magnetic equator for
+the pair whose e_pq is the nadir axis (wheels 1–2 of GE).
 """
 
 from __future__ import annotations
@@ -37,7 +43,10 @@ __all__ = [
     "STATUS_TOO_FEW_WHEELS",
     "LAW_GE_DISTRIBUTION",
     "LAW_PSEUDO_INVERSE",
+    "MD_LAW_SEED",
+    "MD_LAW_PAIR_NORMAL",
     "KAPPA_MAX",
+    "NORMAL_COS_MAX",
     "MIN_MD_PLANE_COVER",
     "P_LAW4",
     "P_GAMMA",
@@ -46,6 +55,7 @@ __all__ = [
     "P_PHI_RHO",
     "P_H_MAX",
     "P_L_MAX",
+    "P_MD_LAW",
     "AllocationConfig",
     "ge_axes",
     "tuning_function",
@@ -60,19 +70,22 @@ __all__ = [
 
 STATUS_OK = 0  # M^r reproduced exactly
 STATUS_MD_SATURATED = 1  # rods at |l_i| = l^m: wheels and MD command scaled down together
-STATUS_KAPPA_REFUSED = 2  # |κ| > 1/2: MD refused, the two wheels give the in-plane part only
+STATUS_KAPPA_REFUSED = 2  # MD refused by its geometric condition: the two wheels give the in-plane part only
 STATUS_SINGULAR = 3  # wheel (or wheel + MD) geometry singular: least-squares wheel torques only
 STATUS_TOO_FEW_WHEELS = 4  # fewer than two wheels: no torque
 
 LAW_GE_DISTRIBUTION = 0
 LAW_PSEUDO_INVERSE = 1
+MD_LAW_SEED = 0  # e^m = b × e_pq, used where |κ| = |⟨e_pq, b⟩| ≤ 1/2 (seed 000 §3 as corrected)
+MD_LAW_PAIR_NORMAL = 1  # e^m = the unit part of the pair normal n_pq across b, used where |⟨n_pq, b⟩| ≤ √3/2
 
 KAPPA_MAX = 0.5  # seed 000 §3: cos(π/3)
+NORMAL_COS_MAX = np.sqrt(3.0) / 2.0  # cos(π/6): e^m keeps ≥ 1/2 of the MD torque across the pair plane
 MIN_MD_PLANE_COVER = 0.05  # |⟨e^m, n_pq⟩| below this needs an MD torque > 20× the out-of-plane demand
 _SINGULAR_PIVOT = 1e-9  # relative pivot below which a small system is treated as singular
 
 # Layout of the float64 parameter vector of the kernels (AllocationConfig.as_array).
-P_LAW4, P_GAMMA, P_RHO, P_MU_RHO, P_PHI_RHO, P_H_MAX, P_L_MAX = range(7)
+P_LAW4, P_GAMMA, P_RHO, P_MU_RHO, P_PHI_RHO, P_H_MAX, P_L_MAX, P_MD_LAW = range(8)
 
 
 @dataclass(frozen=True)
@@ -83,7 +96,7 @@ class AllocationConfig:
     q_s real over the whole momentum box); ρ = 0.5 inside the seed's 0 < ρ < 1; μ_ρ = 0.05 s⁻¹
     tunes f_ρ in ~20 s, far slower than the 2 s control period; φ_ρ = 0.002 s⁻¹ caps the null-motion
     torque to h^m φ_ρ ≈ 0.024 N·m, 12 % of an HR12's 0.2 N·m; h^m = 12 N·m·s (HR12);
-    l^m = 25 A·m² (seed 000 §5).
+    l^m = 25 A·m² (seed 000 §5); the seed's MD direction (``md_law``).
     """
 
     law4: int = LAW_GE_DISTRIBUTION
@@ -93,10 +106,13 @@ class AllocationConfig:
     phi_rho_per_s: float = 0.002
     h_max_nms: float = 12.0
     l_max_am2: float = 25.0
+    md_law: int = MD_LAW_SEED
 
     def __post_init__(self) -> None:
         if self.law4 not in (LAW_GE_DISTRIBUTION, LAW_PSEUDO_INVERSE):
             raise ValueError("law4: use LAW_GE_DISTRIBUTION (0) or LAW_PSEUDO_INVERSE (1)")
+        if self.md_law not in (MD_LAW_SEED, MD_LAW_PAIR_NORMAL):
+            raise ValueError("md_law: use MD_LAW_SEED (0) or MD_LAW_PAIR_NORMAL (1)")
         if not 0.0 < self.gamma_rad < np.pi / 4:
             raise ValueError("gamma_rad: GE half-angle must lie in (0, π/4) so that q_s stays real")
         if not 0.0 < self.rho < 1.0:
@@ -108,7 +124,10 @@ class AllocationConfig:
     def as_array(self) -> np.ndarray:
         """Parameter vector for the kernels of seed 000 eq (6) and §3, indexed by the P_* constants."""
         return np.array(
-            [self.law4, self.gamma_rad, self.rho, self.mu_rho_per_s, self.phi_rho_per_s, self.h_max_nms, self.l_max_am2],
+            [
+                self.law4, self.gamma_rad, self.rho, self.mu_rho_per_s, self.phi_rho_per_s, self.h_max_nms,
+                self.l_max_am2, self.md_law,
+            ],
             dtype=np.float64,
         )
 
@@ -299,8 +318,30 @@ def _pair_least_squares(ap: np.ndarray, aq: np.ndarray, torque: np.ndarray) -> t
 
 
 @njit(cache=True)
+def _md_direction(ap: np.ndarray, aq: np.ndarray, b: np.ndarray, md_law: int) -> tuple[np.ndarray, int]:
+    """Unit MD torque direction e^m (⟂ b) for a wheel pair, or a refusal status (seed 000 §3)."""
+    normal = _cross(ap, aq)
+    normal /= np.sqrt(_dot3(normal, normal))
+    if md_law == MD_LAW_PAIR_NORMAL:
+        nb = _dot3(normal, b)
+        if abs(nb) > NORMAL_COS_MAX:
+            return normal, STATUS_KAPPA_REFUSED
+        e_m = normal - nb * b
+        return e_m / np.sqrt(_dot3(e_m, e_m)), STATUS_OK
+    s = ap + aq
+    e_pq = s / np.sqrt(_dot3(s, s))
+    if abs(_dot3(e_pq, b)) > KAPPA_MAX:
+        return e_pq, STATUS_KAPPA_REFUSED
+    e_m = _cross(b, e_pq)
+    e_m /= np.sqrt(_dot3(e_m, e_m))
+    if abs(_dot3(e_m, normal)) < MIN_MD_PLANE_COVER:
+        return e_m, STATUS_SINGULAR
+    return e_m, STATUS_OK
+
+
+@njit(cache=True)
 def _two_wheels_md(
-    ap: np.ndarray, aq: np.ndarray, torque: np.ndarray, b_field: np.ndarray, l_max: float
+    ap: np.ndarray, aq: np.ndarray, torque: np.ndarray, b_field: np.ndarray, l_max: float, md_law: int
 ) -> tuple[float, float, np.ndarray, int]:
     """Two wheels + MD: A^m_pq {m_p, m_q, m^m} = −M^r, L = (m^m/B)(b × e^m) (seed 000 §3)."""
     b_norm = np.sqrt(_dot3(b_field, b_field))
@@ -309,18 +350,10 @@ def _two_wheels_md(
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_SINGULAR
     b = b_field / b_norm
-    s = ap + aq
-    e_pq = s / np.sqrt(_dot3(s, s))
-    if abs(_dot3(e_pq, b)) > KAPPA_MAX:
+    e_m, status = _md_direction(ap, aq, b, md_law)
+    if status != STATUS_OK:
         mp, mq = _pair_least_squares(ap, aq, torque)
-        return mp, mq, dipole, STATUS_KAPPA_REFUSED
-    e_m = _cross(b, e_pq)
-    e_m /= np.sqrt(_dot3(e_m, e_m))
-    normal = _cross(ap, aq)
-    normal /= np.sqrt(_dot3(normal, normal))
-    if abs(_dot3(e_m, normal)) < MIN_MD_PLANE_COVER:
-        mp, mq = _pair_least_squares(ap, aq, torque)
-        return mp, mq, dipole, STATUS_SINGULAR
+        return mp, mq, dipole, status
     a_m = np.empty((3, 3))
     for i in range(3):
         a_m[i, 0], a_m[i, 1], a_m[i, 2] = ap[i], aq[i], -e_m[i]
@@ -358,7 +391,8 @@ def allocate_1(
         return STATUS_TOO_FEW_WHEELS
     if n_on == 2:
         mp, mq, dip, status = _two_wheels_md(
-            axes_b[:, idx[0]].copy(), axes_b[:, idx[1]].copy(), torque_req_b, b_field_b_t, params[P_L_MAX]
+            axes_b[:, idx[0]].copy(), axes_b[:, idx[1]].copy(), torque_req_b, b_field_b_t, params[P_L_MAX],
+            int(params[P_MD_LAW]),
         )
         wheel_torque_out[idx[0]], wheel_torque_out[idx[1]] = mp, mq
         dipole_out[:] = dip

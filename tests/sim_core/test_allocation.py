@@ -136,6 +136,28 @@ def test_two_wheels_and_md_reproduce_torque_where_kappa_allows(pair, b_dir, torq
         assert 0.0 < scale < 1.0 and np.allclose(achieved, scale * torque_req, atol=EXACT * torque_nm)
 
 
+@settings(max_examples=300, deadline=None)
+@given(st.sampled_from(PAIRS), unit, unit, st.floats(1e-5, 1e-3))
+def test_pair_normal_md_reproduces_torque_wherever_field_leaves_the_pair_normal(pair, b_dir, torque_dir, torque_nm):
+    mask = np.zeros(4, dtype=bool)
+    mask[list(pair)] = True
+    b_field = B_EARTH_T * b_dir
+    torque_req = torque_nm * torque_dir
+    cfg = al.AllocationConfig(md_law=al.MD_LAW_PAIR_NORMAL)
+    wheel, dipole, status = al.allocate(torque_req, AXES, mask, np.zeros(4), b_field, cfg)
+    normal = np.cross(AXES[:, pair[0]], AXES[:, pair[1]])
+    if abs(normal @ b_dir) / np.linalg.norm(normal) > al.NORMAL_COS_MAX:
+        assert status == al.STATUS_KAPPA_REFUSED and np.all(dipole == 0.0)
+        return
+    achieved = -AXES @ wheel + np.cross(dipole, b_field)
+    if status == al.STATUS_OK:
+        assert np.allclose(achieved, torque_req, atol=EXACT * torque_nm)
+    else:
+        assert status == al.STATUS_MD_SATURATED
+        scale = achieved @ torque_req / torque_nm**2
+        assert 0.0 < scale < 1.0 and np.allclose(achieved, scale * torque_req, atol=EXACT * torque_nm)
+
+
 def test_md_refused_when_field_lies_along_pair_direction():
     mask = np.array([True, True, False, False])
     e_pq = (AXES[:, 0] + AXES[:, 1]) / np.linalg.norm(AXES[:, 0] + AXES[:, 1])
@@ -183,5 +205,7 @@ def test_bad_inputs_name_the_field():
         al.allocate([1.0, 2.0, 3.0], np.eye(3, 4), [True] * 4, np.zeros(4), [B_EARTH_T, 0, 0])
     with pytest.raises(ValueError, match="momentum_b_nms"):
         al.distribute_momentum([0.0, 4.0 * CONFIG.h_max_nms, 0.0], AXES)
+    with pytest.raises(ValueError, match="md_law"):
+        al.AllocationConfig(md_law=7)
     with pytest.raises(ValueError, match="rho"):
         al.AllocationConfig(rho=1.5)
