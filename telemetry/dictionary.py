@@ -316,20 +316,35 @@ def load_yaml(path: str | Path) -> Dictionary:
 def load_ccsdspy_csv(
     path: str | Path, apid: int, name: str | None = None, time_code: TimeCode | None = None
 ) -> Dictionary:
-    """A one-packet dictionary from a ccsdspy CSV (``name,data_type,bit_length``, fields after the primary header)."""
+    """A one-packet dictionary from a ccsdspy CSV: ``name,data_type,bit_length[,bit_offset]`` after the primary header.
+
+    As in ccsdspy: ``fill`` fields are padding, ``uint(3)`` is a 1-D array (expanded to ``name_0``…),
+    and an explicit ``bit_offset`` counts from the first octet of the packet.
+    """
     path = Path(path)
     with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows or set(rows[0]) != {"name", "data_type", "bit_length"}:
-        raise ValueError(f"{path}: expected the header name,data_type,bit_length")
-    params, bit = [], PRIMARY_HEADER_BITS
+        rows = list(csv.DictReader(f, skipinitialspace=True))
+    if not rows or not {"name", "data_type", "bit_length"} <= set(rows[0]) <= {"name", "data_type", "bit_length",
+                                                                                "bit_offset"}:
+        raise ValueError(f"{path}: expected the header name,data_type,bit_length[,bit_offset]")
+    params, bit, end = [], PRIMARY_HEADER_BITS, PRIMARY_HEADER_BITS
     for row in rows:
-        params.append(Parameter(row["name"], row["data_type"], bit, int(row["bit_length"])))
-        bit += int(row["bit_length"])
-    if bit % 8:
-        raise ValueError(f"{path}: layout ends at bit {bit}, not on an octet boundary")
+        kind, _, shape = row["data_type"].partition("(")
+        count = int(shape.rstrip(")")) if shape else 1
+        if shape and not shape.rstrip(")").isdigit():
+            raise ValueError(f"{row['name']}.data_type: only 1-D arrays like uint(3) are supported")
+        length = int(row["bit_length"])
+        bit = int(row["bit_offset"]) if row.get("bit_offset") not in (None, "") else bit
+        for k in range(count):
+            if kind != "fill":
+                label = f"{row['name']}_{k}" if shape else row["name"]
+                params.append(Parameter(label, kind, bit, length))
+            bit += length
+        end = max(end, bit)
+    if end % 8:
+        raise ValueError(f"{path}: layout ends at bit {end}, not on an octet boundary")
     packet = PacketDefinition(
-        name=name or path.stem, apid=apid, packet_octets=bit // 8, parameters=tuple(params), time_code=time_code
+        name=name or path.stem, apid=apid, packet_octets=end // 8, parameters=tuple(params), time_code=time_code
     )
     return Dictionary(name=path.stem, packets={apid: packet})
 

@@ -197,3 +197,23 @@ def test_csv_dictionary_needs_an_apid() -> None:
         load_dictionary(SHIPPED / "ccsdspy_jpss1_geolocation.csv")
     with pytest.raises(ValueError, match="dictionary"):
         load_dictionary("no_such_dictionary.yaml")
+
+
+def test_ccsdspy_csv_fill_arrays_and_offsets_decode_like_ccsdspy(tmp_path: Path) -> None:
+    """ccsdspy's own reading of a CSV with padding, a 1-D array and explicit offsets is the truth."""
+    path = tmp_path / "layout.csv"
+    path.write_text("name,data_type,bit_length,bit_offset\nA,uint,4,48\nPAD,fill,4,52\nV,int(3),12,56\n"
+                    "F,float,32,96\nB,uint,8,136\n")
+    packet = load_ccsdspy_csv(path, apid=3).packets[3]
+    assert [p.name for p in packet.parameters] == ["A", "V_0", "V_1", "V_2", "F", "B"]
+    assert packet.packet_octets == 18  # bits 128..135 are an implicit gap before B
+    rows = np.random.default_rng(8).integers(0, 256, (64, 18), dtype=np.uint8)
+    from telemetry import ccsds
+
+    rows[:, :6] = ccsds.encode_primary_headers(3, np.arange(64), 18)
+    theirs = ccsdspy.FixedLength.from_file(str(path)).load(BytesIO(rows.tobytes()))
+    ours = decode_raw(rows, packet)
+    for name in ("A", "F", "B"):
+        np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
+    for k in range(3):
+        np.testing.assert_array_equal(ours[f"V_{k}"], theirs["V"][:, k], err_msg=f"V_{k}")
