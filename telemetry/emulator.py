@@ -14,7 +14,8 @@ Where the values come from (reference dictionary ``reference_satellite.yaml``):
 * drawn from truth with sim_core's sensor models, because the engine does not record raw sensor
   samples: star tracker Λ^m = Λ ∘ Λ^n (seed 000 §4), gyro ω + b + d + n (seed 002 eq 13),
   magnetometer Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG), GPS fix with noise (seed 003 §3.2.1.1), all with
-  the scenario's noise figures and a random stream of their own;
+  the scenario's noise figures and a random stream of their own; the hidden schedule's sensor
+  faults act on them as in the engine (gain, bias, drift, noise, frozen; a failed sensor sends zeros);
 * wheel motor current i = M / K_m (seed 002 eq 2) from the torque the wheel delivers;
 * mode from the guidance programme (PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise).
 
@@ -231,30 +232,103 @@ def _split(prefix: str, columns: np.ndarray, suffixes: Sequence[str]) -> dict[st
     return {f"{prefix}_{sfx}": columns[:, k] for k, sfx in enumerate(suffixes)}
 
 
+def _fault_active(f: FaultSpec, t_s: np.ndarray) -> np.ndarray:
+    """Where a fault acts: inside [onset, end) and, if intermittent, in its on-windows (as sim_core.closed_loop)."""
+    end = np.inf if f.duration_s is None else f.onset_s + f.duration_s
+    active = (t_s >= f.onset_s) & (t_s < end)
+    if f.type == "intermittent" and f.period_s:
+        active &= (t_s - f.onset_s) % f.period_s < f.duty * f.period_s
+    return active
+
+
+def _sensor_faults(sample: np.ndarray, noise: np.ndarray, t_s: np.ndarray, faults: Sequence[FaultSpec],
+                   target: str) -> tuple[np.ndarray, np.ndarray]:
+    """A sensor's (n, 3) samples under the hidden faults of one target, and where it failed (seed 002 §3.2 catalogue).
+
+    Same effects as the engine's sensors: gain, bias, intermittent bias, drift value·(t − onset) and
+    noise scaled to value·σ on axis ``index``; frozen holds the last sample before onset; failure is returned
+    as a mask. ``noise`` is the sample's realised noise (for the noise-scaling fault).
+    """
+    out, failed = sample.copy(), np.zeros(t_s.shape, dtype=bool)
+    for f in (f for f in faults if f.target == target):
+        on = _fault_active(f, t_s)
+        axis = f.index if f.index < 3 else 0
+        if f.type == "failure":
+            failed |= on
+        elif f.type == "frozen" and on.any():
+            out[on] = out[max(int(np.argmax(on)) - 1, 0)]
+        elif f.type == "gain":
+            out[on, axis] *= f.gain
+        elif f.type in ("bias", "intermittent"):
+            out[on, axis] += f.value
+        elif f.type == "drift":
+            out[on, axis] += f.value * (t_s[on] - f.onset_s)
+        elif f.type == "noise":
+            out[on, axis] += (f.value - 1.0) * noise[on, axis]
+    return out, failed
+
+
+def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Star-tracker quaternions Λ^m = Λ ∘ Λ^n ∘ Λ^f (seed 000 §4) with the hidden faults' rotation Λ^f; zeros if failed."""
+    q_m, _ = sensors.star_tracker(sr["q_ib"], sr["omega_b_rad_s"], s.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC,
+                                  STAR_TRACKER_TRACKING_RATE_RAD_S, rng)
+    e = quaternion.multiply(quaternion.conjugate(sr["q_ib"]), q_m)
+    theta = 2.0 * np.arctan2(np.linalg.norm(e[:, 1:], axis=-1), e[:, 0])[:, None]
+    noise = theta * e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
+    faults = s.variants[0].faults
+    turning = [f for f in faults if f.type != "frozen"]
+    rot, failed = _sensor_faults(np.zeros_like(noise), noise, t_s, turning, "star_tracker")
+    q_m = quaternion.normalize(quaternion.multiply(q_m, sensors.rotation_noise_quaternion(rot)))
+    q_m, _ = _sensor_faults(q_m, np.zeros_like(q_m), t_s, [f for f in faults if f.type == "frozen"], "star_tracker")
+    q_m[failed] = 0.0
+    return q_m
+
+
+def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Gyro rates ω + b + d + n_g (seed 002 eq 13) under the hidden gyro faults; zeros if failed."""
+    sn = s.sensors
+    bias = np.array(sn.gyro_bias_rad_s)
+    drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, sn.gyro_drift_density_rad_s_sqrt_s, s.measurement_dt_s)
+    w_g, d, _ = sensors.gyro(sr["omega_b_rad_s"], bias, drift, sn.gyro_noise_rad_s, GYRO_RANGE_RAD_S, rng)
+    w_g, failed = _sensor_faults(w_g, w_g - sr["omega_b_rad_s"] - bias - d, t_s, s.variants[0].faults, "gyro")
+    w_g[failed] = 0.0
+    return w_g
+
+
+def _magnetometer(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range_t: float,
+                  rng: np.random.Generator) -> np.ndarray:
+    """Magnetometer field Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG, IGRF or dipole as flown) under the hidden faults; zeros if failed."""
+    b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], _unix_s(s, t_s), s.magnetic_model)
+    b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), s.sensors.magnetometer_noise_t, range_t, rng)
+    b_true = quaternion.rotate(quaternion.conjugate(sr["q_ib"]), b_i)
+    b_b, failed = _sensor_faults(b_b, b_b - b_true, t_s, s.variants[0].faults, "magnetometer")
+    b_b = np.clip(b_b, -range_t, range_t)
+    b_b[failed] = 0.0
+    return b_b
+
+
+def _unix_s(s: Scenario, t_s: np.ndarray) -> np.ndarray:
+    """Unix seconds of times since the scenario epoch."""
+    return parse_utc_ns(s.orbit.epoch_utc) / NS_PER_S + t_s
+
+
 def _hk_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray,
                rng: np.random.Generator) -> dict[str, np.ndarray]:
     """ACS_HK engineering values at the trajectory rows (estimates, programme, actuators, sensor samples)."""
     sr = {name: series[0, rows] for name, series in traj.series.items()}
     t_s = traj.t_s[rows]
-    t_unix = traj.extra["epoch_unix_s"] + t_s
-    sn = s.sensors
-    q_st, _ = sensors.star_tracker(sr["q_ib"], sr["omega_b_rad_s"], sn.star_tracker_sigma_arcsec * sensors.ARCSEC,
-                                   STAR_TRACKER_TRACKING_RATE_RAD_S, rng)
-    drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, sn.gyro_drift_density_rad_s_sqrt_s, s.measurement_dt_s)
-    omega_g, _, _ = sensors.gyro(sr["omega_b_rad_s"], np.array(sn.gyro_bias_rad_s), drift, sn.gyro_noise_rad_s,
-                                 GYRO_RANGE_RAD_S, rng)
-    b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], t_unix, s.magnetic_model)
-    b_range = _representable(definition, "b_mag_b_t_x")
-    b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), sn.magnetometer_noise_t, b_range, rng)
     wheels = [str(k + 1) for k in range(sr["wheel_speed_rad_s"].shape[-1])]
     event, argument = _last_events(traj, definition, t_s)
     values = {
-        **_split("q_st_ib", q_st, "0123"), **_split("q_est_ib", sr["q_est_ib"], "0123"),
-        **_split("q_prog_ib", sr["q_prog_ib"], "0123"), **_split("omega_est_b_rad_s", sr["omega_est_b_rad_s"], "xyz"),
-        **_split("omega_gyro_b_rad_s", omega_g, "xyz"), **_split("wheel_speed_rad_s", sr["wheel_speed_rad_s"], wheels),
+        **_split("q_st_ib", _star_tracker(sr, s, t_s, rng), "0123"),
+        **_split("omega_gyro_b_rad_s", _gyro(sr, s, t_s, rng), "xyz"),
+        **_split("b_mag_b_t", _magnetometer(sr, s, t_s, _representable(definition, "b_mag_b_t_x"), rng), "xyz"),
+        **_split("q_est_ib", sr["q_est_ib"], "0123"), **_split("q_prog_ib", sr["q_prog_ib"], "0123"),
+        **_split("omega_est_b_rad_s", sr["omega_est_b_rad_s"], "xyz"),
+        **_split("wheel_speed_rad_s", sr["wheel_speed_rad_s"], wheels),
         **_split("wheel_torque_cmd_nm", sr["wheel_torque_cmd_nm"], wheels),
         **_split("wheel_current_a", sr["wheel_torque_nm"] / WHEEL_TORQUE_CONSTANT_NM_A, wheels),
-        **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"), **_split("b_mag_b_t", b_b, "xyz"),
+        **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"),
         "mode": _mode(s, definition, t_s), "fdir_event": event, "fdir_event_argument": argument,
     }
     flags = [p.name for p in definition.parameters if p.name.startswith("fault_")]

@@ -183,6 +183,26 @@ def test_hidden_wheel_failure_shows_in_wheel_speed_telemetry(nominal, wheel_fail
     assert not np.any(batches["failed"].values["fdir_event"] == 2)  # FAULT_ONSET is ground truth, never sent
 
 
+def test_hidden_sensor_faults_show_in_the_raw_sensor_telemetry(nominal, dictionary) -> None:
+    bias_rad_s, onset_s, failure_s = 1e-4, 200.0, 600.0
+    faults = [emulator.parse_fault(f"gyro:2:bias@{onset_s},value={bias_rad_s}"),
+              emulator.parse_fault(f"star_tracker:0:failure@{failure_s}")]
+    traj, series, stream = emulator.emulate(faults=faults, dictionary=dictionary)
+    hk = {b.packet: b for b in decode_stream(stream.data, dictionary).batches}["ACS_HK"].values
+    t_s = traj.t_s[: len(hk["mode"])]
+    rows = np.arange(len(t_s))
+
+    def gyro_minus_truth(values, trajectory):
+        return np.stack([values[f"omega_gyro_b_rad_s_{a}"] for a in "xyz"], -1) - trajectory["omega_b_rad_s"][0, rows]
+
+    nominal_hk = nominal[1]["ACS_HK"].values
+    step = gyro_minus_truth(hk, traj) - gyro_minus_truth(nominal_hk, nominal[0])  # same noise draws in both runs
+    expected = np.where(t_s[:, None] >= onset_s, [0.0, 0.0, bias_rad_s], 0.0)
+    np.testing.assert_allclose(step, expected, atol=1e-9)  # float32 rounding of rates below 0.03 rad/s
+    q_st = np.stack([hk[f"q_st_ib_{k}"] for k in range(4)], -1)
+    assert np.all(q_st[t_s >= failure_s] == 0.0) and np.all(np.linalg.norm(q_st[t_s < failure_s], axis=-1) > 0.99)
+
+
 def drain(subscriber) -> list:
     out = []
     while subscriber.pending:
