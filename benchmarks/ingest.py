@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import multiprocessing
+import os
 import socket
 import tempfile
 import time
@@ -216,11 +217,13 @@ async def live_run(seconds: float, workdir: Path) -> tuple[np.ndarray, int, int,
 def bench_live(seconds: float, workdir: Path) -> None:
     """Print live-stream latency percentiles and counts."""
     decode_stream(b"", live_definition())
+    cpu_start = time.process_time()
     latency_ms, received, dropped, archived = asyncio.run(live_run(seconds, workdir))
+    cpu_share = (time.process_time() - cpu_start) / seconds
     sent = int(seconds / (LIVE_BURST / LIVE_RATE_HZ)) * LIVE_BURST
     print(
         f"live: {LIVE_RATE_HZ:,} packets/s x {LIVE_PARAMETERS} parameters for {seconds:.0f} s: sent {sent:,}, "
-        f"delivered {received:,}, dropped {dropped}, archived {archived:,}"
+        f"delivered {received:,}, dropped {dropped}, archived {archived:,}; listener CPU {cpu_share:.0%} of a core"
     )
     if latency_ms.size:
         print(
@@ -243,6 +246,7 @@ def main() -> None:
         bench_row_layout(workdir)
         if not args.skip_live:
             bench_live(args.live_seconds, workdir)
+    print(f"machine load average while running: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
 
 
 if __name__ == "__main__":
