@@ -402,6 +402,8 @@ def _xtce_apid(definition: Any, container: Any) -> int | None:
     while container is not None:
         for comparison in container.restriction_criteria:
             if getattr(comparison, "referenced_parameter", None) in ("PKT_APID", "APID", "CCSDS_APID"):
+                if comparison.operator not in ("==", "eq"):
+                    raise ValueError(f"{container.name}: APID restriction {comparison.operator!r} is not an equality")
                 return int(comparison.required_value)
         base = container.base_container_name
         container = definition.containers.get(base) if base else None
@@ -429,6 +431,9 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None) -> Dictionary
             bit += int(entry.parameter_type.encoding.size_in_bits)
         if bit % 8:
             raise ValueError(f"{container.name}: layout ends at bit {bit}, not on an octet boundary")
+        if apid in packets:
+            raise ValueError(f"{container.name}: APID {apid} already belongs to {packets[apid].name} "
+                             "(one fixed layout per APID)")
         packets[apid] = PacketDefinition(
             name=container.name,
             apid=apid,

@@ -217,3 +217,19 @@ def test_ccsdspy_csv_fill_arrays_and_offsets_decode_like_ccsdspy(tmp_path: Path)
         np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
     for k in range(3):
         np.testing.assert_array_equal(ours[f"V_{k}"], theirs["V"][:, k], err_msg=f"V_{k}")
+
+
+def test_xtce_with_two_layouts_for_one_apid_is_refused(tmp_path: Path) -> None:
+    second = XTCE_WITH_CALIBRATION.replace(
+        "  </xtce:ContainerSet>",
+        '   <xtce:SequenceContainer name="THERMAL_B"><xtce:EntryList><xtce:ParameterRefEntry parameterRef="TEMP"/>'
+        '<xtce:ParameterRefEntry parameterRef="MODE"/>'
+        '</xtce:EntryList><xtce:BaseContainer containerRef="CCSDSPacket"><xtce:RestrictionCriteria>'
+        '<xtce:ComparisonList><xtce:Comparison parameterRef="PKT_APID" value="42" useCalibratedValue="false"/>'
+        "</xtce:ComparisonList></xtce:RestrictionCriteria></xtce:BaseContainer></xtce:SequenceContainer>\n"
+        "  </xtce:ContainerSet>",
+    )
+    path = tmp_path / "two.xml"
+    path.write_text(second)
+    with pytest.raises(ValueError, match="APID 42 already belongs to THERMAL"):
+        load_xtce(path)
