@@ -8,6 +8,7 @@ from hypothesis import strategies as st
 from scipy import signal
 from scipy.spatial.transform import Rotation
 
+from sim_core import allocation as alloc
 from sim_core import control as ctl
 from sim_core import quaternion as qt
 from sim_core import scenario_library
@@ -243,6 +244,48 @@ def test_stored_momentum_leaves_the_static_error_of_the_loop_stiffness_unless_co
     expected = np.cross(w_p, J @ w_p + h_cluster) / (np.diag(J) * GAINS.k_per_s2)
     assert np.allclose(settled[False], expected, rtol=STATIC_REL_TOL, atol=1e-3 * ARCSEC)
     assert np.linalg.norm(settled[True]) < 1e-3 * ARCSEC
+
+
+def test_law_and_ge_allocation_fly_a_roll_on_a_four_wheel_gyrostat():
+    """Eq (7)–(8) + ω × G, eq (6) allocation and eq (3) limits on body + GE wheels (seed 000 eq 1
+    without flexibility): the 20° roll ends on the program, f_ρ reaches the tuning surface, and the
+    inertial angular momentum stays at zero (no external torque: the wheels only exchange it)."""
+    cfg = alloc.AllocationConfig()
+    axes = alloc.ge_axes(cfg.gamma_rad)
+    params, gains_v, inv = cfg.as_array(), GAINS.as_array(), np.linalg.inv(J)
+    x = np.concatenate([[1.0, 0.0, 0.0, 0.0], np.zeros(3), np.zeros(4)])  # q, ω, wheel momenta h
+    g, dt, wheel_torque, dipole = np.zeros(3), 0.25, np.zeros(4), np.zeros(3)
+    roll, hold = np.deg2rad(20.0), np.zeros(3)
+
+    def program(t):  # 20° roll about y: +α 20 s, coast 20 s, −α 20 s (as the test above)
+        alpha = roll / 800.0
+        if t < 60.0:
+            tau = min(t, 20.0), min(max(t - 20.0, 0.0), 20.0), max(t - 40.0, 0.0)
+            ang = 0.5 * alpha * tau[0] ** 2 + 20.0 * alpha * tau[1] + 20.0 * alpha * tau[2] - 0.5 * alpha * tau[2] ** 2
+            rate = alpha * (tau[0] - tau[2])
+            acc = alpha if t < 20.0 else (0.0 if t < 40.0 else -alpha)
+            return qt.from_axis_angle([0.0, 1.0, 0.0], ang), np.array([0.0, rate, 0.0]), np.array([0.0, acc, 0.0])
+        return qt.from_axis_angle([0.0, 1.0, 0.0], roll), hold, hold
+
+    def f(s, m):
+        w, h = s[4:7], s[7:]
+        w_dot = inv @ (-np.cross(w, J @ w + axes @ h) - axes @ m)
+        return np.concatenate([qt.derivative(s[:4], w), w_dot, m])
+
+    for k in range(200):  # 400 s: f_ρ needs ≈ 250 s at the φ_ρ cap, then decays as e^{−μ_ρ t}
+        q_p, w_p, wd_p = program(k * GAINS.t_u_s)
+        h_body = axes @ x[7:]
+        torque = ctl.digital_law_step(x[:4], x[4:7], q_p, w_p, wd_p, g, J, gains_v) + ctl.gyroscopic_torque_1(x[4:7], J, h_body)
+        status = alloc.allocate_1(torque, axes, np.ones(4, dtype=bool), x[7:].copy(), np.array([3e-5, 0, 0]), params, wheel_torque, dipole)
+        assert status == alloc.STATUS_OK
+        m = np.array([ctl.wheel_torque_command_1(v, 0.0, 0.2) for v in wheel_torque])
+        for _ in range(round(GAINS.t_u_s / dt)):
+            x = _rk4(lambda s: f(s, m), x, dt)
+            x[:4] /= np.linalg.norm(x[:4])
+    h_inertial = qt.rotate(x[:4], J @ x[4:7] + axes @ x[7:])
+    assert np.linalg.norm(h_inertial) < 1e-12  # started at rest with resting wheels
+    assert qt.angle(ctl.error_quaternion(program(400.0)[0], x[:4])) < 0.01 * ARCSEC
+    assert abs(alloc.tuning_function(x[7:], cfg)) < 1e-4
 
 
 def test_wheel_torque_command_quantises_then_saturates():
