@@ -25,6 +25,7 @@ from telemetry.limits import LimitSet
 __all__ = ["LiveMessage", "LiveStats", "Subscriber", "LiveStream", "complete_prefix", "DECODE_INTERVAL_S"]
 
 PRIMARY_HEADER_OCTETS = 6
+IDLE_APID = 0x7FF  # idle packets, CCSDS 133.0-B-2 §4.1.3.3.4.4
 LENGTH_FIELD_OFFSET = 7  # total octets = packet data length field + 7 (CCSDS 133.0-B-2 §4.1.3.5.3)
 READ_BYTES = 1 << 16
 DECODE_INTERVAL_S = 0.02  # coalescing window: adds <= 20 ms of latency, bounds decode calls to 50/s
@@ -32,15 +33,47 @@ ARCHIVE_INTERVAL_S = 0.5
 ARCHIVE_MAX_PACKETS = 8_192
 
 
-def complete_prefix(buffer: bytes | bytearray) -> int:
-    """Octets of ``buffer`` made of whole packets, walking the length fields (CCSDS 133.0-B-2 §4.1)."""
+def complete_prefix(buffer: bytes | bytearray, packet_octets: Mapping[int, int] | None = None) -> int:
+    """Octets of ``buffer`` made of whole packets, walking the length fields (CCSDS 133.0-B-2 §4.1).
+
+    With the dictionary's ``packet_octets`` (APID -> total octets), a header that does not fit
+    (version not 0, unknown APID, length differing from the definition) is treated as noise: the
+    walk resumes at the next header that fits, so the decoder quarantines the noise and one bad
+    octet cannot misalign the rest of the stream.  Without it the length fields are trusted.
+    """
     end, size = 0, len(buffer)
     while end + PRIMARY_HEADER_OCTETS <= size:
+        if packet_octets is not None and not _header_fits(buffer, end, packet_octets):
+            resume = _next_fitting_header(buffer, end + 1, packet_octets)
+            if resume is None:
+                return _noise_to_release(end, size, packet_octets)
+            end = resume
+            continue
         total = ((buffer[end + 4] << 8) | buffer[end + 5]) + LENGTH_FIELD_OFFSET
         if end + total > size:
             break
         end += total
     return end
+
+
+def _header_fits(buffer: bytes | bytearray, at: int, packet_octets: Mapping[int, int]) -> bool:
+    """Version 0 and a known APID whose defined length matches the packet length field (or idle)."""
+    apid = ((buffer[at] & 0x07) << 8) | buffer[at + 1]
+    total = ((buffer[at + 4] << 8) | buffer[at + 5]) + LENGTH_FIELD_OFFSET
+    return buffer[at] >> 5 == 0 and (apid == IDLE_APID or packet_octets.get(apid) == total)
+
+
+def _next_fitting_header(buffer: bytes | bytearray, start: int, packet_octets: Mapping[int, int]) -> int | None:
+    for at in range(start, len(buffer) - PRIMARY_HEADER_OCTETS + 1):
+        if _header_fits(buffer, at, packet_octets):
+            return at
+    return None
+
+
+def _noise_to_release(end: int, size: int, packet_octets: Mapping[int, int]) -> int:
+    """Hand over noise once it is longer than any packet (keeping a tail that may start a header)."""
+    longest = max(packet_octets.values(), default=0)
+    return size - PRIMARY_HEADER_OCTETS if size - end > longest + PRIMARY_HEADER_OCTETS else end
 
 
 @dataclass(frozen=True)
@@ -116,6 +149,7 @@ class LiveStream:
         if archive is not None and not satellite:
             raise ValueError("satellite: required when the stream is archived")
         self._dictionary, self._archive, self._satellite = dictionary, archive, satellite
+        self._packet_octets = dictionary.packet_octets_by_apid()
         self._limits = dict(limits or {})
         self._interval_s, self._max_packets, self._uploaded_by = archive_interval_s, archive_max_packets, uploaded_by
         self._subscribers: list[Subscriber] = []
@@ -189,7 +223,7 @@ class LiveStream:
             self._connections.discard(task)
 
     def _process_complete(self, buffer: bytearray, peer: str) -> None:
-        end = complete_prefix(buffer)
+        end = complete_prefix(buffer, self._packet_octets)
         if end == 0:
             return
         received_ns = time.perf_counter_ns()

@@ -51,6 +51,35 @@ def test_complete_prefix_walks_the_packet_length_fields() -> None:
     assert [complete_prefix(stream[:k]) for k in (0, 5, 7, 8, 15, 16)] == [0, 0, 7, 7, 7, 16]
 
 
+def test_complete_prefix_skips_noise_that_does_not_fit_the_dictionary() -> None:
+    packet_7 = bytes([0x08, 0x01, 0xC0, 0x00, 0x00, 0x00, 0xAA])  # APID 1, 7 octets
+    noise = bytes([0x08, 0x01, 0xC0, 0x00, 0xFF, 0xF0, 0x55])  # APID 1 but claims 65,527 octets
+    stream = packet_7 + noise + packet_7
+    assert complete_prefix(stream) == 7  # trusting the length field would wait for 65 kB
+    assert complete_prefix(stream, {1: 7}) == 21
+    assert complete_prefix(noise, {1: 7}) == 0  # short noise waits: the next header may start in it
+
+
+def test_noise_between_packets_is_quarantined_and_every_packet_delivered() -> None:
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 60, seed=6)
+    noise = np.random.default_rng(8).integers(0, 256, 37, dtype=np.uint8).tobytes()
+    data = raw[:30].tobytes() + noise + raw[30:].tobytes()
+
+    async def scenario() -> tuple[list[LiveMessage], int]:
+        stream = LiveStream(dictionary)
+        subscriber = stream.subscribe()
+        port = await stream.start()
+        await send(port, data, np.full(12, 500), pause_s=0.03)
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        return drain(subscriber), stream.stats.stretches_quarantined
+
+    messages, quarantined = asyncio.run(scenario())
+    np.testing.assert_array_equal(np.concatenate([m.batch.sequence_count for m in messages]), np.arange(60))
+    assert quarantined >= 1
+
+
 def test_packets_cut_at_arbitrary_boundaries_arrive_as_decoded_offline() -> None:
     dictionary = reference()
     hk = dictionary.packets[HK_APID]
