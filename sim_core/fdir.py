@@ -3,11 +3,13 @@
 Wheels (seed 000 eq 1–3, seed 002 eq 1–4): each wheel obeys its own momentum equation
 ḣ_p = m_p − m^f_p(Ω_p), so a per-wheel residual over one control period T_u,
 
-    r_p = J_p (Ω̃_p(t_k) − Ω̃_p(t_{k−1})) − T_u (m_p − ½(m^f_p(Ω̃_p(t_{k−1})) + m^f_p(Ω̃_p(t_k)))),
+    r_p = J_p Δ(Ω̃_p + a_pᵗ ω̂) − T_u (m_p − ½(m^f_p(Ω̃_p(t_{k−1})) + m^f_p(Ω̃_p(t_k)))),
 
-(Ω̃ the tachometer reading, m_p the held command limited as the motor limits it, seed 000 eq 2)
-isolates the wheel by construction. Its threshold is a *bound*, not a tuned number: the
-tachometer quantum q gives |error of J ΔΩ̃| ≤ J q, and friction is monotonic in speed, so the true
+(Ω̃ the tachometer reading of the speed relative to the body, a_pᵗ ω̂ the estimated body rate
+about the spin axis, so that J_p(Ω_p + a_pᵗ ω) is the wheel's absolute spin momentum; m_p the held
+command limited as the motor limits it, seed 000 eq 2) isolates the wheel by construction. Its
+threshold is a *bound*, not a tuned number: the tachometer quantum q gives |error of J ΔΩ̃| ≤ J q,
+the body-rate noise σ_ω adds J n_σ √2 σ_ω, and friction is monotonic in speed, so the true
 mean friction over the period lies between m^f at the slowest and fastest speeds the readings
 allow (± q/2); the trapezoid estimate lies there too. r_p exceeding ``WHEEL_SAFETY`` × that bound
 is a detection; ``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
@@ -83,8 +85,8 @@ EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED = 1, 4, 5, 6
 T_GYRO, T_STAR, T_MAG = 1, 2, 4  # sim_core.closed_loop.TARGET_CODES
 
 # Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
-WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED = range(5)
-WHEEL_STATE_ROWS = 5
+WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL = range(6)
+WHEEL_STATE_ROWS = 6
 # Star-tracker state.
 SS_PREV, SS_COUNT, SS_ISOLATED = 0, 4, 5
 STAR_STATE_SIZE = 6
@@ -149,30 +151,32 @@ def _emit(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> No
 
 
 @njit(cache=True)
-def wheel_bound_1(inertia: float, speed_prev: float, speed_now: float, tach_q: float, t_u: float,
-                  friction: np.ndarray, p: int) -> float:
-    """Bound on |r_p| of a healthy wheel: J q + T_u (m^f(Ω_hi) − m^f(Ω_lo)) (seed 000 eq 1, seed 002 eq 4)."""
+def wheel_bound_1(inertia: float, speed_prev: float, speed_now: float, tach_q: float, rate_noise: float,
+                  t_u: float, friction: np.ndarray, p: int) -> float:
+    """Bound on |r_p| of a healthy wheel: J (q + δω) + T_u (m^f(Ω_hi) − m^f(Ω_lo)) (seed 000 eq 1, seed 002 eq 4)."""
     lo = min(speed_prev, speed_now) - 0.5 * tach_q
     hi = max(speed_prev, speed_now) + 0.5 * tach_q
     spread = friction_torque_one_wheel(hi, friction, p) - friction_torque_one_wheel(lo, friction, p)
-    return inertia * tach_q + t_u * abs(spread) + NUMERICAL_FLOOR_NMS
+    return inertia * (tach_q + rate_noise) + t_u * abs(spread) + NUMERICAL_FLOOR_NMS
 
 
 @njit(cache=True)
-def wheel_residual_1(inertia: float, speed_prev: float, speed_now: float, torque: float, t_u: float,
-                     friction: np.ndarray, p: int) -> float:
+def wheel_residual_1(inertia: float, speed_prev: float, speed_now: float, axial_rate_change: float, torque: float,
+                     t_u: float, friction: np.ndarray, p: int) -> float:
     """Momentum residual r_p of one wheel over one control period, N·m·s (seed 000 eq 1)."""
     f_mean = 0.5 * (friction_torque_one_wheel(speed_prev, friction, p) + friction_torque_one_wheel(speed_now, friction, p))
-    return inertia * (speed_now - speed_prev) - t_u * (torque - f_mean)
+    return inertia * (speed_now - speed_prev + axial_rate_change) - t_u * (torque - f_mean)
 
 
 @njit(cache=True)
-def wheel_check_1(state: np.ndarray, speeds: np.ndarray, inertia: np.ndarray, max_momentum: np.ndarray,
-                  friction: np.ndarray, tach_q: float, t_u: float, available: np.ndarray,
-                  ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes: np.ndarray, inertia: np.ndarray,
+                  max_momentum: np.ndarray, friction: np.ndarray, tach_q: float, rate_noise: float, t_u: float,
+                  available: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
     """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
 
-    ``speeds``: tachometer readings at t (rad/s); ``state`` holds the previous reading and the
+    ``speeds``: tachometer readings at t (rad/s), ``w_body`` the estimated body rate, ``axes`` the
+    spin axes (3, n_w), ``rate_noise`` the bound on the error of a change of a_pᵗ ω̂ (rad/s);
+    ``state`` holds the previous reading and the
     limited torque held since (see :func:`wheel_hold_1`). Writes fault_detected / fault_isolated /
     reconfigured / mode_change events (seed 000 §3 reconfiguration 4 → 3 → 2 + MD).
     """
@@ -185,8 +189,10 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, inertia: np.ndarray, ma
         if abs(inertia[p] * state[WS_SPEED, p]) + abs(torque) * t_u >= max_momentum[p]:
             state[WS_COUNT, p] = 0.0
             continue  # the motor's momentum limit may cut the torque: residual undefined
-        r = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], torque, t_u, friction, p)
-        bound = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q, t_u, friction, p)
+        axial = axes[0, p] * w_body[0] + axes[1, p] * w_body[1] + axes[2, p] * w_body[2]
+        r = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], axial - state[WS_AXIAL, p], torque, t_u,
+                             friction, p)
+        bound = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q, rate_noise, t_u, friction, p)
         if abs(r) <= WHEEL_SAFETY * bound:
             state[WS_COUNT, p] = 0.0
             continue
@@ -212,12 +218,13 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, inertia: np.ndarray, ma
 
 
 @njit(cache=True)
-def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, cmd: np.ndarray, inertia: np.ndarray,
-                 max_torque: np.ndarray, max_momentum: np.ndarray) -> None:
-    """Remember the tachometer reading and the torque the motor will deliver for ``cmd`` (seed 000 eq 2–3)."""
+def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes: np.ndarray, cmd: np.ndarray,
+                 inertia: np.ndarray, max_torque: np.ndarray, max_momentum: np.ndarray) -> None:
+    """Remember the readings and the torque the motor will deliver for ``cmd`` (seed 000 eq 2–3)."""
     limited = limited_motor_torque_1(cmd, speeds, inertia, max_torque, max_momentum)
     for p in range(speeds.shape[0]):
         state[WS_SPEED, p] = speeds[p]
+        state[WS_AXIAL, p] = axes[0, p] * w_body[0] + axes[1, p] * w_body[1] + axes[2, p] * w_body[2]
         state[WS_TORQUE, p] = limited[p]
         state[WS_VALID, p] = 1.0
 
@@ -394,11 +401,14 @@ def wheel_residuals(
     friction: np.ndarray,
     tach_quantum_rad_s: float,
     control_dt_s: float,
+    axial_rate_rad_s: np.ndarray | None = None,
+    rate_noise_rad_s: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Residuals r_p and their healthy bounds × WHEEL_SAFETY for sampled tachometer data (seed 000 eq 1).
 
-    ``speed_rad_s`` (n_samples, n_wheels) at the control instants, ``torque_nm`` (n_samples − 1,
-    n_wheels) the limited torque held over each period; ``friction`` the (4, n_wheels) table of
+    ``speed_rad_s`` (n_samples, n_wheels) at the control instants (relative to the body),
+    ``axial_rate_rad_s`` the body rate about each spin axis a_pᵗ ω at the same instants (default 0),
+    ``torque_nm`` (n_samples − 1, n_wheels) the limited torque held over each period; ``friction`` the (4, n_wheels) table of
     :meth:`sim_core.wheels.WheelParams.friction_table`. Returns two (n_samples − 1, n_wheels) arrays, N·m·s.
     """
     w = np.asarray(speed_rad_s, dtype=float)
@@ -413,19 +423,22 @@ def wheel_residuals(
         raise ValueError("inertia_kg_m2: expected one positive inertia per wheel")
     if f.shape != (4, w.shape[1]):
         raise ValueError("friction: expected the (4, n_wheels) friction table")
-    if not (tach_quantum_rad_s >= 0.0 and control_dt_s > 0.0):
-        raise ValueError("tach_quantum_rad_s, control_dt_s: must be ≥ 0 and > 0")
-    return _residual_table(w, m, j, f, float(tach_quantum_rad_s), float(control_dt_s))
+    if not (tach_quantum_rad_s >= 0.0 and control_dt_s > 0.0 and rate_noise_rad_s >= 0.0):
+        raise ValueError("tach_quantum_rad_s, control_dt_s, rate_noise_rad_s: must be ≥ 0, > 0, ≥ 0")
+    axial = np.zeros_like(w) if axial_rate_rad_s is None else np.asarray(axial_rate_rad_s, dtype=float)
+    if axial.shape != w.shape:
+        raise ValueError(f"axial_rate_rad_s: expected shape {w.shape}, got {axial.shape}")
+    return _residual_table(w, axial, m, j, f, float(tach_quantum_rad_s), float(rate_noise_rad_s), float(control_dt_s))
 
 
 @njit(cache=True)
-def _residual_table(w, m, j, f, q, t_u):
+def _residual_table(w, axial, m, j, f, q, rate_noise, t_u):
     n, nw = m.shape
     r, b = np.empty((n, nw)), np.empty((n, nw))
     for k in range(n):
         for p in range(nw):
-            r[k, p] = wheel_residual_1(j[p], w[k, p], w[k + 1, p], m[k, p], t_u, f, p)
-            b[k, p] = WHEEL_SAFETY * wheel_bound_1(j[p], w[k, p], w[k + 1, p], q, t_u, f, p)
+            r[k, p] = wheel_residual_1(j[p], w[k, p], w[k + 1, p], axial[k + 1, p] - axial[k, p], m[k, p], t_u, f, p)
+            b[k, p] = WHEEL_SAFETY * wheel_bound_1(j[p], w[k, p], w[k + 1, p], q, rate_noise, t_u, f, p)
     return r, b
 
 

@@ -16,6 +16,8 @@ VISCOUS = 2e-5  # N·m·s: ~0.013 N·m at 6,000 rpm, an HR12-class drag
 COULOMB = 2e-3  # N·m dry friction
 SAT_SPEED = 1.0  # rad/s, the dry-friction smoothing speed
 N_TRIALS = 4000
+W0 = np.zeros(3)  # body at rest: the tachometer reads the absolute spin
+AXES4 = np.eye(3)[:, [0, 1, 2, 0]].copy()
 
 
 def _friction() -> np.ndarray:
@@ -41,8 +43,8 @@ def test_healthy_wheel_residual_stays_inside_bound_for_exact_friction_solution()
         if np.sign(w1) != np.sign(w0) or abs(w1) < SAT_SPEED:
             continue
         read0, read1 = TACH_Q * np.round(w0 / TACH_Q), TACH_Q * np.round(w1 / TACH_Q)
-        r = fdir.wheel_residual_1(J_HR12, read0, read1, m, T_U, friction, 0)
-        bound = fdir.wheel_bound_1(J_HR12, read0, read1, TACH_Q, T_U, friction, 0)
+        r = fdir.wheel_residual_1(J_HR12, read0, read1, 0.0, m, T_U, friction, 0)
+        bound = fdir.wheel_bound_1(J_HR12, read0, read1, TACH_Q, 0.0, T_U, friction, 0)
         worst = max(worst, abs(r) / bound)
     assert worst <= 1.0
 
@@ -62,8 +64,19 @@ def test_quantisation_alone_never_exceeds_j_q():
 def test_dead_motor_residual_is_the_missing_momentum():
     friction = np.zeros((4, 1))
     m = 0.01
-    r = fdir.wheel_residual_1(J_HR12, 100.0, 100.0, m, T_U, friction, 0)  # motor delivered nothing
+    r = fdir.wheel_residual_1(J_HR12, 100.0, 100.0, 0.0, m, T_U, friction, 0)  # motor delivered nothing
     assert r == pytest.approx(-m * T_U, rel=1e-12)
+
+
+def test_body_spinning_about_an_idle_wheel_is_no_residual():
+    """Torque-free wheel: J(Ω + aᵗω) is conserved, so the tachometer sees −Δ(aᵗω), which is no fault."""
+    axial = np.array([0.0, 0.01])
+    speed = 300.0 - axial  # relative speed falls as the body spins up about the axis
+    res, bound = fdir.wheel_residuals(speed[:, None], np.zeros((1, 1)), [J_HR12], np.zeros((4, 1)), 0.0, T_U,
+                                      axial_rate_rad_s=axial[:, None])
+    assert abs(res[0, 0]) <= bound[0, 0]
+    res_blind, _ = fdir.wheel_residuals(speed[:, None], np.zeros((1, 1)), [J_HR12], np.zeros((4, 1)), 0.0, T_U)
+    assert abs(res_blind[0, 0]) > 1e3 * bound[0, 0]
 
 
 def _check_sequence(deltas_nms: list[float], torque: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,10 +87,11 @@ def _check_sequence(deltas_nms: list[float], torque: float = 0.0) -> tuple[np.nd
     j = np.full(4, J_HR12)
     zeros = np.zeros((4, 4))
     for k, dh in enumerate(deltas_nms):
-        fdir.wheel_hold_1(state, speeds, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0))
+        fdir.wheel_hold_1(state, speeds, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0))
         speeds = speeds + torque * T_U / J_HR12
         speeds[2] += dh / J_HR12
-        fdir.wheel_check_1(state, speeds, j, np.full(4, 12.0), zeros, TACH_Q, T_U, available, ev, n_ev, (k + 1) * T_U)
+        fdir.wheel_check_1(state, speeds, W0, AXES4, j, np.full(4, 12.0), zeros, TACH_Q, 0.0, T_U, available, ev, n_ev,
+                           (k + 1) * T_U)
     return available, ev[: n_ev[0]], state
 
 
@@ -109,8 +123,9 @@ def test_fewer_than_two_wheels_is_the_fault_mode():
     speeds = np.full(3, 50.0)
     faulty = False
     for k in range(3):
-        fdir.wheel_hold_1(state, speeds, np.array([0.1, 0.0, 0.0]), j, np.full(3, 0.2), np.full(3, 12.0))
-        faulty = fdir.wheel_check_1(state, speeds, j, np.full(3, 12.0), zeros, 0.0, T_U, available, ev, n_ev, k * T_U)
+        fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :3], np.array([0.1, 0.0, 0.0]), j, np.full(3, 0.2), np.full(3, 12.0))
+        faulty = fdir.wheel_check_1(state, speeds, W0, AXES4[:, :3], j, np.full(3, 12.0), zeros, 0.0, 0.0, T_U, available,
+                                     ev, n_ev, k * T_U)
     assert faulty
     assert (1, 4) in [(int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]  # mode_change → MODE_FAULT (4)
 
@@ -122,8 +137,9 @@ def test_wheel_near_momentum_limit_is_not_tested():
     available = np.ones(1, dtype=np.bool_)
     ev, n_ev = np.zeros((4, 3)), np.zeros(1, dtype=np.int64)
     for k in range(3):
-        fdir.wheel_hold_1(state, speeds, np.array([0.2]), j, np.array([0.2]), np.array([12.0]))
-        fdir.wheel_check_1(state, speeds, j, np.array([12.0]), np.zeros((4, 1)), 0.0, T_U, available, ev, n_ev, k * T_U)
+        fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :1], np.array([0.2]), j, np.array([0.2]), np.array([12.0]))
+        fdir.wheel_check_1(state, speeds, W0, AXES4[:, :1], j, np.array([12.0]), np.zeros((4, 1)), 0.0, 0.0, T_U, available,
+                           ev, n_ev, k * T_U)
     assert available[0] and n_ev[0] == 0
 
 
