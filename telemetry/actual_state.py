@@ -1,0 +1,181 @@
+"""The spacecraft's actual state as its telemetry tells it, and a twin scenario aligned to it (seed 000 §7).
+
+The twin session of seed 000 §7 runs the simulation "with the same values of parameters, initial
+conditions and variants of possible faults" as the spacecraft. This module is its telemetry side:
+decoded reference-satellite batches (ACS_HK, GPS_NAV; e.g. live messages or an archived pass) become
+time series under sim_core's names and layouts (:func:`actual_track`), the GPS fixes become the
+circular orbit the twin flies (:func:`fit_circular_orbit`, a least-squares plane and phase through
+the fixes), and a library scenario is re-started at a telemetry instant with the telemetered attitude,
+rates and wheel speeds, its programme shifted to that instant (:func:`aligned_scenario`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim_core import frames, orbit, quaternion
+from sim_core.scenario import FaultSpec, Scenario, VariantSpec
+from telemetry.ccsds import NS_PER_S
+from telemetry.dictionary import parse_utc_ns
+from telemetry.ingest_report import SampleBatch
+
+__all__ = ["ActualTrack", "actual_track", "fit_circular_orbit", "aligned_scenario", "HK_SERIES", "GPS_SERIES"]
+
+# sim_core series name → (dictionary parameter prefix, component suffixes); None = a scalar parameter.
+HK_SERIES = {
+    "q_st_ib": ("q_st_ib", "0123"),
+    "q_est_ib": ("q_est_ib", "0123"),
+    "q_prog_ib": ("q_prog_ib", "0123"),
+    "omega_est_b_rad_s": ("omega_est_b_rad_s", "xyz"),
+    "omega_gyro_b_rad_s": ("omega_gyro_b_rad_s", "xyz"),
+    "md_dipole_am2": ("md_dipole_am2", "xyz"),
+    "b_mag_b_t": ("b_mag_b_t", "xyz"),
+    "mode": ("mode", None),
+    "attitude_error_rad": ("attitude_error_rad", None),
+}
+WHEEL_SERIES = ("wheel_speed_rad_s", "wheel_torque_cmd_nm", "wheel_current_a")  # suffixes _1 … _n
+GPS_SERIES = {"r_ecef_m": ("r_ecef_m", "xyz"), "v_ecef_m_s": ("v_ecef_m_s", "xyz")}
+MIN_GPS_FIXES = 3  # a plane and a phase need at least three non-collinear positions
+
+
+@dataclass(frozen=True)
+class ActualTrack:
+    """Telemetered series in sim_core layouts: ACS_HK at ``t_utc_ns`` (n,), GPS at ``gps_t_utc_ns`` (m,)."""
+
+    t_utc_ns: np.ndarray
+    series: dict[str, np.ndarray]
+    gps_t_utc_ns: np.ndarray
+    gps: dict[str, np.ndarray]
+
+    def at(self, t_utc_ns: int) -> int:
+        """Index of the ACS_HK sample stamped exactly t_utc_ns; ValueError if there is none."""
+        k = int(np.searchsorted(self.t_utc_ns, t_utc_ns))
+        if k >= self.t_utc_ns.shape[0] or self.t_utc_ns[k] != t_utc_ns:
+            raise ValueError(f"t_utc_ns: no ACS_HK sample at {np.datetime64(int(t_utc_ns), 'ns')}Z")
+        return k
+
+
+def _merged(batches: Sequence[SampleBatch]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Times and values of several batches of one packet, time-ordered, repeated times dropped."""
+    t = np.concatenate([b.t_utc_ns for b in batches])
+    names = set(batches[0].values)
+    values = {n: np.concatenate([np.asarray(b.values[n]) for b in batches]) for n in names}
+    t_unique, first = np.unique(t, return_index=True)
+    return t_unique, {n: v[first] for n, v in values.items()}
+
+
+def _stack(values: dict[str, np.ndarray], prefix: str, suffixes: str | None) -> np.ndarray:
+    """(n, k) array of parameters prefix_suffix, or (n,) for a scalar; ValueError naming a missing one."""
+    names = [prefix] if suffixes is None else [f"{prefix}_{s}" for s in suffixes]
+    missing = [n for n in names if n not in values]
+    if missing:
+        raise ValueError(f"batches: telemetry lacks parameters {missing}")
+    return values[prefix] if suffixes is None else np.stack([values[n] for n in names], axis=-1).astype(np.float64)
+
+
+def actual_track(batches: Iterable[SampleBatch], hk_packet: str = "ACS_HK", gps_packet: str = "GPS_NAV") -> ActualTrack:
+    """Decoded reference-satellite batches (any order, repeats allowed) as time series under sim_core's names."""
+    by_packet: dict[str, list[SampleBatch]] = {}
+    for b in batches:
+        if len(b.t_utc_ns):
+            by_packet.setdefault(b.packet, []).append(b)
+    for name in (hk_packet, gps_packet):
+        if name not in by_packet:
+            raise ValueError(f"batches: no {name} samples")
+    t, hk = _merged(by_packet[hk_packet])
+    series = {name: _stack(hk, prefix, sfx) for name, (prefix, sfx) in HK_SERIES.items()}
+    n_wheels = sum(1 for n in hk if n.startswith(f"{WHEEL_SERIES[0]}_"))
+    wheels = "".join(str(k + 1) for k in range(n_wheels))
+    series.update({name: _stack(hk, name, wheels) for name in WHEEL_SERIES})
+    gps_t, gps = _merged(by_packet[gps_packet])
+    return ActualTrack(t, series, gps_t, {name: _stack(gps, p, sfx) for name, (p, sfx) in GPS_SERIES.items()})
+
+
+def fit_circular_orbit(t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray, t0_unix_s: float) -> dict:
+    """Circular-orbit elements at t0 fitted to GPS fixes: plane by least squares, radius and phase u = u0 + n (t − t0).
+
+    Returns ``altitude_m``, ``inclination_deg``, ``raan_deg``, ``arg_latitude_deg`` as
+    :func:`sim_core.orbit.circular_orbit` takes them (seed 003 §3.2.3.2.1 Keplerian OP).
+    """
+    t = np.asarray(t_unix_s, dtype=float)
+    if t.shape[0] < MIN_GPS_FIXES:
+        raise ValueError(f"t_unix_s: need at least {MIN_GPS_FIXES} GPS fixes, got {t.shape[0]}")
+    r, v = frames.ecef_to_eci(r_ecef_m, v_ecef_m_s, t)
+    normal = np.linalg.svd(r)[2][-1]  # the plane through the Earth's centre nearest the fixes
+    if np.dot(normal, np.cross(r, v).sum(axis=0)) < 0.0:
+        normal = -normal
+    node = np.cross([0.0, 0.0, 1.0], normal)
+    node /= np.linalg.norm(node)
+    a = float(np.linalg.norm(r, axis=-1).mean())
+    n = np.sqrt(orbit.MU_EARTH_M3_S2 / a**3)
+    u = np.arctan2(r @ np.cross(normal, node), r @ node)
+    u0 = np.angle(np.mean(np.exp(1j * (u - n * (t - t0_unix_s)))))
+    return {
+        "altitude_m": a - orbit.R_EARTH_M,
+        "inclination_deg": float(np.degrees(np.arccos(np.clip(normal[2], -1.0, 1.0)))),
+        "raan_deg": float(np.degrees(np.arctan2(node[1], node[0]))),
+        "arg_latitude_deg": float(np.degrees(u0)),
+    }
+
+
+def _shifted_route(guidance: dict, elapsed_s: float) -> dict:
+    """The guidance programme as seen from elapsed_s after its epoch (seed 001 route segments trimmed)."""
+    g = dict(guidance)
+    if g["kind"] == "inertial":
+        steps = sorted(g["inertial_steps"], key=lambda step: step[0])
+        current = [q for t, q in steps if t <= elapsed_s][-1:] or [steps[0][1]]
+        g["inertial_steps"] = [(0.0, current[0])] + [(t - elapsed_s, q) for t, q in steps if t > elapsed_s]
+        return g
+    if g["kind"] != "route" or g["route_start_s"] >= elapsed_s:
+        g["route_start_s"] = max(g["route_start_s"] - elapsed_s, 0.0) if g["kind"] == "route" else 0.0
+        return g
+    into, route = elapsed_s - g["route_start_s"], []
+    for seg in g["route"]:
+        if route:
+            route.append(seg)
+        elif into >= seg["duration_s"]:
+            into -= seg["duration_s"]
+        elif seg["kind"] == "turn":
+            raise ValueError("t_align_utc_ns: inside or at the start of a scheduled turn; align during a hold")
+        else:
+            route.append({**seg, "duration_s": seg["duration_s"] - into})
+    if not route:  # past the end of the route: its final hold goes on
+        route = [{**g["route"][-1], "duration_s": 1.0}]
+    g["route"], g["route_start_s"] = route, 0.0
+    return g
+
+
+def aligned_scenario(
+    base: Scenario,
+    track: ActualTrack,
+    t_align_utc_ns: int,
+    duration_s: float,
+    faults: Sequence[FaultSpec] = (),
+    gps_window_s: float = 60.0,
+) -> Scenario:
+    """The twin of ``base`` started at a telemetry instant: epoch, orbit, attitude, rates and wheel speeds from telemetry.
+
+    Hypothesised faults (``faults``, times from the new epoch) make the twin's one variant.
+    """
+    k = track.at(t_align_utc_ns)
+    elapsed_s = (t_align_utc_ns - parse_utc_ns(base.orbit.epoch_utc)) / NS_PER_S
+    if elapsed_s < 0.0:
+        raise ValueError("t_align_utc_ns: before the scenario's epoch")
+    near = np.abs(track.gps_t_utc_ns - t_align_utc_ns) <= gps_window_s * 0.5 * NS_PER_S
+    data = base.model_dump()
+    data["orbit"]["epoch_utc"] = f"{np.datetime64(int(t_align_utc_ns), 'ns')}Z"
+    if base.orbit.kind != "tle":
+        t_gps = track.gps_t_utc_ns[near] / NS_PER_S
+        data["orbit"].update(fit_circular_orbit(t_gps, track.gps["r_ecef_m"][near], track.gps["v_ecef_m_s"][near],
+                                                t_align_utc_ns / NS_PER_S))
+    data["initial_q_ib"] = quaternion.normalize(track.series["q_est_ib"][k]).tolist()
+    data["initial_omega_b_rad_s"] = track.series["omega_est_b_rad_s"][k].tolist()
+    for wheel, speed in zip(data["spacecraft"]["cluster"]["wheels"], track.series["wheel_speed_rad_s"][k]):
+        wheel["initial_speed_rpm"] = float(speed) * 30.0 / np.pi
+    data["guidance"] = _shifted_route(data["guidance"], elapsed_s)
+    data["duration_s"] = duration_s
+    data["variants"] = [VariantSpec(name="twin", faults=list(faults)).model_dump()]
+    return Scenario.model_validate(data)

@@ -1,0 +1,132 @@
+"""Telemetry side of the twin session: actual track, GPS orbit fit, and a twin aligned to telemetry (seed 000 §7).
+
+Truths: sim_core's exact circular orbit (noise-free fixes must give its elements back), the
+emulated satellite's scenario elements under seed 003's GPS noise, the satellite's own programme
+and telemetry (a twin flying the right fault hypothesis must reproduce them; the nominal twin must not).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim_core import frames, orbit, quaternion, scenario_library
+from sim_core.engine import simulate
+from telemetry import emulator
+from telemetry.actual_state import actual_track, aligned_scenario, fit_circular_orbit
+from telemetry.decoding import decode_stream
+from telemetry.dictionary import load_dictionary
+
+ARCSEC = np.pi / 180.0 / 3600.0
+NS = 10**9
+FAILED_WHEEL, FAILURE_ONSET_S = 1, 350.0
+ALIGN_S, TWIN_S = 300.0, 200.0  # start of the first scanning course; runs into the 20° turn (420–520 s)
+EXACT_FIT_TOL_RAD = 1e-9  # noise-free fixes: only rounding of 7,000 km positions (~1e-9 m relative)
+# 60 fixes with σ = 7.5 m (seed 003, 15 m 2σ) over a ±225 km arc: plane tilt σ√3/(225 km·√60) ≈ 7.5e-6 rad; 5σ.
+NOISY_FIT_TOL_RAD = 4e-5
+NOISY_ALTITUDE_TOL_M = 5.0  # σ/√60 ≈ 1 m; 5σ
+PROGRAMME_TOL_RAD = 3.0 * ARCSEC  # the fitted orbit plane turns the ORF by ≲ 1.5″ (tilt above)
+TWIN_ATTITUDE_TOL_RAD = 30.0 * ARCSEC  # twin truth vs telemetered estimate: 10 × the 3″ star tracker σ
+TWIN_WHEEL_TOL_RAD_S = 0.1  # ≈ 1 rpm over 200 s: different noise draws through the same control loop
+DIVERGED_WHEEL_RAD_S = 1.0  # a twin flying the wrong hypothesis is off by more than this (≈ 10 rpm)
+
+
+@pytest.fixture(scope="module")
+def satellite():
+    dictionary = load_dictionary(emulator.REFERENCE_DICTIONARY)
+    fault = emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S}")
+    traj, _, stream = emulator.emulate(faults=[fault], dictionary=dictionary)
+    return traj, stream, decode_stream(stream.data, dictionary).batches
+
+
+def test_actual_track_from_shuffled_repeated_batches_restores_sim_core_layouts(satellite) -> None:
+    traj, stream, batches = satellite
+    dictionary = load_dictionary(emulator.REFERENCE_DICTIONARY)
+    pieces = [stream.window(int(stream.t_utc_ns[0]) + k * 60 * NS, int(stream.t_utc_ns[0]) + (k + 1) * 60 * NS)
+              for k in range(15)]
+    live = [b for p in pieces for b in decode_stream(p.data, dictionary).batches]
+    shuffled = [live[k] for k in np.random.default_rng(3).permutation(len(live))] + live[:4]  # repeats too
+    track = actual_track(shuffled)
+    whole = actual_track(batches)
+    np.testing.assert_array_equal(track.t_utc_ns, whole.t_utc_ns)
+    assert track.series["q_est_ib"].shape == (3600, 4) and track.series["wheel_speed_rad_s"].shape == (3600, 4)
+    assert track.gps["r_ecef_m"].shape == (900, 3)
+    for name, values in whole.series.items():
+        np.testing.assert_array_equal(track.series[name], values)
+    np.testing.assert_allclose(track.series["wheel_speed_rad_s"], traj["wheel_speed_rad_s"][0], atol=np.pi / 240.0 + 1e-12)
+
+
+def test_noise_free_fixes_give_the_circular_orbit_back_exactly() -> None:
+    elements = {"altitude_m": 523e3, "inclination_deg": 61.0, "raan_deg": 40.0, "arg_latitude_deg": 123.0}
+    t0 = 1.77e9
+    t = t0 + np.arange(-30.0, 31.0)
+    r, v = orbit.circular_orbit(t - t0, elements["altitude_m"], elements["inclination_deg"], elements["raan_deg"],
+                                elements["arg_latitude_deg"])
+    r_ecef, v_ecef = frames.eci_to_ecef(r, v, t)
+    fitted = fit_circular_orbit(t, r_ecef, v_ecef, t0)
+    assert fitted["altitude_m"] == pytest.approx(elements["altitude_m"], abs=1e-6)
+    for key in ("inclination_deg", "raan_deg", "arg_latitude_deg"):
+        assert np.radians(fitted[key] - elements[key]) == pytest.approx(0.0, abs=EXACT_FIT_TOL_RAD), key
+
+
+def test_gps_fixes_of_the_emulated_satellite_give_its_scenario_orbit(satellite) -> None:
+    traj, _, batches = satellite
+    track = actual_track(batches)
+    t_align = int(track.t_utc_ns[0]) + int(ALIGN_S * NS)
+    near = np.abs(track.gps_t_utc_ns - t_align) <= 30 * NS
+    fitted = fit_circular_orbit(track.gps_t_utc_ns[near] / NS, track.gps["r_ecef_m"][near],
+                                track.gps["v_ecef_m_s"][near], t_align / NS)
+    s = scenario_library.get("somov-ge4-scan")  # circular 600 km, Sun-synchronous, RAAN 0, u0 = 0
+    a = orbit.R_EARTH_M + s.orbit.altitude_m
+    u = np.degrees(np.sqrt(orbit.MU_EARTH_M3_S2 / a**3) * ALIGN_S)
+    assert fitted["altitude_m"] == pytest.approx(s.orbit.altitude_m, abs=NOISY_ALTITUDE_TOL_M)
+    expected = {"inclination_deg": float(orbit.sun_synchronous_inclination_deg(s.orbit.altitude_m)),
+                "raan_deg": s.orbit.raan_deg, "arg_latitude_deg": u}
+    for key, value in expected.items():
+        assert np.radians(fitted[key] - value) == pytest.approx(0.0, abs=NOISY_FIT_TOL_RAD), key
+
+
+def _twin_vs_telemetry(satellite, hypothesis: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-sample wheel-speed gaps (n, 4), attitude gaps and programme gaps of a twin aligned at ALIGN_S."""
+    _, _, batches = satellite
+    track = actual_track(batches)
+    t_align = int(track.t_utc_ns[0]) + int(ALIGN_S * NS)
+    twin = simulate(aligned_scenario(scenario_library.get("somov-ge4-scan"), track, t_align, TWIN_S, hypothesis))
+    rows = track.at(t_align) + np.arange(twin.t_s.shape[0])
+    wheels = np.abs(twin["wheel_speed_rad_s"][0] - track.series["wheel_speed_rad_s"][rows])
+
+    def gap(q_a, q_b):
+        return quaternion.angle(quaternion.multiply(quaternion.conjugate(q_a), q_b))
+
+    return wheels, gap(twin["q_ib"][0], track.series["q_est_ib"][rows]), gap(twin["q_prog_ib"][0], track.series["q_prog_ib"][rows])
+
+
+def test_twin_with_the_right_fault_hypothesis_reproduces_the_telemetry(satellite) -> None:
+    hypothesis = [emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S - ALIGN_S}")]
+    wheels, attitude, programme = _twin_vs_telemetry(satellite, hypothesis)
+    assert programme.max() < PROGRAMME_TOL_RAD  # the shifted route is the satellite's own programme
+    assert attitude.max() < TWIN_ATTITUDE_TOL_RAD
+    assert wheels.max() < TWIN_WHEEL_TOL_RAD_S
+
+
+def test_nominal_twin_departs_from_a_satellite_with_a_hidden_wheel_failure(satellite) -> None:
+    wheels, _, programme = _twin_vs_telemetry(satellite, [])
+    assert programme.max() < PROGRAMME_TOL_RAD
+    before = int((FAILURE_ONSET_S - ALIGN_S) / 0.25)
+    assert wheels[:before].max() < TWIN_WHEEL_TOL_RAD_S  # same flight until the wheel fails
+    assert wheels[before:].max() > DIVERGED_WHEEL_RAD_S
+
+
+def test_alignment_inside_a_turn_or_off_the_sample_grid_is_refused(satellite) -> None:
+    _, _, batches = satellite
+    track = actual_track(batches)
+    base = scenario_library.get("somov-ge4-scan")
+    t0 = int(track.t_utc_ns[0])
+    with pytest.raises(ValueError, match="t_align_utc_ns: inside"):
+        aligned_scenario(base, track, t0 + 450 * NS, 60.0)
+    with pytest.raises(ValueError, match="t_utc_ns: no ACS_HK sample"):
+        aligned_scenario(base, track, t0 + 450 * NS + 1, 60.0)
+    late = aligned_scenario(base, track, t0 + 800 * NS, 60.0)  # last course: 20° roll hold continues
+    assert late.guidance.route[0].roll_deg == 20.0 and late.guidance.route_start_s == 0.0
+    with pytest.raises(ValueError, match="batches: no GPS_NAV"):
+        actual_track([b for b in batches if b.packet == "ACS_HK"])
