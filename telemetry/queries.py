@@ -17,13 +17,14 @@ import pyarrow as pa
 import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 
-from telemetry.archive import Archive
+from telemetry.archive import Archive, Gap, sequence_gaps
 
 __all__ = [
     "Downsampled",
     "bucket_statistics",
     "downsample",
     "latest_values",
+    "gaps",
     "pass_summary",
     "export_table",
     "export_csv",
@@ -79,6 +80,15 @@ def downsample(archive: Archive, satellite: str, name: str, t0_ns: int, t1_ns: i
 def latest_values(archive: Archive, satellite: str, names: list[str] | None = None) -> dict[str, tuple[int, float]]:
     """Newest (t_utc_ns, value) of each parameter."""
     return archive.latest_values(satellite, names)
+
+
+def gaps(archive: Archive, satellite: str, t0_ns: int, t1_ns: int) -> list[Gap]:
+    """Sequence-count gaps (CCSDS 133.0-B-2 §4.1.3.4.2.2, modulo 2**14) of every APID in [t0_ns, t1_ns]."""
+    found = []
+    for apid, (t, seq) in sorted(archive.packet_keys(satellite, t0_ns, t1_ns).items()):
+        missing = sequence_gaps(seq)
+        found.extend(Gap(apid, int(t[i - 1]), int(t[i]), int(missing[i])) for i in np.flatnonzero(missing).tolist())
+    return found
 
 
 def pass_summary(archive: Archive, satellite: str, pass_id: int) -> dict[str, Any]:

@@ -11,7 +11,15 @@ import pytest
 
 from telemetry.archive import Archive, PacketBatch
 from telemetry.limits import LimitSet
-from telemetry.queries import bucket_statistics, downsample, export_csv, export_parquet, latest_values, pass_summary
+from telemetry.queries import (
+    bucket_statistics,
+    downsample,
+    export_csv,
+    export_parquet,
+    gaps,
+    latest_values,
+    pass_summary,
+)
 from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
 
 SAT = "REF-SAT"
@@ -75,6 +83,19 @@ def test_two_hour_pass_at_4_hz_downsampled_to_1000_points_keeps_every_sample(arc
     np.testing.assert_array_equal(stats.maximum, hi)
     np.testing.assert_array_equal(stats.minimum, lo)
     assert np.nanmax(stats.maximum) == values.max()
+
+
+def test_gaps_over_several_uploads_are_counted_from_sequence_counts(archive: Archive) -> None:
+    n = 40
+    whole = series_batch(10, "x", np.zeros(n), 10**9)
+    archive.ingest(SAT, [whole.take(np.arange(0, 10))], source="a", uploaded_by="tester")
+    archive.ingest(SAT, [whole.take(np.r_[np.arange(13, 20), np.arange(25, n)])], source="b", uploaded_by="tester")
+    found = gaps(archive, SAT, T0_NS, T0_NS + n * 10**9)
+    t = whole.t_utc_ns
+    assert [(g.apid, g.after_t_ns, g.before_t_ns, g.missing) for g in found] == [
+        (10, int(t[9]), int(t[13]), 3),
+        (10, int(t[19]), int(t[25]), 5),
+    ]
 
 
 def test_latest_values_and_pass_summary(archive: Archive) -> None:
