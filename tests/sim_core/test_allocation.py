@@ -33,6 +33,46 @@ def test_min_norm_matches_basilisk_truth():
     assert np.all(dipole == 0.0)
 
 
+def test_min_norm_and_three_wheel_laws_equal_basilisk_rw_motor_torque():
+    """Random wheel layouts, availabilities and torques through Basilisk's rwMotorTorque C module
+    (bsk, the bench extra), which drops unavailable wheels and maps with the minimum-norm inverse."""
+    pytest.importorskip("Basilisk.fswAlgorithms.rwMotorTorque")
+    from Basilisk.architecture import messaging
+    from Basilisk.fswAlgorithms import rwMotorTorque
+    from Basilisk.utilities import SimulationBaseClass, macros
+
+    rng = np.random.default_rng(5)
+    cfg = al.AllocationConfig(law4=al.LAW_PSEUDO_INVERSE)
+    for case in range(12):
+        gs = rng.normal(size=(3, 4))
+        gs /= np.linalg.norm(gs, axis=0)
+        avail = np.ones(4, dtype=bool)
+        if case % 2:
+            avail[rng.integers(4)] = False
+        torque = rng.normal(size=3) * 0.05
+        module = rwMotorTorque.rwMotorTorque()
+        module.controlAxes_B = np.eye(3).ravel().tolist()
+        cmd = messaging.CmdTorqueBodyMsgPayload()
+        cmd.torqueRequestBody = torque.tolist()
+        rw = messaging.RWArrayConfigMsgPayload()
+        rw.GsMatrix_B, rw.JsList, rw.numRW = gs.T.ravel().tolist(), [0.1] * 4, 4
+        av = messaging.RWAvailabilityMsgPayload()
+        av.wheelAvailability = [0 if a else 1 for a in avail]
+        msgs = [messaging.CmdTorqueBodyMsg().write(cmd), messaging.RWArrayConfigMsg().write(rw), messaging.RWAvailabilityMsg().write(av)]
+        for port, msg in zip((module.vehControlInMsg, module.rwParamsInMsg, module.rwAvailInMsg), msgs):
+            port.subscribeTo(msg)
+        sim = SimulationBaseClass.SimBaseClass()
+        sim.CreateNewProcess("p").addTask(sim.CreateNewTask("t", macros.sec2nano(0.5)))
+        sim.AddModelToTask("t", module)
+        sim.InitializeSimulation()
+        sim.ConfigureStopTime(0)
+        sim.ExecuteSimulation()
+        expected = np.array(module.rwMotorTorqueOutMsg.read().motorTorque)[:4]
+        wheel, _, status = al.allocate(torque, gs, avail, np.zeros(4), [B_EARTH_T, 0, 0], cfg)
+        assert status == al.STATUS_OK
+        assert np.allclose(wheel, expected, atol=EXACT)
+
+
 def test_min_norm_equals_numpy_pseudo_inverse():
     cfg = al.AllocationConfig(law4=al.LAW_PSEUDO_INVERSE)
     torque = np.random.default_rng(4).normal(size=(20, 3)) * 0.05

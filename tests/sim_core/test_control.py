@@ -399,6 +399,65 @@ def test_mrp_feedback_matches_basilisk_unit_test_reference():
     assert np.allclose(ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, [True, False, True, True], k, p), without_wheel_2, atol=EXACT)
 
 
+def _basilisk_step(module) -> None:
+    """Run one update of a Basilisk FSW module in its own simulation (its input messages must be alive)."""
+    from Basilisk.utilities import SimulationBaseClass, macros
+
+    sim = SimulationBaseClass.SimBaseClass()
+    sim.CreateNewProcess("p").addTask(sim.CreateNewTask("t", macros.sec2nano(0.5)))
+    sim.AddModelToTask("t", module)
+    sim.InitializeSimulation()
+    sim.ConfigureStopTime(0)
+    sim.ExecuteSimulation()
+
+
+BASILISK_REL = 1e-12  # same double-precision arithmetic, different operation order
+
+
+@pytest.mark.parametrize("law_type", [0, 1])
+def test_mrp_feedback_equals_basilisk_module(law_type):
+    """Random cases through Basilisk's own mrpFeedback C module (bsk, the bench extra): Ki < 0, wheel
+    availability honoured, both control-law types."""
+    pytest.importorskip("Basilisk.fswAlgorithms.mrpFeedback")
+    from Basilisk.architecture import messaging
+    from Basilisk.fswAlgorithms import mrpFeedback
+
+    rng = np.random.default_rng(11 + law_type)
+    for _ in range(10):
+        sigma, w_br, w_rn, dw_rn = rng.uniform(-0.5, 0.5, 3), rng.normal(0, 0.02, 3), rng.normal(0, 0.01, 3), rng.normal(0, 1e-4, 3)
+        root = rng.normal(size=(3, 3))
+        inertia = root @ root.T + np.diag([30.0, 25.0, 20.0])
+        gs = rng.normal(size=(3, 4))
+        gs /= np.linalg.norm(gs, axis=0)
+        js, speeds, avail = rng.uniform(0.01, 0.1, 4), rng.uniform(-500, 500, 4), rng.random(4) > 0.3
+        k, p = rng.uniform(0.1, 5.0), rng.uniform(1.0, 50.0)
+        module = mrpFeedback.mrpFeedback()
+        module.K, module.P, module.Ki, module.controlLawType = k, p, -1.0, law_type
+        guid = messaging.AttGuidMsgPayload()
+        guid.sigma_BR, guid.omega_BR_B, guid.omega_RN_B, guid.domega_RN_B = sigma.tolist(), w_br.tolist(), w_rn.tolist(), dw_rn.tolist()
+        veh = messaging.VehicleConfigMsgPayload()
+        veh.ISCPntB_B = inertia.ravel().tolist()
+        rw = messaging.RWArrayConfigMsgPayload()
+        rw.GsMatrix_B, rw.JsList, rw.numRW = gs.T.ravel().tolist(), js.tolist(), 4
+        spd = messaging.RWSpeedMsgPayload()
+        spd.wheelSpeeds = speeds.tolist()
+        av = messaging.RWAvailabilityMsgPayload()
+        av.wheelAvailability = [0 if a else 1 for a in avail]  # Basilisk: 0 = AVAILABLE
+        msgs = [
+            messaging.AttGuidMsg().write(guid),
+            messaging.VehicleConfigMsg().write(veh),
+            messaging.RWArrayConfigMsg().write(rw),
+            messaging.RWSpeedMsg().write(spd),
+            messaging.RWAvailabilityMsg().write(av),
+        ]
+        for port, msg in zip((module.guidInMsg, module.vehConfigInMsg, module.rwParamsInMsg, module.rwSpeedsInMsg, module.rwAvailInMsg), msgs):
+            port.subscribeTo(msg)
+        _basilisk_step(module)
+        expected = np.array(module.cmdTorqueOutMsg.read().torqueRequestBody)
+        got = ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, avail, k, p, law_type)
+        assert np.allclose(got, expected, rtol=BASILISK_REL, atol=BASILISK_REL * np.max(np.abs(expected)))
+
+
 def test_mrp_feedback_lyapunov_function_decreases_in_regulation():
     """V = ½ωᵀIω + 2K ln(1 + σ²) has dV/dt = −P|ω|² for the rigid body under the law (Schaub & Junkins)."""
     k, p, dt = 2.0, 12.0, 0.05
