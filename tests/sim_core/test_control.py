@@ -1,5 +1,6 @@
 """Control laws against independent truths: scipy's Tustin and ZOH discretisations, closed-loop
-eigenvalues, scipy's frequency response, scipy's rotations, Lyapunov functions and energy dissipation."""
+eigenvalues, scipy's frequency response, scipy's rotations, Lyapunov functions, energy dissipation,
+momentum conservation and Basilisk's own mrpFeedback module."""
 
 import numpy as np
 import pytest
