@@ -16,7 +16,7 @@ from sim_core import quaternion
 from telemetry import ccsds
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
 from telemetry.ingest_report import ApidSummary, DecodeResult, IngestReport, QuarantineRecord, SampleBatch
-from telemetry.validation import header_mismatch, validate_packets
+from telemetry.validation import HEADER_PROBLEMS, header_mismatch, validate_packets
 
 __all__ = [
     "packet_matrix",
@@ -169,11 +169,11 @@ def _decode_apid(
     packets = packet_matrix(buf, offset, definition.packet_octets)
     headers = ccsds.parse_primary_headers(packets)
     mismatch = header_mismatch(headers, secondary_header=True)
-    if any(mismatch):
-        bad = np.array([m != "" for m in mismatch])
+    bad = mismatch != 0
+    if bad.any():
         report.quarantined.extend(
             QuarantineRecord(int(offset[i]), definition.packet_octets, "bad_header", definition.apid,
-                             int(headers.sequence_count[i]), detail=mismatch[i])
+                             int(headers.sequence_count[i]), detail=HEADER_PROBLEMS[mismatch[i]])
             for i in np.flatnonzero(bad)
         )
         offset, packets = offset[~bad], packets[~bad]

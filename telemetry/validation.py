@@ -21,12 +21,15 @@ from numba import njit
 from telemetry.ccsds import SEQUENCE_COUNT_MODULUS, SEQUENCE_FLAGS_UNSEGMENTED, PrimaryHeaders
 from telemetry.ingest_report import QuarantineRecord, SequenceGap
 
-__all__ = ["PacketVerdict", "validate_packets", "header_mismatch", "ACCEPTED", "NON_MONOTONIC", "RESTART"]
+__all__ = [
+    "PacketVerdict", "validate_packets", "header_mismatch", "HEADER_PROBLEMS", "ACCEPTED", "NON_MONOTONIC", "RESTART",
+]
 
 ACCEPTED = 0
 NON_MONOTONIC = 1
 RESTART = -1
 HALF_RANGE = SEQUENCE_COUNT_MODULUS // 2
+HEADER_PROBLEMS = ("", "secondary header flag", "sequence flags (segmented)", "packet type (telecommand)")
 
 
 @dataclass(frozen=True)
@@ -71,17 +74,17 @@ def _sequence_kernel(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return status, missing
 
 
-def header_mismatch(headers: PrimaryHeaders, secondary_header: bool) -> list[str]:
-    """Per packet, what in its header contradicts a fixed-length telemetry packet ("" = nothing).
+def header_mismatch(headers: PrimaryHeaders, secondary_header: bool) -> np.ndarray:
+    """Per packet, an index into HEADER_PROBLEMS of what contradicts a fixed-length telemetry packet (0 = nothing).
 
     Expected: packet type 0 = telemetry (CCSDS 133.0-B-2 §4.1.3.3.2), sequence flags 3 =
     unsegmented (§4.1.3.4.2.2), secondary header flag set when the packet carries a time code (§4.1.3.3.3).
     """
-    problems = np.full(headers.apid.shape, "", dtype=object)
-    problems[headers.secondary_header_flag != int(secondary_header)] = "secondary header flag"
-    problems[headers.sequence_flags != SEQUENCE_FLAGS_UNSEGMENTED] = "sequence flags (segmented)"
-    problems[headers.packet_type != 0] = "packet type (telecommand)"
-    return problems.tolist()
+    problems = np.zeros(headers.apid.shape, dtype=np.int8)
+    problems[headers.secondary_header_flag != int(secondary_header)] = 1
+    problems[headers.sequence_flags != SEQUENCE_FLAGS_UNSEGMENTED] = 2
+    problems[headers.packet_type != 0] = 3
+    return problems
 
 
 def validate_packets(
