@@ -94,13 +94,17 @@ def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
     """Engineering value of a raw field: polynomial Σ c_k x^k (XTCE PolynomialCalibrator), else the native value."""
     if p.polynomial:
         x = raw.astype(np.float64)
-        y = np.full(x.shape, p.polynomial[-1])
-        for c in p.polynomial[-2::-1]:
-            y = y * x + c
+        if len(p.polynomial) == 1:
+            return np.full(x.shape, p.polynomial[0])
+        y = x * p.polynomial[-1]
+        y += p.polynomial[-2]
+        for c in p.polynomial[-3::-1]:
+            y *= x
+            y += c
         return y
     if p.data_type == "float":
-        return raw.astype(np.float64)
-    return raw if raw.dtype == np.uint64 else raw.astype(np.int64)
+        return raw.astype(np.float64, copy=False)
+    return raw if raw.dtype == np.uint64 else raw.astype(np.int64, copy=False)
 
 
 def derive(d: DerivedParameter, values: dict[str, np.ndarray], time_code: ccsds.TimeCode | None) -> np.ndarray:
