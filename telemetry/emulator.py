@@ -469,16 +469,23 @@ async def send_stream(
     rate: float = 1.0,
     retry_s: float = RETRY_S,
     attempts: int | None = None,
+    on_wall_clock: bool = False,
 ) -> SendReport:
     """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting.
 
-    TCP gives no application acknowledgement, so after a lost link the packets written in the last
-    ``REWIND_S`` are sent again; the archive drops duplicates (same APID, count and time).
+    ``on_wall_clock`` (real time only): each packet leaves when the UTC clock reaches its time stamp
+    (those already due leave at once). TCP gives no application acknowledgement, so after a lost link
+    the packets written in the last ``REWIND_S`` are sent again; the archive drops duplicates (same
+    APID, count and time).
     """
     if not rate > 0.0:
         raise ValueError(f"rate: must be > 0 (inf = unpaced), got {rate}")
+    if on_wall_clock and rate != 1.0:
+        raise ValueError(f"on_wall_clock: packets can follow the UTC clock only in real time (rate 1), got rate {rate}")
     if port <= 0 or port > 65535:
         raise ValueError(f"port: expected 1..65535, got {port}")
+    if attempts is not None and attempts < 1:
+        raise ValueError(f"attempts: expected at least 1 (None = keep trying), got {attempts}")
     report, n = SendReport(), len(stream)
     if n == 0:
         return report
@@ -487,6 +494,8 @@ async def send_stream(
     reader, writer = await _connect(host, port, retry_s, attempts)
     report.connections += 1
     wall0, i, recent = time.monotonic(), 0, deque()
+    if on_wall_clock:
+        wall0 -= time.time() - int(stream.t_utc_ns[0]) / NS_PER_S
     try:
         while i < n:
             j = int(np.searchsorted(due_s, time.monotonic() - wall0, side="right"))

@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
     p.add_argument("--fault", action="append", default=[], metavar="TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V]",
                    help="hidden fault, e.g. wheel:1:failure@600 (0-based sim_core index: wheel 1 = wheel_*_2)")
-    p.add_argument("--start-utc", help="epoch of the flight, ISO 8601 or 'now' (default: the scenario's epoch)")
+    p.add_argument("--start-utc", help="epoch of the flight, ISO 8601 or 'now' (in real time, packets then leave at their time stamps)")
     p.add_argument("--attempts", type=int, help="connection attempts before giving up (default: keep trying)")
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
     p.add_argument("--out", type=Path, help="write the packets to this file (for upload) instead of only sending")
@@ -28,12 +28,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _start_utc(text: str | None) -> str | None:
-    """ISO time of the flight epoch; 'now' is the current whole UTC second."""
+    """ISO time of the flight epoch; 'now' is the next whole UTC second."""
     if text != "now":
         return text
     import time
 
-    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(int(time.time()) + 1))
+
+
+def _warn_late_faults(faults: list, duration_s: float) -> None:
+    """Say so when a hidden fault begins after the end of the flight (it would never act)."""
+    for f in faults:
+        if f.onset_s >= duration_s:
+            print(f"warning: fault {f.target}:{f.index}:{f.type} begins at {f.onset_s:g} s, after the end of the "
+                  f"flight ({duration_s:g} s); pass --duration", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,10 +54,12 @@ def run(args: argparse.Namespace) -> int:
         faults = [emulator.parse_fault(text) for text in args.fault]
         if not args.rate > 0.0:
             raise ValueError(f"rate: must be > 0 (inf = unpaced), got {args.rate}")
-        _, _, stream = emulator.emulate(args.scenario, faults, args.duration, _start_utc(args.start_utc), seed=args.seed)
+        traj, _, stream = emulator.emulate(args.scenario, faults, args.duration, _start_utc(args.start_utc),
+                                           seed=args.seed)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    _warn_late_faults(faults, traj.simulated_time_s)
     print(f"emulated {len(stream)} packets ({len(stream.data)} octets) of {args.scenario}")
     if args.out:
         args.out.write_bytes(stream.data)
@@ -60,7 +70,9 @@ def run(args: argparse.Namespace) -> int:
     pace = "unpaced" if math.isinf(args.rate) else f"x{args.rate:g}"
     print(f"sending to {args.host}:{port} ({pace})", flush=True)
     try:
-        report = asyncio.run(emulator.send_stream(stream, args.host, port, args.rate, attempts=args.attempts))
+        on_clock = args.start_utc == "now" and args.rate == 1.0
+        report = asyncio.run(emulator.send_stream(stream, args.host, port, args.rate, attempts=args.attempts,
+                                                  on_wall_clock=on_clock))
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -32,6 +32,8 @@ NOISE_STD_REL_TOL = 0.10  # 3,600 samples estimate a standard deviation to ~1.2 
 GPS_LEAP_S = 18  # GPS − UTC since 2017-01-01 (IERS Bulletin C: TAI − UTC = 37 s, GPS = TAI − 19 s)
 IGRF_NORM_TOL_T = 300e-9  # 6σ of the 50 nT magnetometer noise plus the 2 nT count and the 30 s field table
 SETTLE_S = 0.3  # > telemetry.live.DECODE_INTERVAL_S: lets the listener decode what arrived
+EARLY_TOL_S = 0.005  # time.time() vs time.monotonic() read a few microseconds apart; nothing may leave early
+LATE_TOL_S = 0.25  # event-loop wake-up and loopback delivery on a loaded 2-core machine
 
 
 @pytest.fixture(scope="module")
@@ -272,6 +274,51 @@ def test_sender_reconnects_and_resends_after_the_link_drops(nominal, dictionary)
         for batch in decode_stream(bytes(buffer), dictionary).batches:
             seen.update(zip([batch.apid] * len(batch.t_utc_ns), batch.t_utc_ns.tolist()))
     assert seen == set(zip(piece.apid.tolist(), piece.t_utc_ns.tolist()))  # nothing lost across the drop
+
+
+def test_real_time_sender_releases_each_packet_at_its_utc_time_stamp(dictionary) -> None:
+    start = int(time.time()) + 2  # whole second: CUC-exact stamps, 1-2 s ahead of the wall clock
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(start))
+    _, _, stream = emulator.emulate(duration_s=2.0, start_utc=stamp, dictionary=dictionary)
+    arrivals: list[tuple[float, int]] = []
+
+    async def link() -> float:
+        async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            while data := await reader.read(4096):
+                arrivals.append((time.time(), len(data)))
+            writer.close()
+
+        server = await asyncio.start_server(handle, "127.0.0.1", 0)
+        await emulator.send_stream(stream, "127.0.0.1", server.sockets[0].getsockname()[1], on_wall_clock=True)
+        finished = time.time()
+        server.close()
+        await server.wait_closed()
+        return finished
+
+    finished = asyncio.run(link())
+    last_stamp_s = stream.t_utc_ns[-1] / 1e9
+    assert arrivals[0][0] >= start - EARLY_TOL_S  # nothing leaves before its time stamp
+    assert last_stamp_s - EARLY_TOL_S <= finished < last_stamp_s + LATE_TOL_S
+    assert sum(size for _, size in arrivals) == len(stream.data)
+    with pytest.raises(ValueError, match="on_wall_clock"):
+        asyncio.run(emulator.send_stream(stream, rate=2.0, on_wall_clock=True))
+
+
+def test_cli_streams_to_a_live_listener(dictionary) -> None:
+    async def listen() -> tuple[int, list]:
+        live = LiveStream(dictionary)
+        subscriber = live.subscribe(max_messages=1_000)
+        port = await live.start()
+        code = await asyncio.to_thread(main, ["emulate", "--duration", "10", "--rate", "inf", "--port", str(port),
+                                              "--attempts", "3"])
+        await asyncio.sleep(SETTLE_S)
+        await live.stop()
+        return code, drain(subscriber)
+
+    code, messages = asyncio.run(listen())
+    received = {packet: sum(len(m.batch.t_utc_ns) for m in messages if m.batch.packet == packet)
+                for packet in ("ACS_HK", "GPS_NAV")}
+    assert code == 0 and received == {"ACS_HK": 40, "GPS_NAV": 10}
 
 
 def test_demo_pass_file_holds_the_window_with_mission_sequence_counts(dictionary) -> None:
