@@ -187,7 +187,7 @@ def _decode_apid(
     t = ccsds.decode_time(t_fields, definition.time_code)
     t[~ccsds.time_fields_valid(t_fields, definition.time_code)] = np.iinfo(np.int64).min  # -> time_out_of_range
     verdict = validate_packets(definition.apid, offset, headers.sequence_count, t,
-                               definition.packet_octets, *window)
+                               definition.packet_octets, *window, period_s=definition.period_s)
     kept = packets[verdict.accepted]
     batch = SampleBatch(
         packet=definition.name,

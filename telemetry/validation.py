@@ -8,7 +8,9 @@ are counted as duplicates and dropped, and in time order the 14-bit source seque
 (CCSDS 133.0-B-2 §4.1.3.4.3, modulo 16384) must advance by 1..8191 from the last accepted packet:
 a repeat or a step back is ``non_monotonic_sequence`` unless the next packet continues from it
 (a counter restart, accepted and reported as a gap of unknown size); a step of d > 1 is a gap
-of d − 1 packets.
+of d − 1 packets. When the packet period is known and the time step spans half the count range
+or more (an outage between passes), the count alone is ambiguous: the step is the d + k·16384
+nearest to Δt / period, accepted if within PERIOD_TOLERANCE of it, else a restart.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ ACCEPTED = 0
 NON_MONOTONIC = 1
 RESTART = -1
 HALF_RANGE = SEQUENCE_COUNT_MODULUS // 2
+PERIOD_TOLERANCE = 0.05  # on-board periods drift by far less than 5 % (plus 2 packets of jitter)
 HEADER_PROBLEMS = ("", "secondary header flag", "sequence flags (segmented)", "packet type (telecommand)")
 
 
@@ -49,26 +52,37 @@ def _forward(a: int, b: int) -> int:
 
 
 @njit(cache=True)
-def _sequence_kernel(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Status (ACCEPTED / NON_MONOTONIC) and missing-before count (RESTART = −1) of time-ordered counts."""
+def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Status (ACCEPTED / NON_MONOTONIC) and missing-before count (RESTART = −1) of time-ordered counts.
+
+    period_ns ≤ 0: the packet period is unknown and long outages cannot be sized.
+    """
     n = count.shape[0]
     status = np.zeros(n, dtype=np.int8)
     missing = np.zeros(n, dtype=np.int64)
     last = -1
+    t_last = 0
     for i in range(n):
         if last < 0:
-            last = count[i]
+            last, t_last = count[i], t_ns[i]
             continue
         d = _forward(last, count[i])
+        expected = (t_ns[i] - t_last) / period_ns if period_ns > 0 else 0.0
+        if expected >= HALF_RANGE:
+            steps = d + SEQUENCE_COUNT_MODULUS * round((expected - d) / SEQUENCE_COUNT_MODULUS)
+            ok = steps >= 1 and abs(steps - expected) <= PERIOD_TOLERANCE * expected + 2
+            missing[i] = steps - 1 if ok else RESTART
+            last, t_last = count[i], t_ns[i]
+            continue
         if 1 <= d < HALF_RANGE:
             missing[i] = d - 1
-            last = count[i]
+            last, t_last = count[i], t_ns[i]
             continue
         follows = i + 1 < n and 1 <= _forward(count[i], count[i + 1]) < HALF_RANGE
         resumes = i + 1 < n and 1 <= _forward(last, count[i + 1]) < HALF_RANGE
         if follows and not resumes:
             missing[i] = RESTART
-            last = count[i]
+            last, t_last = count[i], t_ns[i]
         else:
             status[i] = NON_MONOTONIC
     return status, missing
@@ -95,6 +109,7 @@ def validate_packets(
     packet_octets: int,
     valid_from_utc_ns: int | None,
     valid_until_utc_ns: int | None,
+    period_s: float | None = None,
 ) -> PacketVerdict:
     """Judge the framed packets of one APID (CCSDS 133.0-B-2 §4.1.3.4.3 sequence counts), vectorised."""
     offset = np.asarray(offset, dtype=np.int64)
@@ -115,7 +130,8 @@ def validate_packets(
     repeat = np.zeros(idx.shape, dtype=bool)
     repeat[1:] = (t[idx[1:]] == t[idx[:-1]]) & (count[idx[1:]] == count[idx[:-1]])
     idx = idx[~repeat]
-    status, missing = _sequence_kernel(count[idx])
+    period_ns = int(round(period_s * 1e9)) if period_s else 0
+    status, missing = _sequence_kernel(count[idx], t[idx], period_ns)
     quarantined += [
         QuarantineRecord(int(offset[i]), packet_octets, "non_monotonic_sequence", apid, int(count[i]))
         for i in idx[status == NON_MONOTONIC]

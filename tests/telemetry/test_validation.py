@@ -136,3 +136,26 @@ def test_quarantine_records_name_the_apid_of_a_version_0_header() -> None:
     result = decode_stream(stream, reference(), now_utc_ns=NOW_UTC_NS)
     assert [(q.reason, q.apid, q.offset, q.length) for q in result.report.quarantined] == [
         ("unknown_apid", 1_793, 126, 20), ("bad_header", None, 272, 9)]
+
+
+PASS_GAP_S = 5_400  # 90 min between two passes: 21,600 ACS_HK packets, more than the 16,384 count range
+
+
+def test_outage_between_passes_is_sized_from_the_packet_period() -> None:
+    """Counts 0..99, then 90 min later the counter continues: the gap is 21,600 − 100 packets, not mod 2^14."""
+    first = np.arange(100)
+    second = np.arange(100) + PASS_GAP_S * 4
+    count = np.concatenate([first, second]) % 16_384
+    t = T0_UTC_NS + np.concatenate([first, second]) * PERIOD_NS
+    verdict = validate_packets(HK, np.arange(200), count, t, 126, None, None, period_s=0.25)
+    assert verdict.quarantined == [] and len(verdict.accepted) == 200
+    assert [g.missing for g in verdict.gaps] == [PASS_GAP_S * 4 - 100]
+    blind = validate_packets(HK, np.arange(200), count, t, 126, None, None)
+    assert [g.missing for g in blind.gaps] != [PASS_GAP_S * 4 - 100]  # without the period it cannot be sized
+
+
+def test_counter_reset_during_an_outage_is_a_restart() -> None:
+    count = np.concatenate([np.arange(5_000, 5_100), np.arange(0, 100)])
+    t = T0_UTC_NS + np.concatenate([np.arange(100), np.arange(100) + PASS_GAP_S * 4]) * PERIOD_NS
+    verdict = validate_packets(HK, np.arange(200), count, t, 126, None, None, period_s=0.25)
+    assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(5_099, 0, -1)]
