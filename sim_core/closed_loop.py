@@ -14,7 +14,7 @@ import os
 import numpy as np
 from numba import njit
 
-from sim_core import allocation, control, environment, guidance, mekf, sensors
+from sim_core import allocation, control, environment, fdir, guidance, mekf, sensors
 from sim_core.integrators import rk4_step_into
 from sim_core.quaternion import conjugate_rotate_1, multiply_1, rotate_1
 from sim_core.spacecraft import PlantArrays
@@ -42,12 +42,17 @@ EV_FAULT_ONSET, EV_FAULT_CLEARED, EV_ALLOCATION, EV_MD_SATURATED = 2, 3, 7, 8
 # Output channels of the float record (columns of ``rec``), per sample.
 R_Q, R_W, R_QE, R_WE, R_QP, R_WP = 0, 4, 7, 11, 15, 19
 R_MD, R_TORQUE, R_R, R_OBS, R_STATUS, R_FAULTS = 22, 25, 28, 31, 32, 33
-R_WHEELS = 34  # then: speeds (nw), commands (nw), delivered torques (nw)
+R_WHEELS = 34  # then: speeds (nw), commands (nw), delivered torques (nw), availability after FDIR (nw)
+
+# Per-variant FDIR configuration (sim_core.fdir): on/off, bound on the error of a change of the
+# estimated body rate (rad/s), star-tracker χ²(3) limit, Gaussian threshold in σ.
+FD_ON, FD_RATE_NOISE, FD_NIS_MAX, FD_N_SIGMA = range(4)
+FDIR_CONFIG_SIZE = 4
 
 
 def record_width(n_wheels: int) -> int:
     """Number of float channels per output sample for n_wheels wheels."""
-    return R_WHEELS + 3 * n_wheels
+    return R_WHEELS + 4 * n_wheels
 
 
 @njit(cache=True)
@@ -312,7 +317,7 @@ def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> N
 @njit(cache=True, nogil=True)
 def fly_variant(
     x0, p: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-    available, faults, seed, rec, ev, n_ev, shared, slot,
+    available, faults, fdir_cfg, seed, rec, ev, n_ev, shared, slot,
 ) -> None:
     """Fly one variant and fill its output record ``rec`` (samples × channels) and events ``ev``.
 
@@ -321,7 +326,9 @@ def fly_variant(
     gravity_gradient_on, mrp_law_type]; ``times``: [dt, t0_unix, md_max, dut1, st_sigma,
     gyro_noise, mag_noise, tach_quantum, pd_kp, pd_kd, mrp_k, mrp_p, gyro_tau].
     ``program``: (steps_t, steps_q, route); ``orbit``: (table, t0, step); ``env``: (B table, t0,
-    step, c_pn); ``est``: (true gyro bias (3,), initial MEKF covariance (6, 6)). ``shared[0]`` non-zero cancels the run (checked each T_u);
+    step, c_pn); ``est``: (true gyro bias (3,), initial MEKF covariance (6, 6)); ``fdir_cfg``: FD_*
+    entries (onboard FDIR of :mod:`sim_core.fdir`: wheels each T_u, star tracker, gyro drift and
+    magnetometer each T_q with the MEKF; it may drop wheels from ``available``). ``shared[0]`` non-zero cancels the run (checked each T_u);
     ``shared[slot]`` receives the number of steps done, for progress reports from another thread.
     """
     np.random.seed(seed)
@@ -371,6 +378,17 @@ def fly_variant(
     fault_state = np.zeros(faults.shape[0], dtype=np.bool_)
     mag = np.zeros(3)
     out_i = 0
+    fdir_on = fdir_cfg[FD_ON] != 0.0
+    rate_noise, nis_max, n_sigma = fdir_cfg[FD_RATE_NOISE], fdir_cfg[FD_NIS_MAX], fdir_cfg[FD_N_SIGMA]
+    wheel_fd = np.zeros((fdir.WHEEL_STATE_ROWS, nw))
+    star_fd = np.zeros(fdir.STAR_STATE_SIZE)
+    star_fd[0:4] = np.nan
+    gyro_fd = np.zeros(fdir.GYRO_STATE_SIZE)
+    gyro_fd[fdir.GS_T0] = np.nan
+    gyro_fd[fdir.GS_SIGMA_U] = times[12]
+    sigma_u = times[12]
+    mag_fd = np.full(fdir.MAG_STATE_SIZE, np.nan)
+    w_prev = np.zeros(3)
 
     r, v, a = hermite_orbit_1(orbit_tab, orbit_t0, orbit_step, 0.0)
     b_eci = linear_1(b_tab, b_t0, b_step, 0.0)
@@ -417,13 +435,26 @@ def fly_variant(
                     w_est[:] = w_meas
             else:
                 if k > 0 and gyro_ok:
-                    mekf.mekf_propagate_1(q_est, bias_est, p_cov, w_meas, meas_every * dt,
-                                          gyro_noise * np.sqrt(meas_every * dt), times[12])
+                    # mean of the samples bracketing the step: the held sample's ½ ω̇ T_q² error would
+                    # make the filter overconfident in manoeuvres (and the FDIR innovation test with it)
+                    mekf.mekf_propagate_1(q_est, bias_est, p_cov, 0.5 * (w_meas + w_prev), meas_every * dt,
+                                          gyro_noise * np.sqrt(meas_every * dt), sigma_u)
+                w_prev[:] = w_meas
+                if fdir_on and st_ok:
+                    st_ok = fdir.star_tracker_check_1(star_fd, q_est, p_cov, q_m, sig3, nis_max, ev, n_ev, t)
+                if fdir_on and gyro_ok:
+                    sigma_u = fdir.gyro_drift_step_1(gyro_fd, t, w_meas, meas_every * dt, q_m, st_ok, st_sigma,
+                                                     gyro_noise, times[12], n_sigma, ev, n_ev)
                 if st_ok:
                     mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
                 w_est[:] = w_meas - bias_est
             mag[:] = b_body + mag_noise * np.random.standard_normal(3)
             _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
+            if fdir_on:
+                att_sigma = np.sqrt(p_cov[0, 0] + p_cov[1, 1] + p_cov[2, 2]) if est_kind == ESTIMATOR_MEKF \
+                    else np.sqrt(3.0) * st_sigma
+                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, att_sigma,
+                                          n_sigma, ev, n_ev, t)
 
         if k % ctrl_every == 0:
             shared[slot] = k
@@ -434,6 +465,9 @@ def fly_variant(
             if tach_q > 0.0:
                 speeds = tach_q * np.floor(speeds / tach_q + 0.5)
             h_wheels = p.wheel_inertia * speeds
+            if fdir_on:
+                fdir.wheel_check_1(wheel_fd, speeds, w_est, p.wheel_axes, p.wheel_inertia, wheel_limits[1],
+                                   base_friction, tach_q, rate_noise, ctrl_every * dt, available, ev, n_ev, t)
             if law_kind == LAW_SEED000:
                 body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
             elif law_kind == LAW_MRP_FEEDBACK:
@@ -455,6 +489,9 @@ def fly_variant(
                                            wheel_out, dip_out)
             for w in range(nw):
                 cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
+            if fdir_on:
+                fdir.wheel_hold_1(wheel_fd, speeds, w_est, p.wheel_axes, cmd, p.wheel_inertia, wheel_limits[0],
+                                  wheel_limits[1])
             dipole[:] = dip_out
             _rod_faults_1(faults, t, dipole)
             for i in range(3):
@@ -480,6 +517,8 @@ def fly_variant(
             row[R_WHEELS:R_WHEELS + nw] = x[7 + 2 * nq: 7 + 2 * nq + nw]
             row[R_WHEELS + nw:R_WHEELS + 2 * nw] = cmd
             row[R_WHEELS + 2 * nw:R_WHEELS + 3 * nw] = delivered
+            for w in range(nw):
+                row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
             out_i += 1
 
         _wheel_commands_1(faults, t, cmd, frozen_cmd, delivered)
@@ -499,8 +538,8 @@ def fly_variant(
 
 
 def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-              available, faults, n_faults, seeds, rec, ev, n_ev, shared) -> None:
-    """Fly every variant (axis 0 of x0, available, faults, seeds, rec, ev), one thread per core.
+              available, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared) -> None:
+    """Fly every variant (axis 0 of x0, available, faults, fdir_cfg, seeds, rec, ev), one thread per core.
 
     ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
     random stream, so results do not depend on the thread count or order.
@@ -509,7 +548,8 @@ def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est
 
     def one(v: int) -> None:
         fly_variant(x0[v], p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-                    available[v], faults[v, : n_faults[v]], seeds[v], rec[v], ev[v], n_ev[v], shared, 1 + v)
+                    available[v], faults[v, : n_faults[v]], fdir_cfg[v], seeds[v], rec[v], ev[v], n_ev[v], shared,
+                    1 + v)
 
     n = x0.shape[0]
     if n == 1:

@@ -11,18 +11,21 @@ Multi-rate (seed 000 §4): dynamics at ``dynamics_dt_s`` (RK4), measurements and
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from datetime import datetime
+from typing import NamedTuple
 
 import numpy as np
 
 from sim_core import allocation, closed_loop, environment, frames, guidance, mekf, orbit, quaternion, wheels
+from sim_core import fdir as fdir_kernels
 from sim_core.control import DigitalLawGains
 from sim_core.scenario import Scenario
 from sim_core.spacecraft import PlantParams, pack_state
 from sim_core.trajectory import EVENT_NAMES, Trajectory
 
-__all__ = ["simulate", "plant_params", "orbit_state", "MAX_EVENTS"]
+__all__ = ["simulate", "plant_params", "orbit_state", "allocation_params", "program_along", "ProgramSamples",
+           "orbit_period_s", "turn_peak_rate", "MAX_EVENTS"]
 
 ORBIT_TABLE_STEP_S = 10.0  # Hermite error ~ (ωh)⁴ r / 384 ≈ 0.2 mm at LEO
 FIELD_TABLE_STEP_S = 30.0  # linear error ~ (2ω h)² B / 8 ≈ 1e-4 B (a few nT)
@@ -174,6 +177,86 @@ def _fault_tables(s: Scenario) -> tuple[np.ndarray, np.ndarray]:
     return table, counts
 
 
+def allocation_params(s: Scenario) -> np.ndarray:
+    """Parameter vector of ``allocation.allocate_1`` for the scenario's cluster (seed 000 eq 6, §3)."""
+    a = s.allocation
+    ws = s.spacecraft.cluster.wheels
+    law4 = allocation.LAW_GE_DISTRIBUTION if (a.kind == "ge_explicit" and s.spacecraft.cluster.geometry == "ge") \
+        else allocation.LAW_PSEUDO_INVERSE
+    return allocation.AllocationConfig(
+        law4=law4, gamma_rad=np.radians(min(s.spacecraft.cluster.gamma_deg, 44.9)), rho=a.rho,
+        mu_rho_per_s=a.mu_rho_per_s, phi_rho_per_s=a.phi_rho_per_s,
+        h_max_nms=min(w.max_momentum_nms for w in ws), l_max_am2=max(s.spacecraft.md_max_dipole_am2, 1e-9),
+    ).as_array()
+
+
+def _fdir_config(s: Scenario, on: bool | Sequence[bool]) -> np.ndarray:
+    """Per-variant FD_* rows: thresholds from the sensor noise of the scenario (sim_core.fdir)."""
+    nv = len(s.variants)
+    flags = np.broadcast_to(np.asarray(on, dtype=bool), (nv,)) if np.ndim(on) == 0 else np.asarray(on, dtype=bool)
+    if flags.shape != (nv,):
+        raise ValueError(f"fdir: expected one flag or {nv} flags (one per variant), got shape {flags.shape}")
+    n_sigma = fdir_kernels.gaussian_sigmas()
+    rate_noise = 0.0 if s.estimator.kind == "truth" else n_sigma * np.sqrt(2.0) * s.sensors.gyro_noise_rad_s
+    cfg = np.zeros((nv, closed_loop.FDIR_CONFIG_SIZE))
+    cfg[:, closed_loop.FD_ON] = flags
+    cfg[:, closed_loop.FD_RATE_NOISE] = rate_noise
+    cfg[:, closed_loop.FD_NIS_MAX] = fdir_kernels.star_nis_threshold()
+    cfg[:, closed_loop.FD_N_SIGMA] = n_sigma
+    return cfg
+
+
+class ProgramSamples(NamedTuple):
+    """The programmed motion and its environment at sample times (engine frames and units)."""
+
+    q_ib: np.ndarray
+    omega_b: np.ndarray
+    omega_dot_b: np.ndarray
+    observing: np.ndarray
+    r_eci_m: np.ndarray
+    b_eci_t: np.ndarray
+
+
+def program_along(s: Scenario, t_s: np.ndarray) -> ProgramSamples:
+    """Λ^p, ω^p, ω̇^p, observing flag, ECI position and field at t_s after the epoch (seed 000 §5, seed 001)."""
+    t = np.asarray(t_s, dtype=float)
+    if t.ndim != 1 or not np.all(np.isfinite(t)) or np.any(t < 0.0) or np.any(t > s.duration_s + s.control_dt_s):
+        raise ValueError(f"t_s: expected finite times within [0, duration_s = {s.duration_s}] s")
+    t0 = _epoch_unix_s(s.orbit.epoch_utc)
+    state = orbit_state(s)
+    c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
+    kind, program = _program(s, state, t0, c_pn, w_pm, dut1)
+    r, v, a = state(t0 + t)
+    q, w, wd = np.empty((t.size, 4)), np.empty((t.size, 3)), np.empty((t.size, 3))
+    obs = np.empty(t.size, dtype=bool)
+    for i, ti in enumerate(t):
+        q[i], w[i], wd[i], obs[i] = closed_loop._program_1(kind, *program, ti, t0, r[i], v[i], a[i], c_pn, dut1)
+    b = environment.magnetic_field_eci_t(r, t0 + t, s.magnetic_model)
+    return ProgramSamples(q, w, wd, obs, r, b)
+
+
+def orbit_period_s(s: Scenario) -> float:
+    """Keplerian period 2π √(a³/μ) of the scenario's orbit at its epoch, s."""
+    t0 = _epoch_unix_s(s.orbit.epoch_utc)
+    r, v, _ = orbit_state(s)(np.array([t0]))
+    rn, vn = np.linalg.norm(r[0]), np.linalg.norm(v[0])
+    sma = 1.0 / (2.0 / rn - vn * vn / orbit.MU_EARTH_M3_S2)
+    return float(2.0 * np.pi * np.sqrt(sma**3 / orbit.MU_EARTH_M3_S2))
+
+
+def turn_peak_rate(s: Scenario, route_index: int) -> float:
+    """Bound on the rate of the turn ``guidance.route[route_index]`` as compiled (seed 001 envelope), rad/s."""
+    g = s.guidance
+    if g.kind != "route" or not 0 <= route_index < len(g.route) or g.route[route_index].kind != "turn":
+        raise ValueError(f"route_index: guidance.route[{route_index}] is not a turn")
+    t0 = _epoch_unix_s(s.orbit.epoch_utc)
+    c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
+    _, (_, _, route) = _program(s, orbit_state(s), t0, c_pn, w_pm, dut1)
+    shift = 1 if g.route_start_s > 0 else 0
+    envelopes = dict(guidance.turn_envelopes(route))
+    return float(envelopes[route_index + shift].max_rate_bound_rad_s)
+
+
 class Cancelled(RuntimeError):
     """The run was cancelled through its ``cancel`` callback."""
 
@@ -183,12 +266,15 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     wheel_available: np.ndarray | None = None,
     cancel: Callable[[], bool] | None = None,
+    fdir: bool | Sequence[bool] = False,
 ) -> Trajectory:
     """Fly every variant of the scenario and return the batch trajectory (seed 000 §7 twin).
 
     ``wheel_available`` (variants × wheels, optional): which wheels the onboard allocation may use
-    from the start (a reconfigured cluster); default all. ``progress`` gets the fraction done every
-    ``PROGRESS_POLL_S``; ``cancel`` returning True stops the run and raises :class:`Cancelled`.
+    from the start (a reconfigured cluster); default all. ``fdir`` (one flag, or one per variant)
+    switches on the onboard FDIR of :mod:`sim_core.fdir`, which may drop wheels as it isolates
+    them. ``progress`` gets the fraction done every ``PROGRESS_POLL_S``; ``cancel`` returning True
+    stops the run and raises :class:`Cancelled`.
     """
     s = scenario
     start = time.perf_counter()
@@ -227,14 +313,8 @@ def simulate(
     wheel_limits = np.array([[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws],
                              [w.torque_quantum_nm for w in ws]])
     gains = DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array()
-    a = s.allocation
-    law4 = allocation.LAW_GE_DISTRIBUTION if (a.kind == "ge_explicit" and s.spacecraft.cluster.geometry == "ge") \
-        else allocation.LAW_PSEUDO_INVERSE
-    alloc = allocation.AllocationConfig(
-        law4=law4, gamma_rad=np.radians(min(s.spacecraft.cluster.gamma_deg, 44.9)), rho=a.rho,
-        mu_rho_per_s=a.mu_rho_per_s, phi_rho_per_s=a.phi_rho_per_s,
-        h_max_nms=min(w.max_momentum_nms for w in ws), l_max_am2=max(s.spacecraft.md_max_dipole_am2, 1e-9),
-    ).as_array()
+    alloc = allocation_params(s)
+    fdir_cfg = _fdir_config(s, fdir)
     avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)
     if avail.shape != (nv, nw):
         raise ValueError(f"wheel_available: expected shape ({nv}, {nw}), got {avail.shape}")
@@ -251,7 +331,7 @@ def simulate(
     est_init = (np.array(sn.gyro_bias_rad_s, dtype=float), mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S))
     shared = np.zeros(nv + 1, dtype=np.int64)
     args = (x0s, packed, wheel_limits, steps, times, program, orbit_tab, env, gains, est_init, alloc,
-            avail, faults, n_faults, seeds, rec, ev, n_ev, shared)
+            avail, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared)
     _run_watched(args, shared, n_steps, progress, cancel)
     return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)
 
@@ -294,6 +374,7 @@ def _trajectory(s: Scenario, rec, ev, n_ev, nw: int, span: float, params: PlantP
         "wheel_speed_rad_s": rec[..., w0:w0 + nw],
         "wheel_torque_cmd_nm": rec[..., w0 + nw:w0 + 2 * nw],
         "wheel_torque_nm": rec[..., w0 + 2 * nw:w0 + 3 * nw],
+        "wheel_available": rec[..., w0 + 3 * nw:w0 + 4 * nw] > 0.5,
     }
     events = [
         [(float(ev[v, i, 0]), EVENT_NAMES.get(int(ev[v, i, 1]), str(int(ev[v, i, 1]))), int(ev[v, i, 2]))
