@@ -147,6 +147,12 @@ class Dictionary:
     valid_from_utc_ns: int | None = None
     valid_until_utc_ns: int | None = None
     description: str = ""
+    satellite: str = ""
+
+    @property
+    def satellite_name(self) -> str:
+        """The spacecraft these packets come from (archive key); the dictionary name when not given."""
+        return self.satellite or self.name
 
     def time_window(self, now_utc_ns: int | None = None) -> tuple[int, int]:
         """Plausible packet times [from, until] in UTC ns; without an 'until', ingest time + FUTURE_MARGIN_NS."""
@@ -310,6 +316,7 @@ def load_yaml(path: str | Path) -> Dictionary:
         valid_from_utc_ns=parse_utc_ns(valid["from"]) if "from" in valid else None,
         valid_until_utc_ns=parse_utc_ns(valid["until"]) if "until" in valid else None,
         description=str(doc.get("description", "")),
+        satellite=str(doc.get("satellite", "")),
     )
 
 

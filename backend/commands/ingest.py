@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--dictionary", required=True,
                    help="dictionary: .yaml (ours), .xml (XTCE) or .csv (ccsdspy); a bare name means a shipped one")
     p.add_argument("--db", help="SQLAlchemy URL of the archive (default: SQLite in the data directory)")
-    p.add_argument("--satellite", help="satellite name in the archive (default: the dictionary's name)")
+    p.add_argument("--satellite", help="satellite name in the archive (default: the dictionary's 'satellite')")
     p.add_argument("--apid", type=int, help="APID of the packets of a ccsdspy CSV dictionary")
     p.add_argument("--time-code", help="secondary-header time code of XTCE/CSV dictionaries: CDS, CDS-ms, CUC-4-2")
     p.add_argument("--user", default=None, help="who uploads (default: the login name)")
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         url = args.db or Settings().resolved_database_url()
         with Archive(url) as archive:
             stored = archive.ingest_decoded(
-                args.satellite or dictionary.name,
+                args.satellite or dictionary.satellite_name,
                 decoded,
                 uploaded_by=args.user or getpass.getuser(),
                 sha256=hashlib.sha256(data).hexdigest(),

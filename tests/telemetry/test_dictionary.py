@@ -233,3 +233,10 @@ def test_xtce_with_two_layouts_for_one_apid_is_refused(tmp_path: Path) -> None:
     path.write_text(second)
     with pytest.raises(ValueError, match="APID 42 already belongs to THERMAL"):
         load_xtce(path)
+
+
+def test_both_noaa20_layouts_name_the_same_satellite() -> None:
+    """Archive key: one spacecraft whichever layout file decoded its packets."""
+    names = {load_dictionary(n).satellite_name for n in ("noaa20_apid11_xtce.yaml", "noaa20_apid11_ccsdspy.yaml")}
+    assert names == {"NOAA-20"}
+    assert load_xtce(SHIPPED / "jpss1_geolocation_xtce_v1.xml").satellite_name == "JPSS_Geolocation_Packets"
