@@ -126,6 +126,8 @@ function addPlot(container, title, t, columns, labels, colours) {
     title, width: plotWidth(container), height: 170,
     cursor: { sync: { key: SYNC_KEY, setSeries: false }, drag: { x: true, y: false } },
     scales: { x: { time: true } },
+    axes: [AXIS, AXIS],
+    legend: { live: true },
     series: [{}].concat(labels.map((label, i) => ({ label, stroke: colours[i % colours.length], width: 1.2 }))),
     hooks: { setScale: [(u, key) => { if (key === "x") syncScales(u); }] },
   };
@@ -134,6 +136,7 @@ function addPlot(container, title, t, columns, labels, colours) {
   return u;
 }
 
+const AXIS = { stroke: "#c8ccd2", grid: { stroke: "#2e333b", width: 1 }, ticks: { stroke: "#2e333b" } };
 const COLOURS = ["#4aa3ff", "#ff7043", "#48c774", "#ffd54f", "#ba68c8", "#4dd0e1", "#f06292"];
 
 async function plotSelected() {
@@ -275,13 +278,18 @@ function pollWhatif(id) {
 }
 
 function summaryTable(summary) {
+  // one column per variant (nominal twin, what-if), one row per scalar metric
+  const variants = (summary && summary.variants) || [summary || {}];
   const table = document.createElement("table");
   table.id = "whatif-summary-table";
-  for (const [k, v] of Object.entries(summary || {})) {
-    if (v === null || typeof v === "object") continue;
+  const head = table.createTHead().insertRow();
+  head.insertCell().textContent = "metric";
+  for (const v of variants) head.insertCell().textContent = v.variant || "run";
+  const keys = Object.keys(variants[0]).filter((k) => typeof variants[0][k] === "number");
+  for (const k of keys) {
     const tr = table.insertRow();
     tr.insertCell().textContent = k;
-    tr.insertCell().textContent = typeof v === "number" ? Number(v.toPrecision(6)) : v;
+    for (const v of variants) tr.insertCell().textContent = Number((v[k] ?? NaN).toPrecision(5));
   }
   return table;
 }
@@ -309,8 +317,8 @@ function drawWhatifOnPassAxis() {
   const rpm = 30 / Math.PI;
   const cols = [], labels = [];
   nominal.columns.forEach((c, i) => {
-    cols.push(nominal.values.map((row) => row[i] * rpm)); labels.push(`${c} nominal`);
-    cols.push(whatif.values.map((row) => row[i] * rpm)); labels.push(`${c} what-if`);
+    cols.push(nominal.values.map((row) => row[i] * rpm)); labels.push(`RW${i + 1} nominal`);
+    cols.push(whatif.values.map((row) => row[i] * rpm)); labels.push(`RW${i + 1} what-if`);
   });
   const n = Math.min(t.length, whatif.t_s.length);
   const div = document.createElement("div");
