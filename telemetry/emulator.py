@@ -17,11 +17,13 @@ Where the values come from (reference dictionary ``reference_satellite.yaml``):
   the scenario's noise figures and a random stream of their own; the hidden schedule's sensor
   faults act on them as in the engine (gain, bias, drift, noise, frozen; a failed sensor sends zeros);
 * wheel motor current i = M / K_m (seed 002 eq 2) from the torque the wheel delivers;
-* mode from the guidance programme (PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise).
+* mode from the guidance programme (PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise)
+  and FAULT after the onboard FDIR's ``mode_change`` to the fault mode;
+* FDIR flags from the onboard FDIR's ``fault_isolated`` events (:mod:`sim_core.fdir` arguments).
 
-A hidden fault stays hidden: the engine has no onboard FDIR, so the FDIR flags stay OK and the
-engine's fault onset/cleared events (ground truth, not something the satellite knows) are not sent;
-the fault shows only through its effects (a failed wheel stops accelerating and draws no current).
+A hidden fault stays hidden: the engine's fault onset/cleared events (ground truth of the
+injection, not something the satellite knows) are never sent; the fault shows through its effects
+(a failed wheel stops accelerating and draws no current) and through what onboard FDIR reports.
 """
 
 from __future__ import annotations
@@ -36,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import ValidationError
 
-from sim_core import environment, frames, quaternion, scenario_library, sensors
+from sim_core import environment, fdir, frames, modes, quaternion, scenario_library, sensors
+from sim_core.closed_loop import TARGET_CODES
 from sim_core.engine import orbit_state, simulate
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec
 from sim_core.trajectory import EVENT_NAMES, Trajectory
@@ -77,6 +80,10 @@ WHEEL_TORQUE_CONSTANT_NM_A = 0.1  # K_m: the HR12-class 0.2 N·m maximum draws 2
 STAR_TRACKER_TRACKING_RATE_RAD_S = math.radians(2.0)  # validity is not telemetered; a typical tracking limit
 REWIND_S = 1.0  # on reconnect, re-send what went out in the last second (socket buffers lost with the link)
 RETRY_S = 0.5
+MODE_LABELS = {modes.MODE_RATE_DAMPING: "RATE_DAMPING", modes.MODE_SUN_SAFE: "ONE_AXIS", modes.MODE_ORF: "THREE_AXIS",
+               modes.MODE_ROUTE: "THREE_AXIS", modes.MODE_FAULT: "FAULT"}  # sim_core.modes → dictionary labels
+SENSOR_FLAGS = {"star_tracker": "fault_star_tracker", "gyro": "fault_gyro", "magnetometer": "fault_magnetometer",
+                "md_rod": "fault_md"}  # sim_core fault target → dictionary FDIR flag
 
 
 @dataclass(frozen=True)
@@ -202,20 +209,45 @@ def _turn_windows(s: Scenario) -> list[tuple[float, float]]:
     return windows
 
 
-def _mode(s: Scenario, definition: PacketDefinition, t_s: np.ndarray) -> np.ndarray:
-    """Onboard mode code per sample: PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise (seed 001 modes)."""
+def _mode(traj: Trajectory, s: Scenario, definition: PacketDefinition, t_s: np.ndarray) -> np.ndarray:
+    """Onboard mode code per sample: PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise, and the mode
+    the onboard logic announces by ``mode_change`` events from then on (seed 001 modes)."""
     codes = _codes(definition, "mode")
-    mode = np.full(t_s.shape, codes["THREE_AXIS"], dtype=np.int64)
+    programme = np.full(t_s.shape, codes["THREE_AXIS"], dtype=np.int64)
     for start, end in _turn_windows(s):
-        mode[(t_s >= start) & (t_s < end)] = codes["PROGRAM_TURN"]
+        programme[(t_s >= start) & (t_s < end)] = codes["PROGRAM_TURN"]
+    mode = programme.copy()
+    for t, name, arg in traj.events[0]:
+        if name == "mode_change":
+            label = MODE_LABELS.get(arg, "THREE_AXIS")
+            mode[t_s >= t] = programme[t_s >= t] if label == "THREE_AXIS" else codes[label]
     return mode
 
 
+def _fdir_flags(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray) -> dict[str, np.ndarray]:
+    """FDIR isolation flags per sample from the onboard FDIR's ``fault_isolated`` events (sim_core.fdir arguments)."""
+    names = [p.name for p in definition.parameters if p.name.startswith("fault_")]
+    flags = {name: np.zeros(t_s.shape, dtype=np.int64) for name in names}
+    target_names = {code: name for name, code in TARGET_CODES.items()}
+    for t, event, arg in traj.events[0]:
+        if event != "fault_isolated":
+            continue
+        if arg < fdir.SENSOR_ARG:
+            flag = f"fault_wheel_{arg + 1}"
+        else:
+            flag = SENSOR_FLAGS.get(target_names.get((arg - fdir.SENSOR_ARG) // 10, ""), "")
+        if flag in flags:
+            flags[flag][t_s >= t] = 1
+    return flags
+
+
 def _last_events(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Code and argument of the last onboard-known engine event at or before each sample (truth-only events left out)."""
-    codes = _codes(definition, "fdir_event")
+    """Code and argument of the last onboard-known engine event at or before each sample (truth-only events left out;
+    a mode change carries the dictionary's mode code)."""
+    codes, mode_codes = _codes(definition, "fdir_event"), _codes(definition, "mode")
     hidden = {EVENT_NAMES[2], EVENT_NAMES[3]}  # fault onset/cleared: ground truth of the injection
-    known = [(t, codes[name.upper()], arg) for t, name, arg in traj.events[0] if name not in hidden]
+    known = [(t, codes[name.upper()], mode_codes[MODE_LABELS.get(arg, "THREE_AXIS")] if name == "mode_change" else arg)
+             for t, name, arg in traj.events[0] if name not in hidden]
     event = np.full(t_s.shape, codes["NONE"], dtype=np.int64)
     argument = np.zeros(t_s.shape, dtype=np.int64)
     if known:
@@ -329,10 +361,9 @@ def _hk_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows
         **_split("wheel_torque_cmd_nm", sr["wheel_torque_cmd_nm"], wheels),
         **_split("wheel_current_a", sr["wheel_torque_nm"] / WHEEL_TORQUE_CONSTANT_NM_A, wheels),
         **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"),
-        "mode": _mode(s, definition, t_s), "fdir_event": event, "fdir_event_argument": argument,
+        "mode": _mode(traj, s, definition, t_s), "fdir_event": event, "fdir_event_argument": argument,
+        **_fdir_flags(traj, definition, t_s),
     }
-    flags = [p.name for p in definition.parameters if p.name.startswith("fault_")]
-    values.update({name: np.zeros(t_s.shape, dtype=np.int64) for name in flags})  # no onboard FDIR in the engine
     return values
 
 

@@ -9,6 +9,7 @@ rotation invariance of |r| between ECI and ECEF, and the scenario's sensor noise
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import datetime as dt
 import time
 
@@ -18,7 +19,8 @@ import pytest
 from spacepackets.ccsds import SpacePacketHeader
 
 from backend.cli import main
-from sim_core import frames, quaternion
+from sim_core import fdir, frames, modes, quaternion
+from sim_core.closed_loop import TARGET_CODES
 from telemetry import emulator
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
@@ -203,6 +205,24 @@ def test_hidden_sensor_faults_show_in_the_raw_sensor_telemetry(nominal, dictiona
     np.testing.assert_allclose(step, expected, atol=1e-9)  # float32 rounding of rates below 0.03 rad/s
     q_st = np.stack([hk[f"q_st_ib_{k}"] for k in range(4)], -1)
     assert np.all(q_st[t_s >= failure_s] == 0.0) and np.all(np.linalg.norm(q_st[t_s < failure_s], axis=-1) > 0.99)
+
+
+def test_onboard_fdir_events_set_the_isolation_flags_and_fault_mode(nominal, dictionary) -> None:
+    traj, _, _ = nominal
+    gyro_axis_1 = fdir.SENSOR_ARG + 10 * TARGET_CODES["gyro"] + 1  # sim_core.fdir's sensor argument
+    events = [(100.0, "fault_detected", 2), (100.5, "fault_isolated", 2), (101.0, "reconfigured", 0b1011),
+              (200.0, "fault_isolated", gyro_axis_1), (300.0, "mode_change", modes.MODE_FAULT)]
+    reported = dataclasses.replace(traj, events=[events])
+    s = emulator.satellite_scenario()
+    hk = emulator.packet_series(reported, s, dictionary)["ACS_HK"].values
+    t_s = traj.t_s[: len(hk["mode"])]
+    np.testing.assert_array_equal(hk["fault_wheel_3"], t_s >= 100.5)
+    np.testing.assert_array_equal(hk["fault_gyro"], t_s >= 200.0)
+    assert not any(hk[f"fault_wheel_{k}"].any() for k in (1, 2, 4)) and not hk["fault_star_tracker"].any()
+    assert np.all(hk["mode"][t_s >= 300.0] == 5) and not np.any(hk["mode"][t_s < 300.0] == 5)  # FAULT
+    codes = {t: (e, a) for t, e, a in zip(t_s, hk["fdir_event"], hk["fdir_event_argument"])}
+    assert codes[99.75] == (0, 0) and codes[100.75] == (5, 2) and codes[101.0] == (6, 0b1011)
+    assert codes[250.0] == (5, gyro_axis_1) and codes[300.0] == (1, 5)  # MODE_CHANGE to the dictionary's FAULT
 
 
 def drain(subscriber) -> list:
