@@ -176,9 +176,9 @@ class ControllerSpec(_Spec):
     """Control law: seed 000 digital law (7)–(8), MRP feedback (peer), or quaternion PD (seed 002)."""
 
     kind: Literal["seed000", "mrp_feedback", "quaternion_pd"] = "seed000"
-    gain_k_per_s2: Positive = 4.0e-3  # control.DigitalLawGains: crossover ≈ 0.12 rad/s at T_u = 2 s
-    tau1_s: Positive = 30.0
-    tau2_s: Positive = 2.5
+    gain_k_per_s2: Positive = 0.01  # control.DigitalLawGains: crossover ≈ 0.2 rad/s at T_u = 2 s, 13 dB / 50°
+    tau1_s: Positive = 20.0
+    tau2_s: Positive = 1.25
     mrp_k_nm: Positive = 2.7
     mrp_p_nms: Positive = 9.0
     pd_kp_nm: Positive = 1.0
