@@ -6,6 +6,8 @@ First start creates an admin token (stored hashed) and prints it once; later sta
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--database-url", help="SQLAlchemy URL (default SQLite in the data directory)")
     p.add_argument("--no-auth", action="store_true", help="disable tokens (local development only)")
     p.add_argument("--job-workers", type=int, help="simulation worker processes (default 1)")
+    p.add_argument("--no-emulator", action="store_true", help="do not start the demo spacecraft emulator")
+    p.add_argument("--emulator-scenario", default="somov-ge4-scan", help="scenario the demo satellite flies")
     p.set_defaults(handler=run)
 
 
@@ -42,6 +46,21 @@ def first_admin_token(services: Any) -> str | None:
     return token
 
 
+HIDDEN_FAULTS = ["wheel:2:failure@1500"]  # the demo satellite's secret: found from telemetry, not printed
+
+
+def start_emulator(settings: Any, scenario: str) -> subprocess.Popen | None:
+    """The demo satellite (``acs-twin emulate``) streaming into the live listener, logging to data_dir."""
+    if not settings.live_enabled or settings.telemetry_port == 0:
+        return None
+    log = (settings.data_dir / "emulator.log").open("ab")
+    command = [sys.executable, "-m", "backend", "emulate", "--scenario", scenario, "--host", settings.host,
+               "--port", str(settings.telemetry_port), "--rate", "1", "--start-utc", "now"]
+    for fault in HIDDEN_FAULTS:
+        command += ["--fault", fault]
+    return subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+
+
 def run(args: argparse.Namespace) -> int:
     """Build the app from Settings, print URLs (and a first admin token), serve until stopped."""
     import uvicorn
@@ -60,6 +79,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"  admin token (shown once, stored hashed): {token}")
     elif not settings.auth_enabled:
         print("  auth DISABLED: every caller is admin")
+    emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario)
+    if emulator is not None:
+        print(f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
+              f"tcp://{settings.host}:{settings.telemetry_port}, log {settings.data_dir / 'emulator.log'}")
     print("", flush=True)
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning")
+    try:
+        uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning")
+    finally:
+        if emulator is not None:
+            emulator.terminate()
+            emulator.wait(10)
     return 0

@@ -7,6 +7,7 @@ import socket
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
@@ -17,6 +18,7 @@ from backend.app import create_app
 from backend.auth import Role
 from tests.backend.conftest import bearer, make_settings
 
+QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
 LIVE_ARCHIVE_TIMEOUT_S = 10.0  # archive flushes every 0.5 s; margin for a loaded machine
 PUBLISH_BUDGET_S = 1.0  # 100k publishes to a stalled subscriber: must not wait on it (≈ 0.1 s here)
 
@@ -128,3 +130,38 @@ def test_packets_streamed_over_tcp_are_archived_and_reach_a_websocket_subscriber
         samples = client.get("/api/v1/parameters/q_ib_0/samples", headers=bearer(viewer)).json()
     assert seen == n_sent and samples["total_points"] == n_sent
     assert not client.app.state.services.telemetry.live_stats()  # the ingest process has stopped
+
+
+EMULATED_S = 60.0  # one minute of the demo satellite: 240 ACS_HK packets at T_q = 0.25 s
+
+
+def test_emulated_satellite_over_tcp_reaches_archive_and_websocket(tmp_path: Path, database_url: str) -> None:
+    """The issue's end-to-end path: emulator → TCP → ingest process → archive, and → WebSocket subscriber."""
+    from telemetry import emulator
+
+    settings = make_settings(tmp_path, database_url, live_enabled=True)
+    _, series, stream = emulator.emulate("somov-ge4-scan", [], EMULATED_S, "2026-03-20T00:00:00Z")
+    sent_q0 = np.asarray(series["ACS_HK"].values["q_est_ib_0"], dtype=float)
+    with TestClient(create_app(settings)) as client:
+        viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
+        port = client.get("/api/v1/health").json()["live"]["port"]
+        hub = client.app.state.services.hub
+        with client.websocket_connect(f"/api/v1/ws?token={viewer}") as ws:
+            ws.send_json({"op": "subscribe", "topics": ["parameters/q_est_ib_0"]})
+            deadline = time.monotonic() + 2.0
+            while not hub.wants_any("parameters/q_est_ib_0"):
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            asyncio.run(emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3))
+            live: list[float] = []
+            while len(live) < sent_q0.size:
+                for item in ws.receive_json()["items"]:
+                    live.extend(item["data"]["values"])
+        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
+        while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < len(stream):
+            assert time.monotonic() < deadline, "emulated packets never reached the archive"
+            time.sleep(0.1)
+        archived = client.get(f"/api/v1/parameters/q_est_ib_0/samples?satellite={settings.live_satellite}"
+                              f"&max_points={sent_q0.size}", headers=bearer(viewer)).json()
+    assert np.allclose(live, sent_q0, atol=QUATERNION_RESOLUTION)
+    assert np.allclose(archived["values"], sent_q0, atol=QUATERNION_RESOLUTION)
