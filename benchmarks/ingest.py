@@ -216,7 +216,6 @@ async def live_run(seconds: float, workdir: Path) -> tuple[np.ndarray, int, int,
 
 def bench_live(seconds: float, workdir: Path) -> None:
     """Print live-stream latency percentiles and counts."""
-    decode_stream(b"", live_definition())
     cpu_start = time.process_time()
     latency_ms, received, dropped, archived = asyncio.run(live_run(seconds, workdir))
     cpu_share = (time.process_time() - cpu_start) / seconds

@@ -16,13 +16,24 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+import numpy as np
+
 from telemetry.archive import Archive, PacketBatch
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import Dictionary
+from telemetry.encoding import encode_packets
 from telemetry.ingest_report import SampleBatch
 from telemetry.limits import LimitSet
 
-__all__ = ["LiveMessage", "LiveStats", "Subscriber", "LiveStream", "complete_prefix", "DECODE_INTERVAL_S"]
+__all__ = [
+    "LiveMessage",
+    "LiveStats",
+    "Subscriber",
+    "LiveStream",
+    "complete_prefix",
+    "warm_decoder",
+    "DECODE_INTERVAL_S",
+]
 
 PRIMARY_HEADER_OCTETS = 6
 IDLE_APID = 0x7FF  # idle packets, CCSDS 133.0-B-2 §4.1.3.3.4.4
@@ -74,6 +85,23 @@ def _noise_to_release(end: int, size: int, packet_octets: Mapping[int, int]) -> 
     """Hand over noise once it is longer than any packet (keeping a tail that may start a header)."""
     longest = max(packet_octets.values(), default=0)
     return size - PRIMARY_HEADER_OCTETS if size - end > longest + PRIMARY_HEADER_OCTETS else end
+
+
+def warm_decoder(dictionary: Dictionary) -> None:
+    """Decode one zero-valued packet of each type so compiled kernels exist before data arrives.
+
+    A first decode compiles (or loads) numba kernels: seconds on a busy machine, during which a
+    live stream would pile up behind the listener.
+    """
+    now_ns = np.array([time.time_ns()], dtype=np.int64)
+    parts = []
+    for packet in dictionary.packets.values():
+        try:
+            zeros = {p.name: np.zeros(1) for p in packet.parameters}
+            parts.append(encode_packets(packet, now_ns, np.zeros(1, dtype=np.int64), zeros).tobytes())
+        except ValueError:  # no time code, or zero outside a calibrated range: nothing to warm
+            continue
+    decode_stream(b"".join(parts), dictionary)
 
 
 @dataclass(frozen=True)
@@ -174,7 +202,8 @@ class LiveStream:
         self._subscribers.remove(subscriber)
 
     async def start(self, host: str = "127.0.0.1", port: int = 0) -> int:
-        """Listen on host:port (0 = any free port); returns the bound port."""
+        """Warm the decoder, then listen on host:port (0 = any free port); returns the bound port."""
+        await asyncio.to_thread(warm_decoder, self._dictionary)
         self._server = await asyncio.start_server(self._handle, host, port)
         if self._archive is not None:
             self._flusher = asyncio.create_task(self._flush_periodically())
