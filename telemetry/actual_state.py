@@ -22,7 +22,8 @@ from telemetry.ccsds import NS_PER_S
 from telemetry.dictionary import parse_utc_ns
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["ActualTrack", "actual_track", "fit_circular_orbit", "aligned_scenario", "HK_SERIES", "GPS_SERIES"]
+__all__ = ["ActualTrack", "actual_track", "fit_circular_orbit", "aligned_scenario", "aligned_wheel_available",
+           "HK_SERIES", "WHEEL_SERIES", "GPS_SERIES"]
 
 # sim_core series name → (dictionary parameter prefix, component suffixes); None = a scalar parameter.
 HK_SERIES = {
@@ -36,7 +37,7 @@ HK_SERIES = {
     "mode": ("mode", None),
     "attitude_error_rad": ("attitude_error_rad", None),
 }
-WHEEL_SERIES = ("wheel_speed_rad_s", "wheel_torque_cmd_nm", "wheel_current_a")  # suffixes _1 … _n
+WHEEL_SERIES = ("wheel_speed_rad_s", "wheel_torque_cmd_nm", "wheel_current_a", "fault_wheel")  # suffixes _1 … _n
 GPS_SERIES = {"r_ecef_m": ("r_ecef_m", "xyz"), "v_ecef_m_s": ("v_ecef_m_s", "xyz")}
 MIN_GPS_FIXES = 3  # a plane and a phase need at least three non-collinear positions
 
@@ -179,3 +180,8 @@ def aligned_scenario(
     data["duration_s"] = duration_s
     data["variants"] = [VariantSpec(name="twin", faults=list(faults)).model_dump()]
     return Scenario.model_validate(data)
+
+
+def aligned_wheel_available(track: ActualTrack, t_align_utc_ns: int) -> np.ndarray:
+    """(1, n_wheels) wheels the onboard FDIR had not isolated at the telemetry instant (``simulate(wheel_available=)``)."""
+    return track.series["fault_wheel"][track.at(t_align_utc_ns)][None, :] == 0.0

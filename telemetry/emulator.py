@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import ValidationError
 
-from sim_core import environment, fdir, frames, modes, quaternion, scenario_library, sensors
+from sim_core import environment, fdir as onboard_fdir, frames, modes, quaternion, scenario_library, sensors
 from sim_core.closed_loop import TARGET_CODES
 from sim_core.engine import orbit_state, simulate
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec
@@ -232,10 +232,10 @@ def _fdir_flags(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray)
     for t, event, arg in traj.events[0]:
         if event != "fault_isolated":
             continue
-        if arg < fdir.SENSOR_ARG:
+        if arg < onboard_fdir.SENSOR_ARG:
             flag = f"fault_wheel_{arg + 1}"
         else:
-            flag = SENSOR_FLAGS.get(target_names.get((arg - fdir.SENSOR_ARG) // 10, ""), "")
+            flag = SENSOR_FLAGS.get(target_names.get((arg - onboard_fdir.SENSOR_ARG) // 10, ""), "")
         if flag in flags:
             flags[flag][t_s >= t] = 1
     return flags
@@ -451,14 +451,15 @@ def emulate(
     start_utc: str | None = None,
     dictionary: Dictionary | None = None,
     seed: int = 0,
+    fdir: bool = True,
 ) -> tuple[Trajectory, dict[str, PacketSeries], PacketStream]:
-    """Fly the satellite (hidden faults included) and packetise its telemetry: trajectory, values, packets."""
+    """Fly the satellite (hidden faults included, onboard FDIR on) and packetise its telemetry: trajectory, values, packets."""
     dictionary = dictionary or load_dictionary(REFERENCE_DICTIONARY)
     hk = next((p for p in dictionary.packets.values() if p.name == HK_PACKET), None)
     if hk is None or hk.period_s is None:
         raise ValueError(f"dictionary: needs packet {HK_PACKET} with a period_s")
     s = satellite_scenario(scenario, faults, duration_s, start_utc, hk.period_s)
-    traj = simulate(s)
+    traj = simulate(s, fdir=fdir)
     series = packet_series(traj, s, dictionary, seed)
     return traj, series, encode_stream(series)
 

@@ -13,7 +13,7 @@ import pytest
 from sim_core import frames, orbit, quaternion, scenario_library
 from sim_core.engine import simulate
 from telemetry import emulator
-from telemetry.actual_state import actual_track, aligned_scenario, fit_circular_orbit
+from telemetry.actual_state import actual_track, aligned_scenario, aligned_wheel_available, fit_circular_orbit
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 
@@ -91,7 +91,8 @@ def _twin_vs_telemetry(satellite, hypothesis: list) -> tuple[np.ndarray, np.ndar
     _, _, batches = satellite
     track = actual_track(batches)
     t_align = int(track.t_utc_ns[0]) + int(ALIGN_S * NS)
-    twin = simulate(aligned_scenario(scenario_library.get("somov-ge4-scan"), track, t_align, TWIN_S, hypothesis))
+    twin_scenario = aligned_scenario(scenario_library.get("somov-ge4-scan"), track, t_align, TWIN_S, hypothesis)
+    twin = simulate(twin_scenario, wheel_available=aligned_wheel_available(track, t_align), fdir=True)
     rows = track.at(t_align) + np.arange(twin.t_s.shape[0])
     wheels = np.abs(twin["wheel_speed_rad_s"][0] - track.series["wheel_speed_rad_s"][rows])
 
@@ -115,6 +116,17 @@ def test_nominal_twin_departs_from_a_satellite_with_a_hidden_wheel_failure(satel
     before = int((FAILURE_ONSET_S - ALIGN_S) / 0.25)
     assert wheels[:before].max() < TWIN_WHEEL_TOL_RAD_S  # same flight until the wheel fails
     assert wheels[before:].max() > DIVERGED_WHEEL_RAD_S
+
+
+def test_twin_starts_with_the_wheels_onboard_fdir_had_isolated(satellite) -> None:
+    _, _, batches = satellite
+    track = actual_track(batches)
+    t0 = int(track.t_utc_ns[0])
+    before, after = aligned_wheel_available(track, t0 + 300 * NS), aligned_wheel_available(track, t0 + 400 * NS)
+    expected_after = np.ones((1, 4), dtype=bool)
+    expected_after[0, FAILED_WHEEL] = False
+    np.testing.assert_array_equal(before, np.ones((1, 4), dtype=bool))
+    np.testing.assert_array_equal(after, expected_after)
 
 
 def test_alignment_inside_a_turn_or_off_the_sample_grid_is_refused(satellite) -> None:

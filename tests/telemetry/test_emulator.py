@@ -28,6 +28,7 @@ from telemetry.live import LiveStream
 
 FAILED_WHEEL = 1  # sim_core index: the dictionary's wheel_*_2
 FAILURE_ONSET_S = 350.0  # during the observing hold, before the 20° turn (420–520 s)
+FDIR_LATENCY_S = (1 + fdir.CONFIRM_PERIODS) * 2.0  # sim_core.fdir: detected within one T_u = 2 s, then confirmed
 ARCSEC = np.pi / 180.0 / 3600.0
 FLOAT32_REL = 2.0**-23  # one unit in the last place of an IEEE 754 binary32 mantissa
 NOISE_STD_REL_TOL = 0.10  # 3,600 samples estimate a standard deviation to ~1.2 % (1σ); 10 % is > 8σ
@@ -169,7 +170,7 @@ def test_mode_reports_the_scheduled_turn_of_the_route(nominal, decoded) -> None:
     assert np.all(hk.values["mode"][turn] == 4) and np.all(hk.values["mode"][~turn] == 3)  # PROGRAM_TURN, THREE_AXIS
 
 
-def test_hidden_wheel_failure_shows_in_wheel_speed_telemetry(nominal, wheel_failure, dictionary) -> None:
+def test_hidden_wheel_failure_shows_in_wheel_speed_telemetry_and_onboard_fdir_flags(nominal, wheel_failure, dictionary) -> None:
     batches = {}
     for label, (_, _, stream) in (("nominal", nominal), ("failed", wheel_failure)):
         batches[label] = {b.packet: b for b in decode_stream(stream.data, dictionary).batches}["ACS_HK"]
@@ -182,8 +183,11 @@ def test_hidden_wheel_failure_shows_in_wheel_speed_telemetry(nominal, wheel_fail
     nominal_swing = np.ptp(batches["nominal"].values[speed][after])
     assert np.ptp(failed_speed) <= np.pi / 120.0 < 0.01 * nominal_swing  # frozen to one 0.25 rpm count
     assert np.all(batches["failed"].values[f"wheel_current_a_{FAILED_WHEEL + 1}"][after] == 0.0)
-    flags = [n for n in batches["failed"].values if n.startswith("fault_")]
-    assert all(np.all(batches["failed"].values[n] == 0) for n in flags)  # hidden: no onboard FDIR flag
+    isolated = batches["failed"].values[f"fault_wheel_{FAILED_WHEEL + 1}"]
+    first = t_s[np.argmax(isolated > 0)]
+    assert np.all(isolated[t_s >= first] == 1) and FAILURE_ONSET_S < first <= FAILURE_ONSET_S + FDIR_LATENCY_S
+    others = [n for n in batches["failed"].values if n.startswith("fault_") and n != f"fault_wheel_{FAILED_WHEEL + 1}"]
+    assert all(np.all(batches["failed"].values[n] == 0) for n in others)
     assert not np.any(batches["failed"].values["fdir_event"] == 2)  # FAULT_ONSET is ground truth, never sent
 
 
