@@ -372,8 +372,8 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
     """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them.
 
     A dictionary packet that fits at p (known APID, its length, CRC where defined) is taken when its
-    CRC confirms it or the next octets start another well-formed packet (or the data ends); an
-    unconfirmed one is cut short (truncated) at the first packet that fits inside it. Anything else
+    CRC confirms it or another dictionary packet fits right after it (or the data ends); an
+    unconfirmed one is cut short (truncated) at the first packet that fits inside it, else taken. Anything else
     (unknown APIDs included: their length field is never trusted, so garbage cannot hide packets)
     is quarantined up to the next octet where a dictionary packet fits; an idle packet spanning
     exactly that stretch is counted as idle.
@@ -389,7 +389,7 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
             apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
             size = lengths[apid]
             q = p + size
-            if not (crc[apid] or q == n or _well_formed(buf, q)):
+            if not (crc[apid] or q == n or _header_fits(buf, q, lengths, crc, table)):
                 q = _next_fit(buf, p + 1, p + size, lengths, crc, table)
             offsets[k], sizes[k] = p, q - p
             codes[k] = _OK if q == p + size else _TRUNCATED
@@ -419,7 +419,7 @@ def frame_stream(
     """Split a mixed-APID packet stream by its length fields (CCSDS 133.0-B-2 §4.1.3.5), resynchronising on damage.
 
     A packet is taken when its version is 0, its APID is known, its length is the dictionary's and
-    its CRC holds (or, without a CRC, a well-formed packet or the end of data follows it). Damaged
+    its CRC holds (or, without a CRC, no other packet starts inside it before its end). Damaged
     stretches become quarantined segments and the scan resumes where a dictionary packet fits.
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data

@@ -3,17 +3,22 @@
 Properties: the pipeline raises nothing on any input and reports only documented reasons; the
 segments framing returns tile the input exactly; and with CRC-protected packets, every packet left
 intact around corruptions (bit flips, inserted bytes, truncations, deletions) is recovered byte-exact
-while no corrupted one is accepted — a CRC-16 detects every single-bit error (ECSS-E-ST-70-41C §B.1).
+while no corrupted one is accepted — a CRC-16 detects every single-bit error (ECSS-E-ST-70-41C §B.1);
+without a CRC (real NOAA-20 packets) every packet left whole around cut and inserted bytes is recovered.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from telemetry import ccsds
 from telemetry.decoding import decode_stream
+from telemetry.dictionary import load_dictionary
 from telemetry.ingest_report import REASONS
 from tests.telemetry.packet_streams import NOW_UTC_NS, packets, reference
 
@@ -88,3 +93,38 @@ def test_intact_packets_around_corrupt_ones_are_all_recovered(corruptions: list,
     # noise can, by chance, restore a truncated tail)
     assert all(r in stream for r in accepted - kept)
     assert {q.reason for q in result.report.quarantined} <= set(REASONS)
+
+
+NOAA_FILE = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
+NOAA_OCTETS = 71
+NOAA_DICTIONARY = load_dictionary("noaa20_apid11_xtce.yaml")
+
+
+@FUZZ
+@given(st.lists(corruption.filter(lambda c: c[0] != "flip"), max_size=6), st.integers(0, 7_100))
+def test_without_crc_real_packets_around_cut_and_inserted_bytes_are_recovered(
+    noaa_rows: list[bytes], corruptions: list, start: int
+) -> None:
+    """NOAA-20 has no CRC: a flipped payload bit is undetectable, but framing alone must still recover
+    every packet left whole around insertions, truncations and deletions."""
+    rows = noaa_rows[start : start + 30]
+    pieces, noise, intact = list(rows), [b""] * len(rows), set(range(len(rows)))
+    for kind, where, extra in corruptions:
+        i = where % len(rows)
+        if kind == "insert":
+            noise[i] = extra + noise[i]
+        elif i in intact:
+            intact.discard(i)
+            pieces[i] = pieces[i][: where % NOAA_OCTETS] if kind == "truncate" else b""
+    stream = b"".join(n + p for n, p in zip(noise, pieces))
+    result = decode_stream(stream, NOAA_DICTIONARY)
+    accepted = {r.tobytes() for b in result.batches for r in b.packets}
+    assert {rows[i] for i in intact} <= accepted
+
+
+
+@pytest.fixture(scope="module")
+def noaa_rows(shared_data: Path) -> list[bytes]:
+    """The 7,200 real NOAA-20 packets, one bytes object each."""
+    raw = (shared_data / NOAA_FILE).read_bytes()
+    return [raw[i : i + NOAA_OCTETS] for i in range(0, len(raw), NOAA_OCTETS)]
