@@ -134,8 +134,13 @@ class Archive:
             raise ValueError(f"station: no ground station named {name!r}")
         return StationRecord(**row._mapping)
 
-    def add_tle(self, satellite: str, line1: str, line2: str, epoch_ns: int) -> int:
-        """Store a TLE of ``satellite`` (idempotent on its epoch); returns its id."""
+    def add_tle(self, satellite: str, line1: str, line2: str, epoch_ns: int | None = None) -> int:
+        """Store a validated TLE of ``satellite`` (idempotent on its epoch, read from it if not given)."""
+        from sim_core import orbit  # imported on use: SGP4 and numba are not needed to read the archive
+
+        satrec = orbit.parse_tle(line1, line2)  # ValueError naming the TLE field
+        if epoch_ns is None:
+            epoch_ns = round(orbit.tle_epoch_unix_s(satrec) * 1e9)
         sat_id = self.satellite_id(satellite)
         with self._writer.begin() as conn:
             found = conn.execute(
@@ -508,6 +513,10 @@ class Archive:
         ids = []
         with self._writer.begin() as conn:
             for aos_ns, los_ns, tmax_ns, max_el_deg in passes:
+                if not aos_ns <= tmax_ns <= los_ns:
+                    raise ValueError(
+                        f"passes: need aos_ns <= max_elevation_ns <= los_ns, got {aos_ns, tmax_ns, los_ns}"
+                    )
                 found = conn.execute(
                     select(PASS.c.id).where(
                         PASS.c.satellite_id == sat_id, PASS.c.station_id == station_id, PASS.c.aos_ns == int(aos_ns)

@@ -82,6 +82,21 @@ def test_station_record_window_gives_the_same_passes(archive: Archive, shared_da
     assert ours.aos_ns[0] >= START_NS and ours.los_ns[-1] <= end_ns
 
 
+def test_tles_are_validated_and_the_newest_before_a_time_is_found(archive: Archive, shared_data: Path) -> None:
+    lines = (shared_data / "tle" / "real_sso_smallsats.tle").read_text().splitlines()
+    older, newer = [(lines[k + 1], lines[k + 2]) for k, line in enumerate(lines) if line.startswith("NOAA 20")]
+    older_id = archive.add_tle("NOAA-20", *older)
+    newer_id = archive.add_tle("NOAA-20", *newer)
+    assert archive.add_tle("NOAA-20", *older) == older_id  # idempotent on the epoch
+    assert archive.latest_tle("NOAA-20")[0] == newer_id
+    assert archive.latest_tle("NOAA-20", before_ns=START_NS)[1:] == older  # 2021-03-07 is before the newer epoch
+    with pytest.raises(ValueError, match="checksum"):
+        archive.add_tle("NOAA-20", older[0][:-1] + "0", older[1])
+    archive.add_ground_station("Svalbard", *STATIONS["Svalbard"])
+    with pytest.raises(ValueError, match="passes"):
+        archive.save_passes("NOAA-20", "Svalbard", [(START_NS + 10, START_NS, START_NS + 5, 10.0)])
+
+
 def test_assign_to_passes_is_inclusive_and_minus_one_outside() -> None:
     aos, los = np.array([10, 100]), np.array([20, 150])
     t = np.array([5, 10, 15, 20, 21, 99, 100, 150, 151])
