@@ -177,7 +177,8 @@ def satellite_scenario(
         return Scenario.model_validate(data)
     except ValidationError as exc:
         err = exc.errors()[0]
-        raise ValueError(f"scenario.{'.'.join(str(x) for x in err['loc'])}: {err['msg']}") from None
+        where = ".".join(["scenario", *(str(x) for x in err["loc"])])
+        raise ValueError(f"{where}: {err['msg'].removeprefix('Value error, ')} (telemetry sampled every {output_dt_s} s)") from None
 
 
 def _stride(definition: PacketDefinition, output_dt_s: float) -> int:
@@ -414,6 +415,10 @@ def packet_series(traj: Trajectory, s: Scenario, dictionary: Dictionary, seed: i
         raise ValueError(f"dictionary: the emulator needs packets {sorted(missing)} of the reference satellite")
     output_dt = float(traj.t_s[1] - traj.t_s[0]) if traj.t_s.shape[0] > 1 else s.output_dt_s
     epoch_ns = int(round(traj.extra["epoch_unix_s"] * NS_PER_S))
+    n_wheels = sum(1 for p in packets[HK_PACKET].parameters if p.name.startswith("wheel_speed_rad_s_"))
+    if n_wheels != traj.series["wheel_speed_rad_s"].shape[-1]:
+        raise ValueError(f"scenario.spacecraft.cluster.wheels: the dictionary carries {n_wheels} wheels, the scenario "
+                         f"flies {traj.series['wheel_speed_rad_s'].shape[-1]}")
     rng = np.random.default_rng(np.random.SeedSequence([s.seed, seed, EMULATOR_STREAM]))
     out = {}
     for name, build in ((HK_PACKET, _hk_values), (GPS_PACKET, _gps_values)):

@@ -363,6 +363,10 @@ def test_bad_fault_and_scenario_raise_value_errors_naming_the_field() -> None:
         emulator.satellite_scenario("nope")
     with pytest.raises(ValueError, match="faults.index"):
         emulator.satellite_scenario(faults=[emulator.parse_fault("wheel:7:failure@1")])
+    with pytest.raises(ValueError, match="scenario: output_dt_s: must be a whole multiple"):
+        emulator.satellite_scenario("peer-basilisk-rw4")  # RK4 at 0.1 s cannot sample at T_q = 0.25 s
+    with pytest.raises(ValueError, match="cluster.wheels: the dictionary carries 4 wheels, the scenario flies 3"):
+        emulator.emulate("aist-scheduled-turn", duration_s=1.0)
     with pytest.raises(ValueError, match="rate"):
         asyncio.run(emulator.send_stream(emulator.PacketStream(b"", np.zeros(0), np.zeros(0), np.zeros(0)), rate=0.0))
 
