@@ -1,0 +1,119 @@
+"""In a real browser (Debian chromium, headless, software WebGL): each monitor paints a globe, two
+monitors connected at once stay in step when the clock moves, and the operator dashboard served with
+the real backend logs in, lists the NOAA-20 pass with its completeness and runs a what-if to the end."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from frontend.twin_panels import format_utc
+
+pytestmark = pytest.mark.browser
+
+PAINT_TIMEOUT_S = 30.0
+EARTH_SHARE_RANGE = (0.10, 0.80)  # whole-Earth preset: the disc covers ~40 % of the scene area
+BACKGROUND_DELTA = 24  # a pixel belongs to the picture if a channel differs this much from the corner
+WHATIF_TIMEOUT_MS = 180_000
+UTC_PATTERN = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z$"
+SCENE_FRACTION = 0.62  # left part of the page: the control panel floats on the right
+
+
+def _displayed_utc(page) -> str | None:
+    return page.evaluate(
+        "(p) => Array.from(document.querySelectorAll('input')).map(i => i.value).find(v => new RegExp(p).test(v))",
+        UTC_PATTERN)
+
+
+def _wait_for(predicate, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.2)
+
+
+def _earth_share(png_path) -> float:
+    img = np.asarray(Image.open(png_path).convert("RGB"), dtype=int)
+    scene = img[:, : int(img.shape[1] * SCENE_FRACTION)]
+    corner = scene[5, 5]
+    return float(np.mean(np.max(np.abs(scene - corner), axis=-1) > BACKGROUND_DELTA))
+
+
+@pytest.mark.parametrize("role", ["actual", "simulated", "overlay"])
+def test_each_monitor_paints_a_globe(browser, monitors, role, tmp_path):
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    try:
+        page.goto(monitors.urls()[role])
+        page.wait_for_selector("canvas", timeout=PAINT_TIMEOUT_S * 1000)
+        _wait_for(lambda: _displayed_utc(page) is not None, PAINT_TIMEOUT_S, "the monitor's panel")
+        shares = []
+
+        def painted() -> bool:
+            page.screenshot(path=tmp_path / f"{role}.png")
+            shares.append(_earth_share(tmp_path / f"{role}.png"))
+            return shares[-1] > EARTH_SHARE_RANGE[0]
+
+        _wait_for(painted, PAINT_TIMEOUT_S, f"the globe on the {role} monitor")
+        assert EARTH_SHARE_RANGE[0] < shares[-1] < EARTH_SHARE_RANGE[1], shares
+    finally:
+        page.close()
+
+
+def test_two_monitors_connected_at_once_stay_in_step_when_the_clock_moves(browser, monitors):
+    pages = [browser.new_page(viewport={"width": 1000, "height": 700}) for _ in range(2)]
+    try:
+        for page, role in zip(pages, ("actual", "simulated")):
+            page.goto(monitors.urls()[role])
+            _wait_for(lambda p=page: _displayed_utc(p) is not None, PAINT_TIMEOUT_S, f"{role} panel")
+        t0, t1 = monitors.clock.span_unix_s()
+        for target in (t0 + 61.5, t0 + 432.25):
+            monitors.clock.pause()
+            monitors.clock.seek(target)
+            expected = format_utc(target)
+            _wait_for(lambda: [_displayed_utc(p) for p in pages] == [expected] * 2, 10.0,
+                      f"both monitors at {expected}")
+    finally:
+        for page in pages:
+            page.close()
+
+
+def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_server):
+    page = browser.new_page(viewport={"width": 1920, "height": 1080})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(backend_server["base"] + "/dashboard/")
+        assert page.title().startswith("acs-twin")
+        page.fill("#token", "not-a-token")
+        page.click("#login button[type=submit]")
+        page.wait_for_selector("#status.error", timeout=10_000)
+        assert page.locator("#app").is_hidden()
+
+        page.fill("#token", backend_server["token"])
+        page.click("#login button[type=submit]")
+        row = page.wait_for_selector("#passes tbody tr[data-pass-id]", timeout=20_000)
+        expected = backend_server["passes"][0]
+        assert "Svalbard" in row.inner_text()
+        assert f"{round(100 * expected['completeness'])} %" in row.inner_text()
+
+        page.select_option("#parameter-list", ["q_ib_0", "q_ib_3"])
+        row.click()
+        page.wait_for_function("document.querySelectorAll('#plots .uplot').length === 2", timeout=20_000)
+
+        page.select_option("#scenario", "somov-ge4-scan")
+        page.check("input[value='wheel:0:failure']")
+        page.fill("#onset", "30")
+        page.fill("#duration", "120")
+        page.click("#whatif button[type=submit]")
+        page.wait_for_selector("#whatif-chart .uplot", timeout=WHATIF_TIMEOUT_MS)
+        assert re.search(r"succeeded 100 %", page.inner_text("#whatif-status"))
+        table = page.inner_text("#whatif-summary-table")
+        assert "nominal" in table and "what-if" in table and "pointing_error_rms_arcsec" in table
+        assert errors == []
+    finally:
+        page.close()
