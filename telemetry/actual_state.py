@@ -157,7 +157,7 @@ def aligned_scenario(
     faults: Sequence[FaultSpec] = (),
     gps_window_s: float = 60.0,
 ) -> Scenario:
-    """The twin of ``base`` started at a telemetry instant: epoch, orbit, attitude, rates and wheel speeds from telemetry.
+    """The twin of ``base`` started at a telemetry instant: epoch, orbit, attitude, rates, wheel speeds from telemetry.
 
     Hypothesised faults (``faults``, times from the new epoch) make the twin's one variant.
     """
@@ -183,5 +183,5 @@ def aligned_scenario(
 
 
 def aligned_wheel_available(track: ActualTrack, t_align_utc_ns: int) -> np.ndarray:
-    """(1, n_wheels) wheels the onboard FDIR had not isolated at the telemetry instant (``simulate(wheel_available=)``)."""
+    """(1, n_wheels) wheels onboard FDIR had not isolated at the telemetry instant (``simulate(wheel_available=)``)."""
     return track.series["fault_wheel"][track.at(t_align_utc_ns)][None, :] == 0.0

@@ -178,7 +178,8 @@ def satellite_scenario(
     except ValidationError as exc:
         err = exc.errors()[0]
         where = ".".join(["scenario", *(str(x) for x in err["loc"])])
-        raise ValueError(f"{where}: {err['msg'].removeprefix('Value error, ')} (telemetry sampled every {output_dt_s} s)") from None
+        message = err["msg"].removeprefix("Value error, ")
+        raise ValueError(f"{where}: {message} (telemetry sampled every {output_dt_s} s)") from None
 
 
 def _stride(definition: PacketDefinition, output_dt_s: float) -> int:
@@ -186,7 +187,9 @@ def _stride(definition: PacketDefinition, output_dt_s: float) -> int:
     period = definition.period_s or output_dt_s
     ratio = period / output_dt_s
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-        raise ValueError(f"{definition.name}.period_s: {period} s is not a whole multiple of the output step {output_dt_s} s")
+        raise ValueError(
+            f"{definition.name}.period_s: {period} s is not a whole multiple of the output step {output_dt_s} s"
+        )
     return int(round(ratio))
 
 
@@ -302,7 +305,7 @@ def _sensor_faults(sample: np.ndarray, noise: np.ndarray, t_s: np.ndarray, fault
 
 
 def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Star-tracker quaternions Λ^m = Λ ∘ Λ^n ∘ Λ^f (seed 000 §4) with the hidden faults' rotation Λ^f; zeros if failed."""
+    """Star-tracker quaternions Λ^m = Λ ∘ Λ^n ∘ Λ^f (seed 000 §4), Λ^f the hidden faults' rotation; zeros if failed."""
     q_m, _ = sensors.star_tracker(sr["q_ib"], sr["omega_b_rad_s"], s.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC,
                                   STAR_TRACKER_TRACKING_RATE_RAD_S, rng)
     e = quaternion.multiply(quaternion.conjugate(sr["q_ib"]), q_m)
@@ -330,7 +333,7 @@ def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.rando
 
 def _magnetometer(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range_t: float,
                   rng: np.random.Generator) -> np.ndarray:
-    """Magnetometer field Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG, IGRF or dipole as flown) under the hidden faults; zeros if failed."""
+    """Magnetometer field Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG, field model as flown) under the hidden faults; 0 if failed."""
     b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], _unix_s(s, t_s), s.magnetic_model)
     b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), s.sensors.magnetometer_noise_t, range_t, rng)
     b_true = quaternion.rotate(quaternion.conjugate(sr["q_ib"]), b_i)
@@ -458,7 +461,7 @@ def emulate(
     seed: int = 0,
     fdir: bool = True,
 ) -> tuple[Trajectory, dict[str, PacketSeries], PacketStream]:
-    """Fly the satellite (hidden faults included, onboard FDIR on) and packetise its telemetry: trajectory, values, packets."""
+    """Fly the satellite (hidden faults, onboard FDIR on) and packetise its telemetry: trajectory, values, packets."""
     dictionary = dictionary or load_dictionary(REFERENCE_DICTIONARY)
     hk = next((p for p in dictionary.packets.values() if p.name == HK_PACKET), None)
     if hk is None or hk.period_s is None:

@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
     p.add_argument("--fault", action="append", default=[], metavar="TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V]",
                    help="hidden fault, e.g. wheel:1:failure@600 (0-based sim_core index: wheel 1 = wheel_*_2)")
-    p.add_argument("--start-utc", help="epoch of the flight, ISO 8601 or 'now' (in real time, packets then leave at their time stamps)")
+    p.add_argument("--start-utc",
+                   help="epoch of the flight, ISO 8601 or 'now' (at rate 1 packets then leave at their time stamps)")
     p.add_argument("--attempts", type=int, help="connection attempts before giving up (default: keep trying)")
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
     p.add_argument("--out", type=Path, help="write the packets to this file (for upload) instead of only sending")

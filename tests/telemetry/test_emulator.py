@@ -83,7 +83,8 @@ def test_primary_headers_and_cuc_times_read_by_independent_parsers(nominal, dict
         definition = dictionary.packets[header.apid]
         assert (header.packet_len, header.sec_header_flag, int(header.seq_flags)) == (definition.packet_octets, True, 3)
         counts.setdefault(header.apid, 0)
-        stamp = epoch_2000 + dt.timedelta(seconds=int.from_bytes(packet[6:10], "big") + int.from_bytes(packet[10:12], "big") / 65536)
+        cuc_s = int.from_bytes(packet[6:10], "big") + int.from_bytes(packet[10:12], "big") / 65536
+        stamp = epoch_2000 + dt.timedelta(seconds=cuc_s)
         assert stamp.timestamp() * 1e9 == pytest.approx(stream.t_utc_ns[k], abs=1e3)
     assert set(counts) == {256, 257}
 
@@ -170,7 +171,7 @@ def test_mode_reports_the_scheduled_turn_of_the_route(nominal, decoded) -> None:
     assert np.all(hk.values["mode"][turn] == 4) and np.all(hk.values["mode"][~turn] == 3)  # PROGRAM_TURN, THREE_AXIS
 
 
-def test_hidden_wheel_failure_shows_in_wheel_speed_telemetry_and_onboard_fdir_flags(nominal, wheel_failure, dictionary) -> None:
+def test_hidden_wheel_failure_shows_in_wheel_speeds_and_onboard_fdir_flags(nominal, wheel_failure, dictionary) -> None:
     batches = {}
     for label, (_, _, stream) in (("nominal", nominal), ("failed", wheel_failure)):
         batches[label] = {b.packet: b for b in decode_stream(stream.data, dictionary).batches}["ACS_HK"]
