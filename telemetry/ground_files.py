@@ -34,6 +34,11 @@ def _line_starts(data: bytes) -> np.ndarray:
 
 def _to_float(cells: list, enumeration: dict[int, str]) -> tuple[np.ndarray, np.ndarray]:
     """Float values of text/number cells (None/"" = NaN) and a mask of cells that are not numbers."""
+    if not enumeration:
+        try:  # vectorised: numpy parses numeric text and numbers alike, None is NaN
+            return np.array([None if c == "" else c for c in cells], dtype=np.float64), np.zeros(len(cells), bool)
+        except (TypeError, ValueError):
+            pass  # some cell is not a number: find which, one by one
     labels = {v: float(k) for k, v in enumeration.items()}
     out = np.full(len(cells), np.nan)
     bad = np.zeros(len(cells), dtype=bool)
@@ -52,6 +57,16 @@ def _to_float(cells: list, enumeration: dict[int, str]) -> tuple[np.ndarray, np.
 
 def _to_time_ns(cells: list, column: str) -> tuple[np.ndarray, np.ndarray]:
     """UTC ns of ISO 8601 (``t_utc``) or integer-ns (``t_utc_ns``) cells, and a mask of unreadable ones."""
+    try:  # vectorised first; one unreadable cell sends the column to the per-cell path
+        if column == "t_utc_ns":
+            exact = np.array(cells, dtype=object).astype(np.int64)
+            if not np.array_equal(exact.astype(str), np.array(cells, dtype=str)):
+                raise ValueError("not integers")
+            return exact, np.zeros(len(cells), bool)
+        stamps = [c.strip().removesuffix("Z").removesuffix("+00:00") for c in cells]
+        return np.array(stamps, dtype="datetime64[ns]").astype(np.int64), np.zeros(len(cells), bool)
+    except (TypeError, ValueError, AttributeError, OverflowError):
+        pass
     out = np.zeros(len(cells), dtype=np.int64)
     bad = np.zeros(len(cells), dtype=bool)
     for i, c in enumerate(cells):
@@ -145,7 +160,8 @@ def read_ground_csv(
         report.quarantined.append(QuarantineRecord(int(row_offset[i]), int(row_length[i]), "bad_row", line=i + 2,
                                                    detail=f"{len(body[i])} fields, header has {len(header)}"))
     keep = np.setdiff1d(np.arange(len(body)), short)
-    columns = {name: [body[i][k] for i in keep] for k, name in enumerate(header)}
+    kept_rows = [body[i] for i in keep] if short else body
+    columns = dict(zip(header, (list(c) for c in zip(*kept_rows)))) if kept_rows else {name: [] for name in header}
     batches = _validate_rows(columns, row_offset[keep], row_length[keep], keep + 2, 1, dictionary, report, now_utc_ns)
     return _finish(report, batches)
 
