@@ -108,7 +108,9 @@ def test_packets_streamed_over_tcp_are_archived_and_reach_a_websocket_subscriber
     """End to end: TCP link (real NOAA-20 packets) → ingest process → archive and → WebSocket subscriber."""
     packets = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
     n_sent, packet_octets = 500, 71
-    with TestClient(create_app(make_settings(tmp_path, database_url, live_enabled=True))) as client:
+    settings = make_settings(tmp_path, database_url, live_enabled=True, live_satellite="NOAA-20",
+                             live_dictionary="noaa20_apid11_ccsdspy.yaml")
+    with TestClient(create_app(settings)) as client:
         viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
         port = client.get("/api/v1/health").json()["live"]["port"]
         hub = client.app.state.services.hub
