@@ -16,7 +16,7 @@ from sim_core import quaternion
 from telemetry import ccsds
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
 from telemetry.ingest_report import ApidSummary, DecodeResult, IngestReport, QuarantineRecord, SampleBatch
-from telemetry.validation import HEADER_PROBLEMS, header_mismatch, validate_packets
+from telemetry.validation import HEADER_PROBLEMS, INVALID_TIME, header_mismatch, validate_packets
 
 __all__ = [
     "packet_matrix",
@@ -185,7 +185,7 @@ def _decode_apid(
     t0 = ccsds.PRIMARY_HEADER_OCTETS
     t_fields = packets[:, t0 : t0 + definition.time_code.octets]
     t = ccsds.decode_time(t_fields, definition.time_code)
-    t[~ccsds.time_fields_valid(t_fields, definition.time_code)] = np.iinfo(np.int64).min  # -> time_out_of_range
+    t[~ccsds.time_fields_valid(t_fields, definition.time_code)] = INVALID_TIME  # -> time_out_of_range
     verdict = validate_packets(definition.apid, offset, headers.sequence_count, t,
                                definition.packet_octets, *window, period_s=definition.period_s)
     kept = packets[verdict.accepted]

@@ -25,12 +25,14 @@ from telemetry.ingest_report import QuarantineRecord, SequenceGap
 
 __all__ = [
     "PacketVerdict", "validate_packets", "header_mismatch", "HEADER_PROBLEMS", "ACCEPTED", "NON_MONOTONIC", "RESTART",
+    "INVALID_TIME",
 ]
 
 ACCEPTED = 0
 NON_MONOTONIC = 1
 RESTART = -1
 HALF_RANGE = SEQUENCE_COUNT_MODULUS // 2
+INVALID_TIME = np.iinfo(np.int64).min  # stamp of a packet whose time code fields are out of range
 PERIOD_TOLERANCE = 0.05  # on-board periods drift by far less than 5 % (plus 2 packets of jitter)
 HEADER_PROBLEMS = ("", "secondary header flag", "sequence flags (segmented)", "packet type (telecommand)")
 
@@ -122,7 +124,7 @@ def validate_packets(
     in_window = (t >= low) & (t <= high)
     quarantined = [
         QuarantineRecord(int(offset[i]), packet_octets, "time_out_of_range", apid, int(count[i]),
-                         detail=f"t_utc_ns={int(t[i])}")
+                         detail=f"t_utc_ns={int(t[i])}" if t[i] != INVALID_TIME else "invalid time code field")
         for i in np.flatnonzero(~in_window)
     ]
     idx = np.flatnonzero(in_window)
