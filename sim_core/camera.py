@@ -118,13 +118,26 @@ def _intersect_many(o: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _project_many(r: np.ndarray, c: np.ndarray, rays_b: np.ndarray) -> np.ndarray:
+    """Rays fanned from each origin (body rays rotated by C_eb), per-origin terms hoisted out."""
     out = np.empty((r.shape[0], rays_b.shape[0], 3))
-    d = np.empty(3)
     for k in range(r.shape[0]):
+        ox, oy, oz = r[k, 0] / _A, r[k, 1] / _A, r[k, 2] / _B
+        cc = ox * ox + oy * oy + oz * oz - 1.0
         for j in range(rays_b.shape[0]):
-            for i in range(3):
-                d[i] = c[k, i, 0] * rays_b[j, 0] + c[k, i, 1] * rays_b[j, 1] + c[k, i, 2] * rays_b[j, 2]
-            intersect_ellipsoid_1(r[k], d, out[k, j])
+            bx, by, bz = rays_b[j, 0], rays_b[j, 1], rays_b[j, 2]
+            dx = (c[k, 0, 0] * bx + c[k, 0, 1] * by + c[k, 0, 2] * bz) / _A
+            dy = (c[k, 1, 0] * bx + c[k, 1, 1] * by + c[k, 1, 2] * bz) / _A
+            dz = (c[k, 2, 0] * bx + c[k, 2, 1] * by + c[k, 2, 2] * bz) / _B
+            a = dx * dx + dy * dy + dz * dz
+            b = ox * dx + oy * dy + oz * dz
+            disc = b * b - a * cc
+            s = (-b - np.sqrt(disc)) / a if disc >= 0.0 else -1.0
+            if s < 0.0:
+                out[k, j, 0] = out[k, j, 1] = out[k, j, 2] = np.nan
+            else:
+                out[k, j, 0] = (ox + s * dx) * _A
+                out[k, j, 1] = (oy + s * dy) * _A
+                out[k, j, 2] = (oz + s * dz) * _B
     return out
 
 

@@ -1,0 +1,163 @@
+"""Twin-view benchmarks (issue 7); prints the figures.
+
+    .venv/bin/python benchmarks/viewer.py [--seconds 10] [--skip-browser]
+
+* playback: two monitors (``actual`` + ``simulated``) served by a separate process at 30 Hz while
+  replaying a somov-ge4-scan trajectory (a nominal twin against a wheel-1 failure) at x10, each
+  with a headless Debian chromium connected; the server process's CPU time (user + system, from
+  /proc) over the window divided by the wall time.  Target < 25 % of one core.
+* first paint: headless chromium opening a monitor until the globe covers > 10 % of the scene
+  (screenshot polling, so the figure is an upper bound).  Target < 3 s.
+* geometry: footprint polygon + CCD line + ground trace for 10,000 samples (sim_core.camera),
+  best of 20.  Target < 10 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                  "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+N_SAMPLES = 10_000
+PAINTED_SHARE = 0.10
+SCENE_FRACTION = 0.62
+CLOCK_TICKS_S = os.sysconf("SC_CLK_TCK")
+
+
+def twin_trajectory():
+    """A 600 s somov-ge4-scan run: variant 0 nominal (the 'telemetry'), variant 1 wheel 1 failed at 200 s."""
+    from sim_core import engine, scenario_library
+    from sim_core.scenario import FaultSpec, VariantSpec, apply_overrides
+
+    s = apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=600"])
+    s = s.model_copy(update={"variants": [VariantSpec(name="nominal"), VariantSpec(
+        name="rw1-failure", faults=[FaultSpec(target="wheel", index=0, type="failure", onset_s=200.0)])]})
+    return engine.simulate(s)
+
+
+def serve(ports_file: str) -> None:
+    """Subprocess: two monitors at 30 Hz, replay at x10; writes the real ports, then runs until killed."""
+    from frontend.feed import TrajectoryFeed
+    from frontend.monitors import serve_monitors
+
+    feed = TrajectoryFeed(twin_trajectory(), actual_variant=0, simulated_variant=1)
+    handles = serve_monitors(feed, ports={"actual": _free_port(), "simulated": _free_port()},
+                             roles=("actual", "simulated"))
+    handles.clock.set_speed(10.0)
+    handles.clock.play()
+    Path(ports_file).write_text(json.dumps(handles.ports))
+    while True:
+        time.sleep(1.0)
+        if not handles.clock.playing:
+            handles.clock.play()
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def _cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S
+
+
+def _earth_share(png: bytes) -> float:
+    import io
+
+    from PIL import Image
+
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    scene = img[:, : int(img.shape[1] * SCENE_FRACTION)]
+    return float(np.mean(np.max(np.abs(scene - scene[5, 5]), axis=-1) > 24))
+
+
+def bench_playback_and_paint(seconds: float) -> None:
+    from playwright.sync_api import sync_playwright
+
+    ports_file = Path(tempfile.mkdtemp()) / "ports.json"
+    proc = subprocess.Popen([sys.executable, __file__, "--serve", str(ports_file)], cwd=REPO)
+    try:
+        deadline = time.monotonic() + 300.0
+        while not ports_file.exists():
+            if time.monotonic() > deadline or proc.poll() is not None:
+                raise RuntimeError("monitor process did not start")
+            time.sleep(0.2)
+        ports = json.loads(ports_file.read_text())
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+            pages = []
+            for role, port in ports.items():
+                page = browser.new_page(viewport={"width": 1280, "height": 800})
+                start = time.perf_counter()
+                page.goto(f"http://127.0.0.1:{port}/")
+                while _earth_share(page.screenshot()) < PAINTED_SHARE:
+                    if time.perf_counter() - start > 60.0:
+                        raise RuntimeError(f"{role} monitor never painted")
+                print(f"first paint ({role} monitor): {time.perf_counter() - start:.2f} s  (target < 3 s)")
+                pages.append(page)
+            time.sleep(2.0)
+            cpu0, wall0 = _cpu_s(proc.pid), time.perf_counter()
+            time.sleep(seconds)
+            cpu1, wall1 = _cpu_s(proc.pid), time.perf_counter()
+            share = (cpu1 - cpu0) / (wall1 - wall0)
+            print(f"30 Hz playback to two connected monitors: {100 * share:.1f} % of one core over "
+                  f"{wall1 - wall0:.1f} s  (target < 25 %)")
+            browser.close()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def bench_geometry() -> None:
+    from sim_core import camera, frames
+
+    rng = np.random.default_rng(0)
+    r = rng.normal(size=(N_SAMPLES, 3))
+    r *= (frames.WGS84_A_M + 600e3) / np.linalg.norm(r, axis=-1, keepdims=True)
+    x = -r / np.linalg.norm(r, axis=-1, keepdims=True)
+    z = np.cross(x, [0.0, 0.0, 1.0])
+    z /= np.linalg.norm(z, axis=-1, keepdims=True)
+    c_eb = np.stack([x, np.cross(z, x), z], axis=-1)
+    best = np.inf
+    for _ in range(20):
+        start = time.perf_counter()
+        camera.footprint_ecef_m(r, c_eb, np.radians(2.0), np.radians(1.0), 4)
+        camera.ccd_line_ecef_m(r, c_eb, np.radians(2.0), 9)
+        camera.ground_trace_ecef_m(r)
+        best = min(best, time.perf_counter() - start)
+    print(f"footprint (16 rays) + CCD line (9 rays) + ground trace, {N_SAMPLES:,} samples: "
+          f"{1e3 * best:.2f} ms  (target < 10 ms)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="CPU measurement window")
+    parser.add_argument("--skip-browser", action="store_true", help="geometry only")
+    parser.add_argument("--serve", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.serve:
+        serve(args.serve)
+        return
+    bench_geometry()
+    if not args.skip_browser:
+        bench_playback_and_paint(args.seconds)
+
+
+if __name__ == "__main__":
+    main()
