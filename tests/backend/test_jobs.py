@@ -94,3 +94,30 @@ def test_jobs_left_running_by_a_dead_server_are_marked_interrupted(tmp_path: Pat
     with TestClient(create_app(settings)) as client:
         row = client.app.state.services.job_repo.get("deadbeef")
     assert row.status == "interrupted" and "restarted" in row.error
+
+
+ENGINE_JOB_TIMEOUT_S = 400.0  # a fresh worker may compile the numba engine (~1 min here, more under load)
+ENGINE_BODY = {"library": "somov-ge4-scan", "set": ["duration_s=20"]}
+
+
+def test_engine_job_returns_exactly_what_sim_core_engine_computes(tmp_path: Path) -> None:
+    from sim_core import scenario_library
+    from sim_core.engine import simulate
+    from sim_core.scenario import apply_overrides
+
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'engine.sqlite'}")
+    with TestClient(create_app(settings)) as client:
+        operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
+        job_id = client.post("/api/v1/simulations", json=ENGINE_BODY, headers=operator).json()["id"]
+        deadline = time.monotonic() + ENGINE_JOB_TIMEOUT_S
+        while (job := client.get(f"/api/v1/simulations/{job_id}", headers=operator).json())["status"] in ("queued", "running"):
+            assert time.monotonic() < deadline, job
+            time.sleep(0.5)
+        assert job["status"] == "succeeded", job["error"]
+        series = client.get(f"/api/v1/simulations/{job_id}/series/omega_b_rad_s?max_points=100000",
+                            headers=operator).json()
+    direct = simulate(apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=20"]))
+    expected = {k: v for k, v in direct.summary(0).items() if k != "wall_time_s"}
+    got = {k: v for k, v in job["summary"]["variants"][0].items() if k != "wall_time_s"}
+    assert got == expected
+    assert np.array_equal(np.asarray(series["values"]), direct.series["omega_b_rad_s"][0])
