@@ -40,6 +40,9 @@ HK_SERIES = {
 WHEEL_SERIES = ("wheel_speed_rad_s", "wheel_torque_cmd_nm", "wheel_current_a", "fault_wheel")  # suffixes _1 … _n
 GPS_SERIES = {"r_ecef_m": ("r_ecef_m", "xyz"), "v_ecef_m_s": ("v_ecef_m_s", "xyz")}
 MIN_GPS_FIXES = 3  # a plane and a phase need at least three non-collinear positions
+GPS_SIGMA_RATIO_S = 15.0 / 1.5  # σ_r / σ_v of the receiver, seed 003 §3.2.1.1: 15 m and 1.5 m/s (2σ)
+SMOOTHING_FIXES = 31  # ±15 fixes at 1 Hz: a cubic's truncation error there is (nτ)⁴a/24 ≈ 2 cm at LEO
+SMOOTHING_DEGREE = 3
 
 
 @dataclass(frozen=True)
@@ -50,6 +53,24 @@ class ActualTrack:
     series: dict[str, np.ndarray]
     gps_t_utc_ns: np.ndarray
     gps: dict[str, np.ndarray]
+
+    def orbit_eci(self, t_unix_s: np.ndarray, fit_window_s: float = 60.0) -> tuple[np.ndarray, np.ndarray]:
+        """ECI position (m) and velocity (m/s) at t from the GPS fixes: a local least-squares cubic through the fixes
+        inside their span, the circular orbit fitted to the nearest ``fit_window_s`` of them beyond (seed 003
+        §3.2.3.2.1 Keplerian OP)."""
+        t = np.atleast_1d(np.asarray(t_unix_s, dtype=float))
+        t_fix = self.gps_t_utc_ns / NS_PER_S
+        if t_fix.shape[0] < MIN_GPS_FIXES:
+            raise ValueError(f"gps_t_utc_ns: need at least {MIN_GPS_FIXES} GPS fixes, got {t_fix.shape[0]}")
+        r_fix, v_fix = frames.ecef_to_eci(self.gps["r_ecef_m"], self.gps["v_ecef_m_s"], t_fix)
+        r, v = _smoothed_fixes(t_fix, r_fix, v_fix, np.clip(t, t_fix[0], t_fix[-1]))
+        for outside, edge in ((t < t_fix[0], t_fix[0]), (t > t_fix[-1], t_fix[-1])):
+            if outside.any():
+                near = np.abs(t_fix - edge) <= fit_window_s
+                el = fit_circular_orbit(t_fix[near], self.gps["r_ecef_m"][near], self.gps["v_ecef_m_s"][near], edge)
+                r[outside], v[outside] = orbit.circular_orbit(t[outside] - edge, el["altitude_m"], el["inclination_deg"],
+                                                              el["raan_deg"], el["arg_latitude_deg"])
+        return r, v
 
     def at(self, t_utc_ns: int) -> int:
         """Index of the ACS_HK sample stamped exactly t_utc_ns; ValueError if there is none."""
@@ -93,6 +114,23 @@ def actual_track(batches: Iterable[SampleBatch], hk_packet: str = "ACS_HK", gps_
     series.update({name: _stack(hk, name, wheels) for name in WHEEL_SERIES})
     gps_t, gps = _merged(by_packet[gps_packet])
     return ActualTrack(t, series, gps_t, {name: _stack(gps, p, sfx) for name, (p, sfx) in GPS_SERIES.items()})
+
+
+def _smoothed_fixes(t_fix: np.ndarray, r_fix: np.ndarray, v_fix: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, ...]:
+    """r, v at t by a weighted least-squares cubic in time through the nearest SMOOTHING_FIXES positions and velocities."""
+    m = min(SMOOTHING_FIXES, t_fix.shape[0])
+    start = np.clip(np.searchsorted(t_fix, t) - m // 2, 0, t_fix.shape[0] - m)
+    idx = start[:, None] + np.arange(m)
+    tau = t_fix[idx] - t[:, None]  # (Q, m) s
+    powers = np.arange(SMOOTHING_DEGREE + 1)
+    a_r = tau[..., None] ** powers  # position rows: Σ c_k τ^k
+    a_v = GPS_SIGMA_RATIO_S * powers * tau[..., None] ** np.maximum(powers - 1, 0)  # velocity rows, weighted
+    design = np.concatenate([a_r, a_v], axis=1)  # (Q, 2m, d+1)
+    observed = np.concatenate([r_fix[idx], GPS_SIGMA_RATIO_S * v_fix[idx]], axis=1)  # (Q, 2m, 3)
+    scale = np.maximum(np.abs(tau).max(axis=1), 1.0)[:, None, None] ** powers  # conditioning: τ in units of the window
+    normal = np.einsum("qik,qil->qkl", design / scale, design / scale)
+    coeff = np.linalg.solve(normal, np.einsum("qik,qij->qkj", design / scale, observed)) / np.swapaxes(scale, 1, 2)
+    return coeff[:, 0], coeff[:, 1]
 
 
 def fit_circular_orbit(t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray, t0_unix_s: float) -> dict:

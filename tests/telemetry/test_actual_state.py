@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from sim_core import frames, orbit, quaternion, scenario_library
-from sim_core.engine import simulate
+from sim_core.engine import orbit_state, simulate
 from telemetry import emulator
 from telemetry.actual_state import actual_track, aligned_scenario, aligned_wheel_available, fit_circular_orbit
 from telemetry.decoding import decode_stream
@@ -25,6 +25,9 @@ EXACT_FIT_TOL_RAD = 1e-9  # noise-free fixes: only rounding of 7,000 km position
 # 60 fixes with σ = 7.5 m (seed 003, 15 m 2σ) over a ±225 km arc: plane tilt σ√3/(225 km·√60) ≈ 7.5e-6 rad; 5σ.
 NOISY_FIT_TOL_RAD = 4e-5
 NOISY_ALTITUDE_TOL_M = 5.0  # σ/√60 ≈ 1 m; 5σ
+GPS_2SIGMA_R_M, GPS_2SIGMA_V_M_S = 15.0, 1.5  # one fix's 2σ (seed 003); the local cubic averages 31 of them
+EXTRAPOLATION_TOL_M = 100.0  # fitted plane tilt (5σ ≈ 4e-5 rad, above) over ±300 s of flight (2,300 km): < 100 m
+EXTRAPOLATION_TOL_M_S = 0.1  # the same error turning at the orbit rate n ≈ 1.1e-3 rad/s
 PROGRAMME_TOL_RAD = 3.0 * ARCSEC  # the fitted orbit plane turns the ORF by ≲ 1.5″ (tilt above)
 TWIN_ATTITUDE_TOL_RAD = 30.0 * ARCSEC  # twin truth vs telemetered estimate: 10 × the 3″ star tracker σ
 TWIN_WHEEL_TOL_RAD_S = 0.1  # ≈ 1 rpm over 200 s: different noise draws through the same control loop
@@ -85,6 +88,19 @@ def test_gps_fixes_of_the_emulated_satellite_give_its_scenario_orbit(satellite) 
                 "raan_deg": s.orbit.raan_deg, "arg_latitude_deg": u}
     for key, value in expected.items():
         assert np.radians(fitted[key] - value) == pytest.approx(0.0, abs=NOISY_FIT_TOL_RAD), key
+
+
+def test_orbit_from_gps_fixes_follows_the_flown_orbit_inside_and_beyond_the_pass(satellite) -> None:
+    traj, _, batches = satellite
+    track = actual_track(batches)
+    s = emulator.satellite_scenario()
+    inside = traj.extra["epoch_unix_s"] + traj.t_s  # every 0.25 s, between and at the 1 Hz fixes
+    beyond = np.concatenate([inside[0] - np.array([300.0, 10.0]), inside[-1] + np.array([10.0, 300.0])])
+    for t, tol_r, tol_v in ((inside, GPS_2SIGMA_R_M, GPS_2SIGMA_V_M_S), (beyond, EXTRAPOLATION_TOL_M, EXTRAPOLATION_TOL_M_S)):
+        r, v = track.orbit_eci(t)
+        r_true, v_true, _ = orbit_state(s)(t)
+        assert np.linalg.norm(r - r_true, axis=-1).max() < tol_r
+        assert np.linalg.norm(v - v_true, axis=-1).max() < tol_v
 
 
 def _twin_vs_telemetry(satellite, hypothesis: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
