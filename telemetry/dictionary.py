@@ -206,6 +206,10 @@ def parse_time_code(spec: str | dict[str, Any] | None) -> TimeCode | None:
             return TimeCode("CUC", coarse_octets=int(parts[1]), fine_octets=int(parts[2]))
         raise ValueError(f"time_code: unknown short name {spec!r} (use CDS, CDS-ms or CUC-<coarse>-<fine>)")
     spec = dict(spec)
+    if "epoch_utc" in spec:  # earlier spelling: an epoch on the UTC calendar
+        if spec.get("time_scale", "UTC") != "UTC" or "epoch" in spec:
+            raise ValueError("time_code.epoch_utc: means a UTC epoch; use epoch with time_scale instead")
+        spec["epoch"] = spec.pop("epoch_utc")
     epoch = spec.pop("epoch", None)
     keys = ("coarse_octets", "fine_octets", "day_octets", "submillisecond_octets", "time_scale")
     kwargs = {k: spec.pop(k) for k in keys if k in spec}

@@ -240,3 +240,9 @@ def test_both_noaa20_layouts_name_the_same_satellite() -> None:
     names = {load_dictionary(n).satellite_name for n in ("noaa20_apid11_xtce.yaml", "noaa20_apid11_ccsdspy.yaml")}
     assert names == {"NOAA-20"}
     assert load_xtce(SHIPPED / "jpss1_geolocation_xtce_v1.xml").satellite_name == "JPSS_Geolocation_Packets"
+
+
+def test_time_code_epoch_utc_key_still_reads_as_a_utc_epoch() -> None:
+    assert parse_time_code({"format": "CDS", "epoch_utc": "1958-01-01T00:00:00Z"}) == TimeCode("CDS")
+    with pytest.raises(ValueError, match="time_code.epoch_utc"):
+        parse_time_code({"format": "CUC", "epoch_utc": "1958-01-01", "time_scale": "TAI"})
