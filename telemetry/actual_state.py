@@ -68,8 +68,9 @@ class ActualTrack:
             if outside.any():
                 near = np.abs(t_fix - edge) <= fit_window_s
                 el = fit_circular_orbit(t_fix[near], self.gps["r_ecef_m"][near], self.gps["v_ecef_m_s"][near], edge)
-                r[outside], v[outside] = orbit.circular_orbit(t[outside] - edge, el["altitude_m"], el["inclination_deg"],
-                                                              el["raan_deg"], el["arg_latitude_deg"])
+                r[outside], v[outside] = orbit.circular_orbit(
+                    t[outside] - edge, el["altitude_m"], el["inclination_deg"], el["raan_deg"], el["arg_latitude_deg"]
+                )
         return r, v
 
     def at(self, t_utc_ns: int) -> int:
@@ -117,7 +118,7 @@ def actual_track(batches: Iterable[SampleBatch], hk_packet: str = "ACS_HK", gps_
 
 
 def _smoothed_fixes(t_fix: np.ndarray, r_fix: np.ndarray, v_fix: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, ...]:
-    """r, v at t by a weighted least-squares cubic in time through the nearest SMOOTHING_FIXES positions and velocities."""
+    """r, v at t by a weighted least-squares cubic in time through the nearest SMOOTHING_FIXES fixes (r and v)."""
     m = min(SMOOTHING_FIXES, t_fix.shape[0])
     start = np.clip(np.searchsorted(t_fix, t) - m // 2, 0, t_fix.shape[0] - m)
     idx = start[:, None] + np.arange(m)

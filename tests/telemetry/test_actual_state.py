@@ -96,7 +96,8 @@ def test_orbit_from_gps_fixes_follows_the_flown_orbit_inside_and_beyond_the_pass
     s = emulator.satellite_scenario()
     inside = traj.extra["epoch_unix_s"] + traj.t_s  # every 0.25 s, between and at the 1 Hz fixes
     beyond = np.concatenate([inside[0] - np.array([300.0, 10.0]), inside[-1] + np.array([10.0, 300.0])])
-    for t, tol_r, tol_v in ((inside, GPS_2SIGMA_R_M, GPS_2SIGMA_V_M_S), (beyond, EXTRAPOLATION_TOL_M, EXTRAPOLATION_TOL_M_S)):
+    cases = ((inside, GPS_2SIGMA_R_M, GPS_2SIGMA_V_M_S), (beyond, EXTRAPOLATION_TOL_M, EXTRAPOLATION_TOL_M_S))
+    for t, tol_r, tol_v in cases:
         r, v = track.orbit_eci(t)
         r_true, v_true, _ = orbit_state(s)(t)
         assert np.linalg.norm(r - r_true, axis=-1).max() < tol_r
