@@ -22,10 +22,10 @@ Errors are JSON `{"message", "field", "status"}`."""
 
 
 def _routers() -> list:
-    from backend.routes import alarms, health, live, parameters, passes, simulations, telemetry, tokens
+    from backend.routes import alarms, health, live, parameters, passes, simulations, telemetry, tokens, twin
 
     return [health.router, tokens.router, telemetry.router, parameters.router, passes.router,
-            alarms.router, simulations.router, live.router]
+            alarms.router, simulations.router, twin.router, live.router]
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

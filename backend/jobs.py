@@ -33,6 +33,7 @@ class _Handle:
     body: dict[str, Any]
     progress: Any
     cancel: Any
+    options: dict[str, Any] = field(default_factory=dict)
     process: Any = None
     cancel_at: float | None = field(default=None)
 
@@ -69,8 +70,11 @@ class JobManager:
             thread.join(timeout=10)
         self._threads.clear()
 
-    def submit(self, body: dict[str, Any], created_by: str) -> str:
-        """Validate limits and queue a job; ApiError 422 over a limit, 429 when the queue is full."""
+    def submit(self, body: dict[str, Any], created_by: str, options: dict[str, Any] | None = None) -> str:
+        """Validate limits and queue a job; ApiError 422 over a limit, 429 when the queue is full.
+
+        ``options`` go to the engine as keywords (``fdir``, ``wheel_available``), e.g. for twin sessions.
+        """
         scenario, cost = validate_scenario(body)
         self._check_limits(cost)
         job_id = uuid.uuid4().hex
@@ -79,7 +83,7 @@ class JobManager:
                 raise ApiError(429, f"job queue full ({self._settings.job_queue_size} active jobs)",
                                field="job_queue_size",
                                headers={"Retry-After": str(self._settings.job_retry_after_s)})
-            self._active[job_id] = _Handle(scenario, self._ctx.Value("d", 0.0), self._ctx.Event())
+            self._active[job_id] = _Handle(scenario, self._ctx.Value("d", 0.0), self._ctx.Event(), options or {})
             self._repo.add(job_id, scenario, created_by)
         self._queue.put(job_id)
         return job_id
@@ -135,7 +139,8 @@ class JobManager:
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.json").write_text(json.dumps(handle.body))
         handle.process = self._ctx.Process(target=run_in_worker, name=f"sim-{job_id[:8]}",
-                                           args=(handle.body, str(out), handle.progress, handle.cancel))
+                                           args=(handle.body, str(out), handle.progress, handle.cancel,
+                                                 handle.options))
         handle.process.start()
         self._supervise(job_id, handle)
         self._record_outcome(job_id, handle.process.exitcode, out)

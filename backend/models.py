@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from sqlalchemy import JSON, DateTime, Float, Integer, String, Text
+from sqlalchemy import JSON, BigInteger, DateTime, Float, Integer, String, Text
 from sqlalchemy.orm import Mapped, mapped_column
 
 from backend.database import Base
 
-__all__ = ["TokenRow", "AuditRow", "JobRow"]
+__all__ = ["TokenRow", "AuditRow", "JobRow", "TwinSessionRow"]
 
 
 class TokenRow(Base):
@@ -51,3 +51,19 @@ class JobRow(Base):
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
     started_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
     finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)
+
+
+class TwinSessionRow(Base):
+    """A twin session: a simulation job aligned to a telemetry instant, with its fault hypothesis."""
+
+    __tablename__ = "backend_twin_sessions"
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    job_id: Mapped[str] = mapped_column(String(32), index=True)
+    satellite: Mapped[str] = mapped_column(String(100))
+    dictionary: Mapped[str] = mapped_column(String(130))
+    scenario: Mapped[str] = mapped_column(String(100))
+    align_utc_ns: Mapped[int] = mapped_column(BigInteger)
+    duration_s: Mapped[float] = mapped_column(Float)
+    faults: Mapped[list] = mapped_column(JSON)
+    created_by: Mapped[str] = mapped_column(String(100))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

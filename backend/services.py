@@ -14,6 +14,7 @@ from backend.live_hub import LiveHub
 from backend.repositories.audit import AuditRepository
 from backend.repositories.jobs import JobRepository
 from backend.repositories.tokens import TokenRepository
+from backend.repositories.twin_sessions import TwinSessionRepository
 from backend.settings import Settings
 from backend.telemetry_gateway import TelemetryGateway
 
@@ -34,6 +35,7 @@ class Services:
     auth: Authenticator
     hub: LiveHub
     telemetry: TelemetryGateway
+    twin_sessions: TwinSessionRepository
 
     def close(self) -> None:
         """Stop jobs and the telemetry side, dispose of the engine."""
@@ -53,4 +55,5 @@ def build_services(settings: Settings) -> Services:
     return Services(settings=settings, engine=engine, sessions=sessions, tokens=tokens,
                     audit=AuditRepository(sessions), job_repo=job_repo,
                     jobs=JobManager(settings, job_repo), auth=Authenticator(tokens, settings.auth_enabled),
-                    hub=hub, telemetry=TelemetryGateway(settings, hub))
+                    hub=hub, telemetry=TelemetryGateway(settings, hub),
+                    twin_sessions=TwinSessionRepository(sessions))

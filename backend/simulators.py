@@ -82,13 +82,19 @@ def validate_scenario(body: dict[str, Any]) -> tuple[dict[str, Any], JobCost]:
     return scenario.model_dump(mode="json"), _engine_cost(scenario)
 
 
-def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], None], cancelled: Callable[[], bool]) -> None:
+def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], None], cancelled: Callable[[], bool],
+                options: dict[str, Any]) -> None:
+    import numpy as np
+
     from backend.trajectory_files import write_npz
     from sim_core.engine import Cancelled, simulate
     from sim_core.scenario import Scenario
 
+    available = options.get("wheel_available")
     try:
-        trajectory = simulate(Scenario.model_validate(body), progress=progress, cancel=cancelled)
+        trajectory = simulate(Scenario.model_validate(body), progress=progress, cancel=cancelled,
+                              wheel_available=None if available is None else np.asarray(available, dtype=bool),
+                              fdir=bool(options.get("fdir", False)))
     except Cancelled:
         raise JobCancelled from None
     write_npz(trajectory, out / "trajectory.npz")
@@ -104,7 +110,8 @@ def _run_rigid_spin(body: dict[str, Any], out: Path, progress: Callable[[float],
     (out / "summary.json").write_text(json.dumps(trajectory.summary()))
 
 
-def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any) -> None:
+def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any,
+                  options: dict[str, Any] | None = None) -> None:
     """Worker-process entry: simulate, write trajectory.npz + summary.json, or error.txt."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -118,7 +125,7 @@ def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cance
         if _is_rigid_spin(body):
             _run_rigid_spin(body, out, progress)
         else:
-            _run_engine(body, out, progress, cancel_event.is_set)
+            _run_engine(body, out, progress, cancel_event.is_set, options or {})
     except JobCancelled:
         (out / "cancelled").touch()
         raise SystemExit(3) from None

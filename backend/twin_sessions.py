@@ -1,0 +1,89 @@
+"""Twin sessions (seed 000 §7): a simulation started from telemetry, flown beside it, and its residuals.
+
+Start: the archived packets around the alignment instant are replayed and decoded into the actual
+track (telemetry.actual_state); the library scenario is re-started there with the telemetered
+attitude, rates, wheel speeds and GPS orbit, the operator's fault hypothesis and the wheels onboard
+FDIR had isolated, and flown as a simulation job (with onboard FDIR, like the satellite).
+Residuals: twin minus telemetry at the telemetry sample times, attitude angle |Λ̃_tm ∘ Λ_twin| (rad),
+body-rate difference |ω_twin − ω_tm| (rad/s) and wheel-speed differences (rad/s, per wheel).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sim_core import quaternion
+
+__all__ = ["GPS_MARGIN_S", "actual_track_between", "twin_start", "Residuals", "residuals"]
+
+GPS_MARGIN_S = 60.0  # telemetry read before the alignment instant: the GPS fixes the orbit fit uses
+TIME_MATCH_NS = 1_000_000  # twin output and telemetry samples closer than 1 ms are the same instant
+
+
+def actual_track_between(archive: Any, dictionary: Any, satellite: str, t0_ns: int, t1_ns: int) -> Any:
+    """Replay and decode archived packets of [t0_ns, t1_ns] into the actual track (ValueError if none)."""
+    from telemetry.actual_state import actual_track
+    from telemetry.decoding import decode_stream
+
+    packets = archive.replay(satellite, t0_ns, t1_ns)
+    if not packets:
+        raise ValueError(f"align_utc: no archived packets of {satellite!r} around this time")
+    decoded = decode_stream(b"".join(p for _, p in packets), dictionary, source="twin")
+    return actual_track(decoded.batches)
+
+
+def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float,
+               faults: list[str]) -> tuple[int, dict[str, Any], dict[str, Any]]:
+    """(alignment sample time, twin scenario JSON, engine options) at the first ACS_HK sample ≥ align_ns."""
+    from sim_core import scenario_library
+    from telemetry.actual_state import aligned_scenario, aligned_wheel_available
+    from telemetry.emulator import parse_fault
+
+    k = int(np.searchsorted(track.t_utc_ns, align_ns))
+    if k >= track.t_utc_ns.size:
+        raise ValueError("align_utc: after the last archived ACS_HK sample")
+    t_align = int(track.t_utc_ns[k])
+    if scenario not in scenario_library.names():
+        raise ValueError(f"scenario: unknown {scenario!r}; one of {scenario_library.names()}")
+    hypothesis = [parse_fault(text) for text in faults]
+    twin = aligned_scenario(scenario_library.get(scenario), track, t_align, duration_s, hypothesis)
+    options = {"fdir": True, "wheel_available": aligned_wheel_available(track, t_align).tolist()}
+    return t_align, twin.model_dump(mode="json"), options
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Twin minus telemetry at common instants: seconds after alignment and the three residuals."""
+
+    t_s: np.ndarray
+    attitude_rad: np.ndarray
+    rate_rad_s: np.ndarray
+    wheel_speed_rad_s: np.ndarray
+
+    def summary(self) -> dict[str, float]:
+        """Largest residuals (degrees and rpm at the edge) and how many instants were compared."""
+        return {"samples": int(self.t_s.size),
+                "attitude_max_deg": float(np.degrees(self.attitude_rad.max(initial=0.0))),
+                "rate_max_deg_s": float(np.degrees(self.rate_rad_s.max(initial=0.0))),
+                "wheel_speed_max_rpm": float(np.abs(self.wheel_speed_rad_s).max(initial=0.0) * 30.0 / np.pi)}
+
+
+def residuals(track: Any, trajectory_npz: Path, align_ns: int) -> Residuals:
+    """Residuals of the twin's trajectory.npz (variant 0) against the actual track (seed 000 §7 monitors)."""
+    with np.load(trajectory_npz) as twin:
+        t_twin_ns = align_ns + np.round(twin["t_s"] * 1e9).astype(np.int64)
+        q_twin, w_twin, h_twin = twin["q_ib"][0], twin["omega_b_rad_s"][0], twin["wheel_speed_rad_s"][0]
+    k = np.clip(np.searchsorted(track.t_utc_ns, t_twin_ns), 0, track.t_utc_ns.size - 1)
+    same = np.abs(track.t_utc_ns[k] - t_twin_ns) <= TIME_MATCH_NS
+    k = k[same]
+    error = quaternion.multiply(quaternion.conjugate(track.series["q_est_ib"][k]), q_twin[same])
+    return Residuals(
+        t_s=(t_twin_ns[same] - align_ns) / 1e9,
+        attitude_rad=quaternion.angle(error),
+        rate_rad_s=np.linalg.norm(w_twin[same] - track.series["omega_est_b_rad_s"][k], axis=-1),
+        wheel_speed_rad_s=h_twin[same] - track.series["wheel_speed_rad_s"][k],
+    )
