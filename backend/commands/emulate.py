@@ -13,7 +13,7 @@ DEFAULT_PORT = 10025  # backend.settings.Settings.telemetry_port default
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``emulate`` subcommand."""
     p = sub.add_parser("emulate", help="spacecraft emulator: fly a scenario and send its telemetry packets")
-    p.add_argument("--scenario", default="somov-ge4-scan", help="library scenario the satellite flies")
+    p.add_argument("--scenario", default="somov-ge4-scan", help="library scenario (or scenario JSON file) it flies")
     p.add_argument("--host", default="127.0.0.1", help="live listener host")
     p.add_argument("--port", type=int, help=f"live listener TCP port (default {DEFAULT_PORT} unless only --out)")
     p.add_argument("--rate", type=float, default=1.0, help="time acceleration (1 = real time, inf = unpaced)")
@@ -37,6 +37,16 @@ def _start_utc(text: str | None) -> str | None:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(int(time.time()) + 1))
 
 
+def _scenario(name: str):
+    """A library scenario name as is, or the Scenario of a JSON file (as ``acs-twin simulate`` reads it)."""
+    path = Path(name)
+    if path.suffix != ".json" or not path.exists():
+        return name
+    from sim_core.scenario import Scenario
+
+    return Scenario.model_validate_json(path.read_text())
+
+
 def _warn_late_faults(faults: list, duration_s: float) -> None:
     """Say so when a hidden fault begins after the end of the flight (it would never act)."""
     for f in faults:
@@ -55,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         faults = [emulator.parse_fault(text) for text in args.fault]
         if not args.rate > 0.0:
             raise ValueError(f"rate: must be > 0 (inf = unpaced), got {args.rate}")
-        traj, _, stream = emulator.emulate(args.scenario, faults, args.duration, _start_utc(args.start_utc),
+        traj, _, stream = emulator.emulate(_scenario(args.scenario), faults, args.duration, _start_utc(args.start_utc),
                                            seed=args.seed)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -11,6 +11,8 @@ from __future__ import annotations
 import asyncio
 import dataclasses
 import datetime as dt
+import math
+import socket
 import time
 
 import numpy as np
@@ -19,7 +21,7 @@ import pytest
 from spacepackets.ccsds import SpacePacketHeader
 
 from backend.cli import main
-from sim_core import fdir, frames, modes, quaternion
+from sim_core import fdir, frames, modes, quaternion, scenario_library
 from sim_core.closed_loop import TARGET_CODES
 from telemetry import emulator
 from telemetry.decoding import decode_stream
@@ -301,6 +303,31 @@ def test_sender_reconnects_and_resends_after_the_link_drops(nominal, dictionary)
     assert seen == set(zip(piece.apid.tolist(), piece.t_utc_ns.tolist()))  # nothing lost across the drop
 
 
+def test_sender_waits_for_a_listener_that_starts_late(nominal, dictionary) -> None:
+    _, _, stream = nominal
+    piece = stream.window(int(stream.t_utc_ns[0]), int(stream.t_utc_ns[0]) + 5 * 10**9)
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()  # a port nobody listens on yet
+
+    async def late() -> tuple[emulator.SendReport, list]:
+        sending = asyncio.create_task(emulator.send_stream(piece, "127.0.0.1", port, rate=math.inf, retry_s=0.05))
+        await asyncio.sleep(0.3)
+        live = LiveStream(dictionary)
+        subscriber = live.subscribe(max_messages=1_000)
+        await live.start(port=port)
+        report = await sending
+        await asyncio.sleep(SETTLE_S)
+        await live.stop()
+        return report, drain(subscriber)
+
+    report, messages = asyncio.run(late())
+    assert report.connections == 1 and sum(len(m.batch.t_utc_ns) for m in messages) == len(piece) == 25
+    with pytest.raises(OSError):
+        asyncio.run(emulator.send_stream(piece, "127.0.0.1", port, rate=math.inf, retry_s=0.01, attempts=2))
+
+
 def test_real_time_sender_releases_each_packet_at_its_utc_time_stamp(dictionary) -> None:
     start = int(time.time()) + 2  # whole second: CUC-exact stamps, 1-2 s ahead of the wall clock
     stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(start))
@@ -379,3 +406,7 @@ def test_cli_writes_a_packet_file_that_decodes(tmp_path, dictionary, capsys) -> 
     assert result.report.quarantined == [] and result.report.packets_accepted == 80 + 20
     assert main(["emulate", "--duration", "20", "--fault", "wheel:0:melt@5", "--out", str(out)]) == 2
     assert "fault.type" in capsys.readouterr().err
+    scenario = tmp_path / "short.json"
+    scenario.write_text(scenario_library.get("somov-ge4-scan").model_copy(update={"duration_s": 4.0}).model_dump_json())
+    assert main(["emulate", "--scenario", str(scenario), "--out", str(out)]) == 0
+    assert decode_stream(out.read_bytes(), dictionary).report.packets_accepted == 16 + 4
