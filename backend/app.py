@@ -11,7 +11,7 @@ from backend.errors import install_error_handlers
 from backend.services import build_services
 from backend.settings import Settings
 
-__all__ = ["create_app", "API_PREFIX"]
+__all__ = ["create_app", "monitor_urls", "API_PREFIX"]
 
 API_PREFIX = "/api/v1"
 
@@ -28,8 +28,14 @@ def _routers() -> list:
             alarms.router, simulations.router, twin.router, live.router]
 
 
+def monitor_urls(settings: Settings) -> dict[str, str]:
+    """Where ``acs-twin serve`` puts the twin monitors: viewer_port + 0, 1, 2 for actual, simulated, overlay."""
+    roles = ("actual", "simulated", "overlay")
+    return {role: f"http://{settings.host}:{settings.viewer_port + i}" for i, role in enumerate(roles)}
+
+
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """A new app with its own database engine, job manager and live hub."""
+    """A new app with its own database engine, job manager and live hub; the dashboard at /dashboard."""
     settings = settings or Settings()
     services = build_services(settings)
 
@@ -49,4 +55,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_error_handlers(app)
     for router in _routers():
         app.include_router(router, prefix=API_PREFIX)
+    from frontend.dashboard_site import dashboard_app
+
+    app.mount("/dashboard", dashboard_app(monitor_urls(settings), API_PREFIX))
     return app

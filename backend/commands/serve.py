@@ -75,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"acs-twin control centre, data in {settings.data_dir.resolve()}")
     print(f"  API       {base}/api/v1   (OpenAPI {base}/openapi.json, docs {base}/docs)")
     print(f"  live      ws://{settings.host}:{settings.port}/api/v1/ws")
+    print(f"  dashboard {base}/dashboard/")
     if token:
         print(f"  admin token (shown once, stored hashed): {token}")
     elif not settings.auth_enabled:

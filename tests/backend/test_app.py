@@ -57,3 +57,11 @@ def test_factory_creates_nothing_until_called_and_auth_off_acts_as_admin(tmp_pat
     with TestClient(create_app(settings)) as client:
         assert (tmp_path / "d" / "acs-twin.sqlite").exists()
         assert client.get("/api/v1/tokens").status_code == 200
+
+
+def test_dashboard_is_served_with_the_api_prefix_and_monitor_urls(client: TestClient) -> None:
+    page = client.get("/dashboard/")
+    assert page.status_code == 200 and "<html" in page.text.lower()
+    config = client.get("/dashboard/config.json").json()
+    assert config["api_base"] == "/api/v1"
+    assert set(config["monitors"]) == {"actual", "simulated", "overlay"}
