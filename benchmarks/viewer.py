@@ -6,8 +6,10 @@
   replaying a somov-ge4-scan trajectory (a nominal twin against a wheel-1 failure) at x10, each
   with a headless Debian chromium connected; the server process's CPU time (user + system, from
   /proc) over the window divided by the wall time.  Target < 25 % of one core.
-* first paint: headless chromium opening a monitor until the globe covers > 10 % of the scene
-  (screenshot polling, so the figure is an upper bound).  Target < 3 s.
+* first paint: headless chromium opening a monitor, until WebGL is asked to draw the Earth mesh
+  (a drawElements hook installed before the page loads records performance.now(), i.e. ms since
+  navigation start; screenshots under software WebGL take seconds each, so they cannot time it),
+  then the globe is checked on a screenshot.  Target < 3 s.
 * geometry: footprint polygon + CCD line + ground trace for 10,000 samples (sim_core.camera),
   best of 20.  Target < 10 ms.
 """
@@ -31,7 +33,17 @@ CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic
                   "--disable-background-networking", "--disable-component-update", "--disable-sync",
                   "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 N_SAMPLES = 10_000
-PAINTED_SHARE = 0.10
+DRAW_HOOK = """
+(() => {
+  for (const C of [WebGLRenderingContext, WebGL2RenderingContext]) {
+    const draw = C.prototype.drawElements;
+    C.prototype.drawElements = function (mode, count, type, offset) {
+      if (count >= %d && window.__globeDrawnAt === undefined) window.__globeDrawnAt = performance.now();
+      return draw.call(this, mode, count, type, offset);
+    };
+  }
+})();
+"""
 SCENE_FRACTION = 0.62
 CLOCK_TICKS_S = os.sysconf("SC_CLK_TCK")
 
@@ -90,6 +102,8 @@ def _earth_share(png: bytes) -> float:
 def bench_playback_and_paint(seconds: float) -> None:
     from playwright.sync_api import sync_playwright
 
+    from frontend import globe
+
     ports_file = Path(tempfile.mkdtemp()) / "ports.json"
     proc = subprocess.Popen([sys.executable, __file__, "--serve", str(ports_file)], cwd=REPO)
     try:
@@ -101,23 +115,27 @@ def bench_playback_and_paint(seconds: float) -> None:
         ports = json.loads(ports_file.read_text())
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
-            pages = []
-            for role, port in ports.items():
-                page = browser.new_page(viewport={"width": 1280, "height": 800})
-                start = time.perf_counter()
+            for role, port in ports.items():  # one at a time: software WebGL of an open page eats a core
+                context = browser.new_context(viewport={"width": 1280, "height": 800})
+                context.add_init_script(DRAW_HOOK % (3 * len(globe.earth_mesh_arrays()[1])))
+                page = context.new_page()
                 page.goto(f"http://127.0.0.1:{port}/")
-                while _earth_share(page.screenshot()) < PAINTED_SHARE:
-                    if time.perf_counter() - start > 60.0:
-                        raise RuntimeError(f"{role} monitor never painted")
-                print(f"first paint ({role} monitor): {time.perf_counter() - start:.2f} s  (target < 3 s)")
-                pages.append(page)
+                page.wait_for_function("window.__globeDrawnAt !== undefined", timeout=60_000)
+                first_paint_s = page.evaluate("window.__globeDrawnAt") / 1e3
+                share = _earth_share(page.screenshot())
+                print(f"first paint ({role} monitor): {first_paint_s:.2f} s, globe covers {100 * share:.0f} % "
+                      f"of the scene  (target < 3 s; load average {os.getloadavg()[0]:.1f})")
+                context.close()
+            pages = [browser.new_page(viewport={"width": 1280, "height": 800}) for _ in ports]
+            for page, port in zip(pages, ports.values()):
+                page.goto(f"http://127.0.0.1:{port}/")
             time.sleep(2.0)
             cpu0, wall0 = _cpu_s(proc.pid), time.perf_counter()
             time.sleep(seconds)
             cpu1, wall1 = _cpu_s(proc.pid), time.perf_counter()
-            share = (cpu1 - cpu0) / (wall1 - wall0)
-            print(f"30 Hz playback to two connected monitors: {100 * share:.1f} % of one core over "
-                  f"{wall1 - wall0:.1f} s  (target < 25 %)")
+            load = (cpu1 - cpu0) / (wall1 - wall0)
+            print(f"30 Hz playback to two connected monitors: {100 * load:.1f} % of one core over "
+                  f"{wall1 - wall0:.1f} s  (target < 25 %; load average {os.getloadavg()[0]:.1f})")
             browser.close()
     finally:
         proc.terminate()
