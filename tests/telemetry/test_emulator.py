@@ -33,6 +33,11 @@ FAILURE_ONSET_S = 350.0  # during the observing hold, before the 20° turn (420�
 FDIR_LATENCY_S = (1 + fdir.CONFIRM_PERIODS) * 2.0  # sim_core.fdir: detected within one T_u = 2 s, then confirmed
 ARCSEC = np.pi / 180.0 / 3600.0
 FLOAT32_REL = 2.0**-23  # one unit in the last place of an IEEE 754 binary32 mantissa
+FLOAT32_QUATERNION_ANGLE_RAD = 1e-6  # binary32 components (≈ 6e-8 each) move an angle by ~1e-7 rad; 10× margin
+FLOAT32_RATE_RAD_S = 1e-9  # binary32 rounding of rates below 0.03 rad/s (≈ 2e-9 · 0.03 … 1e-10) and of the bias
+HALF_SPEED_COUNT_RAD_S = 0.5 * np.pi / 120.0 * (1 + 1e-9)  # half of the 0.25 rpm count, plus rounding of the division
+HALF_TORQUE_COUNT_NM = 0.5e-5 * (1 + 1e-9)  # half of the 10 µN·m count
+TIMESTAMP_FLOAT_TOL_NS = 1e3  # float64 seconds of 2026 carry ~0.2 µs; CUC 4+2 ticks are exact multiples of 2^-16 s
 NOISE_STD_REL_TOL = 0.10  # 3,600 samples estimate a standard deviation to ~1.2 % (1σ); 10 % is > 8σ
 GPS_LEAP_S = 18  # GPS − UTC since 2017-01-01 (IERS Bulletin C: TAI − UTC = 37 s, GPS = TAI − 19 s)
 IGRF_NORM_TOL_T = 300e-9  # 6σ of the 50 nT magnetometer noise plus the 2 nT count and the 30 s field table
@@ -87,7 +92,7 @@ def test_primary_headers_and_cuc_times_read_by_independent_parsers(nominal, dict
         counts.setdefault(header.apid, 0)
         cuc_s = int.from_bytes(packet[6:10], "big") + int.from_bytes(packet[10:12], "big") / 65536
         stamp = epoch_2000 + dt.timedelta(seconds=cuc_s)
-        assert stamp.timestamp() * 1e9 == pytest.approx(stream.t_utc_ns[k], abs=1e3)
+        assert stamp.timestamp() * 1e9 == pytest.approx(stream.t_utc_ns[k], abs=TIMESTAMP_FLOAT_TOL_NS)
     assert set(counts) == {256, 257}
 
 
@@ -117,11 +122,11 @@ def test_decoded_telemetry_equals_the_simulation_truth(nominal, decoded) -> None
             np.testing.assert_allclose(hk[f"{prefix}_{sfx}"], truth[:, k], rtol=FLOAT32_REL, atol=1e-30)
     for k in range(4):
         np.testing.assert_allclose(hk[f"wheel_speed_rad_s_{k + 1}"], traj["wheel_speed_rad_s"][0, rows, k],
-                                   atol=0.5 * np.pi / 120.0 * (1 + 1e-9))  # half of 0.25 rpm
+                                   atol=HALF_SPEED_COUNT_RAD_S)
         np.testing.assert_allclose(hk[f"wheel_torque_cmd_nm_{k + 1}"], traj["wheel_torque_cmd_nm"][0, rows, k],
-                                   atol=0.5e-5 * (1 + 1e-9))
+                                   atol=HALF_TORQUE_COUNT_NM)
     e = quaternion.multiply(quaternion.conjugate(traj["q_prog_ib"][0, rows]), traj["q_est_ib"][0, rows])
-    np.testing.assert_allclose(hk["attitude_error_rad"], quaternion.angle(e), atol=1e-6)  # float32 quaternions
+    np.testing.assert_allclose(hk["attitude_error_rad"], quaternion.angle(e), atol=FLOAT32_QUATERNION_ANGLE_RAD)
 
 
 def test_sensor_samples_scatter_about_truth_with_the_scenario_noise(nominal, decoded) -> None:
@@ -209,7 +214,7 @@ def test_hidden_sensor_faults_show_in_the_raw_sensor_telemetry(nominal, dictiona
     nominal_hk = nominal[1]["ACS_HK"].values
     step = gyro_minus_truth(hk, traj) - gyro_minus_truth(nominal_hk, nominal[0])  # same noise draws in both runs
     expected = np.where(t_s[:, None] >= onset_s, [0.0, 0.0, bias_rad_s], 0.0)
-    np.testing.assert_allclose(step, expected, atol=1e-9)  # float32 rounding of rates below 0.03 rad/s
+    np.testing.assert_allclose(step, expected, atol=FLOAT32_RATE_RAD_S)
     q_st = np.stack([hk[f"q_st_ib_{k}"] for k in range(4)], -1)
     assert np.all(q_st[t_s >= failure_s] == 0.0) and np.all(np.linalg.norm(q_st[t_s < failure_s], axis=-1) > 0.99)
 
