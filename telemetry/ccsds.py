@@ -70,7 +70,8 @@ class FrameCode:
 class TimeCode:
     """A CUC or CDS time code layout (CCSDS 301.0-B-4 §3.2, §3.3), its epoch and its time scale.
 
-    ``epoch_ns`` is the epoch's calendar date-time in the code's own time scale, as ns since
+    The P-field is implicit (agreed in the dictionary, not sent). ``epoch_ns`` is the epoch's
+    calendar date-time in the code's own time scale, as ns since
     1970-01-01T00:00:00 of that scale; ``time_scale`` is UTC (elapsed time read as UTC without leap
     seconds, POSIX style), TAI (CCSDS level-1 CUC, 301.0-B-4 §3.2.2.1.1) or GPS (TAI − 19 s).
     """
