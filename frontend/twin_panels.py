@@ -65,13 +65,13 @@ class TwinPanels:
                 data=_empty(1), series=({"label": "t − now (s)"},
                                                        {"label": "error (arcsec)", "stroke": "#ff5050"}),
                 scales=_plot_scales(), aspect=2.0)
-        with gui.add_folder("Wheel speeds (rpm)"):
+        with gui.add_folder("Wheel speeds (rpm)", expand_by_default=False):
             self.wheel_plot = gui.add_uplot(
                 data=_empty(n_wheels),
                 series=({"label": "t − now (s)"},) + tuple(
                     {"label": f"RW{k + 1}", "stroke": WHEEL_COLOURS[k % len(WHEEL_COLOURS)]} for k in range(n_wheels)),
                 scales=_plot_scales(), aspect=2.0)
-        with gui.add_folder("MD moment (A·m²)"):
+        with gui.add_folder("MD moment (A·m²)", expand_by_default=False):
             self.md_plot = gui.add_uplot(
                 data=_empty(3),
                 series=({"label": "t − now (s)"},) + tuple(
