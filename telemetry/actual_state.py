@@ -6,7 +6,9 @@ decoded reference-satellite batches (ACS_HK, GPS_NAV; e.g. live messages or an a
 time series under sim_core's names and layouts (:func:`actual_track`), the GPS fixes become the
 circular orbit the twin flies (:func:`fit_circular_orbit`, a least-squares plane and phase through
 the fixes), and a library scenario is re-started at a telemetry instant with the telemetered attitude,
-rates and wheel speeds, its programme shifted to that instant (:func:`aligned_scenario`).
+rates and wheel speeds, its programme shifted to that instant (:func:`aligned_scenario`), and fault
+hypotheses flown as one batch from there are ranked by how closely they reproduce the telemetry
+(:func:`rank_hypotheses`).
 """
 
 from __future__ import annotations
@@ -16,14 +18,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim_core import frames, orbit, quaternion
+from sim_core import frames, orbit, quaternion, sensors
+from sim_core.engine import simulate
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec
 from telemetry.ccsds import NS_PER_S
 from telemetry.dictionary import parse_utc_ns
 from telemetry.ingest_report import SampleBatch
 
 __all__ = ["ActualTrack", "actual_track", "fit_circular_orbit", "aligned_scenario", "aligned_wheel_available",
-           "HK_SERIES", "WHEEL_SERIES", "GPS_SERIES"]
+           "HypothesisFit", "rank_hypotheses", "HK_SERIES", "WHEEL_SERIES", "GPS_SERIES"]
 
 # sim_core series name → (dictionary parameter prefix, component suffixes); None = a scalar parameter.
 HK_SERIES = {
@@ -43,6 +46,7 @@ MIN_GPS_FIXES = 3  # a plane and a phase need at least three non-collinear posit
 GPS_SIGMA_RATIO_S = 15.0 / 1.5  # σ_r / σ_v of the receiver, seed 003 §3.2.1.1: 15 m and 1.5 m/s (2σ)
 SMOOTHING_FIXES = 31  # ±15 fixes at 1 Hz: a cubic's truncation error there is (nτ)⁴a/24 ≈ 2 cm at LEO
 SMOOTHING_DEGREE = 3
+TACHOMETER_COUNT_RAD_S = 0.25 * np.pi / 30.0  # wheel-speed count of the reference dictionary (0.25 rpm)
 
 
 @dataclass(frozen=True)
@@ -224,3 +228,46 @@ def aligned_scenario(
 def aligned_wheel_available(track: ActualTrack, t_align_utc_ns: int) -> np.ndarray:
     """(1, n_wheels) wheels onboard FDIR had not isolated at the telemetry instant (``simulate(wheel_available=)``)."""
     return track.series["fault_wheel"][track.at(t_align_utc_ns)][None, :] == 0.0
+
+
+@dataclass(frozen=True)
+class HypothesisFit:
+    """How far a twin flying one fault hypothesis stays from the telemetry (RMS over the compared samples)."""
+
+    name: str
+    wheel_speed_rms_rad_s: float
+    attitude_rms_rad: float
+    score: float  # both mismatches in units of the telemetry's own resolution, summed
+
+
+def rank_hypotheses(
+    base: Scenario,
+    track: ActualTrack,
+    t_align_utc_ns: int,
+    duration_s: float,
+    hypotheses: dict[str, Sequence[FaultSpec]],
+) -> list[HypothesisFit]:
+    """Fly every fault hypothesis as one variant of a twin batch aligned to telemetry; best fit first (seed 000 §7).
+
+    The mismatch unit of wheel speeds is the tachometer count of the dictionary (0.25 rpm); of the attitude,
+    the star tracker's σ: the twin's true attitude against the telemetered estimate.
+    """
+    if not hypotheses:
+        raise ValueError("hypotheses: give at least one (name -> fault list), e.g. {'nominal': []}")
+    twin = aligned_scenario(base, track, t_align_utc_ns, duration_s)
+    batch = twin.model_copy(update={"variants": [VariantSpec(name=n, faults=list(f)) for n, f in hypotheses.items()]})
+    available = np.repeat(aligned_wheel_available(track, t_align_utc_ns), len(hypotheses), axis=0)
+    flown = simulate(Scenario.model_validate(batch.model_dump()), wheel_available=available, fdir=True)
+    first = track.at(t_align_utc_ns)
+    n = min(flown.t_s.shape[0], track.t_utc_ns.shape[0] - first)
+    rows = first + np.arange(n)
+    sigma_att = max(base.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC, np.finfo(float).eps)
+    fits = []
+    for v, name in enumerate(flown.variant_names):
+        speed_gap = flown["wheel_speed_rad_s"][v, :n] - track.series["wheel_speed_rad_s"][rows]
+        wheel = float(np.sqrt(np.mean(speed_gap**2)))
+        twin_q = quaternion.conjugate(flown["q_ib"][v, :n])
+        gap = quaternion.angle(quaternion.multiply(twin_q, track.series["q_est_ib"][rows]))
+        attitude = float(np.sqrt(np.mean(gap**2)))
+        fits.append(HypothesisFit(name, wheel, attitude, wheel / TACHOMETER_COUNT_RAD_S + attitude / sigma_att))
+    return sorted(fits, key=lambda f: f.score)

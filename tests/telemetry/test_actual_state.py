@@ -13,7 +13,14 @@ import pytest
 from sim_core import frames, orbit, quaternion, scenario_library
 from sim_core.engine import orbit_state, simulate
 from telemetry import emulator
-from telemetry.actual_state import actual_track, aligned_scenario, aligned_wheel_available, fit_circular_orbit
+from telemetry.actual_state import (
+    TACHOMETER_COUNT_RAD_S,
+    actual_track,
+    aligned_scenario,
+    aligned_wheel_available,
+    fit_circular_orbit,
+    rank_hypotheses,
+)
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 
@@ -21,6 +28,7 @@ ARCSEC = np.pi / 180.0 / 3600.0
 NS = 10**9
 FAILED_WHEEL, FAILURE_ONSET_S = 1, 350.0
 ALIGN_S, TWIN_S = 300.0, 200.0  # start of the first scanning course; runs into the 20° turn (420–520 s)
+RANKING_S = 300.0  # through the whole turn, where the wheels of the GE pair 1/3 part ways
 EXACT_FIT_TOL_RAD = 1e-9  # noise-free fixes: only rounding of 7,000 km positions (~1e-9 m relative)
 # 60 fixes with σ = 7.5 m (seed 003, 15 m 2σ) over a ±225 km arc: plane tilt σ√3/(225 km·√60) ≈ 7.5e-6 rad; 5σ.
 NOISY_FIT_TOL_RAD = 4e-5
@@ -135,6 +143,21 @@ def test_nominal_twin_departs_from_a_satellite_with_a_hidden_wheel_failure(satel
     before = int((FAILURE_ONSET_S - ALIGN_S) / 0.25)
     assert wheels[:before].max() < TWIN_WHEEL_TOL_RAD_S  # same flight until the wheel fails
     assert wheels[before:].max() > DIVERGED_WHEEL_RAD_S
+
+
+def test_batch_of_fault_hypotheses_ranks_the_hidden_failure_first(satellite) -> None:
+    _, _, batches = satellite
+    track = actual_track(batches)
+    t_align = int(track.t_utc_ns[0]) + int(ALIGN_S * NS)
+    onset = FAILURE_ONSET_S - ALIGN_S
+    hypotheses = {"nominal": [], "gyro y bias": [emulator.parse_fault(f"gyro:1:bias@{onset},value=1e-4")]}
+    hypotheses.update({f"wheel {k} failure": [emulator.parse_fault(f"wheel:{k}:failure@{onset}")] for k in range(4)})
+    fits = rank_hypotheses(scenario_library.get("somov-ge4-scan"), track, t_align, RANKING_S, hypotheses)
+    assert fits[0].name == f"wheel {FAILED_WHEEL} failure"  # the satellite's hidden schedule
+    assert fits[0].wheel_speed_rms_rad_s < TACHOMETER_COUNT_RAD_S
+    assert min(f.wheel_speed_rms_rad_s for f in fits[1:]) > 2 * TACHOMETER_COUNT_RAD_S
+    with pytest.raises(ValueError, match="hypotheses"):
+        rank_hypotheses(scenario_library.get("somov-ge4-scan"), track, t_align, RANKING_S, {})
 
 
 def test_twin_starts_with_the_wheels_onboard_fdir_had_isolated(satellite) -> None:
