@@ -43,7 +43,7 @@ GPS_LEAP_S = 18  # GPS − UTC since 2017-01-01 (IERS Bulletin C: TAI − UTC = 
 IGRF_NORM_TOL_T = 300e-9  # 6σ of the 50 nT magnetometer noise plus the 2 nT count and the 30 s field table
 SETTLE_S = 0.3  # > telemetry.live.DECODE_INTERVAL_S: lets the listener decode what arrived
 EARLY_TOL_S = 0.005  # time.time() vs time.monotonic() read a few microseconds apart; nothing may leave early
-LATE_TOL_S = 0.25  # event-loop wake-up and loopback delivery on a loaded 2-core machine
+LATE_TOL_S = 0.5  # event-loop wake-up and loopback delivery on a loaded 2-core machine (load average 8 seen)
 
 
 @pytest.fixture(scope="module")
