@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from telemetry.dictionary import Dictionary
+    from telemetry.dictionary import DerivedParameter, Dictionary, Parameter
 
 __all__ = [
     "NOMINAL",
@@ -84,7 +84,8 @@ def dictionary_limits(dictionary: Dictionary) -> dict[str, LimitSet]:
     """Limits of every limited parameter of a telemetry dictionary (telemetry.dictionary.Dictionary)."""
     limits: dict[str, LimitSet] = {}
     for packet in dictionary.packets.values():
-        for parameter in (*packet.parameters, *packet.derived):
+        parameters: tuple[Parameter | DerivedParameter, ...] = (*packet.parameters, *packet.derived)
+        for parameter in parameters:
             b = parameter.limits
             if any(v is not None for v in (b.red_low, b.yellow_low, b.yellow_high, b.red_high)):
                 limits[parameter.name] = limit_set(b.red_low, b.yellow_low, b.yellow_high, b.red_high)

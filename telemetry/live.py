@@ -225,7 +225,8 @@ class LiveStream:
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         task = asyncio.current_task()
-        self._connections.add(task)
+        if task is not None:
+            self._connections.add(task)
         self.stats.connections += 1
         peer = "{}:{}".format(*writer.get_extra_info("peername")[:2])
         buffer, arrived, closed = bytearray(), asyncio.Event(), asyncio.Event()
@@ -249,7 +250,8 @@ class LiveStream:
             self._process_complete(buffer, peer)
             self.stats.stretches_quarantined += 1 if buffer else 0  # a packet cut off by the disconnect
             writer.close()
-            self._connections.discard(task)
+            if task is not None:
+                self._connections.discard(task)
 
     def _process_complete(self, buffer: bytearray, peer: str) -> None:
         end = complete_prefix(buffer, self._packet_octets)

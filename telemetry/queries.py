@@ -84,7 +84,7 @@ def latest_values(archive: Archive, satellite: str, names: list[str] | None = No
 
 def gaps(archive: Archive, satellite: str, t0_ns: int, t1_ns: int) -> list[Gap]:
     """Sequence-count gaps (CCSDS 133.0-B-2 §4.1.3.4.2.2, modulo 2**14) of every APID in [t0_ns, t1_ns]."""
-    found = []
+    found: list[Gap] = []
     for apid, (t, seq) in sorted(archive.packet_keys(satellite, t0_ns, t1_ns).items()):
         missing = sequence_gaps(seq)
         found.extend(Gap(apid, int(t[i - 1]), int(t[i]), int(missing[i])) for i in np.flatnonzero(missing).tolist())

@@ -12,9 +12,10 @@ All functions run on a connection inside the caller's transaction.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
-from sqlalchemy import Connection, insert, select, update
+from sqlalchemy import Connection, Table, insert, select, update
 
 from telemetry.archive.models import Alarm, AlarmEvent
 from telemetry.limits import NOMINAL, SEVERITY_NAMES
@@ -22,8 +23,8 @@ from telemetry.limits import NOMINAL, SEVERITY_NAMES
 __all__ = ["LevelChange", "apply_level_changes", "current_levels", "operator_action"]
 
 OPEN_STATES = ("active", "acknowledged", "shelved")
-ALARM = Alarm.__table__
-EVENT = AlarmEvent.__table__
+ALARM = cast(Table, Alarm.__table__)
+EVENT = cast(Table, AlarmEvent.__table__)
 
 
 @dataclass(frozen=True)

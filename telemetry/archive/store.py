@@ -12,10 +12,10 @@ import hashlib
 import json
 import time
 from collections.abc import Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from sqlalchemy import Connection, func, insert, select, update
+from sqlalchemy import Connection, Row, Table, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
 from telemetry.archive.batch import PacketBatch, sequence_gaps
@@ -51,9 +51,9 @@ if TYPE_CHECKING:
 __all__ = ["Archive", "CHUNK_PACKETS"]
 
 CHUNK_PACKETS = 8_192  # packets per chunk: a 2-h pass at 4 Hz is 4 chunks; see benchmarks/ingest.py
-SAT, STATION, TLE, PASS = Satellite.__table__, GroundStation.__table__, Tle.__table__, Pass.__table__
-UPLOAD, PARAM, CHUNK, VALUE = Upload.__table__, Parameter.__table__, PacketChunk.__table__, ValueChunk.__table__
-ALARM, EVENT = Alarm.__table__, AlarmEvent.__table__
+SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundStation, Tle, Pass))
+UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
+ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
 
 
 def _now_ns() -> int:
@@ -639,7 +639,7 @@ def _gaps_of(batch: PacketBatch) -> list[Gap]:
 def _limit_changes(
     batch: PacketBatch, limits: Mapping[str, LimitSet], open_levels: dict[str, tuple[int, int]]
 ) -> list[alarm_state.LevelChange]:
-    changes = []
+    changes: list[alarm_state.LevelChange] = []
     for name, limit in limits.items():
         if name not in batch.values:
             continue
@@ -676,7 +676,7 @@ def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tup
     return t[lo:hi], v[lo:hi]
 
 
-def _alarm_record(row: object, now_ns: int) -> AlarmRecord:
+def _alarm_record(row: Row[Any], now_ns: int) -> AlarmRecord:
     state = row.state
     if state == "shelved" and row.shelved_until_ns is not None and row.shelved_until_ns <= now_ns:
         state = "active"
@@ -693,7 +693,7 @@ def _alarm_record(row: object, now_ns: int) -> AlarmRecord:
     )
 
 
-def _pass_record(row: object) -> PassRecord:
+def _pass_record(row: Row[Any]) -> PassRecord:
     return PassRecord(
         row.id,
         row.station_name,
