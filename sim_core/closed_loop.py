@@ -45,9 +45,10 @@ R_MD, R_TORQUE, R_R, R_OBS, R_STATUS, R_FAULTS = 22, 25, 28, 31, 32, 33
 R_WHEELS = 34  # then: speeds (nw), commands (nw), delivered torques (nw), availability after FDIR (nw)
 
 # Per-variant FDIR configuration (sim_core.fdir): on/off, bound on the error of a change of the
-# estimated body rate (rad/s), star-tracker χ²(3) limit, Gaussian threshold in σ.
-FD_ON, FD_RATE_NOISE, FD_NIS_MAX, FD_N_SIGMA = range(4)
-FDIR_CONFIG_SIZE = 4
+# estimated body rate (rad/s), star-tracker χ²(3) limit, Gaussian threshold in σ, bound on the
+# external torque the loop does not model (N·m).
+FD_ON, FD_RATE_NOISE, FD_NIS_MAX, FD_N_SIGMA, FD_DIST_TORQUE = range(5)
+FDIR_CONFIG_SIZE = 5
 
 
 def record_width(n_wheels: int) -> int:
@@ -389,6 +390,14 @@ def fly_variant(
     sigma_u = times[12]
     mag_fd = np.full(fdir.MAG_STATE_SIZE, np.nan)
     w_prev = np.zeros(3)
+    md_torque = np.zeros(3)
+    j_eff = p.inertia.copy()
+    for w in range(nw):
+        for i in range(3):
+            for c in range(3):
+                j_eff[i, c] -= p.wheel_axes[i, w] * p.wheel_inertia[w] * p.wheel_axes[c, w]
+    j_eff_inv = np.linalg.inv(j_eff)
+    decouple = fdir.wheel_decoupling_1(p.wheel_axes, p.wheel_inertia, j_eff_inv)
 
     r, v, a = hermite_orbit_1(orbit_tab, orbit_t0, orbit_step, 0.0)
     b_eci = linear_1(b_tab, b_t0, b_step, 0.0)
@@ -451,10 +460,7 @@ def fly_variant(
             mag[:] = b_body + mag_noise * np.random.standard_normal(3)
             _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
             if fdir_on:
-                att_sigma = np.sqrt(p_cov[0, 0] + p_cov[1, 1] + p_cov[2, 2]) if est_kind == ESTIMATOR_MEKF \
-                    else np.sqrt(3.0) * st_sigma
-                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, att_sigma,
-                                          n_sigma, ev, n_ev, t)
+                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma, ev, n_ev, t)
 
         if k % ctrl_every == 0:
             shared[slot] = k
@@ -466,8 +472,8 @@ def fly_variant(
                 speeds = tach_q * np.floor(speeds / tach_q + 0.5)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
-                fdir.wheel_check_1(wheel_fd, speeds, w_est, p.wheel_axes, p.wheel_inertia, wheel_limits[1],
-                                   base_friction, tach_q, rate_noise, ctrl_every * dt, available, ev, n_ev, t)
+                fdir.wheel_check_1(wheel_fd, speeds, p.wheel_inertia, wheel_limits[1], base_friction, tach_q,
+                                   ctrl_every * dt, decouple, available, ev, n_ev, t)
             if law_kind == LAW_SEED000:
                 body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
             elif law_kind == LAW_MRP_FEEDBACK:
@@ -489,14 +495,18 @@ def fly_variant(
                                            wheel_out, dip_out)
             for w in range(nw):
                 cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
-            if fdir_on:
-                fdir.wheel_hold_1(wheel_fd, speeds, w_est, p.wheel_axes, cmd, p.wheel_inertia, wheel_limits[0],
-                                  wheel_limits[1])
             dipole[:] = dip_out
             _rod_faults_1(faults, t, dipole)
             for i in range(3):
                 dipole[i] = min(max(dipole[i], -md_max), md_max)
             md_on = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
+            if fdir_on:
+                md_torque[0] = dipole[1] * mag[2] - dipole[2] * mag[1]
+                md_torque[1] = dipole[2] * mag[0] - dipole[0] * mag[2]
+                md_torque[2] = dipole[0] * mag[1] - dipole[1] * mag[0]
+                fdir.wheel_hold_1(wheel_fd, speeds, w_est, p.wheel_axes, cmd, p.wheel_inertia, wheel_limits[0],
+                                  wheel_limits[1], base_friction, p.inertia, j_eff_inv, md_torque,
+                                  fdir_cfg[FD_DIST_TORQUE], rate_noise, ctrl_every * dt)
 
         if k % out_every == 0 and out_i < rec.shape[0]:
             row = rec[out_i]

@@ -33,6 +33,7 @@ MAX_EVENTS = 256
 ARCSEC = np.pi / 180.0 / 3600.0
 PROGRESS_POLL_S = 0.2
 MEKF_SIGMA0_RAD = 1e-3  # initial attitude uncertainty of the MEKF (≈ 3.4′): the start is the program
+GG_BOUND_MARGIN = 1.5  # gravity-gradient bound 3μ/r³ (J_max − J_min), with room for eccentricity and perigee
 MEKF_BIAS0_RAD_S = 1e-5  # initial gyro-bias uncertainty (≈ 2°/h)
 
 
@@ -203,6 +204,10 @@ def _fdir_config(s: Scenario, on: bool | Sequence[bool]) -> np.ndarray:
     cfg[:, closed_loop.FD_RATE_NOISE] = rate_noise
     cfg[:, closed_loop.FD_NIS_MAX] = fdir_kernels.star_nis_threshold()
     cfg[:, closed_loop.FD_N_SIGMA] = n_sigma
+    if s.gravity_gradient:
+        r0 = np.linalg.norm(orbit_state(s)(np.array([_epoch_unix_s(s.orbit.epoch_utc)]))[0][0])
+        eig = np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2, dtype=float))
+        cfg[:, closed_loop.FD_DIST_TORQUE] = GG_BOUND_MARGIN * 3.0 * orbit.MU_EARTH_M3_S2 / r0**3 * (eig[-1] - eig[0])
     return cfg
 
 

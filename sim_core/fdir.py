@@ -3,13 +3,17 @@
 Wheels (seed 000 eq 1–3, seed 002 eq 1–4): each wheel obeys its own momentum equation
 ḣ_p = m_p − m^f_p(Ω_p), so a per-wheel residual over one control period T_u,
 
-    r_p = J_p Δ(Ω̃_p + a_pᵗ ω̂) − T_u (m_p − ½(m^f_p(Ω̃_p(t_{k−1})) + m^f_p(Ω̃_p(t_k)))),
+    r_p = J_p (ΔΩ̃_p + a_pᵗ Δω^pred) − T_u (m_p − ½(m^f_p(Ω̃_p(t_{k−1})) + m^f_p(Ω̃_p(t_k)))),
 
-(Ω̃ the tachometer reading of the speed relative to the body, a_pᵗ ω̂ the estimated body rate
-about the spin axis, so that J_p(Ω_p + a_pᵗ ω) is the wheel's absolute spin momentum; m_p the held
-command limited as the motor limits it, seed 000 eq 2) isolates the wheel by construction. Its
-threshold is a *bound*, not a tuned number: the tachometer quantum q gives |error of J ΔΩ̃| ≤ J q,
-the body-rate noise σ_ω adds J n_σ √2 σ_ω, and friction is monotonic in speed, so the true
+(Ω̃ the tachometer reading of the speed relative to the body, so that J_p(Ω_p + a_pᵗ ω) is the
+wheel's absolute spin momentum; Δω^pred = J⁻¹(−A m − ω̂ × G + L × B) T_u the body-rate change the
+model predicts from the commanded torques, the estimated momentum G and the known MD torque — a
+prediction, not a gyro difference, so gyro noise (even seed 002's 50σ) cannot raise false alarms;
+m_p the held command limited as the motor limits it, seed 000 eq 2) isolates the wheel by
+construction. Its threshold is a *bound*, not a tuned number: the tachometer quantum q gives
+|error of J ΔΩ̃| ≤ J q; the prediction misses the unmodelled torque (gravity gradient ≤ 3μ/r³
+(J_max − J_min)) and the rate noise in ω̂ × G, at most J_p T_u (M_dist + δω |G|) / J_min; and
+friction is monotonic in speed, so the true
 mean friction over the period lies between m^f at the slowest and fastest speeds the readings
 allow (± q/2); the trapezoid estimate lies there too. r_p exceeding ``WHEEL_SAFETY`` × that bound
 is a detection; ``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
@@ -19,14 +23,16 @@ limit may cut the torque are not tested (the residual is not defined there).
 
 Sensors (seed 000 §4 measurements, seed 003 §3.2 preprocessing flags):
 - star tracker: the normalised innovation squared against the MEKF prediction (χ²(3)) above the
-  ``FALSE_ALARM_PROBABILITY`` quantile is a jump; a reading bit-identical to the previous one is
-  frozen (noise never repeats). Rejected samples are not used (gyro-only propagation);
+  ``FALSE_ALARM_PROBABILITY`` quantile, reached by a step from the last accepted innovation, is a
+  jump; a reading bit-identical to the previous one is frozen (noise never repeats). Rejected
+  samples are not used (gyro-only propagation). A *slow* star-tracker drift cannot be told from a
+  gyro bias change with these two sensors: the gyro test below reports it (as gyro drift);
 - gyros: the rotation the gyros integrate (trapezoid) over ``GYRO_WINDOW_S`` against the
   star tracker's relative rotation over the same window gives the mean rate error per axis; its
   change from the calibration windows beyond the noise bound is drift; on isolation the MEKF's bias
   process noise is widened to the observed drift, so the filter tracks it;
-- magnetometer: each axis against the onboard field model rotated by the estimated attitude;
-  spikes beyond the noise bound are replaced by the model field.
+- magnetometer: the field magnitude against the onboard model's (attitude-free); spikes beyond
+  the noise bound are replaced by the model field rotated by the estimated attitude.
 
 Events (codes of :data:`sim_core.trajectory.EVENT_NAMES`): ``fault_detected``, ``fault_isolated``
 (argument: wheel index 0..3, or ``SENSOR_ARG + 10 · target code + axis`` for sensors, target codes
@@ -63,8 +69,10 @@ __all__ = [
     "mag_state",
     "wheel_bound_1",
     "wheel_residual_1",
+    "wheel_decoupling_1",
     "wheel_check_1",
     "wheel_hold_1",
+    "star_innovation_1",
     "star_tracker_check_1",
     "gyro_drift_step_1",
     "magnetometer_check_1",
@@ -85,11 +93,12 @@ EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED = 1, 4, 5, 6
 T_GYRO, T_STAR, T_MAG = 1, 2, 4  # sim_core.closed_loop.TARGET_CODES
 
 # Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
-WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL = range(6)
-WHEEL_STATE_ROWS = 6
-# Star-tracker state.
-SS_PREV, SS_COUNT, SS_ISOLATED = 0, 4, 5
-STAR_STATE_SIZE = 6
+WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR = range(7)
+WHEEL_STATE_ROWS = 7
+# Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
+# innovation (3), in-jump flag.
+SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP = 0, 4, 5, 6, 9
+STAR_STATE_SIZE = 10
 # Gyro state: integrated rotation, ST at window start, window start time, previous rate, reference
 # bias, windows seen, consecutive exceedances, isolated flag, bias process noise, calibration end time.
 GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF, GS_N, GS_COUNT, GS_ISOLATED, GS_SIGMA_U, GS_TREF = 0, 4, 8, 9, 12, 15, 16, 17, 18, 19
@@ -169,31 +178,55 @@ def wheel_residual_1(inertia: float, speed_prev: float, speed_now: float, axial_
 
 
 @njit(cache=True)
-def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes: np.ndarray, inertia: np.ndarray,
-                  max_momentum: np.ndarray, friction: np.ndarray, tach_q: float, rate_noise: float, t_u: float,
-                  available: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+def wheel_decoupling_1(axes: np.ndarray, inertia: np.ndarray, j_inv: np.ndarray) -> np.ndarray:
+    """(I + diag(J_r) Aᵗ J_e⁻¹ A)⁻¹: a torque error e on the wheels gives residuals r = T_u (I + D) e,
+    since the body rate the prediction misses couples every wheel (seed 000 eq 1); this undoes it."""
+    nw = inertia.shape[0]
+    m = np.eye(nw)
+    ja = j_inv @ axes
+    for p in range(nw):
+        for q in range(nw):
+            m[p, q] += inertia[p] * (axes[0, p] * ja[0, q] + axes[1, p] * ja[1, q] + axes[2, p] * ja[2, q])
+    return np.linalg.inv(m)
+
+
+@njit(cache=True)
+def wheel_check_1(state: np.ndarray, speeds: np.ndarray, inertia: np.ndarray, max_momentum: np.ndarray,
+                  friction: np.ndarray, tach_q: float, t_u: float, decouple: np.ndarray, available: np.ndarray,
+                  ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
     """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
 
-    ``speeds``: tachometer readings at t (rad/s), ``w_body`` the estimated body rate, ``axes`` the
-    spin axes (3, n_w), ``rate_noise`` the bound on the error of a change of a_pᵗ ω̂ (rad/s);
-    ``state`` holds the previous reading and the
-    limited torque held since (see :func:`wheel_hold_1`). Writes fault_detected / fault_isolated /
-    reconfigured / mode_change events (seed 000 §3 reconfiguration 4 → 3 → 2 + MD).
+    ``speeds``: tachometer readings at t (rad/s); ``state`` holds the previous reading, the
+    predicted change of the body rate about each axis with its error bound, and the
+    limited torque held since (see :func:`wheel_hold_1`); ``decouple`` from
+    :func:`wheel_decoupling_1`, so that each decoupled residual answers for its own wheel only.
+    Writes fault_detected / fault_isolated / reconfigured / mode_change events (seed 000 §3
+    reconfiguration 4 → 3 → 2 + MD).
     """
     nw = speeds.shape[0]
-    changed = False
+    raw, bound = np.zeros(nw), np.zeros(nw)
+    tested = np.zeros(nw, dtype=np.bool_)
     for p in range(nw):
         if not available[p] or state[WS_VALID, p] == 0.0:
             continue
         torque = state[WS_TORQUE, p]
         if abs(inertia[p] * state[WS_SPEED, p]) + abs(torque) * t_u >= max_momentum[p]:
+            bound[p] = abs(torque) * t_u  # the motor's momentum limit may cut the torque: untested
+            continue
+        tested[p] = True
+        raw[p] = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u, friction, p)
+        bound[p] = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q, state[WS_AXIAL_ERR, p], t_u,
+                                 friction, p)
+    changed = False
+    for p in range(nw):
+        if not tested[p]:
             state[WS_COUNT, p] = 0.0
-            continue  # the motor's momentum limit may cut the torque: residual undefined
-        axial = axes[0, p] * w_body[0] + axes[1, p] * w_body[1] + axes[2, p] * w_body[2]
-        r = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], axial - state[WS_AXIAL, p], torque, t_u,
-                             friction, p)
-        bound = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q, rate_noise, t_u, friction, p)
-        if abs(r) <= WHEEL_SAFETY * bound:
+            continue
+        r, b = 0.0, 0.0
+        for q in range(nw):
+            r += decouple[p, q] * raw[q]
+            b += abs(decouple[p, q]) * bound[q]
+        if abs(r) <= WHEEL_SAFETY * b:
             state[WS_COUNT, p] = 0.0
             continue
         state[WS_COUNT, p] += 1.0
@@ -219,12 +252,35 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axe
 
 @njit(cache=True)
 def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes: np.ndarray, cmd: np.ndarray,
-                 inertia: np.ndarray, max_torque: np.ndarray, max_momentum: np.ndarray) -> None:
-    """Remember the readings and the torque the motor will deliver for ``cmd`` (seed 000 eq 2–3)."""
+                 inertia: np.ndarray, max_torque: np.ndarray, max_momentum: np.ndarray, friction: np.ndarray,
+                 j_body: np.ndarray, j_inv: np.ndarray, md_torque_b: np.ndarray, dist_torque: float, rate_noise: float,
+                 t_u: float) -> None:
+    """Remember the readings, the torque the motor will deliver for ``cmd`` (seed 000 eq 2–3) and the body-rate
+    change Δω^pred = J_e⁻¹(−A(m − m^f) − ω̂ × G + L × B) T_u the model predicts (seed 000 eq 1).
+
+    ``j_body`` is J (wheels locked, as in G = Jω + A J_r Ω), ``j_inv`` the inverse of J_e = J − A J_r Aᵗ,
+    the inertia that the body rate sees once the wheel equations are eliminated.
+    """
     limited = limited_motor_torque_1(cmd, speeds, inertia, max_torque, max_momentum)
-    for p in range(speeds.shape[0]):
+    nw = speeds.shape[0]
+    g = j_body @ w_body
+    torque = md_torque_b.copy()
+    for p in range(nw):
+        for i in range(3):
+            g[i] += axes[i, p] * inertia[p] * speeds[p]
+            torque[i] -= axes[i, p] * (limited[p] - friction_torque_one_wheel(speeds[p], friction, p))
+    torque[0] -= w_body[1] * g[2] - w_body[2] * g[1]
+    torque[1] -= w_body[2] * g[0] - w_body[0] * g[2]
+    torque[2] -= w_body[0] * g[1] - w_body[1] * g[0]
+    dw = (j_inv @ torque) * t_u
+    j_inv_norm = 0.0
+    for i in range(3):
+        j_inv_norm = max(j_inv_norm, abs(j_inv[i, 0]) + abs(j_inv[i, 1]) + abs(j_inv[i, 2]))
+    err = j_inv_norm * t_u * (dist_torque + rate_noise * np.sqrt(g @ g))
+    for p in range(nw):
         state[WS_SPEED, p] = speeds[p]
-        state[WS_AXIAL, p] = axes[0, p] * w_body[0] + axes[1, p] * w_body[1] + axes[2, p] * w_body[2]
+        state[WS_AXIAL, p] = axes[0, p] * dw[0] + axes[1, p] * dw[1] + axes[2, p] * dw[2]
+        state[WS_AXIAL_ERR, p] = err
         state[WS_TORQUE, p] = limited[p]
         state[WS_VALID, p] = 1.0
 
@@ -248,26 +304,44 @@ def _rotvec_between_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
-                         sigma3: np.ndarray, nis_max: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
-    """Accept or reject one star-tracker sample: innovation χ² (jump) and exact repetition (freeze).
-
-    seed 000 §4: Λ^m = Λ ∘ Λ^n with σ per axis; the innovation z = rotvec(Λ̂̃ ∘ Λ^m) has covariance
-    S = P_θθ + diag(σ²). Returns True if the sample may update the filter.
-    """
+def star_innovation_1(q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray, sigma3: np.ndarray) -> tuple[np.ndarray, float]:
+    """Innovation z = rotvec(Λ̂̃ ∘ Λ^m) and its normalised square zᵀ(P_θθ + diag σ²)⁻¹z, χ²(3) if consistent (seed 000 §4)."""
     z = _rotvec_between_1(q_est, q_meas)
     s = np.empty((3, 3))
     for i in range(3):
         for j in range(3):
             s[i, j] = p_cov[i, j]
         s[i, i] += sigma3[i] * sigma3[i]
-    nis = z @ np.linalg.solve(s, z)
+    return z, z @ np.linalg.solve(s, z)
+
+
+@njit(cache=True)
+def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
+                         sigma3: np.ndarray, nis_max: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+    """Accept or reject one star-tracker sample: an innovation jump beyond χ²(3), or an exact repetition.
+
+    seed 000 §4: Λ^m = Λ ∘ Λ^n with σ per axis; the innovation z = rotvec(Λ̂̃ ∘ Λ^m) has covariance
+    S = P_θθ + diag(σ²). A sample is a *jump* when zᵀS⁻¹z exceeds the limit and z also stepped from
+    the last accepted innovation by more than the limit allows for two independent samples (2σ²;
+    a gradual growth, e.g. an unmodelled gyro drift, is left to the gyro test); once jumped, samples
+    stay rejected while either statistic stays beyond the limit, so that the covariance growing
+    during gyro-only propagation does not let a lasting offset back in. Returns True to use the sample.
+    """
+    z, nis = star_innovation_1(q_est, p_cov, q_meas, sigma3)
+    step = 0.0
+    for i in range(3):
+        d = z[i] - state[SS_Z + i]
+        step += d * d / (2.0 * sigma3[i] * sigma3[i]) if sigma3[i] > 0.0 else 0.0
     frozen = sigma3[0] > 0.0 and q_meas[0] == state[SS_PREV] and q_meas[1] == state[SS_PREV + 1] \
         and q_meas[2] == state[SS_PREV + 2] and q_meas[3] == state[SS_PREV + 3]
     state[SS_PREV:SS_PREV + 4] = q_meas
-    if nis <= nis_max and not frozen:
+    jumped = (nis > nis_max and step > nis_max) or (state[SS_JUMP] != 0.0 and (nis > nis_max or step > nis_max))
+    if not frozen and not jumped:
         state[SS_COUNT] = 0.0
+        state[SS_JUMP] = 0.0
+        state[SS_Z:SS_Z + 3] = z
         return True
+    state[SS_JUMP] = 1.0 if jumped else state[SS_JUMP]
     state[SS_COUNT] += 1.0
     arg = SENSOR_ARG + 10 * T_STAR
     if state[SS_COUNT] == 1.0 and state[SS_ISOLATED] == 0.0:
@@ -369,22 +443,23 @@ def _conj_mul_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def magnetometer_check_1(state: np.ndarray, b_meas: np.ndarray, b_model: np.ndarray, sigma_mag: float,
-                         att_sigma: float, n_sigma: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
-    """Screen one magnetometer sample against the model field in body axes; replace spikes in place.
+                         n_sigma: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+    """Screen one magnetometer sample by its magnitude against the model's; replace a spike in place.
 
-    Seed 003 eq 26 field B in body axes: per-axis bound n_σ σ_mag + |B| σ_att + model error.
+    Seed 003 eq 26 field B: | |B̃| − |B_model| | ≤ n_σ σ_mag + model error holds whatever the attitude
+    (so an attitude-sensor fault is not blamed on the magnetometer); ``b_model`` is the model field
+    rotated into body axes by the estimated attitude, used to name the axis and as the replacement.
     Returns True if the sample was accepted.
     """
-    b_norm = np.sqrt(b_model[0] ** 2 + b_model[1] ** 2 + b_model[2] ** 2)
-    bound = n_sigma * sigma_mag + b_norm * att_sigma + MAG_MODEL_ERROR_T
-    worst, axis = 0.0, 0
-    for i in range(3):
-        d = abs(b_meas[i] - b_model[i])
-        if d > worst:
-            worst, axis = d, i
-    if worst <= bound:
+    model = np.sqrt(b_model[0] ** 2 + b_model[1] ** 2 + b_model[2] ** 2)
+    meas = np.sqrt(b_meas[0] ** 2 + b_meas[1] ** 2 + b_meas[2] ** 2)
+    if abs(meas - model) <= n_sigma * sigma_mag + MAG_MODEL_ERROR_T:
         return True
     if np.isnan(state[MS_LAST]) or t - state[MS_LAST] > MAG_REARM_S:
+        worst, axis = 0.0, 0
+        for i in range(3):
+            if abs(b_meas[i] - b_model[i]) > worst:
+                worst, axis = abs(b_meas[i] - b_model[i]), i
         arg = SENSOR_ARG + 10 * T_MAG + axis
         _emit(ev, n_ev, t, EV_DETECTED, arg)
         _emit(ev, n_ev, t, EV_ISOLATED, arg)

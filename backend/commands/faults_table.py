@@ -11,7 +11,7 @@ COLUMNS = (
     ("configuration", "configuration", "{}"),
     ("pointing_rms_arcsec", "RMS while scanning (″)", "{:.2f}"),
     ("pointing_max_arcsec", "max while scanning (″)", "{:.2f}"),
-    ("kappa_fraction", "orbit with |κ| ≤ 1/2", "{:.0%}"),
+    ("kappa_fraction", "orbit with \\|κ\\| ≤ 1/2", "{:.0%}"),
     ("max_roll_rate_deg_s", "fastest feasible roll (°/s)", "{:.3f}"),
     ("route_flown", "route flown", "{}"),
 )
