@@ -27,7 +27,7 @@ FRAME_RATE_HZ = 30.0
 PANEL_RATE_HZ = 2.0
 WHOLE_EARTH_DISTANCE = 3.2  # Earth radii from the centre, behind the spacecraft
 CHASE_BACK, CHASE_UP = 0.12, 0.05  # Earth radii behind and above the spacecraft
-LOS_BACK = 0.06  # Earth radii behind the spacecraft along its boresight
+LOS_AHEAD = 0.045  # Earth radii in front of the telescope (past the displayed model) along the boresight
 INITIAL_FOV_RAD = float(np.radians(45.0))
 
 
@@ -40,7 +40,10 @@ def camera_pose(preset: str, f: TwinFrame, v_eci: np.ndarray) -> tuple[np.ndarra
         return r + CHASE_BACK * back + CHASE_UP * up_r, r, up_r
     if preset == "line of sight":
         boresight = quaternion.rotate(f.q_actual, np.array([1.0, 0.0, 0.0]))
-        return r - LOS_BACK * boresight + 0.02 * up_r, r + boresight * 0.5, up_r
+        ground = quaternion.rotate(f.earth_wxyz, f.los_actual_ecef)
+        target = ground if np.all(np.isfinite(ground)) else r + boresight * 0.1
+        along = quaternion.rotate(f.q_actual, np.array([0.0, 1.0, 0.0]))
+        return r + LOS_AHEAD * boresight, target, along
     if preset == "whole Earth":
         return up_r * WHOLE_EARTH_DISTANCE, np.zeros(3), np.array([0.0, 0.0, 1.0])
     raise ValueError(f"preset: unknown camera preset {preset!r}")

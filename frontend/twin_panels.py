@@ -35,6 +35,11 @@ def _plot_scales() -> dict:
     return {"x": {"time": False, "range": [-PLOT_WINDOW_S, 0.0]}}
 
 
+def _axes() -> tuple[dict, dict]:
+    """x axis as is; a wide y axis so that values like 20,000 are not clipped."""
+    return ({}, {"size": 64})
+
+
 def _empty(n_series: int) -> tuple[np.ndarray, ...]:
     """Initial plot data spanning the window: viser keeps the relative x zoom, a zero span breaks it."""
     return (np.array([-PLOT_WINDOW_S, 0.0]),) + tuple(np.zeros(2) for _ in range(n_series))
@@ -64,19 +69,19 @@ class TwinPanels:
             self.error_plot = gui.add_uplot(
                 data=_empty(1), series=({"label": "t − now (s)"},
                                                        {"label": "error (arcsec)", "stroke": "#ff5050"}),
-                scales=_plot_scales(), aspect=2.0)
+                scales=_plot_scales(), axes=_axes(), aspect=2.0)
         with gui.add_folder("Wheel speeds (rpm)", expand_by_default=False):
             self.wheel_plot = gui.add_uplot(
                 data=_empty(n_wheels),
                 series=({"label": "t − now (s)"},) + tuple(
                     {"label": f"RW{k + 1}", "stroke": WHEEL_COLOURS[k % len(WHEEL_COLOURS)]} for k in range(n_wheels)),
-                scales=_plot_scales(), aspect=2.0)
+                scales=_plot_scales(), axes=_axes(), aspect=2.0)
         with gui.add_folder("MD moment (A·m²)", expand_by_default=False):
             self.md_plot = gui.add_uplot(
                 data=_empty(3),
                 series=({"label": "t − now (s)"},) + tuple(
                     {"label": f"m{'xyz'[k]}", "stroke": MD_COLOURS[k]} for k in range(3)),
-                scales=_plot_scales(), aspect=2.0)
+                scales=_plot_scales(), axes=_axes(), aspect=2.0)
         with gui.add_folder("Mode and flags"):
             self.flags = gui.add_markdown("—")
         with gui.add_folder("Active alarms"):

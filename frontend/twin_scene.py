@@ -20,7 +20,7 @@ Role = Literal["actual", "simulated", "overlay"]
 ROLES: tuple[Role, ...] = ("actual", "simulated", "overlay")
 
 MODEL_SIZE_EARTH_RADII = 0.03  # displayed half-size of the spacecraft (animation scale, seed 000 §6)
-AXES_LENGTH = 0.05
+AXES_LENGTH = 0.04  # body axes a little longer than the displayed model
 LINE_PX = 2.0
 SUN_LIGHT_DISTANCE = 20.0  # directional light placed along the Sun direction (scene units)
 AMBIENT = 0.12  # dim ambient so that the night side stays readable
@@ -94,8 +94,9 @@ class TwinScene:
             colour = GHOST_COLOUR if ghost else ACTUAL_COLOUR
             node = s.add_frame(f"/sat_{side}", show_axes=False)
             s.add_glb(f"/sat_{side}/model", spacecraft_model.spacecraft_glb(ghost), scale=scale)
-            s.add_frame(f"/sat_{side}/axes", axes_length=AXES_LENGTH, axes_radius=AXES_LENGTH / 25)
-            s.add_label(f"/sat_{side}/label", side, font_screen_scale=0.8)
+            s.add_frame(f"/sat_{side}/axes", axes_length=AXES_LENGTH, axes_radius=AXES_LENGTH / 80)
+            s.add_label(f"/sat_{side}/label", side, font_screen_scale=0.8,
+                        anchor="bottom-left" if ghost else "top-left")
             self.sats[side] = node
             self.los[side] = s.add_line_segments(f"/earth/los_{side}", np.zeros((1, 2, 3)), colour,
                                                  thickness=1.5, thickness_units="screen")

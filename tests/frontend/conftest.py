@@ -111,7 +111,8 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
     settings = Settings(data_dir=tmp / "data", database_url=f"sqlite:///{tmp / 'api.sqlite'}", job_workers=1,
                         job_queue_size=2, telemetry_port=0, live_enabled=False)
     app = create_app(settings)
-    app.mount("/dashboard", dashboard_app({}))
+    if not any(getattr(route, "path", "") == "/dashboard" for route in app.routes):
+        app.mount("/dashboard", dashboard_app({}))  # the backend mounts it itself once it ships that
     port = free_port()
     server, thread = _start_uvicorn(app, port)
     token = app.state.services.auth.issue("browser-test", Role.operator)[1]
