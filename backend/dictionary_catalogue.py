@@ -66,15 +66,19 @@ class DictionaryCatalogue:
 
         _check_name(name)
         self._folder.mkdir(parents=True, exist_ok=True)
-        staging = self._folder / f".staging.{name}"  # same folder: layout_from paths resolve
-        staging.write_bytes(content)
+        path, backup = self._folder / name, self._folder / f".previous.{name}"
+        if path.exists():
+            path.replace(backup)  # the file is loaded under its own name (a CSV's stem names its packet)
+        path.write_bytes(content)
         try:
-            dictionary = load_dictionary(staging, apid=apid, time_code=time_code)
+            dictionary = load_dictionary(path, apid=apid, time_code=time_code)
         except Exception:
-            staging.unlink(missing_ok=True)
+            path.unlink()
+            if backup.exists():
+                backup.replace(path)
             raise
+        backup.unlink(missing_ok=True)
         (self._folder / f"{name}.meta.json").write_text(json.dumps({"apid": apid, "time_code": time_code}))
-        staging.replace(self._folder / name)
         with self._lock:
             self._cache[name] = dictionary
         return dictionary

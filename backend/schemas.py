@@ -5,9 +5,10 @@ from __future__ import annotations
 from datetime import datetime, timezone
 from typing import Annotated, Any, Literal
 
+from fastapi import Path
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
-__all__ = ["Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
+__all__ = ["DbId", "Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
            "JobPublic", "SeriesPublic", "FilePublic"]
 
 
@@ -17,6 +18,7 @@ def _as_utc(moment: datetime) -> datetime:
 
 
 UtcDatetime = Annotated[datetime, AfterValidator(_as_utc)]
+DbId = Annotated[int, Path(ge=1, le=2**62, description="Database id (positive 64-bit integer).")]
 
 
 class Health(BaseModel):

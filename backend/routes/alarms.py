@@ -10,6 +10,7 @@ from fastapi import APIRouter, Query
 from pydantic import BaseModel, Field
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.schemas import DbId
 from backend.errors import ERROR_RESPONSES
 
 router = APIRouter(tags=["alarms"], responses=ERROR_RESPONSES)
@@ -30,7 +31,7 @@ def list_alarms(services: ServicesDep, _: ViewerDep,
 
 
 @router.get("/alarms/{alarm_id}/events", summary="History of one alarm")
-def alarm_events(alarm_id: int, services: ServicesDep, _: ViewerDep) -> list[dict[str, Any]]:
+def alarm_events(alarm_id: DbId, services: ServicesDep, _: ViewerDep) -> list[dict[str, Any]]:
     """Enter, leave, acknowledge, shelve … events in order."""
     return [asdict(e) for e in services.telemetry.archive.alarm_events(alarm_id)]
 
@@ -44,18 +45,18 @@ def _act(services: Any, principal: Any, alarm_id: int, action: str, until_ns: in
 
 
 @router.post("/alarms/{alarm_id}/acknowledge", summary="Acknowledge an alarm")
-def acknowledge(alarm_id: int, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+def acknowledge(alarm_id: DbId, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Mark the alarm seen by the operator."""
     return _act(services, principal, alarm_id, "acknowledge")
 
 
 @router.post("/alarms/{alarm_id}/shelve", summary="Shelve an alarm for duration_s")
-def shelve(alarm_id: int, body: ShelveRequest, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+def shelve(alarm_id: DbId, body: ShelveRequest, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Hide the alarm until now + duration_s."""
     return _act(services, principal, alarm_id, "shelve", time.time_ns() + int(body.duration_s * 1e9))
 
 
 @router.post("/alarms/{alarm_id}/unshelve", summary="Unshelve an alarm")
-def unshelve(alarm_id: int, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+def unshelve(alarm_id: DbId, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Bring a shelved alarm back now."""
     return _act(services, principal, alarm_id, "unshelve")

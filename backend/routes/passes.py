@@ -10,6 +10,7 @@ from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.schemas import DbId
 from backend.errors import ERROR_RESPONSES, ApiError
 from backend.routes.telemetry import read_limited
 from backend.timebase import EARLIEST_NS, LATEST_NS, utc_ns
@@ -107,7 +108,7 @@ def list_passes(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQ
 
 
 @router.get("/passes/{pass_id}", summary="One pass")
-def get_pass(pass_id: int, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
+def get_pass(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """The pass with this id (of the given satellite)."""
     for record in services.telemetry.archive.passes(satellite, EARLIEST_NS, LATEST_NS):
         if record.id == pass_id:
@@ -116,7 +117,7 @@ def get_pass(pass_id: int, services: ServicesDep, _: ViewerDep, satellite: str =
 
 
 @router.get("/passes/{pass_id}/summary", summary="Pass summary: reception, statistics, alarms")
-def pass_summary(pass_id: int, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
+def pass_summary(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """Completeness, per-parameter count/min/max/mean and the alarms raised during the pass."""
     summary = services.telemetry.pass_summary(satellite, pass_id)
     return {**summary, "pass": _pass_public(summary["pass"]), "alarms": [asdict(a) for a in summary["alarms"]]}

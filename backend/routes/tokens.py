@@ -7,7 +7,7 @@ from fastapi import APIRouter, Query
 from backend.auth import Role
 from backend.deps import AdminDep, ServicesDep
 from backend.errors import ERROR_RESPONSES, ApiError
-from backend.schemas import AuditPublic, TokenCreate, TokenIssued, TokenPublic
+from backend.schemas import DbId, AuditPublic, TokenCreate, TokenIssued, TokenPublic
 
 router = APIRouter(tags=["tokens"], responses=ERROR_RESPONSES)
 
@@ -29,7 +29,7 @@ def create_token(body: TokenCreate, services: ServicesDep, principal: AdminDep) 
 
 
 @router.delete("/tokens/{token_id}", response_model=TokenPublic, summary="Revoke an API token")
-def revoke_token(token_id: int, services: ServicesDep, principal: AdminDep) -> TokenPublic:
+def revoke_token(token_id: DbId, services: ServicesDep, principal: AdminDep) -> TokenPublic:
     """Revoke at once (cached lookups are forgotten)."""
     row = services.tokens.revoke(token_id)
     if row is None:

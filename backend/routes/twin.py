@@ -84,6 +84,22 @@ def get_session(session_id: str, services: ServicesDep, _: ViewerDep) -> dict[st
     return _session_public(services, _row(services, session_id))
 
 
+def session_feed(services: Any, session_id: str) -> Any:
+    """The monitors' TwinFeed of a finished session (telemetry of its window against its twin)."""
+    from backend.twin_feed import SessionFeed
+    from backend.twin_sessions import actual_track_between
+
+    row = _row(services, session_id)
+    job = services.job_repo.get(row.job_id)
+    if job is None or job.status != "succeeded":
+        raise ApiError(409, f"twin simulation is {job.status if job else 'missing'}", "session_id")
+    dictionary = services.telemetry.dictionaries.load(row.dictionary)
+    t1 = row.align_utc_ns + int(row.duration_s * NS_PER_S)
+    track = actual_track_between(services.telemetry.archive, dictionary, row.satellite, row.align_utc_ns, t1)
+    alarms = services.telemetry.archive.alarms(row.satellite, include_cleared=True)
+    return SessionFeed(track, services.jobs.result_dir(row.job_id) / "trajectory.npz", row.align_utc_ns, alarms)
+
+
 def _residuals(services: Any, row: Any) -> Any:
     from backend.twin_sessions import actual_track_between, residuals
 

@@ -15,6 +15,9 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.auth import Role
+from backend.routes.twin import session_feed
+from frontend.feed import TwinFeed
+from sim_core import orbit, quaternion
 from tests.backend.conftest import bearer, make_settings
 
 FAILED_WHEEL, FAILURE_ONSET_S = 1, 350.0
@@ -24,6 +27,9 @@ ARCSEC_DEG = 1.0 / 3600.0
 TWIN_ATTITUDE_TOL_DEG = 30.0 * ARCSEC_DEG  # 10 × the 3″ star tracker σ (twin truth vs telemetered estimate)
 TWIN_WHEEL_TOL_RPM = 0.1 * 30.0 / np.pi  # 0.1 rad/s: different noise draws through the same loop
 DIVERGED_WHEEL_RPM = 1.0 * 30.0 / np.pi  # the wrong hypothesis is off by more than 1 rad/s
+SPLINE_THROUGH_SAMPLES_RAD = 1e-9  # interpolation at the knots returns the samples (round-off)
+ORBIT_RADIUS_M = orbit.R_EARTH_M + 600e3  # somov-ge4-scan: circular 600 km above R_EARTH_M
+ORBIT_RADIUS_TOL_M = 100.0  # GPS fixes with σ = 7.5 m (seed 003), Hermite-interpolated
 
 
 @pytest.fixture(scope="module")
@@ -64,11 +70,29 @@ def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_de
         for name, answer in (("right", right.json()), ("nominal", nominal.json())):
             assert _wait(client, answer["id"], operator)["status"] == "succeeded"
             results[name] = client.get(f"/api/v1/twin/sessions/{answer['id']}/residuals", headers=operator).json()
+        feed = session_feed(client.app.state.services, right.json()["id"])
+    _check_feed(feed, results["right"]["summary"])
     right_summary, nominal_summary = results["right"]["summary"], results["nominal"]["summary"]
     assert right_summary["samples"] >= TWIN_S / 0.25 - 1
     assert right_summary["attitude_max_deg"] < TWIN_ATTITUDE_TOL_DEG
     assert right_summary["wheel_speed_max_rpm"] < TWIN_WHEEL_TOL_RPM
     assert nominal_summary["wheel_speed_max_rpm"] > DIVERGED_WHEEL_RPM
+
+
+def _check_feed(feed: TwinFeed, summary: dict) -> None:
+    """The monitors' feed: a TwinFeed through the telemetry samples, its error the residual's order."""
+    assert isinstance(feed, TwinFeed)
+    t0, t1 = feed.span_unix_s()
+    window = feed.window(t0, t1)
+    assert window.t_unix_s.size >= summary["samples"]
+    q_actual = feed.attitude_actual(window.t_unix_s)
+    track_q = feed._track.series["q_est_ib"][: window.t_unix_s.size]  # the spline passes through the samples
+    gap = quaternion.angle(quaternion.multiply(quaternion.conjugate(quaternion.normalize(track_q)), q_actual))
+    assert gap.max() < SPLINE_THROUGH_SAMPLES_RAD
+    assert np.degrees(window.error_angle_rad.max()) < TWIN_ATTITUDE_TOL_DEG
+    assert window.fault_flags[-1] == 1 << FAILED_WHEEL  # onboard FDIR isolated the failed wheel
+    r, _ = feed.orbit_eci(window.t_unix_s[:3])
+    assert np.allclose(np.linalg.norm(r, axis=1), ORBIT_RADIUS_M, atol=ORBIT_RADIUS_TOL_M)
 
 
 def test_twin_without_telemetry_is_422_naming_the_field(client: TestClient, tokens: dict[str, str],
