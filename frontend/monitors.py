@@ -60,6 +60,7 @@ class MonitorHandles:
     panels: dict[str, TwinPanels]
     host: str
     frames_sent: int = 0
+    _lock: threading.Lock = field(default_factory=threading.Lock)
     _stop: threading.Event = field(default_factory=threading.Event)
     _thread: threading.Thread | None = None
 
@@ -75,14 +76,29 @@ class MonitorHandles:
 
     def render(self, t_unix_s: float | None = None) -> TwinFrame:
         """Compute one frame and push it to every monitor (the loop does this at FRAME_RATE_HZ)."""
-        t = self.clock.t_unix_s if t_unix_s is None else t_unix_s
-        f = self.geometry.frame(t)
-        for role, scene in self.scenes.items():
-            scene.show(f)
-            self.panels[role].show_time(f)
-            self._apply_presets(role, f)
-        self.frames_sent += 1
-        return f
+        with self._lock:
+            t = self.clock.t_unix_s if t_unix_s is None else t_unix_s
+            f = self.geometry.frame(t)
+            for role, scene in self.scenes.items():
+                scene.show(f)
+                self.panels[role].show_time(f)
+                self._apply_presets(role, f)
+            self.frames_sent += 1
+            return f
+
+    def set_feed(self, feed: TwinFeed) -> None:
+        """Show another feed (e.g. a newly finished twin session) on the running monitors, paused at its start.
+
+        The panels keep the wheel count of the first feed.
+        """
+        if not isinstance(feed, TwinFeed):
+            raise ValueError("feed: does not implement frontend.feed.TwinFeed")
+        geometry = TwinGeometry(feed)
+        with self._lock:
+            self.geometry = geometry
+            self.clock.set_span(feed.span_unix_s)
+            for scene in self.scenes.values():
+                scene.rebuild(geometry)
 
     def _apply_presets(self, role: str, f: TwinFrame) -> None:
         presets = self.panels[role].presets()
@@ -105,11 +121,12 @@ class MonitorHandles:
 
     def update_panels(self) -> None:
         """Plots, flags and alarms of the last PLOT_WINDOW_S on every monitor."""
-        t = self.clock.t_unix_s
-        w = self.geometry.feed.window(t - PLOT_WINDOW_S, t)
-        alarms = self.geometry.feed.active_alarms(t)
-        for p in self.panels.values():
-            p.show_window(t, w, alarms)
+        with self._lock:
+            t = self.clock.t_unix_s
+            w = self.geometry.feed.window(t - PLOT_WINDOW_S, t)
+            alarms = self.geometry.feed.active_alarms(t)
+            for p in self.panels.values():
+                p.show_window(t, w, alarms)
 
     def _loop(self, rate_hz: float) -> None:
         period = 1.0 / rate_hz

@@ -58,6 +58,12 @@ class PlaybackClock:
         """The data span the clock moves in."""
         return self._span()
 
+    def set_span(self, span: Callable[[], tuple[float, float]]) -> None:
+        """Move in another data span (a new feed): paused at its start."""
+        t0, _ = span()
+        with self._lock:
+            self._span, self._t, self._playing, self._live = span, float(t0), False, False
+
     def advance(self, wall_dt_s: float) -> float:
         """Move by wall_dt × speed (replay) or to the newest data (live); stop at the end; returns t."""
         t0, t1 = self._span()

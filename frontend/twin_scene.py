@@ -105,6 +105,12 @@ class TwinScene:
             self.ccd[side] = s.add_line_segments(f"/earth/ccd_{side}", np.zeros((1, 2, 3)), (255, 255, 255),
                                                  thickness=LINE_PX, thickness_units="screen")
 
+    def rebuild(self, geometry: TwinGeometry) -> None:
+        """Redraw every node for another feed's geometry (viser replaces nodes of the same name)."""
+        self.geometry = geometry
+        self._trace_split = -1
+        self._build()
+
     def show(self, f: TwinFrame) -> None:
         """Move everything to the frame's instant (one batched websocket update)."""
         g = self.geometry

@@ -74,3 +74,22 @@ def test_bad_arguments_name_the_field(twin_feed, monitors):
         serve_monitors(object(), start=False)
     with pytest.raises(ValueError, match="role"):
         TwinScene(monitors.servers["actual"], "sideways", monitors.geometry)
+
+
+def test_set_feed_moves_running_monitors_to_the_new_feed(twin_feed):
+    from frontend.feed import TrajectoryFeed
+    from tests.frontend.conftest import synthetic_trajectory
+
+    handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False)
+    try:
+        later = synthetic_trajectory(duration_s=300.0)
+        later.extra["epoch_unix_s"] += 86_400.0
+        handles.set_feed(TrajectoryFeed(later))
+        t0, t1 = handles.clock.span_unix_s()
+        assert (t0, t1) == (later.extra["epoch_unix_s"], later.extra["epoch_unix_s"] + 300.0)
+        f = handles.render()
+        assert f.t_unix_s == t0 and handles.panels["overlay"].time_text.value == format_utc(t0)
+        with pytest.raises(ValueError, match="feed"):
+            handles.set_feed(object())
+    finally:
+        handles.stop()
