@@ -96,6 +96,37 @@ def bench_bulk(scales: list[int], workdir: Path) -> None:
         )
 
 
+def bench_chunk_sizes(workdir: Path) -> None:
+    """Commit and query time of a 2-hour, 4 Hz ACS_HK dump for a few packets-per-chunk settings."""
+    from telemetry.archive import store
+
+    dictionary = reference_dictionary()
+    hk = dictionary.packets[256]
+    n = 2 * 3_600 * 4
+    t = 1_750_000_000 * 10**9 + np.arange(n, dtype=np.int64) * 250_000_000
+    values = plausible_values(hk, n, np.random.default_rng(4))
+    decoded = decode_stream(encode_packets(hk, t, np.arange(n) % 16_384, values).tobytes(), dictionary)
+    chosen = store.CHUNK_PACKETS
+    with Archive(f"sqlite:///{workdir / 'chunks_warm_up.sqlite'}") as archive:
+        archive.ingest_decoded("REF", decoded, uploaded_by="bench")  # first-use costs out of the sweep
+    cells = []
+    for size in (1_024, 8_192, 16_384, 65_536):
+        store.CHUNK_PACKETS = size
+        with Archive(f"sqlite:///{workdir / f'chunks_{size}.sqlite'}") as archive:
+            start = time.perf_counter()
+            result = archive.ingest_decoded("REF", decoded, uploaded_by="bench")
+            commit_s = time.perf_counter() - start
+            start = time.perf_counter()
+            for _ in range(QUERY_REPEATS):
+                downsample(archive, "REF", "omega_est_b_rad_s_x", int(t[0]), int(t[0]) + 600 * 10**9, 1_000)
+            query_ms = (time.perf_counter() - start) / QUERY_REPEATS * 1e3
+        cells.append(
+            f"{size:,}: commit {result.samples_accepted / commit_s / 1e6:.1f} M samples/s, 10-min query {query_ms:.2f} ms"
+        )
+    store.CHUNK_PACKETS = chosen
+    print(f"packets per chunk (archive uses {chosen:,}): " + "; ".join(cells))
+
+
 def bench_row_layout(workdir: Path) -> None:
     """The layout we did not choose: one SQLite row per sample (parameter, time, value)."""
     import sqlite3
@@ -243,6 +274,7 @@ def main() -> None:
         bench_bulk([int(s) for s in args.scales.split(",")], workdir)
         bench_query(workdir)
         bench_row_layout(workdir)
+        bench_chunk_sizes(workdir)
         if not args.skip_live:
             bench_live(args.live_seconds, workdir)
     print(f"machine load average while running: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

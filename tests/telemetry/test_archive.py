@@ -17,6 +17,7 @@ from telemetry.archive import Archive, PacketBatch, upgrade
 from telemetry.archive.engine import create_archive_engine
 from telemetry.archive.migrate import alembic_config
 from telemetry.archive.models import Base
+from telemetry.archive.store import CHUNK_PACKETS
 from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
 
 NOAA_DIR = Path("real/noaa20_jpss1_apid11")
@@ -166,13 +167,14 @@ def test_duplicates_inside_one_upload_are_dropped(archive: Archive) -> None:
 
 
 def test_out_of_order_data_is_accepted_and_read_back_in_time_order(archive: Archive) -> None:
-    whole = synthetic_batch(20_000)
-    shuffled = whole.take(np.random.default_rng(7).permutation(20_000))
-    archive.ingest(SAT, [shuffled.take(np.arange(10_000, 20_000))], source="late", uploaded_by="tester")
-    archive.ingest(SAT, [shuffled.take(np.arange(0, 10_000))], source="early", uploaded_by="tester")
+    n = 4 * CHUNK_PACKETS + 123  # each upload spans several chunks, interleaved in time
+    whole = synthetic_batch(n)
+    shuffled = whole.take(np.random.default_rng(7).permutation(n))
+    archive.ingest(SAT, [shuffled.take(np.arange(n // 2, n))], source="late", uploaded_by="tester")
+    archive.ingest(SAT, [shuffled.take(np.arange(0, n // 2))], source="early", uploaded_by="tester")
     t, v = archive.read_parameter(SAT, "index", int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
     np.testing.assert_array_equal(t, whole.t_utc_ns)
-    np.testing.assert_array_equal(v, np.arange(20_000.0))
+    np.testing.assert_array_equal(v, np.arange(float(n)))
     replayed = archive.replay(SAT, int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
     assert [p for _, p in replayed] == whole.packets()
 
