@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import socket
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -14,6 +17,7 @@ from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401
 from tests.telemetry.packet_streams import T0_UTC_NS, engineering_values, packets, reference
 
 HK_APID = 256
+STALL_S = 0.5  # about twice the 0.25-s send: most of the stream arrives while the loop is blocked
 SETTLE_S = 0.3  # > DECODE_INTERVAL_S: lets the listener decode what was sent before we look
 
 
@@ -132,6 +136,32 @@ def test_slow_subscriber_never_stalls_the_stream_and_is_told_what_it_dropped() -
     assert slow.dropped_packets_total > 0
     assert late.dropped_packets == slow.dropped_packets_total
     assert int(late.batch.sequence_count[0]) == 2_000
+
+
+def test_a_stalled_listener_catches_up_without_losing_packets() -> None:
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 1_000, seed=9)
+
+    def blocking_sender(port: int) -> None:
+        with socket.create_connection(("127.0.0.1", port)) as link:
+            for piece in np.array_split(raw, 50):
+                link.sendall(piece.tobytes())
+                time.sleep(0.005)
+
+    async def scenario() -> list[LiveMessage]:
+        stream = LiveStream(dictionary)
+        subscriber = stream.subscribe(max_messages=10_000)
+        port = await stream.start()
+        sender = threading.Thread(target=blocking_sender, args=(port,))
+        sender.start()
+        time.sleep(STALL_S)  # the event loop stalls: the kernel buffers the stream meanwhile
+        await asyncio.to_thread(sender.join)
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        return drain(subscriber)
+
+    counts = np.concatenate([m.batch.sequence_count for m in asyncio.run(scenario())])
+    np.testing.assert_array_equal(counts, np.arange(1_000))
 
 
 def test_corrupt_packet_is_quarantined_and_its_neighbours_delivered() -> None:
