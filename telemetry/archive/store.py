@@ -50,9 +50,9 @@ if TYPE_CHECKING:
 
 __all__ = ["Archive", "CHUNK_PACKETS"]
 
-CHUNK_PACKETS = (
-    16_384  # measured (benchmarks/ingest.py): commit 7 / 12 / 19 M samples/s at 1k / 8k / 16k, queries ~2-4 ms alike
-)
+# Packets per chunk. benchmarks/ingest.py (bench_chunk_sizes) measures bigger chunks committing
+# faster (1k: ~7 M samples/s, 16k: 8-19 M on this shared machine) with short queries alike (2-4 ms).
+CHUNK_PACKETS = 16_384
 SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundStation, Tle, Pass))
 UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
 ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
