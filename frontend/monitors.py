@@ -10,6 +10,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +20,9 @@ from frontend.twin_geometry import TwinFrame, TwinGeometry
 from frontend.twin_panels import PLOT_WINDOW_S, TwinPanels
 from frontend.twin_scene import ROLES, Role, TwinScene
 from sim_core import quaternion
+
+if TYPE_CHECKING:
+    import viser
 
 __all__ = ["DEFAULT_PORTS", "MonitorHandles", "serve_monitors", "camera_pose"]
 
@@ -53,7 +57,7 @@ def camera_pose(preset: str, f: TwinFrame, v_eci: np.ndarray) -> tuple[np.ndarra
 class MonitorHandles:
     """Running monitors: servers and real ports by role, the shared clock, and the render loop."""
 
-    servers: dict[str, object]
+    servers: dict[str, "viser.ViserServer"]
     clock: PlaybackClock
     geometry: TwinGeometry
     scenes: dict[str, TwinScene]

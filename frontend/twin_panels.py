@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import threading
 from datetime import datetime, timezone
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -14,6 +15,9 @@ from frontend.feed import FeedWindow
 from frontend.globe import EARTH_CREDIT
 from frontend.playback import SPEEDS, PlaybackClock
 from frontend.twin_geometry import TwinFrame
+
+if TYPE_CHECKING:
+    import viser
 
 __all__ = ["TwinPanels", "CAMERA_PRESETS", "PLOT_WINDOW_S", "format_utc"]
 
@@ -48,7 +52,7 @@ def _empty(n_series: int) -> tuple[np.ndarray, ...]:
 class TwinPanels:
     """GUI of one viser server, bound to the shared clock; camera preset chosen per browser client."""
 
-    def __init__(self, server, role: str, clock: PlaybackClock, n_wheels: int) -> None:
+    def __init__(self, server: "viser.ViserServer", role: str, clock: PlaybackClock, n_wheels: int) -> None:
         self.server, self.role, self.clock = server, role, clock
         self.camera_preset: dict[int, str] = {}
         self._lock = threading.Lock()

@@ -6,13 +6,16 @@ ground stations with visibility circles and the day/night boundary (seed 000 §6
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from frontend import globe, spacecraft_model
 from frontend.twin_geometry import TwinFrame, TwinGeometry
 from sim_core import quaternion
+
+if TYPE_CHECKING:
+    import viser
 
 __all__ = ["Role", "ROLES", "TwinScene", "polyline_segments"]
 
@@ -50,7 +53,7 @@ def _closed(points: np.ndarray) -> np.ndarray:
 class TwinScene:
     """The scene graph of one monitor role, built once, updated per playback frame."""
 
-    def __init__(self, server, role: Role, geometry: TwinGeometry) -> None:
+    def __init__(self, server: "viser.ViserServer", role: Role, geometry: TwinGeometry) -> None:
         if role not in ROLES:
             raise ValueError(f"role: expected one of {ROLES}, got {role!r}")
         self.server, self.role, self.geometry = server, role, geometry
@@ -144,7 +147,7 @@ def _ecef_of(f: TwinFrame) -> np.ndarray:
     return quaternion.to_dcm(f.earth_wxyz).T
 
 
-def _set_segments(handle, segments: np.ndarray, visible: bool = True) -> None:
+def _set_segments(handle: "viser.LineSegmentsHandle", segments: np.ndarray, visible: bool = True) -> None:
     """Replace a line set's segments; hide it when there is nothing (or nothing wanted) to draw."""
     if segments.shape[0]:
         handle.points = segments

@@ -104,6 +104,14 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
         page.select_option("#parameter-list", ["q_ib_0", "q_ib_3"])
         row.click()
         page.wait_for_function("document.querySelectorAll('#plots .uplot').length === 2", timeout=20_000)
+        with page.expect_download() as csv_download:
+            page.click("#export-csv")
+        rows = open(csv_download.value.path()).read().splitlines()
+        assert rows[0] == "parameter,t_utc,value"
+        assert {r.split(",")[0] for r in rows[1:]} == {"q_ib_0", "q_ib_3"} and len(rows) > 100
+        with page.expect_download() as png_download:
+            page.click("#export-png")
+        assert open(png_download.value.path(), "rb").read(8) == b"\x89PNG\r\n\x1a\n"
 
         page.select_option("#scenario", "somov-ge4-scan")
         page.check("input[value='wheel:0:failure']")
