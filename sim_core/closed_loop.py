@@ -450,7 +450,10 @@ def fly_variant(
                                           gyro_noise * np.sqrt(meas_every * dt), sigma_u)
                 w_prev[:] = w_meas
                 if fdir_on and st_ok:
-                    st_ok = fdir.star_tracker_check_1(star_fd, q_est, p_cov, q_m, sig3, nis_max, ev, n_ev, t)
+                    st_scale = fdir.star_tracker_check_1(star_fd, q_est, p_cov, q_m, sig3, nis_max,
+                                                         gyro_fd[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t)
+                    st_ok = st_scale > 0.0
+                    sig3 *= max(st_scale, 1.0)
                 if fdir_on and gyro_ok:
                     sigma_u = fdir.gyro_drift_step_1(gyro_fd, t, w_meas, meas_every * dt, q_m, st_ok, st_sigma,
                                                      gyro_noise, times[12], n_sigma, ev, n_ev)

@@ -97,8 +97,9 @@ WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR = r
 WHEEL_STATE_ROWS = 7
 # Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
 # innovation (3), in-jump flag.
-SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP = 0, 4, 5, 6, 9
-STAR_STATE_SIZE = 10
+SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM = 0, 4, 5, 6, 9, 10, 11, 12
+STAR_STATE_SIZE = 18  # SS_SUM: sums of z (3) and z² (3) of the rejected run
+NOISE_WINDOW = 20  # rejected samples (5 s at 4 Hz) before deciding noise vs jump: 4 standard errors ≈ 0.9σ_z
 # Gyro state: integrated rotation, ST at window start, window start time, previous rate, reference
 # bias, windows seen, consecutive exceedances, isolated flag, bias process noise, calibration end time.
 GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF, GS_N, GS_COUNT, GS_ISOLATED, GS_SIGMA_U, GS_TREF = 0, 4, 8, 9, 12, 15, 16, 17, 18, 19
@@ -317,30 +318,40 @@ def star_innovation_1(q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray, 
 
 @njit(cache=True)
 def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
-                         sigma3: np.ndarray, nis_max: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
-    """Accept or reject one star-tracker sample: an innovation jump beyond χ²(3), or an exact repetition.
+                         sigma3: np.ndarray, nis_max: float, gyro_suspect: bool, ev: np.ndarray, n_ev: np.ndarray,
+                         t: float) -> float:
+    """Screen one star-tracker sample; returns the factor on σ to update with, or 0 to reject it.
 
     seed 000 §4: Λ^m = Λ ∘ Λ^n with σ per axis; the innovation z = rotvec(Λ̂̃ ∘ Λ^m) has covariance
     S = P_θθ + diag(σ²). A sample is a *jump* when zᵀS⁻¹z exceeds the limit and z also stepped from
     the last accepted innovation by more than the limit allows for two independent samples (2σ²;
     a gradual growth, e.g. an unmodelled gyro drift, is left to the gyro test); once jumped, samples
     stay rejected while either statistic stays beyond the limit, so that the covariance growing
-    during gyro-only propagation does not let a lasting offset back in. Returns True to use the sample.
+    during gyro-only propagation does not let a lasting offset back in. Once isolated, innovations whose
+    mean over ``NOISE_WINDOW`` samples is zero within 4 standard errors are noise, not a jump: σ is
+    scaled to their scatter (seed 002's 10σ/50σ) and the sensor used again. With the gyro suspect
+    (drift isolated) only freezes are rejected. A reading bit-identical to the previous one is frozen.
     """
-    z, nis = star_innovation_1(q_est, p_cov, q_meas, sigma3)
+    scale = max(1.0, state[SS_SCALE])
+    sig = sigma3 * scale
+    z, nis = star_innovation_1(q_est, p_cov, q_meas, sig)
     step = 0.0
     for i in range(3):
         d = z[i] - state[SS_Z + i]
-        step += d * d / (2.0 * sigma3[i] * sigma3[i]) if sigma3[i] > 0.0 else 0.0
+        step += d * d / (2.0 * sig[i] * sig[i]) if sig[i] > 0.0 else 0.0
     frozen = sigma3[0] > 0.0 and q_meas[0] == state[SS_PREV] and q_meas[1] == state[SS_PREV + 1] \
         and q_meas[2] == state[SS_PREV + 2] and q_meas[3] == state[SS_PREV + 3]
     state[SS_PREV:SS_PREV + 4] = q_meas
     jumped = (nis > nis_max and step > nis_max) or (state[SS_JUMP] != 0.0 and (nis > nis_max or step > nis_max))
+    if gyro_suspect:
+        jumped = False
+    if state[SS_ISOLATED] != 0.0 and not frozen:
+        _noise_or_jump_1(state, z, p_cov, sigma3, ev, n_ev, t)
     if not frozen and not jumped:
         state[SS_COUNT] = 0.0
         state[SS_JUMP] = 0.0
         state[SS_Z:SS_Z + 3] = z
-        return True
+        return scale
     state[SS_JUMP] = 1.0 if jumped else state[SS_JUMP]
     state[SS_COUNT] += 1.0
     arg = SENSOR_ARG + 10 * T_STAR
@@ -348,9 +359,40 @@ def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray
         _emit(ev, n_ev, t, EV_DETECTED, arg)
     if state[SS_COUNT] == CONFIRM_PERIODS and state[SS_ISOLATED] == 0.0:
         state[SS_ISOLATED] = 1.0
+        state[SS_N] = 0.0
         _emit(ev, n_ev, t, EV_ISOLATED, arg)
         _emit(ev, n_ev, t, EV_RECONFIGURED, arg)
-    return False
+    return 0.0
+
+
+@njit(cache=True)
+def _noise_or_jump_1(state: np.ndarray, z: np.ndarray, p_cov: np.ndarray, sigma3: np.ndarray,
+                     ev: np.ndarray, n_ev: np.ndarray, t: float) -> None:
+    """Accumulate innovations while the tracker is suspect; an unbiased scatter over NOISE_WINDOW samples
+    is noise: σ is rescaled to it and the tracker trusted again (its in-jump and isolated flags cleared)."""
+    n = state[SS_N]
+    if n == 0.0:
+        state[SS_SUM:SS_SUM + 6] = 0.0
+    state[SS_SUM:SS_SUM + 3] += z
+    state[SS_SUM + 3:SS_SUM + 6] += z * z
+    n += 1.0
+    state[SS_N] = n
+    if n < NOISE_WINDOW:
+        return
+    state[SS_N] = 0.0
+    worst = 1.0
+    for i in range(3):
+        mean = state[SS_SUM + i] / n
+        var = max(state[SS_SUM + 3 + i] / n - mean * mean, 0.0)
+        if abs(mean) > 4.0 * np.sqrt(var / n):
+            return  # biased: a real jump, keep rejecting
+        if sigma3[i] > 0.0:
+            worst = max(worst, np.sqrt(max(var - p_cov[i, i], 0.0)) / sigma3[i])
+    state[SS_SCALE] = max(worst, state[SS_SCALE])
+    state[SS_JUMP] = 0.0
+    state[SS_ISOLATED] = 0.0
+    state[SS_COUNT] = 0.0
+    _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_STAR + 1)
 
 
 @njit(cache=True)

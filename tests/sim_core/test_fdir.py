@@ -174,7 +174,7 @@ def test_star_tracker_innovation_is_chi2_and_consistent_samples_are_accepted():
     for i in range(N_SAMPLES_CHI2):
         q_est, q_meas = _star_sample(rng, q, SIGMA_ST), _star_sample(rng, q, SIGMA_ST)
         nis.append(fdir.star_innovation_1(q_est, p, q_meas, sig)[1])
-        accepted += fdir.star_tracker_check_1(state, q_est, p, q_meas, sig, nis_max, ev, n_ev, float(i))
+        accepted += fdir.star_tracker_check_1(state, q_est, p, q_meas, sig, nis_max, False, ev, n_ev, float(i)) > 0
     assert kstest(nis, chi2(3).cdf).pvalue > 0.01
     assert accepted == N_SAMPLES_CHI2
 
@@ -188,19 +188,46 @@ def test_star_tracker_jump_and_freeze_are_rejected_and_isolated():
     state = fdir.star_state()
     ev, n_ev = np.zeros((8, 3)), np.zeros(1, dtype=np.int64)
     jump = np.array([np.cos(0.5 * 20 * SIGMA_ST), np.sin(0.5 * 20 * SIGMA_ST), 0.0, 0.0])
-    assert not fdir.star_tracker_check_1(state, q, p, jump, sig, nis_max, ev, n_ev, 1.0)
-    assert not fdir.star_tracker_check_1(state, q, p, jump, sig, nis_max, ev, n_ev, 2.0)  # and frozen
+    assert not fdir.star_tracker_check_1(state, q, p, jump, sig, nis_max, False, ev, n_ev, 1.0)
+    assert not fdir.star_tracker_check_1(state, q, p, jump, sig, nis_max, False, ev, n_ev, 2.0)  # and frozen
     names = [int(e[1]) for e in ev[: n_ev[0]]]
     assert names == [4, 5, 6] and int(ev[0, 2]) == fdir.SENSOR_ARG + 10 * 2
     slow = fdir.star_state()  # the same offset reached gradually is no jump: left to the gyro-drift test
     for i in range(1, 41):
         offset = 20 * SIGMA_ST * i / 40
         grown = np.array([np.cos(0.5 * offset), np.sin(0.5 * offset), 0.0, 0.0])
-        assert fdir.star_tracker_check_1(slow, q, p, grown, sig, nis_max, ev, n_ev, 10.0 + i)
+        assert fdir.star_tracker_check_1(slow, q, p, grown, sig, nis_max, False, ev, n_ev, 10.0 + i)
     state = fdir.star_state()
     sample = _star_sample(rng, q, SIGMA_ST)
-    assert fdir.star_tracker_check_1(state, q, p, sample, sig, nis_max, ev, n_ev, 3.0)
-    assert not fdir.star_tracker_check_1(state, q, p, sample.copy(), sig, nis_max, ev, n_ev, 3.25)
+    assert fdir.star_tracker_check_1(state, q, p, sample, sig, nis_max, False, ev, n_ev, 3.0)
+    assert not fdir.star_tracker_check_1(state, q, p, sample.copy(), sig, nis_max, False, ev, n_ev, 3.25)
+
+
+def test_tenfold_star_tracker_noise_is_rescaled_not_locked_out():
+    """Seed 002's 10σ: unbiased innovations are noise, so σ is rescaled to their scatter (≈ 10, within
+    the 20-sample estimate) and the sensor used again; a 60″ offset stays a jump."""
+    rng = np.random.default_rng(7)
+    q = np.array([1.0, 0.0, 0.0, 0.0])
+    p = np.diag([SIGMA_ST**2] * 3 + [1e-12] * 3)
+    sig = np.full(3, SIGMA_ST)
+    ev, n_ev = np.zeros((32, 3)), np.zeros(1, dtype=np.int64)
+    state, nis_max = fdir.star_state(), fdir.star_nis_threshold()
+    scales = [fdir.star_tracker_check_1(state, q, p, _star_sample(rng, q, 10 * SIGMA_ST), sig, nis_max, False, ev, n_ev,
+                                        0.25 * i) for i in range(200)]
+    assert 6.0 < state[fdir.SS_SCALE] < 14.0
+    assert np.mean(np.array(scales[-100:]) > 0) > 0.99
+    jumped = fdir.star_state()
+    offset = np.array([np.cos(0.5 * 60 / 206265), np.sin(0.5 * 60 / 206265), 0.0, 0.0])
+    for i in range(200):
+        sample = fdir.star_tracker_check_1(jumped, q, p, quaternion_mul(offset, _star_sample(rng, q, SIGMA_ST)), sig,
+                                           nis_max, False, ev, n_ev, 0.25 * i)
+    assert sample == 0.0 and jumped[fdir.SS_SCALE] <= 1.0
+
+
+def quaternion_mul(a, b):
+    from sim_core.quaternion import multiply
+
+    return multiply(a, b)
 
 
 OMEGA_ORF = 1.1e-3  # rad/s, the ORF pitch rate at 600 km
