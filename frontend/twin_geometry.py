@@ -91,7 +91,7 @@ class TwinGeometry:
         r, _ = self.feed.orbit_eci(t)
         r_e = m @ r[0]
         q_a, q_s = self.feed.attitude_actual(t)[0], self.feed.attitude_simulated(t)[0]
-        c_a, c_s = m @ quaternion.to_dcm(q_a), m @ quaternion.to_dcm(q_s)
+        c_a, c_s = camera.body_to_ecef_dcm(q_a, m), camera.body_to_ecef_dcm(q_s, m)
         sun = environment.sun_position_1(float(t_unix_s))
         sun /= np.linalg.norm(sun)
         win = self.feed.window(float(t_unix_s) - 1.0, float(t_unix_s))

@@ -120,6 +120,9 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
         page.click("#whatif button[type=submit]")
         page.wait_for_selector("#whatif-chart .uplot", timeout=WHATIF_TIMEOUT_MS)
         assert re.search(r"succeeded 100 %", page.inner_text("#whatif-status"))
+        monitors = page.evaluate("fetch('config.json').then(r => r.json())")["monitors"]
+        srcs = page.eval_on_selector_all("#monitors iframe", "fs => fs.map(f => f.src)")
+        assert sorted(srcs) == sorted(url.rstrip("/") + "/" for url in monitors.values())
         table = page.inner_text("#whatif-summary-table")
         assert "nominal" in table and "what-if" in table and "pointing_error_rms_arcsec" in table
         assert errors == []
