@@ -36,9 +36,12 @@ def actual_track_between(archive: Any, dictionary: Any, satellite: str, t0_ns: i
     return actual_track(decoded.batches)
 
 
-def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float,
-               faults: list[str]) -> tuple[int, dict[str, Any], dict[str, Any]]:
-    """(alignment sample time, twin scenario JSON, engine options) at the first ACS_HK sample ≥ align_ns."""
+def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float, faults: list[str],
+               epoch_ns: int | None = None) -> tuple[int, dict[str, Any], dict[str, Any]]:
+    """(alignment sample time, twin scenario JSON, engine options) at the first ACS_HK sample ≥ align_ns.
+
+    ``epoch_ns``: when the satellite started flying the scenario's route (default: the library epoch).
+    """
     from sim_core import scenario_library
     from telemetry.actual_state import aligned_scenario, aligned_wheel_available
     from telemetry.emulator import parse_fault
@@ -50,7 +53,12 @@ def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float,
     if scenario not in scenario_library.names():
         raise ValueError(f"scenario: unknown {scenario!r}; one of {scenario_library.names()}")
     hypothesis = [parse_fault(text) for text in faults]
-    twin = aligned_scenario(scenario_library.get(scenario), track, t_align, duration_s, hypothesis)
+    base = scenario_library.get(scenario)
+    if epoch_ns is not None:
+        data = base.model_dump()
+        data["orbit"]["epoch_utc"] = f"{np.datetime64(int(epoch_ns), 'ns')}Z"
+        base = type(base).model_validate(data)
+    twin = aligned_scenario(base, track, t_align, duration_s, hypothesis)
     options = {"fdir": True, "wheel_available": aligned_wheel_available(track, t_align).tolist()}
     return t_align, twin.model_dump(mode="json"), options
 

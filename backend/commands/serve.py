@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import subprocess
+import threading
 import sys
 from pathlib import Path
 from typing import Any
@@ -81,14 +82,33 @@ def run(args: argparse.Namespace) -> int:
     elif not settings.auth_enabled:
         print("  auth DISABLED: every caller is admin")
     emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario)
+    stop, twin = threading.Event(), None
     if emulator is not None:
         print(f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
               f"tcp://{settings.host}:{settings.telemetry_port}, log {settings.data_dir / 'emulator.log'}")
+        twin = start_demo_twin(app.state.services, settings, args.emulator_scenario, stop)
     print("", flush=True)
     try:
         uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning")
     finally:
+        stop.set()
         if emulator is not None:
             emulator.terminate()
             emulator.wait(10)
+        if twin is not None:
+            twin.join(5)
     return 0
+
+
+def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading.Event) -> threading.Thread:
+    """Thread: the demo twin session and its 3D monitors once telemetry has arrived (see backend.demo_twin)."""
+    from backend.app import monitor_urls
+    from backend.demo_twin import TWIN_S, WARMUP_S, run_demo_twin
+
+    ports = {role: int(url.rsplit(":", 1)[1]) for role, url in monitor_urls(settings).items()}
+    thread = threading.Thread(target=run_demo_twin, args=(services, ports, scenario, stop),
+                              name="demo-twin", daemon=True)
+    thread.start()
+    urls = ", ".join(f"{role} {url}" for role, url in monitor_urls(settings).items())
+    print(f"  monitors  {urls} (after ~{WARMUP_S + TWIN_S:.0f} s of telemetry; log {settings.data_dir / 'twin.log'})")
+    return thread

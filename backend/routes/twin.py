@@ -30,6 +30,8 @@ class TwinSessionCreate(BaseModel):
     align_utc: datetime = Field(description="Start of the twin (the first ACS_HK sample at or after it).",
                                 examples=["2026-03-20T00:05:00Z"])
     duration_s: float = Field(gt=0, le=86_400, examples=[200.0])
+    scenario_epoch_utc: datetime | None = Field(None, description="When the satellite started the scenario's "
+                                                "route (default: the library scenario's epoch).")
     faults: list[str] = Field(default_factory=list, max_length=16, examples=[["wheel:1:failure@50"]],
                               description="Hypothesis, TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V] (s after align).")
 
@@ -42,14 +44,16 @@ def _session_public(services: Any, row: Any) -> dict[str, Any]:
             "progress": services.jobs.progress(row.job_id) or (job.progress if job else 0.0)}
 
 
-def _start(services: Any, body: TwinSessionCreate, actor: str) -> dict[str, Any]:
+def start_session(services: Any, body: TwinSessionCreate, actor: str) -> dict[str, Any]:
+    """Align a twin to archived telemetry and queue its simulation; the session as answered by the API."""
     from backend.twin_sessions import GPS_MARGIN_S, actual_track_between, twin_start
 
     align_ns = utc_ns(body.align_utc, 0)
     dictionary = services.telemetry.dictionaries.load(body.dictionary)
     track = actual_track_between(services.telemetry.archive, dictionary, body.satellite,
                                  align_ns - int(GPS_MARGIN_S * NS_PER_S), align_ns + int(body.duration_s * NS_PER_S))
-    t_align, scenario, options = twin_start(track, body.scenario, align_ns, body.duration_s, body.faults)
+    epoch_ns = None if body.scenario_epoch_utc is None else utc_ns(body.scenario_epoch_utc, 0)
+    t_align, scenario, options = twin_start(track, body.scenario, align_ns, body.duration_s, body.faults, epoch_ns)
     job_id = services.jobs.submit(scenario, actor, options)
     row = services.twin_sessions.add(id=uuid.uuid4().hex, job_id=job_id, satellite=body.satellite,
                                      dictionary=body.dictionary, scenario=body.scenario, align_utc_ns=t_align,
@@ -60,7 +64,7 @@ def _start(services: Any, body: TwinSessionCreate, actor: str) -> dict[str, Any]
 @router.post("/twin/sessions", status_code=202, summary="Start a twin session from archived telemetry")
 async def create_session(body: TwinSessionCreate, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Align the twin to telemetry at align_utc, fly it with the hypothesis (a simulation job)."""
-    session = await run_in_threadpool(_start, services, body, principal.name)
+    session = await run_in_threadpool(start_session, services, body, principal.name)
     services.audit.record(principal.name, "twin.create", f"twin/{session['id']}", {"faults": body.faults})
     return session
 
