@@ -28,6 +28,7 @@ __all__ = ["DEFAULT_PORTS", "MonitorHandles", "serve_monitors", "camera_pose"]
 
 DEFAULT_PORTS: dict[str, int] = {"actual": 8081, "simulated": 8082, "overlay": 8083}
 FRAME_RATE_HZ = 30.0
+TRACK_RENEW_MARGIN_S = 1500.0  # live: redraw the tracks when the data comes this close to their end
 PANEL_RATE_HZ = 2.0
 WHOLE_EARTH_DISTANCE = 3.2  # Earth radii from the centre, behind the spacecraft
 CHASE_BACK, CHASE_UP = 0.12, 0.05  # Earth radii behind and above the spacecraft
@@ -123,6 +124,18 @@ class MonitorHandles:
                 with self.panels[role]._lock:
                     self.panels[role].camera_preset.pop(cid, None)
 
+    def extend_tracks(self) -> bool:
+        """Recompute orbit, trace and survey zone once live data nears the end of the drawn tracks."""
+        _, t1 = self.geometry.feed.span_unix_s()
+        if t1 < self.geometry.track_t[-1] - TRACK_RENEW_MARGIN_S:
+            return False
+        geometry = TwinGeometry(self.geometry.feed)
+        with self._lock:
+            self.geometry = geometry
+            for scene in self.scenes.values():
+                scene.rebuild(geometry)
+        return True
+
     def update_panels(self) -> None:
         """Plots, flags and alarms of the last PLOT_WINDOW_S on every monitor."""
         with self._lock:
@@ -142,6 +155,7 @@ class MonitorHandles:
             last = now
             self.render()
             if now >= next_panels:
+                self.extend_tracks()
                 self.update_panels()
                 next_panels = now + 1.0 / PANEL_RATE_HZ
             self._stop.wait(max(0.0, period - (time.perf_counter() - now)))

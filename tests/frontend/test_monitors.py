@@ -93,3 +93,31 @@ def test_set_feed_moves_running_monitors_to_the_new_feed(twin_feed):
             handles.set_feed(object())
     finally:
         handles.stop()
+
+
+class GrowingFeed:
+    """A TrajectoryFeed whose data span grows like a live pass."""
+
+    def __init__(self, feed) -> None:
+        self._feed, self.end = feed, feed.span_unix_s()[0] + 100.0
+
+    def span_unix_s(self) -> tuple[float, float]:
+        return self._feed.span_unix_s()[0], self.end
+
+    def __getattr__(self, name):
+        return getattr(self._feed, name)
+
+
+def test_live_data_nearing_the_end_of_the_drawn_tracks_extends_them(twin_feed):
+    feed = GrowingFeed(twin_feed)
+    handles = serve_monitors(feed, ports={"overlay": free_port()}, roles=("overlay",), start=False)
+    try:
+        assert not handles.extend_tracks()
+        first_end = handles.geometry.track_t[-1]
+        feed.end = first_end - 1000.0
+        assert handles.extend_tracks()
+        assert handles.geometry.track_t[-1] > first_end
+        handles.clock.follow_live()
+        assert handles.clock.advance(0.1) == feed.end and handles.render().t_unix_s == feed.end
+    finally:
+        handles.stop()
