@@ -103,7 +103,10 @@ class TwinPanels:
 
         @self.play.on_click
         def _(event) -> None:
-            clock.play() if self.play.value == "play" else clock.pause()
+            if self.play.value == "play":
+                clock.play()
+            else:
+                clock.pause()
 
         @self.speed.on_update
         def _(event) -> None:
