@@ -36,6 +36,10 @@ TYPE_CODES = {"failure": 0, "stuck": 1, "gain": 2, "bias": 3, "drift": 4, "inter
 T_WHEEL, T_GYRO, T_STAR, T_EARTH, T_MAG, T_SUN, T_CTRL, T_ROD = range(8)
 Y_FAIL, Y_STUCK, Y_GAIN, Y_BIAS, Y_DRIFT, Y_INTERMITTENT, Y_NOISE, Y_FRICTION, Y_FROZEN = range(9)
 
+# Attitude sensors used when the star tracker gives no sample (failed, blinded or rejected by FDIR).
+EARTH_SENSOR_SIGMA_RAD = np.radians(0.05)  # static infrared earth sensor class (seed 002 eq 14 gives none)
+MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
+
 # Event codes (sim_core.trajectory.EVENT_NAMES).
 EV_FAULT_ONSET, EV_FAULT_CLEARED, EV_ALLOCATION, EV_MD_SATURATED = 2, 3, 7, 8
 
@@ -309,6 +313,28 @@ def _rod_faults_1(faults: np.ndarray, t: float, dipole: np.ndarray) -> None:
 
 
 @njit(cache=True)
+def _earth_and_field_update_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray, b_eci: np.ndarray,
+                              mag: np.ndarray, mag_noise: float, q_est: np.ndarray, bias_est: np.ndarray,
+                              p_cov: np.ndarray) -> None:
+    """Without a star-tracker sample: MEKF updates on the earth sensor's nadir (roll, pitch; seed 002 eq 14,
+    with the variant's earth-sensor faults) and on the magnetometer's field direction (seed 003 §3.2)."""
+    roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
+    normal = np.random.standard_normal(2)
+    angles = np.zeros(3)
+    angles[0] = roll + EARTH_SENSOR_SIGMA_RAD * normal[0]
+    angles[1] = pitch + EARTH_SENSOR_SIGMA_RAD * normal[1]
+    if _sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3)):
+        nadir = np.empty(3)
+        nadir[0] = np.cos(angles[1]) * np.cos(angles[0])
+        nadir[1] = -np.sin(angles[1])
+        nadir[2] = np.cos(angles[1]) * np.sin(angles[0])
+        mekf.mekf_vector_update_1(q_est, bias_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD)
+    b_norm = np.sqrt(b_eci[0] ** 2 + b_eci[1] ** 2 + b_eci[2] ** 2)
+    if mag_noise > 0.0 and b_norm > 0.0:
+        mekf.mekf_vector_update_1(q_est, bias_est, p_cov, mag, b_eci, mag_noise / b_norm + MAG_DIRECTION_FLOOR_RAD)
+
+
+@njit(cache=True)
 def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> None:
     if n_ev[0] < ev.shape[0]:
         ev[n_ev[0], 0], ev[n_ev[0], 1], ev[n_ev[0], 2] = t, code, arg
@@ -434,6 +460,10 @@ def fly_variant(
                 q_m[:] = st_frozen
             else:
                 st_frozen[:] = q_m
+            mag[:] = b_body + mag_noise * np.random.standard_normal(3)
+            _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
+            if fdir_on:
+                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma, ev, n_ev, t)
             if est_kind == ESTIMATOR_TRUTH:
                 q_est[:] = x[0:4]
                 w_est[:] = x[4:7]
@@ -459,11 +489,9 @@ def fly_variant(
                                                      gyro_noise, times[12], n_sigma, ev, n_ev)
                 if st_ok:
                     mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
+                else:
+                    _earth_and_field_update_1(faults, t, x, r, b_eci, mag, mag_noise, q_est, bias_est, p_cov)
                 w_est[:] = w_meas - bias_est
-            mag[:] = b_body + mag_noise * np.random.standard_normal(3)
-            _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
-            if fdir_on:
-                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma, ev, n_ev, t)
 
         if k % ctrl_every == 0:
             shared[slot] = k

@@ -347,6 +347,7 @@ def loop_run():
         VariantSpec(name="st jump, no fdir", faults=[jump]),
         VariantSpec(name="st frozen", faults=[FaultSpec(target="star_tracker", type="frozen", onset_s=SENSOR_ONSET_S, duration_s=30.0)]),
         VariantSpec(name="gyro drift", faults=[FaultSpec(target="gyro", index=1, type="drift", onset_s=400.0, value=2e-8)]),
+        VariantSpec(name="st failed", faults=[FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]),
         VariantSpec(name="mag spikes", faults=[FaultSpec(target="magnetometer", index=2, type="intermittent", onset_s=SENSOR_ONSET_S,
                                                          duration_s=100.0, value=5e-6, period_s=20.0, duty=0.1)]),
     ]
@@ -420,3 +421,34 @@ def test_no_false_alarm_in_24_hours_of_nominal_scan_with_sensor_noise():
     assert s.sensors.star_tracker_sigma_arcsec > 0 and s.sensors.gyro_noise_rad_s > 0 and s.sensors.magnetometer_noise_t > 0
     traj = engine.simulate(s, fdir=True)
     assert traj.events[0] == []
+
+
+EARTH_SENSOR_HOLD_ARCSEC = 30.0  # gyros + 0.05° earth sensor + field direction keep a few-arcsec estimate for minutes
+
+
+def test_star_tracker_failure_falls_back_to_earth_sensor_and_magnetometer(loop_run):
+    _, traj = loop_run
+    v = traj.variant_names.index("st failed")
+    after = traj.t_s >= SENSOR_ONSET_S
+    est_err = quaternion_angle_between(traj["q_est_ib"][v, after], traj["q_ib"][v, after]) / ARCSEC
+    assert np.max(est_err) < EARTH_SENSOR_HOLD_ARCSEC
+
+
+def quaternion_angle_between(a, b):
+    from sim_core import quaternion
+
+    return quaternion.angle(quaternion.multiply(quaternion.conjugate(a), b))
+
+
+def test_earth_sensor_bias_during_a_star_tracker_outage_pulls_the_estimate_by_the_bias_order():
+    """With the star tracker failed, the earth sensor is the only absolute pitch/roll reference: a 0.2°
+    bias on it ends up in the estimate (between half and twice the bias after 40 min)."""
+    bias_rad = np.radians(0.2)
+    outage = [FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]
+    earth = FaultSpec(target="earth_sensor", index=0, type="bias", onset_s=SENSOR_ONSET_S, value=bias_rad)
+    s = _scan([VariantSpec(name="outage", faults=outage), VariantSpec(name="outage + earth bias", faults=outage + [earth])],
+              duration_s=3000.0, output_dt_s=5.0)
+    traj = engine.simulate(s, fdir=True)
+    err = [quaternion_angle_between(traj["q_est_ib"][v, -1], traj["q_ib"][v, -1]) for v in range(2)]
+    assert err[0] < EARTH_SENSOR_HOLD_ARCSEC * ARCSEC
+    assert 0.5 * bias_rad < err[1] < 2.0 * bias_rad
