@@ -1,6 +1,6 @@
 """API load benchmark (issue 6): the downsampled-samples endpoint under wrk while a live stream is ingested.
 
-    .venv/bin/python benchmarks/api_load.py [--seconds 20] [--connections 32] [--live-rate 2000]
+    .venv/bin/python benchmarks/api_load.py [--seconds 20] [--connections 8] [--live-rate 2000]
 
 Starts ``acs-twin serve`` (SQLite under a fresh data directory, auth on) as its own process,
 uploads the real NOAA-20 diary (7,200 packets), then runs a sender process streaming reference-
@@ -135,7 +135,7 @@ def main() -> None:
     """Run both wrk passes under the live stream and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=int, default=20)
-    parser.add_argument("--connections", type=int, default=32)
+    parser.add_argument("--connections", type=int, default=8)
     parser.add_argument("--live-rate", type=float, default=2_000.0)
     args = parser.parse_args()
     if shutil.which("wrk") is None:
