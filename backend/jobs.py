@@ -59,11 +59,13 @@ class JobManager:
         return interrupted
 
     def stop(self) -> None:
-        """Cancel every active job and stop the dispatchers (server shutdown)."""
+        """Stop every active job (recorded interrupted, as after a crash) and the dispatchers (shutdown)."""
         with self._lock:
-            ids = list(self._active)
-        for job_id in ids:
-            self.cancel(job_id)
+            handles = dict(self._active)
+        for job_id, handle in handles.items():
+            self._repo.finish(job_id, "interrupted", error="server stopped while the job was active")
+            handle.cancel.set()
+            handle.cancel_at = time.monotonic()
         for _ in self._threads:
             self._queue.put(None)
         for thread in self._threads:

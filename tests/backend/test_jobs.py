@@ -121,3 +121,15 @@ def test_engine_job_returns_exactly_what_sim_core_engine_computes(tmp_path: Path
     got = {k: v for k, v in job["summary"]["variants"][0].items() if k != "wall_time_s"}
     assert got == expected
     assert np.array_equal(np.asarray(series["values"]), direct.series["omega_b_rad_s"][0])
+
+
+def test_shutdown_stops_running_jobs_and_records_them_interrupted(tmp_path: Path) -> None:
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'stop.sqlite'}")
+    with TestClient(create_app(settings)) as client:
+        operator = client.app.state.services.auth.issue("op", Role.operator)[1]
+        job_id = client.post("/api/v1/simulations", json=LONG_SPIN, headers=bearer(operator)).json()["id"]
+        _wait(client, job_id, operator, ("running",))
+        handle = client.app.state.services.jobs._active[job_id]
+    assert client.app.state.services.job_repo.get(job_id).status == "interrupted"
+    handle.process.join(JOB_TIMEOUT_S)
+    assert not handle.process.is_alive()
