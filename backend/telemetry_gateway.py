@@ -177,11 +177,10 @@ class TelemetryGateway:
 
     def _archive_and_publish(self, satellite: str, decoded: Any, dictionary: Any, source: str,
                              uploaded_by: str) -> dict[str, Any]:
-        from telemetry.archive import PacketBatch
         from telemetry.limits import dictionary_limits
 
-        result = self.archive.ingest(satellite, [PacketBatch.from_sample_batch(b) for b in decoded.batches], source=source,
-                                     uploaded_by=uploaded_by, limits=dictionary_limits(dictionary))
+        result = self.archive.ingest_decoded(satellite, decoded, uploaded_by=uploaded_by,
+                                             limits=dictionary_limits(dictionary))
         self._invalidate_batches(satellite, decoded.batches)
         if not result.duplicate_upload:
             self._publish(satellite, decoded.batches, result.alarm_events)

@@ -110,10 +110,10 @@ def list_passes(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQ
 @router.get("/passes/{pass_id}", summary="One pass")
 def get_pass(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """The pass with this id (of the given satellite)."""
-    for record in services.telemetry.archive.passes(satellite, EARLIEST_NS, LATEST_NS):
-        if record.id == pass_id:
-            return _pass_public(record)
-    raise ApiError(404, f"no pass {pass_id} for satellite {satellite!r}", "pass_id")
+    try:
+        return _pass_public(services.telemetry.archive.pass_record(satellite, pass_id))
+    except ValueError as exc:
+        raise ApiError(404, str(exc), str(exc).split(":", 1)[0]) from exc
 
 
 @router.get("/passes/{pass_id}/summary", summary="Pass summary: reception, statistics, alarms")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict
 from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request
@@ -62,6 +63,13 @@ async def upload_telemetry(
                           {"bytes": len(data), "format": format, "upload_id": report["archive"]["upload_id"],
                            "packets_accepted": report["archive"]["packets_accepted"]})
     return report
+
+
+@router.get("/telemetry/uploads", summary="Uploads of a satellite (who, when, source, report)")
+def list_uploads(services: ServicesDep, _: ViewerDep,
+                 satellite: str = Query("NOAA-20", min_length=1, max_length=100)) -> list[dict[str, Any]]:
+    """Every upload with its checksum, tallies and stored ingest report, oldest first."""
+    return [asdict(u) for u in services.telemetry.archive.uploads(satellite)]
 
 
 @router.get("/dictionaries", response_model=list[str], summary="Known telemetry dictionaries")

@@ -65,6 +65,9 @@ def test_repeated_upload_is_a_reported_no_op_and_uploads_are_audited(
     assert again["archive"]["duplicate_upload"] is True and again["archive"]["packets_accepted"] == 0
     audit = client.get("/api/v1/audit?action=telemetry.upload", headers=bearer(tokens["admin"])).json()
     assert len(audit) == 2 and audit[-1]["detail"]["packets_accepted"] == N_PACKETS
+    uploads = client.get("/api/v1/telemetry/uploads?satellite=NOAA-20", headers=bearer(tokens["viewer"])).json()
+    assert [u["packets_accepted"] for u in uploads] == [N_PACKETS]  # the repeat stored nothing
+    assert uploads[0]["uploaded_by"] == "test-operator" and uploads[0]["source"] == "DAT1"
 
 
 def test_parquet_and_csv_exports_round_trip(client: TestClient, tokens: dict[str, str], uploaded: dict,
