@@ -65,5 +65,6 @@ class TwinSessionRow(Base):
     align_utc_ns: Mapped[int] = mapped_column(BigInteger)
     duration_s: Mapped[float] = mapped_column(Float)
     faults: Mapped[list] = mapped_column(JSON)
+    alternatives: Mapped[dict] = mapped_column(JSON, default=dict)
     created_by: Mapped[str] = mapped_column(String(100))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

@@ -10,6 +10,7 @@ body-rate difference |ω_twin − ω_tm| (rad/s) and wheel-speed differences (ra
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,7 +19,7 @@ import numpy as np
 
 from sim_core import quaternion
 
-__all__ = ["GPS_MARGIN_S", "actual_track_between", "twin_start", "Residuals", "residuals"]
+__all__ = ["GPS_MARGIN_S", "actual_track_between", "twin_start", "Residuals", "residuals", "variant_names"]
 
 GPS_MARGIN_S = 60.0  # telemetry read before the alignment instant: the GPS fixes the orbit fit uses
 TIME_MATCH_NS = 1_000_000  # twin output and telemetry samples closer than 1 ms are the same instant
@@ -37,12 +38,15 @@ def actual_track_between(archive: Any, dictionary: Any, satellite: str, t0_ns: i
 
 
 def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float, faults: list[str],
-               epoch_ns: int | None = None) -> tuple[int, dict[str, Any], dict[str, Any]]:
+               epoch_ns: int | None = None, alternatives: dict[str, list[str]] | None = None,
+               ) -> tuple[int, dict[str, Any], dict[str, Any]]:
     """(alignment sample time, twin scenario JSON, engine options) at the first ACS_HK sample ≥ align_ns.
 
     ``epoch_ns``: when the satellite started flying the scenario's route (default: the library epoch).
+    ``alternatives``: what-if variants flown beside the twin from the same state, name → fault hypothesis.
     """
     from sim_core import scenario_library
+    from sim_core.scenario import VariantSpec
     from telemetry.actual_state import aligned_scenario, aligned_wheel_available
     from telemetry.emulator import parse_fault
 
@@ -59,8 +63,12 @@ def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float, faul
         data["orbit"]["epoch_utc"] = f"{np.datetime64(int(epoch_ns), 'ns')}Z"
         base = type(base).model_validate(data)
     twin = aligned_scenario(base, track, t_align, duration_s, hypothesis)
-    options = {"fdir": True, "wheel_available": aligned_wheel_available(track, t_align).tolist()}
-    return t_align, twin.model_dump(mode="json"), options
+    data = twin.model_dump(mode="json")
+    for name, texts in (alternatives or {}).items():
+        data["variants"].append(VariantSpec(name=name, faults=[parse_fault(t) for t in texts]).model_dump(mode="json"))
+    available = np.repeat(aligned_wheel_available(track, t_align), len(data["variants"]), axis=0)
+    return t_align, type(twin).model_validate(data).model_dump(mode="json"), {"fdir": True,
+                                                                              "wheel_available": available.tolist()}
 
 
 @dataclass(frozen=True)
@@ -80,11 +88,14 @@ class Residuals:
                 "wheel_speed_max_rpm": float(np.abs(self.wheel_speed_rad_s).max(initial=0.0) * 30.0 / np.pi)}
 
 
-def residuals(track: Any, trajectory_npz: Path, align_ns: int) -> Residuals:
-    """Residuals of the twin's trajectory.npz (variant 0) against the actual track (seed 000 §7 monitors)."""
+def residuals(track: Any, trajectory_npz: Path, align_ns: int, variant: int = 0) -> Residuals:
+    """Residuals of one variant of the twin's trajectory.npz against the actual track (seed 000 §7 monitors)."""
     with np.load(trajectory_npz) as twin:
+        if not 0 <= variant < twin["q_ib"].shape[0]:
+            raise ValueError(f"variant: {variant} outside 0..{twin['q_ib'].shape[0] - 1}")
         t_twin_ns = align_ns + np.round(twin["t_s"] * 1e9).astype(np.int64)
-        q_twin, w_twin, h_twin = twin["q_ib"][0], twin["omega_b_rad_s"][0], twin["wheel_speed_rad_s"][0]
+        q_twin, w_twin = twin["q_ib"][variant], twin["omega_b_rad_s"][variant]
+        h_twin = twin["wheel_speed_rad_s"][variant]
     k = np.clip(np.searchsorted(track.t_utc_ns, t_twin_ns), 0, track.t_utc_ns.size - 1)
     same = np.abs(track.t_utc_ns[k] - t_twin_ns) <= TIME_MATCH_NS
     k = k[same]
@@ -95,3 +106,9 @@ def residuals(track: Any, trajectory_npz: Path, align_ns: int) -> Residuals:
         rate_rad_s=np.linalg.norm(w_twin[same] - track.series["omega_est_b_rad_s"][k], axis=-1),
         wheel_speed_rad_s=h_twin[same] - track.series["wheel_speed_rad_s"][k],
     )
+
+
+def variant_names(trajectory_npz: Path) -> list[str]:
+    """Names of the variants in a trajectory.npz (the twin first, then the what-if alternatives)."""
+    with np.load(trajectory_npz) as twin:
+        return list(json.loads(str(twin["meta"]))["variants"])

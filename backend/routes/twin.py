@@ -30,6 +30,9 @@ class TwinSessionCreate(BaseModel):
     align_utc: datetime = Field(description="Start of the twin (the first ACS_HK sample at or after it).",
                                 examples=["2026-03-20T00:05:00Z"])
     duration_s: float = Field(gt=0, le=86_400, examples=[200.0])
+    alternatives: dict[str, list[str]] = Field(default_factory=dict, max_length=15,
+                                               examples=[{"nominal": [], "wheel-2-fails": ["wheel:2:failure@30"]}],
+                                               description="What-if variants flown from the same state.")
     scenario_epoch_utc: datetime | None = Field(None, description="When the satellite started the scenario's "
                                                 "route (default: the library scenario's epoch).")
     faults: list[str] = Field(default_factory=list, max_length=16, examples=[["wheel:1:failure@50"]],
@@ -40,6 +43,7 @@ def _session_public(services: Any, row: Any) -> dict[str, Any]:
     job = services.job_repo.get(row.job_id)
     return {"id": row.id, "satellite": row.satellite, "scenario": row.scenario, "align_utc_ns": row.align_utc_ns,
             "duration_s": row.duration_s, "faults": row.faults, "created_by": row.created_by,
+            "variants": ["twin", *row.alternatives],
             "job_id": row.job_id, "status": job.status if job else "unknown",
             "progress": services.jobs.progress(row.job_id) or (job.progress if job else 0.0)}
 
@@ -53,11 +57,13 @@ def start_session(services: Any, body: TwinSessionCreate, actor: str) -> dict[st
     track = actual_track_between(services.telemetry.archive, dictionary, body.satellite,
                                  align_ns - int(GPS_MARGIN_S * NS_PER_S), align_ns + int(body.duration_s * NS_PER_S))
     epoch_ns = None if body.scenario_epoch_utc is None else utc_ns(body.scenario_epoch_utc, 0)
-    t_align, scenario, options = twin_start(track, body.scenario, align_ns, body.duration_s, body.faults, epoch_ns)
+    t_align, scenario, options = twin_start(track, body.scenario, align_ns, body.duration_s, body.faults, epoch_ns,
+                                            body.alternatives)
     job_id = services.jobs.submit(scenario, actor, options)
     row = services.twin_sessions.add(id=uuid.uuid4().hex, job_id=job_id, satellite=body.satellite,
                                      dictionary=body.dictionary, scenario=body.scenario, align_utc_ns=t_align,
-                                     duration_s=body.duration_s, faults=body.faults, created_by=actor)
+                                     duration_s=body.duration_s, faults=body.faults, alternatives=body.alternatives,
+                                     created_by=actor)
     return _session_public(services, row)
 
 
@@ -104,8 +110,8 @@ def session_feed(services: Any, session_id: str) -> Any:
     return SessionFeed(track, services.jobs.result_dir(row.job_id) / "trajectory.npz", row.align_utc_ns, alarms)
 
 
-def _residuals(services: Any, row: Any) -> Any:
-    from backend.twin_sessions import actual_track_between, residuals
+def _residuals(services: Any, row: Any) -> tuple[list[str], list[Any]]:
+    from backend.twin_sessions import actual_track_between, residuals, variant_names
 
     job = services.job_repo.get(row.job_id)
     if job is None or job.status != "succeeded":
@@ -114,20 +120,28 @@ def _residuals(services: Any, row: Any) -> Any:
     dictionary = services.telemetry.dictionaries.load(row.dictionary)
     t1 = row.align_utc_ns + int(row.duration_s * NS_PER_S)
     track = actual_track_between(services.telemetry.archive, dictionary, row.satellite, row.align_utc_ns, t1)
-    return residuals(track, services.jobs.result_dir(row.job_id) / "trajectory.npz", row.align_utc_ns)
+    npz = services.jobs.result_dir(row.job_id) / "trajectory.npz"
+    names = variant_names(npz)
+    return names, [residuals(track, npz, row.align_utc_ns, v) for v in range(len(names))]
 
 
 @router.get("/twin/sessions/{session_id}/residuals", summary="Twin minus telemetry residuals")
 async def get_residuals(session_id: str, services: ServicesDep, _: ViewerDep,
+                        variant: int = Query(0, ge=0, le=15, description="0 = the twin, then the alternatives."),
                         max_points: int = Query(1000, ge=2, le=100_000)) -> dict[str, Any]:
-    """Attitude angle (deg), rate difference (deg/s), wheel-speed differences (rpm), downsampled; published on 'twin'."""
+    """Attitude angle (deg), rate difference (deg/s), wheel-speed differences (rpm) of one variant, downsampled;
+    the summary of every variant (the what-if comparison); published on 'twin'."""
     row = _row(services, session_id)
-    found = await run_in_threadpool(_residuals, services, row)
-    columns = np.column_stack([np.degrees(found.attitude_rad), np.degrees(found.rate_rad_s),
-                               found.wheel_speed_rad_s * 30.0 / np.pi])
-    keep = minmax_indices(columns, max_points) if found.t_s.size else np.arange(0)
-    answer = {"session_id": session_id, "summary": found.summary(), "t_s": found.t_s[keep].tolist(),
-              "attitude_deg": columns[keep, 0].tolist(), "rate_deg_s": columns[keep, 1].tolist(),
-              "wheel_speed_rpm": columns[keep, 2:].tolist()}
-    services.hub.publish("twin", {"session_id": session_id, "summary": answer["summary"]})
+    names, found = await run_in_threadpool(_residuals, services, row)
+    if variant >= len(names):
+        raise ApiError(422, f"variant: {variant} outside 0..{len(names) - 1}", "variant")
+    chosen = found[variant]
+    columns = np.column_stack([np.degrees(chosen.attitude_rad), np.degrees(chosen.rate_rad_s),
+                               chosen.wheel_speed_rad_s * 30.0 / np.pi])
+    keep = minmax_indices(columns, max_points) if chosen.t_s.size else np.arange(0)
+    summaries = {name: r.summary() for name, r in zip(names, found)}
+    answer = {"session_id": session_id, "variant": names[variant], "summary": summaries[names[variant]],
+              "summaries": summaries, "t_s": chosen.t_s[keep].tolist(), "attitude_deg": columns[keep, 0].tolist(),
+              "rate_deg_s": columns[keep, 1].tolist(), "wheel_speed_rpm": columns[keep, 2:].tolist()}
+    services.hub.publish("twin", {"session_id": session_id, "summaries": summaries})
     return answer

@@ -61,18 +61,17 @@ def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_de
         upload = client.post("/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml",
                              content=data, headers=operator)
         assert upload.status_code == 200, upload.json()
-        body = {"satellite": "REFSAT", "align_utc": align, "duration_s": TWIN_S}
         right = client.post("/api/v1/twin/sessions", headers=operator, json={
-            **body, "faults": [f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S - ALIGN_S}"]})
-        nominal = client.post("/api/v1/twin/sessions", headers=operator, json=body)
-        assert right.status_code == 202 and nominal.status_code == 202, (right.json(), nominal.json())
-        results = {}
-        for name, answer in (("right", right.json()), ("nominal", nominal.json())):
-            assert _wait(client, answer["id"], operator)["status"] == "succeeded"
-            results[name] = client.get(f"/api/v1/twin/sessions/{answer['id']}/residuals", headers=operator).json()
+            "satellite": "REFSAT", "align_utc": align, "duration_s": TWIN_S,
+            "faults": [f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S - ALIGN_S}"], "alternatives": {"nominal": []}})
+        assert right.status_code == 202, right.json()
+        assert _wait(client, right.json()["id"], operator)["status"] == "succeeded"
+        residuals = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals", headers=operator).json()
+        nominal = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals?variant=1", headers=operator).json()
         feed = session_feed(client.app.state.services, right.json()["id"])
-    _check_feed(feed, results["right"]["summary"])
-    right_summary, nominal_summary = results["right"]["summary"], results["nominal"]["summary"]
+    _check_feed(feed, residuals["summary"])
+    right_summary, nominal_summary = residuals["summaries"]["twin"], residuals["summaries"]["nominal"]
+    assert nominal["summary"] == nominal_summary and nominal["variant"] == "nominal"
     assert right_summary["samples"] >= TWIN_S / 0.25 - 1
     assert right_summary["attitude_max_deg"] < TWIN_ATTITUDE_TOL_DEG
     assert right_summary["wheel_speed_max_rpm"] < TWIN_WHEEL_TOL_RPM
