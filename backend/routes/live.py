@@ -48,8 +48,10 @@ async def _send_batches(websocket: WebSocket, sub: Subscription, period_s: float
 async def _receive_commands(websocket: WebSocket, hub: Any, sub: Subscription) -> None:
     while True:
         message = await websocket.receive_json()
-        op, topics = message.get("op"), message.get("topics", [])
         try:
+            if not isinstance(message, dict):
+                raise ValueError("op: expected a JSON object {\"op\": ..., \"topics\": [...]}")
+            op, topics = message.get("op"), message.get("topics", [])
             if not isinstance(topics, list) or not all(isinstance(t, str) for t in topics):
                 raise ValueError("topics: expected a list of strings")
             if op == "subscribe":

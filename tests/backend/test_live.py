@@ -71,6 +71,8 @@ def test_websocket_batches_at_most_rate_hz_and_needs_a_token(client: TestClient,
     with client.websocket_connect(f"/api/v1/ws?token={tokens['viewer']}") as ws:
         ws.send_json({"op": "subscribe", "topics": ["parameters/x", "bogus"]})
         assert ws.receive_json()["field"] == "topics"
+        ws.send_json(["not", "an", "object"])
+        assert ws.receive_json()["field"] == "op"
         ws.send_json({"op": "subscribe", "topics": ["parameters/x"]})
         deadline = time.monotonic() + 2.0
         while hub.subscriber_count == 0 or not hub.wants_any("parameters/x"):
