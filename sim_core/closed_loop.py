@@ -38,6 +38,7 @@ Y_FAIL, Y_STUCK, Y_GAIN, Y_BIAS, Y_DRIFT, Y_INTERMITTENT, Y_NOISE, Y_FRICTION, Y
 
 # Attitude sensors used when the star tracker gives no sample (failed, blinded or rejected by FDIR).
 EARTH_SENSOR_SIGMA_RAD = np.radians(0.05)  # static infrared earth sensor class (seed 002 eq 14 gives none)
+STAR_RESET_SIGMA_RAD = np.radians(1.0)  # attitude uncertainty re-opened after a wheel is isolated (a seizure's kick)
 MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
 
 # Event codes (sim_core.trajectory.EVENT_NAMES).
@@ -313,21 +314,28 @@ def _rod_faults_1(faults: np.ndarray, t: float, dipole: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def _earth_and_field_update_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray, b_eci: np.ndarray,
-                              mag: np.ndarray, mag_noise: float, q_est: np.ndarray, bias_est: np.ndarray,
-                              p_cov: np.ndarray) -> None:
-    """Without a star-tracker sample: MEKF updates on the earth sensor's nadir (roll, pitch; seed 002 eq 14,
-    with the variant's earth-sensor faults) and on the magnetometer's field direction (seed 003 §3.2)."""
+def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Nadir direction in body axes from an earth-sensor sample (roll, pitch; seed 002 eq 14) with the
+    variant's earth-sensor faults; False if the sensor has failed."""
     roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
     normal = np.random.standard_normal(2)
     angles = np.zeros(3)
     angles[0] = roll + EARTH_SENSOR_SIGMA_RAD * normal[0]
     angles[1] = pitch + EARTH_SENSOR_SIGMA_RAD * normal[1]
-    if _sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3)):
-        nadir = np.empty(3)
-        nadir[0] = np.cos(angles[1]) * np.cos(angles[0])
-        nadir[1] = -np.sin(angles[1])
-        nadir[2] = np.cos(angles[1]) * np.sin(angles[0])
+    ok = _sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3))
+    nadir = np.empty(3)
+    nadir[0] = np.cos(angles[1]) * np.cos(angles[0])
+    nadir[1] = -np.sin(angles[1])
+    nadir[2] = np.cos(angles[1]) * np.sin(angles[0])
+    return nadir, ok
+
+
+@njit(cache=True)
+def _earth_and_field_update_1(nadir: np.ndarray, earth_ok: bool, r: np.ndarray, b_eci: np.ndarray, mag: np.ndarray,
+                              mag_noise: float, q_est: np.ndarray, bias_est: np.ndarray, p_cov: np.ndarray) -> None:
+    """Without a star-tracker sample: MEKF updates on the earth sensor's nadir (seed 002 eq 14) and on
+    the magnetometer's field direction (seed 003 §3.2)."""
+    if earth_ok:
         mekf.mekf_vector_update_1(q_est, bias_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD)
     b_norm = np.sqrt(b_eci[0] ** 2 + b_eci[1] ** 2 + b_eci[2] ** 2)
     if mag_noise > 0.0 and b_norm > 0.0:
@@ -479,6 +487,7 @@ def fly_variant(
                     mekf.mekf_propagate_1(q_est, bias_est, p_cov, 0.5 * (w_meas + w_prev), meas_every * dt,
                                           gyro_noise * np.sqrt(meas_every * dt), sigma_u)
                 w_prev[:] = w_meas
+                st_raw_ok = st_ok
                 if fdir_on and st_ok:
                     st_scale = fdir.star_tracker_check_1(star_fd, q_est, p_cov, q_m, sig3, nis_max,
                                                          gyro_fd[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t)
@@ -487,10 +496,15 @@ def fly_variant(
                 if fdir_on and gyro_ok:
                     sigma_u = fdir.gyro_drift_step_1(gyro_fd, t, w_meas, meas_every * dt, q_m, st_ok, st_sigma,
                                                      gyro_noise, times[12], n_sigma, ev, n_ev)
+                if not st_ok:
+                    nadir, earth_ok = _earth_sensor_nadir_1(faults, t, x, r)
+                    if fdir_on and earth_ok and st_raw_ok:
+                        st_ok = fdir.star_readmit_1(star_fd, q_est, q_m, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD,
+                                                    n_sigma, ev, n_ev, t)
+                    if not st_ok:
+                        _earth_and_field_update_1(nadir, earth_ok, r, b_eci, mag, mag_noise, q_est, bias_est, p_cov)
                 if st_ok:
                     mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
-                else:
-                    _earth_and_field_update_1(faults, t, x, r, b_eci, mag, mag_noise, q_est, bias_est, p_cov)
                 w_est[:] = w_meas - bias_est
 
         if k % ctrl_every == 0:
@@ -503,8 +517,11 @@ def fly_variant(
                 speeds = tach_q * np.floor(speeds / tach_q + 0.5)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
-                fdir.wheel_check_1(wheel_fd, speeds, p.wheel_inertia, wheel_limits[1], base_friction, tach_q,
+                n_before = np.sum(available)
+                fdir.wheel_check_1(wheel_fd, speeds, w_est, p.wheel_inertia, wheel_limits[1], base_friction, tach_q,
                                    ctrl_every * dt, decouple, available, ev, n_ev, t)
+                if est_kind == ESTIMATOR_MEKF and np.sum(available) < n_before:
+                    fdir.star_reset_1(star_fd, p_cov, STAR_RESET_SIGMA_RAD)
             if law_kind == LAW_SEED000:
                 body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
             elif law_kind == LAW_MRP_FEEDBACK:

@@ -48,6 +48,7 @@ from numba import njit
 from scipy.stats import chi2, norm
 
 from sim_core.modes import MODE_FAULT
+from sim_core.quaternion import conjugate_rotate_1
 from sim_core.wheels import friction_torque_one_wheel, limited_motor_torque_1
 
 __all__ = [
@@ -74,6 +75,8 @@ __all__ = [
     "wheel_hold_1",
     "star_innovation_1",
     "star_tracker_check_1",
+    "star_readmit_1",
+    "star_reset_1",
     "gyro_drift_step_1",
     "magnetometer_check_1",
     "wheel_residuals",
@@ -93,8 +96,8 @@ EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED = 1, 4, 5, 6
 T_GYRO, T_STAR, T_MAG = 1, 2, 4  # sim_core.closed_loop.TARGET_CODES
 
 # Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
-WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR = range(7)
-WHEEL_STATE_ROWS = 7
+WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR, WS_COUPLING, WS_W = range(9)
+WHEEL_STATE_ROWS = 11  # WS_W..WS_W+2: the body rate at the hold (same in every column)
 # Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
 # innovation (3), in-jump flag.
 SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM = 0, 4, 5, 6, 9, 10, 11, 12
@@ -192,32 +195,38 @@ def wheel_decoupling_1(axes: np.ndarray, inertia: np.ndarray, j_inv: np.ndarray)
 
 
 @njit(cache=True)
-def wheel_check_1(state: np.ndarray, speeds: np.ndarray, inertia: np.ndarray, max_momentum: np.ndarray,
-                  friction: np.ndarray, tach_q: float, t_u: float, decouple: np.ndarray, available: np.ndarray,
-                  ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, inertia: np.ndarray,
+                  max_momentum: np.ndarray, friction: np.ndarray, tach_q: float, t_u: float, decouple: np.ndarray,
+                  available: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
     """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
 
     ``speeds``: tachometer readings at t (rad/s); ``state`` holds the previous reading, the
     predicted change of the body rate about each axis with its error bound, and the
     limited torque held since (see :func:`wheel_hold_1`); ``decouple`` from
-    :func:`wheel_decoupling_1`, so that each decoupled residual answers for its own wheel only.
+    :func:`wheel_decoupling_1`, so that each decoupled residual answers for its own wheel only;
+    ``w_body`` the estimated body rate now: the prediction held ω̂ × G constant over the period, so
+    its error bound grows with the rate change |Δω̂| (a seizing wheel's kick, a manoeuvre).
     Writes fault_detected / fault_isolated / reconfigured / mode_change events (seed 000 §3
     reconfiguration 4 → 3 → 2 + MD).
     """
     nw = speeds.shape[0]
     raw, bound = np.zeros(nw), np.zeros(nw)
     tested = np.zeros(nw, dtype=np.bool_)
+    dw = 0.0
+    for i in range(3):
+        dw += (w_body[i] - state[WS_W + i, 0]) ** 2
+    dw = np.sqrt(dw)
     for p in range(nw):
-        if not available[p] or state[WS_VALID, p] == 0.0:
+        if state[WS_VALID, p] == 0.0:
             continue
         torque = state[WS_TORQUE, p]
         if abs(inertia[p] * state[WS_SPEED, p]) + abs(torque) * t_u >= max_momentum[p]:
             bound[p] = abs(torque) * t_u  # the motor's momentum limit may cut the torque: untested
             continue
-        tested[p] = True
+        tested[p] = available[p]  # dropped wheels still enter the decoupling (a rubbing one still pushes)
         raw[p] = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u, friction, p)
-        bound[p] = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q, state[WS_AXIAL_ERR, p], t_u,
-                                 friction, p)
+        bound[p] = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q,
+                                 state[WS_AXIAL_ERR, p] + state[WS_COUPLING, p] * dw, t_u, friction, p)
     changed = False
     for p in range(nw):
         if not tested[p]:
@@ -282,6 +291,8 @@ def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes
         state[WS_SPEED, p] = speeds[p]
         state[WS_AXIAL, p] = axes[0, p] * dw[0] + axes[1, p] * dw[1] + axes[2, p] * dw[2]
         state[WS_AXIAL_ERR, p] = err
+        state[WS_COUPLING, p] = j_inv_norm * t_u * np.sqrt(g @ g)  # |Δ(ω × G)| ≤ |Δω| |G| over the period
+        state[WS_W:WS_W + 3, p] = w_body
         state[WS_TORQUE, p] = limited[p]
         state[WS_VALID, p] = 1.0
 
@@ -363,6 +374,46 @@ def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray
         _emit(ev, n_ev, t, EV_ISOLATED, arg)
         _emit(ev, n_ev, t, EV_RECONFIGURED, arg)
     return 0.0
+
+
+@njit(cache=True)
+def star_readmit_1(state: np.ndarray, q_est: np.ndarray, q_meas: np.ndarray, p_cov: np.ndarray, nadir_b: np.ndarray,
+                   nadir_ref_i: np.ndarray, sigma_earth: float, n_sigma: float, ev: np.ndarray, n_ev: np.ndarray,
+                   t: float) -> bool:
+    """Third-sensor vote on a rejected star-tracker sample (seed 002 eq 14 earth sensor): if the earth
+    sensor's nadir agrees with the star tracker and not with the estimate, the estimate was wrong (a
+    kick the propagation missed), so the tracker is re-admitted and the attitude covariance opened."""
+    if state[SS_JUMP] == 0.0:
+        return False
+    limit = n_sigma * np.sqrt(2.0) * sigma_earth
+    ref = nadir_ref_i / np.sqrt(nadir_ref_i @ nadir_ref_i)
+    by_star = conjugate_rotate_1(q_meas, ref)
+    by_est = conjugate_rotate_1(q_est, ref)
+    if np.arccos(min(1.0, nadir_b @ by_star)) > limit or np.arccos(min(1.0, nadir_b @ by_est)) <= limit:
+        return False
+    z = _rotvec_between_1(q_est, q_meas)
+    for i in range(3):
+        p_cov[i, i] += z @ z
+    state[SS_JUMP] = 0.0
+    state[SS_COUNT] = 0.0
+    state[SS_ISOLATED] = 0.0
+    state[SS_Z:SS_Z + 3] = 0.0
+    _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_STAR + 2)
+    return True
+
+
+@njit(cache=True)
+def star_reset_1(state: np.ndarray, p_cov: np.ndarray, sigma_att: float) -> None:
+    """After an actuator reconfiguration (a seizing wheel kicks the body faster than the filter models), trust
+    the star tracker again: clear its rejection state and open the attitude covariance to ``sigma_att``."""
+    if state[SS_JUMP] == 0.0 and state[SS_ISOLATED] == 0.0:
+        return
+    state[SS_JUMP] = 0.0
+    state[SS_COUNT] = 0.0
+    state[SS_ISOLATED] = 0.0
+    state[SS_Z:SS_Z + 3] = 0.0
+    for i in range(3):
+        p_cov[i, i] += sigma_att * sigma_att
 
 
 @njit(cache=True)

@@ -92,7 +92,7 @@ def _check_sequence(deltas_nms: list[float], torque: float = 0.0) -> tuple[np.nd
                           *RIGID)
         speeds = speeds + torque * T_U / J_HR12
         speeds[2] += dh / J_HR12
-        fdir.wheel_check_1(state, speeds, j, np.full(4, 12.0), zeros, TACH_Q, T_U, np.eye(4), available, ev, n_ev,
+        fdir.wheel_check_1(state, speeds, W0, j, np.full(4, 12.0), zeros, TACH_Q, T_U, np.eye(4), available, ev, n_ev,
                            (k + 1) * T_U)
     return available, ev[: n_ev[0]], state
 
@@ -127,7 +127,7 @@ def test_fewer_than_two_wheels_is_the_fault_mode():
     for k in range(3):
         fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :3], np.array([0.1, 0.0, 0.0]), j, np.full(3, 0.2), np.full(3, 12.0),
                           zeros, *RIGID)
-        faulty = fdir.wheel_check_1(state, speeds, j, np.full(3, 12.0), zeros, 0.0, T_U, np.eye(3), available, ev, n_ev,
+        faulty = fdir.wheel_check_1(state, speeds, W0, j, np.full(3, 12.0), zeros, 0.0, T_U, np.eye(3), available, ev, n_ev,
                                      k * T_U)
     assert faulty
     assert (1, 4) in [(int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]  # mode_change → MODE_FAULT (4)
@@ -142,7 +142,8 @@ def test_wheel_near_momentum_limit_is_not_tested():
     for k in range(3):
         fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :1], np.array([0.2]), j, np.array([0.2]), np.array([12.0]),
                           np.zeros((4, 1)), *RIGID)
-        fdir.wheel_check_1(state, speeds, j, np.array([12.0]), np.zeros((4, 1)), 0.0, T_U, np.eye(1), available, ev, n_ev,
+        fdir.wheel_check_1(state, speeds, W0, j, np.array([12.0]), np.zeros((4, 1)), 0.0, T_U, np.eye(1), available, ev,
+                           n_ev,
                            k * T_U)
     assert available[0] and n_ev[0] == 0
 
@@ -348,6 +349,9 @@ def loop_run():
         VariantSpec(name="st frozen", faults=[FaultSpec(target="star_tracker", type="frozen", onset_s=SENSOR_ONSET_S, duration_s=30.0)]),
         VariantSpec(name="gyro drift", faults=[FaultSpec(target="gyro", index=1, type="drift", onset_s=400.0, value=2e-8)]),
         VariantSpec(name="st failed", faults=[FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]),
+        VariantSpec(name="wheel 2 seized", faults=[faults.wheel_failure(1, ONSET_S, "stuck")]),
+        VariantSpec(name="wheel 4 friction", faults=[faults.wheel_failure(3, ONSET_S, "friction", value=5e-3)]),
+        VariantSpec(name="wheel 1 half torque", faults=[faults.wheel_failure(0, ONSET_S, "gain", gain=0.5)]),
         VariantSpec(name="mag spikes", faults=[FaultSpec(target="magnetometer", index=2, type="intermittent", onset_s=SENSOR_ONSET_S,
                                                          duration_s=100.0, value=5e-6, period_s=20.0, duty=0.1)]),
     ]
@@ -368,6 +372,15 @@ def test_abrupt_wheel_failure_is_detected_within_10_s_and_isolated_right_in_all_
         delays.append(t_det - ONSET_S)
         assert not traj["wheel_available"][1 + p, -1, p] and traj["wheel_available"][1 + p, -1].sum() == 3
     assert max(delays) < DETECTION_DELAY_MAX_S
+
+
+@pytest.mark.parametrize(("name", "wheel"), [("wheel 2 seized", 1), ("wheel 4 friction", 3), ("wheel 1 half torque", 0)])
+def test_seized_rubbing_and_weak_wheels_are_isolated_too(loop_run, name, wheel):
+    _, traj = loop_run
+    events = [e for e in traj.events[traj.variant_names.index(name)] if e[2] < fdir.SENSOR_ARG]
+    t_iso, w = _first(events, "fault_isolated")
+    assert w == wheel and t_iso - ONSET_S < DETECTION_DELAY_MAX_S
+    assert traj["wheel_available"][traj.variant_names.index(name), -1].sum() == 3
 
 
 def test_nominal_flight_raises_no_event_and_keeps_all_wheels(loop_run):
