@@ -14,8 +14,6 @@ import json
 import multiprocessing as mp
 import queue
 import threading
-import time
-from collections import OrderedDict, deque
 from dataclasses import asdict
 from typing import Any
 
@@ -25,9 +23,11 @@ from backend.dictionary_catalogue import DictionaryCatalogue
 from backend.downsampling import minmax_indices
 from backend.errors import ApiError
 from backend.live_hub import LiveHub
+from backend.sample_cache import SampleCache
 from backend.settings import Settings
+from backend.timebase import BOUND_NS
 
-__all__ = ["TelemetryGateway", "COMPONENT_MODULES", "SAMPLE_CACHE_ENTRIES"]
+__all__ = ["TelemetryGateway", "COMPONENT_MODULES"]
 
 COMPONENT_MODULES = {
     "archive": "telemetry.archive.store",
@@ -41,10 +41,8 @@ COMPONENT_MODULES = {
     "emulator": "telemetry.emulator",
     "engine": "sim_core.engine",
 }
-SAMPLE_CACHE_ENTRIES = 4096  # distinct (parameter, window, max_points) answers kept between ingests
 LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
 LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
-HOT_S = 5.0  # live data younger than this may still wait for the archive flush (every 0.5 s): no caching
 
 
 def _importable(module: str) -> bool:
@@ -67,10 +65,7 @@ class TelemetryGateway:
         self._relay: threading.Thread | None = None
         self._live_stats: dict[str, Any] = {}
         self.live_port: int | None = None
-        self._cache: OrderedDict[tuple, bytes] = OrderedDict()
-        self._generation: dict[str, int] = {}
-        self._hot: deque[tuple[float, str, int]] = deque()
-        self._cache_lock = threading.Lock()
+        self._samples = SampleCache()
 
     def components(self) -> dict[str, bool]:
         """Which optional modules are importable in this build."""
@@ -129,7 +124,7 @@ class TelemetryGateway:
                 self._live_stats = payload
                 continue
             if len(payload.t_utc_ns):
-                self._hot.append((time.monotonic(), satellite, int(payload.t_utc_ns.min())))
+                self._samples.mark_live(satellite, int(payload.t_utc_ns.min()))
             self._invalidate_batches(satellite, [payload])
             self._publish(satellite, [payload], 0)
 
@@ -234,53 +229,41 @@ class TelemetryGateway:
 
         return queries.export_table(self.archive, satellite, names, t0_ns, t1_ns)
 
-    def _invalidate(self, satellite: str, t0_ns: int = -(2**63), t1_ns: int = 2**63 - 1) -> None:
-        """Forget cached answers of ``satellite`` whose window overlaps new data in [t0_ns, t1_ns]."""
-        with self._cache_lock:
-            self._generation[satellite] = self._generation.get(satellite, 0) + 1
-            for key in [k for k in self._cache if k[0] == satellite and k[2] <= t1_ns and k[3] >= t0_ns]:
-                del self._cache[key]
-
     def _invalidate_batches(self, satellite: str, batches: list[Any]) -> None:
         spans = [(int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in batches if len(b.t_utc_ns)]
         if spans:
-            self._invalidate(satellite, min(s[0] for s in spans), max(s[1] for s in spans))
-
-    def _hot_start_ns(self, satellite: str) -> int | None:
-        """Earliest time of live data of ``satellite`` received within HOT_S (maybe not archived yet)."""
-        while self._hot and time.monotonic() - self._hot[0][0] > HOT_S:
-            self._hot.popleft()
-        starts = [t for _, sat, t in list(self._hot) if sat == satellite]
-        return min(starts) if starts else None
+            self._samples.invalidate(satellite, min(s[0] for s in spans), max(s[1] for s in spans))
 
     def cached_samples(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes | None:
         """The JSON answer of :meth:`samples_json` if cached (no database access; safe in the event loop)."""
-        key = (satellite, name, t0_ns, t1_ns, max_points)
-        with self._cache_lock:
-            hit = self._cache.get(key)
-            if hit is not None:
-                self._cache.move_to_end(key)
-            return hit
+        return self._samples.answer((satellite, name, t0_ns, t1_ns, max_points))
+
+    def _read(self, satellite: str, name: str, t0_ns: int, t1_ns: int, generation: int) -> tuple[np.ndarray, np.ndarray]:
+        """Samples in [t0_ns, t1_ns]: sliced from the whole cached series, read whole once, or (live) per window."""
+        whole = self._samples.series(satellite, name)
+        if whole is None and self._samples.hot_start_ns(satellite) is not None:
+            return self.archive.read_parameter(satellite, name, t0_ns, t1_ns)
+        if whole is None:
+            whole = self.archive.read_parameter(satellite, name, -BOUND_NS, BOUND_NS)
+            self._samples.store_series(satellite, name, generation, *whole)
+        t, v = whole
+        lo, hi = np.searchsorted(t, t0_ns, side="left"), np.searchsorted(t, t1_ns, side="right")
+        return t[lo:hi], v[lo:hi]
 
     def samples_json(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes:
         """JSON of one parameter's samples in [t0_ns, t1_ns], min/max-downsampled to max_points (cached)."""
-        hit = self.cached_samples(satellite, name, t0_ns, t1_ns, max_points)
+        key = (satellite, name, t0_ns, t1_ns, max_points)
+        hit = self._samples.answer(key)
         if hit is not None:
             return hit
-        with self._cache_lock:
-            generation = self._generation.get(satellite, 0)
-        t, v = self.archive.read_parameter(satellite, name, t0_ns, t1_ns)
+        generation = self._samples.generation(satellite)
+        t, v = self._read(satellite, name, t0_ns, t1_ns, generation)
         keep = minmax_indices(v, max_points) if v.size else np.arange(0)
         values = np.asarray(v[keep], dtype=float)
         listed = values.tolist() if np.all(np.isfinite(values)) else [x if np.isfinite(x) else None for x in values]
         answer = json.dumps({"satellite": satellite, "name": name, "total_points": int(t.size),
                              "t_utc_ns": t[keep].tolist(), "values": listed}).encode()
-        hot = self._hot_start_ns(satellite)
-        with self._cache_lock:
-            if self._generation.get(satellite, 0) == generation and (hot is None or t1_ns < hot):
-                self._cache[(satellite, name, t0_ns, t1_ns, max_points)] = answer
-                if len(self._cache) > SAMPLE_CACHE_ENTRIES:
-                    self._cache.popitem(last=False)
+        self._samples.store_answer(key, generation, answer)
         return answer
 
 
