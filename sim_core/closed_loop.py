@@ -363,7 +363,8 @@ def fly_variant(
     ``program``: (steps_t, steps_q, route); ``orbit``: (table, t0, step); ``env``: (B table, t0,
     step, c_pn); ``est``: (true gyro bias (3,), initial MEKF covariance (6, 6)); ``fdir_cfg``: FD_*
     entries (onboard FDIR of :mod:`sim_core.fdir`: wheels each T_u, star tracker, gyro drift and
-    magnetometer each T_q with the MEKF; it may drop wheels from ``available``). ``shared[0]`` non-zero cancels the run (checked each T_u);
+    magnetometer each T_q with the MEKF; it may drop wheels from ``available``). ``shared[0]`` non-zero
+    cancels the run (checked each T_u);
     ``shared[slot]`` receives the number of steps done, for progress reports from another thread.
     """
     np.random.seed(seed)
@@ -471,7 +472,8 @@ def fly_variant(
             mag[:] = b_body + mag_noise * np.random.standard_normal(3)
             _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
             if fdir_on:
-                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma, ev, n_ev, t)
+                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma,
+                                          ev, n_ev, t)
             if est_kind == ESTIMATOR_TRUTH:
                 q_est[:] = x[0:4]
                 w_est[:] = x[4:7]

@@ -82,15 +82,23 @@ def _axes(target: str, kind: str, onset: float, **params: float) -> list[FaultSp
     return [FaultSpec(target=target, index=i, type=kind, onset_s=onset, **params) for i in range(3)]
 
 
+def _noise(k: float) -> list[FaultSpec]:
+    """Gyro and star-tracker noise scaled to k·σ on every axis (seed 002 §3.2.4)."""
+    return _axes("gyro", "noise", 0.0, value=k) + _axes("star_tracker", "noise", 0.0, value=k)
+
+
 def seed002_fault_sets(onset_s: float = SEED002_ONSET_S) -> dict[str, list[FaultSpec]]:
     """Seed 002 §3.2 experiments as named fault sets for the three-wheel ``song-table1`` bus."""
     m = SEED002_MAGNITUDES
     gyro_drift = [FaultSpec(target="gyro", index=0, type="drift", onset_s=onset_s, value=m["gyro_drift_rad_s2"])]
-    att_drift = [FaultSpec(target="star_tracker", index=0, type="drift", onset_s=onset_s, value=m["attitude_drift_rad_s"])]
+    att_drift = [FaultSpec(target="star_tracker", index=0, type="drift", onset_s=onset_s,
+                           value=m["attitude_drift_rad_s"])]
     return {
         "nominal": [],
-        "controller intermittent 7-8 s": [FaultSpec(target="controller", type="intermittent", onset_s=onset_s, duration_s=1.0)],
-        "controller abrupt 7 s": [FaultSpec(target="controller", index=0, type="bias", onset_s=onset_s, value=m["controller_bias_nm"])],
+        "controller intermittent 7-8 s": [FaultSpec(target="controller", type="intermittent", onset_s=onset_s,
+                                                    duration_s=1.0)],
+        "controller abrupt 7 s": [FaultSpec(target="controller", index=0, type="bias", onset_s=onset_s,
+                                            value=m["controller_bias_nm"])],
         "wheel 3 multiplicative": [wheel_failure(2, onset_s, "gain", gain=m["wheel_gain"])],
         "wheel 3 stuck": [wheel_failure(2, onset_s, "stuck")],
         "wheels 1,2": [wheel_failure(0, onset_s), wheel_failure(1, onset_s)],
@@ -100,8 +108,8 @@ def seed002_fault_sets(onset_s: float = SEED002_ONSET_S) -> dict[str, list[Fault
         "gyro graded": gyro_drift,
         "attitude sensor graded": att_drift,
         "gyro + attitude sensor graded": gyro_drift + att_drift,
-        "noise 10 sigma": _axes("gyro", "noise", 0.0, value=m["noise_10"]) + _axes("star_tracker", "noise", 0.0, value=m["noise_10"]),
-        "noise 50 sigma": _axes("gyro", "noise", 0.0, value=m["noise_50"]) + _axes("star_tracker", "noise", 0.0, value=m["noise_50"]),
+        "noise 10 sigma": _noise(m["noise_10"]),
+        "noise 50 sigma": _noise(m["noise_50"]),
     }
 
 

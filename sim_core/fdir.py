@@ -105,7 +105,8 @@ STAR_STATE_SIZE = 18  # SS_SUM: sums of z (3) and z² (3) of the rejected run
 NOISE_WINDOW = 20  # rejected samples (5 s at 4 Hz) before deciding noise vs jump: 4 standard errors ≈ 0.9σ_z
 # Gyro state: integrated rotation, ST at window start, window start time, previous rate, reference
 # bias, windows seen, consecutive exceedances, isolated flag, bias process noise, calibration end time.
-GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF, GS_N, GS_COUNT, GS_ISOLATED, GS_SIGMA_U, GS_TREF = 0, 4, 8, 9, 12, 15, 16, 17, 18, 19
+GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF = 0, 4, 8, 9, 12
+GS_N, GS_COUNT, GS_ISOLATED, GS_SIGMA_U, GS_TREF = 15, 16, 17, 18, 19
 GYRO_STATE_SIZE = 20
 # Magnetometer state: time of the last rejected sample (NaN: none yet).
 MS_LAST = 0
@@ -177,7 +178,8 @@ def wheel_bound_1(inertia: float, speed_prev: float, speed_now: float, tach_q: f
 def wheel_residual_1(inertia: float, speed_prev: float, speed_now: float, axial_rate_change: float, torque: float,
                      t_u: float, friction: np.ndarray, p: int) -> float:
     """Momentum residual r_p of one wheel over one control period, N·m·s (seed 000 eq 1)."""
-    f_mean = 0.5 * (friction_torque_one_wheel(speed_prev, friction, p) + friction_torque_one_wheel(speed_now, friction, p))
+    f_mean = 0.5 * (friction_torque_one_wheel(speed_prev, friction, p)
+                    + friction_torque_one_wheel(speed_now, friction, p))
     return inertia * (speed_now - speed_prev + axial_rate_change) - t_u * (torque - f_mean)
 
 
@@ -224,7 +226,8 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, ine
             bound[p] = abs(torque) * t_u  # the motor's momentum limit may cut the torque: untested
             continue
         tested[p] = available[p]  # dropped wheels still enter the decoupling (a rubbing one still pushes)
-        raw[p] = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u, friction, p)
+        raw[p] = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u,
+                                  friction, p)
         bound[p] = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q,
                                  state[WS_AXIAL_ERR, p] + state[WS_COUPLING, p] * dw, t_u, friction, p)
     changed = False
@@ -316,8 +319,9 @@ def _rotvec_between_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def star_innovation_1(q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray, sigma3: np.ndarray) -> tuple[np.ndarray, float]:
-    """Innovation z = rotvec(Λ̂̃ ∘ Λ^m) and its normalised square zᵀ(P_θθ + diag σ²)⁻¹z, χ²(3) if consistent (seed 000 §4)."""
+def star_innovation_1(q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
+                      sigma3: np.ndarray) -> tuple[np.ndarray, float]:
+    """Innovation z = rotvec(Λ̂̃ ∘ Λ^m) and zᵀ(P_θθ + diag σ²)⁻¹z, χ²(3) if consistent (seed 000 §4)."""
     z = _rotvec_between_1(q_est, q_meas)
     s = np.empty((3, 3))
     for i in range(3):
@@ -576,7 +580,8 @@ def wheel_residuals(
 
     ``speed_rad_s`` (n_samples, n_wheels) at the control instants (relative to the body),
     ``axial_rate_rad_s`` the body rate about each spin axis a_pᵗ ω at the same instants (default 0),
-    ``torque_nm`` (n_samples − 1, n_wheels) the limited torque held over each period; ``friction`` the (4, n_wheels) table of
+    ``torque_nm`` (n_samples − 1, n_wheels) the limited torque held over each period; ``friction`` the
+    (4, n_wheels) table of
     :meth:`sim_core.wheels.WheelParams.friction_table`. Returns two (n_samples − 1, n_wheels) arrays, N·m·s.
     """
     w = np.asarray(speed_rad_s, dtype=float)

@@ -167,7 +167,8 @@ def feasibility(
     m_max = params.wheels.max_torque_nm
     h_max = params.wheels.max_momentum_nms
     alloc = engine.allocation_params(s)
-    h = params.wheels.inertia_kg_m2 * np.array([w.initial_speed_rpm for w in s.spacecraft.cluster.wheels]) * np.pi / 30.0
+    speeds_rpm = np.array([w.initial_speed_rpm for w in s.spacecraft.cluster.wheels])
+    h = params.wheels.inertia_kg_m2 * speeds_rpm * np.pi / 30.0
     b_body = np.array([conjugate_rotate_1(q, b) for q, b in zip(prog.q_ib, prog.b_eci_t)])
     kappa = _pair_kappa(axes, avail, b_body)
     worst_m, worst_h, worst_drift = 0.0, 0.0, 0.0
@@ -210,7 +211,8 @@ def _violation(worst_m: float, worst_h: float, drift_arcsec: float, budget: floa
     if worst_h > 1.0:
         return f"wheel momentum {worst_h:.2f}× its limit at t = {t:.1f} s"
     if drift_arcsec > budget:
-        where = "" if kappa is None else f" (|κ| = {abs(kappa[k]):.2f}{' > 1/2' if abs(kappa[k]) > 0.5 else ', MD saturated'})"
+        cause = " > 1/2" if kappa is not None and abs(kappa[k]) > 0.5 else ", MD saturated"
+        where = "" if kappa is None else f" (|κ| = {abs(kappa[k]):.2f}{cause})"
         return f"unproduced torque drifts the attitude {drift_arcsec:.0f}″ > {budget:.0f}″ at t = {t:.1f} s{where}"
     return ""
 
@@ -289,7 +291,8 @@ ROUTE_FLOWN_ARCSEC = POINTING_BUDGET_ARCSEC  # a scanning course counts as flown
 def _nadir_kappa(scenario: Scenario, available: np.ndarray, samples: int = 1200) -> tuple[np.ndarray, np.ndarray]:
     """κ = ⟨e_pq, b⟩ of a wheel pair over one orbit in the nadir (ORF) attitude (seed 000 §3)."""
     period = engine.orbit_period_s(scenario)
-    s = scenario.model_copy(update={"guidance": scenario.guidance.model_copy(update={"kind": "orf"}), "duration_s": period})
+    nadir = scenario.guidance.model_copy(update={"kind": "orf"})
+    s = scenario.model_copy(update={"guidance": nadir, "duration_s": period})
     t = np.linspace(0.0, period, samples, endpoint=False)
     prog = engine.program_along(s, t)
     b_body = np.array([conjugate_rotate_1(q, b) for q, b in zip(prog.q_ib, prog.b_eci_t)])

@@ -26,12 +26,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(handler=run)
 
 
+def _cell(value, fmt: str) -> str:
+    if value is None:
+        return "—"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return fmt.format(value)
+
+
 def markdown(rows: list[dict]) -> str:
     """The table as GitHub Markdown; missing figures (κ for ≥ 3 wheels, no feasible roll) as '—'."""
     lines = ["| " + " | ".join(title for _, title, _ in COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     for row in rows:
-        cells = ["—" if row[key] is None else ("yes" if row[key] is True else "no" if row[key] is False else fmt.format(row[key]))
-                 for key, _, fmt in COLUMNS]
+        cells = [_cell(row[key], fmt) for key, _, fmt in COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

@@ -80,7 +80,8 @@ def _quiet(variants: list[VariantSpec], duration_s: float = 60.0) -> Scenario:
 
 def _h_inertial(traj, s: Scenario, v: int) -> np.ndarray:
     p = engine.plant_params(s)
-    h_body = traj["omega_b_rad_s"][v] @ p.inertia_kg_m2.T + (traj["wheel_speed_rad_s"][v] * p.wheels.inertia_kg_m2) @ p.wheel_axes_b.T
+    wheels = (traj["wheel_speed_rad_s"][v] * p.wheels.inertia_kg_m2) @ p.wheel_axes_b.T
+    h_body = traj["omega_b_rad_s"][v] @ p.inertia_kg_m2.T + wheels
     return quaternion.rotate(traj["q_ib"][v], h_body)
 
 
@@ -113,7 +114,8 @@ def test_gain_fault_scales_the_delivered_torque():
 def test_intermittent_controller_fault_silences_only_its_window():
     s = scenario_library.get("song-table1")
     fs = faults.seed002_fault_sets()["controller intermittent 7-8 s"]
-    s = Scenario.model_validate({**s.model_dump(), "duration_s": 12.0, "variants": [{"name": "x", "faults": [f.model_dump() for f in fs]}]})
+    variant = {"name": "x", "faults": [f.model_dump() for f in fs]}
+    s = Scenario.model_validate({**s.model_dump(), "duration_s": 12.0, "variants": [variant]})
     traj = engine.simulate(s)
     torque = np.linalg.norm(traj["control_torque_b_nm"][0], axis=1)
     inside = (traj.t_s >= 7.0 + s.control_dt_s) & (traj.t_s < 8.0)

@@ -18,7 +18,8 @@ SAT_SPEED = 1.0  # rad/s, the dry-friction smoothing speed
 N_TRIALS = 4000
 W0 = np.zeros(3)  # body at rest: the tachometer reads the absolute spin
 AXES4 = np.eye(3)[:, [0, 1, 2, 0]].copy()
-RIGID = (np.eye(3) * 1e12, np.eye(3) * 1e-12, np.zeros(3), 0.0, 0.0, T_U)  # a body too heavy to turn: J, J_e⁻¹, MD, bounds
+# a body too heavy to turn: J, J_e⁻¹, MD torque, disturbance and rate-noise bounds, T_u
+RIGID = (np.eye(3) * 1e12, np.eye(3) * 1e-12, np.zeros(3), 0.0, 0.0, T_U)
 
 
 def _friction() -> np.ndarray:
@@ -125,9 +126,11 @@ def test_fewer_than_two_wheels_is_the_fault_mode():
     speeds = np.full(3, 50.0)
     faulty = False
     for k in range(3):
-        fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :3], np.array([0.1, 0.0, 0.0]), j, np.full(3, 0.2), np.full(3, 12.0),
+        fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :3], np.array([0.1, 0.0, 0.0]), j, np.full(3, 0.2),
+                          np.full(3, 12.0),
                           zeros, *RIGID)
-        faulty = fdir.wheel_check_1(state, speeds, W0, j, np.full(3, 12.0), zeros, 0.0, T_U, np.eye(3), available, ev, n_ev,
+        faulty = fdir.wheel_check_1(state, speeds, W0, j, np.full(3, 12.0), zeros, 0.0, T_U, np.eye(3), available,
+                                     ev, n_ev,
                                      k * T_U)
     assert faulty
     assert (1, 4) in [(int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]  # mode_change → MODE_FAULT (4)
@@ -270,7 +273,8 @@ def test_gyro_ramp_drift_is_detected_on_its_axis_and_widens_the_bias_noise():
     isolated = [e for e in ev if int(e[1]) == 5]
     assert detected and isolated
     assert int(isolated[0][2]) == fdir.SENSOR_ARG + 10 * 1 + 0  # gyro, axis x
-    noise = fdir.gaussian_sigmas() * np.sqrt(2 * SIGMA_ST**2 / fdir.GYRO_WINDOW_S**2 + SIGMA_G**2 * T_Q / fdir.GYRO_WINDOW_S)
+    w = fdir.GYRO_WINDOW_S
+    noise = fdir.gaussian_sigmas() * np.sqrt(2 * SIGMA_ST**2 / w**2 + SIGMA_G**2 * T_Q / w)
     expected = onset + noise / rate  # the drift reaches the noise bound (±1 window of averaging)
     assert abs(detected[0][0] - expected) <= 2 * fdir.GYRO_WINDOW_S
     assert sigma_u[-1] > 1e-9
@@ -340,19 +344,23 @@ def _first(events, name: str):
 @pytest.fixture(scope="module")
 def loop_run():
     """One batch: nominal, the four single-wheel failures, and sensor faults with and without FDIR."""
-    jump = FaultSpec(target="star_tracker", index=0, type="bias", onset_s=SENSOR_ONSET_S, duration_s=60.0, value=ST_JUMP_ARCSEC * ARCSEC)
+    jump = FaultSpec(target="star_tracker", index=0, type="bias", onset_s=SENSOR_ONSET_S, duration_s=60.0,
+                     value=ST_JUMP_ARCSEC * ARCSEC)
+    st = dict(target="star_tracker", onset_s=SENSOR_ONSET_S)
     variants = [VariantSpec(name="nominal")]
     variants += [VariantSpec(name=f"wheel {p + 1}", faults=[faults.wheel_failure(p, ONSET_S)]) for p in range(4)]
     variants += [
         VariantSpec(name="st jump", faults=[jump]),
         VariantSpec(name="st jump, no fdir", faults=[jump]),
-        VariantSpec(name="st frozen", faults=[FaultSpec(target="star_tracker", type="frozen", onset_s=SENSOR_ONSET_S, duration_s=30.0)]),
-        VariantSpec(name="gyro drift", faults=[FaultSpec(target="gyro", index=1, type="drift", onset_s=400.0, value=2e-8)]),
-        VariantSpec(name="st failed", faults=[FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]),
+        VariantSpec(name="st frozen", faults=[FaultSpec(**st, type="frozen", duration_s=30.0)]),
+        VariantSpec(name="gyro drift", faults=[FaultSpec(target="gyro", index=1, type="drift", onset_s=400.0,
+                                                         value=2e-8)]),
+        VariantSpec(name="st failed", faults=[FaultSpec(**st, type="failure")]),
         VariantSpec(name="wheel 2 seized", faults=[faults.wheel_failure(1, ONSET_S, "stuck")]),
         VariantSpec(name="wheel 4 friction", faults=[faults.wheel_failure(3, ONSET_S, "friction", value=5e-3)]),
         VariantSpec(name="wheel 1 half torque", faults=[faults.wheel_failure(0, ONSET_S, "gain", gain=0.5)]),
-        VariantSpec(name="mag spikes", faults=[FaultSpec(target="magnetometer", index=2, type="intermittent", onset_s=SENSOR_ONSET_S,
+        VariantSpec(name="mag spikes", faults=[FaultSpec(target="magnetometer", index=2, type="intermittent",
+                                                         onset_s=SENSOR_ONSET_S,
                                                          duration_s=100.0, value=5e-6, period_s=20.0, duty=0.1)]),
     ]
     flags = [v.name != "st jump, no fdir" for v in variants]
@@ -374,7 +382,8 @@ def test_abrupt_wheel_failure_is_detected_within_10_s_and_isolated_right_in_all_
     assert max(delays) < DETECTION_DELAY_MAX_S
 
 
-@pytest.mark.parametrize(("name", "wheel"), [("wheel 2 seized", 1), ("wheel 4 friction", 3), ("wheel 1 half torque", 0)])
+@pytest.mark.parametrize(("name", "wheel"),
+                         [("wheel 2 seized", 1), ("wheel 4 friction", 3), ("wheel 1 half torque", 0)])
 def test_seized_rubbing_and_weak_wheels_are_isolated_too(loop_run, name, wheel):
     _, traj = loop_run
     events = [e for e in traj.events[traj.variant_names.index(name)] if e[2] < fdir.SENSOR_ARG]
@@ -394,7 +403,8 @@ def test_star_tracker_jump_is_rejected_and_the_pointing_kept(loop_run):
     with_fdir, without = names.index("st jump"), names.index("st jump, no fdir")
     t_iso, arg = _first(traj.events[with_fdir], "fault_isolated")
     assert arg == fdir.SENSOR_ARG + 20 and SENSOR_ONSET_S <= t_iso < SENSOR_ONSET_S + 1.0
-    window = (traj.t_s >= SENSOR_ONSET_S + 20.0) & (traj.t_s < SENSOR_ONSET_S + 60.0)  # the filter has followed the jump
+    # by then a filter that took the jump has followed it
+    window = (traj.t_s >= SENSOR_ONSET_S + 20.0) & (traj.t_s < SENSOR_ONSET_S + 60.0)
     err = traj.pointing_error_rad() / ARCSEC
     assert np.max(err[without, window]) > 0.7 * ST_JUMP_ARCSEC  # the loop without FDIR follows the jump
     assert np.max(err[with_fdir, window]) < 0.5 * np.max(err[without, window])
@@ -425,13 +435,15 @@ def test_random_onsets_and_wheels_are_isolated_right_in_at_least_95_percent():
     right = 0
     for v, spec in enumerate(variants):
         t_iso, w = _first(traj.events[v], "fault_isolated")
-        right += w == spec.faults[0].index and t_iso is not None and t_iso - spec.faults[0].onset_s < DETECTION_DELAY_MAX_S
+        onset = spec.faults[0].onset_s
+        right += w == spec.faults[0].index and t_iso is not None and t_iso - onset < DETECTION_DELAY_MAX_S
     assert right / len(variants) >= ISOLATION_RATE_MIN
 
 
 def test_no_false_alarm_in_24_hours_of_nominal_scan_with_sensor_noise():
     s = _scan([VariantSpec(name="nominal")], duration_s=86400.0, output_dt_s=60.0)
-    assert s.sensors.star_tracker_sigma_arcsec > 0 and s.sensors.gyro_noise_rad_s > 0 and s.sensors.magnetometer_noise_t > 0
+    sn = s.sensors
+    assert sn.star_tracker_sigma_arcsec > 0 and sn.gyro_noise_rad_s > 0 and sn.magnetometer_noise_t > 0
     traj = engine.simulate(s, fdir=True)
     assert traj.events[0] == []
 
@@ -459,7 +471,8 @@ def test_earth_sensor_bias_during_a_star_tracker_outage_pulls_the_estimate_by_th
     bias_rad = np.radians(0.2)
     outage = [FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]
     earth = FaultSpec(target="earth_sensor", index=0, type="bias", onset_s=SENSOR_ONSET_S, value=bias_rad)
-    s = _scan([VariantSpec(name="outage", faults=outage), VariantSpec(name="outage + earth bias", faults=outage + [earth])],
+    s = _scan([VariantSpec(name="outage", faults=outage),
+               VariantSpec(name="outage + earth bias", faults=outage + [earth])],
               duration_s=3000.0, output_dt_s=5.0)
     traj = engine.simulate(s, fdir=True)
     err = [quaternion_angle_between(traj["q_est_ib"][v, -1], traj["q_ib"][v, -1]) for v in range(2)]

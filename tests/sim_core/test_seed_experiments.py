@@ -139,15 +139,16 @@ def test_fdir_cannot_tell_a_slow_attitude_sensor_drift_from_a_gyro_bias(without_
     """Two sensors, one ramp: indistinguishable from a constant gyro bias, so not caught (said in fdir)."""
     assert not any(n == "fault_isolated" for _, n, _ in with_fdir.events("attitude sensor graded"))
     end = DURATION_S - 1.0
-    assert with_fdir.at("attitude sensor graded", end) == pytest.approx(without_fdir.at("attitude sensor graded", end), rel=0.05)
+    name = "attitude sensor graded"
+    assert with_fdir.at(name, end) == pytest.approx(without_fdir.at(name, end), rel=0.05)
 
 
 @pytest.fixture(scope="module")
 def somov_pairs():
     s = scenario_library.get("somov-ge4-scan")
     fs, mask = faults.seed000_two_wheels()
-    s = Scenario.model_validate({**s.model_dump(), "variants": [{"name": "all wheels"},
-                                                                {"name": "wheels 2+4 + MD", "faults": [f.model_dump() for f in fs]}]})
+    pair = {"name": "wheels 2+4 + MD", "faults": [f.model_dump() for f in fs]}
+    s = Scenario.model_validate({**s.model_dump(), "variants": [{"name": "all wheels"}, pair]})
     traj = simulate(s, wheel_available=np.array([[True] * 4, mask]), fdir=True)
     obs = traj["observing"] > 0
     err = traj.pointing_error_rad() / ARCSEC
