@@ -88,6 +88,7 @@ class TwinPanels:
                 scales=_plot_scales(), axes=_axes(), aspect=2.0)
         with gui.add_folder("Mode and flags"):
             self.flags = gui.add_markdown("—")
+            self.image_motion = gui.add_markdown("—")
         with gui.add_folder("Active alarms"):
             self.alarms = gui.add_markdown("none")
         gui.add_markdown(f"<small>{EARTH_CREDIT}</small>")
@@ -137,6 +138,9 @@ class TwinPanels:
         self.slider.value = float(np.round((f.t_unix_s - t0) * 4.0) / 4.0)
         self.live.value = self.clock.live
         self.speed.value = f"x{self.clock.speed:g}"
+        along, across = f.image_motion_rad_s * 1e3
+        self.image_motion.content = ("image motion at the boresight: off the Earth" if np.isnan(along) else
+                                     f"image motion at the boresight: along {along:+.2f}, across {across:+.2f} mrad/s")
 
     def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str]) -> None:
         """Plots of the last PLOT_WINDOW_S, mode/flags and alarms (a few times per second)."""

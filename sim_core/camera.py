@@ -32,6 +32,8 @@ __all__ = [
     "survey_zone_bounds_ecef_m",
     "station_visibility_circle_ecef_m",
     "terminator_ecef_m",
+    "image_motion_rad_s",
+    "ground_point_velocity_eci_m_s",
     "surface_point_from_normal",
     "intersect_ellipsoid_1",
     "ground_trace_1",
@@ -290,3 +292,36 @@ def terminator_ecef_m(sun_ecef_m: np.ndarray, n_points: int = 180) -> np.ndarray
     theta = np.linspace(0.0, 2.0 * np.pi, _count(n_points, "n_points", 3))
     normals = np.cos(theta)[:, None] * u[..., None, :] + np.sin(theta)[:, None] * w[..., None, :]
     return surface_point_from_normal(normals)
+
+
+def ground_point_velocity_eci_m_s(p_eci_m: np.ndarray) -> np.ndarray:
+    """Inertial velocity ω⊕ × p of a point fixed on the Earth (rotation about ECI z; the CIP tilt is < 1e-6 rad)."""
+    p = _vectors(p_eci_m, "p_eci_m")
+    return np.cross([0.0, 0.0, frames.EARTH_ROTATION_RATE_RAD_S], p)
+
+
+def image_motion_rad_s(
+    r_eci_m: np.ndarray,
+    v_eci_m_s: np.ndarray,
+    q_ib: np.ndarray,
+    omega_b_rad_s: np.ndarray,
+    p_eci_m: np.ndarray,
+    p_velocity_eci_m_s: np.ndarray,
+) -> np.ndarray:
+    """Image-motion velocity of a ground point in the focal plane, (..., 2) rad/s (seed 000 §6 SURIUS-S).
+
+    With ρ = C_bi (p − r) the point seen in body axes, its focal-plane (tangent) coordinates are
+    (ρ_y/ρ_x, ρ_z/ρ_x) — along track and along the CCD line for the nominal attitude; multiplied by
+    the focal length they are metres on the detector. Their rate follows from
+    ρ̇ = C_bi (ṗ − v) − ω × ρ (transport theorem, ω in body axes, seed 000 eq 1 kinematics).
+    """
+    r, v = _vectors(r_eci_m, "r_eci_m"), _vectors(v_eci_m_s, "v_eci_m_s")
+    p, vp = _vectors(p_eci_m, "p_eci_m"), _vectors(p_velocity_eci_m_s, "p_velocity_eci_m_s")
+    w = _vectors(omega_b_rad_s, "omega_b_rad_s")
+    q_bi = quaternion.conjugate(quaternion.normalize(q_ib))
+    rho = quaternion.rotate(q_bi, p - r)
+    rho_dot = quaternion.rotate(q_bi, vp - v) - np.cross(w, rho)
+    x = rho[..., 0:1]
+    if np.any(x <= 0.0):
+        raise ValueError("p_eci_m: the point lies behind the focal plane (ρ_x ≤ 0)")
+    return (rho_dot[..., 1:] * x - rho[..., 1:] * rho_dot[..., 0:1]) / x**2

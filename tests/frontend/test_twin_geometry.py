@@ -86,3 +86,15 @@ def test_trace_split_moves_forward_with_time_and_trace_lies_on_the_ellipsoid(geo
     b = frames.WGS84_A_M * (1 - frames.WGS84_F)
     resid = (p[:, 0] ** 2 + p[:, 1] ** 2) / frames.WGS84_A_M**2 + p[:, 2] ** 2 / b**2 - 1.0
     assert np.max(np.abs(resid)) < 1e-12
+
+
+def test_image_motion_of_the_nadir_pointer_runs_backwards_at_about_v_ground_over_h(geometry):
+    """Orbit-locked nadir camera: the boresight point slides back at n R / h (± Earth rotation, ellipsoid)."""
+    t0, _ = geometry.feed.span_unix_s()
+    f = geometry.frame(t0 + 250.0)
+    radius = np.linalg.norm(f.sat_eci) * SCENE_UNIT_M
+    n = np.sqrt(3.986004418e14 / radius**3)
+    height = radius - np.linalg.norm(f.los_actual_ecef) * SCENE_UNIT_M
+    expected = -n * (radius - height) / height
+    assert abs(f.image_motion_rad_s[0] / expected - 1.0) < 0.08  # Earth rotation ≤ 6 % of the ground speed
+    assert abs(f.image_motion_rad_s[1]) < 0.08 * abs(expected)

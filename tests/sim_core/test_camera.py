@@ -167,3 +167,57 @@ def test_footprint_and_ground_trace_for_ten_thousand_samples_within_budget():
         camera.ground_trace_ecef_m(r)
         best = min(best, time.perf_counter() - start)
     assert best < GEOMETRY_BUDGET_S
+
+
+MU_M3_S2 = 3.986004418e14
+IMAGE_RATE_TOL_RAD_S = 1e-9  # central difference with h = 0.01 s: O(h²) terms ≈ 1e-11 rad/s, round-off 1e-12
+
+
+def test_image_motion_of_the_nadir_point_is_minus_n_r_over_h_for_an_orbit_locked_camera():
+    """Non-rotating sphere, circular orbit, body = ORF (x nadir, y along track, z = x × y): the point
+    at nadir moves backwards along track at n R / h in the focal plane (ρ̇_y = −v + n h = −n R)."""
+    radius = A_M + ALTITUDE_M
+    n = np.sqrt(MU_M3_S2 / radius**3)
+    r, v = np.array([radius, 0.0, 0.0]), np.array([0.0, n * radius, 0.0])
+    c_ib = np.array([[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]])  # columns x^o, y^o, z^o in ECI
+    from sim_core import quaternion
+
+    q_ib = quaternion.from_dcm(c_ib)
+    omega_b = np.array([0.0, 0.0, -n])  # ORF turns about the orbit normal = −z^o
+    rate = camera.image_motion_rad_s(r, v, q_ib, omega_b, np.array([A_M, 0.0, 0.0]), np.zeros(3))
+    np.testing.assert_allclose(rate, [-n * A_M / ALTITUDE_M, 0.0], rtol=1e-12, atol=1e-15)
+
+
+def test_image_motion_matches_finite_differences_of_the_exact_geometry():
+    """Circular inclined orbit, constant body rate, a ground point turning with the Earth: the rate of
+    its tangent-plane coordinates by central differences of the closed-form motion."""
+    from sim_core import orbit, quaternion
+    from sim_core.attitude_spline import exp_rotation
+
+    omega_b = np.array([0.002, -0.01, 0.004])
+    r0, _ = orbit.circular_orbit(np.array([0.0]), ALTITUDE_M, 97.8, 10.0, -25.0)
+    p0 = r0[0] * A_M / np.linalg.norm(r0[0]) + np.array([30e3, -20e3, 40e3])  # a point near nadir
+    x = (p0 - r0[0]) / np.linalg.norm(p0 - r0[0])  # boresight on the point at t = 0
+    y = np.cross([0.0, 0.0, 1.0], x)
+    y /= np.linalg.norm(y)
+    q0 = quaternion.from_dcm(np.stack([x, y, np.cross(x, y)], axis=-1))
+    we = frames.EARTH_ROTATION_RATE_RAD_S
+
+    def state(t: float):
+        r, v = orbit.circular_orbit(np.array([t]), ALTITUDE_M, 97.8, 10.0, -25.0)
+        q = quaternion.multiply(q0, exp_rotation(omega_b * t))
+        c, s = np.cos(we * t), np.sin(we * t)
+        p = np.array([c * p0[0] - s * p0[1], s * p0[0] + c * p0[1], p0[2]])
+        return r[0], v[0], q, p
+
+    def tangent(t: float) -> np.ndarray:
+        r, _, q, p = state(t)
+        rho = quaternion.rotate(quaternion.conjugate(q), p - r)
+        return rho[1:] / rho[0]
+
+    h = 0.01
+    truth = (tangent(h) - tangent(-h)) / (2 * h)
+    r, v, q, p = state(0.0)
+    rate = camera.image_motion_rad_s(r, v, q, omega_b, p, camera.ground_point_velocity_eci_m_s(p))
+    np.testing.assert_allclose(tangent(0.0), 0.0, atol=1e-12)  # the point sits on the boresight at t = 0
+    np.testing.assert_allclose(rate, truth, rtol=0, atol=IMAGE_RATE_TOL_RAD_S)
