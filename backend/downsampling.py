@@ -20,6 +20,7 @@ def minmax_indices(values: np.ndarray, max_points: int) -> np.ndarray:
     padded = np.concatenate([y, np.repeat(y[-1:], buckets * size - n, axis=0)])
     blocks = padded.reshape(buckets, size, columns)
     offsets = (np.arange(buckets) * size)[:, None]
-    picks = np.concatenate([np.nanargmin(blocks, axis=1) + offsets,
-                            np.nanargmax(blocks, axis=1) + offsets], axis=1)
-    return np.unique(np.minimum(picks.ravel(), n - 1))
+    argmin, argmax = (np.nanargmin, np.nanargmax) if np.isnan(y).any() else (np.argmin, np.argmax)
+    picks = np.sort(np.concatenate([argmin(blocks, axis=1), argmax(blocks, axis=1)], axis=1) + offsets, axis=1)
+    flat = np.minimum(picks.ravel(), n - 1)  # rows are sorted and bucket b precedes b + 1: flat is monotone
+    return flat[np.concatenate(([True], np.diff(flat) != 0))]
