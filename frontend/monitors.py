@@ -142,8 +142,9 @@ class MonitorHandles:
             t = self.clock.t_unix_s
             w = self.geometry.feed.window(t - PLOT_WINDOW_S, t)
             alarms = self.geometry.feed.active_alarms(t)
+            motion = self.geometry.image_motion_rad_s(t)
             for p in self.panels.values():
-                p.show_window(t, w, alarms)
+                p.show_window(t, w, alarms, motion)
 
     def _loop(self, rate_hz: float) -> None:
         period = 1.0 / rate_hz

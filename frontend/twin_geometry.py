@@ -21,6 +21,7 @@ __all__ = ["CameraFov", "TwinFrame", "TwinGeometry", "SCENE_UNIT_M"]
 SCENE_UNIT_M = frames.WGS84_A_M
 TRACE_STEP_S = 20.0  # ground trace and orbit polyline sampling (≈ 150 km of track)
 TRACE_HALF_SPAN_S = 3000.0  # past and future shown: about half an orbit each way
+TERMINATOR_STEP_RAD = np.radians(0.05)  # redraw the day/night boundary once the Sun moved this much (ECEF)
 RATE_STEP_S = 0.05  # body rate of the displayed attitude by a central difference over this step
 SURVEY_MAX_ROLL_RAD = np.radians(30.0)  # survey zone: boresight rolled up to ±30° (seed 000 §5 uses 20°)
 
@@ -50,7 +51,6 @@ class TwinFrame:
     ccd_actual_ecef: np.ndarray  # (m, 3) projected CCD line
     ccd_simulated_ecef: np.ndarray
     observing: bool
-    image_motion_rad_s: np.ndarray  # (2,) focal-plane rate of the actual boresight point, NaN off Earth
     trace_split: int  # index of the first future trace sample
     terminator_ecef: np.ndarray  # (k, 3)
 
@@ -71,6 +71,7 @@ class TwinGeometry:
         self.trace_ecef = camera.ground_trace_ecef_m(r_e) / SCENE_UNIT_M
         left, right = camera.survey_zone_bounds_ecef_m(r_e, v_e, SURVEY_MAX_ROLL_RAD)
         self.survey_left_ecef, self.survey_right_ecef = left / SCENE_UNIT_M, right / SCENE_UNIT_M
+        self._terminator = (np.zeros(3), np.zeros((0, 3)))
         altitude = float(np.median(np.linalg.norm(r, axis=-1))) - frames.WGS84_A_M
         self.stations = feed.ground_stations()
         self.station_ecef = [frames.geodetic_to_ecef(s.lat_deg, s.lon_deg, 0.0) / SCENE_UNIT_M for s in self.stations]
@@ -86,19 +87,34 @@ class TwinGeometry:
         r3[..., 0, 0], r3[..., 0, 1], r3[..., 1, 0], r3[..., 1, 1], r3[..., 2, 2] = c, s, -s, c, 1.0
         return self._w_pm @ r3 @ self._c_pn
 
-    def _image_motion(self, t: float, r: np.ndarray, v: np.ndarray, q: np.ndarray, p_eci: np.ndarray) -> np.ndarray:
-        """Focal-plane rate of the boresight ground point (seed 000 §6), body rate from the attitude spline."""
-        if not np.all(np.isfinite(p_eci)):
+    def _terminator_at(self, sun_ecef: np.ndarray) -> np.ndarray:
+        """Day/night boundary (scene units), recomputed only when the Sun moved by TERMINATOR_STEP_RAD."""
+        last_sun, points = self._terminator
+        if np.dot(last_sun, sun_ecef) < np.cos(TERMINATOR_STEP_RAD):
+            points = camera.terminator_ecef_m(sun_ecef, n_points=181) / SCENE_UNIT_M
+            self._terminator = (sun_ecef, points)
+        return points
+
+    def image_motion_rad_s(self, t_unix_s: float) -> np.ndarray:
+        """Focal-plane rate (2,) of the actual boresight's ground point (seed 000 §6), NaN when it misses the Earth.
+
+        The body rate is the central difference of the displayed attitude spline over RATE_STEP_S.
+        """
+        t = float(t_unix_s)
+        m = self.eci_to_ecef(np.array([t]))[0]
+        r, v = self.feed.orbit_eci(np.array([t]))
+        q0, q, q1 = self.feed.attitude_actual(np.array([t - RATE_STEP_S / 2, t, t + RATE_STEP_S / 2]))
+        p = m.T @ camera.line_of_sight_ecef_m(m @ r[0], camera.body_to_ecef_dcm(q, m))
+        if not np.all(np.isfinite(p)):
             return np.full(2, np.nan)
-        q0, q1 = self.feed.attitude_actual(np.array([t - RATE_STEP_S / 2, t + RATE_STEP_S / 2]))
         omega = attitude_spline.log_rotation(quaternion.multiply(quaternion.conjugate(q0), q1)) / RATE_STEP_S
-        return camera.image_motion_rad_s(r, v, q, omega, p_eci, camera.ground_point_velocity_eci_m_s(p_eci))
+        return camera.image_motion_rad_s(r[0], v[0], q, omega, p, camera.ground_point_velocity_eci_m_s(p))
 
     def frame(self, t_unix_s: float) -> TwinFrame:
         """Everything the scenes need at one instant (seed 000 §6 trace point, LOS point, CCD line)."""
         t = np.array([float(t_unix_s)])
         m = self.eci_to_ecef(t)[0]
-        r, v = self.feed.orbit_eci(t)
+        r, _ = self.feed.orbit_eci(t)
         r_e = m @ r[0]
         q_a, q_s = self.feed.attitude_actual(t)[0], self.feed.attitude_simulated(t)[0]
         c_a, c_s = camera.body_to_ecef_dcm(q_a, m), camera.body_to_ecef_dcm(q_s, m)
@@ -106,7 +122,6 @@ class TwinGeometry:
         sun /= np.linalg.norm(sun)
         win = self.feed.window(float(t_unix_s) - 1.0, float(t_unix_s))
         fov = self.fov
-        los_a = camera.line_of_sight_ecef_m(r_e, c_a)
         return TwinFrame(
             t_unix_s=float(t_unix_s),
             earth_wxyz=quaternion.from_dcm(m.T),
@@ -114,7 +129,7 @@ class TwinGeometry:
             sat_eci=r[0] / SCENE_UNIT_M,
             q_actual=q_a,
             q_simulated=q_s,
-            los_actual_ecef=los_a / SCENE_UNIT_M,
+            los_actual_ecef=camera.line_of_sight_ecef_m(r_e, c_a) / SCENE_UNIT_M,
             los_simulated_ecef=camera.line_of_sight_ecef_m(r_e, c_s) / SCENE_UNIT_M,
             footprint_actual_ecef=camera.footprint_ecef_m(r_e, c_a, fov.half_across_rad, fov.half_along_rad) / SCENE_UNIT_M,
             footprint_simulated_ecef=camera.footprint_ecef_m(r_e, c_s, fov.half_across_rad, fov.half_along_rad)
@@ -122,7 +137,6 @@ class TwinGeometry:
             ccd_actual_ecef=camera.ccd_line_ecef_m(r_e, c_a, fov.half_across_rad) / SCENE_UNIT_M,
             ccd_simulated_ecef=camera.ccd_line_ecef_m(r_e, c_s, fov.half_across_rad) / SCENE_UNIT_M,
             observing=bool(win.observing[-1]) if win.observing.size else False,
-            image_motion_rad_s=self._image_motion(float(t_unix_s), r[0], v[0], q_a, m.T @ los_a),
             trace_split=int(np.searchsorted(self.track_t, float(t_unix_s))),
-            terminator_ecef=camera.terminator_ecef_m(m @ sun, n_points=181) / SCENE_UNIT_M,
+            terminator_ecef=self._terminator_at(m @ sun),
         )

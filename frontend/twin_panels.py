@@ -138,12 +138,12 @@ class TwinPanels:
         self.slider.value = float(np.round((f.t_unix_s - t0) * 4.0) / 4.0)
         self.live.value = self.clock.live
         self.speed.value = f"x{self.clock.speed:g}"
-        along, across = f.image_motion_rad_s * 1e3
+
+    def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str], image_motion_rad_s: np.ndarray) -> None:
+        """Plots of the last PLOT_WINDOW_S, mode/flags, image motion and alarms (a few times per second)."""
+        along, across = np.asarray(image_motion_rad_s) * 1e3
         self.image_motion.content = ("image motion at the boresight: off the Earth" if np.isnan(along) else
                                      f"image motion at the boresight: along {along:+.2f}, across {across:+.2f} mrad/s")
-
-    def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str]) -> None:
-        """Plots of the last PLOT_WINDOW_S, mode/flags and alarms (a few times per second)."""
         x = w.t_unix_s - t_unix_s
         if x.size >= 2:
             self.error_plot.data = (x, w.error_angle_rad * ARCSEC_PER_RAD)

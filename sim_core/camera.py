@@ -14,6 +14,8 @@ vectorised over leading axes and return NaN where a ray misses the Earth.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numba import njit
 
@@ -148,11 +150,13 @@ def line_of_sight_ecef_m(r_ecef_m: np.ndarray, c_eb: np.ndarray) -> np.ndarray:
     return intersect_ellipsoid(r_ecef_m, _dcm(c_eb)[..., :, 0])
 
 
+@lru_cache(maxsize=32)
 def camera_rays_b(half_across_rad: float, half_along_rad: float, n_per_edge: int) -> np.ndarray:
     """Unit body-frame rays around the rectangular field of view, counter-clockwise, shape (4 n, 3).
 
     The field is a pyramid about +x: tan-plane coordinates (y, z) = (tan α_along, tan α_across) on
-    the edges of the rectangle, so straight edges in the focal plane stay straight rays.
+    the edges of the rectangle, so straight edges in the focal plane stay straight rays. Cached and
+    read-only (the display asks for the same field every frame).
     """
     ta = np.tan(_half_angle(half_across_rad, "half_across_rad"))
     tl = np.tan(_half_angle(half_along_rad, "half_along_rad"))
@@ -162,7 +166,9 @@ def camera_rays_b(half_across_rad: float, half_along_rad: float, n_per_edge: int
     y = np.concatenate([e[0] for e in edges])
     z = np.concatenate([e[1] for e in edges])
     rays = np.stack([np.ones_like(y), y, z], axis=-1)
-    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays.flags.writeable = False  # cached: shared by every caller
+    return rays
 
 
 def _project_rays(r_ecef_m: np.ndarray, c_eb: np.ndarray, rays_b: np.ndarray) -> np.ndarray:
