@@ -19,7 +19,8 @@ class Settings(BaseSettings):
     database_url: str | None = Field(None, description="SQLAlchemy URL; default SQLite under data_dir.")
     host: str = Field("127.0.0.1", description="Interface to bind; loopback unless told otherwise.")
     port: int = Field(8000, ge=0, le=65535, description="HTTP port of the REST/WebSocket API.")
-    viewer_port: int = Field(8080, ge=0, le=65535, description="Port of the 3D twin viewer.")
+    viewer_port: int = Field(8080, ge=0, le=65533,
+                             description="First of the 3 twin monitor ports (actual, simulated, overlay).")
     telemetry_port: int = Field(10025, ge=0, le=65535, description="TCP port of the live listener (0: any).")
     live_enabled: bool = Field(True, description="Listen for a live CCSDS packet stream over TCP.")
     live_satellite: str = Field("REFSAT", min_length=1, description="Satellite the live stream belongs to.")

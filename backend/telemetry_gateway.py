@@ -238,7 +238,8 @@ class TelemetryGateway:
         """The JSON answer of :meth:`samples_json` if cached (no database access; safe in the event loop)."""
         return self._samples.answer((satellite, name, t0_ns, t1_ns, max_points))
 
-    def _read(self, satellite: str, name: str, t0_ns: int, t1_ns: int, generation: int) -> tuple[np.ndarray, np.ndarray]:
+    def _read(self, satellite: str, name: str, t0_ns: int, t1_ns: int,
+              generation: int) -> tuple[np.ndarray, np.ndarray]:
         """Samples in [t0_ns, t1_ns]: sliced from the whole cached series, read whole once, or (live) per window."""
         whole = self._samples.series(satellite, name)
         if whole is None and self._samples.hot_start_ns(satellite) is not None:

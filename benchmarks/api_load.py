@@ -41,8 +41,9 @@ counter = 0
 request = function()
   counter = counter + 1
   local minute = counter % 7200
-  local path = string.format("/api/v1/parameters/q_ib_0/samples?start=2021-04-09T00:00:00Z&end=2021-04-09T%02d:%02d:%02dZ&max_points=1000",
-                             1 + math.floor(minute / 3600), math.floor(minute / 60) % 60, minute % 60)
+  local query = "start=2021-04-09T00:00:00Z&end=2021-04-09T%02d:%02d:%02dZ&max_points=1000"
+  local path = "/api/v1/parameters/q_ib_0/samples?" .. string.format(query,
+               1 + math.floor(minute / 3600), math.floor(minute / 60) % 60, minute % 60)
   return wrk.format("GET", path)
 end
 """

@@ -71,7 +71,8 @@ async def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str
 
 
 @router.get("/exports/samples", summary="Export samples as CSV or Parquet (one column per parameter)",
-            response_class=Response, responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}})
+            response_class=Response,
+            responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}})
 def export_samples(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
                    names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"],
                                       description="Comma-separated parameter names."),

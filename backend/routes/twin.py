@@ -36,7 +36,8 @@ class TwinSessionCreate(BaseModel):
     scenario_epoch_utc: datetime | None = Field(None, description="When the satellite started the scenario's "
                                                 "route (default: the library scenario's epoch).")
     faults: list[str] = Field(default_factory=list, max_length=16, examples=[["wheel:1:failure@50"]],
-                              description="Hypothesis, TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V] (s after align).")
+                              description="Hypothesis, TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V] "
+                                          "(onset in s after align).")
 
 
 def _session_public(services: Any, row: Any) -> dict[str, Any]:

@@ -110,7 +110,8 @@ def test_engine_job_returns_exactly_what_sim_core_engine_computes(tmp_path: Path
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
         job_id = client.post("/api/v1/simulations", json=ENGINE_BODY, headers=operator).json()["id"]
         deadline = time.monotonic() + ENGINE_JOB_TIMEOUT_S
-        while (job := client.get(f"/api/v1/simulations/{job_id}", headers=operator).json())["status"] in ("queued", "running"):
+        while (job := client.get(f"/api/v1/simulations/{job_id}", headers=operator).json())["status"] in (
+                "queued", "running"):
             assert time.monotonic() < deadline, job
             time.sleep(0.5)
         assert job["status"] == "succeeded", job["error"]

@@ -37,7 +37,8 @@ def test_predicted_passes_match_skyfield_and_reception_uses_the_diary(
     operator, viewer = bearer(tokens["operator"]), bearer(tokens["viewer"])
     line1, line2 = _noaa20_tle(shared_data)
     assert client.post("/api/v1/ground-stations", json=STATION, headers=operator).status_code == 201
-    assert client.post("/api/v1/satellites/NOAA-20/tles", content=f"{line1}\n{line2}\n", headers=operator).status_code == 201
+    tle = client.post("/api/v1/satellites/NOAA-20/tles", content=f"{line1}\n{line2}\n", headers=operator)
+    assert tle.status_code == 201
     predicted = client.post(f"/api/v1/satellites/NOAA-20/passes/predict?station=Fairbanks&start={DAY[0]}&end={DAY[1]}",
                             headers=operator)
     assert predicted.status_code == 200, predicted.json()

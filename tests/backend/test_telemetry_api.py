@@ -120,7 +120,8 @@ def test_uploaded_dictionary_with_limits_raises_alarms_that_operators_acknowledg
     assert [a["parameter"] for a in alarms] == ["q0_watch"]
     alarm_id = alarms[0]["id"]
     assert client.post(f"/api/v1/alarms/{alarm_id}/shelve", json={"duration_s": 600}, headers=viewer).status_code == 403
-    assert client.post(f"/api/v1/alarms/{alarm_id}/shelve", json={"duration_s": 600}, headers=operator).status_code == 200
+    shelved = client.post(f"/api/v1/alarms/{alarm_id}/shelve", json={"duration_s": 600}, headers=operator)
+    assert shelved.status_code == 200
     kinds = [e["kind"] for e in client.get(f"/api/v1/alarms/{alarm_id}/events", headers=viewer).json()]
     assert kinds[-1] == "shelve"
     actions = {e["action"] for e in client.get("/api/v1/audit", headers=bearer(tokens["admin"])).json()}
