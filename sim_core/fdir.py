@@ -100,9 +100,10 @@ WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR, WS
 WHEEL_STATE_ROWS = 11  # WS_W..WS_W+2: the body rate at the hold (same in every column)
 # Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
 # innovation (3), in-jump flag.
-SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM = 0, 4, 5, 6, 9, 10, 11, 12
-STAR_STATE_SIZE = 18  # SS_SUM: sums of z (3) and z² (3) of the rejected run
-NOISE_WINDOW = 20  # rejected samples (5 s at 4 Hz) before deciding noise vs jump: 4 standard errors ≈ 0.9σ_z
+SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM, SS_ZLAST = 0, 4, 5, 6, 9, 10, 11, 12, 15
+STAR_STATE_SIZE = 18  # SS_SUM: squared consecutive innovation differences (3); SS_ZLAST: last innovation (3)
+NOISE_WINDOW = 20  # samples (5 s at 4 Hz) before deciding noise vs jump: the scatter is then known to ±16 %
+NOISE_RATIO = 2.0  # scatter above 2σ (well beyond ±16 %) is noise; a jumped tracker stays at σ
 # Gyro state: integrated rotation, ST at window start, window start time, previous rate, reference
 # bias, windows seen, consecutive exceedances, isolated flag, bias process noise, calibration end time.
 GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF = 0, 4, 8, 9, 12
@@ -342,9 +343,9 @@ def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray
     the last accepted innovation by more than the limit allows for two independent samples (2σ²;
     a gradual growth, e.g. an unmodelled gyro drift, is left to the gyro test); once jumped, samples
     stay rejected while either statistic stays beyond the limit, so that the covariance growing
-    during gyro-only propagation does not let a lasting offset back in. Once isolated, innovations whose
-    mean over ``NOISE_WINDOW`` samples is zero within 4 standard errors are noise, not a jump: σ is
-    scaled to their scatter (seed 002's 10σ/50σ) and the sensor used again. With the gyro suspect
+    during gyro-only propagation does not let a lasting offset back in. Once isolated, a tracker whose
+    consecutive innovations scatter beyond ``NOISE_RATIO`` σ is noisy, not jumped: σ is scaled to the
+    scatter (seed 002's 10σ/50σ) and the sensor used again. With the gyro suspect
     (drift isolated) only freezes are rejected. A reading bit-identical to the previous one is frozen.
     """
     scale = max(1.0, state[SS_SCALE])
@@ -423,26 +424,29 @@ def star_reset_1(state: np.ndarray, p_cov: np.ndarray, sigma_att: float) -> None
 @njit(cache=True)
 def _noise_or_jump_1(state: np.ndarray, z: np.ndarray, p_cov: np.ndarray, sigma3: np.ndarray,
                      ev: np.ndarray, n_ev: np.ndarray, t: float) -> None:
-    """Accumulate innovations while the tracker is suspect; an unbiased scatter over NOISE_WINDOW samples
-    is noise: σ is rescaled to it and the tracker trusted again (its in-jump and isolated flags cleared)."""
+    """Noise or jump? While the tracker is suspect, the scatter of *consecutive* innovation differences
+    (free of the estimate's own error) over NOISE_WINDOW samples: a self-consistent tracker (scatter
+    within NOISE_RATIO of its σ) is offset — a jump, keep rejecting; a scattered one is noisy: σ is
+    rescaled to the scatter and the tracker trusted again (in-jump and isolated flags cleared)."""
     n = state[SS_N]
     if n == 0.0:
-        state[SS_SUM:SS_SUM + 6] = 0.0
-    state[SS_SUM:SS_SUM + 3] += z
-    state[SS_SUM + 3:SS_SUM + 6] += z * z
-    n += 1.0
-    state[SS_N] = n
+        state[SS_SUM:SS_SUM + 3] = 0.0
+        state[SS_ZLAST:SS_ZLAST + 3] = z
+        state[SS_N] = 1.0
+        return
+    d = z - state[SS_ZLAST:SS_ZLAST + 3]
+    state[SS_ZLAST:SS_ZLAST + 3] = z
+    state[SS_SUM:SS_SUM + 3] += d * d
+    state[SS_N] = n + 1.0
     if n < NOISE_WINDOW:
         return
     state[SS_N] = 0.0
     worst = 1.0
     for i in range(3):
-        mean = state[SS_SUM + i] / n
-        var = max(state[SS_SUM + 3 + i] / n - mean * mean, 0.0)
-        if abs(mean) > 4.0 * np.sqrt(var / n):
-            return  # biased: a real jump, keep rejecting
         if sigma3[i] > 0.0:
-            worst = max(worst, np.sqrt(max(var - p_cov[i, i], 0.0)) / sigma3[i])
+            worst = max(worst, np.sqrt(state[SS_SUM + i] / (2.0 * n)) / sigma3[i])
+    if worst <= NOISE_RATIO:
+        return  # self-consistent readings: an offset, keep rejecting
     state[SS_SCALE] = max(worst, state[SS_SCALE])
     state[SS_JUMP] = 0.0
     state[SS_ISOLATED] = 0.0
