@@ -176,3 +176,13 @@ def test_faults_table_lists_the_eleven_configurations(tmp_path):
         assert rows[name]["max_roll_rate_deg_s"] <= rows["all wheels"]["max_roll_rate_deg_s"]
     assert rows["wheels 2+4 + MD"]["route_flown"]
     assert all(0.0 < rows[n]["kappa_fraction"] < 1.0 for n in rows if "+ MD" in n)
+
+
+@pytest.mark.parametrize("name", ["noise 10 sigma", "noise 50 sigma"])
+def test_fdir_rescales_a_noisy_star_tracker_instead_of_locking_it_out(without_fdir, with_fdir, name):
+    """Seed 002 §3.2.4 noise is no fault to isolate for good: σ is rescaled and the accuracy stays within
+    3× of the loop without FDIR (which uses the noisy tracker directly)."""
+    from sim_core.fdir import SENSOR_ARG
+
+    assert any(n == "reconfigured" and arg == SENSOR_ARG + 21 for _, n, arg in with_fdir.events(name))
+    assert with_fdir.rms_late(name) < 3.0 * without_fdir.rms_late(name)
