@@ -24,6 +24,17 @@ NOAA20_PACKETS = Path("real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z
 NOAA20_TLE = Path("tle/real_sso_smallsats.tle")
 STATION = {"name": "Svalbard", "lat_deg": 78.23, "lon_deg": 15.39, "alt_m": 500.0, "min_elevation_deg": 5.0}
 DIARY_START, DIARY_END = "2021-04-09T00:00:00Z", "2021-04-09T02:00:00Z"
+ALARM_SATELLITE = "NOAA-20L"  # the same diary under a dictionary with a limit on the attitude scalar
+LIMITED_DICTIONARY = """
+name: NOAA-20 with a limit on the attitude scalar
+packets:
+  - name: JPSS_ATT_EPHEM
+    apid: 11
+    layout_from: {ccsdspy_csv: ccsdspy_jpss1_geolocation.csv}
+    time_code: {format: CDS, day_octets: 2, submillisecond_octets: 2, epoch_utc: "1958-01-01T00:00:00Z"}
+    derived:
+      - {name: q0_watch, kind: alias, inputs: [ADCFAQ4], limits: {yellow_high: 0.9, red_high: 0.99}}
+"""
 
 
 def free_port() -> int:
@@ -101,7 +112,8 @@ def _start_uvicorn(app, port: int) -> tuple[object, threading.Thread]:
 @pytest.fixture(scope="module")
 def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
     """The backend app (create_app) + dashboard on 127.0.0.1 over a temp SQLite, with the NOAA-20
-    diary uploaded, a TLE, the Svalbard station and the passes of the diary's two hours."""
+    diary uploaded, a TLE, the Svalbard station and the passes of the diary's two hours; the same diary
+    again as NOAA-20L under a dictionary whose limit on the attitude scalar raises an alarm."""
     from backend.app import create_app
     from backend.auth import Role
     from backend.settings import Settings
@@ -129,6 +141,11 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
         c.post("/api/v1/satellites/NOAA-20/passes/predict",
                params={"station": "Svalbard", "start": DIARY_START, "end": DIARY_END}).raise_for_status()
         passes = c.post("/api/v1/satellites/NOAA-20/passes/reception").json()
+        layout = (shared_data / NOAA20_PACKETS.parent / "ccsdspy_jpss1_geolocation.csv").read_bytes()
+        c.post("/api/v1/dictionaries/ccsdspy_jpss1_geolocation.csv?apid=11", content=layout).raise_for_status()
+        c.post("/api/v1/dictionaries/limited.yaml", content=LIMITED_DICTIONARY.encode()).raise_for_status()
+        c.post(f"/api/v1/telemetry/uploads?satellite={ALARM_SATELLITE}&dictionary=limited.yaml",
+               content=(shared_data / NOAA20_PACKETS).read_bytes()).raise_for_status()
     yield {"base": base, "token": token, "passes": passes}
     server.should_exit = True
     thread.join(timeout=10.0)

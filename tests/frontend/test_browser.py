@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from frontend.twin_panels import format_utc
+from tests.frontend.conftest import ALARM_SATELLITE
 
 pytestmark = pytest.mark.browser
 
@@ -125,6 +126,17 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
         assert sorted(srcs) == sorted(url.rstrip("/") + "/" for url in monitors.values())
         table = page.inner_text("#whatif-summary-table")
         assert "nominal" in table and "what-if" in table and "pointing_error_rms_arcsec" in table
+
+        page.fill("#satellite", ALARM_SATELLITE)
+        page.click("#login button[type=submit]")
+        alarm = page.wait_for_selector("#alarms tbody tr.state-active", timeout=20_000)
+        assert "q0_watch" in alarm.inner_text()
+        alarm.query_selector("button:text('shelve 1 h')").click()
+        page.wait_for_selector("#alarms tbody tr.state-shelved", timeout=10_000)
+        # the diary ends back inside the limits: acknowledging clears the alarm off the active list
+        page.click("#alarms tbody tr.state-shelved button:text('ack')")
+        page.wait_for_function("document.querySelector('#alarms tbody').innerText.includes('no active alarms')",
+                               timeout=10_000)
         assert errors == []
     finally:
         page.close()
