@@ -6,6 +6,8 @@
         t_ns, q0 = api.samples("q_ib_0", max_points=2000)
         job = api.simulate({"library": "somov-ge4-scan"}, progress=print)
         arrays = api.results(job["id"])            # numpy arrays of trajectory.npz
+        twin = api.start_twin("2026-03-20T00:05:00Z", 200.0, satellite="REFSAT", alternatives={"nominal": []})
+        residuals = api.twin_residuals(twin["id"])   # attitude_deg, rate_deg_s, wheel_speed_rpm arrays
         for item in api.subscribe(["parameters/q_ib_0"]):
             ...
 """
@@ -129,6 +131,23 @@ class Client:
         content = self._call("GET", f"/simulations/{job_id}/files/trajectory.npz").content
         with np.load(io.BytesIO(content)) as npz:
             return {name: npz[name] for name in npz.files}
+
+    def start_twin(self, align_utc: datetime | str, duration_s: float, faults: list[str] | None = None,
+                   alternatives: dict[str, list[str]] | None = None, **fields: Any) -> dict[str, Any]:
+        """Start a twin session aligned to archived telemetry (fields: satellite, scenario, …); the session."""
+        body = {"align_utc": _iso(align_utc), "duration_s": duration_s, "faults": faults or [],
+                "alternatives": alternatives or {}, **fields}
+        return self._call("POST", "/twin/sessions", json=body).json()
+
+    def twin_residuals(self, session_id: str, variant: int = 0, max_points: int = 1000,
+                       poll_s: float = 0.5, timeout_s: float | None = None) -> dict[str, Any]:
+        """Wait for the session's simulation, then its residuals (numpy arrays) and every variant's summary."""
+        session = self._call("GET", f"/twin/sessions/{session_id}").json()
+        self.wait(session["job_id"], poll_s=poll_s, timeout_s=timeout_s)
+        body = self._call("GET", f"/twin/sessions/{session_id}/residuals",
+                          params={"variant": variant, "max_points": max_points}).json()
+        arrays = {k: np.asarray(body[k], dtype=float) for k in ("t_s", "attitude_deg", "rate_deg_s", "wheel_speed_rpm")}
+        return {**body, **arrays}
 
     def subscribe(self, topics: list[str], timeout_s: float | None = None) -> Iterator[dict[str, Any]]:
         """Live items ``{"topic", "data"}`` of the topics, as they arrive (WebSocket)."""

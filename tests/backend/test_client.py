@@ -84,3 +84,22 @@ def test_client_raises_with_status_and_field(server: tuple[str, dict[str, str]])
     with Client(url) as anonymous, pytest.raises(ClientError) as missing:
         anonymous.job("nope")
     assert missing.value.status == 401 and missing.value.field == "Authorization"
+
+
+EMULATED_S, ALIGN_S, TWIN_S = 130.0, 65.0, 60.0  # a short flight: GPS fixes before the alignment, then a minute
+TWIN_ATTITUDE_TOL_DEG = 30.0 / 3600.0  # 10 × the 3″ star-tracker σ, as in test_twin.py
+
+
+def test_client_runs_a_twin_session_and_gets_residual_arrays(server: tuple[str, dict[str, str]]) -> None:
+    from telemetry import emulator
+
+    url, tokens = server
+    _, _, stream = emulator.emulate(duration_s=EMULATED_S)
+    align = np.datetime_as_string(np.datetime64(int(stream.t_utc_ns[0]) + int(ALIGN_S * 1e9), "ns"), unit="ms")
+    with Client(url, tokens["operator"]) as api:
+        api.upload(stream.data, satellite="REFSAT", dictionary="reference_satellite.yaml")
+        session = api.start_twin(align + "Z", TWIN_S, satellite="REFSAT", alternatives={"spare": []})
+        residuals = api.twin_residuals(session["id"], max_points=100_000, poll_s=0.2, timeout_s=300)
+    assert set(residuals["summaries"]) == {"twin", "spare"}
+    assert residuals["t_s"].size >= TWIN_S / 0.25 - 1 and residuals["wheel_speed_rpm"].shape[1] == 4
+    assert residuals["attitude_deg"].max() < TWIN_ATTITUDE_TOL_DEG
