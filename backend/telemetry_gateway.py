@@ -234,9 +234,17 @@ class TelemetryGateway:
         if spans:
             self._samples.invalidate(satellite, min(s[0] for s in spans), max(s[1] for s in spans))
 
-    def cached_samples(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes | None:
-        """The JSON answer of :meth:`samples_json` if cached (no database access; safe in the event loop)."""
-        return self._samples.answer((satellite, name, t0_ns, t1_ns, max_points))
+    def samples_from_memory(self, satellite: str, name: str, t0_ns: int, t1_ns: int,
+                            max_points: int) -> bytes | None:
+        """The answer of :meth:`samples_json` when no database access is needed (cached answer or series),
+        else None; costs ≲ 1 ms, so it runs in the event loop."""
+        key = (satellite, name, t0_ns, t1_ns, max_points)
+        hit = self._samples.answer(key)
+        if hit is not None or self._samples.hot_start_ns(satellite) is not None:
+            return hit
+        generation = self._samples.generation(satellite)
+        whole = self._samples.series(satellite, name)
+        return None if whole is None else self._answer(key, generation, *_window_of(whole, t0_ns, t1_ns))
 
     def _read(self, satellite: str, name: str, t0_ns: int, t1_ns: int,
               generation: int) -> tuple[np.ndarray, np.ndarray]:
@@ -247,9 +255,7 @@ class TelemetryGateway:
         if whole is None:
             whole = self.archive.read_parameter(satellite, name, -BOUND_NS, BOUND_NS)
             self._samples.store_series(satellite, name, generation, *whole)
-        t, v = whole
-        lo, hi = np.searchsorted(t, t0_ns, side="left"), np.searchsorted(t, t1_ns, side="right")
-        return t[lo:hi], v[lo:hi]
+        return _window_of(whole, t0_ns, t1_ns)
 
     def samples_json(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes:
         """JSON of one parameter's samples in [t0_ns, t1_ns], min/max-downsampled to max_points (cached)."""
@@ -258,14 +264,22 @@ class TelemetryGateway:
         if hit is not None:
             return hit
         generation = self._samples.generation(satellite)
-        t, v = self._read(satellite, name, t0_ns, t1_ns, generation)
-        keep = minmax_indices(v, max_points) if v.size else np.arange(0)
-        answer = orjson.dumps({"satellite": satellite, "name": name, "total_points": int(t.size),
+        return self._answer(key, generation, *self._read(satellite, name, t0_ns, t1_ns, generation))
+
+    def _answer(self, key: tuple[str, str, int, int, int], generation: int, t: np.ndarray, v: np.ndarray) -> bytes:
+        keep = minmax_indices(v, key[4]) if v.size else np.arange(0)
+        answer = orjson.dumps({"satellite": key[0], "name": key[1], "total_points": int(t.size),
                                "t_utc_ns": np.ascontiguousarray(t[keep], dtype=np.int64),
                                "values": np.ascontiguousarray(v[keep], dtype=np.float64)},
                               option=orjson.OPT_SERIALIZE_NUMPY)  # NaN → null; ~16× faster than json here
         self._samples.store_answer(key, generation, answer)
         return answer
+
+
+def _window_of(series: tuple[np.ndarray, np.ndarray], t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    t, v = series
+    lo, hi = np.searchsorted(t, t0_ns, side="left"), np.searchsorted(t, t1_ns, side="right")
+    return t[lo:hi], v[lo:hi]
 
 
 def dictionary_name_of(dictionary: Any) -> str:

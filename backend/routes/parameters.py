@@ -60,11 +60,11 @@ async def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str
                   max_points: int = Query(1000, ge=2, le=100_000)) -> Response:
     """Samples in [start, end] (ISO 8601 UTC), min/max-bucket downsampled to at most max_points.
 
-    Answers are cached per window until ingested data overlaps it; a hit never leaves the event loop.
+    Answers (and archived series) are cached until ingested data overlaps them; a hit never leaves the event loop.
     """
     t0, t1 = _window(start, end)
     args = (satellite, name, t0, t1, min(max_points, services.settings.max_points))
-    body = services.telemetry.cached_samples(*args)
+    body = services.telemetry.samples_from_memory(*args)
     if body is None:
         body = await run_in_threadpool(services.telemetry.samples_json, *args)
     return Response(body, media_type="application/json")
