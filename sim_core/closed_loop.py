@@ -14,7 +14,7 @@ import os
 import numpy as np
 from numba import njit
 
-from sim_core import allocation, control, environment, fdir, guidance, mekf, sensors
+from sim_core import allocation, control, environment, fdir, guidance, mekf, modes, sensors
 from sim_core.integrators import rk4_step_into
 from sim_core.quaternion import conjugate_rotate_1, multiply_1, rotate_1
 from sim_core.spacecraft import PlantArrays
@@ -42,18 +42,29 @@ STAR_RESET_SIGMA_RAD = np.radians(1.0)  # attitude uncertainty re-opened after a
 MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
 
 # Event codes (sim_core.trajectory.EVENT_NAMES).
-EV_FAULT_ONSET, EV_FAULT_CLEARED, EV_ALLOCATION, EV_MD_SATURATED = 2, 3, 7, 8
+EV_MODE_CHANGE, EV_FAULT_ONSET, EV_FAULT_CLEARED, EV_ALLOCATION, EV_MD_SATURATED = 1, 2, 3, 7, 8
 
 # Output channels of the float record (columns of ``rec``), per sample.
 R_Q, R_W, R_QE, R_WE, R_QP, R_WP = 0, 4, 7, 11, 15, 19
 R_MD, R_TORQUE, R_R, R_OBS, R_STATUS, R_FAULTS = 22, 25, 28, 31, 32, 33
-R_WHEELS = 34  # then: speeds (nw), commands (nw), delivered torques (nw), availability after FDIR (nw)
+R_MODE = 34  # onboard mode (sim_core.modes codes; −1 when the mode machine is off)
+R_WHEELS = 35  # then: speeds (nw), commands (nw), delivered torques (nw), availability after FDIR (nw)
 
 # Per-variant FDIR configuration (sim_core.fdir): on/off, bound on the error of a change of the
 # estimated body rate (rad/s), star-tracker χ²(3) limit, Gaussian threshold in σ, bound on the
 # external torque the loop does not model (N·m).
 FD_ON, FD_RATE_NOISE, FD_NIS_MAX, FD_N_SIGMA, FD_DIST_TORQUE = range(5)
 FDIR_CONFIG_SIZE = 5
+
+
+# ``times`` entries of the onboard mode machine (sim_core.modes), used when TM_ON is non-zero.
+TM_ON, TM_INITIAL, TM_BDOT_GAIN, TM_THRESHOLDS = 13, 14, 15, 16
+SUN_AXIS_B = np.array([0.0, 0.0, 1.0])  # solar-array normal the Sun/safe mode points at the Sun
+WHEEL_CAPTURE_RAD_S = np.radians(1.0)  # below this the wheels take over rate damping from B-dot
+RATE_DAMPING_TAU_S = 20.0  # time constant of the wheel rate brake (10 T_u at T_u = 2 s)
+FINE_POINTING_RAD = np.radians(2.0)  # ORF mode hands over from the acquisition PD to the scenario's law
+ACQUISITION_OMEGA_RAD_S = 0.02  # Sun/ORF acquisition bandwidth: slews ≤ 0.57 °/s, under the 1 °/s rate-lost limit
+UNLOADING_GAIN_PER_S = 1e-3  # seed 003 eq 29 unloading gain k: the cluster momentum decays in ~1/k s
 
 
 def record_width(n_wheels: int) -> int:
@@ -349,6 +360,68 @@ def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> N
         n_ev[0] += 1
 
 
+@njit(cache=True)
+def _angle_between_1(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (rad) between two non-zero vectors."""
+    c = np.cross(a, b)
+    return np.arctan2(np.sqrt(c @ c), a @ b)
+
+
+@njit(cache=True)
+def _attitude_difference_1(q_a: np.ndarray, q_b: np.ndarray) -> float:
+    """Rotation angle (rad, in [0, π]) between two attitudes."""
+    d = abs(q_a[0] * q_b[0] + q_a[1] * q_b[1] + q_a[2] * q_b[2] + q_a[3] * q_b[3])
+    return 2.0 * np.arccos(min(d, 1.0))
+
+
+@njit(cache=True)
+def _sun_safe_program_1(q_est: np.ndarray, sun_eci: np.ndarray) -> np.ndarray:
+    """One-axis Sun orientation (seed 001): the attitude nearest q_est that puts SUN_AXIS_B on the Sun."""
+    s_b = conjugate_rotate_1(q_est, sun_eci / np.sqrt(sun_eci @ sun_eci))
+    axis = np.cross(SUN_AXIS_B, s_b)
+    n = np.sqrt(axis @ axis)
+    ang = np.arctan2(n, SUN_AXIS_B @ s_b)
+    dq = np.array([1.0, 0.0, 0.0, 0.0])
+    if n > 1e-12:
+        dq[0] = np.cos(0.5 * ang)
+        dq[1:] = np.sin(0.5 * ang) * axis / n
+    return multiply_1(q_est, dq)
+
+
+@njit(cache=True)
+def _mode_program_1(mode: int, q_est, r, v, a, t_unix, q_p, w_p, wd_p) -> None:
+    """Program of the Sun/safe and ORF modes (seed 001 one- and three-axis orientation), in place."""
+    if mode == modes.MODE_SUN_SAFE:
+        q_p[:] = _sun_safe_program_1(q_est, environment.sun_position_1(t_unix))
+        w_p[:] = 0.0
+        wd_p[:] = 0.0
+    else:
+        q_o, w_o, wd_o = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), r, v, a)
+        q_p[:] = q_o
+        w_p[:] = w_o
+        wd_p[:] = wd_o
+
+
+@njit(cache=True)
+def _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, t_u, bdot_gain, md_max, p, available, h_wheels,
+                    alloc_params, wheel_limits, body_torque, cmd, dipole, wheel_out, dip_out) -> None:
+    """Rate damping (seed 001 initial mode, seed 003 eq 29–30): B-dot above 1 °/s or in the fault mode;
+    below it the wheels brake the body (−J ω / RATE_DAMPING_TAU_S) while the rods unload the cluster."""
+    body_torque[:] = 0.0
+    cmd[:] = 0.0
+    dipole[:] = 0.0
+    rate = np.sqrt(w_est @ w_est)
+    if mode == modes.MODE_FAULT or rate > WHEEL_CAPTURE_RAD_S or np.sum(available) < 2:
+        if have_mag_prev:
+            dipole[:] = control.bdot_dipole_step(mag, mag_prev, t_u, bdot_gain, md_max)
+        return
+    body_torque[:] = -(p.inertia @ w_est) / RATE_DAMPING_TAU_S
+    allocation.allocate_1(body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params, wheel_out, dip_out)
+    for w in range(cmd.shape[0]):
+        cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
+    dipole[:] = control.unloading_dipole_step(mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, md_max)
+
+
 @njit(cache=True, nogil=True)
 def fly_variant(
     x0, p: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
@@ -439,6 +512,17 @@ def fly_variant(
     b_body = conjugate_rotate_1(x[0:4], b_eci)
     flags = 0
     md_on = False
+    modes_on = times[TM_ON] != 0.0
+    mode = int(times[TM_INITIAL]) if modes_on else -1
+    mode_state = np.full(modes.STATE_SIZE, np.nan)
+    mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
+    mode_thresholds = times[TM_THRESHOLDS:TM_THRESHOLDS + 5].copy()
+    mag_prev = np.zeros(3)
+    have_mag_prev = False
+    j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
+    acq_kp = j_max * ACQUISITION_OMEGA_RAD_S**2  # seed 002 eq 18 PD for the large-angle acquisitions
+    acq_kd = 2.0 * j_max * ACQUISITION_OMEGA_RAD_S  # steady slew rate ≤ kp/kd = ω_n/2 per unit error
+    attitude_valid = True
     for k in range(n_steps):
         t = k * dt
         control_tick = k % ctrl_every == 0
@@ -507,6 +591,7 @@ def fly_variant(
                         _earth_and_field_update_1(nadir, earth_ok, r, b_eci, mag, mag_noise, q_est, bias_est, p_cov)
                 if st_ok:
                     mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
+                attitude_valid = st_ok
                 w_est[:] = w_meas - bias_est
 
         if k % ctrl_every == 0:
@@ -514,6 +599,19 @@ def fly_variant(
             if shared[0] != 0:
                 break
             q_p, w_p, wd_p, observing = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
+            if modes_on:
+                q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), r, v, a)
+                sun_b = conjugate_rotate_1(q_est, environment.sun_position_1(t0_unix + t))
+                new_mode = modes.mode_step_1(mode_state, mode_thresholds, t, np.sqrt(w_est @ w_est), attitude_valid,
+                                             _angle_between_1(SUN_AXIS_B, sun_b), _attitude_difference_1(q_est, q_orf),
+                                             True, np.sum(available) < 2, False)
+                if new_mode != mode:
+                    _event(ev, n_ev, t, EV_MODE_CHANGE, new_mode)
+                    g[:] = 0.0
+                    mode = new_mode
+                if mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF:
+                    _mode_program_1(mode, q_est, r, v, a, t0_unix + t, q_p, w_p, wd_p)
+                    observing = False
             speeds = x[7 + 2 * nq: 7 + 2 * nq + nw].copy()
             if tach_q > 0.0:
                 speeds = tach_q * np.floor(speeds / tach_q + 0.5)
@@ -524,7 +622,12 @@ def fly_variant(
                                    ctrl_every * dt, decouple, available, ev, n_ev, t)
                 if est_kind == ESTIMATOR_MEKF and np.sum(available) < n_before:
                     fdir.star_reset_1(star_fd, p_cov, STAR_RESET_SIGMA_RAD)
-            if law_kind == LAW_SEED000:
+            coarse = mode == modes.MODE_SUN_SAFE or (
+                mode == modes.MODE_ORF and _attitude_difference_1(q_est, q_p) > FINE_POINTING_RAD)
+            if modes_on and coarse:
+                body_torque = control.quaternion_pd_step(q_est, w_est, q_p, w_p, acq_kp, acq_kd) \
+                    + control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
+            elif law_kind == LAW_SEED000:
                 body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
             elif law_kind == LAW_MRP_FEEDBACK:
                 qpc = q_p.copy()
@@ -549,6 +652,16 @@ def fly_variant(
             _rod_faults_1(faults, t, dipole)
             for i in range(3):
                 dipole[i] = min(max(dipole[i], -md_max), md_max)
+            if modes_on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
+                # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
+                dipole[:] = control.unloading_dipole_step(mag, p.wheel_axes @ h_wheels, np.zeros(3),
+                                                          UNLOADING_GAIN_PER_S, md_max)
+            if modes_on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
+                _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, ctrl_every * dt, times[TM_BDOT_GAIN], md_max,
+                                p, available, h_wheels, alloc_params, wheel_limits, body_torque, cmd, dipole,
+                                wheel_out, dip_out)
+            mag_prev[:] = mag
+            have_mag_prev = True
             md_on = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
             if fdir_on:
                 md_torque[0] = dipole[1] * mag[2] - dipole[2] * mag[1]
@@ -574,6 +687,7 @@ def fly_variant(
             row[R_OBS] = 1.0 if obs_now else 0.0
             row[R_STATUS] = status
             row[R_FAULTS] = flags
+            row[R_MODE] = mode
             row[R_WHEELS:R_WHEELS + nw] = x[7 + 2 * nq: 7 + 2 * nq + nw]
             row[R_WHEELS + nw:R_WHEELS + 2 * nw] = cmd
             row[R_WHEELS + 2 * nw:R_WHEELS + 3 * nw] = delivered

@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sim_core import allocation, closed_loop, environment, frames, guidance, mekf, orbit, quaternion, wheels
+from sim_core import allocation, closed_loop, environment, frames, guidance, mekf, modes, orbit, quaternion, wheels
 from sim_core import fdir as fdir_kernels
 from sim_core.control import DigitalLawGains
 from sim_core.scenario import Scenario
@@ -161,6 +161,25 @@ def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, 
         segs = _route_segments(s)
     route = guidance.compile_route(segs, t0, state, c_pn, dut1, w_pm)
     return closed_loop.PROGRAM_ROUTE, (np.zeros(1), np.array([[1.0, 0, 0, 0]]), np.ascontiguousarray(route))
+
+
+def _mode_settings(s: Scenario, field_eci_t: np.ndarray) -> list[float]:
+    """``times`` entries TM_* of the onboard mode machine (closed_loop): on, initial mode, B-dot gain
+    and the thresholds of :class:`sim_core.modes.ModeThresholds`. The route's window is always open:
+    a route begins with its ORF hold, so ORF → route happens once the ORF pointing is ready.
+
+    B-dot gain k/|B|² with k = 2n(1 + sin ξ)J_min (Avanzini & Giulietti 2012, ξ ≈ 90° on a polar
+    or Sun-synchronous orbit), |B|² the orbit mean of the field table: L = −k Ḃ/|B|².
+    """
+    if s.initial_mode is None:
+        return [0.0, 0.0, 0.0, *modes.ModeThresholds().to_array()]
+    a = orbit.R_EARTH_M + s.orbit.altitude_m
+    n = np.sqrt(orbit.MU_EARTH_M3_S2 / a**3)
+    j_min = float(np.min(np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2, dtype=float))))
+    gain = 2.0 * n * 2.0 * j_min / float(np.mean(np.sum(field_eci_t**2, axis=1)))
+    initial = {"rate_damping": modes.MODE_RATE_DAMPING, "sun_safe": modes.MODE_SUN_SAFE, "orf": modes.MODE_ORF,
+               "route": modes.MODE_ROUTE}[s.initial_mode]
+    return [1.0, float(initial), gain, *modes.ModeThresholds().to_array()]
 
 
 def _fault_tables(s: Scenario) -> tuple[np.ndarray, np.ndarray]:
@@ -309,10 +328,11 @@ def simulate(
     steps = np.array([n_steps, *every, law, est, prog_kind, int(s.gravity_gradient), 0], dtype=np.int64)
     c = s.controller
     sn = s.sensors
+    field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
     times = np.array([
         dt, t0, s.spacecraft.md_max_dipole_am2, dut1, sn.star_tracker_sigma_arcsec * ARCSEC, sn.gyro_noise_rad_s,
         sn.magnetometer_noise_t, sn.tachometer_quantum_rad_s, c.pd_kp_nm, c.pd_kd_nms, c.mrp_k_nm, c.mrp_p_nms,
-        sn.gyro_drift_density_rad_s_sqrt_s,
+        sn.gyro_drift_density_rad_s_sqrt_s, *_mode_settings(s, field_tab[0]),
     ])
     ws = s.spacecraft.cluster.wheels
     wheel_limits = np.array([[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws],
@@ -326,7 +346,6 @@ def simulate(
     faults, n_faults = _fault_tables(s)
     seeds = np.array([s.seed * 1000 + i * 7919 + v.seed_offset for i, v in enumerate(s.variants)], dtype=np.int64)
     orbit_tab = _orbit_table(state, t0, s.duration_s)
-    field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
     env = (field_tab[0], field_tab[1], field_tab[2], np.ascontiguousarray(c_pn))
 
     rec = np.zeros((nv, n_out, closed_loop.record_width(nw)))
@@ -376,6 +395,7 @@ def _trajectory(s: Scenario, rec, ev, n_ev, nw: int, span: float, params: PlantP
         "observing": rec[..., cl.R_OBS],
         "allocation_status": rec[..., cl.R_STATUS].astype(np.int64),
         "fault_flags": rec[..., cl.R_FAULTS].astype(np.int64),
+        "mode": rec[..., cl.R_MODE].astype(np.int64),
         "wheel_speed_rad_s": rec[..., w0:w0 + nw],
         "wheel_torque_cmd_nm": rec[..., w0 + nw:w0 + 2 * nw],
         "wheel_torque_nm": rec[..., w0 + 2 * nw:w0 + 3 * nw],

@@ -245,6 +245,7 @@ class Scenario(_Spec):
     controller: ControllerSpec = Field(default_factory=ControllerSpec)
     allocation: AllocationSpec = Field(default_factory=AllocationSpec)
     gravity_gradient: bool = True
+    initial_mode: Literal["rate_damping", "sun_safe", "orf", "route"] | None = None  # None: no mode machine
     magnetic_model: Literal["igrf", "dipole"] = "igrf"
     duration_s: Positive = 5801.0
     dynamics_dt_s: Positive = 0.05

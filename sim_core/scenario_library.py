@@ -169,11 +169,30 @@ def song_table1() -> Scenario:
     )
 
 
+def somov_detumble_to_scan() -> Scenario:
+    """Seed 001/003 mode chain on the somov-ge4-scan spacecraft: after separation at (2, −1, 1.5) °/s
+    B-dot rate damping (25 A·m² rods), Sun/safe one-axis orientation, ORF stabilisation, then the
+    seed 000 two-course route once its window opens at 7,000 s."""
+    s = somov_ge4_scan()
+    g = s.guidance.model_copy(update={"route_start_s": 7000.0})
+    return s.model_copy(update={
+        "name": "somov-detumble-to-scan",
+        "description": "Mode chain: rate damping -> Sun/safe -> ORF -> route (seed 001/003)",
+        "guidance": g,
+        "initial_mode": "rate_damping",
+        "initial_q_ib": [1.0, 0.0, 0.0, 0.0],
+        "initial_omega_b_rad_s": np.radians([2.0, -1.0, 1.5]).tolist(),
+        "duration_s": 7600.0,
+        "output_dt_s": 1.0,
+    })
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "peer-basilisk-rw4": peer_basilisk_rw4,
     "somov-ge4-scan": somov_ge4_scan,
     "aist-scheduled-turn": aist_scheduled_turn,
     "song-table1": song_table1,
+    "somov-detumble-to-scan": somov_detumble_to_scan,
 }
 
 

@@ -121,3 +121,17 @@ def test_scenario_rejects_nan_and_non_unit_quaternions():
         Scenario(initial_q_ib=[1.0, 1.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="duration_s"):
         Scenario(duration_s=float("nan"))
+
+
+def test_mode_chain_from_separation_rates_to_the_route():
+    """Seed 001/003 modes in the loop: B-dot damping, Sun/safe, ORF, then the route, each a timed event."""
+    traj = engine.simulate(scenario_library.get("somov-detumble-to-scan"))
+    changes = [(t, arg) for t, name, arg in traj.events[0] if name == "mode_change"]
+    assert [arg for _, arg in changes] == [1, 2, 3]  # sun_safe, orf_stabilisation, route
+    assert all(a[0] < b[0] for a, b in zip(changes, changes[1:]))
+    mode = traj["mode"][0]
+    assert mode[0] == 0 and mode[-1] == 3
+    damped = np.degrees(np.linalg.norm(traj["omega_b_rad_s"][0][traj.t_s >= changes[0][0]], axis=1))
+    assert np.max(damped) < 1.0  # the rate never returns above the rate-lost limit
+    assert traj.summary()["observing_samples"] == 240
+    assert traj.summary()["pointing_error_max_arcsec"] < 300.0
