@@ -73,36 +73,9 @@ def record_width(n_wheels: int) -> int:
 
 
 @njit(cache=True)
-def hermite_orbit_1(table: np.ndarray, t0: float, step: float, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ECI r, v, a at t from a table of rows (r, v, a) every ``step`` s by cubic Hermite interpolation."""
-    u = (t - t0) / step
-    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
-    s = u - i
-    s2, s3 = s * s, s * s * s
-    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-    d00, d10, d01, d11 = (6 * s2 - 6 * s) / step, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / step, 3 * s2 - 2 * s
-    a, b = table[i], table[i + 1]
-    r, v, acc = np.empty(3), np.empty(3), np.empty(3)
-    for j in range(3):
-        r[j] = h00 * a[j] + h10 * step * a[3 + j] + h01 * b[j] + h11 * step * b[3 + j]
-        v[j] = d00 * a[j] + d10 * a[3 + j] + d01 * b[j] + d11 * b[3 + j]
-        acc[j] = (1 - s) * a[6 + j] + s * b[6 + j]
-    return r, v, acc
-
-
-@njit(cache=True)
-def linear_1(table: np.ndarray, t0: float, step: float, t: float) -> np.ndarray:
-    """Row of ``table`` (sampled every ``step`` s from t0) linearly interpolated at t."""
-    u = (t - t0) / step
-    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
-    s = u - i
-    return (1.0 - s) * table[i] + s * table[i + 1]
-
-
-@njit(cache=True)
 def hermite_orbit_into(table: np.ndarray, t0: float, step: float, t: float, r: np.ndarray, v: np.ndarray,
                        acc: np.ndarray) -> None:
-    """In-place :func:`hermite_orbit_1` (no allocation, for the per-step path)."""
+    """ECI r, v, a at t from a table of rows (r, v, a) every ``step`` s by cubic Hermite interpolation, in place."""
     u = (t - t0) / step
     i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
     s = u - i
@@ -117,7 +90,7 @@ def hermite_orbit_into(table: np.ndarray, t0: float, step: float, t: float, r: n
 
 @njit(cache=True)
 def linear_into(table: np.ndarray, t0: float, step: float, t: float, out: np.ndarray) -> None:
-    """In-place :func:`linear_1`."""
+    """Row of ``table`` (sampled every ``step`` s from t0) linearly interpolated at t, into ``out``."""
     u = (t - t0) / step
     i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
     s = u - i
@@ -507,8 +480,9 @@ def fly_variant(
     j_eff_inv = np.linalg.inv(j_eff)
     decouple = fdir.wheel_decoupling_1(p.wheel_axes, p.wheel_inertia, j_eff_inv)
 
-    r, v, a = hermite_orbit_1(orbit_tab, orbit_t0, orbit_step, 0.0)
-    b_eci = linear_1(b_tab, b_t0, b_step, 0.0)
+    r, v, a, b_eci = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    hermite_orbit_into(orbit_tab, orbit_t0, orbit_step, 0.0, r, v, a)
+    linear_into(b_tab, b_t0, b_step, 0.0, b_eci)
     b_body = conjugate_rotate_1(x[0:4], b_eci)
     flags = 0
     md_on = False
