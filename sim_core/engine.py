@@ -290,14 +290,14 @@ def simulate(
     progress: Callable[[float], None] | None = None,
     wheel_available: np.ndarray | None = None,
     cancel: Callable[[], bool] | None = None,
-    fdir: bool | Sequence[bool] = False,
+    fdir: bool | Sequence[bool] | None = None,
 ) -> Trajectory:
     """Fly every variant of the scenario and return the batch trajectory (seed 000 §7 twin).
 
     ``wheel_available`` (variants × wheels, optional): which wheels the onboard allocation may use
-    from the start (a reconfigured cluster); default all. ``fdir`` (one flag, or one per variant)
-    switches on the onboard FDIR of :mod:`sim_core.fdir`, which may drop wheels as it isolates
-    them. ``progress`` gets the fraction done every ``PROGRESS_POLL_S``; ``cancel`` returning True
+    from the start (a reconfigured cluster); default all. ``fdir`` (one flag, or one per variant;
+    default: the scenario's ``fdir`` field) switches on the onboard FDIR of :mod:`sim_core.fdir`,
+    which may drop wheels as it isolates them. ``progress`` gets the fraction done every ``PROGRESS_POLL_S``; ``cancel`` returning True
     stops the run and raises :class:`Cancelled`.
     """
     s = scenario
@@ -339,7 +339,7 @@ def simulate(
                              [w.torque_quantum_nm for w in ws]])
     gains = DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array()
     alloc = allocation_params(s)
-    fdir_cfg = _fdir_config(s, fdir)
+    fdir_cfg = _fdir_config(s, s.fdir if fdir is None else fdir)
     avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)
     if avail.shape != (nv, nw):
         raise ValueError(f"wheel_available: expected shape ({nv}, {nw}), got {avail.shape}")

@@ -246,6 +246,7 @@ class Scenario(_Spec):
     allocation: AllocationSpec = Field(default_factory=AllocationSpec)
     gravity_gradient: bool = True
     initial_mode: Literal["rate_damping", "sun_safe", "orf", "route"] | None = None  # None: no mode machine
+    fdir: bool = False  # onboard wheel and sensor FDIR (sim_core.fdir); off flies the faults unmitigated
     magnetic_model: Literal["igrf", "dipole"] = "igrf"
     duration_s: Positive = 5801.0
     dynamics_dt_s: Positive = 0.05

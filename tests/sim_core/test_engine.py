@@ -135,3 +135,13 @@ def test_mode_chain_from_separation_rates_to_the_route():
     assert np.max(damped) < 1.0  # the rate never returns above the rate-lost limit
     assert traj.summary()["observing_samples"] == 240
     assert traj.summary()["pointing_error_max_arcsec"] < 300.0
+
+
+def test_scenario_fdir_flag_switches_the_onboard_fdir():
+    """Scenario.fdir: a dead wheel is isolated (event) only when the scenario asks for FDIR."""
+    base = apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=120"])
+    dead = [VariantSpec(name="dead wheel 3", faults=[FaultSpec(target="wheel", index=2, type="failure", onset_s=40)])]
+    for fdir_on in (False, True):
+        s = base.model_copy(update={"variants": dead, "fdir": fdir_on})
+        names = [name for _, name, _ in engine.simulate(s).events[0]]
+        assert ("fault_isolated" in names) is fdir_on
