@@ -59,6 +59,7 @@ FDIR_CONFIG_SIZE = 5
 
 # ``times`` entries of the onboard mode machine (sim_core.modes), used when TM_ON is non-zero.
 TM_ON, TM_INITIAL, TM_BDOT_GAIN, TM_THRESHOLDS = 13, 14, 15, 16
+T_GYRO_COMPENSATION = 21  # ``times`` entry: add ω × (Jω + A h) to seed 000's law (7) when non-zero
 SUN_AXIS_B = np.array([0.0, 0.0, 1.0])  # solar-array normal the Sun/safe mode points at the Sun
 WHEEL_CAPTURE_RAD_S = np.radians(1.0)  # below this the wheels take over rate damping from B-dot
 RATE_DAMPING_TAU_S = 20.0  # time constant of the wheel rate brake (10 T_u at T_u = 2 s)
@@ -603,6 +604,8 @@ def fly_variant(
                     + control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
             elif law_kind == LAW_SEED000:
                 body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
+                if times[T_GYRO_COMPENSATION] != 0.0:
+                    body_torque += control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
             elif law_kind == LAW_MRP_FEEDBACK:
                 qpc = q_p.copy()
                 qpc[1:] = -qpc[1:]

@@ -332,7 +332,7 @@ def simulate(
     times = np.array([
         dt, t0, s.spacecraft.md_max_dipole_am2, dut1, sn.star_tracker_sigma_arcsec * ARCSEC, sn.gyro_noise_rad_s,
         sn.magnetometer_noise_t, sn.tachometer_quantum_rad_s, c.pd_kp_nm, c.pd_kd_nms, c.mrp_k_nm, c.mrp_p_nms,
-        sn.gyro_drift_density_rad_s_sqrt_s, *_mode_settings(s, field_tab[0]),
+        sn.gyro_drift_density_rad_s_sqrt_s, *_mode_settings(s, field_tab[0]), float(c.gyroscopic_compensation),
     ])
     ws = s.spacecraft.cluster.wheels
     wheel_limits = np.array([[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws],

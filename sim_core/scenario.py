@@ -179,6 +179,7 @@ class ControllerSpec(_Spec):
     gain_k_per_s2: Positive = 0.01  # control.DigitalLawGains: crossover ≈ 0.2 rad/s at T_u = 2 s, 13 dB / 50°
     tau1_s: Positive = 20.0
     tau2_s: Positive = 1.25
+    gyroscopic_compensation: bool = False  # add ω × (Jω + A h) to eq (7), which prints no such term
     mrp_k_nm: Positive = 2.7
     mrp_p_nms: Positive = 9.0
     pd_kp_nm: Positive = 1.0

@@ -172,7 +172,9 @@ def song_table1() -> Scenario:
 def somov_detumble_to_scan() -> Scenario:
     """Seed 001/003 mode chain on the somov-ge4-scan spacecraft: after separation at (2, −1, 1.5) °/s
     B-dot rate damping (25 A·m² rods), Sun/safe one-axis orientation, ORF stabilisation, then the
-    seed 000 two-course route once its window opens at 7,000 s."""
+    seed 000 two-course route once its window opens at 7,000 s. Rate damping leaves its momentum in
+    the cluster, so this case adds the gyroscopic term ω × (Jω + A h) to law (7) (77″ RMS without it).
+    """
     s = somov_ge4_scan()
     g = s.guidance.model_copy(update={"route_start_s": 7000.0})
     return s.model_copy(update={
@@ -180,6 +182,7 @@ def somov_detumble_to_scan() -> Scenario:
         "description": "Mode chain: rate damping -> Sun/safe -> ORF -> route (seed 001/003)",
         "guidance": g,
         "initial_mode": "rate_damping",
+        "controller": s.controller.model_copy(update={"gyroscopic_compensation": True}),
         "initial_q_ib": [1.0, 0.0, 0.0, 0.0],
         "initial_omega_b_rad_s": np.radians([2.0, -1.0, 1.5]).tolist(),
         "duration_s": 7600.0,
