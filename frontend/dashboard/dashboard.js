@@ -1,6 +1,7 @@
 // acs-twin operator dashboard: plain JS over the REST API (/api/v1, Bearer token), no build step.
 // Panels: passes with completeness, parameter plots on one shared time axis (zoom, CSV/PNG export),
-// alarms with acknowledge/shelve, what-if runs with progress compared on the pass time axis, monitors.
+// alarms with acknowledge/shelve, what-if twin sessions compared with the actual pass telemetry (or a
+// nominal simulation) on the pass time axis, monitors.
 "use strict";
 
 const state = {
@@ -35,7 +36,7 @@ async function api(path, options = {}) {
   const body = response.headers.get("content-type")?.includes("json") ? await response.json() : await response.text();
   if (!response.ok) {
     const message = body && body.message ? body.message : `${response.status} ${response.statusText}`;
-    throw new Error(message);
+    throw Object.assign(new Error(message), { field: body && body.field });
   }
   return body;
 }
@@ -62,7 +63,10 @@ async function login(event) {
   $("app").hidden = false;
   $("logout").hidden = false;
   setStatus(`logged in · ${state.satellite}`);
-  await Promise.allSettled([loadPasses(), loadParameters(), loadAlarms(), loadScenarios()]);
+  state.window = null;
+  clearWhatif();
+  const [passes] = await Promise.allSettled([loadPasses(), loadParameters(), loadAlarms(), loadScenarios()]);
+  if (passes.status === "fulfilled" && !passes.value) await telemetryWindow().catch((e) => setStatus(e.message, true));
   showMonitors();
 }
 
@@ -91,6 +95,7 @@ async function loadPasses() {
     body.appendChild(tr);
   }
   if (!passes.length) body.innerHTML = `<tr><td colspan="5">no passes for ${state.satellite}</td></tr>`;
+  return passes.length;
 }
 
 function selectPass(row, p) {
@@ -99,6 +104,7 @@ function selectPass(row, p) {
   const t0 = (p.received_start_ns ?? p.aos_ns) / 1e9, t1 = (p.received_end_ns ?? p.los_ns) / 1e9;
   state.window = [t0, t1];
   $("window-label").textContent = `pass ${p.id} · ${hhmmss(t0)} → ${hhmmss(t1)} UTC`;
+  defaultWhatifStart();
   plotSelected();
 }
 
@@ -121,14 +127,15 @@ function syncScales(source) {
   state.syncing = false;
 }
 
-function addPlot(container, title, t, columns, labels, colours) {
+function addPlot(container, title, t, columns, labels, colours, dashes = []) {
   const opts = {
     title, width: plotWidth(container), height: 170,
     cursor: { sync: { key: SYNC_KEY, setSeries: false }, drag: { x: true, y: false } },
     scales: { x: { time: true } },
+    tzDate: (ts) => uPlot.tzDate(new Date(ts * 1e3), "Etc/UTC"),  // the whole dashboard speaks UTC
     axes: [AXIS, AXIS],
     legend: { live: true },
-    series: [{}].concat(labels.map((label, i) => ({ label, stroke: colours[i % colours.length], width: 1.2 }))),
+    series: [{}].concat(labels.map((label, i) => ({ label, stroke: colours[i % colours.length], width: 1.2, dash: dashes[i] }))),
     hooks: { setScale: [(u, key) => { if (key === "x") syncScales(u); }] },
   };
   const u = new uPlot(opts, [t].concat(columns), container);
@@ -232,10 +239,40 @@ async function loadAlarms() {
 }
 
 // ---- what-if -----------------------------------------------------------------------------------
+// Default: a twin session aligned to the selected pass's telemetry at a chosen start, flying the fault
+// hypothesis and its alternatives; residuals (twin − telemetry) per variant on the pass's time axis.
+// Alternative: the previous nominal-vs-fault simulation job (no telemetry involved).
+const GPS_MARGIN_S = 60;    // telemetry the twin reads before its start for the orbit fit (backend GPS_MARGIN_S)
+const START_MARGIN_S = 60;  // default start: this much after the GPS margin into the pass
+const RANK_KEYS = ["wheel_speed_max_rpm", "attitude_max_deg", "rate_max_deg_s"];  // best-match order
+const WHEEL_DASHES = [[], [6, 3], [2, 3], [8, 3, 2, 3]];  // RW1 solid, RW2 dashed, RW3 dotted, RW4 dash-dot
+
 async function loadScenarios() {
   const names = await api("/scenarios");
   $("scenario").replaceChildren(...names.map((n) => new Option(n, n)));
   if (names.includes("somov-ge4-scan")) $("scenario").value = "somov-ge4-scan";
+}
+
+const utcInput = (s) => new Date(s * 1000).toISOString().slice(0, 23);
+const inputUtc = (v) => (v ? Date.parse(v.endsWith("Z") ? v : v + "Z") / 1000 : NaN);
+
+function defaultWhatifStart() {
+  if (!state.window) return;
+  const [t0, t1] = state.window;
+  const duration = Number($("duration").value);
+  const latest = Math.max(t0 + GPS_MARGIN_S, t1 - duration);
+  $("whatif-start").value = utcInput(Math.min(t0 + GPS_MARGIN_S + START_MARGIN_S, latest));
+}
+
+async function telemetryWindow() {
+  // no predicted pass (e.g. the emulated demo satellite): the archived telemetry's span is the window
+  const names = Array.from($("parameter-list").options).map((o) => o.value);
+  if (!names.length) return;
+  const s = await api(`/parameters/${encodeURIComponent(names[0])}/samples?satellite=${sat()}&max_points=100`);
+  if (!s.t_utc_ns.length) return;
+  state.window = [s.t_utc_ns[0] / 1e9, s.t_utc_ns[s.t_utc_ns.length - 1] / 1e9];
+  $("window-label").textContent = `telemetry ${hhmmss(state.window[0])} → ${hhmmss(state.window[1])} UTC`;
+  defaultWhatifStart();
 }
 
 function faultSpec(value, onset) {
@@ -246,37 +283,169 @@ function faultSpec(value, onset) {
   return spec;
 }
 
+function faultText(value, onset) {
+  // TARGET:INDEX:TYPE@ONSET[,gain=G|,value=V], the twin sessions' hypothesis syntax
+  const spec = faultSpec(value, onset);
+  const extra = spec.gain !== undefined ? `,gain=${spec.gain}` : spec.value !== undefined ? `,value=${spec.value}` : "";
+  return `${value}@${onset}${extra}`;
+}
+
+function parseAlternatives() {
+  const alternatives = {};
+  if ($("alt-nominal").checked) alternatives.nominal = [];
+  for (const line of $("alternatives").value.split("\n").map((l) => l.trim()).filter(Boolean)) {
+    const colon = line.indexOf(":");
+    const name = line.slice(0, colon).trim();
+    if (colon < 1 || !name || name.includes(" ")) throw Object.assign(new Error(`alternatives: "${line}" is not "name: fault …"`), { field: "alternatives" });
+    alternatives[name] = line.slice(colon + 1).trim().split(/\s+/).filter(Boolean);
+  }
+  return alternatives;
+}
+
+function clearWhatif() {
+  state.whatif = null;
+  state.twin = null;
+  $("whatif-summary").replaceChildren();
+  const box = $("whatif-plots");
+  const old = state.plots.filter((u) => box.contains(u.root));
+  for (const u of old) u.destroy();
+  state.plots = state.plots.filter((u) => !old.includes(u));
+  box.replaceChildren();
+}
+
+function showError(prefix, err) {
+  $("whatif-status").textContent = `${prefix}: ${err.message}` + (err.field ? ` (field: ${err.field})` : "");
+  $("whatif-status").classList.add("error");
+  $("whatif-progress").hidden = true;
+}
+
 async function runWhatif(event) {
   event.preventDefault();
+  clearWhatif();
+  $("whatif-status").classList.remove("error");
   const onset = Number($("onset").value), duration = Number($("duration").value);
-  const faults = Array.from(document.querySelectorAll("input[name=fault]:checked")).map((c) => faultSpec(c.value, onset));
-  const variants = [{ name: "nominal" }, { name: "what-if", faults }];
-  const body = { library: $("scenario").value, set: [`duration_s=${duration}`, `variants=${JSON.stringify(variants)}`] };
-  $("whatif-summary").replaceChildren();
-  $("whatif-plots").replaceChildren();
+  const checked = Array.from(document.querySelectorAll("input[name=fault]:checked")).map((c) => c.value);
   try {
-    const job = await api("/simulations", { method: "POST", json: body });
-    $("whatif-status").textContent = `job ${job.id} queued`;
-    $("whatif-progress").hidden = false;
-    pollWhatif(job.id);
+    if ($("whatif-against").value === "actual") await startTwin(checked, onset, duration);
+    else await startSimulation(checked, onset, duration);
   } catch (err) {
-    $("whatif-status").textContent = `rejected: ${err.message}`;
+    showError("rejected", err);
   }
 }
 
-function pollWhatif(id) {
+async function startTwin(checked, onset, duration) {
+  const start = inputUtc($("whatif-start").value);
+  if (!Number.isFinite(start)) throw Object.assign(new Error("choose a start instant within the pass"), { field: "align_utc" });
+  const body = { satellite: state.satellite, dictionary: $("whatif-dictionary").value.trim(), scenario: $("scenario").value,
+    align_utc: isoOf(start), duration_s: duration, faults: checked.map((v) => faultText(v, onset)),
+    alternatives: parseAlternatives() };
+  if ($("whatif-epoch").value) body.scenario_epoch_utc = isoOf(inputUtc($("whatif-epoch").value));
+  const session = await api("/twin/sessions", { method: "POST", json: body });
+  $("whatif-status").textContent = `twin ${session.id.slice(0, 8)} ${session.status}`;
+  $("whatif-progress").hidden = false;
+  poll(`/twin/sessions/${session.id}`, `twin ${session.id.slice(0, 8)}`, (s) => showTwin(s));
+}
+
+async function startSimulation(checked, onset, duration) {
+  const variants = [{ name: "nominal" }, { name: "what-if", faults: checked.map((v) => faultSpec(v, onset)) }];
+  const body = { library: $("scenario").value, set: [`duration_s=${duration}`, `variants=${JSON.stringify(variants)}`] };
+  const job = await api("/simulations", { method: "POST", json: body });
+  $("whatif-status").textContent = `job ${job.id} queued`;
+  $("whatif-progress").hidden = false;
+  poll(`/simulations/${job.id}`, `job ${job.id}`, (j) => showWhatif(j.id, j));
+}
+
+function poll(path, label, done) {
   clearTimeout(state.whatifPoll);
   state.whatifPoll = setTimeout(async () => {
-    let job;
-    try { job = await api(`/simulations/${id}`); } catch (err) { $("whatif-status").textContent = err.message; return; }
-    $("whatif-progress").value = job.progress;
-    $("whatif-status").textContent = `job ${id}: ${job.status} ${Math.round(100 * job.progress)} %`;
-    if (job.status === "queued" || job.status === "running") { pollWhatif(id); return; }
-    if (job.status === "succeeded") await showWhatif(id, job);
-    else $("whatif-status").textContent += job.error ? ` — ${job.error}` : "";
+    let run;
+    try { run = await api(path); } catch (err) { showError(label, err); return; }
+    $("whatif-progress").value = run.progress;
+    $("whatif-status").textContent = `${label}: ${run.status} ${Math.round(100 * run.progress)} %`;
+    if (run.status === "queued" || run.status === "running") { poll(path, label, done); return; }
+    if (run.status !== "succeeded") { showError(label, new Error(`${run.status}${run.error ? ` — ${run.error}` : ""}`)); return; }
+    try { await done(run); } catch (err) { showError(label, err); }
   }, WHATIF_POLL_MS);
 }
 
+// -- against the actual pass: residuals of every variant ------------------------------------------
+function bestVariant(summaries) {
+  // smallest largest-residual, compared key by key in RANK_KEYS order (wheel speeds first: the faults act there)
+  const better = (a, b) => {
+    for (const k of RANK_KEYS) if (summaries[a][k] !== summaries[b][k]) return summaries[a][k] < summaries[b][k];
+    return false;
+  };
+  return Object.keys(summaries).reduce((best, name) => (better(name, best) ? name : best));
+}
+
+function twinTable(variants, summaries, hypotheses) {
+  const best = bestVariant(summaries);
+  const table = document.createElement("table");
+  table.id = "twin-summary-table";
+  const compared = variants.map((n) => summaries[n].samples).join("/");
+  table.createCaption().textContent = `best match with the telemetry: ${best} (ranked by ${RANK_KEYS.join(", then ")};` +
+    ` ${compared} instants compared)`;
+  const head = table.createTHead().insertRow();
+  for (const h of ["variant", "faults", "att. max °", "rate max °/s", "wheel max rpm"]) head.insertCell().textContent = h;
+  const body = table.createTBody();
+  for (const name of variants) {
+    const s = summaries[name], tr = body.insertRow();
+    tr.dataset.variant = name;
+    tr.classList.toggle("best", name === best);
+    tr.insertCell().textContent = name;
+    tr.insertCell().textContent = hypotheses[name].join(" ") || "none";
+    for (const k of ["attitude_max_deg", "rate_max_deg_s", "wheel_speed_max_rpm"]) tr.insertCell().textContent = Number(s[k].toPrecision(4));
+  }
+  return table;
+}
+
+async function showTwin(session) {
+  const answers = await Promise.all(session.variants.map((_, i) =>
+    api(`/twin/sessions/${session.id}/residuals?variant=${i}&max_points=1500`)));
+  const hypotheses = { twin: session.faults };
+  const alternatives = parseAlternatives();
+  for (const name of session.variants.slice(1)) hypotheses[name] = alternatives[name] || [];
+  $("whatif-summary").replaceChildren(twinTable(session.variants, answers[0].summaries, hypotheses));
+  state.twin = { t0: session.align_utc_ns / 1e9, answers };
+  drawWhatifOnPassAxis();
+}
+
+function alignedColumns(answers, pick) {
+  // variants share the twin's instants but each keeps those with telemetry: union axis, nulls elsewhere
+  const t = Array.from(new Set(answers.flatMap((a) => a.t_s))).sort((x, y) => x - y);
+  const index = new Map(t.map((x, i) => [x, i]));
+  const cols = answers.flatMap((a) => pick(a).map((values) => {
+    const col = new Array(t.length).fill(null);
+    a.t_s.forEach((x, i) => { col[index.get(x)] = values[i]; });
+    return col;
+  }));
+  return { t, cols };
+}
+
+function drawTwin(box) {
+  const { t0, answers } = state.twin;
+  const names = answers.map((a) => a.variant);
+  const nWheels = answers[0].wheel_speed_rpm.length ? answers[0].wheel_speed_rpm[0].length : 0;
+  const charts = [
+    ["attitude difference (°): twin − telemetry", (a) => [a.attitude_deg], names],
+    ["rate difference (°/s): twin − telemetry", (a) => [a.rate_deg_s], names],
+    ["wheel-speed differences (rpm): twin − telemetry",
+      (a) => Array.from({ length: nWheels }, (_, w) => a.wheel_speed_rpm.map((row) => row[w])),
+      names.flatMap((n) => Array.from({ length: nWheels }, (_, w) => `${n} RW${w + 1}`))],
+  ];
+  for (const [title, pick, labels] of charts) {
+    const { t, cols } = alignedColumns(answers, pick);
+    const perVariant = cols.length / names.length;  // one colour per variant, one dash pattern per wheel
+    const colours = cols.map((_, i) => COLOURS[Math.floor(i / perVariant) % COLOURS.length]);
+    const dashes = cols.map((_, i) => WHEEL_DASHES[i % perVariant % WHEEL_DASHES.length]);
+    const div = document.createElement("div");
+    div.className = "twin-chart";
+    box.appendChild(div);
+    addPlot(div, title, t.map((s) => t0 + s), cols, labels, colours, dashes);
+  }
+}
+
+// -- against the nominal simulation ----------------------------------------------------------------
 function summaryTable(summary) {
   // one column per variant (nominal twin, what-if), one row per scalar metric
   const variants = (summary && summary.variants) || [summary || {}];
@@ -294,7 +463,8 @@ function summaryTable(summary) {
   return table;
 }
 
-state.whatif = null;  // {t_s, nominal, whatif} series of the last run, in seconds from its start
+state.whatif = null;  // {nominal, whatif} series of the last simulation run, in seconds from its start
+state.twin = null;    // {t0, answers} residuals of the last twin session, per variant
 
 async function showWhatif(id, job) {
   $("whatif-summary").replaceChildren(summaryTable(job.summary));
@@ -304,13 +474,7 @@ async function showWhatif(id, job) {
   drawWhatifOnPassAxis();
 }
 
-function drawWhatifOnPassAxis() {
-  const box = $("whatif-plots");
-  if (!state.whatif) return;
-  const old = state.plots.filter((u) => box.contains(u.root));
-  for (const u of old) u.destroy();
-  state.plots = state.plots.filter((u) => !old.includes(u));
-  box.replaceChildren();
+function drawSimulation(box) {
   const { nominal, whatif } = state.whatif;
   const t0 = state.window ? state.window[0] : 0;  // on the selected pass's time axis, for comparison
   const t = nominal.t_s.map((s) => t0 + s);
@@ -325,6 +489,22 @@ function drawWhatifOnPassAxis() {
   div.id = "whatif-chart";
   box.appendChild(div);
   addPlot(div, "wheel speeds (rpm): nominal vs what-if", t.slice(0, n), cols.map((c) => c.slice(0, n)), labels, COLOURS);
+}
+
+function drawWhatifOnPassAxis() {
+  const box = $("whatif-plots");
+  if (!state.whatif && !state.twin) return;
+  const old = state.plots.filter((u) => box.contains(u.root));
+  for (const u of old) u.destroy();
+  state.plots = state.plots.filter((u) => !old.includes(u));
+  box.replaceChildren();
+  if (state.twin) drawTwin(box);
+  else drawSimulation(box);
+}
+
+function showAgainst() {
+  const twin = $("whatif-against").value === "actual";
+  for (const el of document.querySelectorAll("#whatif .twin-only")) el.hidden = !twin;
 }
 
 // ---- monitors ----------------------------------------------------------------------------------
@@ -363,6 +543,8 @@ async function start() {
   $("export-png").addEventListener("click", exportPng);
   $("refresh-alarms").addEventListener("click", () => loadAlarms().catch((e) => setStatus(e.message, true)));
   $("whatif").addEventListener("submit", runWhatif);
+  $("whatif-against").addEventListener("change", showAgainst);
+  $("duration").addEventListener("input", defaultWhatifStart);
   window.addEventListener("resize", () => {
     for (const u of state.plots) u.setSize({ width: plotWidth(u.root.parentElement), height: 170 });
   });

@@ -1,6 +1,8 @@
 """In a real browser (Debian chromium, headless, software WebGL): each monitor paints a globe, two
 monitors connected at once stay in step when the clock moves, and the operator dashboard served with
-the real backend logs in, lists the NOAA-20 pass with its completeness and runs a what-if to the end."""
+the real backend logs in, lists the NOAA-20 pass with its completeness and runs a what-if to the end;
+a what-if against the ACTUAL telemetry of an emulated satellite with a hidden wheel failure (seed 000 §7)
+plots each variant's residuals and names the right hypothesis as the best match."""
 
 from __future__ import annotations
 
@@ -114,6 +116,8 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
             page.click("#export-png")
         assert open(png_download.value.path(), "rb").read(8) == b"\x89PNG\r\n\x1a\n"
 
+        page.select_option("#whatif-against", "nominal")
+        assert page.locator("#whatif-start").is_hidden()  # twin-only fields hide for a simulation comparison
         page.select_option("#scenario", "somov-ge4-scan")
         page.check("input[value='wheel:0:failure']")
         page.fill("#onset", "30")
@@ -137,6 +141,83 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
         page.click("#alarms tbody tr.state-shelved button:text('ack')")
         page.wait_for_function("document.querySelector('#alarms tbody').innerText.includes('no active alarms')",
                                timeout=10_000)
+        assert errors == []
+    finally:
+        page.close()
+
+
+EMULATED_SATELLITE = "REFSAT"  # the emulator's reference satellite (dictionary reference_satellite.yaml)
+HIDDEN_WHEEL, HIDDEN_ONSET_S, EMULATED_S = 1, 350.0, 600.0  # RW2 fails 350 s into the emulated telemetry
+TWIN_ALIGN_S, TWIN_S = 300.0, 200.0  # the twin starts 50 s before the failure and flies past it
+DEFAULT_START_AFTER_S = 120.0  # dashboard default: 60 s GPS margin for the orbit fit + 60 s into the window
+START_TOL_S = 1e-3  # the start input keeps milliseconds
+VARIANTS = ["twin", "nominal", "rw3-stuck"]
+N_WHEELS = 4
+
+
+@pytest.fixture(scope="module")
+def emulated_telemetry(backend_server) -> int:
+    """Telemetry of the emulated satellite, RW2 failing at 350 s, uploaded to the backend; its first packet (ns)."""
+    import httpx
+
+    from telemetry import emulator
+
+    fault = emulator.parse_fault(f"wheel:{HIDDEN_WHEEL}:failure@{HIDDEN_ONSET_S}")
+    _, _, stream = emulator.emulate(faults=[fault], duration_s=EMULATED_S)
+    with httpx.Client(base_url=backend_server["base"], timeout=120.0,
+                      headers={"Authorization": f"Bearer {backend_server['token']}"}) as c:
+        c.post(f"/api/v1/telemetry/uploads?satellite={EMULATED_SATELLITE}&dictionary=reference_satellite.yaml",
+               content=stream.data).raise_for_status()
+    return int(stream.t_utc_ns[0])
+
+
+def _series_per_chart(page) -> list[int]:
+    """Plotted series of each residual chart (legend rows minus the time axis)."""
+    return page.eval_on_selector_all(
+        "#whatif-plots .twin-chart", "cs => cs.map(c => c.querySelectorAll('.u-legend .u-series').length - 1)")
+
+
+def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(browser, backend_server, emulated_telemetry,
+                                                                        tmp_path):
+    page = browser.new_page(viewport={"width": 1920, "height": 1400})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(backend_server["base"] + "/dashboard/")
+        page.fill("#satellite", EMULATED_SATELLITE)
+        page.fill("#token", backend_server["token"])
+        page.click("#login button[type=submit]")
+        # no predicted pass for the emulated satellite: its archived telemetry is the window
+        page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=20_000)
+        page.fill("#duration", str(TWIN_S))  # the default start moves so that the run fits in the window
+        window_s = page.evaluate("state.window")
+        default_start = page.evaluate("inputUtc(document.querySelector('#whatif-start').value)")
+        assert abs(default_start - (window_s[0] + DEFAULT_START_AFTER_S)) < START_TOL_S
+        assert window_s[0] <= default_start <= window_s[1] - TWIN_S
+
+        page.fill("#onset", str(HIDDEN_ONSET_S - TWIN_ALIGN_S))
+        page.check(f"input[value='wheel:{HIDDEN_WHEEL}:failure']")
+        page.fill("#alternatives", "bad: wheel:1:melt@5")
+        page.click("#whatif button[type=submit]")
+        page.wait_for_selector("#whatif-status.error", timeout=20_000)
+        assert "field: fault" in page.inner_text("#whatif-status")  # the API's message and its offending field
+
+        start = np.datetime_as_string(np.datetime64(emulated_telemetry + int(TWIN_ALIGN_S * 1e9), "ns"), unit="ms")
+        page.evaluate("(v) => { document.querySelector('#whatif-start').value = v; }", str(start))
+        page.fill("#alternatives", f"rw3-stuck: wheel:2:stuck@{HIDDEN_ONSET_S - TWIN_ALIGN_S}")
+        page.click("#whatif button[type=submit]")
+        page.wait_for_selector("#twin-summary-table", timeout=WHATIF_TIMEOUT_MS)
+        assert re.search(r"succeeded 100 %", page.inner_text("#whatif-status"))
+        page.wait_for_function("document.querySelectorAll('#whatif-plots .twin-chart .uplot').length === 3")
+        assert _series_per_chart(page) == [len(VARIANTS), len(VARIANTS), len(VARIANTS) * N_WHEELS]
+        rows = page.eval_on_selector_all("#twin-summary-table tbody tr", "rs => rs.map(r => r.dataset.variant)")
+        assert rows == VARIANTS
+        assert "best match with the telemetry: twin" in page.inner_text("#twin-summary-table caption")
+        assert page.eval_on_selector("#twin-summary-table tr.best", "r => r.dataset.variant") == "twin"
+        # residuals sit on the pass's time axis: the first plotted instant is the chosen start
+        x0 = page.evaluate("state.plots.find(u => document.querySelector('#whatif-plots').contains(u.root)).data[0][0]")
+        assert abs(x0 - emulated_telemetry / 1e9 - TWIN_ALIGN_S) < 1.0
+        page.locator("#whatif-panel").screenshot(path=tmp_path / "whatif.png")
         assert errors == []
     finally:
         page.close()
