@@ -341,6 +341,7 @@ async function startTwin(checked, onset, duration) {
     alternatives: parseAlternatives() };
   if ($("whatif-epoch").value) body.scenario_epoch_utc = isoOf(inputUtc($("whatif-epoch").value));
   const session = await api("/twin/sessions", { method: "POST", json: body });
+  state.twinAlternatives = body.alternatives;  // as sent: the table names each variant's faults
   $("whatif-status").textContent = `twin ${session.id.slice(0, 8)} ${session.status}`;
   $("whatif-progress").hidden = false;
   poll(`/twin/sessions/${session.id}`, `twin ${session.id.slice(0, 8)}`, (s) => showTwin(s));
@@ -403,8 +404,7 @@ async function showTwin(session) {
   const answers = await Promise.all(session.variants.map((_, i) =>
     api(`/twin/sessions/${session.id}/residuals?variant=${i}&max_points=1500`)));
   const hypotheses = { twin: session.faults };
-  const alternatives = parseAlternatives();
-  for (const name of session.variants.slice(1)) hypotheses[name] = alternatives[name] || [];
+  for (const name of session.variants.slice(1)) hypotheses[name] = state.twinAlternatives[name] || [];
   $("whatif-summary").replaceChildren(twinTable(session.variants, answers[0].summaries, hypotheses));
   state.twin = { t0: session.align_utc_ns / 1e9, answers };
   drawWhatifOnPassAxis();
@@ -465,6 +465,7 @@ function summaryTable(summary) {
 
 state.whatif = null;  // {nominal, whatif} series of the last simulation run, in seconds from its start
 state.twin = null;    // {t0, answers} residuals of the last twin session, per variant
+state.twinAlternatives = {};  // alternatives of the last twin session request, by name
 
 async function showWhatif(id, job) {
   $("whatif-summary").replaceChildren(summaryTable(job.summary));

@@ -200,7 +200,8 @@ def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(browser,
         page.fill("#alternatives", "bad: wheel:1:melt@5")
         page.click("#whatif button[type=submit]")
         page.wait_for_selector("#whatif-status.error", timeout=20_000)
-        assert "field: fault" in page.inner_text("#whatif-status")  # the API's message and its offending field
+        status = page.inner_text("#whatif-status")
+        assert "melt" in status and "(field: fault" in status, status  # the API's message and its offending field
 
         start = np.datetime_as_string(np.datetime64(emulated_telemetry + int(TWIN_ALIGN_S * 1e9), "ns"), unit="ms")
         page.evaluate("(v) => { document.querySelector('#whatif-start').value = v; }", str(start))
