@@ -48,6 +48,7 @@ def first_admin_token(services: Any) -> str | None:
 
 
 HIDDEN_FAULTS = ["wheel:2:failure@1500"]  # the demo satellite's secret: found from telemetry, not printed
+DEMO_FLIGHT_S = 5801.0  # one orbit of the demo satellite, so that the hidden fault does happen
 
 
 def start_emulator(settings: Any, scenario: str) -> subprocess.Popen | None:
@@ -56,7 +57,8 @@ def start_emulator(settings: Any, scenario: str) -> subprocess.Popen | None:
         return None
     log = (settings.data_dir / "emulator.log").open("ab")
     command = [sys.executable, "-m", "backend", "emulate", "--scenario", scenario, "--host", settings.host,
-               "--port", str(settings.telemetry_port), "--rate", "1", "--start-utc", "now"]
+               "--port", str(settings.telemetry_port), "--rate", "1", "--start-utc", "now",
+               "--duration", str(DEMO_FLIGHT_S)]
     for fault in HIDDEN_FAULTS:
         command += ["--fault", fault]
     return subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
