@@ -237,15 +237,6 @@ def _dot3(u: np.ndarray, v: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    r = np.empty(3)
-    r[0] = u[1] * v[2] - u[2] * v[1]
-    r[1] = u[2] * v[0] - u[0] * v[2]
-    r[2] = u[0] * v[1] - u[1] * v[0]
-    return r
-
-
-@njit(cache=True)
 def _solve3(m: np.ndarray, i0: int, i1: int, i2: int, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
     """Solve [m_{i0} m_{i1} m_{i2}] x = rhs for three columns of m by Cramer's rule (no temporaries)."""
     c0 = (m[0, i0], m[1, i0], m[2, i0])
@@ -320,7 +311,7 @@ def _pair_least_squares(ap: np.ndarray, aq: np.ndarray, torque: np.ndarray) -> t
 @njit(cache=True)
 def _md_direction(ap: np.ndarray, aq: np.ndarray, b: np.ndarray, md_law: int) -> tuple[np.ndarray, int]:
     """Unit MD torque direction e^m (⟂ b) for a wheel pair, or a refusal status (seed 000 §3)."""
-    normal = _cross(ap, aq)
+    normal = np.cross(ap, aq)
     normal /= np.sqrt(_dot3(normal, normal))
     if md_law == MD_LAW_PAIR_NORMAL:
         nb = _dot3(normal, b)
@@ -332,7 +323,7 @@ def _md_direction(ap: np.ndarray, aq: np.ndarray, b: np.ndarray, md_law: int) ->
     e_pq = s / np.sqrt(_dot3(s, s))
     if abs(_dot3(e_pq, b)) > KAPPA_MAX:
         return e_pq, STATUS_KAPPA_REFUSED
-    e_m = _cross(b, e_pq)
+    e_m = np.cross(b, e_pq)
     e_m /= np.sqrt(_dot3(e_m, e_m))
     if abs(_dot3(e_m, normal)) < MIN_MD_PLANE_COVER:
         return e_m, STATUS_SINGULAR
@@ -358,7 +349,7 @@ def _two_wheels_md(
     for i in range(3):
         a_m[i, 0], a_m[i, 1], a_m[i, 2] = ap[i], aq[i], -e_m[i]
     sol, _ = _solve3(a_m, 0, 1, 2, -torque)
-    dipole = (sol[2] / b_norm) * _cross(b, e_m)
+    dipole = (sol[2] / b_norm) * np.cross(b, e_m)
     peak = max(abs(dipole[0]), abs(dipole[1]), abs(dipole[2]))
     if peak > l_max:
         k = l_max / peak

@@ -163,15 +163,6 @@ def _mv3(m: np.ndarray, v: np.ndarray) -> np.ndarray:
     return r
 
 
-@njit(cache=True)
-def _cross3(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    r = np.empty(3)
-    r[0] = u[1] * v[2] - u[2] * v[1]
-    r[1] = u[2] * v[0] - u[0] * v[2]
-    r[2] = u[0] * v[1] - u[1] * v[0]
-    return r
-
-
 def error_matrix(e: np.ndarray) -> np.ndarray:
     """C_e of error quaternions (..., 4) → (..., 3, 3) (seed 000 §2)."""
     e = _as_field(e, "e", 4)
@@ -260,7 +251,7 @@ def gyroscopic_torque_1(omega_b: np.ndarray, inertia: np.ndarray, h_cluster_b: n
     g = np.empty(3)
     for i in range(3):
         g[i] = inertia[i, 0] * omega_b[0] + inertia[i, 1] * omega_b[1] + inertia[i, 2] * omega_b[2] + h_cluster_b[i]
-    return _cross3(omega_b, g)
+    return np.cross(omega_b, g)
 
 
 def gyroscopic_torque(
@@ -422,7 +413,7 @@ def unloading_dipole_step(
     b2 = b_b_t @ b_b_t
     if b2 == 0.0:
         return np.zeros(3)
-    dipole = _cross3(b_b_t, -gain_per_s * (h_wheels_b_nms - h_target_b_nms))
+    dipole = np.cross(b_b_t, -gain_per_s * (h_wheels_b_nms - h_target_b_nms))
     return _limit_dipole(dipole / b2, l_max_am2)
 
 
@@ -474,8 +465,8 @@ def mrp_feedback_step(
             spin = js_kg_m2[i] * (omega[0] * gs_b[0, i] + omega[1] * gs_b[1, i] + omega[2] * gs_b[2, i] + wheel_speed_rad_s[i])
             for r in range(3):
                 h[r] += spin * gs_b[r, i]
-    gyro = _cross3(omega_rn_b if law_type == 0 else omega, h)
-    feed = _mv3(inertia, _cross3(omega, omega_rn_b) - domega_rn_b)
+    gyro = np.cross(omega_rn_b if law_type == 0 else omega, h)
+    feed = _mv3(inertia, np.cross(omega, omega_rn_b) - domega_rn_b)
     return -k_nm * sigma_br - p_nms * omega_br_b + gyro - feed
 
 
