@@ -30,7 +30,13 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "handler", None):
         parser.print_help()
         return 0
-    return int(args.handler(args) or 0)
+    try:
+        return int(args.handler(args) or 0)
+    except KeyboardInterrupt:  # Ctrl-C: a stop, not a crash (no traceback)
+        return 130
+    except BrokenPipeError:  # `acs-twin … | head`: the reader left
+        sys.stderr.close()
+        return 0
 
 
 if __name__ == "__main__":

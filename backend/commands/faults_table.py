@@ -22,7 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("faults-table", help="the 11 GE wheel configurations (nominal, singles, pairs + MD): "
                                             "pointing, MD windows, fastest roll, route flown")
     p.add_argument("--scenario", default="somov-ge4-scan", help="library scenario (default: somov-ge4-scan)")
-    p.add_argument("--out", type=Path, help="also write the table as JSON to this file")
+    p.add_argument("--out", type=Path, action="append", default=[],
+                   help="also write the table to this file, Markdown for .md, JSON for .json (repeatable)")
     p.set_defaults(handler=run)
 
 
@@ -43,12 +44,24 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+FORMATS = {".md": "markdown", ".markdown": "markdown", ".json": "json"}
+
+
+def _out_format(path: Path) -> str:
+    """The file format its name says (ValueError naming --out for another suffix)."""
+    try:
+        return FORMATS[path.suffix.lower()]
+    except KeyError:
+        raise ValueError(f"--out {path}: the file name must end in {', '.join(FORMATS)} (the format to write)") from None
+
+
 def run(args: argparse.Namespace) -> int:
-    """Fly the configurations, print Markdown then JSON, write JSON to --out; exit 2 on a bad scenario."""
+    """Fly the configurations, print Markdown then JSON, write each --out in its suffix's format; exit 2 on bad input."""
     from sim_core import scenario_library
     from sim_core.whatif import configuration_table
 
     try:
+        formats = [_out_format(path) for path in args.out]
         scenario = scenario_library.get(args.scenario)
         rows = configuration_table(scenario)
     except ValueError as exc:
@@ -58,6 +71,6 @@ def run(args: argparse.Namespace) -> int:
     print(markdown(rows))
     print()
     print(json.dumps(document, indent=2))
-    if args.out:
-        args.out.write_text(json.dumps(document, indent=2) + "\n")
+    for path, fmt in zip(args.out, formats):
+        path.write_text((markdown(rows) if fmt == "markdown" else json.dumps(document, indent=2)) + "\n")
     return 0

@@ -167,10 +167,12 @@ def test_wheels_2_and_4_with_the_md_fly_the_scan_near_the_four_wheel_accuracy(so
 def test_faults_table_lists_the_eleven_configurations(tmp_path):
     from backend.cli import main
 
-    out = tmp_path / "table.json"
-    assert main(["faults-table", "--out", str(out)]) == 0
+    out, table_md = tmp_path / "table.json", tmp_path / "table.md"
+    assert main(["faults-table", "--out", str(out), "--out", str(table_md)]) == 0
     rows = {r["configuration"]: r for r in json.loads(out.read_text())["configurations"]}
     assert len(rows) == 11
+    lines = table_md.read_text().splitlines()  # the format its name says: a Markdown table, 11 rows
+    assert lines[0].startswith("| configuration |") and len(lines) == 2 + 11
     for name in ["all wheels"] + [f"without wheel {p}" for p in range(1, 5)]:
         assert rows[name]["route_flown"] and rows[name]["kappa_fraction"] is None
         assert rows[name]["max_roll_rate_deg_s"] <= rows["all wheels"]["max_roll_rate_deg_s"]
