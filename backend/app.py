@@ -7,9 +7,9 @@ from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 
-from backend.errors import install_error_handlers
+from backend.core.errors import install_error_handlers
 from backend.services import build_services
-from backend.settings import Settings
+from backend.core.settings import Settings
 
 __all__ = ["create_app", "monitor_urls", "API_PREFIX"]
 

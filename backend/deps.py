@@ -9,8 +9,8 @@ from fastapi import Depends, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from starlette.concurrency import run_in_threadpool
 
-from backend.auth import Principal, Role
-from backend.errors import ApiError
+from backend.core.auth import Principal, Role
+from backend.core.errors import ApiError
 from backend.services import Services
 
 __all__ = ["get_services", "require", "ServicesDep", "ViewerDep", "OperatorDep", "AdminDep"]

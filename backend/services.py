@@ -7,16 +7,16 @@ from dataclasses import dataclass
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.auth import Authenticator
-from backend.database import create_schema, make_engine, make_session_factory
-from backend.jobs import JobManager
-from backend.live_hub import LiveHub
-from backend.repositories.audit import AuditRepository
-from backend.repositories.jobs import JobRepository
-from backend.repositories.tokens import TokenRepository
-from backend.repositories.twin_sessions import TwinSessionRepository
-from backend.settings import Settings
-from backend.telemetry_gateway import TelemetryGateway
+from backend.core.auth import Authenticator
+from backend.core.database import create_schema, make_engine, make_session_factory
+from backend.jobs.jobs import JobManager
+from backend.ingest.live_hub import LiveHub
+from backend.core.audit_repository import AuditRepository
+from backend.jobs.job_repository import JobRepository
+from backend.core.token_repository import TokenRepository
+from backend.twin.session_repository import TwinSessionRepository
+from backend.core.settings import Settings
+from backend.ingest.telemetry_gateway import TelemetryGateway
 
 __all__ = ["Services", "build_services"]
 

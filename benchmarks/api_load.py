@@ -59,9 +59,9 @@ def free_port() -> int:
 
 def make_tokens(data_dir: Path) -> dict[str, str]:
     """Viewer and operator tokens issued in the server's database before it starts."""
-    from backend.auth import Role
+    from backend.core.auth import Role
     from backend.services import build_services
-    from backend.settings import Settings
+    from backend.core.settings import Settings
 
     services = build_services(Settings(data_dir=data_dir))
     tokens = {role.name: services.auth.issue(f"bench-{role.name}", role)[1] for role in (Role.viewer, Role.operator)}

@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-DEFAULT_PORT = 10025  # backend.settings.Settings.telemetry_port default
+DEFAULT_PORT = 10025  # backend.core.settings.Settings.telemetry_port default
 
 
 def register(sub: argparse._SubParsersAction) -> None:

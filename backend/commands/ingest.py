@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     report = {"decode": decoded.report.to_dict()}
     if not args.dry_run:
-        from backend.settings import Settings
+        from backend.core.settings import Settings
         from telemetry.archive import Archive
 
         url = args.db or Settings().resolved_database_url()

@@ -38,7 +38,7 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
 
 def first_admin_token(services: Any) -> str | None:
     """Issue an admin token when none is active (first start); the plain token, else None."""
-    from backend.auth import Role
+    from backend.core.auth import Role
 
     if not services.settings.auth_enabled or services.tokens.count_active_admins() > 0:
         return None
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from backend.app import create_app
-    from backend.settings import Settings
+    from backend.core.settings import Settings
 
     settings = Settings(**_overrides(args))
     app = create_app(settings)
@@ -103,9 +103,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading.Event) -> threading.Thread:
-    """Thread: the demo twin session and its 3D monitors once telemetry has arrived (see backend.demo_twin)."""
+    """Thread: the demo twin session and its 3D monitors once telemetry has arrived (see backend.twin.demo_twin)."""
     from backend.app import monitor_urls
-    from backend.demo_twin import TWIN_S, WARMUP_S, run_demo_twin
+    from backend.twin.demo_twin import TWIN_S, WARMUP_S, run_demo_twin
 
     ports = {role: int(url.rsplit(":", 1)[1]) for role, url in monitor_urls(settings).items()}
     thread = threading.Thread(target=run_demo_twin, args=(services, ports, scenario, stop),

@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  {key:28s} {value}")
         print(f"  {'events':28s} {len(summary['events'])}")
     if args.out:
-        from backend.trajectory_files import write_all
+        from backend.jobs.trajectory_files import write_all
 
         for path in write_all(traj, args.out):
             print(f"wrote {path}")

@@ -11,7 +11,7 @@ from pydantic import BaseModel, Field
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.schemas import DbId
-from backend.errors import ERROR_RESPONSES
+from backend.core.errors import ERROR_RESPONSES
 
 router = APIRouter(tags=["alarms"], responses=ERROR_RESPONSES)
 

@@ -14,8 +14,8 @@ from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
-from backend.auth import Role
-from backend.live_hub import Subscription
+from backend.core.auth import Role
+from backend.ingest.live_hub import Subscription
 
 router = APIRouter(tags=["live"])
 

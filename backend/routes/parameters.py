@@ -14,8 +14,8 @@ from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
 from backend.deps import ServicesDep, ViewerDep
-from backend.errors import ERROR_RESPONSES, ApiError
-from backend.timebase import EARLIEST_NS, LATEST_NS, utc_ns
+from backend.core.errors import ERROR_RESPONSES, ApiError
+from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 
 router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
 

@@ -11,9 +11,9 @@ from pydantic import BaseModel, Field
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.schemas import DbId
-from backend.errors import ERROR_RESPONSES, ApiError
+from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.routes.telemetry import read_limited
-from backend.timebase import EARLIEST_NS, LATEST_NS, utc_ns
+from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 
 router = APIRouter(tags=["passes"], responses=ERROR_RESPONSES)
 

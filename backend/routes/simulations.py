@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.downsampling import minmax_indices
-from backend.errors import ERROR_RESPONSES, ApiError
+from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.schemas import FilePublic, JobAccepted, JobPublic, SeriesPublic
 
 router = APIRouter(tags=["simulations"], responses=ERROR_RESPONSES)
@@ -48,7 +48,7 @@ def _job(services: Any, job_id: str) -> JobPublic:
 @router.get("/scenarios", response_model=list[str], summary="Library scenarios")
 def list_scenarios(_: ViewerDep) -> list[str]:
     """Names usable as ``{"library": NAME}`` in POST /simulations."""
-    from backend.simulators import library_names
+    from backend.jobs.simulators import library_names
 
     return library_names()
 

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query, Request
 from starlette.concurrency import run_in_threadpool
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.errors import ERROR_RESPONSES, ApiError
+from backend.core.errors import ERROR_RESPONSES, ApiError
 
 router = APIRouter(tags=["telemetry"], responses=ERROR_RESPONSES)
 

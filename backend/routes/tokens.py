@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Query
 
-from backend.auth import Role
+from backend.core.auth import Role
 from backend.deps import AdminDep, ServicesDep
-from backend.errors import ERROR_RESPONSES, ApiError
+from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.schemas import DbId, AuditPublic, TokenCreate, TokenIssued, TokenPublic
 
 router = APIRouter(tags=["tokens"], responses=ERROR_RESPONSES)

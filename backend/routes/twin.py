@@ -13,8 +13,8 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.downsampling import minmax_indices
-from backend.errors import ERROR_RESPONSES, ApiError
-from backend.timebase import utc_ns
+from backend.core.errors import ERROR_RESPONSES, ApiError
+from backend.core.time import utc_ns
 
 router = APIRouter(tags=["twin"], responses=ERROR_RESPONSES)
 
@@ -51,7 +51,7 @@ def _session_public(services: Any, row: Any) -> dict[str, Any]:
 
 def start_session(services: Any, body: TwinSessionCreate, actor: str) -> dict[str, Any]:
     """Align a twin to archived telemetry and queue its simulation; the session as answered by the API."""
-    from backend.twin_sessions import GPS_MARGIN_S, actual_track_between, twin_start
+    from backend.twin.twin_sessions import GPS_MARGIN_S, actual_track_between, twin_start
 
     align_ns = utc_ns(body.align_utc, 0)
     dictionary = services.telemetry.dictionaries.load(body.dictionary)
@@ -97,8 +97,8 @@ def get_session(session_id: str, services: ServicesDep, _: ViewerDep) -> dict[st
 
 def session_feed(services: Any, session_id: str) -> Any:
     """The monitors' TwinFeed of a finished session (telemetry of its window against its twin)."""
-    from backend.twin_feed import SessionFeed
-    from backend.twin_sessions import actual_track_between
+    from backend.twin.twin_feed import SessionFeed
+    from backend.twin.twin_sessions import actual_track_between
 
     row = _row(services, session_id)
     job = services.job_repo.get(row.job_id)
@@ -112,7 +112,7 @@ def session_feed(services: Any, session_id: str) -> Any:
 
 
 def _residuals(services: Any, row: Any) -> tuple[list[str], list[Any]]:
-    from backend.twin_sessions import actual_track_between, residuals, variant_names
+    from backend.twin.twin_sessions import actual_track_between, residuals, variant_names
 
     job = services.job_repo.get(row.job_id)
     if job is None or job.status != "succeeded":

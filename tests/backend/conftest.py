@@ -12,8 +12,8 @@ import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.auth import Role
-from backend.settings import Settings
+from backend.core.auth import Role
+from backend.core.settings import Settings
 
 
 def postgres_schema_url(base_url: str) -> Iterator[str]:

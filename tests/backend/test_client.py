@@ -12,9 +12,9 @@ import pytest
 import uvicorn
 
 from backend.app import create_app
-from backend.auth import Role
+from backend.core.auth import Role
 from backend.client import Client, ClientError
-from backend.settings import Settings
+from backend.core.settings import Settings
 from tests.backend.conftest import free_port
 
 STARTUP_TIMEOUT_S = 20.0

@@ -9,8 +9,8 @@ import numpy as np
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.auth import Role
-from backend.repositories.jobs import JobRepository
+from backend.core.auth import Role
+from backend.jobs.job_repository import JobRepository
 from backend.services import build_services
 from tests.backend.conftest import bearer, make_settings
 

@@ -18,7 +18,7 @@ from schemathesis.specs.openapi.checks import (
 )
 
 from backend.app import create_app
-from backend.settings import Settings
+from backend.core.settings import Settings
 
 EXAMPLES_PER_OPERATION = 8  # keeps the whole run well under 60 s on 2 cores
 CHECKS = [status_code_conformance, content_type_conformance, response_schema_conformance]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from backend.sample_cache import SampleCache
+from backend.ingest.sample_cache import SampleCache
 
 KEY = ("SAT", "q", 100, 200, 1000)
 

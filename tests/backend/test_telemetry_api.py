@@ -12,7 +12,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.auth import Role
+from backend.core.auth import Role
 from tests.backend.conftest import bearer, make_settings
 
 NOAA20 = Path("real/noaa20_jpss1_apid11")

@@ -14,7 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.auth import Role
+from backend.core.auth import Role
 from backend.routes.twin import session_feed
 from frontend.feed import TwinFeed
 from sim_core import orbit, quaternion

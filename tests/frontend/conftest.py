@@ -115,8 +115,8 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
     diary uploaded, a TLE, the Svalbard station and the passes of the diary's two hours; the same diary
     again as NOAA-20L under a dictionary whose limit on the attitude scalar raises an alarm."""
     from backend.app import create_app
-    from backend.auth import Role
-    from backend.settings import Settings
+    from backend.core.auth import Role
+    from backend.core.settings import Settings
     from frontend.dashboard_site import dashboard_app
 
     tmp = tmp_path_factory.mktemp("backend")

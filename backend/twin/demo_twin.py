@@ -20,7 +20,7 @@ HK_APID = 256  # reference satellite ACS_HK
 
 
 def _telemetry_span_ns(services: Any, satellite: str) -> tuple[int, int] | None:
-    from backend.errors import ApiError
+    from backend.core.errors import ApiError
 
     try:
         keys = services.telemetry.archive.packet_keys(satellite, 0, 2**62, apid=HK_APID)

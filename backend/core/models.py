@@ -5,11 +5,13 @@ from __future__ import annotations
 from datetime import datetime
 
 from sqlalchemy import JSON, BigInteger, DateTime, Float, Integer, String, Text
-from sqlalchemy.orm import Mapped, mapped_column
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-from backend.database import Base
+__all__ = ["Base", "TokenRow", "AuditRow", "JobRow", "TwinSessionRow"]
 
-__all__ = ["TokenRow", "AuditRow", "JobRow", "TwinSessionRow"]
+
+class Base(DeclarativeBase):
+    """Declarative base of the backend's ORM models (tables prefixed ``backend_``)."""
 
 
 class TokenRow(Base):

@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 import orjson
 
-from backend.dictionary_catalogue import DictionaryCatalogue
+from backend.ingest.dictionary_catalogue import DictionaryCatalogue
 from backend.downsampling import minmax_indices
-from backend.errors import ApiError
-from backend.live_hub import LiveHub
-from backend.sample_cache import SampleCache
-from backend.settings import Settings
-from backend.timebase import BOUND_NS
+from backend.core.errors import ApiError
+from backend.ingest.live_hub import LiveHub
+from backend.ingest.sample_cache import SampleCache
+from backend.core.settings import Settings
+from backend.core.time import BOUND_NS
 
 __all__ = ["TelemetryGateway", "COMPONENT_MODULES"]
 
@@ -96,7 +96,7 @@ class TelemetryGateway:
         """Start the live-ingest process (telemetry.live) and the thread relaying it to the hub."""
         if not (self._settings.live_enabled and self._archive is not None and _importable(COMPONENT_MODULES["live"])):
             return
-        from backend.live_ingest import OUTBOX_MESSAGES, run_ingest_process
+        from backend.ingest.live_ingest import OUTBOX_MESSAGES, run_ingest_process
 
         self.dictionaries.load(self._settings.live_dictionary)  # fail here, naming the dictionary
         ctx = mp.get_context("spawn")

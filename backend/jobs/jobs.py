@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from backend.errors import ApiError
-from backend.repositories.jobs import JobRepository
-from backend.settings import Settings
-from backend.simulators import run_in_worker, validate_scenario
+from backend.core.errors import ApiError
+from backend.jobs.job_repository import JobRepository
+from backend.core.settings import Settings
+from backend.jobs.simulators import run_in_worker, validate_scenario
 
 __all__ = ["JobManager"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from backend.rigid_spin import RigidSpinScenario, simulate
+from sim_core.rigid_spin import RigidSpinScenario, simulate
 from sim_core import quaternion as qt
 
 RK4_RATE_TOLERANCE = 1e-10  # rad/s: RK4 at 0.01 s, error ∝ (ΩΔt)^4 with ΩΔt ~ 1e-2

@@ -8,7 +8,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.models import TwinSessionRow
+from backend.core.models import TwinSessionRow
 
 __all__ = ["TwinSessionRepository"]
 

@@ -7,7 +7,7 @@ from datetime import datetime, timezone
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.models import TokenRow
+from backend.core.models import TokenRow
 
 __all__ = ["TokenRepository"]
 

@@ -36,7 +36,7 @@ def _offer(outbox: Any, message: tuple, tally: dict[str, int]) -> None:
 
 async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str, satellite: str, host: str,
                  port: int, outbox: Any, stop: Any) -> None:
-    from backend.dictionary_catalogue import DictionaryCatalogue
+    from backend.ingest.dictionary_catalogue import DictionaryCatalogue
     from telemetry.archive import Archive
     from telemetry.limits import dictionary_limits
     from telemetry.live import LiveStream

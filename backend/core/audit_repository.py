@@ -8,7 +8,7 @@ from typing import Any
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.models import AuditRow
+from backend.core.models import AuditRow
 
 __all__ = ["AuditRepository"]
 

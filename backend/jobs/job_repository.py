@@ -8,7 +8,7 @@ from typing import Any
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
-from backend.models import JobRow
+from backend.core.models import JobRow
 
 __all__ = ["JobRepository", "ACTIVE_STATES", "FINAL_STATES"]
 

@@ -13,7 +13,7 @@ import threading
 from dataclasses import dataclass
 from enum import IntEnum
 
-from backend.repositories.tokens import TokenRepository
+from backend.core.token_repository import TokenRepository
 
 __all__ = ["Role", "Principal", "new_token", "token_sha256", "Authenticator", "TOKEN_PREFIX"]
 

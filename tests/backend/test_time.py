@@ -6,7 +6,7 @@ from datetime import datetime, timedelta, timezone
 
 import numpy as np
 
-from backend.timebase import BOUND_NS, utc_ns
+from backend.core.time import BOUND_NS, utc_ns
 
 
 def test_utc_ns_matches_numpy_datetime64_and_treats_naive_as_utc() -> None:

@@ -8,14 +8,12 @@ database (SQLite or PostgreSQL).
 from __future__ import annotations
 
 from sqlalchemy import Engine, create_engine, event
-from sqlalchemy.orm import DeclarativeBase, sessionmaker, Session
+from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
-__all__ = ["Base", "make_engine", "make_session_factory", "create_schema"]
+from backend.core.models import Base
 
-
-class Base(DeclarativeBase):
-    """Declarative base of the backend's ORM models (tables prefixed ``backend_``)."""
+__all__ = ["make_engine", "make_session_factory", "create_schema"]
 
 
 def _sqlite_pragmas(dbapi_connection, _record) -> None:  # type: ignore[no-untyped-def]

@@ -74,7 +74,7 @@ def _engine_cost(scenario: Any) -> JobCost:
 def validate_scenario(body: dict[str, Any]) -> tuple[dict[str, Any], JobCost]:
     """Parse a scenario body (ValueError/ValidationError naming the field) and estimate its cost."""
     if _is_rigid_spin(body):
-        from backend.rigid_spin import RigidSpinScenario
+        from sim_core.rigid_spin import RigidSpinScenario
 
         spin = RigidSpinScenario.model_validate(body)
         return spin.model_dump(), JobCost(spin.duration_s, spin.batch_size, spin.output_bytes())
@@ -86,7 +86,7 @@ def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], Non
                 options: dict[str, Any]) -> None:
     import numpy as np
 
-    from backend.trajectory_files import write_npz
+    from backend.jobs.trajectory_files import write_npz
     from sim_core.engine import Cancelled, simulate
     from sim_core.scenario import Scenario
 
@@ -103,7 +103,7 @@ def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], Non
 
 
 def _run_rigid_spin(body: dict[str, Any], out: Path, progress: Callable[[float], None]) -> None:
-    from backend import rigid_spin
+    from sim_core import rigid_spin
 
     trajectory = rigid_spin.simulate(rigid_spin.RigidSpinScenario.model_validate(body), progress)
     trajectory.to_npz(out / "trajectory.npz")

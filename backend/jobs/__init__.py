@@ -1,0 +1,1 @@
+"""Simulation jobs: the job manager and its repository, the simulators, the trajectory files."""

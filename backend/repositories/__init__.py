@@ -1,1 +1,0 @@
-"""Repositories: the only code that touches a database session for the backend's tables."""
