@@ -43,6 +43,7 @@ DATA_TYPES = ("uint", "int", "float")
 DERIVED_KINDS = {"attitude_error_angle": 8, "cds_time": 3, "alias": 1}
 SHIPPED = Path(__file__).with_name("dictionaries")
 FUTURE_MARGIN_NS = 86_400 * 10**9  # on-board clocks run ahead by less than a day; later stamps are corrupt
+MAX_PACKET_BITS = 8 * (PRIMARY_HEADER_OCTETS + 65536)  # CCSDS 133.0-B-2 §4.1.3.5: data field ≤ 65,536 octets
 
 
 @dataclass(frozen=True)
@@ -270,6 +271,14 @@ def _yaml_parameters(specs: list[dict[str, Any]], first_bit: int) -> tuple[tuple
     return tuple(params), bit
 
 
+def _beside(folder: Path, file: Any, field: str) -> Path:
+    """A layout file a dictionary names: a regular file in the dictionary's own folder, never elsewhere."""
+    path = (folder / str(file)).resolve()
+    if path.parent != folder.resolve() or not path.is_file():
+        raise ValueError(f"{field}: {file!r} must be a file next to the dictionary (same folder), not another path")
+    return path
+
+
 def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
     """One packet definition from our YAML format (layout inline or taken from an XTCE/CSV file)."""
     name, apid = str(spec["name"]), int(spec["apid"])
@@ -283,12 +292,13 @@ def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
     )
     source = spec.get("layout_from")
     if source:
-        if set(source) == {"xtce"}:
-            base = load_xtce(folder / source["xtce"]).packets.get(apid)
-        elif set(source) == {"ccsdspy_csv"}:
-            base = load_ccsdspy_csv(folder / source["ccsdspy_csv"], apid=apid, name=name).packets.get(apid)
-        else:
+        if not isinstance(source, dict) or set(source) not in ({"xtce"}, {"ccsdspy_csv"}):
             raise ValueError(f"{name}.layout_from: expected {{xtce: FILE}} or {{ccsdspy_csv: FILE}}, got {source}")
+        if "xtce" in source:
+            base = load_xtce(_beside(folder, source["xtce"], f"{name}.layout_from.xtce")).packets.get(apid)
+        else:
+            layout = _beside(folder, source["ccsdspy_csv"], f"{name}.layout_from.ccsdspy_csv")
+            base = load_ccsdspy_csv(layout, apid=apid, name=name).packets.get(apid)
         if base is None:
             raise ValueError(f"{name}.layout_from: no packet with APID {apid} in {source}")
         return replace(base, name=name, crc=crc, **common)
@@ -341,11 +351,14 @@ def load_ccsdspy_csv(
     params, bit, end = [], PRIMARY_HEADER_BITS, PRIMARY_HEADER_BITS
     for row in rows:
         kind, _, shape = row["data_type"].partition("(")
-        count = int(shape.rstrip(")")) if shape else 1
         if shape and not shape.rstrip(")").isdigit():
             raise ValueError(f"{row['name']}.data_type: only 1-D arrays like uint(3) are supported")
+        count = int(shape.rstrip(")")) if shape else 1
         length = int(row["bit_length"])
         bit = int(row["bit_offset"]) if row.get("bit_offset") not in (None, "") else bit
+        if not (0 <= bit and 1 <= length <= 64 and bit + count * length <= MAX_PACKET_BITS):
+            raise ValueError(f"{row['name']}.data_type: {count} × {length} bits from bit {bit} do not fit in the "
+                             f"largest CCSDS packet ({MAX_PACKET_BITS // 8} octets)")
         for k in range(count):
             if kind != "fill":
                 label = f"{row['name']}_{k}" if shape else row["name"]

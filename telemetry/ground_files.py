@@ -12,6 +12,7 @@ CSV lines are located by newline, so quoted fields must not contain line breaks.
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
 
@@ -139,26 +140,36 @@ def _finish(report: IngestReport, batches: list[SampleBatch]) -> DecodeResult:
     return DecodeResult(batches=batches, report=report)
 
 
+def _csv_row(line: str) -> tuple[list[str], str]:
+    """The fields of one CSV line and why it is unreadable ("" if readable: no stray CR, no unclosed quote)."""
+    if "\r" in line:
+        return [], "carriage return inside the line"
+    try:
+        return next(csv.reader([line], strict=True), []), ""
+    except csv.Error as exc:
+        return [], f"unreadable CSV: {exc}"
+
+
 def read_ground_csv(
     data: bytes, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None
 ) -> DecodeResult:
     """Validated batches of a CSV of ground-processed values (header row of column names)."""
-    import csv
-    import io
-
     report = IngestReport(source=source, octets=len(data))
     starts = _line_starts(data)
-    text = data.decode("utf-8", errors="replace")
-    rows = list(csv.reader(io.StringIO(text)))
-    if not rows:
+    lines = data.decode("utf-8", errors="replace").split("\n")[: len(starts)]  # one row per \n, as starts
+    parsed = [_csv_row(line.removesuffix("\r")) for line in lines]
+    if not parsed:
         raise ValueError("data: empty CSV, expected a header row with t_utc or t_utc_ns")
-    header, body = rows[0], rows[1:]
+    if parsed[0][1]:
+        raise ValueError(f"data: line 1 (header): {parsed[0][1]}")
+    header, body = parsed[0][0], [fields for fields, _ in parsed[1:]]
     ends = np.append(starts[1:], len(data))
     row_offset, row_length = starts[1 : 1 + len(body)], (ends - starts)[1 : 1 + len(body)]
-    short = [i for i, r in enumerate(body) if len(r) != len(header)]
+    short = [i for i, (fields, problem) in enumerate(parsed[1:]) if problem or len(fields) != len(header)]
     for i in short:
+        detail = parsed[i + 1][1] or f"{len(body[i])} fields, header has {len(header)}"
         report.quarantined.append(QuarantineRecord(int(row_offset[i]), int(row_length[i]), "bad_row", line=i + 2,
-                                                   detail=f"{len(body[i])} fields, header has {len(header)}"))
+                                                   detail=detail))
     keep = np.setdiff1d(np.arange(len(body)), short)
     kept_rows = [body[i] for i in keep] if short else body
     columns = dict(zip(header, (list(c) for c in zip(*kept_rows)))) if kept_rows else {name: [] for name in header}
@@ -182,7 +193,7 @@ def read_ground_jsonl(
             obj = json.loads(line)
             if not isinstance(obj, dict):
                 raise ValueError("not an object")
-        except ValueError as exc:
+        except (ValueError, RecursionError) as exc:  # RecursionError: nested deeper than the parser's stack
             report.quarantined.append(QuarantineRecord(s, e - s, "bad_row", line=line_no, detail=str(exc)[:80]))
             continue
         objects.append((line_no, obj))
