@@ -42,7 +42,5 @@ def make_session_factory(engine: Engine) -> sessionmaker[Session]:
 
 
 def create_schema(engine: Engine) -> None:
-    """Create the backend's tables if missing (idempotent)."""
-    from backend import models  # noqa: F401  (registers the tables on Base.metadata)
-
+    """Create the backend's tables if missing (idempotent); importing models registered them on Base."""
     Base.metadata.create_all(engine)
