@@ -10,13 +10,26 @@ on the thread count). Everything is plain float64/int64 arrays; :mod:`sim_core.e
 from __future__ import annotations
 
 import os
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-from sim_core import allocation, control, environment, fdir, guidance, mekf, modes, sensors
+from sim_core import (
+    allocation,
+    control,
+    environment,
+    fdir,
+    guidance,
+    magnetic,
+    mekf,
+    modes,
+    sensors,
+)
+from sim_core import faults as faults_mod
+from sim_core.faults import T_EARTH, T_GYRO, T_MAG, T_SUN
 from sim_core.integrators import rk4_step_into
-from sim_core.quaternion import conjugate_rotate_1, multiply_1, rotate_1
+from sim_core.quaternion import conjugate_rotate_1, multiply_1
 from sim_core.spacecraft import PlantArrays
 
 # Guidance kinds.
@@ -26,15 +39,8 @@ LAW_SEED000, LAW_MRP_FEEDBACK, LAW_QUATERNION_PD = 0, 1, 2
 # Estimators.
 ESTIMATOR_TRUTH, ESTIMATOR_STAR_TRACKER, ESTIMATOR_MEKF = 0, 1, 2
 
-# Fault table columns and codes (sim_core.engine builds the table from FaultSpec).
-F_TARGET, F_INDEX, F_TYPE, F_ONSET, F_END, F_GAIN, F_VALUE, F_PERIOD, F_DUTY = range(9)
-FAULT_COLUMNS = 9
-TARGET_CODES = {"wheel": 0, "gyro": 1, "star_tracker": 2, "earth_sensor": 3, "magnetometer": 4,
-                "sun_sensor": 5, "controller": 6, "md_rod": 7}
-TYPE_CODES = {"failure": 0, "stuck": 1, "gain": 2, "bias": 3, "drift": 4, "intermittent": 5,
-              "noise": 6, "friction": 7, "frozen": 8}
-T_WHEEL, T_GYRO, T_STAR, T_EARTH, T_MAG, T_SUN, T_CTRL, T_ROD = range(8)
-Y_FAIL, Y_STUCK, Y_GAIN, Y_BIAS, Y_DRIFT, Y_INTERMITTENT, Y_NOISE, Y_FRICTION, Y_FROZEN = range(9)
+# Fault codes live in sim_core.faults (re-exported here for the record's readers).
+TARGET_CODES, TYPE_CODES, FAULT_COLUMNS = faults_mod.TARGET_CODES, faults_mod.TYPE_CODES, faults_mod.FAULT_COLUMNS
 
 # Attitude sensors used when the star tracker gives no sample (failed, blinded or rejected by FDIR).
 EARTH_SENSOR_SIGMA_RAD = np.radians(0.05)  # static infrared earth sensor class (seed 002 eq 14 gives none)
@@ -42,7 +48,7 @@ STAR_RESET_SIGMA_RAD = np.radians(1.0)  # attitude uncertainty re-opened after a
 MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
 
 # Event codes (sim_core.trajectory.EVENT_NAMES).
-EV_MODE_CHANGE, EV_FAULT_ONSET, EV_FAULT_CLEARED, EV_ALLOCATION, EV_MD_SATURATED = 1, 2, 3, 7, 8
+EV_MODE_CHANGE, EV_ALLOCATION, EV_MD_SATURATED = 1, 7, 8
 
 # Output channels of the float record (columns of ``rec``), per sample.
 R_Q, R_W, R_QE, R_WE, R_QP, R_WP = 0, 4, 7, 11, 15, 19
@@ -66,6 +72,19 @@ RATE_DAMPING_TAU_S = 20.0  # time constant of the wheel rate brake (10 T_u at T_
 FINE_POINTING_RAD = np.radians(2.0)  # ORF mode hands over from the acquisition PD to the scenario's law
 ACQUISITION_OMEGA_RAD_S = 0.02  # Sun/ORF acquisition bandwidth: slews ≤ 0.57 °/s, under the 1 °/s rate-lost limit
 UNLOADING_GAIN_PER_S = 1e-3  # seed 003 eq 29 unloading gain k: the cluster momentum decays in ~1/k s
+
+
+SUN_SENSOR_COS_HALF_FOV = -1.0  # coarse Sun sensors on every face: the whole sphere, blind only in eclipse
+
+
+class SeedModels(NamedTuple):
+    """Seed models flown when set (zero switches each off): residual dipole m_res (A·m², torque m_res × B),
+    gyro Markov drift (stationary σ, τ; seed 002 eq 13), Sun sensor noise (rad; seed 003 SS)."""
+
+    residual_dipole_am2: np.ndarray
+    gyro_markov_sigma_rad_s: float
+    gyro_markov_tau_s: float
+    sun_sensor_sigma_rad: float
 
 
 def record_width(n_wheels: int) -> int:
@@ -135,33 +154,6 @@ def limit_motor_torque_into(m: np.ndarray, x: np.ndarray, i0: int, inertia: np.n
 
 
 @njit(cache=True)
-def _fault_transitions_1(faults: np.ndarray, t: float, state: np.ndarray, ev: np.ndarray, n_ev: np.ndarray) -> int:
-    """Active-fault bit flags at t, with onset/clear events; returns −flags−1 if a fault just began."""
-    flags = 0
-    began = False
-    for f in range(faults.shape[0]):
-        on = fault_active_1(faults[f], t)
-        if on:
-            flags |= 1 << min(f, 30)
-        if on != state[f]:
-            _event(ev, n_ev, t, EV_FAULT_ONSET if on else EV_FAULT_CLEARED, f)
-            began = began or on
-            state[f] = on
-    return -flags - 1 if began else flags
-
-
-@njit(cache=True)
-def fault_active_1(row: np.ndarray, t: float) -> bool:
-    """Whether a fault row acts at t: inside [onset, end) and, if intermittent, in an on-window."""
-    if t < row[F_ONSET] or t >= row[F_END]:
-        return False
-    if int(row[F_TYPE]) == Y_INTERMITTENT and row[F_PERIOD] > 0.0:
-        phase = (t - row[F_ONSET]) % row[F_PERIOD]
-        return phase < row[F_DUTY] * row[F_PERIOD]
-    return True
-
-
-@njit(cache=True)
 def _program_1(kind: int, steps_t: np.ndarray, steps_q: np.ndarray, route: np.ndarray, t: float,
                t0_unix: float, r: np.ndarray, v: np.ndarray, a: np.ndarray, c_pn: np.ndarray, dut1: float):
     """Λ^p, ω^p, ω̇^p (program axes) and the observing flag at t (seed 000 §2, seed 001)."""
@@ -174,131 +166,6 @@ def _program_1(kind: int, steps_t: np.ndarray, steps_q: np.ndarray, route: np.nd
 
 
 @njit(cache=True)
-def _sensor_faults_1(faults: np.ndarray, target: int, t: float, value: np.ndarray, frozen: np.ndarray,
-                     sigma: float, normals: np.ndarray) -> bool:
-    """Apply the variant's faults of one sensor to its sample in place; returns validity."""
-    valid = True
-    for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) != target or not fault_active_1(row, t):
-            continue
-        kind, i = int(row[F_TYPE]), int(row[F_INDEX])
-        axis = i if i < value.shape[0] else 0
-        if kind == Y_FAIL:
-            valid = False
-        elif kind == Y_FROZEN:
-            value[:] = frozen
-        elif kind == Y_GAIN:
-            value[axis] *= row[F_GAIN]
-        elif kind == Y_BIAS or kind == Y_INTERMITTENT:
-            value[axis] += row[F_VALUE]
-        elif kind == Y_DRIFT:
-            value[axis] += row[F_VALUE] * (t - row[F_ONSET])
-        elif kind == Y_NOISE:
-            value[axis] += (row[F_VALUE] - 1.0) * sigma * normals[axis]
-    return valid
-
-
-@njit(cache=True)
-def _fault_of_type_1(faults: np.ndarray, target: int, kind: int, t: float) -> bool:
-    """Whether a fault of this target and type acts at t."""
-    for f in range(faults.shape[0]):
-        if int(faults[f, F_TARGET]) == target and int(faults[f, F_TYPE]) == kind and fault_active_1(faults[f], t):
-            return True
-    return False
-
-
-@njit(cache=True)
-def _rotation_1(rot: np.ndarray) -> np.ndarray:
-    """Quaternion of a small rotation vector (rad)."""
-    ang = np.sqrt(rot @ rot)
-    dq = np.empty(4)
-    dq[0] = np.cos(0.5 * ang)
-    dq[1:] = np.sin(0.5 * ang) * rot / ang
-    return dq
-
-
-@njit(cache=True)
-def _wheel_commands_1(faults: np.ndarray, t: float, cmd: np.ndarray, frozen_cmd: np.ndarray, out: np.ndarray) -> None:
-    """Torque the wheel motors deliver for the held command under the variant's wheel faults."""
-    out[:] = cmd
-    for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) != T_WHEEL or not fault_active_1(row, t):
-            continue
-        kind, p = int(row[F_TYPE]), int(row[F_INDEX])
-        if kind == Y_FAIL or kind == Y_INTERMITTENT or kind == Y_STUCK:
-            out[p] = 0.0
-        elif kind == Y_GAIN:
-            out[p] *= row[F_GAIN]
-        elif kind == Y_BIAS:
-            out[p] += row[F_VALUE]
-        elif kind == Y_FROZEN:
-            out[p] = frozen_cmd[p]
-
-
-@njit(cache=True)
-def _lock_stuck_wheels_1(faults: np.ndarray, t: float, x: np.ndarray, p: PlantArrays, j_inv: np.ndarray) -> None:
-    """Seized wheels: Ω_p = 0 with the body taking the momentum (H conserved, seed 000 eq 1)."""
-    nq = p.flex_mass.shape[0]
-    for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) != T_WHEEL or int(row[F_TYPE]) != Y_STUCK or not fault_active_1(row, t):
-            continue
-        w = int(row[F_INDEX])
-        i = 7 + 2 * nq + w
-        h = p.wheel_inertia[w] * x[i]
-        for r in range(3):
-            for c in range(3):
-                x[4 + r] += j_inv[r, c] * p.wheel_axes[c, w] * h
-        x[i] = 0.0
-
-
-@njit(cache=True)
-def _extra_friction(faults: np.ndarray, t: float, friction: np.ndarray, base: np.ndarray) -> None:
-    """Coulomb friction table with the variant's 'increased friction' faults added (N·m)."""
-    friction[:, :] = base
-    for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) == T_WHEEL and int(row[F_TYPE]) == Y_FRICTION and fault_active_1(row, t):
-            friction[0, int(row[F_INDEX])] += row[F_VALUE]
-
-
-@njit(cache=True)
-def _controller_faults_1(faults: np.ndarray, t: float, torque: np.ndarray, frozen: np.ndarray) -> None:
-    """Controller-output faults (seed 002 §3.2: intermittent and abrupt) applied in place."""
-    for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) != T_CTRL or not fault_active_1(row, t):
-            continue
-        kind, axis = int(row[F_TYPE]), min(int(row[F_INDEX]), 2)
-        if kind == Y_FAIL or kind == Y_INTERMITTENT:
-            torque[:] = 0.0
-        elif kind == Y_GAIN:
-            torque *= row[F_GAIN]
-        elif kind == Y_BIAS:
-            torque[axis] += row[F_VALUE]
-        elif kind == Y_FROZEN:
-            torque[:] = frozen
-
-
-@njit(cache=True)
-def _rod_faults_1(faults: np.ndarray, t: float, dipole: np.ndarray) -> None:
-    """Magnetic-driver rod faults applied to the commanded dipole in place."""
-    for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) != T_ROD or not fault_active_1(row, t):
-            continue
-        kind, i = int(row[F_TYPE]), min(int(row[F_INDEX]), 2)
-        if kind == Y_FAIL or kind == Y_STUCK:
-            dipole[i] = 0.0
-        elif kind == Y_GAIN:
-            dipole[i] *= row[F_GAIN]
-        elif kind == Y_BIAS:
-            dipole[i] += row[F_VALUE]
-
-
-@njit(cache=True)
 def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool]:
     """Nadir direction in body axes from an earth-sensor sample (roll, pitch; seed 002 eq 14) with the
     variant's earth-sensor faults; False if the sensor has failed."""
@@ -307,7 +174,7 @@ def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.nda
     angles = np.zeros(3)
     angles[0] = roll + EARTH_SENSOR_SIGMA_RAD * normal[0]
     angles[1] = pitch + EARTH_SENSOR_SIGMA_RAD * normal[1]
-    ok = _sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3))
+    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3))
     nadir = np.empty(3)
     nadir[0] = np.cos(angles[1]) * np.cos(angles[0])
     nadir[1] = -np.sin(angles[1])
@@ -325,6 +192,22 @@ def _earth_and_field_update_1(nadir: np.ndarray, earth_ok: bool, r: np.ndarray, 
     b_norm = np.sqrt(b_eci[0] ** 2 + b_eci[1] ** 2 + b_eci[2] ** 2)
     if mag_noise > 0.0 and b_norm > 0.0:
         mekf.mekf_vector_update_1(q_est, bias_est, p_cov, mag, b_eci, mag_noise / b_norm + MAG_DIRECTION_FLOOR_RAD)
+
+
+@njit(cache=True)
+def _sun_direction_1(faults: np.ndarray, t: float, x: np.ndarray, q_est: np.ndarray, sun_eci: np.ndarray,
+                     r: np.ndarray, sigma: float, frozen: np.ndarray) -> np.ndarray:
+    """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1) under its faults; in eclipse
+    or when failed, the ephemeris Sun seen through the attitude estimate."""
+    normals = np.random.standard_normal(3)
+    s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
+    ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
+    frozen[:] = s_b
+    n = np.sqrt(s_b @ s_b)
+    if not ok or n == 0.0:
+        s_b = conjugate_rotate_1(q_est, sun_eci)
+        n = np.sqrt(s_b @ s_b)
+    return s_b / n
 
 
 @njit(cache=True)
@@ -349,9 +232,9 @@ def _attitude_difference_1(q_a: np.ndarray, q_b: np.ndarray) -> float:
 
 
 @njit(cache=True)
-def _sun_safe_program_1(q_est: np.ndarray, sun_eci: np.ndarray) -> np.ndarray:
-    """One-axis Sun orientation (seed 001): the attitude nearest q_est that puts SUN_AXIS_B on the Sun."""
-    s_b = conjugate_rotate_1(q_est, sun_eci / np.sqrt(sun_eci @ sun_eci))
+def _sun_safe_program_1(q_est: np.ndarray, s_b: np.ndarray) -> np.ndarray:
+    """One-axis Sun orientation (seed 001): the attitude nearest q_est that puts SUN_AXIS_B on the Sun
+    direction s_b (unit, body axes, as the Sun sensor sees it)."""
     axis = np.cross(SUN_AXIS_B, s_b)
     n = np.sqrt(axis @ axis)
     ang = np.arctan2(n, SUN_AXIS_B @ s_b)
@@ -363,10 +246,10 @@ def _sun_safe_program_1(q_est: np.ndarray, sun_eci: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _mode_program_1(mode: int, q_est, r, v, a, t_unix, q_p, w_p, wd_p) -> None:
+def _mode_program_1(mode: int, q_est, r, v, a, sun_b, q_p, w_p, wd_p) -> None:
     """Program of the Sun/safe and ORF modes (seed 001 one- and three-axis orientation), in place."""
     if mode == modes.MODE_SUN_SAFE:
-        q_p[:] = _sun_safe_program_1(q_est, environment.sun_position_1(t_unix))
+        q_p[:] = _sun_safe_program_1(q_est, sun_b)
         w_p[:] = 0.0
         wd_p[:] = 0.0
     else:
@@ -399,7 +282,7 @@ def _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, t_u, bdot_gain, m
 @njit(cache=True, nogil=True)
 def fly_variant(
     x0, p: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-    available, faults, fdir_cfg, seed, rec, ev, n_ev, shared, slot,
+    available, faults, fdir_cfg, seed, rec, ev, n_ev, shared, slot, models: SeedModels,
 ) -> None:
     """Fly one variant and fill its output record ``rec`` (samples × channels) and events ``ev``.
 
@@ -411,7 +294,7 @@ def fly_variant(
     step, c_pn); ``est``: (true gyro bias (3,), initial MEKF covariance (6, 6)); ``fdir_cfg``: FD_*
     entries (onboard FDIR of :mod:`sim_core.fdir`: wheels each T_u, star tracker, gyro drift and
     magnetometer each T_q with the MEKF; it may drop wheels from ``available``). ``shared[0]`` non-zero
-    cancels the run (checked each T_u);
+    cancels the run (checked each T_u); ``models``: the :class:`SeedModels` switched on.
     ``shared[slot]`` receives the number of steps done, for progress reports from another thread.
     """
     np.random.seed(seed)
@@ -428,6 +311,15 @@ def fly_variant(
     n = x0.shape[0]
 
     x = x0.copy()
+    m_res = models.residual_dipole_am2
+    res_on = m_res[0] != 0.0 or m_res[1] != 0.0 or m_res[2] != 0.0
+    markov_on = models.gyro_markov_sigma_rad_s > 0.0
+    markov_decay = np.full(3, np.exp(-times[0] * steps[1] / models.gyro_markov_tau_s))
+    markov_step = models.gyro_markov_sigma_rad_s * np.sqrt(1.0 - markov_decay**2)
+    gyro_drift = models.gyro_markov_sigma_rad_s * np.random.standard_normal(3) if markov_on else np.zeros(3)
+    gyro_noise3 = np.full(3, times[5])
+    sun_frozen = np.zeros(3)
+    total_dipole = np.zeros(3)
     work = np.zeros((6, n + 3 + nq + nw))
     j_inv = np.linalg.inv(p.inertia)
     base_friction = p.friction.copy()
@@ -503,11 +395,11 @@ def fly_variant(
         control_tick = k % ctrl_every == 0
         if gg_on or md_on or control_tick or k % meas_every == 0 or k % out_every == 0:
             hermite_orbit_into(orbit_tab, orbit_t0, orbit_step, t, r, v, a)
-        if md_on or k % meas_every == 0:
+        if md_on or res_on or k % meas_every == 0:
             linear_into(b_tab, b_t0, b_step, t, b_eci)
             conjugate_rotate_into(x, b_eci, b_body)
         if faults.shape[0] > 0:
-            flags = _fault_transitions_1(faults, t, fault_state, ev, n_ev)
+            flags = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
             if flags < 0:
                 flags = -flags - 1
                 frozen_cmd[:] = cmd
@@ -516,20 +408,15 @@ def fly_variant(
 
         if k % meas_every == 0:
             normals = np.random.standard_normal(6)
-            w_meas = x[4:7] + gyro_bias + gyro_noise * normals[0:3]
-            gyro_ok = _sensor_faults_1(faults, T_GYRO, t, w_meas, gyro_frozen, gyro_noise, normals[0:3])
+            drift_normals = np.random.standard_normal(3) if markov_on else np.zeros(3)
+            w_meas, _ = sensors.gyro_1(x[4:7], gyro_bias, gyro_drift, gyro_noise3, markov_decay, markov_step, np.inf,
+                                       np.concatenate((normals[0:3], drift_normals)))
+            gyro_ok = faults_mod.sensor_faults_1(faults, T_GYRO, t, w_meas, gyro_frozen, gyro_noise, normals[0:3])
             sig3 = np.full(3, st_sigma)
             q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, 1e9, normals[3:6])
-            rot = np.zeros(3)
-            st_ok = _sensor_faults_1(faults, T_STAR, t, rot, rot, st_sigma, normals[3:6]) and st_ok
-            if rot[0] != 0.0 or rot[1] != 0.0 or rot[2] != 0.0:
-                q_m = multiply_1(q_m, _rotation_1(rot))
-            if _fault_of_type_1(faults, T_STAR, Y_FROZEN, t):
-                q_m[:] = st_frozen
-            else:
-                st_frozen[:] = q_m
+            st_ok = faults_mod.star_tracker_faults_1(faults, t, q_m, st_frozen, st_sigma, normals[3:6]) and st_ok
             mag[:] = b_body + mag_noise * np.random.standard_normal(3)
-            _sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
+            faults_mod.sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
             if fdir_on:
                 fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma,
                                           ev, n_ev, t)
@@ -576,7 +463,8 @@ def fly_variant(
             q_p, w_p, wd_p, observing = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
             if modes_on:
                 q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), r, v, a)
-                sun_b = conjugate_rotate_1(q_est, environment.sun_position_1(t0_unix + t))
+                sun_b = _sun_direction_1(faults, t, x, q_est, environment.sun_position_1(t0_unix + t), r,
+                                         models.sun_sensor_sigma_rad, sun_frozen)
                 new_mode = modes.mode_step_1(mode_state, mode_thresholds, t, np.sqrt(w_est @ w_est), attitude_valid,
                                              _angle_between_1(SUN_AXIS_B, sun_b), _attitude_difference_1(q_est, q_orf),
                                              True, np.sum(available) < 2, False)
@@ -585,7 +473,7 @@ def fly_variant(
                     g[:] = 0.0
                     mode = new_mode
                 if mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF:
-                    _mode_program_1(mode, q_est, r, v, a, t0_unix + t, q_p, w_p, wd_p)
+                    _mode_program_1(mode, q_est, r, v, a, sun_b, q_p, w_p, wd_p)
                     observing = False
             speeds = x[7 + 2 * nq: 7 + 2 * nq + nw].copy()
             if tach_q > 0.0:
@@ -620,13 +508,13 @@ def fly_variant(
                                                         mrp_k, mrp_p, mrp_law)
             else:
                 body_torque = control.quaternion_pd_step(q_est, w_est, q_p, w_p, pd_kp, pd_kd)
-            _controller_faults_1(faults, t, body_torque, frozen_torque)
+            faults_mod.controller_faults_1(faults, t, body_torque, frozen_torque)
             status = allocation.allocate_1(body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params,
                                            wheel_out, dip_out)
             for w in range(nw):
                 cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
             dipole[:] = dip_out
-            _rod_faults_1(faults, t, dipole)
+            faults_mod.rod_faults_1(faults, t, dipole)
             for i in range(3):
                 dipole[i] = min(max(dipole[i], -md_max), md_max)
             if modes_on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
@@ -672,24 +560,25 @@ def fly_variant(
                 row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
             out_i += 1
 
-        _wheel_commands_1(faults, t, cmd, frozen_cmd, delivered)
+        faults_mod.wheel_commands_1(faults, t, cmd, frozen_cmd, delivered)
         limit_motor_torque_into(delivered, x, 7 + 2 * nq, p.wheel_inertia, wheel_limits[0], wheel_limits[1])
         if faults.shape[0] > 0:
-            _extra_friction(faults, t, friction, base_friction)
-        ext[0] = dipole[1] * b_body[2] - dipole[2] * b_body[1]
-        ext[1] = dipole[2] * b_body[0] - dipole[0] * b_body[2]
-        ext[2] = dipole[0] * b_body[1] - dipole[1] * b_body[0]
+            faults_mod.extra_friction_1(faults, t, friction, base_friction)
+        ext[:] = 0.0
+        if md_on or res_on:
+            total_dipole[:] = dipole + m_res
+            ext[:] = magnetic.magnetic_torque_1(total_dipole, b_body)
         if gg_on:
             add_gravity_gradient_into(x, r, p.inertia, ext)
         rk4_step_into(x, dt, delivered, ext, plant, work, x)
         if faults.shape[0] > 0:
-            _lock_stuck_wheels_1(faults, t + dt, x, p, j_inv)
+            faults_mod.lock_stuck_wheels_1(faults, t + dt, x, p, j_inv)
     else:
         shared[slot] = n_steps
 
 
 def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-              available, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared) -> None:
+              available, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared, models: SeedModels) -> None:
     """Fly every variant (axis 0 of x0, available, faults, fdir_cfg, seeds, rec, ev), one thread per core.
 
     ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
@@ -700,7 +589,7 @@ def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est
     def one(v: int) -> None:
         fly_variant(x0[v], p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
                     available[v], faults[v, : n_faults[v]], fdir_cfg[v], seeds[v], rec[v], ev[v], n_ev[v], shared,
-                    1 + v)
+                    1 + v, models)
 
     n = x0.shape[0]
     if n == 1:

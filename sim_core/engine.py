@@ -17,7 +17,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sim_core import allocation, closed_loop, environment, frames, guidance, mekf, modes, orbit, quaternion, wheels
+from sim_core import (
+    allocation,
+    closed_loop,
+    environment,
+    frames,
+    guidance,
+    mekf,
+    modes,
+    orbit,
+    quaternion,
+    wheels,
+)
+from sim_core import faults as fault_kernels
 from sim_core import fdir as fdir_kernels
 from sim_core.control import DigitalLawGains
 from sim_core.scenario import Scenario
@@ -182,21 +194,6 @@ def _mode_settings(s: Scenario, field_eci_t: np.ndarray) -> list[float]:
     return [1.0, float(initial), gain, *modes.ModeThresholds().to_array()]
 
 
-def _fault_tables(s: Scenario) -> tuple[np.ndarray, np.ndarray]:
-    n_max = max(1, max(len(v.faults) for v in s.variants))
-    table = np.zeros((len(s.variants), n_max, closed_loop.FAULT_COLUMNS))
-    counts = np.zeros(len(s.variants), dtype=np.int64)
-    for i, v in enumerate(s.variants):
-        for j, f in enumerate(v.faults):
-            end = np.inf if f.duration_s is None else f.onset_s + f.duration_s
-            table[i, j] = [
-                closed_loop.TARGET_CODES[f.target], f.index, closed_loop.TYPE_CODES[f.type], f.onset_s, end,
-                f.gain, f.value, f.period_s or 0.0, f.duty,
-            ]
-        counts[i] = len(v.faults)
-    return table, counts
-
-
 def allocation_params(s: Scenario) -> np.ndarray:
     """Parameter vector of ``allocation.allocate_1`` for the scenario's cluster (seed 000 eq 6, §3)."""
     a = s.allocation
@@ -281,6 +278,14 @@ def turn_peak_rate(s: Scenario, route_index: int) -> float:
     return float(envelopes[route_index + shift].max_rate_bound_rad_s)
 
 
+def seed_models(s: Scenario) -> closed_loop.SeedModels:
+    """The scenario's residual dipole, gyro Markov drift and Sun sensor for the loop (zero = off)."""
+    sn = s.sensors
+    return closed_loop.SeedModels(np.array(s.spacecraft.residual_dipole_am2, dtype=float),
+                                  float(sn.gyro_markov_sigma_rad_s), float(sn.gyro_markov_tau_s),
+                                  float(sn.sun_sensor_sigma_rad))
+
+
 class Cancelled(RuntimeError):
     """The run was cancelled through its ``cancel`` callback."""
 
@@ -343,7 +348,7 @@ def simulate(
     avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)
     if avail.shape != (nv, nw):
         raise ValueError(f"wheel_available: expected shape ({nv}, {nw}), got {avail.shape}")
-    faults, n_faults = _fault_tables(s)
+    faults, n_faults = fault_kernels.fault_table(s.variants)
     seeds = np.array([s.seed * 1000 + i * 7919 + v.seed_offset for i, v in enumerate(s.variants)], dtype=np.int64)
     orbit_tab = _orbit_table(state, t0, s.duration_s)
     env = (field_tab[0], field_tab[1], field_tab[2], np.ascontiguousarray(c_pn))
@@ -355,7 +360,7 @@ def simulate(
     est_init = (np.array(sn.gyro_bias_rad_s, dtype=float), mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S))
     shared = np.zeros(nv + 1, dtype=np.int64)
     args = (x0s, packed, wheel_limits, steps, times, program, orbit_tab, env, gains, est_init, alloc,
-            avail, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared)
+            avail, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared, seed_models(s))
     _run_watched(args, shared, n_steps, progress, cancel)
     return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)
 

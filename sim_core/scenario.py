@@ -127,6 +127,7 @@ class SensorsSpec(_Spec):
     gyro_bias_rad_s: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
     gyro_markov_sigma_rad_s: NonNegative = 0.0
     gyro_markov_tau_s: Positive = 300.0
+    sun_sensor_sigma_rad: NonNegative = 0.0087  # coarse Sun sensor, 0.5° (seed 003 SS)
     magnetometer_noise_t: NonNegative = 50e-9
     tachometer_quantum_rad_s: NonNegative = 0.0
 

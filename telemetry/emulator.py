@@ -38,13 +38,23 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import ValidationError
 
-from sim_core import environment, fdir as onboard_fdir, frames, modes, quaternion, scenario_library, sensors
-from sim_core.closed_loop import TARGET_CODES
+from sim_core import environment, frames, modes, quaternion, scenario_library, sensors
+from sim_core import faults as fault_kernels
+from sim_core import fdir as onboard_fdir
 from sim_core.engine import orbit_state, simulate
+from sim_core.faults import (  # parse_fault: the grammar's home is sim_core.faults
+    TARGET_CODES,
+    parse_fault,
+)
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec
 from sim_core.trajectory import EVENT_NAMES, Trajectory
 from telemetry.ccsds import NS_PER_S, SEQUENCE_COUNT_MODULUS
-from telemetry.dictionary import Dictionary, PacketDefinition, load_dictionary, parse_utc_ns
+from telemetry.dictionary import (
+    Dictionary,
+    PacketDefinition,
+    load_dictionary,
+    parse_utc_ns,
+)
 from telemetry.encoding import encode_packets
 
 __all__ = [
@@ -127,34 +137,6 @@ class SendReport:
     octets_sent: int = 0
     connections: int = 0
     packets_resent: int = 0
-
-
-def parse_fault(text: str) -> FaultSpec:
-    """A hidden fault from ``target:index:type@onset_s[+duration_s][,gain=G][,value=V]`` (sim_core FaultSpec).
-
-    ``index`` is sim_core's 0-based index (wheel 0 is the dictionary's ``wheel_*_1``).
-    >>> parse_fault("wheel:1:failure@600").model_dump(include={"target", "index", "type", "onset_s"})
-    {'target': 'wheel', 'index': 1, 'type': 'failure', 'onset_s': 600.0}
-    """
-    head, *options = text.split(",")
-    spec, _, timing = head.partition("@")
-    parts = spec.split(":")
-    if len(parts) != 3 or not timing:
-        raise ValueError(f"fault: expected target:index:type@onset_s[+duration_s][,key=value], got {text!r}")
-    onset, _, duration = timing.partition("+")
-    fields: dict = {"target": parts[0], "index": parts[1], "type": parts[2], "onset_s": onset}
-    if duration:
-        fields["duration_s"] = duration
-    for option in options:
-        key, sep, value = option.partition("=")
-        if not sep or key not in ("gain", "value", "period_s", "duty"):
-            raise ValueError(f"fault: option {option!r} is not gain=, value=, period_s= or duty=")
-        fields[key] = value
-    try:
-        return FaultSpec.model_validate(fields)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        raise ValueError(f"fault.{'.'.join(str(x) for x in err['loc'])}: {err['msg']} in {text!r}") from None
 
 
 def satellite_scenario(
@@ -268,42 +250,6 @@ def _split(prefix: str, columns: np.ndarray, suffixes: Sequence[str]) -> dict[st
     return {f"{prefix}_{sfx}": columns[:, k] for k, sfx in enumerate(suffixes)}
 
 
-def _fault_active(f: FaultSpec, t_s: np.ndarray) -> np.ndarray:
-    """Where a fault acts: inside [onset, end) and, if intermittent, in its on-windows (as sim_core.closed_loop)."""
-    end = np.inf if f.duration_s is None else f.onset_s + f.duration_s
-    active = (t_s >= f.onset_s) & (t_s < end)
-    if f.type == "intermittent" and f.period_s:
-        active &= (t_s - f.onset_s) % f.period_s < f.duty * f.period_s
-    return active
-
-
-def _sensor_faults(sample: np.ndarray, noise: np.ndarray, t_s: np.ndarray, faults: Sequence[FaultSpec],
-                   target: str) -> tuple[np.ndarray, np.ndarray]:
-    """A sensor's (n, 3) samples under the hidden faults of one target, and where it failed (seed 002 §3.2 catalogue).
-
-    Same effects as the engine's sensors: gain, bias, intermittent bias, drift value·(t − onset) and
-    noise scaled to value·σ on axis ``index``; frozen holds the last sample before onset; failure is returned
-    as a mask. ``noise`` is the sample's realised noise (for the noise-scaling fault).
-    """
-    out, failed = sample.copy(), np.zeros(t_s.shape, dtype=bool)
-    for f in (f for f in faults if f.target == target):
-        on = _fault_active(f, t_s)
-        axis = f.index if f.index < 3 else 0
-        if f.type == "failure":
-            failed |= on
-        elif f.type == "frozen" and on.any():
-            out[on] = out[max(int(np.argmax(on)) - 1, 0)]
-        elif f.type == "gain":
-            out[on, axis] *= f.gain
-        elif f.type in ("bias", "intermittent"):
-            out[on, axis] += f.value
-        elif f.type == "drift":
-            out[on, axis] += f.value * (t_s[on] - f.onset_s)
-        elif f.type == "noise":
-            out[on, axis] += (f.value - 1.0) * noise[on, axis]
-    return out, failed
-
-
 def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Star-tracker quaternions Λ^m = Λ ∘ Λ^n ∘ Λ^f (seed 000 §4), Λ^f the hidden faults' rotation; zeros if failed."""
     q_m, _ = sensors.star_tracker(sr["q_ib"], sr["omega_b_rad_s"], s.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC,
@@ -311,11 +257,10 @@ def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: 
     e = quaternion.multiply(quaternion.conjugate(sr["q_ib"]), q_m)
     theta = 2.0 * np.arctan2(np.linalg.norm(e[:, 1:], axis=-1), e[:, 0])[:, None]
     noise = theta * e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
-    faults = s.variants[0].faults
-    turning = [f for f in faults if f.type != "frozen"]
-    rot, failed = _sensor_faults(np.zeros_like(noise), noise, t_s, turning, "star_tracker")
-    q_m = quaternion.normalize(quaternion.multiply(q_m, sensors.rotation_noise_quaternion(rot)))
-    q_m, _ = _sensor_faults(q_m, np.zeros_like(q_m), t_s, [f for f in faults if f.type == "frozen"], "star_tracker")
+    table, _ = fault_kernels.fault_table(s.variants[:1])
+    q_m, failed = fault_kernels.star_tracker_fault_series(table[0], t_s, np.ascontiguousarray(q_m),
+                                                          np.ascontiguousarray(noise))
+    q_m = quaternion.normalize(q_m)
     q_m[failed] = 0.0
     return q_m
 
@@ -324,9 +269,11 @@ def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.rando
     """Gyro rates ω + b + d + n_g (seed 002 eq 13) under the hidden gyro faults; zeros if failed."""
     sn = s.sensors
     bias = np.array(sn.gyro_bias_rad_s)
-    drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, sn.gyro_drift_density_rad_s_sqrt_s, s.measurement_dt_s)
+    density = sn.gyro_markov_sigma_rad_s * math.sqrt(2.0 / sn.gyro_markov_tau_s)  # stationary σ as in the loop
+    drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, density, s.measurement_dt_s)
     w_g, d, _ = sensors.gyro(sr["omega_b_rad_s"], bias, drift, sn.gyro_noise_rad_s, GYRO_RANGE_RAD_S, rng)
-    w_g, failed = _sensor_faults(w_g, w_g - sr["omega_b_rad_s"] - bias - d, t_s, s.variants[0].faults, "gyro")
+    table, _ = fault_kernels.fault_table(s.variants[:1])
+    w_g, failed = fault_kernels.sensor_fault_series(table[0], fault_kernels.T_GYRO, t_s, w_g, w_g - sr["omega_b_rad_s"] - bias - d)
     w_g[failed] = 0.0
     return w_g
 
@@ -337,7 +284,8 @@ def _magnetometer(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range
     b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], _unix_s(s, t_s), s.magnetic_model)
     b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), s.sensors.magnetometer_noise_t, range_t, rng)
     b_true = quaternion.rotate(quaternion.conjugate(sr["q_ib"]), b_i)
-    b_b, failed = _sensor_faults(b_b, b_b - b_true, t_s, s.variants[0].faults, "magnetometer")
+    table, _ = fault_kernels.fault_table(s.variants[:1])
+    b_b, failed = fault_kernels.sensor_fault_series(table[0], fault_kernels.T_MAG, t_s, b_b, b_b - b_true)
     b_b = np.clip(b_b, -range_t, range_t)
     b_b[failed] = 0.0
     return b_b

@@ -1,0 +1,173 @@
+"""Every fault type and switchable seed model acts on the flight: effect against nominal, sign and size
+from the physics (seed 002 §3.2 outage and gain loss, residual dipole m × B, gyro Markov drift, Sun sensor)."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from sim_core import engine, environment, faults, quaternion, scenario_library, sensors
+from sim_core.closed_loop import SUN_AXIS_B
+from sim_core.scenario import FaultSpec, Scenario, VariantSpec
+from telemetry import emulator
+
+ONSET_S = faults.SEED002_ONSET_S
+
+
+def _with(s: Scenario, **fields) -> Scenario:
+    return Scenario.model_validate({**s.model_dump(), **fields})
+
+
+def _variants(*named: tuple[str, list[FaultSpec]]) -> list[dict]:
+    return [VariantSpec(name=n, faults=f).model_dump() for n, f in named]
+
+
+# --- grammar ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("text", ["wheel:1:failure@600", "gyro:2:bias@10.5,value=0.0001",
+                                  "controller:0:intermittent@7+1,period_s=0.5,duty=0.25", "md_rod:2:gain@3,gain=0.5",
+                                  "sun_sensor:0:drift@1.25+100.0,value=-2e-05"])
+def test_grammar_round_trips_and_is_the_emulators(text):
+    f = faults.parse_fault(text)
+    assert faults.parse_fault(faults.format_fault(f)) == f
+    assert emulator.parse_fault is faults.parse_fault
+
+
+def test_table_codes_each_fault_of_each_variant():
+    vs = [VariantSpec(name="a", faults=[faults.parse_fault("wheel:3:stuck@5+2")]), VariantSpec(name="b")]
+    table, counts = faults.fault_table(vs)
+    assert counts.tolist() == [1, 0] and table.shape == (2, 1, faults.FAULT_COLUMNS)
+    row = table[0, 0]
+    assert row[faults.F_TARGET] == faults.TARGET_CODES["wheel"] and row[faults.F_INDEX] == 3
+    assert row[faults.F_TYPE] == faults.TYPE_CODES["stuck"] and (row[faults.F_ONSET], row[faults.F_END]) == (5.0, 7.0)
+
+
+# --- seed 002 outage and gain loss on its bus --------------------------------------------------------
+
+
+def _x_axis(traj, v: int) -> tuple[np.ndarray, np.ndarray]:
+    """Roll-axis error angle 2 e_x (e = Λ̃^p ∘ Λ, small angles) and body rate ω_x of variant v."""
+    e = quaternion.multiply(quaternion.conjugate(traj["q_prog_ib"][v]), traj["q_ib"][v])
+    e *= np.sign(e[:, :1])
+    return 2.0 * e[:, 1], traj["omega_b_rad_s"][v, :, 0]
+
+
+def _pd_response(theta0: float, rate0: float, inertia: float, kp: float, kd: float, gain: float, t: np.ndarray):
+    """Small-angle response J θ̈ = −g (k_p θ/2 + k_d θ̇) of seed 002's quaternion PD (eq 18) from (θ0, θ̇0)."""
+    sol = solve_ivp(lambda _, y: [y[1], -gain * (kp * y[0] / 2 + kd * y[1]) / inertia], (t[0], t[-1]),
+                    [theta0, rate0], t_eval=t, rtol=1e-9, atol=1e-12)
+    return sol.y[0]
+
+
+def test_seed002_wheel_outage_and_gain_loss_follow_the_axis_dynamics():
+    """Wheel 1 (roll axis) of the song-table1 bus at 7 s: an outage leaves the axis free (θ grows at the
+    rate it had), a 70 % gain loss slows its PD by g = 0.3; both predicted from the state at the onset."""
+    s = scenario_library.get("song-table1")
+    gain = faults.SEED002_MAGNITUDES["wheel_gain"]
+    s = _with(s, duration_s=60.0, variants=_variants(
+        ("nominal", []), ("outage", [faults.wheel_failure(0, ONSET_S)]),
+        ("gain loss", [faults.wheel_failure(0, ONSET_S, "gain", gain=gain)])))
+    traj = engine.simulate(s)
+    j, kp, kd = s.spacecraft.inertia_kg_m2[0][0], s.controller.pd_kp_nm, s.controller.pd_kd_nms
+    at = round(ONSET_S / s.output_dt_s)
+    t = traj.t_s[at:]
+    theta = [_x_axis(traj, v)[0][at:] for v in range(3)]
+    theta0, rate0 = theta[0][0], _x_axis(traj, 0)[1][at]
+    assert abs(theta0) > np.radians(0.5)  # the roll transient is still under way at the onset
+    scale = abs(theta0)
+    free = theta0 + rate0 * (t - t[0])
+    assert np.max(np.abs(theta[1] - free)) <= 0.05 * scale
+    for v, g in ((0, 1.0), (2, gain)):
+        assert np.max(np.abs(theta[v] - _pd_response(theta0, rate0, j, kp, kd, g, t))) <= 0.05 * scale
+    # effect against nominal: nominal settles, the outage runs away, the weak wheel lags
+    assert abs(theta[0][-1]) < 0.05 * scale < abs(theta[2][-1]) < abs(theta[1][-1])
+
+
+# --- residual dipole ------------------------------------------------------------------------------
+
+
+def _quiet(**fields) -> Scenario:
+    """somov-ge4-scan, no gravity gradient, truth navigation, no rods: no external torque but the one tested."""
+    s = scenario_library.get("somov-ge4-scan")
+    d = s.model_dump()
+    d.update(gravity_gradient=False, **fields)
+    d["estimator"]["kind"] = "truth"
+    d["spacecraft"]["md_max_dipole_am2"] = 0.0
+    return Scenario.model_validate(d)
+
+
+def _h_inertial(traj, s: Scenario) -> np.ndarray:
+    p = engine.plant_params(s)
+    h_body = traj["omega_b_rad_s"][0] @ p.inertia_kg_m2.T + (traj["wheel_speed_rad_s"][0] * p.wheels.inertia_kg_m2) @ p.wheel_axes_b.T
+    return quaternion.rotate(traj["q_ib"][0], h_body)
+
+
+def test_residual_dipole_changes_the_momentum_by_the_integral_of_m_cross_b():
+    m_res = [1.0, -2.0, 3.0]  # A·m², a small satellite's uncompensated harness and magnet loops
+    nominal = _quiet(duration_s=600.0)
+    dipole = _quiet(duration_s=600.0, spacecraft={**nominal.spacecraft.model_dump(), "residual_dipole_am2": m_res})
+    h_nom, traj = _h_inertial(engine.simulate(nominal), nominal), engine.simulate(dipole)
+    h = _h_inertial(traj, dipole)
+    t0 = traj.extra["epoch_unix_s"]
+    b_eci = environment.magnetic_field_eci_t(traj["r_eci_m"][0], t0 + traj.t_s, dipole.magnetic_model)
+    b_body = quaternion.rotate(quaternion.conjugate(traj["q_ib"][0]), b_eci)
+    torque_i = quaternion.rotate(traj["q_ib"][0], np.cross(np.array(m_res), b_body))
+    expected = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (torque_i[1:] + torque_i[:-1]), axis=0)
+                               * np.diff(traj.t_s)[:, None]])
+    scale = np.max(np.linalg.norm(expected, axis=1))
+    assert scale > 1e-3  # N·m·s: ~1e-4 N·m of m × B over ten minutes
+    assert np.max(np.linalg.norm((h - h[0]) - expected, axis=1)) <= 0.02 * scale
+    assert np.max(np.linalg.norm(h_nom - h_nom[0], axis=1)) <= 1e-3 * scale
+
+
+# --- gyro Markov drift ----------------------------------------------------------------------------
+
+
+def test_gyro_markov_drift_has_its_sigma_and_correlation_time_in_the_twin_and_the_emulator():
+    sigma, tau = 2e-5, 60.0
+    base = scenario_library.get("somov-ge4-scan")
+    sn = base.sensors.model_dump()
+    nominal = _with(base, duration_s=1800.0, estimator={"kind": "star_tracker"})
+    drifting = _with(nominal, sensors={**sn, "gyro_markov_sigma_rad_s": sigma, "gyro_markov_tau_s": tau})
+    errors = []
+    for s in (nominal, drifting):
+        traj = engine.simulate(s)
+        errors.append(traj["omega_est_b_rad_s"][0, 1:] - traj["omega_b_rad_s"][0, 1:])
+    noise = base.sensors.gyro_noise_rad_s
+    assert np.std(errors[0]) == pytest.approx(noise, rel=0.1)
+    assert np.std(errors[1]) == pytest.approx(np.hypot(sigma, noise), rel=0.25)
+    lag = int(tau / drifting.output_dt_s)
+    e = errors[1] - errors[1].mean(axis=0)
+    rho = np.sum(e[lag:] * e[:-lag]) / np.sum(e * e)
+    assert rho == pytest.approx(np.exp(-1.0), abs=0.15)
+    # the emulated satellite's gyro flies the same drift model
+    truth = {"omega_b_rad_s": np.zeros((int(1800 / 0.25), 3))}
+    w_g = emulator._gyro(truth, drifting, np.arange(truth["omega_b_rad_s"].shape[0]) * 0.25, np.random.default_rng(1))
+    assert np.std(w_g) == pytest.approx(np.hypot(sigma, noise), rel=0.25)
+
+
+# --- Sun sensor -----------------------------------------------------------------------------------
+
+
+def test_sun_sensor_bias_tilts_the_sun_safe_pointing_by_the_bias():
+    """Sun/safe mode with the star tracker out (attitude invalid keeps the mode): the Sun axis follows the
+    Sun sensor, so a bias b on its x component leaves the true Sun at atan(b) on the −x side."""
+    bias = 0.05
+    lost = faults.parse_fault("star_tracker:0:failure@0")
+    s = _with(scenario_library.get("somov-ge4-scan"), duration_s=1500.0, initial_mode="sun_safe",
+              estimator={"kind": "mekf"}, output_dt_s=5.0, variants=_variants(
+                  ("nominal", [lost]), ("sun sensor bias", [lost, faults.parse_fault(f"sun_sensor:0:bias@0,value={bias}")])))
+    traj = engine.simulate(s)
+    t0 = traj.extra["epoch_unix_s"]
+    sun = environment.sun_position_eci_m(t0 + traj.t_s)
+    lit = ~sensors.in_earth_shadow(traj["r_eci_m"][0], sun) & (traj.t_s > 900.0)
+    assert lit.sum() >= 20
+    angles, x_side = [], []
+    for v in range(2):
+        s_b = quaternion.rotate(quaternion.conjugate(traj["q_ib"][v]), sun / np.linalg.norm(sun, axis=1, keepdims=True))
+        assert np.all(traj["mode"][v, lit] == 1)  # still Sun/safe
+        angles.append(np.median(np.arccos(np.clip(s_b[lit] @ SUN_AXIS_B, -1, 1))))
+        x_side.append(np.median(s_b[lit, 0]))
+    assert angles[0] < np.radians(1.0)
+    assert angles[1] == pytest.approx(np.arctan(bias), rel=0.2)
+    assert x_side[1] < 0.0
