@@ -59,10 +59,11 @@ def run(args: argparse.Namespace) -> int:
     """Fly, packetise, then write and/or send; exit 2 on bad input, 1 if the listener cannot be reached."""
     import asyncio
 
+    from sim_core.faults import parse_fault
     from telemetry import emulator
 
     try:
-        faults = [emulator.parse_fault(text) for text in args.fault]
+        faults = [parse_fault(text) for text in args.fault]
         if not args.rate > 0.0:
             raise ValueError(f"rate: must be > 0 (inf = unpaced), got {args.rate}")
         traj, _, stream = emulator.emulate(_scenario(args.scenario), faults, args.duration, _start_utc(args.start_utc),

@@ -48,7 +48,7 @@ def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float, faul
     from sim_core import scenario_library
     from sim_core.scenario import VariantSpec
     from telemetry.actual_state import aligned_scenario, aligned_wheel_available
-    from telemetry.emulator import parse_fault
+    from sim_core.faults import parse_fault
 
     k = int(np.searchsorted(track.t_utc_ns, align_ns))
     if k >= track.t_utc_ns.size:
