@@ -25,6 +25,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``acs-twin`` console script; returns the process exit code."""
+    from backend.core.processes import die_with_parent
+
+    die_with_parent()  # a child of `acs-twin serve` (the demo emulator) goes when the server goes
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "handler", None):

@@ -6,9 +6,13 @@ First start creates an admin token (stored hashed) and prints it once; later sta
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
+import socket
 import subprocess
-import threading
 import sys
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -51,29 +55,126 @@ HIDDEN_FAULTS = ["wheel:2:failure@1500"]  # the demo satellite's secret: found f
 DEMO_FLIGHT_S = 5801.0  # one orbit of the demo satellite, so that the hidden fault does happen
 
 
-def start_emulator(settings: Any, scenario: str) -> subprocess.Popen | None:
+def start_emulator(settings: Any, scenario: str, telemetry_port: int | None) -> subprocess.Popen | None:
     """The demo satellite (``acs-twin emulate``) streaming into the live listener, logging to data_dir."""
-    if not settings.live_enabled or settings.telemetry_port == 0:
-        return None
+    from backend.core.processes import spawn_owned
+
+    if not settings.live_enabled or not settings.telemetry_port or not telemetry_port:
+        return None  # an ephemeral telemetry port (0) means no demo satellite
     log = (settings.data_dir / "emulator.log").open("ab")
     command = [sys.executable, "-m", "backend", "emulate", "--scenario", scenario, "--host", settings.host,
-               "--port", str(settings.telemetry_port), "--rate", "1", "--start-utc", "now",
+               "--port", str(telemetry_port), "--rate", "1", "--start-utc", "now",
                "--duration", str(DEMO_FLIGHT_S)]
     for fault in HIDDEN_FAULTS:
         command += ["--fault", fault]
-    return subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+    return spawn_owned(command, log)
+
+
+def _bind_api_socket(host: str, port: int) -> socket.socket:
+    """The API's listening socket, bound before anything starts (SystemExit naming the holder if taken)."""
+    sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        raise SystemExit(_port_message("API", host, port, "--port", exc)) from None
+    return sock
+
+
+def _check_port_free(host: str, port: int) -> None:
+    """SystemExit naming the holder if the telemetry port cannot be bound (the ingest process binds it)."""
+    if not port:
+        return
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind((host, port))
+        except OSError as exc:
+            raise SystemExit(_port_message("telemetry", host, port, "ACS_TWIN_TELEMETRY_PORT", exc)) from None
+
+
+def _port_message(what: str, host: str, port: int, knob: str, exc: OSError) -> str:
+    from backend.core.processes import port_holder
+
+    holder = port_holder(port) or "another process"
+    return (f"acs-twin serve: the {what} port {host}:{port} is not available ({exc.strerror or exc}); "
+            f"held by {holder}. Stop it or choose another port ({knob}).")
+
+
+def _owned_server(config: Any, on_started: Callable[[], None]) -> Any:
+    """uvicorn's server minus its re-raise of SIGTERM/SIGINT after shutdown (which killed the process before
+    ``serve`` could stop its children); ``on_started`` runs once the server listens."""
+    import uvicorn
+
+    class OwnedServer(uvicorn.Server):
+        @contextlib.contextmanager
+        def capture_signals(self) -> Iterator[None]:
+            if threading.current_thread() is not threading.main_thread():
+                yield
+                return
+            previous = {sig: signal.signal(sig, self.handle_exit) for sig in (signal.SIGINT, signal.SIGTERM)}
+            try:
+                yield
+            finally:
+                for sig, handler in previous.items():
+                    signal.signal(sig, handler)
+
+        async def startup(self, sockets: list[socket.socket] | None = None) -> None:
+            await super().startup(sockets)
+            if self.started and not self.should_exit:
+                on_started()
+
+    return OwnedServer(config)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Build the app from Settings, print URLs (and a first admin token), serve until stopped."""
+    """Build the app from Settings, serve until SIGTERM/SIGINT; children start once it listens, stop on exit."""
     import uvicorn
 
     from backend.app import create_app
+    from backend.core.processes import stop_owned
     from backend.core.settings import Settings
 
     settings = Settings(**_overrides(args))
+    api_socket = _bind_api_socket(settings.host, settings.port)
+    if settings.live_enabled:
+        _check_port_free(settings.host, settings.telemetry_port)
     app = create_app(settings)
-    token = first_admin_token(app.state.services)
+    children: dict[str, Any] = {}
+    stop = threading.Event()
+
+    def on_started() -> None:  # the one-time admin token is issued only once the server really is up
+        _announce(settings, app.state.services)
+        port = app.state.services.telemetry.live_port
+        emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario, port)
+        if emulator is not None:
+            children["emulator"] = emulator
+            print(f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
+                  f"tcp://{settings.host}:{port}, log {settings.data_dir / 'emulator.log'}")
+            children["twin"] = start_demo_twin(app.state.services, settings, args.emulator_scenario, stop)
+        print(flush=True)
+
+    server = _owned_server(uvicorn.Config(app, log_level="warning"), on_started)
+    try:
+        server.run(sockets=[api_socket])
+    finally:
+        stop.set()
+        if "emulator" in children:
+            stop_owned(children["emulator"])
+        if "twin" in children:
+            children["twin"].join(5)
+        api_socket.close()
+    if not server.started:
+        print("acs-twin serve: start-up failed (see above); no admin token was issued", file=sys.stderr)
+        return 1
+    print("acs-twin serve: stopped", flush=True)
+    return 0
+
+
+def _announce(settings: Any, services: Any) -> None:
+    """Print the URLs and, on first start, the admin token."""
+    token = first_admin_token(services)
     base = f"http://{settings.host}:{settings.port}"
     print(f"acs-twin control centre, data in {settings.data_dir.resolve()}")
     print(f"  API       {base}/api/v1   (OpenAPI {base}/openapi.json, docs {base}/docs)")
@@ -83,23 +184,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"  admin token (shown once, stored hashed): {token}")
     elif not settings.auth_enabled:
         print("  auth DISABLED: every caller is admin")
-    emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario)
-    stop, twin = threading.Event(), None
-    if emulator is not None:
-        print(f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
-              f"tcp://{settings.host}:{settings.telemetry_port}, log {settings.data_dir / 'emulator.log'}")
-        twin = start_demo_twin(app.state.services, settings, args.emulator_scenario, stop)
-    print("", flush=True)
-    try:
-        uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning")
-    finally:
-        stop.set()
-        if emulator is not None:
-            emulator.terminate()
-            emulator.wait(10)
-        if twin is not None:
-            twin.join(5)
-    return 0
 
 
 def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading.Event) -> threading.Thread:

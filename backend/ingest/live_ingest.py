@@ -10,21 +10,36 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import os
 import queue
+import signal
+import threading
 from pathlib import Path
 from typing import Any
 
-__all__ = ["run_ingest_process", "STATS_PERIOD_S", "OUTBOX_MESSAGES"]
+__all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 
 STATS_PERIOD_S = 0.5
 OUTBOX_MESSAGES = 1_000  # ≈ 20 s of batches at the 50 decodes/s of telemetry.live
 STOP_POLL_S = 0.1
+ORPHAN_EXIT_S = 20.0  # after SIGTERM the pending batches are archived within this, else the process exits anyway
 
 
 def run_ingest_process(database_url: str, dictionaries_dir: str, dictionary: str, satellite: str, host: str,
                        port: int, outbox: Any, stop: Any) -> None:
-    """Process entry: serve the live stream until ``stop`` is set; reports ("port", n) first."""
+    """Process entry: serve the live stream until ``stop`` is set (or the server dies); ("port", n) or ("error", why) first."""
+    from backend.core.processes import become_owned_child
+
+    become_owned_child()  # SIGTERM when the server dies, even by kill -9: stop as if told to
+    signal.signal(signal.SIGTERM, lambda *_: _stop_orphan(outbox, stop))
     asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop))
+
+
+def _stop_orphan(outbox: Any, stop: Any) -> None:
+    """SIGTERM: archive what is pending, never wait for the server to read the outbox, exit within a bound."""
+    outbox.cancel_join_thread()
+    stop.set()
+    threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,)).start()
 
 
 def _offer(outbox: Any, message: tuple, tally: dict[str, int]) -> None:
@@ -44,7 +59,15 @@ async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str
     archive = Archive(database_url, migrate=False)
     dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
     stream = LiveStream(dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary))
-    outbox.put(("port", await stream.start(host, port)))
+    try:
+        outbox.put(("port", await stream.start(host, port)))
+    except OSError as exc:  # the port is taken: say by whom instead of leaving the server waiting
+        from backend.core.processes import port_holder
+
+        holder = port_holder(port) or "another process"
+        outbox.put(("error", f"telemetry port {host}:{port}: {exc.strerror or exc}; held by {holder}"))
+        archive.close()
+        return
     subscriber = stream.subscribe(max_messages=OUTBOX_MESSAGES)
     tally = {"forward_dropped": 0}
 

@@ -13,21 +13,22 @@ import importlib.util
 import multiprocessing as mp
 import queue
 import threading
+import time
 from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 import orjson
 
-from backend.ingest.dictionary_catalogue import DictionaryCatalogue
-from backend.downsampling import minmax_indices
 from backend.core.errors import ApiError
-from backend.ingest.live_hub import LiveHub
-from backend.ingest.sample_cache import SampleCache
 from backend.core.settings import Settings
 from backend.core.time import BOUND_NS
+from backend.downsampling import minmax_indices
+from backend.ingest.dictionary_catalogue import DictionaryCatalogue
+from backend.ingest.live_hub import LiveHub
+from backend.ingest.sample_cache import SampleCache
 
-__all__ = ["TelemetryGateway", "COMPONENT_MODULES"]
+__all__ = ["COMPONENT_MODULES", "TelemetryGateway"]
 
 COMPONENT_MODULES = {
     "archive": "telemetry.archive.store",
@@ -106,10 +107,26 @@ class TelemetryGateway:
                 self._settings.telemetry_port, self._outbox, self._stop_live)
         self._live = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
         self._live.start()
-        kind, port = await asyncio.to_thread(self._outbox.get, True, LIVE_START_TIMEOUT_S)
-        self.live_port = int(port)
+        kind, detail = await asyncio.to_thread(self._first_live_message)
+        if kind != "port":
+            self._stop_live.set()
+            await asyncio.to_thread(self._live.join, LIVE_STOP_TIMEOUT_S)
+            self._live = None
+            raise RuntimeError(f"live ingest did not start: {detail}")
+        self.live_port = int(detail)
         self._relay = threading.Thread(target=self._relay_loop, name="live-relay", daemon=True)
         self._relay.start()
+
+    def _first_live_message(self) -> tuple[str, Any]:
+        """("port", n) from the ingest process, or ("error", why) if it failed, died or stayed silent."""
+        deadline = time.monotonic() + LIVE_START_TIMEOUT_S
+        while time.monotonic() < deadline:
+            try:
+                return self._outbox.get(timeout=0.2)
+            except queue.Empty:
+                if not self._live.is_alive():
+                    return "error", f"the ingest process exited with code {self._live.exitcode} (see its output above)"
+        return "error", f"no answer from the ingest process within {LIVE_START_TIMEOUT_S:.0f} s"
 
     def _relay_loop(self) -> None:
         satellite = self._settings.live_satellite

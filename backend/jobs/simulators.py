@@ -113,6 +113,9 @@ def _run_rigid_spin(body: dict[str, Any], out: Path, progress: Callable[[float],
 def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any,
                   options: dict[str, Any] | None = None) -> None:
     """Worker-process entry: simulate, write trajectory.npz + summary.json, or error.txt."""
+    from backend.core.processes import become_owned_child
+
+    become_owned_child()  # a job never outlives the server (kill -9 included)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
 

@@ -1,0 +1,150 @@
+"""``acs-twin serve`` owns its children: no stop (SIGTERM, SIGINT, kill -9) leaves one running.
+
+Truths: the kernel's process table (/proc: every descendant of the server, zombies counted as
+gone), the ports (a restart on the same ports after kill -9 answers), and the server's own words
+(no traceback on a normal stop; a busy port named with the process that holds it, and no admin
+token spent on a start that failed).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+from tests.backend.conftest import free_port
+
+pytestmark = pytest.mark.slow
+
+START_TIMEOUT_S = 120.0  # cold imports of the server, the ingest process and the emulator on a busy machine
+GONE_TIMEOUT_S = 25.0  # the ingest process archives what is pending before it exits (ORPHAN_EXIT_S = 20)
+
+
+def _ppid_and_state(pid: int) -> tuple[int, str] | None:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat.rsplit(")", 1)[1].split()
+    return int(fields[1]), fields[0]
+
+
+def descendants(pid: int) -> set[int]:
+    """Every living process below ``pid`` in the process tree (zombies excluded)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit() and (info := _ppid_and_state(int(entry.name))) and info[1] != "Z":
+            children.setdefault(info[0], []).append(int(entry.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def alive(pids: set[int]) -> set[int]:
+    """The ``pids`` still running (not exited, not zombies)."""
+    return {pid for pid in pids if (info := _ppid_and_state(pid)) is not None and info[1] != "Z"}
+
+
+def wait_gone(pids: set[int], timeout_s: float = GONE_TIMEOUT_S) -> set[int]:
+    """Poll until none of ``pids`` runs; the ones left after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while (left := alive(pids)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return left
+
+
+def start_server(data_dir: Path, api_port: int, telemetry_port: int, *extra: str) -> tuple[subprocess.Popen, list[str]]:
+    """``python -m backend serve`` on free loopback ports with the demo emulator; its start-up lines."""
+    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": str(telemetry_port),
+           "ACS_TWIN_VIEWER_PORT": str(free_port())}
+    env.pop("ACS_TWIN_DATABASE_URL", None)
+    process = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(api_port), *extra],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    lines: list[str] = []
+    assert process.stdout is not None
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while (line := process.stdout.readline()) and line.strip() and time.monotonic() < deadline:
+        lines.append(line.rstrip())
+    return process, lines
+
+
+def wait_children(process: subprocess.Popen, count: int) -> set[int]:
+    """The server's descendants once there are ``count`` of them (ingest process + emulator)."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while len(found := descendants(process.pid)) < count and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert len(found) >= count, f"expected {count} children of the server, found {found}"
+    return found
+
+
+def health(port: int) -> int:
+    return httpx.get(f"http://127.0.0.1:{port}/api/v1/health", timeout=5.0).status_code
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_normal_stop_leaves_no_child_and_prints_no_traceback(tmp_path: Path, sig: signal.Signals) -> None:
+    api, telemetry = free_port(), free_port()
+    process, lines = start_server(tmp_path, api, telemetry)
+    try:
+        assert any("emulator" in line for line in lines), lines
+        children = wait_children(process, 2)
+        assert health(api) == 200
+        process.send_signal(sig)
+        out, _ = process.communicate(timeout=60)
+    finally:
+        process.kill()
+    assert process.returncode == 0, out
+    assert wait_gone(children) == set()
+    assert "Traceback" not in out
+    assert "Traceback" not in (tmp_path / "emulator.log").read_text()
+
+
+def test_kill_9_of_the_server_takes_its_children_and_a_restart_gets_the_ports_back(tmp_path: Path) -> None:
+    api, telemetry = free_port(), free_port()
+    process, lines = start_server(tmp_path, api, telemetry)
+    try:
+        children = wait_children(process, 2)
+        process.kill()
+        process.wait(10)
+        assert wait_gone(children) == set()
+    finally:
+        process.kill()
+    again, lines = start_server(tmp_path, api, telemetry)
+    try:
+        assert any("emulator" in line for line in lines), lines
+        assert health(api) == 200
+        children = wait_children(again, 2)
+        again.send_signal(signal.SIGTERM)
+        again.communicate(timeout=60)
+    finally:
+        again.kill()
+    assert wait_gone(children) == set()
+
+
+def test_a_busy_port_is_named_with_its_holder_and_spends_no_admin_token(tmp_path: Path) -> None:
+    api, telemetry = free_port(), free_port()
+    with socket.socket() as squatter:
+        squatter.bind(("127.0.0.1", telemetry))
+        squatter.listen()
+        process, lines = start_server(tmp_path, api, telemetry, "--no-emulator")
+        out = "\n".join(lines) + process.communicate(timeout=60)[0]
+    assert process.returncode != 0
+    assert f"telemetry port 127.0.0.1:{telemetry}" in out and f"pid {os.getpid()}" in out, out
+    assert "Traceback" not in out and "admin token" not in out
+    process, lines = start_server(tmp_path, api, free_port(), "--no-emulator")
+    try:
+        assert any(re.search(r"admin token .*: acs_\S+", line) for line in lines), lines
+    finally:
+        process.send_signal(signal.SIGTERM)
+        process.communicate(timeout=60)
