@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 from sqlalchemy import select
@@ -21,7 +21,7 @@ class AuditRepository:
 
     def record(self, actor: str, action: str, target: str, detail: dict[str, Any] | None = None) -> None:
         """Append one entry stamped now (UTC)."""
-        row = AuditRow(at=datetime.now(timezone.utc), actor=actor, action=action,
+        row = AuditRow(at=datetime.now(UTC), actor=actor, action=action,
                        target=target, detail=detail or {})
         with self._sessions.begin() as session:
             session.add(row)

@@ -28,7 +28,7 @@ class Role(IntEnum):
     admin = 3
 
     @classmethod
-    def parse(cls, name: str) -> "Role":
+    def parse(cls, name: str) -> Role:
         """Role from its name; ValueError naming the field ``role`` otherwise."""
         try:
             return cls[name]

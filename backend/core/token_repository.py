@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
@@ -21,7 +21,7 @@ class TokenRepository:
     def add(self, name: str, role: str, token_sha256: str) -> TokenRow:
         """Insert a token row and return it."""
         row = TokenRow(name=name, role=role, token_sha256=token_sha256,
-                       created_at=datetime.now(timezone.utc))
+                       created_at=datetime.now(UTC))
         with self._sessions.begin() as session:
             session.add(row)
         return row
@@ -43,7 +43,7 @@ class TokenRepository:
         with self._sessions.begin() as session:
             row = session.get(TokenRow, token_id)
             if row is not None and row.revoked_at is None:
-                row.revoked_at = datetime.now(timezone.utc)
+                row.revoked_at = datetime.now(UTC)
             return row
 
     def count_active_admins(self) -> int:

@@ -45,8 +45,8 @@ class SampleCache:
             self._generation[satellite] = self._generation.get(satellite, 0) + 1
             for key in [k for k in self._answers if k[0] == satellite and k[2] <= t1_ns and k[3] >= t0_ns]:
                 del self._answers[key]
-            for key in [k for k in self._series if k[0] == satellite]:
-                self._series_bytes -= sum(a.nbytes for a in self._series.pop(key))
+            for series_key in [k for k in self._series if k[0] == satellite]:
+                self._series_bytes -= sum(a.nbytes for a in self._series.pop(series_key))
 
     def mark_live(self, satellite: str, t_min_ns: int) -> None:
         """Live data from t_min_ns on has just arrived (maybe not archived for a while)."""

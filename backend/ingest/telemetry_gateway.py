@@ -153,7 +153,8 @@ class TelemetryGateway:
         await asyncio.to_thread(self._live.join, LIVE_STOP_TIMEOUT_S)
         if self._live.is_alive():
             self._live.terminate()
-        await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
+        if self._relay is not None:
+            await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
         self._live = None
 
     def live_stats(self) -> dict[str, Any]:

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
-from typing import Any
+from datetime import UTC, datetime
+from typing import Any, cast
 
-from sqlalchemy import select, update
+from sqlalchemy import CursorResult, select, update
 from sqlalchemy.orm import Session, sessionmaker
 
 from backend.core.models import JobRow
@@ -17,7 +17,7 @@ FINAL_STATES = ("succeeded", "failed", "cancelled", "interrupted")
 
 
 def _now() -> datetime:
-    return datetime.now(timezone.utc)
+    return datetime.now(UTC)
 
 
 class JobRepository:
@@ -50,7 +50,7 @@ class JobRepository:
         with self._sessions.begin() as session:
             stmt = (update(JobRow).where(JobRow.id == job_id, JobRow.status == "queued")
                     .values(status="running", started_at=_now(), result_dir=result_dir))
-            return session.execute(stmt).rowcount == 1
+            return cast("CursorResult[Any]", session.execute(stmt)).rowcount == 1
 
     def set_progress(self, job_id: str, progress: float) -> None:
         """Store the progress fraction of a running job."""
@@ -76,4 +76,4 @@ class JobRepository:
             stmt = (update(JobRow).where(JobRow.status.in_(ACTIVE_STATES))
                     .values(status="interrupted", finished_at=_now(),
                             error="server restarted while the job was active"))
-            return session.execute(stmt).rowcount
+            return cast("CursorResult[Any]", session.execute(stmt)).rowcount

@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from backend.core.errors import ApiError
-from backend.jobs.job_repository import JobRepository
 from backend.core.settings import Settings
+from backend.jobs.job_repository import JobRepository
 from backend.jobs.simulators import run_in_worker, validate_scenario
 
 __all__ = ["JobManager"]

@@ -18,7 +18,7 @@ def write_npz(traj: Trajectory, path: Path) -> Path:
     meta = {"scenario": traj.scenario_name, "variants": traj.variant_names, "events": traj.events,
             "wall_time_s": traj.wall_time_s, "simulated_time_s": traj.simulated_time_s, **traj.extra}
     np.savez_compressed(path, t_s=traj.t_s, wheel_inertia_kg_m2=traj.wheel_inertia_kg_m2,
-                        meta=np.array(json.dumps(meta)), **traj.series)
+                        meta=np.array(json.dumps(meta)), allow_pickle=False, **traj.series)
     return path
 
 

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 from fastapi import APIRouter, Body, Query, Request
+from fastapi.openapi.models import Example
 from fastapi.responses import FileResponse
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
@@ -16,7 +17,7 @@ from backend.schemas import FilePublic, JobAccepted, JobPublic, SeriesPublic
 
 router = APIRouter(tags=["simulations"], responses=ERROR_RESPONSES)
 
-SCENARIO_EXAMPLES = {
+SCENARIO_EXAMPLES: dict[str, Example] = {
     "rigid-spin": {
         "summary": "Torque-free spin of two bodies (built-in workload)",
         "value": {"kind": "rigid-spin", "duration_s": 60.0, "dt_s": 0.01,

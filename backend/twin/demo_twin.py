@@ -8,7 +8,7 @@ monitors (frontend.monitors). Runs in a daemon thread; every step is logged to d
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 __all__ = ["run_demo_twin", "WARMUP_S", "TWIN_S"]
@@ -32,7 +32,7 @@ def _telemetry_span_ns(services: Any, satellite: str) -> tuple[int, int] | None:
 
 def _log(services: Any, text: str) -> None:
     with (services.settings.data_dir / "twin.log").open("a") as log:
-        log.write(f"{datetime.now(timezone.utc).isoformat()} {text}\n")
+        log.write(f"{datetime.now(UTC).isoformat()} {text}\n")
 
 
 def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, stop: Any) -> Any:
@@ -48,8 +48,8 @@ def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, s
         stop.wait(POLL_S)
     else:
         return None
-    align = datetime.fromtimestamp((span[0] + WARMUP_S * 1e9) / 1e9, tz=timezone.utc)
-    epoch = datetime.fromtimestamp(span[0] / 1e9, tz=timezone.utc)  # the emulator flies from its first packet
+    align = datetime.fromtimestamp((span[0] + WARMUP_S * 1e9) / 1e9, tz=UTC)
+    epoch = datetime.fromtimestamp(span[0] / 1e9, tz=UTC)  # the emulator flies from its first packet
     body = TwinSessionCreate(satellite=satellite, dictionary=services.settings.live_dictionary,
                              scenario=scenario, align_utc=align, duration_s=TWIN_S, scenario_epoch_utc=epoch)
     session = start_session(services, body, "acs-twin serve")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import Any
 
 from sqlalchemy import select
@@ -21,7 +21,7 @@ class TwinSessionRepository:
 
     def add(self, **fields: Any) -> TwinSessionRow:
         """Insert a session row stamped now."""
-        row = TwinSessionRow(created_at=datetime.now(timezone.utc), **fields)
+        row = TwinSessionRow(created_at=datetime.now(UTC), **fields)
         with self._sessions.begin() as session:
             session.add(row)
         return row
