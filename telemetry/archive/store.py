@@ -343,6 +343,26 @@ class Archive:
         return ids
 
     # --- reading -------------------------------------------------------------------------
+    def satellites(self, exclude_apids: Sequence[int] = ()) -> list[dict[str, Any]]:
+        """Every registered satellite, by name: ``name``, ``norad_id`` and the first/last archived packet time
+        (``first_t_ns``, ``last_t_ns``; None when nothing is archived), packets of ``exclude_apids`` not counted."""
+        on = CHUNK.c.satellite_id == SAT.c.id
+        if exclude_apids:
+            on = on & CHUNK.c.apid.not_in(list(exclude_apids))
+        query = (
+            select(SAT.c.name, SAT.c.norad_id, func.min(CHUNK.c.t_start_ns), func.max(CHUNK.c.t_end_ns))
+            .select_from(SAT.outerjoin(CHUNK, on))
+            .group_by(SAT.c.id, SAT.c.name, SAT.c.norad_id)
+            .order_by(SAT.c.name)
+        )
+        with self.engine.connect() as conn:
+            rows = conn.execute(query).all()
+        return [
+            {"name": name, "norad_id": norad, "first_t_ns": None if t0 is None else int(t0),
+             "last_t_ns": None if t1 is None else int(t1)}
+            for name, norad, t0, t1 in rows
+        ]
+
     def parameters(self, satellite: str) -> dict[str, int]:
         """Archived parameter names of ``satellite`` with their APID."""
         sat_id = self._known_satellite(satellite)
