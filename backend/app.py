@@ -22,10 +22,11 @@ Errors are JSON `{"message", "field", "status"}`."""
 
 
 def _routers() -> list:
-    from backend.routes import alarms, health, live, parameters, passes, simulations, telemetry, tokens, twin
+    from backend.routes import (alarms, health, live, parameters, passes, satellites, simulations, telemetry, tokens,
+                                twin)
 
     return [health.router, tokens.router, telemetry.router, parameters.router, passes.router,
-            alarms.router, simulations.router, twin.router, live.router]
+            alarms.router, simulations.router, twin.router, live.router, satellites.router]
 
 
 def monitor_urls(settings: Settings) -> dict[str, str]:
@@ -43,11 +44,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         services.jobs.start()
         services.telemetry.start()
+        services.twins.start()  # recovers every twin from the archive in its own thread
         await services.telemetry.start_live()
         try:
             yield
         finally:
             await services.telemetry.stop_live()
+            services.twins.stop()
             services.close()
 
     app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan)

@@ -17,6 +17,7 @@ from backend.core.token_repository import TokenRepository
 from backend.twin.session_repository import TwinSessionRepository
 from backend.core.settings import Settings
 from backend.ingest.telemetry_gateway import TelemetryGateway
+from backend.twin.live import LiveTwins
 
 __all__ = ["Services", "build_services"]
 
@@ -36,6 +37,7 @@ class Services:
     hub: LiveHub
     telemetry: TelemetryGateway
     twin_sessions: TwinSessionRepository
+    twins: LiveTwins
 
     def close(self) -> None:
         """Stop jobs and the telemetry side, dispose of the engine."""
@@ -52,8 +54,11 @@ def build_services(settings: Settings) -> Services:
     sessions = make_session_factory(engine)
     tokens, job_repo = TokenRepository(sessions), JobRepository(sessions)
     hub = LiveHub(settings.ws_buffer_items)
+    telemetry = TelemetryGateway(settings, hub)
+    twins = LiveTwins(telemetry.opened_archive, hub, telemetry.dictionaries.load, telemetry.invalidate,
+                      mapping_folders=[settings.data_dir / "dictionaries"])
+    telemetry.on_commit(twins.submit)
     return Services(settings=settings, engine=engine, sessions=sessions, tokens=tokens,
                     audit=AuditRepository(sessions), job_repo=job_repo,
                     jobs=JobManager(settings, job_repo), auth=Authenticator(tokens, settings.auth_enabled),
-                    hub=hub, telemetry=TelemetryGateway(settings, hub),
-                    twin_sessions=TwinSessionRepository(sessions))
+                    hub=hub, telemetry=telemetry, twin_sessions=TwinSessionRepository(sessions), twins=twins)

@@ -15,6 +15,7 @@ import queue
 import threading
 import time
 from dataclasses import asdict
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -67,6 +68,21 @@ class TelemetryGateway:
         self._live_stats: dict[str, Any] = {}
         self.live_port: int | None = None
         self._samples = SampleCache()
+        self._committed: list[Callable[[str, str, list[Any]], None]] = []
+
+    def on_commit(self, listener: Callable[[str, str, list[Any]], None]) -> None:
+        """Call ``listener(satellite, dictionary_name, batches)`` for every upload the archive committed and every
+        live batch (the ingest process commits those within telemetry.live.ARCHIVE_INTERVAL_S); the live twins'
+        one input path."""
+        self._committed.append(listener)
+
+    def opened_archive(self) -> Any:
+        """The archive once started, else None (no 503: for background workers)."""
+        return self._archive
+
+    def invalidate(self, satellite: str, t0_ns: int, t1_ns: int) -> None:
+        """Forget cached sample answers of ``satellite`` touching [t0_ns, t1_ns] (derived parameters archived)."""
+        self._samples.invalidate(satellite, t0_ns, t1_ns)
 
     def components(self) -> dict[str, bool]:
         """Which optional modules are importable in this build."""
@@ -144,6 +160,8 @@ class TelemetryGateway:
                 self._samples.mark_live(satellite, int(payload.t_utc_ns.min()))
             self._invalidate_batches(satellite, [payload])
             self._publish(satellite, [payload], 0)
+            for listener in self._committed:
+                listener(satellite, self._settings.live_dictionary, [payload])
 
     async def stop_live(self) -> None:
         """Stop the ingest process (it archives what is pending first) and the relay thread."""
@@ -175,7 +193,7 @@ class TelemetryGateway:
 
         dictionary = self.dictionaries.load(dictionary_name)
         decoded = decode_stream(data, dictionary, source=source)
-        return self._archive_and_publish(satellite, decoded, dictionary, source, uploaded_by)
+        return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
 
     def ingest_ground_file(self, satellite: str, data: bytes, kind: str, dictionary_name: str,
                            source: str, uploaded_by: str) -> dict[str, Any]:
@@ -186,17 +204,20 @@ class TelemetryGateway:
         dictionary = self.dictionaries.load(dictionary_name)
         read = ground_files.read_ground_csv if kind == "csv" else ground_files.read_ground_jsonl
         decoded = read(data, dictionary, source=source)
-        return self._archive_and_publish(satellite, decoded, dictionary, source, uploaded_by)
+        return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
 
-    def _archive_and_publish(self, satellite: str, decoded: Any, dictionary: Any, source: str,
+    def _archive_and_publish(self, satellite: str, decoded: Any, dictionary_name: str, source: str,
                              uploaded_by: str) -> dict[str, Any]:
         from telemetry.limits import dictionary_limits
 
+        dictionary = self.dictionaries.load(dictionary_name)
         result = self.archive.ingest_decoded(satellite, decoded, uploaded_by=uploaded_by,
                                              limits=dictionary_limits(dictionary))
         self._invalidate_batches(satellite, decoded.batches)
         if not result.duplicate_upload:
             self._publish(satellite, decoded.batches, result.alarm_events)
+            for listener in self._committed:
+                listener(satellite, dictionary_name, decoded.batches)
         return {"satellite": satellite, "dictionary": dictionary_name_of(dictionary),
                 "archive": result.as_report(), "decoding": decoded.report.to_dict()}
 

@@ -30,6 +30,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,6 +38,7 @@ import numpy as np
 from sim_core import quaternion
 from sim_core.scenario import Scenario
 from telemetry.attitude_mapping import (
+    SHIPPED_MAPPINGS,
     AttitudeMapping,
     actual_attitude,
     mapping_for_parameters,
@@ -90,13 +92,13 @@ RESIDUAL_PARAMETERS = residual_names(4)
 
 def residual_limits(n_wheels: int) -> dict[str, LimitSet]:
     """Yellow/red limits of the residual parameters (yellow = the forced re-sync level, red = ten times it)."""
-    def band(limit: float, low: bool) -> LimitSet:
-        lo = -limit if low else -np.inf
-        return LimitSet(lo * RED_FACTOR if low else -np.inf, lo, limit, limit * RED_FACTOR)
+    def band(limit: float, signed: bool) -> LimitSet:
+        low = -limit if signed else -np.inf  # an angle is ≥ 0: no low limit
+        return LimitSet(yellow_low=low, yellow_high=limit, red_low=low * RED_FACTOR, red_high=limit * RED_FACTOR)
 
     names = residual_names(n_wheels)
     limits = [ATTITUDE_LIMIT_ARCSEC] + [RATE_LIMIT_RAD_S] * 3 + [WHEEL_LIMIT_RAD_S] * n_wheels
-    return {n: band(lim, low=i > 0) for i, (n, lim) in enumerate(zip(names, limits))}
+    return {n: band(lim, signed=i > 0) for i, (n, lim) in enumerate(zip(names, limits))}
 
 
 @dataclass
@@ -430,16 +432,17 @@ class LiveTwin:
 class LiveTwins:
     """Every satellite's live twin, run by one worker thread off the ingest and request paths.
 
-    ``archive`` is a callable giving the telemetry.archive.Archive (None while not open), ``publish(topic, data)``
-    the hub's publish, ``on_archived(satellite, t0_ns, t1_ns)`` the sample cache's invalidation,
-    ``dictionary(name)`` the catalogue's loader.
+    ``archive`` is a callable giving the telemetry.archive.Archive (None while not open), ``hub`` the live hub
+    (``publish``, ``wants_any``), ``dictionary(name)`` the catalogue's loader, ``on_archived(satellite, t0_ns,
+    t1_ns)`` the sample cache's invalidation; mappings are looked up in ``mapping_folders`` before the shipped ones.
     """
 
-    def __init__(self, archive: Callable[[], Any], publish: Callable[[str, Any], None],
-                 dictionary: Callable[[str], Any], on_archived: Callable[[str, int, int], None] | None = None,
-                 clock: Callable[[], float] = time.time) -> None:
-        self._archive, self._publish, self._dictionary = archive, publish, dictionary
+    def __init__(self, archive: Callable[[], Any], hub: Any, dictionary: Callable[[str], Any],
+                 on_archived: Callable[[str, int, int], None] | None = None,
+                 mapping_folders: Sequence[Path] = (), clock: Callable[[], float] = time.time) -> None:
+        self._archive, self._hub, self._dictionary = archive, hub, dictionary
         self._on_archived, self._clock = on_archived, clock
+        self._folders = [*mapping_folders, SHIPPED_MAPPINGS]
         self._twins: dict[str, LiveTwin] = {}
         self._models: dict[str, tuple[str, int | None]] = {}
         self._inbox: queue.Queue = queue.Queue()
@@ -520,7 +523,7 @@ class LiveTwins:
         twin = self._twins.get(satellite)
         if twin is not None and twin.mapping.dictionary == dictionary_name:
             return twin
-        mapping = shipped_mapping(dictionary_name)
+        mapping = next((m for f in self._folders if (m := shipped_mapping(dictionary_name, f)) is not None), None)
         if mapping is None:
             return twin
         mapping.check(self._dictionary(dictionary_name))
@@ -560,13 +563,13 @@ class LiveTwins:
         if self._clock() - self._flushed_at.get(satellite, 0.0) >= ARCHIVE_PERIOD_S:
             self._flush(satellite)
         self._stale_published.discard(satellite)
-        self._publish("twin", twin.public(self._clock()))
+        self._hub.publish("twin", twin.public(self._clock()))
 
     def _publish_rows(self, satellite: str, rows: dict[str, np.ndarray]) -> None:
         t = rows["t_utc_ns"].tolist()
         for name, values in rows.items():
-            if name != "t_utc_ns":
-                self._publish(f"parameters/{name}", {"satellite": satellite, "t_utc_ns": t, "values": values.tolist()})
+            if name != "t_utc_ns" and self._hub.wants_any(f"parameters/{name}"):
+                self._hub.publish(f"parameters/{name}", {"satellite": satellite, "t_utc_ns": t, "values": values.tolist()})
 
     def _tick(self) -> None:
         """Publish the transition to stale once per satellite; archive residuals that waited long enough."""
@@ -575,7 +578,7 @@ class LiveTwins:
             public = twin.public(now)
             if public["stale"] and public["telemetry_utc"] and satellite not in self._stale_published:
                 self._stale_published.add(satellite)
-                self._publish("twin", public)
+                self._hub.publish("twin", public)
             if self._pending.get(satellite) and now - self._flushed_at.get(satellite, 0.0) >= ARCHIVE_PERIOD_S:
                 self._flush(satellite)
 
@@ -615,7 +618,8 @@ class LiveTwins:
         for row in archive.satellites(exclude_apids=(TWIN_APID,)):
             if row["last_t_ns"] is None or row["name"] in self._twins:
                 continue
-            mapping = mapping_for_parameters(set(archive.parameters(row["name"])))
+            archived = set(archive.parameters(row["name"]))
+            mapping = next((m for f in self._folders if (m := mapping_for_parameters(archived, f)) is not None), None)
             if mapping is None:
                 continue
             t1 = int(row["last_t_ns"])
