@@ -29,6 +29,7 @@ __all__ = [
     "VariantSpec",
     "Scenario",
     "apply_overrides",
+    "shifted_guidance",
 ]
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
@@ -309,3 +310,30 @@ def apply_overrides(scenario: Scenario, assignments: list[str]) -> Scenario:
             else:
                 node = node[key]
     return Scenario.model_validate(data)
+
+
+def shifted_guidance(guidance: dict, elapsed_s: float) -> dict:
+    """The guidance programme as seen from elapsed_s after its epoch (seed 001 route segments trimmed)."""
+    g = dict(guidance)
+    if g["kind"] == "inertial":
+        steps = sorted(g["inertial_steps"], key=lambda step: step[0])
+        current = [q for t, q in steps if t <= elapsed_s][-1:] or [steps[0][1]]
+        g["inertial_steps"] = [(0.0, current[0])] + [(t - elapsed_s, q) for t, q in steps if t > elapsed_s]
+        return g
+    if g["kind"] != "route" or g["route_start_s"] >= elapsed_s:
+        g["route_start_s"] = max(g["route_start_s"] - elapsed_s, 0.0) if g["kind"] == "route" else 0.0
+        return g
+    into, route = elapsed_s - g["route_start_s"], []
+    for seg in g["route"]:
+        if route:
+            route.append(seg)
+        elif into >= seg["duration_s"]:
+            into -= seg["duration_s"]
+        elif seg["kind"] == "turn":
+            raise ValueError("start: inside or at the start of a scheduled turn; align during a hold")
+        else:
+            route.append({**seg, "duration_s": seg["duration_s"] - into})
+    if not route:  # past the end of the route: its final hold goes on
+        route = [{**g["route"][-1], "duration_s": 1.0}]
+    g["route"], g["route_start_s"] = route, 0.0
+    return g

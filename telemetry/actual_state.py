@@ -20,7 +20,7 @@ import numpy as np
 
 from sim_core import frames, orbit, quaternion, sensors
 from sim_core.engine import simulate
-from sim_core.scenario import FaultSpec, Scenario, VariantSpec
+from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
 from telemetry.ccsds import NS_PER_S
 from telemetry.dictionary import parse_utc_ns
 from telemetry.ingest_report import SampleBatch
@@ -165,33 +165,6 @@ def fit_circular_orbit(t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: n
     }
 
 
-def _shifted_route(guidance: dict, elapsed_s: float) -> dict:
-    """The guidance programme as seen from elapsed_s after its epoch (seed 001 route segments trimmed)."""
-    g = dict(guidance)
-    if g["kind"] == "inertial":
-        steps = sorted(g["inertial_steps"], key=lambda step: step[0])
-        current = [q for t, q in steps if t <= elapsed_s][-1:] or [steps[0][1]]
-        g["inertial_steps"] = [(0.0, current[0])] + [(t - elapsed_s, q) for t, q in steps if t > elapsed_s]
-        return g
-    if g["kind"] != "route" or g["route_start_s"] >= elapsed_s:
-        g["route_start_s"] = max(g["route_start_s"] - elapsed_s, 0.0) if g["kind"] == "route" else 0.0
-        return g
-    into, route = elapsed_s - g["route_start_s"], []
-    for seg in g["route"]:
-        if route:
-            route.append(seg)
-        elif into >= seg["duration_s"]:
-            into -= seg["duration_s"]
-        elif seg["kind"] == "turn":
-            raise ValueError("t_align_utc_ns: inside or at the start of a scheduled turn; align during a hold")
-        else:
-            route.append({**seg, "duration_s": seg["duration_s"] - into})
-    if not route:  # past the end of the route: its final hold goes on
-        route = [{**g["route"][-1], "duration_s": 1.0}]
-    g["route"], g["route_start_s"] = route, 0.0
-    return g
-
-
 def aligned_scenario(
     base: Scenario,
     track: ActualTrack,
@@ -219,7 +192,7 @@ def aligned_scenario(
     data["initial_omega_b_rad_s"] = track.series["omega_est_b_rad_s"][k].tolist()
     for wheel, speed in zip(data["spacecraft"]["cluster"]["wheels"], track.series["wheel_speed_rad_s"][k]):
         wheel["initial_speed_rpm"] = float(speed) * 30.0 / np.pi
-    data["guidance"] = _shifted_route(data["guidance"], elapsed_s)
+    data["guidance"] = shifted_guidance(data["guidance"], elapsed_s)
     data["duration_s"] = duration_s
     data["variants"] = [VariantSpec(name="twin", faults=list(faults)).model_dump()]
     return Scenario.model_validate(data)

@@ -1,0 +1,560 @@
+"""Automatic fault diagnosis from ACS housekeeping: detect, prune, estimate, rank (seed 000 §7 in-flight support).
+
+Pipeline (DESIGN.md "Diagnosis"), pure numerics on telemetered arrays (:class:`Observations`):
+
+1. **Residual channels.** Per wheel p, the momentum balance of seed 000 eq (1) row 3,
+   J_r (Ω̇_p + a_pᵗ ω̇) = m_p − m^f_p, integrated between telemetry samples with the *telemetered*
+   command (held at the control period T_u, the unseen commands between samples interpolated and their
+   spread counted as process noise), against the tachometer speed rounded to its quantum. Per gyro axis,
+   the gyro rate against the rate of the telemetered attitude quaternions. Star-tracker validity. Per
+   magnetometer axis, the field against the scenario's field model (when the telemetry carries it).
+2. **Detection** (:func:`sim_core.fault_detection.window_alarm`): quantisation-bounded window tests on
+   the open-loop residuals, false-alarm rate stated by :func:`detection_rate_per_day`; the alarm bounds
+   the onset search.
+3. **Pruning.** Wheels whose momentum balance never leaves PRUNE_SIGMA of what quantisation and noise
+   explain inside the analysis window carry no fault hypothesis (pairs are built from survivors only).
+4. **Estimation.** For every surviving hypothesis the exact Gaussian likelihood of its channel
+   (:func:`sim_core.fault_detection.level_loglik`) is profiled over the onset (every sample of the
+   search window) and the magnitude (the likelihood is quadratic in a remaining gain, an added friction
+   torque or a bias, so three evaluations give its maximum exactly).
+5. **Ranking.** Evidence = log mean over onsets of the profiled likelihood (uniform onset prior, so
+   searching many onsets is paid for) − ½ ln n per magnitude parameter (BIC), relative to "none";
+   posterior probabilities with equal priors are the scores. Wheel channels are independent given the
+   telemetered commands, so a pair's evidence is the sum of its members'.
+6. **Replay** (:func:`replay`): the top hypotheses are flown as variants of one twin batch from a
+   telemetry instant before the onset, and the attitude residual of each is reported as evidence.
+
+"No fault" is a hypothesis; the top score is a probability that says how far the data support it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+
+from sim_core import fault_detection as fd
+from sim_core.scenario import Scenario
+from sim_core.twin_replay import fault_specs, replay_scores
+
+__all__ = ["Observations", "WheelModel", "Hypothesis", "Diagnosis", "diagnose", "WHEEL_FAULTS", "SENSOR_FAULTS",
+           "detection_rate_per_day", "MIN_SAMPLES", "wheel_model"]
+
+WHEEL_FAULTS = ("failure", "gain_loss", "friction", "stuck", "speed_bias")
+SENSOR_FAULTS = ("gyro_bias", "star_tracker_outage", "magnetometer_bias")
+MIN_SAMPLES = 60  # a minute at 1 Hz: shorter telemetry cannot separate a fault from quantisation
+UNMODELLED_TORQUE_NM = 2e-6  # σ of wheel torque the balance does not model (bearing ripple, drag): 10 % of a GG command
+PRE_ONSET_S = 300.0  # nominal data kept before the onset search window
+POST_ALARM_S = 300.0  # data after the alarm used to identify the fault
+ONSET_MARGIN_S = 60.0  # the onset may precede the start of the alarming window by this much
+PRUNE_SIGMA = 3.0  # a wheel whose balance stays within 3σ (+ quantisation) is not suspected
+INVALID_PROBABILITY = 1e-4  # a healthy star tracker's invalid samples (Sun or Moon in the field of view)
+MAX_REMAINING_GAIN = 0.95  # a gain loss smaller than 5 % is "none" at this resolution
+MAX_LISTED = 12
+REPLAYED = 3  # wheel hypotheses flown in the twin replay
+REPLAY_ONSETS = 13  # onsets tried per replayed hypothesis
+REPLAY_LEAD_S = 60.0  # the twin starts this long before the earliest onset tried
+KINEMATIC_RATE_FLOOR_RAD_S = 2e-7  # float32 quaternion components (6e-8) differenced over 1 s, with margin
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Telemetered ACS housekeeping at times ``t_s`` after ``epoch_unix_s`` (engine frames, SI units).
+
+    Required: estimated attitude, rates, wheel speeds and wheel torque commands; optional: measured
+    (star-tracker) attitude, gyro rates, magnetometer field (NaN rows = no sample).
+    """
+
+    t_s: np.ndarray
+    epoch_unix_s: float
+    q_est_ib: np.ndarray
+    omega_b_rad_s: np.ndarray
+    wheel_speed_rad_s: np.ndarray
+    wheel_torque_cmd_nm: np.ndarray
+    speed_quantum_rad_s: float
+    torque_quantum_nm: float = 0.0
+    q_st_ib: np.ndarray | None = None
+    omega_gyro_b_rad_s: np.ndarray | None = None
+    b_mag_b_t: np.ndarray | None = None
+    b_model_b_t: np.ndarray | None = None  # the field model at the telemetered attitude, same layout
+
+    def __post_init__(self) -> None:
+        n = self.t_s.shape[0]
+        if n < MIN_SAMPLES:
+            raise ValueError(f"telemetry: {n} samples; the diagnosis needs at least {MIN_SAMPLES}")
+        if np.any(np.diff(self.t_s) <= 0.0):
+            raise ValueError("telemetry: sample times must increase")
+        for name in ("q_est_ib", "omega_b_rad_s", "wheel_speed_rad_s", "wheel_torque_cmd_nm"):
+            a = getattr(self, name)
+            if a.shape[0] != n:
+                raise ValueError(f"telemetry.{name}: {a.shape[0]} rows for {n} sample times")
+        if self.wheel_speed_rad_s.shape != self.wheel_torque_cmd_nm.shape:
+            raise ValueError("telemetry: wheel speeds and torque commands cover different wheels")
+        if not self.speed_quantum_rad_s > 0.0:
+            raise ValueError("telemetry.speed_quantum_rad_s: the tachometer resolution must be positive")
+
+    @property
+    def n_wheels(self) -> int:
+        """Number of wheels telemetered."""
+        return int(self.wheel_speed_rad_s.shape[1])
+
+
+@dataclass(frozen=True)
+class WheelModel:
+    """What the momentum balance needs of the cluster: spin axes (3, n_w), rotor inertia, torque limit, dry friction."""
+
+    axes_b: np.ndarray
+    inertia_kg_m2: np.ndarray
+    max_torque_nm: np.ndarray
+    coulomb_nm: np.ndarray
+    control_dt_s: float
+
+
+def wheel_model(axes_b: np.ndarray, inertia_kg_m2: np.ndarray, max_torque_nm: np.ndarray, coulomb_nm: np.ndarray,
+                control_dt_s: float) -> WheelModel:
+    """A checked :class:`WheelModel` (arrays as float64)."""
+    axes = np.asarray(axes_b, dtype=float)
+    jr = np.asarray(inertia_kg_m2, dtype=float)
+    if axes.ndim != 2 or axes.shape[0] != 3 or axes.shape[1] != jr.shape[0]:
+        raise ValueError("wheel model: axes_b must be (3, n_wheels) with one inertia per wheel")
+    return WheelModel(axes, jr, np.asarray(max_torque_nm, dtype=float), np.asarray(coulomb_nm, dtype=float),
+                      float(control_dt_s))
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """One ranked explanation: fault name(s), wheel number(s) (1-based), onset, magnitude, score (posterior)."""
+
+    fault: str
+    wheel: int | list[int] | None
+    onset_s: float | None
+    onset_sigma_s: float | None
+    magnitude: float | list[float | None] | None
+    log_evidence: float
+    score: float = 0.0
+
+
+@dataclass
+class Diagnosis:
+    """The result: ranked hypotheses (best first), the detection and what was pruned."""
+
+    hypotheses: list[Hypothesis]
+    detected: bool
+    alarm_s: float | None
+    alarm_channel: str | None
+    false_alarms_per_day: float
+    window_s: tuple[float, float]
+    suspected_wheels: list[int] = field(default_factory=list)
+    untestable: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def confidence(self) -> float:
+        """Posterior probability of the top hypothesis."""
+        return self.hypotheses[0].score
+
+
+@dataclass
+class _Channel:
+    """One residual channel ready for the likelihood: signal, nominal drift, noise and the fault templates."""
+
+    name: str
+    y: np.ndarray
+    drift: np.ndarray
+    q_var: np.ndarray
+    r_var: np.ndarray
+    bound: float
+    templates: dict[str, np.ndarray] = field(default_factory=dict)  # per-interval effect of a unit magnitude
+
+
+def _wheel_channels(obs: Observations, wm: WheelModel, sigma_torque_nm: float) -> list[_Channel]:
+    """Momentum balance of every wheel (seed 000 eq 1 row 3) with the telemetered commands as input."""
+    t = obs.t_s
+    dt = np.diff(t)
+    sub = np.maximum(1.0, np.round(dt / wm.control_dt_s))  # commands held per telemetry interval
+    d_omega = np.diff(obs.omega_b_rad_s, axis=0)
+    out = []
+    r_var = np.full(t.shape[0], obs.speed_quantum_rad_s**2 / 12.0)
+    for p in range(obs.n_wheels):
+        u = np.clip(np.nan_to_num(obs.wheel_torque_cmd_nm[:, p]), -wm.max_torque_nm[p], wm.max_torque_nm[p])
+        du = np.diff(u)
+        u_mean = u[:-1] + du * (sub - 1.0) / (2.0 * sub)  # unseen commands on the line between samples
+        u_var = du**2 * (sub - 1.0) / sub**2 / 12.0 + obs.torque_quantum_nm**2 / 12.0 / sub + sigma_torque_nm**2
+        y = obs.wheel_speed_rad_s[:, p]
+        spin = np.sign(np.nan_to_num(y[:-1]))
+        jr = wm.inertia_kg_m2[p]
+        coupling = np.nan_to_num(d_omega @ wm.axes_b[:, p])
+        drift = dt * (u_mean - wm.coulomb_nm[p] * spin) / jr - coupling
+        templates = {"motor": dt * u_mean / jr, "friction": -dt * spin / jr, "coupling": coupling}
+        out.append(_Channel(f"wheel {p + 1}", y, drift, (dt / jr) ** 2 * u_var, r_var, obs.speed_quantum_rad_s,
+                            templates))
+    return out
+
+
+def _robust_var(x: np.ndarray) -> float:
+    """Variance from the median absolute deviation (1.4826 MAD)² of the finite values."""
+    x = x[np.isfinite(x)]
+    if x.size < 3:
+        return 0.0
+    return float((1.4826 * np.median(np.abs(x - np.median(x)))) ** 2)
+
+
+def _kinematic_rates(q: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Mean body rate between samples from Λ̇ = ½ Λ∘ω: 2 vec(Λ_k* ∘ Λ_{k+1}) / Δt (first order in the angle)."""
+    qa, qb = q[:-1], q[1:]
+    w0 = qa[:, 0:1] * qb[:, 1:] - qb[:, 0:1] * qa[:, 1:] - np.cross(qa[:, 1:], qb[:, 1:])
+    scalar = np.sum(qa * qb, axis=1, keepdims=True)
+    return 2.0 * np.sign(scalar) * w0 / np.diff(t)[:, None]
+
+
+def _gyro_channels(obs: Observations) -> list[_Channel]:
+    """Gyro (or estimated) rate minus the rate of the attitude quaternions, per axis: a gyro bias is a step."""
+    rates = obs.omega_gyro_b_rad_s if obs.omega_gyro_b_rad_s is not None else obs.omega_b_rad_s
+    q = obs.q_st_ib if obs.q_st_ib is not None else obs.q_est_ib
+    kin = _kinematic_rates(q, obs.t_s)
+    mean_rate = 0.5 * (rates[1:] + rates[:-1])
+    turn = np.abs(np.diff(rates, n=2, axis=0))  # the trapezoid's error grows with the change of the rate change
+    turn = np.concatenate([turn[:1], turn], axis=0)
+    out = []
+    for axis in range(3):
+        y = mean_rate[:, axis] - kin[:, axis]
+        r0 = max(_robust_var(np.diff(y)) / 2.0, KINEMATIC_RATE_FLOOR_RAD_S**2)
+        r_var = r0 + (0.5 * turn[:, axis]) ** 2
+        n = y.shape[0]
+        out.append(_Channel(f"gyro {'xyz'[axis]}", y, np.zeros(n - 1), np.full(n - 1, 1e-4 * r0), r_var, 0.0))
+    return out
+
+
+def _magnetometer_channels(obs: Observations) -> list[_Channel]:
+    """Measured minus modelled field per axis; the model's slow mismatch is a random walk, a bias a step."""
+    y_all = obs.b_mag_b_t - obs.b_model_b_t  # type: ignore[operator]
+    out = []
+    for axis in range(3):
+        y = y_all[:, axis]
+        q_var = max(_robust_var(np.diff(y)), 1e-22)
+        n = y.shape[0]
+        out.append(_Channel(f"magnetometer {'xyz'[axis]}", y, np.zeros(n - 1), np.full(n - 1, 0.5 * q_var),
+                            np.full(n, 0.25 * q_var), 0.0))
+    return out
+
+
+def _star_tracker_valid(q: np.ndarray) -> np.ndarray:
+    """Valid star-tracker samples: finite, unit, and not a frozen repeat of the previous sample."""
+    norm = np.linalg.norm(q, axis=1)
+    ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 1e-3)
+    frozen = np.zeros(q.shape[0], dtype=bool)
+    frozen[1:] = np.all(q[1:] == q[:-1], axis=1)
+    return ok & ~frozen
+
+
+def detection_rate_per_day(n_channels: int, dt_s: float) -> float:
+    """Stated false-alarm rate of the detector over ``n_channels`` residual channels sampled every ``dt_s``."""
+    return fd.false_alarms_per_day(n_channels, dt_s)
+
+
+def _log_mean_exp(x: np.ndarray) -> float:
+    m = float(np.max(x))
+    return m + math.log(float(np.mean(np.exp(x - m))))
+
+
+def _onset_stats(t: np.ndarray, ll: np.ndarray) -> tuple[float, float, int]:
+    """Maximum-likelihood onset, posterior σ under a uniform prior, and its index."""
+    w = np.exp(ll - ll.max())
+    w /= w.sum()
+    mean = float(w @ t)
+    return float(t[int(np.argmax(ll))]), float(np.sqrt(max(w @ (t - mean) ** 2, 0.0))), int(np.argmax(ll))
+
+
+@dataclass(frozen=True)
+class _Fit:
+    """A single-channel hypothesis fitted over the onset grid."""
+
+    fault: str
+    channel: int
+    delta: float  # log evidence against the channel's nominal model (onset-marginal, BIC for the magnitude)
+    onset_s: float
+    onset_sigma_s: float
+    magnitude: float | None
+
+
+def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Profiled log-likelihood over onset indices (and magnitude if ``quadratic``): (ll (G,), θ* (G,))."""
+    n = ch.y.shape[0]
+    g = onsets.shape[0]
+    after = (np.arange(n - 1)[None, :] >= onsets[:, None]).astype(float)  # interval k → k+1 after onset
+    after_sample = (np.arange(n)[None, :] >= onsets[:, None]).astype(float)
+    zero_off = np.zeros((g, n))
+    no_reset = np.zeros((g, n), dtype=np.bool_)
+    base = np.broadcast_to(ch.drift, (g, n - 1))
+
+    def run(drift: np.ndarray, offset: np.ndarray, reset: np.ndarray) -> np.ndarray:
+        return fd.level_loglik(ch.y, np.ascontiguousarray(drift), ch.q_var, ch.r_var, np.ascontiguousarray(offset),
+                               np.ascontiguousarray(reset))
+
+    if kind == "stuck":
+        reset = after_sample.astype(np.bool_)
+        drift = base * (1.0 - after) - 0.0 * after
+        return run(drift, zero_off, reset), np.full(g, np.nan)
+    if kind in ("failure", "gain_loss"):
+        lost = base - after * ch.templates["motor"]  # motor delivers nothing after the onset
+
+        def at(theta: float) -> np.ndarray:
+            return run(lost + theta * after * ch.templates["motor"], zero_off, no_reset)
+        if not quadratic:
+            return at(0.0), np.full(g, np.nan)
+        return _quadratic_max(at, 0.0, MAX_REMAINING_GAIN)
+    if kind == "friction":
+        def at(theta: float) -> np.ndarray:
+            return run(base + theta * after * ch.templates["friction"], zero_off, no_reset)
+        return _quadratic_max(at, 0.0, np.inf, scale=1e-3)
+
+    def at_bias(theta: float) -> np.ndarray:  # speed, gyro or magnetometer bias: a step in the measurement
+        return run(base, theta * after_sample, no_reset)
+    return _quadratic_max(at_bias, -np.inf, np.inf, scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0)
+
+
+def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi]."""
+    if np.isfinite(hi) and np.isfinite(lo):
+        p0, p1, p2 = lo, 0.5 * (lo + hi), hi
+    else:
+        p0, p1, p2 = 0.0, scale, -scale if not np.isfinite(lo) else 2.0 * scale
+    f0, f1, f2 = at(p0), at(p1), at(p2)
+    xs = np.array([p0, p1, p2])
+    vand = np.vander(xs, 3)  # rows [θ², θ, 1]
+    coef = np.linalg.solve(vand, np.stack([f0, f1, f2]))  # (3, G)
+    a, b, c = coef
+    with np.errstate(divide="ignore", invalid="ignore"):
+        theta = np.where(a < 0.0, -b / (2.0 * a), np.where(b > 0.0, hi, lo))
+    theta = np.clip(theta, lo, hi)
+    theta = np.where(np.isfinite(theta), theta, p0)
+    ll = a * theta**2 + b * theta + c
+    return ll, theta
+
+
+def _fit(ch: _Channel, index: int, kind: str, onsets: np.ndarray, t_s: np.ndarray, nominal: float,
+         n_params: int) -> _Fit:
+    """Onset-marginal, magnitude-penalised log evidence of one fault in one channel."""
+    quadratic = kind not in ("failure", "stuck")
+    ll, theta = _profile(ch, onsets, kind, quadratic)
+    onset, sigma, best = _onset_stats(t_s[onsets], ll)
+    penalty = 0.5 * n_params * math.log(max(ch.y.shape[0] - int(onsets[best]), 2))
+    magnitude = None if np.isnan(theta[best]) else float(theta[best])
+    return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude)
+
+
+def _window(alarm: fd.Alarm | None, n: int, dt: float) -> tuple[int, int, int]:
+    """Analysis window [start, stop) and the first onset index searched."""
+    if alarm is None:
+        return 0, n, 1
+    first = max(1, alarm.index - alarm.window - int(ONSET_MARGIN_S / dt))
+    return max(0, first - int(PRE_ONSET_S / dt)), min(n, alarm.index + int(POST_ALARM_S / dt) + 1), first
+
+
+def _cut(ch: _Channel, a: int, b: int) -> _Channel:
+    """The channel restricted to samples [a, b)."""
+    return _Channel(ch.name, ch.y[a:b], ch.drift[a:b - 1], ch.q_var[a:b - 1], ch.r_var[a:b], ch.bound,
+                    {k: v[a:b - 1] for k, v in ch.templates.items()})
+
+
+def _nominal(ch: _Channel) -> float:
+    n = ch.y.shape[0]
+    return float(fd.level_loglik(ch.y, ch.drift[None, :].copy(), ch.q_var, ch.r_var, np.zeros((1, n)),
+                                 np.zeros((1, n), dtype=np.bool_))[0])
+
+
+def _suspected(ch: _Channel) -> bool:
+    """Cheap pruning: does the open-loop balance leave PRUNE_SIGMA of quantisation + noise anywhere in the window?"""
+    r = fd.open_loop_residual(ch.y, ch.drift)[None, :]
+    dt = 1.0
+    return fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt, n_sigma=PRUNE_SIGMA,
+                           windows_s=tuple(float(w) for w in (1, 3, 10, 30, 100, 300))) is not None
+
+
+def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None,
+             sigma_torque_nm: float = UNMODELLED_TORQUE_NM, flyer: Callable[[Scenario], object] | None = None
+             ) -> Diagnosis:
+    """Detect, prune, fit and rank the fault hypotheses of the spacecraft on ``obs`` (module docstring);
+    with ``scenario``, the top wheel hypotheses are replayed in the twin (``flyer``: how a batch is flown)."""
+    if wm.axes_b.shape[1] != obs.n_wheels:
+        raise ValueError(f"telemetry: {obs.n_wheels} wheels telemetered, the scenario's spacecraft has "
+                         f"{wm.axes_b.shape[1]} (telemetry from another spacecraft?)")
+    t = obs.t_s
+    dt = float(np.median(np.diff(t)))
+    wheels = _wheel_channels(obs, wm, sigma_torque_nm)
+    sensors = {"gyro_bias": _gyro_channels(obs)}
+    untestable: dict[str, str] = {}
+    if obs.b_mag_b_t is not None and obs.b_model_b_t is not None:
+        sensors["magnetometer_bias"] = _magnetometer_channels(obs)
+    else:
+        untestable["magnetometer_bias"] = "no magnetometer field (b_mag_b_t_*) or field model in the telemetry"
+    valid = _star_tracker_valid(obs.q_st_ib) if obs.q_st_ib is not None else None
+    if valid is None:
+        untestable["star_tracker_outage"] = "no star-tracker quaternion (q_st_ib_*) in the telemetry"
+
+    # detection over the whole record: continuous channels by window tests, star tracker by invalid runs
+    channels = wheels + [c for group in sensors.values() for c in group]
+    alarm = _first_alarm(channels, dt)
+    st_alarm = _star_tracker_alarm(valid)
+    if st_alarm is not None and (alarm is None or st_alarm < alarm.index):
+        alarm = fd.Alarm(-1, st_alarm, 1, float("inf"))
+    start, stop, first = _window(alarm, t.shape[0], dt)
+    stride = 1 if alarm is not None else max(1, (stop - start) // 200)
+    onsets = np.arange(first - start, stop - start - 1, stride)
+    tw = t[start:stop]
+
+    fits: list[_Fit] = []
+    suspected = []
+    for p, ch in enumerate(wheels):
+        cut = _cut(ch, start, stop)
+        if not _suspected(cut):
+            continue
+        suspected.append(p + 1)
+        nominal = _nominal(cut)
+        for kind in WHEEL_FAULTS:
+            fits.append(_fit(cut, p, kind, onsets, tw, nominal, 0 if kind in ("failure", "stuck") else 1))
+    sensor_fits = [_sensor_fit(kind, group, start, stop, onsets, tw) for kind, group in sensors.items()]
+    if valid is not None:
+        sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
+    hyps = _rank(fits, [f for f in sensor_fits if f is not None])
+    if scenario is not None and alarm is not None:
+        hyps = _replayed(hyps, obs, scenario, start, stop, flyer)
+    name = None
+    if alarm is not None:
+        name = "star tracker" if alarm.channel < 0 else channels[alarm.channel].name
+    return Diagnosis(
+        hypotheses=hyps, detected=alarm is not None, alarm_s=None if alarm is None else float(t[alarm.index]),
+        alarm_channel=name, false_alarms_per_day=detection_rate_per_day(len(channels), dt),
+        window_s=(float(t[start]), float(t[stop - 1])), suspected_wheels=suspected, untestable=untestable,
+    )
+
+
+def _first_alarm(channels: list[_Channel], dt: float) -> fd.Alarm | None:
+    """Earliest window-test alarm over all continuous channels."""
+    best = None
+    for i, ch in enumerate(channels):
+        r = fd.open_loop_residual(np.nan_to_num(ch.y, nan=0.0), ch.drift)[None, :]
+        a = fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt)
+        if a is not None and (best is None or a.index < best.index):
+            best = fd.Alarm(i, a.index, a.window, a.ratio)
+    return best
+
+
+STAR_OUTAGE_RUN = 5  # consecutive invalid samples: P = (1e-4)^5 per sample for a healthy tracker
+
+
+def _star_tracker_alarm(valid: np.ndarray | None) -> int | None:
+    """Index completing the first run of STAR_OUTAGE_RUN invalid star-tracker samples."""
+    if valid is None:
+        return None
+    bad = (~valid).astype(int)
+    run = np.convolve(bad, np.ones(STAR_OUTAGE_RUN, dtype=int), mode="valid")
+    hits = np.flatnonzero(run == STAR_OUTAGE_RUN)
+    return int(hits[0] + STAR_OUTAGE_RUN - 1) if hits.size else None
+
+
+def _sensor_fit(kind: str, group: list[_Channel], start: int, stop: int, onsets: np.ndarray,
+                tw: np.ndarray) -> _Fit | None:
+    """A bias step common in onset to the three axes of a sensor: sum of per-axis profiles."""
+    total = None
+    thetas = []
+    nominal = 0.0
+    for ch in group:
+        cut = _cut(ch, start, min(stop, ch.y.shape[0]))
+        if cut.y.shape[0] < 3:
+            return None
+        grid = onsets[onsets < cut.y.shape[0] - 1]
+        ll, theta = _profile(cut, grid, "bias", True)
+        nominal += _nominal(cut)
+        total = ll if total is None else total[: ll.shape[0]] + ll[: total.shape[0]]
+        thetas.append(theta)
+    assert total is not None
+    onset, sigma, best = _onset_stats(tw[onsets[: total.shape[0]]], total)
+    penalty = 0.5 * 3 * math.log(max(len(tw) - int(onsets[best]), 2))
+    magnitude = float(np.linalg.norm([th[best] for th in thetas]))
+    return _Fit(kind, -1, _log_mean_exp(total) - nominal - penalty, onset, sigma, magnitude)
+
+
+def _outage_fit(valid: np.ndarray, onsets: np.ndarray, tw: np.ndarray) -> _Fit:
+    """Bernoulli change point: invalid samples rare before the onset, the rule after it."""
+    eps = INVALID_PROBABILITY
+    bad = ~valid
+    ok_ll = np.where(bad, math.log(eps), math.log1p(-eps))
+    out_ll = np.where(bad, math.log1p(-eps), math.log(eps))
+    nominal = float(ok_ll.sum())
+    head = np.concatenate([[0.0], np.cumsum(ok_ll)])
+    tail = np.concatenate([np.cumsum(out_ll[::-1])[::-1], [0.0]])
+    ll = head[onsets] + tail[onsets]
+    onset, sigma, _ = _onset_stats(tw[onsets], ll)
+    return _Fit("star_tracker_outage", -1, _log_mean_exp(ll) - nominal, onset, sigma, None)
+
+
+def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, start: int, stop: int,
+              flyer: Callable[[Scenario], object] | None) -> list[Hypothesis]:
+    """Add the twin replay's evidence (commands and attitude, onset re-estimated on a common coarse-then-fine
+    grid) to the top wheel hypotheses and re-rank (:mod:`sim_core.twin_replay`)."""
+    t = obs.t_s
+    chosen = [h for h in hyps if h.onset_s is not None and fault_specs(h.fault, h.wheel, 0.0, h.magnitude)][:REPLAYED]
+    if not chosen:
+        return hyps
+    top = chosen[0]
+    half = float(np.clip(3.0 * (top.onset_sigma_s or 0.0) + 20.0, 30.0, 300.0))
+    lo, hi = float(t[start + 1]), float(t[stop - 2])
+    grid = np.unique(np.clip(top.onset_s + np.linspace(-half, half, REPLAY_ONSETS), lo, hi))
+    ll = _replay_grid(chosen, grid, obs, scenario, start, stop, flyer)
+    step = float(np.diff(grid).min(initial=2.0 * half))
+    best = grid[int(np.argmax(ll.max(axis=0)))]
+    fine = np.unique(np.clip(best + np.linspace(-step, step, REPLAY_ONSETS), lo, hi))
+    ll_fine = _replay_grid(chosen, fine, obs, scenario, start, stop, flyer)
+    taus = np.concatenate([grid, fine])
+    all_ll = np.concatenate([ll, ll_fine], axis=1)
+    updated = {}
+    for i, h in enumerate(chosen):
+        onset, sigma, _ = _onset_stats(taus, all_ll[i])
+        evidence = _log_mean_exp(ll[i])  # the coarse grid spans the onset prior; fine points refine the onset
+        updated[id(h)] = Hypothesis(h.fault, h.wheel, onset, max(sigma, float(np.diff(fine).min(initial=1.0))),
+                                    h.magnitude, h.log_evidence + evidence)
+    return _scored([updated.get(id(h), h) for h in hyps])
+
+
+def _replay_grid(chosen: list[Hypothesis], grid: np.ndarray, obs: Observations, scenario: Scenario, start: int,
+                 stop: int, flyer: Callable[[Scenario], object] | None) -> np.ndarray:
+    """Replay log-likelihood (hypotheses × onsets) relative to the no-fault variant."""
+    t = obs.t_s
+    first = max(0, min(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start))
+    reference = max(int(np.searchsorted(t, grid[0])), first + 2)
+    candidates = [(fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau))
+                  for h in chosen for tau in grid]
+    ll = replay_scores(scenario, t, obs.epoch_unix_s, obs.q_est_ib, obs.omega_b_rad_s, obs.wheel_speed_rad_s,
+                       obs.wheel_torque_cmd_nm, candidates, first, stop, reference, obs.torque_quantum_nm, flyer)
+    return (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
+
+
+def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:
+    """Posterior probabilities (equal priors) from the log evidences, best first."""
+    ev = np.array([h.log_evidence for h in hyps])
+    post = np.exp(ev - ev.max())
+    post /= post.sum()
+    return sorted((Hypothesis(h.fault, h.wheel, h.onset_s, h.onset_sigma_s, h.magnitude, h.log_evidence, float(s))
+                   for h, s in zip(hyps, post)), key=lambda h: -h.log_evidence)
+
+
+def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit]) -> list[Hypothesis]:
+    """Singles, pairs of wheel faults on different wheels, sensors and "none", scored by posterior probability."""
+    hyps = [Hypothesis("none", None, None, None, None, 0.0)]
+    for f in wheel_fits:
+        hyps.append(Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta))
+    for f in sensor_fits:
+        hyps.append(Hypothesis(f.fault, None, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta))
+    by_wheel: dict[int, list[_Fit]] = {}
+    for f in wheel_fits:
+        by_wheel.setdefault(f.channel, []).append(f)
+    for p, q in combinations(sorted(by_wheel), 2):
+        for a in by_wheel[p]:
+            for b in by_wheel[q]:
+                hyps.append(Hypothesis(f"{a.fault}+{b.fault}", [p + 1, q + 1], min(a.onset_s, b.onset_s),
+                                       max(a.onset_sigma_s, b.onset_sigma_s), [a.magnitude, b.magnitude],
+                                       a.delta + b.delta))
+    return _scored(hyps)[:MAX_LISTED]
