@@ -40,8 +40,18 @@ from sim_core import fault_detection as fd
 from sim_core.scenario import Scenario
 from sim_core.twin_replay import fault_specs, replay_scores
 
-__all__ = ["Observations", "WheelModel", "Hypothesis", "Diagnosis", "diagnose", "WHEEL_FAULTS", "SENSOR_FAULTS",
-           "detection_rate_per_day", "MIN_SAMPLES", "wheel_model"]
+__all__ = [
+    "MIN_SAMPLES",
+    "SENSOR_FAULTS",
+    "WHEEL_FAULTS",
+    "Diagnosis",
+    "Hypothesis",
+    "Observations",
+    "WheelModel",
+    "detection_rate_per_day",
+    "diagnose",
+    "wheel_model",
+]
 
 WHEEL_FAULTS = ("failure", "gain_loss", "friction", "stuck", "speed_bias")
 SENSOR_FAULTS = ("gyro_bias", "star_tracker_outage", "magnetometer_bias")
@@ -77,6 +87,7 @@ class Observations:
     speed_quantum_rad_s: float
     torque_quantum_nm: float = 0.0
     q_st_ib: np.ndarray | None = None
+    q_prog_ib: np.ndarray | None = None
     omega_gyro_b_rad_s: np.ndarray | None = None
     b_mag_b_t: np.ndarray | None = None
     b_model_b_t: np.ndarray | None = None  # the field model at the telemetered attitude, same layout
@@ -503,7 +514,10 @@ def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, sta
     half = float(np.clip(3.0 * (top.onset_sigma_s or 0.0) + 20.0, 30.0, 300.0))
     lo, hi = float(t[start + 1]), float(t[stop - 2])
     grid = np.unique(np.clip(top.onset_s + np.linspace(-half, half, REPLAY_ONSETS), lo, hi))
-    ll = _replay_grid(chosen, grid, obs, scenario, start, stop, flyer)
+    try:
+        ll = _replay_grid(chosen, grid, obs, scenario, start, stop, flyer)
+    except ValueError:  # the twin cannot restart there (inside a scheduled turn): the balance's ranking stands
+        return hyps
     step = float(np.diff(grid).min(initial=2.0 * half))
     best = grid[int(np.argmax(ll.max(axis=0)))]
     fine = np.unique(np.clip(best + np.linspace(-step, step, REPLAY_ONSETS), lo, hi))
@@ -528,7 +542,8 @@ def _replay_grid(chosen: list[Hypothesis], grid: np.ndarray, obs: Observations, 
     candidates = [(fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau))
                   for h in chosen for tau in grid]
     ll = replay_scores(scenario, t, obs.epoch_unix_s, obs.q_est_ib, obs.omega_b_rad_s, obs.wheel_speed_rad_s,
-                       obs.wheel_torque_cmd_nm, candidates, first, stop, reference, obs.torque_quantum_nm, flyer)
+                       obs.wheel_torque_cmd_nm, candidates, first, stop, reference, obs.torque_quantum_nm, flyer,
+                       q_prog_ib=obs.q_prog_ib)
     return (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
 
 

@@ -25,8 +25,15 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-__all__ = ["level_loglik", "window_alarm", "Alarm", "WINDOWS_S", "N_SIGMA", "false_alarms_per_day",
-           "open_loop_residual"]
+__all__ = [
+    "N_SIGMA",
+    "WINDOWS_S",
+    "Alarm",
+    "false_alarms_per_day",
+    "level_loglik",
+    "open_loop_residual",
+    "window_alarm",
+]
 
 WINDOWS_S = (10.0, 30.0, 100.0, 300.0, 1000.0)  # a failed wheel commanded 1e-5 N·m shows one 0.25 rpm count in ~30 s
 N_SIGMA = 6.5  # 2Φ(−6.5) = 8e-11 per test: with 5 windows × 10 channels at 1 Hz, ≤ 3.5e-4 false alarms a day
@@ -85,7 +92,7 @@ def window_alarm(residual: np.ndarray, q_var: np.ndarray, r_var: np.ndarray, bou
     n_ch, n = residual.shape
     cum_q = np.concatenate([np.zeros((n_ch, 1)), np.cumsum(q_var, axis=1)], axis=1)
     for w_s in windows_s:
-        lag = max(1, int(round(w_s / dt_s)))
+        lag = max(1, round(w_s / dt_s))
         if lag >= n:
             continue
         diff = residual[:, lag:] - residual[:, :-lag]

@@ -330,7 +330,7 @@ def shifted_guidance(guidance: dict, elapsed_s: float) -> dict:
         elif into >= seg["duration_s"]:
             into -= seg["duration_s"]
         elif seg["kind"] == "turn":
-            raise ValueError("start: inside or at the start of a scheduled turn; align during a hold")
+            raise ValueError("inside or at the start of a scheduled turn; align during a hold")
         else:
             route.append({**seg, "duration_s": seg["duration_s"] - into})
     if not route:  # past the end of the route: its final hold goes on

@@ -21,30 +21,51 @@ import numpy as np
 from sim_core import engine, orbit, quaternion
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
 
-__all__ = ["twin_at", "replay_scores", "fault_specs", "ARCSEC_FLOOR"]
+__all__ = ["ARCSEC_FLOOR", "fault_specs", "replay_scores", "telemetered_steps", "twin_at"]
 
 ARCSEC_FLOOR = 0.05  # arcsec: float32 quaternion components resolve ~0.01″; below this the twin is "exact"
+PROGRAM_STEP_RAD = 1e-6  # a change of the guidance quaternion above float32 noise is a new inertial step
 TORQUE_FLOOR_NM = 1e-8  # a CSV's engineering torques carry no resolution; the twin's own rounding is below this
 FAULT_TYPES = {"failure": "failure", "gain_loss": "gain", "friction": "friction", "stuck": "stuck"}
 
 
+def telemetered_steps(t_s: np.ndarray, q_prog_ib: np.ndarray, after_s: float) -> list[tuple[float, list[float]]]:
+    """Inertial programme steps (time after ``after_s``, q_ib) where the telemetered guidance quaternion changes."""
+    q = quaternion.normalize(np.asarray(q_prog_ib, dtype=float))
+    k0 = max(int(np.searchsorted(t_s, after_s, side="right")) - 1, 0)
+    steps = [(0.0, q[k0].tolist())]
+    for k in range(k0 + 1, q.shape[0]):
+        if np.all(np.isfinite(q[k])) and quaternion.angle(quaternion.multiply(quaternion.conjugate(q[k - 1]),
+                                                                               q[k])) > PROGRAM_STEP_RAD:
+            steps.append((float(t_s[k] - after_s), q[k].tolist()))
+    return steps
+
+
 def twin_at(base: Scenario, epoch_unix_s: float, t_s: float, q_ib: np.ndarray, omega_b: np.ndarray,
-            wheel_speed_rad_s: np.ndarray, duration_s: float) -> Scenario:
-    """``base`` restarted at ``t_s`` after the telemetry epoch with the telemetered state (seed 000 §7 twin)."""
+            wheel_speed_rad_s: np.ndarray, duration_s: float,
+            program: tuple[np.ndarray, np.ndarray] | None = None) -> Scenario:
+    """``base`` restarted at ``t_s`` after the telemetry epoch with the telemetered state (seed 000 §7 twin).
+
+    An inertial programme is taken from the telemetered guidance quaternions (``program`` = (t_s, q_prog_ib))
+    when given, so a file need not begin where the scenario does; other programmes are shifted in time.
+    """
     data = base.model_dump()
-    stamp = np.datetime64(int(round((epoch_unix_s + t_s) * 1e9)), "ns")
+    stamp = np.datetime64(round((epoch_unix_s + t_s) * 1e9), "ns")
     data["orbit"]["epoch_utc"] = f"{stamp}Z"
     if base.orbit.kind in ("circular", "j2"):
         a = orbit.R_EARTH_M + base.orbit.altitude_m
         n = math.sqrt(orbit.MU_EARTH_M3_S2 / a**3)
         data["orbit"]["arg_latitude_deg"] = (base.orbit.arg_latitude_deg + math.degrees(n * t_s)) % 360.0
-    data["guidance"] = shifted_guidance(data["guidance"], t_s)
+    if program is not None and base.guidance.kind == "inertial":
+        data["guidance"]["inertial_steps"] = telemetered_steps(program[0], program[1], t_s)
+    else:
+        data["guidance"] = shifted_guidance(data["guidance"], t_s)
     data["initial_q_ib"] = quaternion.normalize(np.asarray(q_ib, dtype=float)).tolist()
     data["initial_omega_b_rad_s"] = np.asarray(omega_b, dtype=float).tolist()
     for wheel, speed in zip(data["spacecraft"]["cluster"]["wheels"], wheel_speed_rad_s):
         wheel["initial_speed_rpm"] = float(speed) * 30.0 / math.pi
     data["duration_s"] = float(duration_s)
-    data["output_dt_s"] = data["control_dt_s"] if data["control_dt_s"] >= 1.0 else 1.0
+    data["output_dt_s"] = max(data["control_dt_s"], 1.0)
     data["initial_mode"] = None if base.initial_mode is None else base.initial_mode
     return Scenario.model_validate(data)
 
@@ -84,6 +105,7 @@ def replay_scores(
     torque_quantum_nm: float = 0.0,
     flyer: Callable[[Scenario], object] | None = None,
     correlation_s: float = 10.0,
+    q_prog_ib: np.ndarray | None = None,
 ) -> np.ndarray:
     """Log-likelihood of telemetry rows [start, stop) under each candidate (faults, onset after t_s[start])
     flown in one batch from row ``start``, plus a no-fault variant (last).
@@ -94,8 +116,9 @@ def replay_scores(
     loop's residuals are smooth over its settling time, so the sample count would overstate the evidence).
     """
     duration = float(t_s[stop - 1] - t_s[start]) + 1.0
+    program = None if q_prog_ib is None else (t_s, q_prog_ib)
     twin = twin_at(base, epoch_unix_s, float(t_s[start]), q_est_ib[start], omega_b[start], wheel_speed_rad_s[start],
-                   duration)
+                   duration, program)
     variants = [VariantSpec(name=f"h{i}", faults=f) for i, (f, _) in enumerate(candidates)]
     variants.append(VariantSpec(name="none"))
     batch = Scenario.model_validate({**twin.model_dump(), "variants": [v.model_dump() for v in variants],

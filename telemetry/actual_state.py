@@ -192,7 +192,10 @@ def aligned_scenario(
     data["initial_omega_b_rad_s"] = track.series["omega_est_b_rad_s"][k].tolist()
     for wheel, speed in zip(data["spacecraft"]["cluster"]["wheels"], track.series["wheel_speed_rad_s"][k]):
         wheel["initial_speed_rpm"] = float(speed) * 30.0 / np.pi
-    data["guidance"] = shifted_guidance(data["guidance"], elapsed_s)
+    try:
+        data["guidance"] = shifted_guidance(data["guidance"], elapsed_s)
+    except ValueError as exc:
+        raise ValueError(f"t_align_utc_ns: {exc}") from None
     data["duration_s"] = duration_s
     data["variants"] = [VariantSpec(name="twin", faults=list(faults)).model_dump()]
     return Scenario.model_validate(data)

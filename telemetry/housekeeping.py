@@ -24,7 +24,7 @@ from telemetry.dictionary import Dictionary, Parameter
 from telemetry.ground_files import read_ground_file
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["read_batches", "observations", "MIN_SPACING_S", "GROUND_SUFFIXES"]
+__all__ = ["GROUND_SUFFIXES", "MIN_SPACING_S", "observations", "read_batches"]
 
 MIN_SPACING_S = 1.0
 GROUND_SUFFIXES = (".csv", ".jsonl", ".ndjson")
@@ -120,10 +120,20 @@ def observations(batches: list[SampleBatch], dictionary: Dictionary, satellite: 
         wheel_speed_rad_s=cut(_stack(values, "wheel_speed_rad_s", suffixes)),  # type: ignore[arg-type]
         wheel_torque_cmd_nm=cut(_stack(values, "wheel_torque_cmd_nm", suffixes)),  # type: ignore[arg-type]
         speed_quantum_rad_s=quantum,
-        torque_quantum_nm=_step(dictionary, "wheel_torque_cmd_nm_1"),
+        torque_quantum_nm=_resolution(values["wheel_torque_cmd_nm_1"][keep], _step(dictionary, "wheel_torque_cmd_nm_1")),
         q_st_ib=cut(_stack(values, "q_st_ib", "0123")),
+        q_prog_ib=cut(_stack(values, "q_prog_ib", "0123")),
         omega_gyro_b_rad_s=cut(_stack(values, "omega_gyro_b_rad_s", "xyz")),
     )
+
+
+def _resolution(values: np.ndarray, step: float) -> float:
+    """The dictionary's step if the values sit on its grid (packets), else 0 (ground files of unrounded values)."""
+    v = values[np.isfinite(values)]
+    if step <= 0.0 or v.size == 0:
+        return 0.0
+    counts = v / step
+    return step if np.allclose(counts, np.round(counts), rtol=0.0, atol=1e-3) else 0.0
 
 
 def _thinned(t_ns: np.ndarray) -> np.ndarray:
