@@ -9,7 +9,7 @@ from fastapi import Path
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 __all__ = ["DbId", "Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
-           "JobPublic", "SeriesPublic", "FilePublic"]
+           "JobPublic", "SeriesPublic", "FilePublic", "TwinSessionCreate", "TwinSessionPublic", "ResidualsPublic"]
 
 
 def _as_utc(moment: datetime) -> datetime:
@@ -89,6 +89,54 @@ class JobPublic(BaseModel):
     created_at: UtcDatetime
     started_at: UtcDatetime | None = None
     finished_at: UtcDatetime | None = None
+
+
+class TwinSessionCreate(BaseModel):
+    """Where to align the twin, how long to fly it, and the operator's fault hypothesis."""
+
+    satellite: str = Field("REFSAT", min_length=1, max_length=100)
+    dictionary: str = Field("reference_satellite.yaml", max_length=130)
+    scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
+    align_utc: datetime = Field(description="Start of the twin (the first ACS_HK sample at or after it).",
+                                examples=["2026-03-20T00:05:00Z"])
+    duration_s: float = Field(gt=0, le=86_400, examples=[200.0])
+    alternatives: dict[str, list[str]] = Field(default_factory=dict, max_length=15,
+                                               examples=[{"nominal": [], "wheel-2-fails": ["wheel:2:failure@30"]}],
+                                               description="What-if variants flown from the same state.")
+    scenario_epoch_utc: datetime | None = Field(None, description="When the satellite started the scenario's "
+                                                "route (default: the library scenario's epoch).")
+    faults: list[str] = Field(default_factory=list, max_length=16, examples=[["wheel:1:failure@50"]],
+                              description="Hypothesis, TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V] "
+                                          "(onset in s after align).")
+
+
+class TwinSessionPublic(BaseModel):
+    """A twin session with the state of its simulation job."""
+
+    id: str
+    satellite: str
+    scenario: str
+    align_utc_ns: int = Field(description="The ACS_HK sample the twin starts from (UTC ns).")
+    duration_s: float
+    faults: list[str]
+    created_by: str
+    variants: list[str] = Field(description="'twin', then the what-if alternatives.")
+    job_id: str
+    status: str
+    progress: float
+
+
+class ResidualsPublic(BaseModel):
+    """Twin minus telemetry of one variant (downsampled), and the summary of every variant."""
+
+    session_id: str
+    variant: str
+    summary: dict[str, int | float]
+    summaries: dict[str, dict[str, int | float]]
+    t_s: list[float] = Field(description="Seconds after the alignment instant.")
+    attitude_deg: list[float]
+    rate_deg_s: list[float]
+    wheel_speed_rpm: list[list[float]] = Field(description="One column per wheel.")
 
 
 class SeriesPublic(BaseModel):

@@ -24,7 +24,7 @@ import orjson
 from backend.core.errors import ApiError
 from backend.core.settings import Settings
 from backend.core.time import BOUND_NS
-from backend.downsampling import minmax_indices
+from telemetry.downsampling import minmax_indices
 from backend.ingest.dictionary_catalogue import DictionaryCatalogue
 from backend.ingest.live_hub import LiveHub
 from backend.ingest.sample_cache import SampleCache

@@ -11,7 +11,7 @@ from fastapi.openapi.models import Example
 from fastapi.responses import FileResponse
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.downsampling import minmax_indices
+from telemetry.downsampling import minmax_indices
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.schemas import FilePublic, JobAccepted, JobPublic, SeriesPublic
 

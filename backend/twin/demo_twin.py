@@ -37,7 +37,8 @@ def _log(services: Any, text: str) -> None:
 
 def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, stop: Any) -> Any:
     """Wait for telemetry, start a nominal twin session, wait for it, serve the monitors; their handles."""
-    from backend.routes.twin import TwinSessionCreate, session_feed, start_session
+    from backend.schemas import TwinSessionCreate
+    from backend.twin.session_service import session_feed, start_session
     from frontend.monitors import serve_monitors
 
     satellite = services.settings.live_satellite
@@ -53,10 +54,10 @@ def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, s
     body = TwinSessionCreate(satellite=satellite, dictionary=services.settings.live_dictionary,
                              scenario=scenario, align_utc=align, duration_s=TWIN_S, scenario_epoch_utc=epoch)
     session = start_session(services, body, "acs-twin serve")
-    _log(services, f"twin session {session['id']} aligned at {align.isoformat()}, job {session['job_id']}")
-    while services.job_repo.get(session["job_id"]).status in ("queued", "running") and not stop.is_set():
+    _log(services, f"twin session {session.id} aligned at {align.isoformat()}, job {session.job_id}")
+    while services.job_repo.get(session.job_id).status in ("queued", "running") and not stop.is_set():
         time.sleep(1.0)
-    feed = session_feed(services, session["id"])
+    feed = session_feed(services, session.id)
     handles = serve_monitors(feed, host=services.settings.host, ports=monitor_ports)
     _log(services, f"monitors: {handles.urls()}")
     return handles

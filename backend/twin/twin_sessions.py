@@ -46,9 +46,9 @@ def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float, faul
     ``alternatives``: what-if variants flown beside the twin from the same state, name → fault hypothesis.
     """
     from sim_core import scenario_library
+    from sim_core.faults import parse_fault
     from sim_core.scenario import VariantSpec
     from telemetry.actual_state import aligned_scenario, aligned_wheel_available
-    from sim_core.faults import parse_fault
 
     k = int(np.searchsorted(track.t_utc_ns, align_ns))
     if k >= track.t_utc_ns.size:

@@ -15,7 +15,7 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.core.auth import Role
-from backend.routes.twin import session_feed
+from backend.twin.session_service import session_feed
 from frontend.feed import TwinFeed
 from sim_core import orbit, quaternion
 from tests.backend.conftest import bearer, make_settings

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from backend.downsampling import minmax_indices
+from telemetry.downsampling import minmax_indices
 
 
 def test_global_extremes_of_every_column_survive() -> None:
