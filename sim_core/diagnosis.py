@@ -91,6 +91,7 @@ class Observations:
     omega_gyro_b_rad_s: np.ndarray | None = None
     b_mag_b_t: np.ndarray | None = None
     b_model_b_t: np.ndarray | None = None  # the field model at the telemetered attitude, same layout
+    wheel_isolated: np.ndarray | None = None  # onboard FDIR's isolation flags per wheel (n, n_w), if telemetered
 
     def __post_init__(self) -> None:
         n = self.t_s.shape[0]
@@ -431,7 +432,7 @@ def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None
         sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
     hyps = _rank(fits, [f for f in sensor_fits if f is not None])
     if scenario is not None and alarm is not None:
-        hyps = _replayed(hyps, obs, scenario, start, stop, flyer)
+        hyps = _replayed(hyps, obs, scenario, start, stop, alarm.index, flyer)
     name = None
     if alarm is not None:
         name = "star tracker" if alarm.channel < 0 else channels[alarm.channel].name
@@ -502,7 +503,7 @@ def _outage_fit(valid: np.ndarray, onsets: np.ndarray, tw: np.ndarray) -> _Fit:
     return _Fit("star_tracker_outage", -1, _log_mean_exp(ll) - nominal, onset, sigma, None)
 
 
-def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, start: int, stop: int,
+def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, start: int, stop: int, alarm: int,
               flyer: Callable[[Scenario], object] | None) -> list[Hypothesis]:
     """Add the twin replay's evidence (commands and attitude, onset re-estimated on a common coarse-then-fine
     grid) to the top wheel hypotheses and re-rank (:mod:`sim_core.twin_replay`)."""
@@ -512,7 +513,7 @@ def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, sta
         return hyps
     top = chosen[0]
     half = float(np.clip(3.0 * (top.onset_sigma_s or 0.0) + 20.0, 30.0, 300.0))
-    lo, hi = float(t[start + 1]), float(t[stop - 2])
+    lo, hi = float(t[start + 1]), float(t[min(alarm, stop - 2)])  # the fault began before it was detected
     grid = np.unique(np.clip(top.onset_s + np.linspace(-half, half, REPLAY_ONSETS), lo, hi))
     try:
         ll = _replay_grid(chosen, grid, obs, scenario, start, stop, flyer)
@@ -537,6 +538,8 @@ def _replay_grid(chosen: list[Hypothesis], grid: np.ndarray, obs: Observations, 
                  stop: int, flyer: Callable[[Scenario], object] | None) -> np.ndarray:
     """Replay log-likelihood (hypotheses × onsets) relative to the no-fault variant."""
     t = obs.t_s
+    fdir = scenario.fdir or (obs.wheel_isolated is not None and bool(np.any(obs.wheel_isolated[start:stop] > 0)))
+    scenario = scenario.model_copy(update={"fdir": fdir})
     first = max(0, min(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start))
     reference = max(int(np.searchsorted(t, grid[0])), first + 2)
     candidates = [(fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau))

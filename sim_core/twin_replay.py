@@ -108,7 +108,7 @@ def replay_scores(
     q_prog_ib: np.ndarray | None = None,
 ) -> np.ndarray:
     """Log-likelihood of telemetry rows [start, stop) under each candidate (faults, onset after t_s[start])
-    flown in one batch from row ``start``, plus a no-fault variant (last).
+    flown in one batch from row ``start``, plus a no-fault variant (last); the onboard FDIR flies if ``base.fdir``.
 
     Concentrated Gaussian likelihood (σ unknown, profiled out) of the command and attitude residuals:
     −(N/2) ln(MSE + σ₀²) per channel, with σ₀ the telemetry resolution (and the no-fault variant's
@@ -121,8 +121,7 @@ def replay_scores(
                    duration, program)
     variants = [VariantSpec(name=f"h{i}", faults=f) for i, (f, _) in enumerate(candidates)]
     variants.append(VariantSpec(name="none"))
-    batch = Scenario.model_validate({**twin.model_dump(), "variants": [v.model_dump() for v in variants],
-                                     "fdir": False})
+    batch = Scenario.model_validate({**twin.model_dump(), "variants": [v.model_dump() for v in variants]})
     traj = (flyer or engine.simulate)(batch)
     rel = t_s[start:stop] - t_s[start]
     k = np.clip(np.round(rel / batch.output_dt_s).astype(int), 0, traj.t_s.shape[0] - 1)  # type: ignore[attr-defined]

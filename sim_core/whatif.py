@@ -12,6 +12,7 @@ momentum limits and the torque the actuators cannot produce (the MD outside its 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -81,14 +82,20 @@ def sweep(
     wheel_available: np.ndarray | None = None,
     initial: dict | None = None,
     fdir: bool = True,
+    flyer: Callable[[Scenario], Trajectory] | None = None,
 ) -> list[dict]:
     """Fly the fault variants in one batch from ``initial`` (q_ib, omega_b_rad_s, wheel_speed_rpm) and
-    return :func:`variant_metrics` per variant (seed 002 §3.2 fault impact, seed 000 §3 reconfiguration)."""
+    return :func:`variant_metrics` per variant (seed 002 §3.2 fault impact, seed 000 §3 reconfiguration).
+
+    ``flyer`` flies the batch instead of :func:`sim_core.engine.simulate` (e.g. spread over a Dask cluster by
+    :func:`backend.jobs.cluster.flyer`); it takes no ``wheel_available``."""
     if not variants:
         raise ValueError("variants: at least one variant is required")
     s = _with_initial(scenario, initial).model_copy(update={"variants": list(variants)})
-    s = Scenario.model_validate(s.model_dump())
-    traj = engine.simulate(s, wheel_available=wheel_available, fdir=fdir)
+    s = Scenario.model_validate({**s.model_dump(), "fdir": fdir})
+    if flyer is not None and wheel_available is not None:
+        raise ValueError("wheel_available: not supported with a flyer; fail the wheels as faults from t = 0")
+    traj = flyer(s) if flyer is not None else engine.simulate(s, wheel_available=wheel_available)
     return [variant_metrics(traj, s, v) for v in range(traj.n_variants)]
 
 

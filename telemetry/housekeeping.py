@@ -120,9 +120,11 @@ def observations(batches: list[SampleBatch], dictionary: Dictionary, satellite: 
         wheel_speed_rad_s=cut(_stack(values, "wheel_speed_rad_s", suffixes)),  # type: ignore[arg-type]
         wheel_torque_cmd_nm=cut(_stack(values, "wheel_torque_cmd_nm", suffixes)),  # type: ignore[arg-type]
         speed_quantum_rad_s=quantum,
-        torque_quantum_nm=_resolution(values["wheel_torque_cmd_nm_1"][keep], _step(dictionary, "wheel_torque_cmd_nm_1")),
+        torque_quantum_nm=_resolution(values["wheel_torque_cmd_nm_1"][keep],
+                                      _step(dictionary, "wheel_torque_cmd_nm_1")),
         q_st_ib=cut(_stack(values, "q_st_ib", "0123")),
         q_prog_ib=cut(_stack(values, "q_prog_ib", "0123")),
+        wheel_isolated=cut(_stack(values, "fault_wheel", suffixes)),
         omega_gyro_b_rad_s=cut(_stack(values, "omega_gyro_b_rad_s", "xyz")),
     )
 

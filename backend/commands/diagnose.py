@@ -16,6 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", required=True, help="library scenario name or scenario JSON file the spacecraft flies")
     p.add_argument("--satellite", help="expected satellite name (checked against the dictionary)")
     p.add_argument("--json", dest="json_out", type=Path, help="write the ranked hypotheses as JSON here")
+    p.add_argument("--scheduler", help="fly the twin replays on this Dask scheduler (tcp://host:port; default "
+                   "$ACS_TWIN_DASK_SCHEDULER, else on this machine without a cluster)")
     p.set_defaults(handler=run)
 
 
@@ -31,15 +33,25 @@ def _scenario(name: str):
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose and print the ranking; exit 2 on bad input."""
+    import os
+
+    from backend.jobs import cluster
     from backend.twin.diagnosis import diagnose_file
     from telemetry.dictionary import load_dictionary
 
+    client = None
     try:
         dictionary = load_dictionary(args.dictionary)
-        result = diagnose_file(args.telemetry, dictionary, _scenario(args.scenario), args.satellite)
+        address = args.scheduler or os.environ.get(cluster.SCHEDULER_ENV)
+        client = cluster.dask_client(address) if address else None
+        flyer = cluster.flyer(client) if client is not None else None
+        result = diagnose_file(args.telemetry, dictionary, _scenario(args.scenario), args.satellite, flyer)
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    finally:
+        if client is not None:
+            client.close()
     det = result["detection"]
     if det["detected"]:
         print(f"anomaly detected at {det['alarm_utc']} on {det['channel']} "

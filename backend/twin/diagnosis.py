@@ -12,6 +12,7 @@ rate, the analysis window), ``suspected_wheels`` and ``untestable`` (hypotheses 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -79,15 +80,17 @@ def result_json(d: Diagnosis, obs: Observations, satellite: str, scenario: str) 
 
 
 def diagnose_batches(batches: list[SampleBatch], dictionary: Dictionary, scenario: Scenario,
-                     satellite: str | None = None) -> dict[str, Any]:
-    """Diagnose decoded batches of one satellite against its scenario; ValueError naming what is missing."""
+                     satellite: str | None = None, flyer: Callable[[Scenario], Any] | None = None) -> dict[str, Any]:
+    """Diagnose decoded batches of one satellite against its scenario; ValueError naming what is missing.
+
+    ``flyer`` flies the replay batches (:func:`backend.jobs.cluster.flyer` for a Dask cluster)."""
     wm = scenario_wheels(scenario)
     obs = observations(batches, dictionary, satellite, n_wheels=wm.axes_b.shape[1])
-    result = diagnose(obs, wm, scenario)
+    result = diagnose(obs, wm, scenario, flyer=flyer)
     return result_json(result, obs, dictionary.satellite_name, scenario.name)
 
 
-def diagnose_file(path: str | Path, dictionary: Dictionary, scenario: Scenario,
-                  satellite: str | None = None) -> dict[str, Any]:
+def diagnose_file(path: str | Path, dictionary: Dictionary, scenario: Scenario, satellite: str | None = None,
+                  flyer: Callable[[Scenario], Any] | None = None) -> dict[str, Any]:
     """Diagnose a packet file or a ground CSV/JSONL file (``acs-twin diagnose``)."""
-    return diagnose_batches(read_batches(path, dictionary), dictionary, scenario, satellite)
+    return diagnose_batches(read_batches(path, dictionary), dictionary, scenario, satellite, flyer)
