@@ -65,15 +65,22 @@ class AttitudeMapping:
             raise ValueError(f"{where}: attitude.scalar: expected one of {SCALAR_POSITIONS}, got {self.scalar!r}")
         if self.direction not in DIRECTIONS:
             raise ValueError(f"{where}: attitude.direction: expected one of {DIRECTIONS}, got {self.direction!r}")
-        if self.acs_model is not None and not (self.rates_b_rad_s and self.wheel_speeds_rad_s and self.r_ecef_m
-                                               and self.v_ecef_m_s and self.wheel_isolated):
-            raise ValueError(f"{where}: acs_model: a twin needs rates_b_rad_s, wheel_speeds_rad_s, wheel_isolated "
-                             "and the GPS orbit (r_ecef_m, v_ecef_m_s) mapped too")
+        if self.acs_model is not None and not (
+            self.rates_b_rad_s and self.wheel_speeds_rad_s and self.r_ecef_m and self.v_ecef_m_s and self.wheel_isolated
+        ):
+            raise ValueError(
+                f"{where}: acs_model: a twin needs rates_b_rad_s, wheel_speeds_rad_s, wheel_isolated "
+                "and the GPS orbit (r_ecef_m, v_ecef_m_s) mapped too"
+            )
 
     def hk_parameters(self) -> list[str]:
         """Parameters of the attitude packet the mapping reads."""
-        names = [*self.quaternion, *(self.rates_b_rad_s or ()), *(self.wheel_speeds_rad_s or ()),
-                 *(self.wheel_isolated or ())]
+        names = [
+            *self.quaternion,
+            *(self.rates_b_rad_s or ()),
+            *(self.wheel_speeds_rad_s or ()),
+            *(self.wheel_isolated or ()),
+        ]
         return names + ([self.mode] if self.mode else [])
 
     def orbit_parameters(self) -> list[str]:
@@ -96,7 +103,7 @@ class AttitudeMapping:
                 raise ValueError(f"{where}: parameters {missing} are not in packet {packet!r} of {self.dictionary!r}")
 
 
-def _names(data: dict, key: str, n: int | None, where: str) -> tuple[str, ...] | None:
+def _names(data: dict[str, Any], key: str, n: int | None, where: str) -> tuple[str, ...] | None:
     value = data.get(key)
     if value is None:
         return None
@@ -116,15 +123,21 @@ def load_mapping(path: Path) -> AttitudeMapping:
     if q is None or "dictionary" not in data or "packet" not in att:
         raise ValueError(f"{where}: 'dictionary', 'attitude.packet' and 'attitude.quaternion' are required")
     return AttitudeMapping(
-        dictionary=str(data["dictionary"]), packet=str(att["packet"]), quaternion=q,  # type: ignore[arg-type]
-        scalar=str(att.get("scalar", "first")), direction=str(att.get("direction", "body_to_inertial")),
+        dictionary=str(data["dictionary"]),
+        packet=str(att["packet"]),
+        quaternion=q,  # type: ignore[arg-type]
+        scalar=str(att.get("scalar", "first")),
+        direction=str(att.get("direction", "body_to_inertial")),
         rates_b_rad_s=_names(att, "rates_b_rad_s", 3, where),  # type: ignore[arg-type]
         wheel_speeds_rad_s=_names(att, "wheel_speeds_rad_s", None, where),
         wheel_isolated=_names(att, "wheel_isolated", None, where),
-        mode=att.get("mode"), turn_modes=tuple(int(m) for m in att.get("turn_modes", ())),
-        orbit_packet=orb.get("packet"), r_ecef_m=_names(orb, "r_ecef_m", 3, where),  # type: ignore[arg-type]
+        mode=att.get("mode"),
+        turn_modes=tuple(int(m) for m in att.get("turn_modes", ())),
+        orbit_packet=orb.get("packet"),
+        r_ecef_m=_names(orb, "r_ecef_m", 3, where),  # type: ignore[arg-type]
         v_ecef_m_s=_names(orb, "v_ecef_m_s", 3, where),  # type: ignore[arg-type]
-        acs_model=data.get("acs_model"), source=where,
+        acs_model=data.get("acs_model"),
+        source=where,
     )
 
 
@@ -156,8 +169,9 @@ class QuaternionCheck:
         """Human-readable findings (empty when the quaternions were clean)."""
         out = []
         if self.non_unit:
-            out.append(f"{self.non_unit} quaternion samples not unit (|‖q‖ − 1| up to {self.worst_norm_error:.3g}): "
-                       "normalised")
+            out.append(
+                f"{self.non_unit} quaternion samples not unit (|‖q‖ − 1| up to {self.worst_norm_error:.3g}): normalised"
+            )
         if self.invalid:
             out.append(f"{self.invalid} quaternion samples zero or not finite: ignored")
         if self.flips:
@@ -165,8 +179,9 @@ class QuaternionCheck:
         return out
 
 
-def actual_attitude(mapping: AttitudeMapping, values: dict[str, np.ndarray],
-                    previous_q_ib: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, QuaternionCheck]:
+def actual_attitude(
+    mapping: AttitudeMapping, values: dict[str, np.ndarray], previous_q_ib: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, QuaternionCheck]:
     """(valid (n,) mask, (n, 4) scalar-first unit q_ib continuous from ``previous_q_ib``, findings) of a batch."""
     raw = np.stack([np.asarray(values[n], dtype=np.float64) for n in mapping.quaternion], axis=-1)
     q = raw if mapping.scalar == "first" else raw[:, [3, 0, 1, 2]]

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim_core import frames, orbit
-from telemetry.archive import Archive, PassRecord, StationRecord, sequence_gaps
+from telemetry.archive import DERIVED_APID, Archive, PassRecord, StationRecord, sequence_gaps
 
 __all__ = [
     "PredictedPasses",
@@ -27,6 +27,8 @@ __all__ = [
     "predict_station_passes",
     "assign_to_passes",
     "record_reception",
+    "passes_from_data",
+    "DATA_PASS_GAP_S",
     "COARSE_STEP_S",
     "REFINE_TOLERANCE_S",
 ]
@@ -36,6 +38,9 @@ REFINE_TOLERANCE_S = 1e-3  # bracket width at which AOS/LOS/culmination refineme
 NS_PER_S = 10**9
 SECONDS_PER_DAY = 86_400.0
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+# Telemetry closer than this in time is one pass: a LEO pass over one station lasts ≤ ~15 min and consecutive
+# passes over it are a ~100 min orbit apart, so a 10 min silence ends a contact.
+DATA_PASS_GAP_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -194,6 +199,7 @@ def record_reception(archive: Archive, satellite: str, passes: list[PassRecord])
     updated = []
     for p in passes:
         keys = archive.packet_keys(satellite, p.aos_ns, p.los_ns)
+        keys.pop(DERIVED_APID, None)  # parameters derived on the ground were not received
         received = sum(t.size for t, _ in keys.values())
         missing = sum(int(sequence_gaps(seq).sum()) for _, seq in keys.values())
         starts = [int(t[0]) for t, _ in keys.values() if t.size]
@@ -212,6 +218,47 @@ def record_reception(archive: Archive, satellite: str, passes: list[PassRecord])
                 span[1],
                 received,
                 missing,
+                p.origin,
             )
         )
     return updated
+
+
+def _runs(t_ns: np.ndarray, free: np.ndarray, gap_ns: int) -> list[tuple[int, int]]:
+    """[first, last] of the runs of sorted times where ``free`` holds, broken by a non-free sample or by more than
+    gap_ns of silence."""
+    index = np.flatnonzero(free)
+    if index.size == 0:
+        return []
+    breaks = np.flatnonzero((np.diff(index) > 1) | (np.diff(t_ns[index]) > gap_ns))
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [index.size - 1]])
+    return [(int(t_ns[index[a]]), int(t_ns[index[b]])) for a, b in zip(starts, ends)]
+
+
+def passes_from_data(archive: Archive, satellite: str, t0_ns: int, t1_ns: int,
+                     station: str | None = None) -> list[PassRecord]:
+    """The passes holding the telemetry archived in [t0_ns, t1_ns], their reception recounted: predicted passes
+    that cover it, and passes made from the data itself (origin "data", AOS/LOS = first/last sample, station
+    ``station`` or unknown) where none does; data continuing a pass from data within DATA_PASS_GAP_S widens it."""
+    gap = int(DATA_PASS_GAP_S * NS_PER_S)
+    keys = archive.packet_keys(satellite, t0_ns, t1_ns)
+    keys.pop(DERIVED_APID, None)
+    if not keys:
+        return []
+    t = np.unique(np.concatenate([k[0] for k in keys.values()]))
+    known = archive.passes(satellite, int(t[0]) - gap, int(t[-1]) + gap)
+    predicted = [p for p in known if p.origin != "data"]
+    covered = np.zeros(t.shape, dtype=bool)
+    for p in predicted:
+        covered |= (t >= p.aos_ns) & (t <= p.los_ns)
+    touched = {p.id for p in predicted if p.aos_ns <= t[-1] and p.los_ns >= t[0]}
+    for first, last in _runs(t, ~covered, gap):
+        near = [p for p in known if p.origin == "data" and p.aos_ns - gap <= last and p.los_ns + gap >= first]
+        if near:
+            p = near[0]
+            touched.add(archive.save_data_pass(satellite, min(p.aos_ns, first), max(p.los_ns, last), pass_id=p.id))
+        else:
+            touched.add(archive.save_data_pass(satellite, first, last, station))
+    span = archive.passes(satellite, int(t[0]) - gap, int(t[-1]) + gap)
+    return record_reception(archive, satellite, [p for p in span if p.id in touched])

@@ -14,8 +14,8 @@ import multiprocessing as mp
 import queue
 import threading
 import time
-from dataclasses import asdict
 from collections.abc import Callable
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -44,6 +44,7 @@ COMPONENT_MODULES = {
     "engine": "sim_core.engine",
 }
 LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
+LIVE_PASS_PERIOD_S = 10.0  # the live stream's pass from data is widened this often (a few queries each time)
 LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
 
 
@@ -69,6 +70,7 @@ class TelemetryGateway:
         self.live_port: int | None = None
         self._samples = SampleCache()
         self._committed: list[Callable[[str, str, list[Any]], None]] = []
+        self._live_pass_at_ns = 0
 
     def on_commit(self, listener: Callable[[str, str, list[Any]], None]) -> None:
         """Call ``listener(satellite, dictionary_name, batches)`` for every upload the archive committed and every
@@ -162,6 +164,24 @@ class TelemetryGateway:
             self._publish(satellite, [payload], 0)
             for listener in self._committed:
                 listener(satellite, self._settings.live_dictionary, [payload])
+            self._live_passes(satellite, payload)
+
+    def _live_passes(self, satellite: str, batch: Any) -> None:
+        """Every LIVE_PASS_PERIOD_S, the live stream's pass (from data when none was predicted) over what the
+        ingest process has committed so far (it commits every telemetry.live.ARCHIVE_INTERVAL_S)."""
+        if not len(batch.t_utc_ns):
+            return
+        newest = int(batch.t_utc_ns.max())
+        if newest - self._live_pass_at_ns < LIVE_PASS_PERIOD_S * 1e9:
+            return
+        start = newest - int(2 * LIVE_PASS_PERIOD_S * 1e9) if self._live_pass_at_ns else int(batch.t_utc_ns.min())
+        self._live_pass_at_ns = newest
+        try:
+            from telemetry import passes
+
+            passes.passes_from_data(self.archive, satellite, start, newest)
+        except ValueError:  # nothing committed yet for a new satellite: the next period will see it
+            self._live_pass_at_ns = 0
 
     async def stop_live(self) -> None:
         """Stop the ingest process (it archives what is pending first) and the relay thread."""
@@ -214,12 +234,25 @@ class TelemetryGateway:
         result = self.archive.ingest_decoded(satellite, decoded, uploaded_by=uploaded_by,
                                              limits=dictionary_limits(dictionary))
         self._invalidate_batches(satellite, decoded.batches)
+        passes: list[Any] = []
         if not result.duplicate_upload:
             self._publish(satellite, decoded.batches, result.alarm_events)
             for listener in self._committed:
                 listener(satellite, dictionary_name, decoded.batches)
+            passes = self.passes_from_data(satellite, decoded.batches)
         return {"satellite": satellite, "dictionary": dictionary_name_of(dictionary),
-                "archive": result.as_report(), "decoding": decoded.report.to_dict()}
+                "archive": result.as_report(), "decoding": decoded.report.to_dict(),
+                "passes": [{**asdict(p), "completeness": p.completeness} for p in passes]}
+
+    def passes_from_data(self, satellite: str, batches: list[Any]) -> list[Any]:
+        """The passes the batches' samples fall in, made from the data where no predicted pass covers them
+        (telemetry.passes.passes_from_data), reception recounted."""
+        from telemetry import passes
+
+        spans = [(int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in batches if len(b.t_utc_ns)]
+        if not spans:
+            return []
+        return passes.passes_from_data(self.archive, satellite, min(s[0] for s in spans), max(s[1] for s in spans))
 
     def _publish(self, satellite: str, batches: list[Any], alarm_events: int) -> None:
         for batch in batches:

@@ -23,8 +23,11 @@ class SatellitePublic(BaseModel):
     norad_id: int | None = None
     first_telemetry_utc: str | None = Field(None, description="Oldest archived packet, ISO 8601 UTC (null if none).")
     latest_telemetry_utc: str | None = Field(None, description="Newest archived packet, ISO 8601 UTC (null if none).")
-    twin_state: str | None = Field(None, description="waiting, synchronised, propagating, stale or actual_only; "
-                                   "null when no attitude mapping fits the satellite's dictionary.")
+    twin_state: str | None = Field(
+        None,
+        description="waiting, synchronised, propagating, stale or actual_only; "
+        "null when no attitude mapping fits the satellite's dictionary.",
+    )
     acs_model: str | None = Field(None, description="Library scenario the twin flies; null: no ACS model.")
 
 
@@ -40,15 +43,23 @@ async def list_satellites(services: ServicesDep, _: ViewerDep) -> list[Satellite
     out = []
     for row in rows:
         twin = services.twins.state(row["name"]) or {}
-        out.append(SatellitePublic(name=row["name"], norad_id=row["norad_id"], first_telemetry_utc=_iso(row["first_t_ns"]),
-                                   latest_telemetry_utc=_iso(row["last_t_ns"]), twin_state=twin.get("state"),
-                                   acs_model=twin.get("acs_model")))
+        out.append(
+            SatellitePublic(
+                name=row["name"],
+                norad_id=row["norad_id"],
+                first_telemetry_utc=_iso(row["first_t_ns"]),
+                latest_telemetry_utc=_iso(row["last_t_ns"]),
+                twin_state=twin.get("state"),
+                acs_model=twin.get("acs_model"),
+            )
+        )
     return out
 
 
 @router.get("/satellites/{name}/twin", summary="The live twin of one satellite")
-def get_twin(services: ServicesDep, _: ViewerDep,
-             name: str = Path(min_length=1, max_length=100, examples=["REFSAT"])) -> dict[str, Any]:
+def get_twin(
+    services: ServicesDep, _: ViewerDep, name: str = Path(min_length=1, max_length=100, examples=["REFSAT"])
+) -> dict[str, Any]:
     """State of the satellite's live twin; the same object is published on the WebSocket topic ``twin`` whenever a
     telemetry batch has been compared and once when the satellite turns stale.
 
@@ -72,5 +83,9 @@ def get_twin(services: ServicesDep, _: ViewerDep,
     known = {row["name"] for row in services.telemetry.archive.satellites((TWIN_APID,))}
     if name not in known:
         raise ApiError(404, f"no satellite {name!r} in the archive", "name")
-    raise ApiError(404, f"satellite {name!r} has no live twin: no attitude mapping (<dictionary>.attitude.yaml) "
-                   "fits its dictionary, or no telemetry arrived since the server started", "name")
+    raise ApiError(
+        404,
+        f"satellite {name!r} has no live twin: no attitude mapping (<dictionary>.attitude.yaml) "
+        "fits its dictionary, or no telemetry arrived since the server started",
+        "name",
+    )

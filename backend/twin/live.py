@@ -37,6 +37,7 @@ import numpy as np
 
 from sim_core import quaternion
 from sim_core.scenario import Scenario
+from telemetry.archive.batch import DERIVED_APID
 from telemetry.attitude_mapping import (
     SHIPPED_MAPPINGS,
     AttitudeMapping,
@@ -61,7 +62,7 @@ log = logging.getLogger(__name__)
 
 NS_PER_S = 1_000_000_000
 ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
-TWIN_APID = 2046  # archive APID of the twin's residual parameters (2047 is the CCSDS idle packet; no raw bytes)
+TWIN_APID = DERIVED_APID  # the residuals are parameters derived on the ground: no raw packets
 RESYNC_S = 60.0  # segment length: see the module docstring
 STALE_S = 10.0  # no telemetry for this long (ten 1 Hz packets missed) = stale; a gap this long forces a re-sync
 RECENT_S = 600.0  # telemetry kept per satellite: the sync sample may lie before a 100 s scheduled turn
@@ -78,13 +79,22 @@ RATE_LIMIT_RAD_S = 1e-4
 WHEEL_LIMIT_RAD_S = 10 * 0.25 * np.pi / 30.0
 RED_FACTOR = 10.0
 
-WAITING, SYNCHRONISED, PROPAGATING, STALE, ACTUAL_ONLY = "waiting", "synchronised", "propagating", "stale", "actual_only"
+WAITING, SYNCHRONISED, PROPAGATING, STALE, ACTUAL_ONLY = (
+    "waiting",
+    "synchronised",
+    "propagating",
+    "stale",
+    "actual_only",
+)
 
 
 def residual_names(n_wheels: int) -> list[str]:
     """Archived parameter names of the residuals of a satellite with ``n_wheels`` wheels."""
-    return (["twin_attitude_residual_arcsec"] + [f"twin_rate_residual_b_rad_s_{a}" for a in "xyz"]
-            + [f"twin_wheel_speed_residual_rad_s_{k + 1}" for k in range(n_wheels)])
+    return (
+        ["twin_attitude_residual_arcsec"]
+        + [f"twin_rate_residual_b_rad_s_{a}" for a in "xyz"]
+        + [f"twin_wheel_speed_residual_rad_s_{k + 1}" for k in range(n_wheels)]
+    )
 
 
 RESIDUAL_PARAMETERS = residual_names(4)
@@ -92,6 +102,7 @@ RESIDUAL_PARAMETERS = residual_names(4)
 
 def residual_limits(n_wheels: int) -> dict[str, LimitSet]:
     """Yellow/red limits of the residual parameters (yellow = the forced re-sync level, red = ten times it)."""
+
     def band(limit: float, signed: bool) -> LimitSet:
         low = -limit if signed else -np.inf  # an angle is ≥ 0: no low limit
         return LimitSet(yellow_low=low, yellow_high=limit, red_low=low * RED_FACTOR, red_high=limit * RED_FACTOR)
@@ -166,11 +177,18 @@ def _iso(t_ns: int | None) -> str | None:
 class LiveTwin:
     """The twin of one satellite: its recent telemetry, its flown segment and its state machine."""
 
-    def __init__(self, satellite: str, mapping: AttitudeMapping, model: Scenario | None,
-                 epoch_ns: int | None = None, resync_s: float = RESYNC_S) -> None:
+    def __init__(
+        self,
+        satellite: str,
+        mapping: AttitudeMapping,
+        model: Scenario | None,
+        epoch_ns: int | None = None,
+        resync_s: float = RESYNC_S,
+    ) -> None:
         self.mapping, self.model, self._epoch_ns, self._resync_s = mapping, model, epoch_ns, resync_s
-        self.state = TwinState(satellite, mapping.dictionary, mapping.acs_model if model is not None else None,
-                               state=WAITING)
+        self.state = TwinState(
+            satellite, mapping.dictionary, mapping.acs_model if model is not None else None, state=WAITING
+        )
         self._t = np.empty(0, np.int64)
         self._hk: dict[str, np.ndarray] = {}
         self._q = np.empty((0, 4))
@@ -193,8 +211,11 @@ class LiveTwin:
     def _columns(self, batch: Any, names: Sequence[str]) -> dict[str, np.ndarray] | None:
         missing = [n for n in names if n not in batch.values]
         if missing:
-            self.report("mapping", f"{self.mapping.source}: mapping names parameters {missing} that packet "
-                        f"{batch.packet} does not carry: ignored until the mapping is fixed")
+            self.report(
+                "mapping",
+                f"{self.mapping.source}: mapping names parameters {missing} that packet "
+                f"{batch.packet} does not carry: ignored until the mapping is fixed",
+            )
             return None
         return {n: np.asarray(batch.values[n], dtype=np.float64) for n in names}
 
@@ -233,12 +254,17 @@ class LiveTwin:
         newest = int(self._t[-1]) if self._t.size else None
         restarted = False
         if newest is not None and int(t[0]) < newest - SAME_INSTANT_NS:
-            self._restart(f"time went back {(newest - int(t[0])) / 1e9:.3f} s (from {_iso(newest)} to "
-                          f"{_iso(int(t[0]))}); everything is archived", "time_backwards", int(t[0]))
+            self._restart(
+                f"time went back {(newest - int(t[0])) / 1e9:.3f} s (from {_iso(newest)} to "
+                f"{_iso(int(t[0]))}); everything is archived",
+                "time_backwards",
+                int(t[0]),
+            )
             restarted = True
         elif newest is not None and int(t[0]) - newest > STALE_S * NS_PER_S:
-            self._restart(f"gap of {(int(t[0]) - newest) / 1e9:.1f} s in telemetry (from {_iso(newest)})", "gap",
-                          int(t[0]))
+            self._restart(
+                f"gap of {(int(t[0]) - newest) / 1e9:.1f} s in telemetry (from {_iso(newest)})", "gap", int(t[0])
+            )
             restarted = True
         fresh = t > (self._t[-1] + SAME_INSTANT_NS // 2 if self._t.size else -(2**62))
         t, cols = t[fresh], {n: c[fresh] for n, c in cols.items()}
@@ -304,21 +330,29 @@ class LiveTwin:
 
         i = self._sync_index(k)
         if i is None:
-            self.report("sync", "no sample outside a scheduled turn in the recent telemetry yet: waiting",
-                        int(self._t[k]))
+            self.report(
+                "sync", "no sample outside a scheduled turn in the recent telemetry yet: waiting", int(self._t[k])
+            )
             return None
         t_sync = int(self._t[i])
         near = np.abs(self._gps_t - t_sync) <= GPS_WINDOW_S / 2 * NS_PER_S
         if near.sum() < 3:
-            self.report("sync", f"fewer than 3 GPS fixes within {GPS_WINDOW_S / 2:.0f} s of {_iso(t_sync)}: waiting",
-                        t_sync)
+            self.report(
+                "sync", f"fewer than 3 GPS fixes within {GPS_WINDOW_S / 2:.0f} s of {_iso(t_sync)}: waiting", t_sync
+            )
             return None
         m, hk = self.mapping, self._hk
-        track = ActualTrack(self._t, {"q_est_ib": self._q, "omega_est_b_rad_s": _stack(hk, m.rates_b_rad_s),
-                                      "wheel_speed_rad_s": _stack(hk, m.wheel_speeds_rad_s),
-                                      "fault_wheel": _stack(hk, m.wheel_isolated)},
-                            self._gps_t[near], {"r_ecef_m": _stack(self._gps, m.r_ecef_m)[near],
-                                                "v_ecef_m_s": _stack(self._gps, m.v_ecef_m_s)[near]})
+        track = ActualTrack(
+            self._t,
+            {
+                "q_est_ib": self._q,
+                "omega_est_b_rad_s": _stack(hk, m.rates_b_rad_s),
+                "wheel_speed_rad_s": _stack(hk, m.wheel_speeds_rad_s),
+                "fault_wheel": _stack(hk, m.wheel_isolated),
+            },
+            self._gps_t[near],
+            {"r_ecef_m": _stack(self._gps, m.r_ecef_m)[near], "v_ecef_m_s": _stack(self._gps, m.v_ecef_m_s)[near]},
+        )
         duration = (int(self._t[k]) - t_sync) / 1e9 + self._resync_s
         try:
             twin = aligned_scenario(self._model_at_epoch(), track, t_sync, duration)
@@ -328,8 +362,12 @@ class LiveTwin:
         twin = twin.model_copy(update={"output_dt_s": twin.measurement_dt_s})
         flown = simulate(twin, wheel_available=track.series["fault_wheel"][i][None, :] == 0.0, fdir=True)
         self.state.resyncs += 1
-        return Segment(t_sync + np.round(flown.t_s * 1e9).astype(np.int64), flown["q_ib"][0],
-                       flown["omega_b_rad_s"][0], flown["wheel_speed_rad_s"][0])
+        return Segment(
+            t_sync + np.round(flown.t_s * 1e9).astype(np.int64),
+            flown["q_ib"][0],
+            flown["omega_b_rad_s"][0],
+            flown["wheel_speed_rad_s"][0],
+        )
 
     def _epoch(self) -> int:
         """When the satellite started its scenario's route (registered, else its first telemetry)."""
@@ -367,8 +405,12 @@ class LiveTwin:
                 rows, res = rows[:cut], {n: v[:cut] for n, v in res.items()}
                 self._segment, self._last_forced_ns = None, int(self._t[rows[-1]])
                 self.state.forced_resyncs += 1
-                self.report("residual", "residual beyond the sensors' noise for "
-                            f"{EXCEED_SAMPLES} samples: re-synchronised (diagnosis hook)", int(self._t[rows[-1]]))
+                self.report(
+                    "residual",
+                    "residual beyond the sensors' noise for "
+                    f"{EXCEED_SAMPLES} samples: re-synchronised (diagnosis hook)",
+                    int(self._t[rows[-1]]),
+                )
             out.append(res)
             k = int(rows[-1]) + 1
         if not out:
@@ -379,8 +421,8 @@ class LiveTwin:
         t = self._t[rows]
         q_twin, w_twin, h_twin = seg.at(t)
         m = self.mapping
-        w_tm = np.stack([self._hk[n][rows] for n in m.rates_b_rad_s], -1)
-        h_tm = np.stack([self._hk[n][rows] for n in m.wheel_speeds_rad_s], -1)
+        w_tm = _stack(self._hk, m.rates_b_rad_s)[rows]
+        h_tm = _stack(self._hk, m.wheel_speeds_rad_s)[rows]
         angle = quaternion.angle(quaternion.multiply(quaternion.conjugate(self._q[rows]), q_twin))
         names = residual_names(h_tm.shape[1])
         columns = [angle * ARCSEC_PER_RAD, *(w_twin - w_tm).T, *(h_twin - h_tm).T]
@@ -413,18 +455,31 @@ class LiveTwin:
         age = None if s.last_arrival_unix_s is None else max(now_unix_s - s.last_arrival_unix_s, 0.0)
         stale = age is None or age > STALE_S
         return {
-            "satellite": s.satellite, "dictionary": s.dictionary, "acs_model": s.acs_model,
-            "model_note": None if s.acs_model else f"no ACS model is configured for {s.satellite}: actual attitude only",
+            "satellite": s.satellite,
+            "dictionary": s.dictionary,
+            "acs_model": s.acs_model,
+            "model_note": None
+            if s.acs_model
+            else f"no ACS model is configured for {s.satellite}: actual attitude only",
             "state": STALE if stale and s.telemetry_utc_ns is not None else s.state,
-            "stale": stale, "last_packet_age_s": age, "stale_after_s": STALE_S,
-            "telemetry_utc": _iso(s.telemetry_utc_ns), "twin_utc": _iso(s.twin_utc_ns),
-            "twin_behind_telemetry_s": None if s.twin_utc_ns is None or s.telemetry_utc_ns is None
+            "stale": stale,
+            "last_packet_age_s": age,
+            "stale_after_s": STALE_S,
+            "telemetry_utc": _iso(s.telemetry_utc_ns),
+            "twin_utc": _iso(s.twin_utc_ns),
+            "twin_behind_telemetry_s": None
+            if s.twin_utc_ns is None or s.telemetry_utc_ns is None
             else (s.telemetry_utc_ns - s.twin_utc_ns) / 1e9,
-            "synchronised_utc": _iso(s.synchronised_utc_ns), "horizon_utc": _iso(s.horizon_utc_ns),
-            "actual_q_ib": s.actual_q_ib, "twin_q_ib": s.twin_q_ib,
+            "synchronised_utc": _iso(s.synchronised_utc_ns),
+            "horizon_utc": _iso(s.horizon_utc_ns),
+            "actual_q_ib": s.actual_q_ib,
+            "twin_q_ib": s.twin_q_ib,
             "attitude_residual_arcsec": s.attitude_residual_arcsec if s.acs_model else None,
-            "rate_residual_b_rad_s": s.rate_residual_b_rad_s, "wheel_speed_residual_rad_s": s.wheel_speed_residual_rad_s,
-            "resyncs": s.resyncs, "forced_resyncs": s.forced_resyncs, "samples_compared": s.samples_compared,
+            "rate_residual_b_rad_s": s.rate_residual_b_rad_s,
+            "wheel_speed_residual_rad_s": s.wheel_speed_residual_rad_s,
+            "resyncs": s.resyncs,
+            "forced_resyncs": s.forced_resyncs,
+            "samples_compared": s.samples_compared,
             "issues": list(s.issues),
         }
 
@@ -437,9 +492,15 @@ class LiveTwins:
     t1_ns)`` the sample cache's invalidation; mappings are looked up in ``mapping_folders`` before the shipped ones.
     """
 
-    def __init__(self, archive: Callable[[], Any], hub: Any, dictionary: Callable[[str], Any],
-                 on_archived: Callable[[str, int, int], None] | None = None,
-                 mapping_folders: Sequence[Path] = (), clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self,
+        archive: Callable[[], Any],
+        hub: Any,
+        dictionary: Callable[[str], Any],
+        on_archived: Callable[[str, int, int], None] | None = None,
+        mapping_folders: Sequence[Path] = (),
+        clock: Callable[[], float] = time.time,
+    ) -> None:
         self._archive, self._hub, self._dictionary = archive, hub, dictionary
         self._on_archived, self._clock = on_archived, clock
         self._folders = [*mapping_folders, SHIPPED_MAPPINGS]
@@ -541,7 +602,7 @@ class LiveTwins:
 
     def _first_telemetry_ns(self, satellite: str) -> int | None:
         archive = self._archive()
-        for row in (archive.satellites(exclude_apids=(TWIN_APID,)) if archive is not None else []):
+        for row in archive.satellites(exclude_apids=(TWIN_APID,)) if archive is not None else []:
             if row["name"] == satellite:
                 return row["first_t_ns"]
         return None
@@ -569,7 +630,9 @@ class LiveTwins:
         t = rows["t_utc_ns"].tolist()
         for name, values in rows.items():
             if name != "t_utc_ns" and self._hub.wants_any(f"parameters/{name}"):
-                self._hub.publish(f"parameters/{name}", {"satellite": satellite, "t_utc_ns": t, "values": values.tolist()})
+                self._hub.publish(
+                    f"parameters/{name}", {"satellite": satellite, "t_utc_ns": t, "values": values.tolist()}
+                )
 
     def _tick(self) -> None:
         """Publish the transition to stale once per satellite; archive residuals that waited long enough."""
@@ -600,8 +663,9 @@ class LiveTwins:
         batch = PacketBatch(TWIN_APID, t, np.zeros(n, np.int64), b"", np.zeros(n, np.int64), columns)
         n_wheels = sum(1 for name in columns if name.startswith("twin_wheel"))
         try:
-            archive.ingest(satellite, [batch], source="live twin", uploaded_by="live twin",
-                           limits=residual_limits(n_wheels))
+            archive.ingest(
+                satellite, [batch], source="live twin", uploaded_by="live twin", limits=residual_limits(n_wheels)
+            )
         except Exception:
             log.exception("live twin of %s: residuals not archived", satellite)
             return
@@ -624,6 +688,7 @@ class LiveTwins:
                 continue
             t1 = int(row["last_t_ns"])
             packets = archive.replay(row["name"], t1 - int(RECENT_S * NS_PER_S), t1)
-            decoded = decode_stream(b"".join(p for _, p in packets), self._dictionary(mapping.dictionary),
-                                    source="twin recovery")
+            decoded = decode_stream(
+                b"".join(p for _, p in packets), self._dictionary(mapping.dictionary), source="twin recovery"
+            )
             self._process(row["name"], mapping.dictionary, decoded.batches, t1 / 1e9)

@@ -1,6 +1,6 @@
 """The telemetry archive: SQLAlchemy models, alembic migrations and the repository API."""
 
-from telemetry.archive.batch import PacketBatch, sequence_gaps
+from telemetry.archive.batch import DERIVED_APID, PacketBatch, sequence_gaps
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.records import (
     AlarmEventRecord,
@@ -15,6 +15,7 @@ from telemetry.archive.store import Archive
 
 __all__ = [
     "Archive",
+    "DERIVED_APID",
     "PacketBatch",
     "sequence_gaps",
     "upgrade",

@@ -15,10 +15,13 @@ import numpy as np
 if TYPE_CHECKING:
     from telemetry.ingest_report import SampleBatch
 
-__all__ = ["PacketBatch", "SEQUENCE_COUNT_MODULUS", "sequence_gaps"]
+__all__ = ["PacketBatch", "SEQUENCE_COUNT_MODULUS", "DERIVED_APID", "sequence_gaps"]
 
 SEQUENCE_COUNT_MODULUS = 16_384  # 14-bit packet sequence count, CCSDS 133.0-B-2 §4.1.3.4.2.2
 MAX_APID = 2_047  # 11-bit APID, CCSDS 133.0-B-2 §4.1.3.3.4
+# Archive APID of parameters derived on the ground (the live twin's residuals): no raw packets, sequence counts 0;
+# 2047 is the idle packet (CCSDS 133.0-B-2 §4.1.3.3.4.4), so the highest APID a mission may use is 2045 here.
+DERIVED_APID = 2_046
 
 
 @dataclass(frozen=True)

@@ -85,7 +85,7 @@ class Tle(Base):
 
 
 class Pass(Base):
-    """A predicted pass over a station and what was actually received during it."""
+    """A pass over a station, predicted from a TLE or made from received data (origin), and what was received."""
 
     __tablename__ = "pass"
     __table_args__ = (
@@ -94,12 +94,13 @@ class Pass(Base):
     )
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     satellite_id: Mapped[int] = mapped_column(ForeignKey("satellite.id"))
-    station_id: Mapped[int] = mapped_column(ForeignKey("ground_station.id"))
+    station_id: Mapped[int | None] = mapped_column(ForeignKey("ground_station.id"))  # None: a pass from data
     tle_id: Mapped[int | None] = mapped_column(ForeignKey("tle.id"))
+    origin: Mapped[str] = mapped_column(String(16), default="predicted", server_default="predicted")
     aos_ns: Mapped[int] = mapped_column(BigInteger)
     los_ns: Mapped[int] = mapped_column(BigInteger)
     max_elevation_ns: Mapped[int] = mapped_column(BigInteger)
-    max_elevation_deg: Mapped[float] = mapped_column(Float)
+    max_elevation_deg: Mapped[float | None] = mapped_column(Float)  # None: a pass from data (no station geometry)
     received_start_ns: Mapped[int | None] = mapped_column(BigInteger)
     received_end_ns: Mapped[int | None] = mapped_column(BigInteger)
     packets_received: Mapped[int] = mapped_column(Integer, default=0)

@@ -93,15 +93,16 @@ class PassRecord:
     """A predicted pass and what was received in it (completeness from sequence-count gaps)."""
 
     id: int
-    station: str
+    station: str | None
     aos_ns: int
     los_ns: int
     max_elevation_ns: int
-    max_elevation_deg: float
+    max_elevation_deg: float | None
     received_start_ns: int | None
     received_end_ns: int | None
     packets_received: int
     packets_missing: int
+    origin: str = "predicted"  # or "data": made from telemetry no predicted pass covered (AOS/LOS = first/last sample)
 
     @property
     def completeness(self) -> float:

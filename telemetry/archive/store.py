@@ -560,13 +560,30 @@ class Archive:
                 ids.append(int(found))
         return ids
 
+    def save_data_pass(self, satellite: str, aos_ns: int, los_ns: int, station: str | None = None,
+                       pass_id: int | None = None) -> int:
+        """Store (or, with ``pass_id``, widen) a pass made from received data: AOS/LOS = first/last sample."""
+        if los_ns < aos_ns:
+            raise ValueError(f"passes: need aos_ns <= los_ns, got {aos_ns, los_ns}")
+        sat_id = self.satellite_id(satellite)
+        station_id = None if station is None else self.ground_station(station).id
+        row: dict[str, Any] = {"aos_ns": int(aos_ns), "los_ns": int(los_ns),
+                               "max_elevation_ns": (int(aos_ns) + int(los_ns)) // 2}
+        with self._writer.begin() as conn:
+            if pass_id is not None:
+                conn.execute(update(PASS).where(PASS.c.id == pass_id, PASS.c.origin == "data").values(**row))
+                return pass_id
+            row |= {"satellite_id": sat_id, "station_id": station_id, "origin": "data", "max_elevation_deg": None,
+                    "packets_received": 0, "packets_missing": 0}
+            return int(conn.execute(insert(PASS).values(**row).returning(PASS.c.id)).scalar_one())
+
     def passes(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
         """Passes of ``satellite`` overlapping [t0_ns, t1_ns], in AOS order."""
         sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             rows = conn.execute(
                 select(PASS, STATION.c.name.label("station_name"))
-                .join(STATION, STATION.c.id == PASS.c.station_id)
+                .outerjoin(STATION, STATION.c.id == PASS.c.station_id)
                 .where(PASS.c.satellite_id == sat_id, PASS.c.aos_ns <= t1_ns, PASS.c.los_ns >= t0_ns)
                 .order_by(PASS.c.aos_ns)
             ).all()
@@ -578,7 +595,7 @@ class Archive:
         with self.engine.connect() as conn:
             row = conn.execute(
                 select(PASS, STATION.c.name.label("station_name"))
-                .join(STATION, STATION.c.id == PASS.c.station_id)
+                .outerjoin(STATION, STATION.c.id == PASS.c.station_id)
                 .where(PASS.c.satellite_id == sat_id, PASS.c.id == pass_id)
             ).one_or_none()
         if row is None:
@@ -727,4 +744,5 @@ def _pass_record(row: Row[Any]) -> PassRecord:
         row.received_end_ns,
         row.packets_received,
         row.packets_missing,
+        row.origin,
     )

@@ -40,8 +40,13 @@ def _seconds(batches: list[SampleBatch]) -> list[list[SampleBatch]]:
 
 
 def _slice(b: SampleBatch, keep: np.ndarray) -> SampleBatch:
-    return dataclasses.replace(b, t_utc_ns=b.t_utc_ns[keep], sequence_count=b.sequence_count[keep],
-                               values={n: np.asarray(v)[keep] for n, v in b.values.items()}, packets=None)
+    return dataclasses.replace(
+        b,
+        t_utc_ns=b.t_utc_ns[keep],
+        sequence_count=b.sequence_count[keep],
+        values={n: np.asarray(v)[keep] for n, v in b.values.items()},
+        packets=None,
+    )
 
 
 def _twin() -> LiveTwin:
@@ -94,8 +99,10 @@ def test_non_unit_quaternion_is_reported_and_normalised(reference_batches):
     hk = next(b for b in second if b.packet == "ACS_HK")
     scaled = dict(hk.values, **{f"q_est_ib_{k}": np.asarray(hk.values[f"q_est_ib_{k}"]) * 1.02 for k in range(4)})
     twin.observe([dataclasses.replace(hk, values=scaled)], 0.0)
-    assert any(i["kind"] == "quaternion" and "4 quaternion samples not unit" in i["message"] and "0.02" in i["message"]
-               for i in twin.state.issues)
+    assert any(
+        i["kind"] == "quaternion" and "4 quaternion samples not unit" in i["message"] and "0.02" in i["message"]
+        for i in twin.state.issues
+    )
     assert np.linalg.norm(twin.state.actual_q_ib) == pytest.approx(1.0)
 
 

@@ -29,8 +29,9 @@ def reference_pass() -> bytes:
 
 
 def _upload(client: TestClient, token: str, satellite: str, dictionary: str, data: bytes) -> dict:
-    answer = client.post(f"/api/v1/telemetry/uploads?satellite={satellite}&dictionary={dictionary}",
-                         content=data, headers=bearer(token))
+    answer = client.post(
+        f"/api/v1/telemetry/uploads?satellite={satellite}&dictionary={dictionary}", content=data, headers=bearer(token)
+    )
     assert answer.status_code == 200, answer.json()
     client.app.state.services.twins.drain()
     return answer.json()
@@ -42,7 +43,8 @@ def _last_csv_row(shared_data: Path) -> dict[str, str]:
 
 
 def test_noaa20_upload_lists_the_satellite_and_its_actual_attitude_without_acs_model(
-        client: TestClient, tokens: dict[str, str], shared_data: Path) -> None:
+    client: TestClient, tokens: dict[str, str], shared_data: Path
+) -> None:
     _upload(client, tokens["operator"], "NOAA-20", "noaa20_apid11_xtce.yaml", (shared_data / PACKETS).read_bytes())
     listed = client.get("/api/v1/satellites", headers=bearer(tokens["viewer"])).json()
     row = next(s for s in listed if s["name"] == "NOAA-20")
@@ -57,15 +59,18 @@ def test_noaa20_upload_lists_the_satellite_and_its_actual_attitude_without_acs_m
 
 
 def test_reference_satellite_twin_compares_every_sample_and_archives_its_residuals(
-        client: TestClient, tokens: dict[str, str], reference_pass: bytes) -> None:
+    client: TestClient, tokens: dict[str, str], reference_pass: bytes
+) -> None:
     _upload(client, tokens["operator"], "REFSAT", "reference_satellite.yaml", reference_pass)
     twin = client.get("/api/v1/satellites/REFSAT/twin", headers=bearer(tokens["viewer"])).json()
     assert twin["acs_model"] == "somov-ge4-scan" and twin["state"] in ("propagating", "stale")
     assert twin["twin_utc"] == twin["telemetry_utc"] == "2026-03-20T00:03:59.750Z"
     assert twin["attitude_residual_arcsec"] < 5 * STAR_TRACKER_SIGMA_ARCSEC
     assert len(twin["actual_q_ib"]) == 4 and len(twin["wheel_speed_residual_rad_s"]) == 4
-    samples = client.get("/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT&max_points=100000",
-                         headers=bearer(tokens["viewer"])).json()
+    samples = client.get(
+        "/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT&max_points=100000",
+        headers=bearer(tokens["viewer"]),
+    ).json()
     assert samples["total_points"] == twin["samples_compared"] > 0.9 * 4 * PASS_S
     settled = np.array(samples["values"])[np.array(samples["t_utc_ns"]) > samples["t_utc_ns"][0] + 30 * 10**9]
     assert np.sqrt(np.mean(settled**2)) < 2 * STAR_TRACKER_SIGMA_ARCSEC  # the sensors' noise, not a model mismatch
@@ -74,13 +79,16 @@ def test_reference_satellite_twin_compares_every_sample_and_archives_its_residua
 
 
 def test_restart_recovers_the_twins_from_the_archive_without_altering_it(
-        tmp_path: Path, database_url: str, reference_pass: bytes) -> None:
+    tmp_path: Path, database_url: str, reference_pass: bytes
+) -> None:
     settings = make_settings(tmp_path, database_url)
     with TestClient(create_app(settings)) as first:
         token = first.app.state.services.auth.issue("op", Role.operator)[1]
         _upload(first, token, "REFSAT", "reference_satellite.yaml", reference_pass)
-        before = first.get("/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT"
-                           "&max_points=100000", headers=bearer(token)).json()
+        before = first.get(
+            "/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT&max_points=100000",
+            headers=bearer(token),
+        ).json()
     with TestClient(create_app(settings)) as second:
         token = second.app.state.services.auth.issue("op2", Role.operator)[1]
         second.app.state.services.twins.drain()
@@ -91,8 +99,10 @@ def test_restart_recovers_the_twins_from_the_archive_without_altering_it(
         twin = second.get("/api/v1/satellites/REFSAT/twin", headers=bearer(token)).json()
         assert twin["telemetry_utc"] == "2026-03-20T00:03:59.750Z" and twin["acs_model"] == "somov-ge4-scan"
         assert twin["state"] == "stale" and twin["samples_compared"] > 0  # recovered, and no telemetry since
-        after = second.get("/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT"
-                           "&max_points=100000", headers=bearer(token)).json()
+        after = second.get(
+            "/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT&max_points=100000",
+            headers=bearer(token),
+        ).json()
     assert after == before  # the recovery's re-computed residuals are duplicates: nothing archived altered
 
 

@@ -270,6 +270,7 @@ def test_exported_members_are_the_documented_surface() -> None:
     assert sorted(package.__all__) == sorted(
         [
             "Archive",
+            "DERIVED_APID",
             "PacketBatch",
             "sequence_gaps",
             "upgrade",
