@@ -8,6 +8,7 @@ from contextlib import asynccontextmanager
 from fastapi import FastAPI
 
 from backend.core.errors import install_error_handlers
+from backend.core.request_bounds import JsonBodyBounds
 from backend.services import build_services
 from backend.core.settings import Settings
 
@@ -56,6 +57,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan)
     app.state.services = services
     install_error_handlers(app)
+    app.add_middleware(JsonBodyBounds, max_bytes=int(settings.max_json_kb * 1000))
     for router in _routers():
         app.include_router(router, prefix=API_PREFIX)
     from frontend.dashboard_site import dashboard_app

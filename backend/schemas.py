@@ -9,7 +9,10 @@ from fastapi import Path
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field
 
 __all__ = ["DbId", "Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
-           "JobPublic", "SeriesPublic", "FilePublic", "TwinSessionCreate", "TwinSessionPublic", "ResidualsPublic"]
+           "JobPublic", "SeriesPublic", "FilePublic", "TwinSessionCreate", "TwinSessionPublic", "ResidualsPublic",
+           "SATELLITE_NAME"]
+
+SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)
 
 
 def _as_utc(moment: datetime) -> datetime:

@@ -14,17 +14,20 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from sim_core import quaternion as qt
 
 __all__ = ["RigidSpinScenario", "RigidSpinTrajectory", "simulate", "BYTES_PER_SAMPLE"]
 
+MAX_STEPS = 1e9  # RK4 steps of one run; the result-size limit of the caller bites long before
 BYTES_PER_SAMPLE = 8 * (1 + 4 + 3)  # t, q_ib, omega_b per batch member and step (float64)
 
 
 class RigidSpinScenario(BaseModel):
     """Inputs of a torque-free spin: batch of inertia diagonals and initial body rates."""
+
+    model_config = ConfigDict(allow_inf_nan=False)  # every number finite: Infinity / NaN name their field
 
     kind: str = Field("rigid-spin", pattern="^rigid-spin$")
     duration_s: float = Field(10.0, gt=0, examples=[10.0])
@@ -42,6 +45,8 @@ class RigidSpinScenario(BaseModel):
             raise ValueError("omega0_rad_s: each row must have 3 components")
         if len(self.inertia_kg_m2) != len(self.omega0_rad_s):
             raise ValueError("omega0_rad_s: needs one row per inertia_kg_m2 row (batch size)")
+        if not self.duration_s / self.dt_s <= MAX_STEPS:  # a denormal dt_s makes the ratio infinite
+            raise ValueError(f"dt_s: duration_s / dt_s = {self.duration_s / self.dt_s:.3g} steps, over {MAX_STEPS:.0e}")
         return self
 
     @property

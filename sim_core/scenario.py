@@ -270,7 +270,7 @@ class Scenario(_Spec):
     def _rates_nest(self) -> "Scenario":
         for name in ("measurement_dt_s", "control_dt_s", "output_dt_s"):
             ratio = getattr(self, name) / self.dynamics_dt_s
-            if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            if not math.isfinite(ratio) or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:  # denormal dt: inf
                 raise ValueError(f"{name}: must be a whole multiple of dynamics_dt_s ({self.dynamics_dt_s} s)")
         if not self.variants:
             raise ValueError("variants: at least one variant is required")

@@ -33,6 +33,8 @@ class Settings(BaseSettings):
     max_batch_size: int = Field(64, ge=1, description="Most fault variants in one job.")
     max_output_mb: float = Field(512.0, gt=0, description="Largest result file a job may write.")
     max_upload_mb: float = Field(256.0, gt=0, description="Largest telemetry/dictionary upload.")
+    max_json_kb: float = Field(2_000.0, gt=0, description="Largest JSON request body (scenarios, settings).")
+    max_prediction_days: float = Field(31.0, gt=0, le=366, description="Longest pass-prediction window.")
     max_points: int = Field(100_000, ge=2, description="Most points one time-series answer returns.")
     ws_rate_hz: float = Field(10.0, gt=0, le=100, description="Batches per second per WS client.")
     ws_buffer_items: int = Field(5_000, ge=1, description="Items buffered per WS client before thinning.")

@@ -1,27 +1,44 @@
-"""Telemetry dictionaries the server knows: the shipped ones plus those uploaded by operators.
+"""Telemetry dictionaries the server knows: the shipped ones (read-only) plus those uploaded by operators.
 
 An uploaded definition is stored as ``data_dir/dictionaries/<name>`` with ``<name>.meta.json``
-holding the APID and time code a ccsdspy CSV needs (XTCE and YAML carry their own).
+holding the APID and time code a ccsdspy CSV needs (XTCE and YAML carry their own) and its version.
+Every upload is a new version: the one it replaces is kept as ``.versions/<name>.v<N>`` (with its
+meta), files reach their final name only by an atomic rename after an fsync, and a file that cannot
+be read (a crash mid-write on an older build, a disk error) is a 422 naming the dictionary.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import threading
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DictionaryCatalogue", "DICTIONARY_SUFFIXES"]
+from backend.core.errors import ApiError
+
+__all__ = ["DICTIONARY_SUFFIXES", "DictionaryCatalogue"]
 
 DICTIONARY_SUFFIXES = (".yaml", ".yml", ".xml", ".csv")
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
+VERSIONS = ".versions"
 
 
 def _check_name(name: str) -> str:
     if not _SAFE_NAME.match(name) or Path(name).suffix.lower() not in DICTIONARY_SUFFIXES:
         raise ValueError(f"dictionary: {name!r} must be a plain file name ending in {DICTIONARY_SUFFIXES}")
     return name
+
+
+def _write_atomically(path: Path, content: bytes) -> None:
+    """``path`` holds either its old content or all of ``content``, never a part (fsync, then rename)."""
+    part = path.with_name(f".part.{path.name}")
+    with part.open("wb") as f:
+        f.write(content)
+        f.flush()
+        os.fsync(f.fileno())
+    part.replace(path)
 
 
 class DictionaryCatalogue:
@@ -42,6 +59,12 @@ class DictionaryCatalogue:
                       if p.suffix in DICTIONARY_SUFFIXES and not p.name.startswith(".")}
         return sorted(found)
 
+    def _meta(self, name: str) -> dict[str, Any]:
+        try:
+            return json.loads((self._folder / f"{name}.meta.json").read_text())
+        except (OSError, ValueError):
+            return {}  # meta lost or torn: a CSV then asks for its APID, YAML/XTCE need none
+
     def load(self, name: str) -> Any:
         """The telemetry.dictionary.Dictionary called ``name`` (ValueError naming ``dictionary``)."""
         from telemetry.dictionary import load_dictionary
@@ -51,34 +74,54 @@ class DictionaryCatalogue:
             if name in self._cache:
                 return self._cache[name]
         uploaded = self._folder / name
-        if uploaded.is_file():
-            meta = json.loads((self._folder / f"{name}.meta.json").read_text())
-            dictionary = load_dictionary(uploaded, apid=meta["apid"], time_code=meta["time_code"])
-        else:
-            dictionary = load_dictionary(name)
+        try:
+            if uploaded.is_file():
+                meta = self._meta(name)
+                dictionary = load_dictionary(uploaded, apid=meta.get("apid"), time_code=meta.get("time_code"))
+            else:
+                dictionary = load_dictionary(name)
+        except ValueError:
+            raise
+        except Exception as exc:  # a torn or corrupt file raises its parser's own errors
+            raise ValueError(f"dictionary: {name} cannot be read ({type(exc).__name__}: {exc}); "
+                             "upload it again") from exc
         with self._lock:
             self._cache[name] = dictionary
         return dictionary
 
-    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None) -> Any:
-        """Store an uploaded definition (YAML, XTCE or ccsdspy CSV + APID) once it loads cleanly."""
-        from telemetry.dictionary import load_dictionary
+    def version(self, name: str) -> int:
+        """Version of the uploaded dictionary ``name`` (0: none uploaded)."""
+        return int(self._meta(name).get("version", 1)) if (self._folder / name).is_file() else 0
+
+    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None) -> tuple[Any, int]:
+        """Store an uploaded definition (YAML, XTCE or ccsdspy CSV + APID) once it loads; (dictionary, version).
+
+        Shipped dictionaries are read-only (409): loosening their limits would silence real alarms.
+        """
+        from telemetry.dictionary import SHIPPED, load_dictionary
 
         _check_name(name)
+        if (SHIPPED / name).exists():
+            raise ApiError(409, f"name: {name} is a shipped dictionary and read-only; upload under another name",
+                           "name")
         self._folder.mkdir(parents=True, exist_ok=True)
-        path, backup = self._folder / name, self._folder / f".previous.{name}"
-        if path.exists():
-            path.replace(backup)  # the file is loaded under its own name (a CSV's stem names its packet)
-        path.write_bytes(content)
-        try:
-            dictionary = load_dictionary(path, apid=apid, time_code=time_code)
-        except Exception:
-            path.unlink()
-            if backup.exists():
-                backup.replace(path)
-            raise
-        backup.unlink(missing_ok=True)
-        (self._folder / f"{name}.meta.json").write_text(json.dumps({"apid": apid, "time_code": time_code}))
-        with self._lock:
+        with self._lock:  # one upload at a time per catalogue: versions are numbered without gaps
+            path, previous = self._folder / name, self.version(name)
+            kept = self._folder / VERSIONS / f"{name}.v{previous}"
+            if previous:
+                kept.parent.mkdir(exist_ok=True)
+                path.replace(kept)  # the file is loaded under its own name (a CSV's stem names its packet)
+            _write_atomically(path, content)
+            try:
+                dictionary = load_dictionary(path, apid=apid, time_code=time_code)
+            except Exception:
+                path.unlink()
+                if previous:
+                    kept.replace(path)
+                raise
+            if previous:
+                (self._folder / f"{name}.meta.json").replace(kept.with_name(f"{kept.name}.meta.json"))
+            meta = {"apid": apid, "time_code": time_code, "version": previous + 1}
+            _write_atomically(self._folder / f"{name}.meta.json", json.dumps(meta).encode())
             self._cache[name] = dictionary
-        return dictionary
+        return dictionary, previous + 1

@@ -273,6 +273,9 @@ class TelemetryGateway:
 
         if t1_ns <= t0_ns:
             raise ValueError("end: must be after start")
+        span_days, limit_days = (t1_ns - t0_ns) / 86_400e9, self._settings.max_prediction_days
+        if span_days > limit_days:
+            raise ValueError(f"end: the window spans {span_days:,.1f} days, over max_prediction_days = {limit_days:g}")
         tle_id, line1, line2 = self.archive.latest_tle(satellite, before_ns=t1_ns)
         site = self.archive.ground_station(station)
         predicted = passes.predict_passes(line1, line2, site.lat_deg, site.lon_deg, site.alt_m,

@@ -9,6 +9,7 @@ writes ``trajectory.npz`` and ``summary.json`` (or ``error.txt``).
 from __future__ import annotations
 
 import json
+import math
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -61,11 +62,25 @@ def _engine_scenario(body: dict[str, Any]) -> Any:
     return apply_overrides(scenario_library.get(body["library"]), sets)
 
 
+MAX_STEPS = 10**9  # dynamics steps of one job: far above any real scenario (one orbit at 0.01 s: 580,100)
+
+
+def _steps(scenario: Any, field: str) -> int:
+    """``getattr(scenario, field) / dynamics_dt_s`` as a count (ValueError naming the field when not finite/too big)."""
+    for name in ("duration_s", "dynamics_dt_s", "output_dt_s"):
+        value = float(getattr(scenario, name))
+        if not (math.isfinite(value) and value > 0 and math.isfinite(1.0 / value)):
+            raise ValueError(f"{name}: must be a finite, normal number of seconds > 0, got {value!r}")
+    steps = float(getattr(scenario, field)) / float(scenario.dynamics_dt_s)
+    if not steps <= MAX_STEPS:
+        raise ValueError(f"{field}: {field} / dynamics_dt_s = {steps:.3g} steps, over {MAX_STEPS:.0e}")
+    return max(round(steps), 1)
+
+
 def _engine_cost(scenario: Any) -> JobCost:
     from sim_core.closed_loop import record_width
 
-    n_out = -(-int(round(scenario.duration_s / scenario.dynamics_dt_s))
-              // int(round(scenario.output_dt_s / scenario.dynamics_dt_s)))
+    n_out = -(-_steps(scenario, "duration_s") // _steps(scenario, "output_dt_s"))
     n_wheels = len(scenario.spacecraft.cluster.wheels)
     batch = len(scenario.variants)
     return JobCost(scenario.duration_s, batch, n_out * batch * record_width(n_wheels) * FLOAT_BYTES)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 from datetime import datetime
 from typing import Any, Literal
 
@@ -13,13 +14,14 @@ from fastapi.responses import Response
 from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
+from backend.schemas import SATELLITE_NAME
 from backend.deps import ServicesDep, ViewerDep
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 
 router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
 
-SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, examples=["NOAA-20"])
+SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 MAX_EXPORT_PARAMETERS = 200
 
 
@@ -91,5 +93,6 @@ def export_samples(services: ServicesDep, _: ViewerDep, satellite: str = Satelli
     else:
         pq.write_table(table, sink, compression="zstd")
         media = "application/vnd.apache.parquet"
-    headers = {"Content-Disposition": f'attachment; filename="{satellite}-samples.{format}"'}
+    filename = re.sub(r"[^A-Za-z0-9._-]+", "_", satellite)  # a header value carries no CR/LF, quote or path
+    headers = {"Content-Disposition": f'attachment; filename="{filename}-samples.{format}"'}
     return Response(sink.getvalue(), media_type=media, headers=headers)

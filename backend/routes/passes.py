@@ -10,14 +10,14 @@ from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import DbId
+from backend.schemas import DbId, SATELLITE_NAME
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.routes.telemetry import read_limited
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 
 router = APIRouter(tags=["passes"], responses=ERROR_RESPONSES)
 
-SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, examples=["NOAA-20"])
+SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 MAX_TLE_BYTES = 64_000
 TLE_BODY = {"requestBody": {"required": True, "content": {"text/plain": {"schema": {"type": "string"},
             "example": "NOAA 20\n1 43013U 17073A   21099.50000000  .00000012  00000-0  26000-4 0  9991\n"
@@ -27,7 +27,7 @@ TLE_BODY = {"requestBody": {"required": True, "content": {"text/plain": {"schema
 class SatelliteCreate(BaseModel):
     """Register a satellite by name (and NORAD id)."""
 
-    name: str = Field(min_length=1, max_length=100, examples=["NOAA-20"])
+    name: str = Field(min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
     norad_id: int | None = Field(None, ge=1, le=999_999, examples=[43013])
 
 

@@ -8,6 +8,7 @@ from typing import Any, Literal
 from fastapi import APIRouter, Query, Request
 from starlette.concurrency import run_in_threadpool
 
+from backend.schemas import SATELLITE_NAME
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.core.errors import ERROR_RESPONSES, ApiError
 
@@ -44,7 +45,7 @@ def _parse_failure(exc: Exception, field: str) -> ApiError:
              openapi_extra=BINARY_BODY)
 async def upload_telemetry(
     request: Request, services: ServicesDep, principal: OperatorDep,
-    satellite: str = Query("NOAA-20", min_length=1, max_length=100, examples=["NOAA-20"]),
+    satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"]),
     dictionary: str = Query("noaa20_apid11_ccsdspy.yaml", examples=["noaa20_apid11_ccsdspy.yaml"]),
     format: Literal["ccsds", "csv", "jsonl"] = Query("ccsds"),
     source: str = Query("upload", max_length=200),
@@ -90,10 +91,11 @@ async def upload_dictionary(
     services.telemetry.require("dictionary")
     data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
     try:
-        loaded = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code)
-    except ValueError:
+        loaded, version = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code)
+    except (ValueError, ApiError):
         raise
     except Exception as exc:  # a malformed XML/YAML file raises its parser's own errors
         raise _parse_failure(exc, "body") from exc
-    services.audit.record(principal.name, "dictionary.upload", f"dictionary/{name}", {"bytes": len(data)})
+    services.audit.record(principal.name, "dictionary.upload", f"dictionary/{name}",
+                          {"bytes": len(data), "version": version})
     return {"name": name, "packets": {str(a): p.name for a, p in loaded.packets.items()}}

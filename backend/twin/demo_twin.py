@@ -35,10 +35,26 @@ def _log(services: Any, text: str) -> None:
         log.write(f"{datetime.now(UTC).isoformat()} {text}\n")
 
 
+def _start_when_admitted(services: Any, body: Any, stop: Any) -> Any:
+    """The twin session, retried while the job queue is full (429) instead of giving up; None if stopped."""
+    from backend.core.errors import ApiError
+    from backend.twin.session_service import start_session
+
+    while not stop.is_set():
+        try:
+            return start_session(services, body, "acs-twin serve")
+        except ApiError as exc:
+            if exc.status != 429:
+                raise
+            _log(services, f"job queue full, retrying the twin session in {POLL_S:g} s")
+            stop.wait(POLL_S)
+    return None
+
+
 def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, stop: Any) -> Any:
     """Wait for telemetry, start a nominal twin session, wait for it, serve the monitors; their handles."""
     from backend.schemas import TwinSessionCreate
-    from backend.twin.session_service import session_feed, start_session
+    from backend.twin.session_service import session_feed
     from frontend.monitors import serve_monitors
 
     satellite = services.settings.live_satellite
@@ -53,7 +69,9 @@ def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, s
     epoch = datetime.fromtimestamp(span[0] / 1e9, tz=UTC)  # the emulator flies from its first packet
     body = TwinSessionCreate(satellite=satellite, dictionary=services.settings.live_dictionary,
                              scenario=scenario, align_utc=align, duration_s=TWIN_S, scenario_epoch_utc=epoch)
-    session = start_session(services, body, "acs-twin serve")
+    session = _start_when_admitted(services, body, stop)
+    if session is None:
+        return None
     _log(services, f"twin session {session.id} aligned at {align.isoformat()}, job {session.job_id}")
     while services.job_repo.get(session.job_id).status in ("queued", "running") and not stop.is_set():
         time.sleep(1.0)

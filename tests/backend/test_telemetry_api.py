@@ -97,7 +97,7 @@ name: NOAA-20 with a limit on the attitude scalar
 packets:
   - name: JPSS_ATT_EPHEM
     apid: 11
-    layout_from: {ccsdspy_csv: ccsdspy_jpss1_geolocation.csv}
+    layout_from: {ccsdspy_csv: jpss1_geolocation_layout.csv}
     time_code: {format: CDS, day_octets: 2, submillisecond_octets: 2, epoch_utc: "1958-01-01T00:00:00Z"}
     derived:
       - {name: q0_watch, kind: alias, inputs: [ADCFAQ4], limits: {yellow_high: 0.9, red_high: 0.99}}
@@ -108,7 +108,10 @@ def test_uploaded_dictionary_with_limits_raises_alarms_that_operators_acknowledg
         client: TestClient, tokens: dict[str, str], shared_data: Path) -> None:
     operator, viewer = bearer(tokens["operator"]), bearer(tokens["viewer"])
     layout = (shared_data / NOAA20 / "ccsdspy_jpss1_geolocation.csv").read_bytes()
-    assert client.post("/api/v1/dictionaries/ccsdspy_jpss1_geolocation.csv?apid=11", content=layout,
+    shipped = client.post("/api/v1/dictionaries/ccsdspy_jpss1_geolocation.csv?apid=11", content=layout,
+                          headers=operator)
+    assert shipped.status_code == 409 and shipped.json()["field"] == "name"  # shipped dictionaries are read-only
+    assert client.post("/api/v1/dictionaries/jpss1_geolocation_layout.csv?apid=11", content=layout,
                        headers=operator).status_code == 201
     made = client.post("/api/v1/dictionaries/limited.yaml", content=LIMITED_DICTIONARY.encode(), headers=operator)
     assert made.status_code == 201 and made.json()["packets"] == {"11": "JPSS_ATT_EPHEM"}
