@@ -1,22 +1,31 @@
 """The backend's seam to the telemetry package: archive, decoding, limits, passes, live stream.
 
-Telemetry modules are built alongside the server; the gateway wires each one that is importable
-and answers 503 naming the missing module for the others, so routes never change. Ingest is the
+Telemetry is a hard dependency of the backend (never switched on by importability); the archive is
+handed out typed as the :class:`~backend.ingest.ports.TelemetryArchive` Protocol. Ingest is the
 pipeline decode → validate → archive (with limits) → publish to the live hub; downsampled sample
 queries are cached per satellite until its next ingest.
+
+Fan-out of live samples, one policy: a producer never waits on a consumer; a full bounded queue
+loses items, counts them and tells its consumer the count; the archive, not the fan-out, is the
+lossless record. Every ingested batch (upload or live link) is published once to the hub. Where
+the loss falls: telemetry.live's subscriber queue and the ingest process's outbox refuse the
+newcomer (what is delivered stays in order, the next message carries the gap); the WebSocket hub
+evicts the oldest so a stalled display resumes at the present.
 """
 
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import multiprocessing as mp
 import queue
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import asdict
-from typing import Any
+from dataclasses import asdict, dataclass
+from multiprocessing.process import BaseProcess
+from multiprocessing.queues import Queue
+from multiprocessing.synchronize import Event
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import orjson
@@ -24,61 +33,74 @@ import orjson
 from backend.core.errors import ApiError
 from backend.core.settings import Settings
 from backend.core.time import BOUND_NS
-from telemetry.downsampling import minmax_indices
 from backend.ingest.dictionary_catalogue import DictionaryCatalogue
 from backend.ingest.live_hub import LiveHub
+from backend.ingest.ports import TelemetryArchive
 from backend.ingest.sample_cache import SampleCache
+from telemetry import decoding, ground_files
+from telemetry.archive import Archive
+from telemetry.archive.records import PassRecord
+from telemetry.dictionary import Dictionary
+from telemetry.downsampling import minmax_indices
+from telemetry.ingest_report import DecodeResult, SampleBatch
+from telemetry.limits import dictionary_limits
 
-__all__ = ["COMPONENT_MODULES", "TelemetryGateway"]
+if TYPE_CHECKING:
+    import pyarrow as pa
 
-COMPONENT_MODULES = {
-    "archive": "telemetry.archive.store",
-    "queries": "telemetry.queries",
-    "decoding": "telemetry.decoding",
-    "dictionary": "telemetry.dictionary",
-    "limits": "telemetry.limits",
-    "ground_files": "telemetry.ground_files",
-    "passes": "telemetry.passes",
-    "live": "telemetry.live",
-    "emulator": "telemetry.emulator",
-    "engine": "sim_core.engine",
-}
+__all__ = ["COMPONENTS", "TelemetryGateway"]
+
+# the parts /health lists; all are hard dependencies of the backend, so all are present
+COMPONENTS = ("archive", "queries", "decoding", "dictionary", "limits", "ground_files", "passes", "live",
+              "emulator", "engine")
 LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
 LIVE_PASS_PERIOD_S = 10.0  # the live stream's pass from data is widened this often (a few queries each time)
 LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
 
 
-def _importable(module: str) -> bool:
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
-        return False
+@dataclass(frozen=True)
+class _LiveChild:
+    """The live-ingest process, its outbox to this server and its stop event."""
+
+    process: BaseProcess
+    outbox: Queue[tuple[str, Any]]
+    stop: Event
+
+
+def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
+    """("port", n) from the ingest process, or ("error", why) if it failed, died or stayed silent."""
+    deadline = time.monotonic() + LIVE_START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        try:
+            return live.outbox.get(timeout=0.2)
+        except queue.Empty:
+            if not live.process.is_alive():
+                return "error", f"the ingest process exited with code {live.process.exitcode} (see its output above)"
+    return "error", f"no answer from the ingest process within {LIVE_START_TIMEOUT_S:.0f} s"
 
 
 class TelemetryGateway:
-    """Reaches telemetry through one object; knows which parts are present."""
+    """Reaches telemetry through one object: the archive, ingest, passes, queries and the live link."""
 
     def __init__(self, settings: Settings, hub: LiveHub) -> None:
         self._settings, self._hub = settings, hub
         self.dictionaries = DictionaryCatalogue(settings.data_dir / "dictionaries")
-        self._archive: Any = None
-        self._live: Any = None
-        self._outbox: Any = None
-        self._stop_live: Any = None
+        self._archive: Archive | None = None
+        self._live: _LiveChild | None = None
         self._relay: threading.Thread | None = None
         self._live_stats: dict[str, Any] = {}
         self.live_port: int | None = None
         self._samples = SampleCache()
-        self._committed: list[Callable[[str, str, list[Any]], None]] = []
+        self._committed: list[Callable[[str, str, list[SampleBatch]], None]] = []
         self._live_pass_at_ns = 0
 
-    def on_commit(self, listener: Callable[[str, str, list[Any]], None]) -> None:
+    def on_commit(self, listener: Callable[[str, str, list[SampleBatch]], None]) -> None:
         """Call ``listener(satellite, dictionary_name, batches)`` for every upload the archive committed and every
         live batch (the ingest process commits those within telemetry.live.ARCHIVE_INTERVAL_S); the live twins'
         one input path."""
         self._committed.append(listener)
 
-    def opened_archive(self) -> Any:
+    def opened_archive(self) -> TelemetryArchive | None:
         """The archive once started, else None (no 503: for background workers)."""
         return self._archive
 
@@ -87,72 +109,57 @@ class TelemetryGateway:
         self._samples.invalidate(satellite, t0_ns, t1_ns)
 
     def components(self) -> dict[str, bool]:
-        """Which optional modules are importable in this build."""
-        return {name: _importable(module) for name, module in COMPONENT_MODULES.items()}
-
-    def require(self, component: str) -> None:
-        """503 naming the module when ``component`` has not landed in this build."""
-        if not _importable(COMPONENT_MODULES[component]):
-            raise ApiError(503, f"{COMPONENT_MODULES[component]} is not available in this build",
-                           field=component)
+        """The telemetry parts of this build (all of them: they are dependencies, not plug-ins)."""
+        return dict.fromkeys(COMPONENTS, True)
 
     @property
-    def archive(self) -> Any:
-        """The telemetry.archive.Archive over the server's database (503 if not built)."""
+    def archive(self) -> TelemetryArchive:
+        """The telemetry archive over the server's database (503 until started)."""
+        return self._opened()
+
+    def _opened(self) -> Archive:
         if self._archive is None:
-            self.require("archive")
             raise ApiError(503, "archive not started", "archive")
         return self._archive
 
     def start(self) -> None:
         """Open (and migrate) the archive on the server's database URL."""
-        if _importable(COMPONENT_MODULES["archive"]):
-            from telemetry.archive import Archive
-
-            self._archive = Archive(self._settings.resolved_database_url())
+        self._archive = Archive(self._settings.resolved_database_url())
 
     async def start_live(self) -> None:
         """Start the live-ingest process (telemetry.live) and the thread relaying it to the hub."""
-        if not (self._settings.live_enabled and self._archive is not None and _importable(COMPONENT_MODULES["live"])):
+        if not (self._settings.live_enabled and self._archive is not None):
             return
         from backend.ingest.live_ingest import OUTBOX_MESSAGES, run_ingest_process
 
         self.dictionaries.load(self._settings.live_dictionary)  # fail here, naming the dictionary
         ctx = mp.get_context("spawn")
-        self._outbox, self._stop_live = ctx.Queue(OUTBOX_MESSAGES), ctx.Event()
+        outbox: Queue[tuple[str, Any]] = ctx.Queue(OUTBOX_MESSAGES)
+        stop = ctx.Event()
         args = (self._settings.resolved_database_url(), str(self._settings.data_dir / "dictionaries"),
                 self._settings.live_dictionary, self._settings.live_satellite, self._settings.host,
-                self._settings.telemetry_port, self._outbox, self._stop_live)
-        self._live = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
-        self._live.start()
-        kind, detail = await asyncio.to_thread(self._first_live_message)
+                self._settings.telemetry_port, outbox, stop)
+        live = _LiveChild(ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest",
+                                      daemon=True), outbox, stop)
+        self._live = live
+        live.process.start()
+        kind, detail = await asyncio.to_thread(_first_live_message, live)
         if kind != "port":
-            self._stop_live.set()
-            await asyncio.to_thread(self._live.join, LIVE_STOP_TIMEOUT_S)
+            stop.set()
+            await asyncio.to_thread(live.process.join, LIVE_STOP_TIMEOUT_S)
             self._live = None
             raise RuntimeError(f"live ingest did not start: {detail}")
         self.live_port = int(detail)
-        self._relay = threading.Thread(target=self._relay_loop, name="live-relay", daemon=True)
+        self._relay = threading.Thread(target=self._relay_loop, args=(live,), name="live-relay", daemon=True)
         self._relay.start()
 
-    def _first_live_message(self) -> tuple[str, Any]:
-        """("port", n) from the ingest process, or ("error", why) if it failed, died or stayed silent."""
-        deadline = time.monotonic() + LIVE_START_TIMEOUT_S
-        while time.monotonic() < deadline:
-            try:
-                return self._outbox.get(timeout=0.2)
-            except queue.Empty:
-                if not self._live.is_alive():
-                    return "error", f"the ingest process exited with code {self._live.exitcode} (see its output above)"
-        return "error", f"no answer from the ingest process within {LIVE_START_TIMEOUT_S:.0f} s"
-
-    def _relay_loop(self) -> None:
+    def _relay_loop(self, live: _LiveChild) -> None:
         satellite = self._settings.live_satellite
         while True:
             try:
-                kind, payload = self._outbox.get(timeout=0.2)
+                kind, payload = live.outbox.get(timeout=0.2)
             except queue.Empty:
-                if self._stop_live.is_set() and not self._live.is_alive():
+                if live.stop.is_set() and not live.process.is_alive():
                     return
                 continue
             if kind == "stats":
@@ -166,7 +173,7 @@ class TelemetryGateway:
                 listener(satellite, self._settings.live_dictionary, [payload])
             self._live_passes(satellite, payload)
 
-    def _live_passes(self, satellite: str, batch: Any) -> None:
+    def _live_passes(self, satellite: str, batch: SampleBatch) -> None:
         """Every LIVE_PASS_PERIOD_S, the live stream's pass (from data when none was predicted) over what the
         ingest process has committed so far (it commits every telemetry.live.ARCHIVE_INTERVAL_S)."""
         if not len(batch.t_utc_ns):
@@ -179,7 +186,7 @@ class TelemetryGateway:
         try:
             from telemetry import passes
 
-            passes.passes_from_data(self.archive, satellite, start, newest)
+            passes.passes_from_data(self._opened(), satellite, start, newest)
         except ValueError:  # nothing committed yet for a new satellite: the next period will see it
             self._live_pass_at_ns = 0
 
@@ -187,10 +194,11 @@ class TelemetryGateway:
         """Stop the ingest process (it archives what is pending first) and the relay thread."""
         if self._live is None:
             return
-        self._stop_live.set()
-        await asyncio.to_thread(self._live.join, LIVE_STOP_TIMEOUT_S)
-        if self._live.is_alive():
-            self._live.terminate()
+        process = self._live.process
+        self._live.stop.set()
+        await asyncio.to_thread(process.join, LIVE_STOP_TIMEOUT_S)
+        if process.is_alive():
+            process.terminate()
         if self._relay is not None:
             await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
         self._live = None
@@ -208,33 +216,25 @@ class TelemetryGateway:
     def ingest_packets(self, satellite: str, data: bytes, dictionary_name: str, source: str,
                        uploaded_by: str) -> dict[str, Any]:
         """Decode a CCSDS byte stream, archive it with limit checking, publish it; the ingest report."""
-        self.require("decoding")
-        from telemetry.decoding import decode_stream
-
         dictionary = self.dictionaries.load(dictionary_name)
-        decoded = decode_stream(data, dictionary, source=source)
+        decoded = decoding.decode_stream(data, dictionary, source=source)
         return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
 
     def ingest_ground_file(self, satellite: str, data: bytes, kind: str, dictionary_name: str,
                            source: str, uploaded_by: str) -> dict[str, Any]:
         """Archive a CSV or JSONL ground file (telemetry.ground_files) like a packet upload."""
-        self.require("ground_files")
-        from telemetry import ground_files
-
         dictionary = self.dictionaries.load(dictionary_name)
         read = ground_files.read_ground_csv if kind == "csv" else ground_files.read_ground_jsonl
         decoded = read(data, dictionary, source=source)
         return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
 
-    def _archive_and_publish(self, satellite: str, decoded: Any, dictionary_name: str, source: str,
+    def _archive_and_publish(self, satellite: str, decoded: DecodeResult, dictionary_name: str, source: str,
                              uploaded_by: str) -> dict[str, Any]:
-        from telemetry.limits import dictionary_limits
-
         dictionary = self.dictionaries.load(dictionary_name)
         result = self.archive.ingest_decoded(satellite, decoded, uploaded_by=uploaded_by,
                                              limits=dictionary_limits(dictionary))
         self._invalidate_batches(satellite, decoded.batches)
-        passes: list[Any] = []
+        passes: list[PassRecord] = []
         if not result.duplicate_upload:
             self._publish(satellite, decoded.batches, result.alarm_events)
             for listener in self._committed:
@@ -244,7 +244,7 @@ class TelemetryGateway:
                 "archive": result.as_report(), "decoding": decoded.report.to_dict(),
                 "passes": [{**asdict(p), "completeness": p.completeness} for p in passes]}
 
-    def passes_from_data(self, satellite: str, batches: list[Any]) -> list[Any]:
+    def passes_from_data(self, satellite: str, batches: list[SampleBatch]) -> list[PassRecord]:
         """The passes the batches' samples fall in, made from the data where no predicted pass covers them
         (telemetry.passes.passes_from_data), reception recounted."""
         from telemetry import passes
@@ -252,9 +252,9 @@ class TelemetryGateway:
         spans = [(int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in batches if len(b.t_utc_ns)]
         if not spans:
             return []
-        return passes.passes_from_data(self.archive, satellite, min(s[0] for s in spans), max(s[1] for s in spans))
+        return passes.passes_from_data(self._opened(), satellite, min(s[0] for s in spans), max(s[1] for s in spans))
 
-    def _publish(self, satellite: str, batches: list[Any], alarm_events: int) -> None:
+    def _publish(self, satellite: str, batches: list[SampleBatch], alarm_events: int) -> None:
         for batch in batches:
             for name, column in batch.values.items():
                 topic = f"parameters/{name}"
@@ -266,9 +266,8 @@ class TelemetryGateway:
             self._hub.publish("alarms", {"satellite": satellite,
                                          "alarms": [asdict(a) for a in alarms]})
 
-    def predict_passes(self, satellite: str, station: str, t0_ns: int, t1_ns: int) -> list[Any]:
+    def predict_passes(self, satellite: str, station: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
         """Passes from the newest TLE over ``station`` in [t0_ns, t1_ns] (telemetry.passes), stored."""
-        self.require("passes")
         from telemetry import passes
 
         if t1_ns <= t0_ns:
@@ -283,28 +282,26 @@ class TelemetryGateway:
         ids = set(self.archive.save_passes(satellite, station, predicted.rows(), tle_id=tle_id))
         return [p for p in self.archive.passes(satellite, t0_ns, t1_ns) if p.id in ids]
 
-    def record_reception(self, satellite: str, t0_ns: int, t1_ns: int) -> list[Any]:
+    def record_reception(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
         """Recount what was received in each pass of [t0_ns, t1_ns] (completeness from gaps)."""
-        self.require("passes")
-        from telemetry import passes
+        from telemetry import passes  # skyfield and sgp4: imported on first use, not at server start
 
-        return passes.record_reception(self.archive, satellite, self.archive.passes(satellite, t0_ns, t1_ns))
+        archive = self._opened()
+        return passes.record_reception(archive, satellite, archive.passes(satellite, t0_ns, t1_ns))
 
     def pass_summary(self, satellite: str, pass_id: int) -> dict[str, Any]:
         """Reception, per-parameter statistics and alarms of one pass (telemetry.queries)."""
-        self.require("queries")
-        from telemetry import queries
+        from telemetry import queries  # pyarrow: imported on first use, not at server start
 
-        return queries.pass_summary(self.archive, satellite, pass_id)
+        return queries.pass_summary(self._opened(), satellite, pass_id)
 
-    def export_table(self, satellite: str, names: list[str], t0_ns: int, t1_ns: int) -> Any:
+    def export_table(self, satellite: str, names: list[str], t0_ns: int, t1_ns: int) -> pa.Table:
         """Wide pyarrow table of the parameters (telemetry.queries.export_table)."""
-        self.require("queries")
         from telemetry import queries
 
-        return queries.export_table(self.archive, satellite, names, t0_ns, t1_ns)
+        return queries.export_table(self._opened(), satellite, names, t0_ns, t1_ns)
 
-    def _invalidate_batches(self, satellite: str, batches: list[Any]) -> None:
+    def _invalidate_batches(self, satellite: str, batches: list[SampleBatch]) -> None:
         spans = [(int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in batches if len(b.t_utc_ns)]
         if spans:
             self._samples.invalidate(satellite, min(s[0] for s in spans), max(s[1] for s in spans))
@@ -357,6 +354,6 @@ def _window_of(series: tuple[np.ndarray, np.ndarray], t0_ns: int, t1_ns: int) ->
     return t[lo:hi], v[lo:hi]
 
 
-def dictionary_name_of(dictionary: Any) -> str:
+def dictionary_name_of(dictionary: Dictionary) -> str:
     """Display name of a loaded dictionary."""
     return str(getattr(dictionary, "name", ""))

@@ -51,7 +51,6 @@ async def upload_telemetry(
     source: str = Query("upload", max_length=200),
 ) -> dict[str, Any]:
     """Decode, validate, archive (limits checked, duplicates dropped) and return the ingest report."""
-    services.telemetry.require("archive")
     data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
     gateway = services.telemetry
     if format == "ccsds":
@@ -76,7 +75,6 @@ def list_uploads(services: ServicesDep, _: ViewerDep,
 @router.get("/dictionaries", response_model=list[str], summary="Known telemetry dictionaries")
 def list_dictionaries(services: ServicesDep, _: ViewerDep) -> list[str]:
     """File names usable as ``dictionary=`` in uploads (shipped and uploaded)."""
-    services.telemetry.require("dictionary")
     return services.telemetry.dictionaries.names()
 
 
@@ -88,7 +86,6 @@ async def upload_dictionary(
     time_code: str | None = Query(None, max_length=200, description="Time code spec for CSV/XTCE."),
 ) -> dict[str, Any]:
     """Store a definition for a new spacecraft or APID once it loads; lists its packets."""
-    services.telemetry.require("dictionary")
     data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
     try:
         loaded, version = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code)
