@@ -32,6 +32,7 @@ __all__ = [
     "encode_primary_headers",
     "decode_time",
     "time_fields_valid",
+    "scale_to_utc",
     "encode_time",
     "crc16_ccitt",
     "frame_stream",
@@ -50,7 +51,8 @@ MS_PER_DAY_WITH_LEAP = 86_401_000  # a UTC day with a positive leap second
 TIME_SCALE_OFFSET_S = {"UTC": None, "TAI": 0, "GPS": -19}  # scale − TAI where leap seconds apply
 
 
-_OK, _BAD_HEADER, _UNKNOWN_APID, _BAD_LENGTH, _TRUNCATED, _CRC_FAILURE, _IDLE = range(7)
+_OK, _BAD_HEADER, _UNKNOWN_APID, _BAD_LENGTH, _TRUNCATED, _CRC_FAILURE, _IDLE, _UNDEFINED = range(8)
+UNDEFINED_CHAIN = 4  # well-formed packets of undefined APIDs followed to confirm one's length field
 
 
 class FrameCode:
@@ -63,7 +65,8 @@ class FrameCode:
     TRUNCATED = _TRUNCATED
     CRC_FAILURE = _CRC_FAILURE
     IDLE = _IDLE
-    NAMES = ("ok", "bad_header", "unknown_apid", "bad_length", "truncated", "crc_failure", "idle")
+    UNDEFINED = _UNDEFINED
+    NAMES = ("ok", "bad_header", "unknown_apid", "bad_length", "truncated", "crc_failure", "idle", "undefined_apid")
 
 
 @dataclass(frozen=True)
@@ -185,7 +188,7 @@ def _tai_minus_utc_ns(boundaries: str, t_ns: np.ndarray) -> np.ndarray:
     return offset[np.clip(np.searchsorted(starts, t_ns, side="right") - 1, 0, None)]
 
 
-def _scale_to_utc(t_scale_ns: np.ndarray, scale: str) -> np.ndarray:
+def scale_to_utc(t_scale_ns: np.ndarray, scale: str) -> np.ndarray:
     """UTC ns of times labelled in a time scale (UTC, TAI, GPS)."""
     if TIME_SCALE_OFFSET_S[scale] is None:
         return t_scale_ns
@@ -210,12 +213,12 @@ def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
         fine = _big_endian_uint(t[:, code.coarse_octets :]).astype(np.int64)
         bits = 8 * code.fine_octets
         fine_ns = (fine * NS_PER_S + (1 << bits >> 1)) >> bits if bits else 0
-        return _scale_to_utc(code.epoch_ns + coarse * NS_PER_S + fine_ns, code.time_scale)
+        return scale_to_utc(code.epoch_ns + coarse * NS_PER_S + fine_ns, code.time_scale)
     day = _big_endian_uint(t[:, : code.day_octets]).astype(np.int64)
     ms = _big_endian_uint(t[:, code.day_octets : code.day_octets + 4]).astype(np.int64)
     sub = _big_endian_uint(t[:, code.day_octets + 4 :]).astype(np.int64)
     sub_ns = {0: 0, 2: sub * 1_000, 4: sub // 1_000}[code.submillisecond_octets]
-    return _scale_to_utc(code.epoch_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns, code.time_scale)
+    return scale_to_utc(code.epoch_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns, code.time_scale)
 
 
 def time_fields_valid(octets: np.ndarray, code: TimeCode) -> np.ndarray:
@@ -314,7 +317,7 @@ def _header_fits(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, 
         return False
     apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
     size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
-    if lengths[apid] <= 0 or size != lengths[apid] or p + size > n:
+    if lengths[apid] == 0 or (lengths[apid] > 0 and size != lengths[apid]) or p + size > n:
         return False
     if crc[apid]:
         return _crc16_1(buf, p, p + size - 2, table) == ((np.int64(buf[p + size - 2]) << 8) | buf[p + size - 1])
@@ -342,7 +345,7 @@ def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, tab
     size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
     if lengths[apid] == 0:
         return _UNKNOWN_APID
-    if size != lengths[apid]:
+    if lengths[apid] > 0 and size != lengths[apid]:
         return _BAD_LENGTH
     if p + size > n:
         return _TRUNCATED
@@ -360,6 +363,46 @@ def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
 
 
 @njit(cache=True)
+def _links_confirm(buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """True when the data ends at q, a dictionary packet fits at q, or UNDEFINED_CHAIN well-formed, unsegmented
+    telemetry packets follow one another from q (each where the previous one's length field ends) before either.
+
+    This confirms a length field that no dictionary definition checks: garbage rarely forms even two links.
+    """
+    n = buf.shape[0]
+    for _ in range(UNDEFINED_CHAIN):
+        if q == n or _header_fits(buf, q, lengths, crc, table):
+            return True
+        if not _well_formed(buf, q) or (buf[q] >> 4) & 1 or buf[q + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
+            return False
+        if (((np.int64(buf[q]) & 7) << 8) | buf[q + 1]) == IDLE_APID:
+            return False
+        q += ((np.int64(buf[q + 4]) << 8) | buf[q + 5]) + PRIMARY_HEADER_OCTETS + 1
+    return True
+
+
+@njit(cache=True)
+def _undefined_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """A well-formed packet of an APID without definition at p, its length field confirmed by the links from p."""
+    if not _well_formed(buf, p) or lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]] != 0:
+        return False
+    return _links_confirm(buf, p, lengths, crc, table)
+
+
+@njit(cache=True)
+def _other_length_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """A well-formed packet of a defined APID whose length differs from its definition, its length field confirmed
+    by the links from its end; the decoder reports the length mismatch."""
+    if not _well_formed(buf, p):
+        return False
+    apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
+    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1 or buf[p + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
+        return False
+    q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+    return _links_confirm(buf, q, lengths, crc, table)
+
+
+@njit(cache=True)
 def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
     """First q in [start, stop) where a dictionary packet fits, else stop."""
     q = start
@@ -369,7 +412,7 @@ def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: 
 
 
 @njit(cache=True)
-def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray):
+def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, keep_undefined: bool):
     """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them.
 
     A dictionary packet that fits at p (known APID, its length, CRC where defined) is taken when its
@@ -377,7 +420,9 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
     unconfirmed one is cut short (truncated) at the first packet that fits inside it, else taken. Anything else
     (unknown APIDs included: their length field is never trusted, so garbage cannot hide packets)
     is quarantined up to the next octet where a dictionary packet fits; an idle packet spanning
-    exactly that stretch is counted as idle.
+    exactly that stretch is counted as idle. With keep_undefined, a well-formed packet of an APID
+    without definition whose length field is confirmed (see _undefined_confirmed) is its own segment.
+    lengths[apid]: 0 = no definition, > 0 = exact length, < 0 = any length (taken from the header).
     """
     n = buf.shape[0]
     offsets = np.empty(n // PRIMARY_HEADER_OCTETS + 2, dtype=np.int64)
@@ -388,14 +433,29 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
     while p < n:
         if _header_fits(buf, p, lengths, crc, table):
             apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-            size = lengths[apid]
+            size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
             q = p + size
-            if not (crc[apid] or q == n or _header_fits(buf, q, lengths, crc, table)):
+            confirmed = crc[apid] or q == n or _header_fits(buf, q, lengths, crc, table)
+            if not confirmed and keep_undefined:
+                confirmed = _links_confirm(buf, q, lengths, crc, table)
+            if not confirmed:
                 q = _next_fit(buf, p + 1, p + size, lengths, crc, table)
             offsets[k], sizes[k] = p, q - p
             codes[k] = _OK if q == p + size else _TRUNCATED
             k += 1
             p = q
+            continue
+        if keep_undefined and _other_length_confirmed(buf, p, lengths, crc, table):
+            offsets[k], sizes[k] = p, ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+            codes[k] = _OK
+            p += sizes[k]
+            k += 1
+            continue
+        if keep_undefined and _undefined_confirmed(buf, p, lengths, crc, table):
+            offsets[k], sizes[k] = p, ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
+            codes[k] = _UNDEFINED
+            p += sizes[k]
+            k += 1
             continue
         q = _next_fit(buf, p + 1, n, lengths, crc, table)
         offsets[k], sizes[k] = p, q - p
@@ -415,13 +475,18 @@ class Frames:
 
 
 def frame_stream(
-    data: bytes | np.ndarray, packet_octets_by_apid: dict[int, int], crc_apids: frozenset[int] = frozenset()
+    data: bytes | np.ndarray,
+    packet_octets_by_apid: dict[int, int],
+    crc_apids: frozenset[int] = frozenset(),
+    keep_undefined: bool = False,
 ) -> Frames:
     """Split a mixed-APID packet stream by its length fields (CCSDS 133.0-B-2 §4.1.3.5), resynchronising on damage.
 
     A packet is taken when its version is 0, its APID is known, its length is the dictionary's and
     its CRC holds (or, without a CRC, no other packet starts inside it before its end). Damaged
     stretches become quarantined segments and the scan resumes where a dictionary packet fits.
+    A length of 0 means any length (variable-length packets, or layouts checked after framing);
+    keep_undefined frames confirmed packets of APIDs without definition (FrameCode.UNDEFINED).
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
     if buf.dtype != np.uint8 or buf.ndim != 1:
@@ -431,9 +496,9 @@ def frame_stream(
     for apid, size in packet_octets_by_apid.items():
         if not 0 <= apid < IDLE_APID:
             raise ValueError(f"packet_octets_by_apid: APID {apid} outside 0..2046")
-        if size < PRIMARY_HEADER_OCTETS + 1:
+        if 0 < size < PRIMARY_HEADER_OCTETS + 1 or size < 0:
             raise ValueError(f"packet_octets_by_apid: APID {apid} length {size} < 7 octets")
-        lengths[apid] = size
+        lengths[apid] = size if size else -1
         crc[apid] = apid in crc_apids
-    offset, length, code = _frame_kernel(buf, lengths, crc, _CRC_TABLES)
+    offset, length, code = _frame_kernel(buf, lengths, crc, _CRC_TABLES, keep_undefined)
     return Frames(offset=offset, length=length, code=code)

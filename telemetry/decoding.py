@@ -9,14 +9,26 @@ integers, vectorised per field. No per-packet Python. Calibration: polynomial c0
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numba import njit
 
 from sim_core import quaternion
 from telemetry import ccsds
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
-from telemetry.ingest_report import ApidSummary, DecodeResult, IngestReport, QuarantineRecord, SampleBatch
+from telemetry.ingest_report import (
+    ApidSummary,
+    DecodeResult,
+    IngestReport,
+    QuarantineRecord,
+    SampleBatch,
+    UndefinedPackets,
+)
+from telemetry.packet_time import TIME_PROBLEMS, field_times
 from telemetry.validation import HEADER_PROBLEMS, INVALID_TIME, header_mismatch, validate_packets
+
+MAX_PACKET_OCTETS = ccsds.PRIMARY_HEADER_OCTETS + 65_536  # CCSDS 133.0-B-2 §4.1.3.5
 
 __all__ = [
     "packet_matrix",
@@ -64,8 +76,34 @@ def _bit_patterns(packets: np.ndarray, first: np.ndarray, last: np.ndarray, shif
     return out
 
 
+def _reorder_octets(pattern: np.ndarray, p: Parameter) -> np.ndarray:
+    """A field's bit pattern with its octets reordered as ccsdspy does (``little`` or digits like ``3412``).
+
+    As ccsdspy (decode.py, packet_types._do_array_byte_reordering): the masked, right-aligned value
+    sits in a container of the field's covering octets (3 -> 4, 5..7 -> 8) that is byte-swapped for
+    ``little``; a digit order permutes that container's octets (1 = least significant), right-aligned.
+    """
+    covering = (p.bit_offset + p.bit_length - 1) // 8 - p.bit_offset // 8 + 1
+    width = {3: 4, 5: 8, 6: 8, 7: 8}.get(covering, covering)
+    shifts = np.arange(8 * (width - 1), -8, -8, dtype=np.uint64)
+    octets = (pattern[:, None] >> shifts) & np.uint64(0xFF)  # most significant first
+    if p.byte_order == "little":
+        octets = octets[:, ::-1]
+    else:
+        digits = [int(d) for d in p.byte_order]
+        chosen = [d - 1 for d in reversed(digits)]
+        select = chosen + sorted(set(range(width)) - set(chosen))
+        reordered = octets[:, ::-1][:, select]
+        padding = width - len(digits)
+        octets = np.zeros_like(reordered)
+        octets[:, padding:] = reordered[:, : width - padding]
+    return np.bitwise_or.reduce(octets << shifts, axis=1) if width else pattern
+
+
 def _raw_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
     """Raw value of a field's bit patterns: IEEE 754 float, two's-complement int, or unsigned."""
+    if p.byte_order != "big":
+        pattern = _reorder_octets(pattern, p)
     if p.data_type == "float":
         return pattern.astype(np.uint32).view(np.float32) if p.bit_length == 32 else pattern.view(np.float64)
     if p.data_type == "int":
@@ -153,7 +191,8 @@ def quaternion_of(values: dict[str, np.ndarray], prefix: str) -> np.ndarray:
 
 def _frame_records(buf: np.ndarray, frames: ccsds.Frames) -> list[QuarantineRecord]:
     """Quarantine records of the stretches framing rejected (not packets, not idle packets)."""
-    bad = np.flatnonzero((frames.code != ccsds.FrameCode.OK) & (frames.code != ccsds.FrameCode.IDLE))
+    kept = (ccsds.FrameCode.OK, ccsds.FrameCode.IDLE, ccsds.FrameCode.UNDEFINED)
+    bad = np.flatnonzero(~np.isin(frames.code, kept))
     records = []
     for i in bad:
         off, size = int(frames.offset[i]), int(frames.length[i])
@@ -163,59 +202,202 @@ def _frame_records(buf: np.ndarray, frames: ccsds.Frames) -> list[QuarantineReco
     return records
 
 
+def _packet_lengths(buf: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """Total octets of the packets at offset, from their packet data length fields (CCSDS 133.0-B-2 §4.1.3.5)."""
+    return ((buf[offset + 4].astype(np.int64) << 8) | buf[offset + 5]) + ccsds.PRIMARY_HEADER_OCTETS + 1
+
+
+def _layout_groups(
+    buf: np.ndarray, offset: np.ndarray, length: np.ndarray, definition: PacketDefinition
+) -> tuple[list[tuple[np.ndarray, PacketDefinition]], dict[int, str]]:
+    """Packets sharing one fixed layout (by length and count-field values), and why the others are too short."""
+    short: dict[int, str] = {}
+    needed = definition.packet_octets
+    for i in np.flatnonzero(length < needed).tolist():
+        short[i] = f"packet has {int(length[i])} octets, the definition needs {needed}"
+    fits = np.flatnonzero(length >= needed)
+    if not definition.variable:
+        return ([(fits, definition)] if fits.size else []), short
+    counts = definition.count_fields
+    keys = length[fits][:, None]
+    if counts and fits.size:
+        raw = decode_raw(packet_matrix(buf, offset[fits], needed), definition)
+        keys = np.stack([length[fits]] + [raw[c].astype(np.int64) for c in counts], axis=1)
+    groups = []
+    unique, inverse = np.unique(keys, axis=0, return_inverse=True)
+    for g, key in enumerate(unique.tolist()):
+        idx = fits[inverse.ravel() == g]
+        try:
+            params = definition.resolve(key[0], dict(zip(counts, key[1:])))
+        except ValueError as exc:
+            short.update({i: str(exc) for i in idx.tolist()})
+            continue
+        groups.append((idx, replace(definition, parameters=params, packet_octets=key[0], fields=())))
+    return groups, short
+
+
+def _union(parts: list[tuple[np.ndarray, dict[str, np.ndarray]]], n: int) -> dict[str, np.ndarray]:
+    """Values of all packets by parameter; float64 NaN where a packet's layout lacks the parameter."""
+    if len(parts) == 1 and len(parts[0][0]) == n:
+        return parts[0][1]
+    names = dict.fromkeys(name for _, values in parts for name in values)
+    out = {}
+    for name in names:
+        pieces = [(idx, values[name]) for idx, values in parts if name in values]
+        complete = sum(len(idx) for idx, _ in pieces) == n
+        column = (np.empty(n, np.result_type(*(v for _, v in pieces))) if complete else np.full(n, np.nan))
+        for idx, v in pieces:
+            column[idx] = v
+        out[name] = column
+    return out
+
+
+@njit(cache=True)
+def _gather_octets(buf: np.ndarray, offset: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """The packets at offset (of the given lengths) back to back (compiled kernel)."""
+    out = np.empty(length.sum(), dtype=np.uint8)
+    k = 0
+    for i in range(offset.shape[0]):
+        out[k : k + length[i]] = buf[offset[i] : offset[i] + length[i]]
+        k += length[i]
+    return out
+
+
+def _packet_times(
+    rows: np.ndarray, raw: dict[str, np.ndarray], layout: PacketDefinition
+) -> tuple[np.ndarray, list[str]]:
+    """UTC ns of each packet of one layout and, per packet, why its time is invalid ("" = valid)."""
+    if layout.time_fields is not None:
+        t, problem = field_times(raw, layout.time_fields)
+        return t, [TIME_PROBLEMS[c] for c in problem.tolist()]
+    code = layout.time_code
+    assert code is not None
+    t_fields = rows[:, ccsds.PRIMARY_HEADER_OCTETS : ccsds.PRIMARY_HEADER_OCTETS + code.octets]
+    valid = ccsds.time_fields_valid(t_fields, code)
+    return ccsds.decode_time(t_fields, code), ["" if v else "invalid time code field" for v in valid.tolist()]
+
+
 def _decode_apid(
     buf: np.ndarray, offset: np.ndarray, definition: PacketDefinition, window: tuple[int | None, int | None],
     report: IngestReport,
 ) -> SampleBatch:
-    """Validate and decode the framed packets of one APID; tallies go into the report."""
+    """Validate and decode the framed packets of one APID (any lengths, fixed or variable layout)."""
+    if definition.time_code is None and definition.time_fields is None:
+        raise ValueError(f"time_code: packet {definition.name} has no time code or time fields to stamp samples "
+                         "(give --time-code or --time-fields)")
+    n, apid = offset.shape[0], definition.apid
+    length = _packet_lengths(buf, offset)
+    summary = ApidSummary(apid, definition.name)
+    report.apids[apid] = summary
+    summary.packet_octets = dict(zip(*(a.tolist() for a in np.unique(length, return_counts=True))))
+    headers = ccsds.parse_primary_headers(packet_matrix(buf, offset, ccsds.PRIMARY_HEADER_OCTETS))
+    mismatch = header_mismatch(headers, secondary_header=definition.time_code is not None)
     if definition.time_code is None:
-        raise ValueError(f"time_code: packet {definition.name} has no secondary-header time code to stamp samples")
-    packets = packet_matrix(buf, offset, definition.packet_octets)
-    headers = ccsds.parse_primary_headers(packets)
-    mismatch = header_mismatch(headers, secondary_header=True)
-    bad = mismatch != 0
-    if bad.any():
-        report.quarantined.extend(
-            QuarantineRecord(int(offset[i]), definition.packet_octets, "bad_header", definition.apid,
-                             int(headers.sequence_count[i]), detail=HEADER_PROBLEMS[mismatch[i]])
-            for i in np.flatnonzero(bad)
-        )
-        offset, packets = offset[~bad], packets[~bad]
-        headers = ccsds.parse_primary_headers(packets)
-    t0 = ccsds.PRIMARY_HEADER_OCTETS
-    t_fields = packets[:, t0 : t0 + definition.time_code.octets]
-    t = ccsds.decode_time(t_fields, definition.time_code)
-    t[~ccsds.time_fields_valid(t_fields, definition.time_code)] = INVALID_TIME  # -> time_out_of_range
-    verdict = validate_packets(definition.apid, offset, headers.sequence_count, t,
-                               definition.packet_octets, *window, period_s=definition.period_s)
-    kept = packets[verdict.accepted]
-    batch = SampleBatch(
-        packet=definition.name,
-        apid=definition.apid,
-        t_utc_ns=t[verdict.accepted],
-        sequence_count=headers.sequence_count[verdict.accepted],
-        values=decode_packets(kept, definition),
-        packets=kept,
-    )
-    report.quarantined.extend(verdict.quarantined)
+        mismatch[mismatch == 1] = 0  # time in named fields: the secondary header flag is the mission's business
+    records = [QuarantineRecord(int(offset[i]), int(length[i]), "bad_header", apid,
+                                int(headers.sequence_count[i]), detail=HEADER_PROBLEMS[mismatch[i]])
+               for i in np.flatnonzero(mismatch)]
+    dropped = mismatch != 0
+    groups, short = _layout_groups(buf, offset, length, definition)
+    for i, why in short.items():
+        if not dropped[i]:
+            records.append(QuarantineRecord(int(offset[i]), int(length[i]), "bad_length", apid,
+                                            int(headers.sequence_count[i]), detail=why))
+    summary.shorter_than_definition = len(short)
+    dropped[list(short)] = True
+    if not definition.variable:
+        summary.definition_octets = definition.packet_octets
+        summary.longer_than_definition = int(np.count_nonzero(length > definition.packet_octets))
+    t = np.full(n, INVALID_TIME, dtype=np.int64)
+    parts, rows_by_group = [], []
+    for idx, layout in groups:
+        rows = packet_matrix(buf, offset[idx], layout.packet_octets)
+        raw = decode_raw(rows, layout)
+        t[idx], problems = _packet_times(rows, raw, layout)
+        for i, why in zip(idx.tolist(), problems):
+            if why and not dropped[i]:
+                dropped[i] = True
+                records.append(QuarantineRecord(int(offset[i]), int(length[i]), "invalid_time", apid,
+                                                int(headers.sequence_count[i]), detail=why))
+        parts.append((idx, {p.name: calibrate(raw[p.name], p) for p in layout.parameters}))
+        rows_by_group.append(rows)
+    keep = np.flatnonzero(~dropped)
+    verdict = validate_packets(apid, offset[keep], headers.sequence_count[keep], t[keep], 0, *window,
+                               period_s=definition.period_s)
+    accepted = keep[verdict.accepted]
+    values = {name: v[accepted] for name, v in _union(parts, n).items()}
+    for d in definition.derived:
+        values[d.name] = derive(d, values, definition.time_code)
+    same_length = len(groups) == 1 and groups[0][1].packet_octets == int(length[0]) and len(groups[0][0]) == n
+    lengths = None if same_length else length[accepted]
+    packets = (rows_by_group[0][accepted] if same_length
+               else _gather_octets(buf, offset[accepted], length[accepted]))
+    batch = SampleBatch(packet=definition.name, apid=apid, t_utc_ns=t[accepted],
+                        sequence_count=headers.sequence_count[accepted], values=values, packets=packets,
+                        packet_lengths=lengths)
+    for q in verdict.quarantined:
+        records.append(replace(q, length=int(length[np.searchsorted(offset, q.offset)])))
+    report.quarantined.extend(records)
     report.duplicates += verdict.duplicates
-    summary = ApidSummary(definition.apid, definition.name, len(kept), verdict.duplicates,
-                          missing=sum(max(g.missing, 0) for g in verdict.gaps), gaps=verdict.gaps)
-    if len(kept):
+    summary.accepted, summary.duplicates = len(accepted), verdict.duplicates
+    summary.missing = sum(max(g.missing, 0) for g in verdict.gaps)
+    summary.gaps = verdict.gaps
+    if len(accepted):
         summary.t_first_utc_ns, summary.t_last_utc_ns = int(batch.t_utc_ns[0]), int(batch.t_utc_ns[-1])
-    report.apids[definition.apid] = summary
     return batch
 
 
+def _undefined_packets(buf: np.ndarray, frames: ccsds.Frames, report: IngestReport) -> list[UndefinedPackets]:
+    """Raw packets of APIDs without definition, by APID, counted in the report."""
+    undefined = frames.code == ccsds.FrameCode.UNDEFINED
+    offset, length = frames.offset[undefined], frames.length[undefined]
+    apid = ((buf[offset].astype(np.int64) & 7) << 8) | buf[offset + 1]
+    out = []
+    for a in np.unique(apid).tolist():
+        mine = apid == a
+        count = ((buf[offset[mine] + 2].astype(np.int64) & 0x3F) << 8) | buf[offset[mine] + 3]
+        out.append(UndefinedPackets(a, _gather_octets(buf, offset[mine], length[mine]), length[mine], count))
+        report.undefined_apids[a] = int(mine.sum())
+    return out
+
+
+def _complete_end(buf: np.ndarray, frames: ccsds.Frames) -> int:
+    """Where the whole segments of a chunk end: before a trailing segment the chunk's end may have cut
+    (a packet, or damage whose next packet may follow), keeping at most one packet's length unread."""
+    n = buf.shape[0]
+    if frames.offset.size == 0:
+        return max(n - MAX_PACKET_OCTETS, 0)
+    last = frames.offset.size - 1
+    whole = frames.code[last] in (ccsds.FrameCode.OK, ccsds.FrameCode.UNDEFINED, ccsds.FrameCode.IDLE)
+    if whole and n - int(frames.offset[last]) >= ccsds.PRIMARY_HEADER_OCTETS:
+        return n
+    return max(int(frames.offset[last]), n - MAX_PACKET_OCTETS)
+
+
 def decode_stream(
-    data: bytes | np.ndarray, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None
+    data: bytes | np.ndarray, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None,
+    final: bool = True,
 ) -> DecodeResult:
-    """Frame, validate and decode a mixed-APID packet stream (CCSDS 133.0-B-2 §4.1) into time-ordered batches."""
+    """Frame, validate and decode a mixed-APID packet stream (CCSDS 133.0-B-2 §4.1) into time-ordered batches.
+
+    Packets of a fixed layout sync on its length; a defined APID's packet of another length is taken
+    when what follows confirms its length field (a layout shorter than its packets decodes their
+    prefix, a longer one quarantines them as bad_length); variable layouts take any length;
+    confirmed packets of undefined APIDs are counted and kept raw. With final=False (a chunk of a
+    longer stream) a trailing segment the chunk may have cut is left out: ``consumed`` says where
+    the next chunk starts.
+    """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
-    frames = ccsds.frame_stream(buf, dictionary.packet_octets_by_apid(), dictionary.crc_apids())
+    lengths = {a: 0 if p.variable else p.packet_octets for a, p in dictionary.packets.items()}
+    frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True)
+    consumed = int(buf.shape[0]) if final else _complete_end(buf, frames)
+    if consumed < buf.shape[0]:
+        buf = buf[:consumed]
+        frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True)
     report = IngestReport(source=source, octets=int(buf.shape[0]))
     report.quarantined.extend(_frame_records(buf, frames))
     report.idle_packets = int(np.count_nonzero(frames.code == ccsds.FrameCode.IDLE))
+    undefined = _undefined_packets(buf, frames, report)
     offset = frames.offset[frames.code == ccsds.FrameCode.OK]
     apid = ((buf[offset].astype(np.int64) & 7) << 8) | buf[offset + 1]
     window = dictionary.time_window(now_utc_ns)
@@ -228,4 +410,4 @@ def decode_stream(
             report.apids[q.apid].quarantined += 1
     report.packets_accepted = sum(len(b.t_utc_ns) for b in batches)
     report.samples_accepted = sum(b.n_samples for b in batches)
-    return DecodeResult(batches=batches, report=report)
+    return DecodeResult(batches=batches, report=report, undefined=undefined, consumed=consumed)

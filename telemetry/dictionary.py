@@ -9,6 +9,7 @@ offset from the first octet of the packet, so layouts from all three sources dec
 from __future__ import annotations
 
 import csv
+import re
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -18,10 +19,12 @@ import numpy as np
 import yaml
 
 from telemetry.ccsds import APID_COUNT, IDLE_APID, PRIMARY_HEADER_OCTETS, TimeCode
+from telemetry.packet_time import TimeFields, parse_time_fields
 
 __all__ = [
     "Limits",
     "Parameter",
+    "FieldSpec",
     "DerivedParameter",
     "PacketDefinition",
     "Dictionary",
@@ -30,6 +33,9 @@ __all__ = [
     "load_dictionary",
     "load_yaml",
     "load_ccsdspy_csv",
+    "load_ccsdspy_folder",
+    "merge_dictionaries",
+    "lay_out",
     "load_xtce",
     "parse_time_code",
     "parse_utc_ns",
@@ -44,6 +50,7 @@ DERIVED_KINDS = {"attitude_error_angle": 8, "cds_time": 3, "alias": 1}
 SHIPPED = Path(__file__).with_name("dictionaries")
 FUTURE_MARGIN_NS = 86_400 * 10**9  # on-board clocks run ahead by less than a day; later stamps are corrupt
 MAX_PACKET_BITS = 8 * (PRIMARY_HEADER_OCTETS + 65536)  # CCSDS 133.0-B-2 §4.1.3.5: data field ≤ 65,536 octets
+EARLIEST_UTC_NS = 2 * 365 * 86_400 * 10**9  # 1972-01-01: UTC as defined today starts; 1970 stamps are unset clocks
 
 
 @dataclass(frozen=True)
@@ -74,8 +81,13 @@ class Parameter:
     polynomial: tuple[float, ...] = ()
     enumeration: dict[int, str] = field(default_factory=dict)
     limits: Limits = Limits()
+    byte_order: str = "big"
 
     def __post_init__(self) -> None:
+        if self.byte_order not in ("big", "little") and not (
+            self.byte_order.isdigit() and sorted(self.byte_order) == [str(k + 1) for k in range(len(self.byte_order))]
+        ):
+            raise ValueError(f"{self.name}.byte_order: expected big, little or a digit order like 3412")
         if self.data_type not in DATA_TYPES:
             raise ValueError(f"{self.name}.data_type: expected one of {DATA_TYPES}, got {self.data_type!r}")
         if self.data_type == "float" and self.bit_length not in (32, 64):
@@ -107,8 +119,41 @@ class DerivedParameter:
 
 
 @dataclass(frozen=True)
+class FieldSpec:
+    """A field of a variable layout (ccsdspy semantics): scalar, fixed array, or an array sized by the packet
+    length (``shape="expand"``) or by the value of an earlier field (``shape=<field name>``)."""
+
+    name: str
+    data_type: str
+    bit_length: int
+    bit_offset: int | None = None
+    byte_order: str = "big"
+    shape: tuple[int, ...] | str | None = None
+    array_order: str = "C"
+
+    @property
+    def is_variable(self) -> bool:
+        """True when the element count depends on the packet."""
+        return isinstance(self.shape, str)
+
+    def element_names(self, count: int) -> list[str]:
+        """Names of the elements in packet order: ``name``, ``name_k`` or ``name_i_j`` (ccsdspy's array index)."""
+        if self.shape is None:
+            return [self.name]
+        if isinstance(self.shape, tuple) and len(self.shape) > 1:
+            index = np.unravel_index(np.arange(count), self.shape, order=self.array_order)  # type: ignore[arg-type]
+            return [self.name + "".join(f"_{int(i[k])}" for i in index) for k in range(count)]
+        return [f"{self.name}_{k}" for k in range(count)]
+
+
+@dataclass(frozen=True)
 class PacketDefinition:
-    """A fixed-length telemetry packet type: APID, total length, secondary-header time code, CRC, fields."""
+    """A telemetry packet type: APID, length, time (secondary-header code or named fields), CRC, fields.
+
+    Fixed layouts list every parameter with its bit offset. A variable layout keeps its ``fields``
+    (ccsdspy semantics); ``parameters`` then hold the fixed part before the first variable array and
+    ``packet_octets`` the octets that fixed part needs; :meth:`resolve` lays a packet's fields out.
+    """
 
     name: str
     apid: int
@@ -119,10 +164,42 @@ class PacketDefinition:
     period_s: float | None = None
     description: str = ""
     derived: tuple[DerivedParameter, ...] = ()
+    time_fields: TimeFields | None = None
+    fields: tuple[FieldSpec, ...] = ()
+
+    @property
+    def variable(self) -> bool:
+        """True when the layout depends on the packet length or on a field's value."""
+        return bool(self.fields)
+
+    @property
+    def count_fields(self) -> tuple[str, ...]:
+        """Fields whose values size arrays of this packet."""
+        return tuple(str(f.shape) for f in self.fields if f.is_variable and f.shape != "expand")
+
+    def resolve(self, packet_octets: int, counts: dict[str, int]) -> tuple[Parameter, ...]:
+        """Parameters of a variable layout in a packet of packet_octets whose count fields hold counts.
+
+        ValueError when the fields need more octets than the packet has.
+        """
+        params, end = lay_out(self.fields, packet_octets, counts)
+        if end > 8 * packet_octets:
+            raise ValueError(f"packet has {packet_octets} octets, the definition needs {-(-end // 8)}")
+        return params
 
     def __post_init__(self) -> None:
         if not 0 <= self.apid < IDLE_APID:
             raise ValueError(f"{self.name}.apid: expected 0..2046, got {self.apid}")
+        if self.time_code is not None and self.time_fields is not None:
+            raise ValueError(f"{self.name}: give a time_code or time_fields, not both")
+        fixed_names = {p.name for p in self.parameters}
+        if any(c not in fixed_names for c in self.count_fields):
+            raise ValueError(f"{self.name}: array size fields {self.count_fields} must precede every variable array")
+        if self.time_fields is not None:
+            names = fixed_names
+            missing = [n for n in self.time_fields.names if n not in names]
+            if missing:
+                raise ValueError(f"{self.name}.time_fields: no fixed-position parameters {missing}")
         body_end = 8 * (self.packet_octets - (CRC_OCTETS if self.crc else 0))
         for p in self.parameters:
             if p.bit_offset < PRIMARY_HEADER_BITS or p.bit_offset + p.bit_length > body_end:
@@ -139,6 +216,13 @@ class PacketDefinition:
             raise ValueError(f"{self.name}.time_code: longer than the packet")
 
 
+def _fixed_count(f: FieldSpec) -> int:
+    """Element count of a scalar or fixed-shape field (variable ones count 0 here)."""
+    if f.shape is None:
+        return 1
+    return int(np.prod(f.shape)) if isinstance(f.shape, tuple) else 0
+
+
 @dataclass(frozen=True)
 class Dictionary:
     """All packet types of one spacecraft, by APID, and the window of plausible packet times."""
@@ -149,6 +233,7 @@ class Dictionary:
     valid_until_utc_ns: int | None = None
     description: str = ""
     satellite: str = ""
+    notes: tuple[str, ...] = ()
 
     @property
     def satellite_name(self) -> str:
@@ -156,9 +241,10 @@ class Dictionary:
         return self.satellite or self.name
 
     def time_window(self, now_utc_ns: int | None = None) -> tuple[int, int]:
-        """Plausible packet times [from, until] in UTC ns; without an 'until', ingest time + FUTURE_MARGIN_NS."""
+        """Plausible packet times [from, until] in UTC ns; by default from 1972 (no zero/unset clock is archived)
+        until ingest time + FUTURE_MARGIN_NS."""
         now = time.time_ns() if now_utc_ns is None else now_utc_ns
-        low = self.valid_from_utc_ns if self.valid_from_utc_ns is not None else np.iinfo(np.int64).min
+        low = self.valid_from_utc_ns if self.valid_from_utc_ns is not None else EARLIEST_UTC_NS
         high = self.valid_until_utc_ns if self.valid_until_utc_ns is not None else now + FUTURE_MARGIN_NS
         return low, high
 
@@ -250,7 +336,8 @@ def _yaml_parameters(specs: list[dict[str, Any]], first_bit: int) -> tuple[tuple
     """Parameters laid out back to back from first_bit, and the bit after the last one."""
     params, bit = [], first_bit
     for s in specs:
-        unknown = set(s) - {"name", "type", "bits", "units", "description", "polynomial", "enumeration", "limits"}
+        unknown = set(s) - {"name", "type", "bits", "units", "description", "polynomial", "enumeration", "limits",
+                            "byte_order"}
         if unknown:
             raise ValueError(f"{s.get('name')}: unknown keys {sorted(unknown)}")
         enum = {int(k): str(v) for k, v in (s.get("enumeration") or {}).items()}
@@ -265,6 +352,7 @@ def _yaml_parameters(specs: list[dict[str, Any]], first_bit: int) -> tuple[tuple
                 polynomial=tuple(float(c) for c in s.get("polynomial") or ()),
                 enumeration=enum,
                 limits=_limits(s.get("limits")),
+                byte_order=str(s.get("byte_order", "big")),
             )
         )
         bit += int(s["bits"])
@@ -283,9 +371,11 @@ def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
     """One packet definition from our YAML format (layout inline or taken from an XTCE/CSV file)."""
     name, apid = str(spec["name"]), int(spec["apid"])
     time_code = parse_time_code(spec.get("time_code"))
+    time_fields = parse_time_fields(spec.get("time_fields"))
     crc = bool(spec.get("crc", False))
     common = dict(
         time_code=time_code,
+        time_fields=time_fields,
         period_s=float(spec["period_s"]) if spec.get("period_s") is not None else None,
         description=str(spec.get("description", "")),
         derived=_derived(spec.get("derived")),
@@ -334,43 +424,146 @@ def load_yaml(path: str | Path) -> Dictionary:
     )
 
 
-def load_ccsdspy_csv(
-    path: str | Path, apid: int, name: str | None = None, time_code: TimeCode | None = None
-) -> Dictionary:
-    """A one-packet dictionary from a ccsdspy CSV: ``name,data_type,bit_length[,bit_offset]`` after the primary header.
+def lay_out(
+    fields: tuple[FieldSpec, ...], packet_octets: int | None, counts: dict[str, int]
+) -> tuple[tuple[Parameter, ...], int]:
+    """Parameters of fields laid out from the end of the primary header (ccsdspy semantics), and the end bit.
 
-    As in ccsdspy: ``fill`` fields are padding, ``uint(3)`` is a 1-D array (expanded to ``name_0``…),
-    and an explicit ``bit_offset`` counts from the first octet of the packet.
+    An explicit bit_offset counts from the first octet of the packet; ``fill`` and ``str`` fields only
+    take room. With packet_octets None the layout stops before the first variable array.
+    """
+    bit, end, params = PRIMARY_HEADER_BITS, PRIMARY_HEADER_BITS, []
+    for i, f in enumerate(fields):
+        bit = f.bit_offset if f.bit_offset is not None else bit
+        if f.is_variable and packet_octets is None:
+            break
+        if f.shape == "expand":
+            footer = sum(g.bit_length * _fixed_count(g) for g in fields[i + 1 :])
+            count = max((8 * int(packet_octets or 0) - bit - footer) // f.bit_length, 0)
+        elif isinstance(f.shape, str):
+            count = int(counts[f.shape])
+        else:
+            count = _fixed_count(f)
+        if not (bit >= 0 and 1 <= f.bit_length <= 64 and bit + count * f.bit_length <= MAX_PACKET_BITS):
+            raise ValueError(f"{f.name}.data_type: {count} × {f.bit_length} bits from bit {bit} do not fit in the "
+                             f"largest CCSDS packet ({MAX_PACKET_BITS // 8} octets)")
+        if f.data_type in DATA_TYPES:
+            params.extend(Parameter(name, f.data_type, bit + k * f.bit_length, f.bit_length, byte_order=f.byte_order)
+                          for k, name in enumerate(f.element_names(count)))
+        bit += count * f.bit_length
+        end = max(end, bit)
+    return tuple(params), end
+
+
+def _ccsdspy_fields(path: Path) -> list[FieldSpec]:
+    """The fields of a ccsdspy CSV definition as ccsdspy itself reads them (``FixedLength/VariableLength.from_file``).
+
+    ccsdspy reads ``name,data_type,bit_length`` and an optional ``bit_offset`` column, ignores any
+    other column (``byte_order`` too: its CSV reader leaves every field big-endian), and takes
+    ``uint(4)``, ``uint(2, 3)``, ``uint(expand)`` and ``uint(<field>)`` as arrays.
+    """
+    import ccsdspy
+
+    try:
+        try:
+            packet = ccsdspy.FixedLength.from_file(str(path))
+        except ValueError as exc:
+            if "variable fields" not in str(exc):
+                raise
+            packet = ccsdspy.VariableLength.from_file(str(path))
+    except (ValueError, RuntimeError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: ccsdspy cannot read this definition: {exc}") from exc
+    specs = []
+    for f in packet._fields:
+        shape = getattr(f, "_array_shape", None)
+        if isinstance(shape, int):
+            shape = (shape,)
+        specs.append(FieldSpec(
+            name=f._name, data_type=f._data_type, bit_length=int(f._bit_length),
+            bit_offset=None if f._bit_offset is None else int(f._bit_offset), byte_order=f._byte_order,
+            shape=tuple(int(x) for x in shape) if isinstance(shape, tuple) else shape,
+            array_order=getattr(f, "_array_order", "C"),
+        ))
+    return specs
+
+
+def load_ccsdspy_csv(
+    path: str | Path,
+    apid: int,
+    name: str | None = None,
+    time_code: TimeCode | None = None,
+    time_fields: TimeFields | None = None,
+) -> Dictionary:
+    """A one-packet dictionary from a ccsdspy CSV definition, read by ccsdspy (3- or 4-column, arrays, expand).
+
+    Fixed layouts list every element (arrays as ``name_k``); a layout with an ``expand`` array or an
+    array sized by another field stays variable (:meth:`PacketDefinition.resolve` per packet).
     """
     path = Path(path)
-    with path.open(newline="") as f:
-        rows = list(csv.DictReader(f, skipinitialspace=True))
-    if not rows or not {"name", "data_type", "bit_length"} <= set(rows[0]) <= {"name", "data_type", "bit_length",
-                                                                                "bit_offset"}:
-        raise ValueError(f"{path}: expected the header name,data_type,bit_length[,bit_offset]")
-    params, bit, end = [], PRIMARY_HEADER_BITS, PRIMARY_HEADER_BITS
-    for row in rows:
-        kind, _, shape = row["data_type"].partition("(")
-        if shape and not shape.rstrip(")").isdigit():
-            raise ValueError(f"{row['name']}.data_type: only 1-D arrays like uint(3) are supported")
-        count = int(shape.rstrip(")")) if shape else 1
-        length = int(row["bit_length"])
-        bit = int(row["bit_offset"]) if row.get("bit_offset") not in (None, "") else bit
-        if not (0 <= bit and 1 <= length <= 64 and bit + count * length <= MAX_PACKET_BITS):
-            raise ValueError(f"{row['name']}.data_type: {count} × {length} bits from bit {bit} do not fit in the "
-                             f"largest CCSDS packet ({MAX_PACKET_BITS // 8} octets)")
-        for k in range(count):
-            if kind != "fill":
-                label = f"{row['name']}_{k}" if shape else row["name"]
-                params.append(Parameter(label, kind, bit, length))
-            bit += length
-        end = max(end, bit)
-    if end % 8:
+    fields = tuple(_ccsdspy_fields(path))
+    variable = any(f.is_variable for f in fields)
+    params, end = lay_out(fields, None if variable else 0, {})
+    if end % 8 and not variable:
         raise ValueError(f"{path}: layout ends at bit {end}, not on an octet boundary")
-    packet = PacketDefinition(
-        name=name or path.stem, apid=apid, packet_octets=end // 8, parameters=tuple(params), time_code=time_code
+    try:
+        packet = PacketDefinition(
+            name=name or path.stem, apid=apid, packet_octets=-(-end // 8), parameters=params, time_code=time_code,
+            time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
+            fields=fields if variable else (),
+        )
+    except ValueError as exc:
+        raise ValueError(f"{path.name}: {exc}") from exc
+    with path.open(newline="") as f:
+        header = next(csv.reader(f, skipinitialspace=True), [])
+    ignored = [c for c in header if c not in ("name", "data_type", "bit_length", "bit_offset")]
+    notes = (f"{path.name}: columns {ignored} ignored, as ccsdspy's CSV reader does",) if ignored else ()
+    return Dictionary(name=path.stem, packets={apid: packet}, notes=notes)
+
+
+APID_IN_NAME = re.compile(r"(?:^|[^a-z])apid[_-]?0*(\d+)|^0*(\d+)$", re.IGNORECASE)
+
+
+def load_ccsdspy_folder(
+    folder: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None
+) -> Dictionary:
+    """One ccsdspy CSV per APID in a folder, the APID in each file name (``apid00384.csv``, ``384.csv``)."""
+    folder = Path(folder)
+    files = sorted(folder.glob("*.csv"))
+    if not files:
+        raise ValueError(f"{folder}: no ccsdspy .csv definitions in this folder")
+    parts = []
+    for path in files:
+        found = APID_IN_NAME.search(path.stem)
+        if found is None:
+            raise ValueError(f"{path.name}: the file name must carry the APID (apid00384.csv or 384.csv)")
+        apid = int(found.group(1) or found.group(2))
+        parts.append(load_ccsdspy_csv(path, apid=apid, time_code=time_code, time_fields=time_fields))
+    return merge_dictionaries(parts, name=folder.name)
+
+
+def merge_dictionaries(parts: list[Dictionary], name: str | None = None) -> Dictionary:
+    """One spacecraft's dictionary from several (e.g. one ccsdspy CSV per APID); an APID is defined once.
+
+    A parameter name in several packets is one series (the same measurand telemetered twice).
+    """
+    if len(parts) == 1 and name is None:
+        return parts[0]
+    packets: dict[int, PacketDefinition] = {}
+    for part in parts:
+        for apid, packet in part.packets.items():
+            if apid in packets:
+                raise ValueError(f"dictionaries: APID {apid} is defined twice ({packets[apid].name}, {packet.name})")
+            packets[apid] = packet
+    lows = [d.valid_from_utc_ns for d in parts if d.valid_from_utc_ns is not None]
+    highs = [d.valid_until_utc_ns for d in parts if d.valid_until_utc_ns is not None]
+    return Dictionary(
+        name=name or "+".join(d.name for d in parts),
+        packets=dict(sorted(packets.items())),
+        valid_from_utc_ns=max(lows) if lows else None,
+        valid_until_utc_ns=min(highs) if highs else None,
+        satellite=next((d.satellite for d in parts if d.satellite), ""),
+        notes=tuple(n for d in parts for n in d.notes),
     )
-    return Dictionary(name=path.stem, packets={apid: packet})
 
 
 def _xtce_entries(container: Any) -> list[Any]:
@@ -434,7 +627,9 @@ def _xtce_apid(definition: Any, container: Any) -> int | None:
     return None
 
 
-def load_xtce(path: str | Path, time_code: TimeCode | None = None) -> Dictionary:
+def load_xtce(
+    path: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None
+) -> Dictionary:
     """A dictionary of the concrete, APID-selected containers of an XTCE file (space-packet-parser reads it)."""
     import space_packet_parser as spp
 
@@ -464,6 +659,7 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None) -> Dictionary
             packet_octets=bit // 8,
             parameters=tuple(params),
             time_code=time_code,
+            time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
             description=container.short_description or container.long_description or "",
         )
     if not packets:
@@ -471,20 +667,31 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None) -> Dictionary
     return Dictionary(name=definition.space_system_name or Path(path).stem, packets=packets)
 
 
-def load_dictionary(path: str | Path, apid: int | None = None, time_code: str | None = None) -> Dictionary:
-    """Any supported dictionary by file suffix (.yaml/.yml, .csv, .xml); a bare name means a shipped one."""
+def load_dictionary(
+    path: str | Path, apid: int | None = None, time_code: str | None = None, time_fields: str | None = None
+) -> Dictionary:
+    """Any supported dictionary: .yaml/.yml, .csv (ccsdspy), .xml (XTCE), or a folder of ccsdspy CSVs (one per APID).
+
+    A bare name means a shipped one. time_code / time_fields (``year=F1,doy=F2,…``) stamp the
+    packets of CSV and XTCE definitions, which carry no time of their own.
+    """
     path = Path(path)
     if not path.exists() and (SHIPPED / path).exists():
         path = SHIPPED / path
     if not path.exists():
         raise ValueError(f"dictionary: no file {path} (shipped: {sorted(p.name for p in SHIPPED.glob('*.yaml'))})")
+    code, fields = parse_time_code(time_code), parse_time_fields(time_fields)
+    if path.is_dir():
+        return load_ccsdspy_folder(path, time_code=code, time_fields=fields)
     suffix = path.suffix.lower()
     if suffix in (".yaml", ".yml"):
+        if code or fields:
+            raise ValueError("time: a YAML dictionary defines its packets' time itself (time_code or time_fields)")
         return load_yaml(path)
     if suffix == ".xml":
-        return load_xtce(path, time_code=parse_time_code(time_code))
+        return load_xtce(path, time_code=code, time_fields=fields)
     if suffix == ".csv":
         if apid is None or not 0 <= apid < APID_COUNT:
             raise ValueError("apid: a ccsdspy CSV definition needs the APID (0..2046) of its packets")
-        return load_ccsdspy_csv(path, apid=apid, time_code=parse_time_code(time_code))
-    raise ValueError(f"dictionary: unknown suffix {suffix!r} (use .yaml, .xml or .csv)")
+        return load_ccsdspy_csv(path, apid=apid, time_code=code, time_fields=fields)
+    raise ValueError(f"dictionary: unknown suffix {suffix!r} (use .yaml, .xml, .csv or a folder of .csv)")

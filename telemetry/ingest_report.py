@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import json
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["QuarantineRecord", "SequenceGap", "ApidSummary", "IngestReport", "SampleBatch", "DecodeResult", "REASONS"]
+__all__ = ["QuarantineRecord", "SequenceGap", "ApidSummary", "IngestReport", "SampleBatch", "DecodeResult", "REASONS",
+           "UndefinedPackets"]
 
+MAX_LISTED = 10_000  # quarantine records / gaps listed in one report; the rest are counted
 REASONS = (
     "bad_header",
     "unknown_apid",
@@ -26,6 +28,7 @@ REASONS = (
     "non_monotonic_sequence",
     "bad_row",
     "unknown_parameter",
+    "invalid_time",
 )
 
 
@@ -71,6 +74,23 @@ class ApidSummary:
     gaps: list[SequenceGap] = field(default_factory=list)
     t_first_utc_ns: int | None = None
     t_last_utc_ns: int | None = None
+    packet_octets: dict[int, int] = field(default_factory=dict)
+    definition_octets: int | None = None
+    longer_than_definition: int = 0
+    shorter_than_definition: int = 0
+
+    def absorb(self, other: ApidSummary) -> None:
+        """Add the tallies of the same APID from the next chunk of the input."""
+        for name in ("accepted", "duplicates", "quarantined", "missing", "longer_than_definition",
+                     "shorter_than_definition"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
+        self.gaps.extend(other.gaps[: max(MAX_LISTED - len(self.gaps), 0)])
+        for octets, n in other.packet_octets.items():
+            self.packet_octets[octets] = self.packet_octets.get(octets, 0) + n
+        self.definition_octets = other.definition_octets
+        firsts = [t for t in (self.t_first_utc_ns, other.t_first_utc_ns) if t is not None]
+        lasts = [t for t in (self.t_last_utc_ns, other.t_last_utc_ns) if t is not None]
+        self.t_first_utc_ns, self.t_last_utc_ns = min(firsts, default=None), max(lasts, default=None)
 
 
 @dataclass
@@ -85,10 +105,35 @@ class IngestReport:
     idle_packets: int = 0
     quarantined: list[QuarantineRecord] = field(default_factory=list)
     apids: dict[int, ApidSummary] = field(default_factory=dict)
+    undefined_apids: dict[int, int] = field(default_factory=dict)
+
+    quarantined_not_listed: dict[str, int] = field(default_factory=dict)
 
     def reason_counts(self) -> dict[str, int]:
-        """Number of quarantined stretches per reason."""
-        return dict(Counter(q.reason for q in self.quarantined))
+        """Number of quarantined stretches per reason (listed or not)."""
+        counts = Counter(q.reason for q in self.quarantined)
+        counts.update(self.quarantined_not_listed)
+        return dict(counts)
+
+    def absorb(self, other: IngestReport, offset: int) -> None:
+        """Add the report of the next chunk of the same input (its byte offsets start at ``offset``).
+
+        At most MAX_LISTED quarantine records are kept; the others are counted by reason.
+        """
+        self.octets += other.octets
+        self.packets_accepted += other.packets_accepted
+        self.samples_accepted += other.samples_accepted
+        self.duplicates += other.duplicates
+        self.idle_packets += other.idle_packets
+        room = max(MAX_LISTED - len(self.quarantined), 0)
+        self.quarantined.extend(replace(q, offset=q.offset + offset) for q in other.quarantined[:room])
+        for q in other.quarantined[room:]:
+            self.quarantined_not_listed[q.reason] = self.quarantined_not_listed.get(q.reason, 0) + 1
+        for apid, n in other.undefined_apids.items():
+            self.undefined_apids[apid] = self.undefined_apids.get(apid, 0) + n
+        for apid, summary in other.apids.items():
+            mine = self.apids.setdefault(apid, ApidSummary(apid, summary.packet))
+            mine.absorb(summary)
 
     def to_dict(self) -> dict:
         """JSON-ready mapping (what ``acs-twin ingest`` prints and the archive stores)."""
@@ -99,10 +144,11 @@ class IngestReport:
             "samples_accepted": self.samples_accepted,
             "duplicates": self.duplicates,
             "idle_packets": self.idle_packets,
-            "quarantined_count": len(self.quarantined),
+            "quarantined_count": len(self.quarantined) + sum(self.quarantined_not_listed.values()),
             "quarantine_reasons": self.reason_counts(),
             "quarantined": [asdict(q) for q in self.quarantined],
             "apids": {str(a): asdict(s) for a, s in sorted(self.apids.items())},
+            "undefined_apids": {str(a): n for a, n in sorted(self.undefined_apids.items())},
         }
 
     def to_json(self, indent: int | None = 2) -> str:
@@ -117,7 +163,9 @@ class SampleBatch:
     ``t_utc_ns`` int64 (n,); ``sequence_count`` uint16 (n,) (zeros for ground files);
     ``packets`` (n, L) uint8 byte-exact raw packets (None for ground files);
     ``values`` parameter name → (n,) engineering values (float64, or int64 for uncalibrated integers
-    and enumeration codes), derived parameters included.
+    and enumeration codes; float64 with NaN where a variable layout has no such element), derived
+    parameters included. Packets of several lengths come as ``packets`` 1-D (all octets, in order)
+    with ``packet_lengths`` (n,).
     """
 
     packet: str
@@ -126,6 +174,7 @@ class SampleBatch:
     sequence_count: np.ndarray
     values: dict[str, np.ndarray]
     packets: np.ndarray | None = None
+    packet_lengths: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -134,8 +183,20 @@ class SampleBatch:
 
 
 @dataclass(frozen=True)
+class UndefinedPackets:
+    """Well-framed packets of an APID the dictionary does not define, kept raw (octets in order, lengths)."""
+
+    apid: int
+    packets: np.ndarray
+    packet_lengths: np.ndarray
+    sequence_count: np.ndarray
+
+
+@dataclass(frozen=True)
 class DecodeResult:
-    """Decoded, validated batches and the report of one input."""
+    """Decoded, validated batches, raw packets of undefined APIDs, and the report of one input."""
 
     batches: list[SampleBatch]
     report: IngestReport
+    undefined: list[UndefinedPackets] = field(default_factory=list)
+    consumed: int = 0

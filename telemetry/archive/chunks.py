@@ -53,7 +53,8 @@ def narrowest_exact(values: np.ndarray) -> np.ndarray:
     """
     array = np.ascontiguousarray(values)
     if array.dtype == np.float64 and array.size:
-        narrow = array.astype(np.float32)
+        with np.errstate(over="ignore"):  # beyond float32's range: inf, which fails the comparison below
+            narrow = array.astype(np.float32)
         if np.array_equal(narrow.astype(np.float64), array, equal_nan=True):
             return narrow
     if array.dtype.kind in "iu" and array.size:

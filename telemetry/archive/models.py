@@ -32,6 +32,7 @@ __all__ = [
     "Upload",
     "Parameter",
     "PacketChunk",
+    "UndefinedPacketChunk",
     "ValueChunk",
     "Alarm",
     "AlarmEvent",
@@ -147,6 +148,21 @@ class PacketChunk(Base):
     t_end_ns: Mapped[int] = mapped_column(BigInteger)
     n_packets: Mapped[int] = mapped_column(Integer)
     t_blob: Mapped[bytes] = mapped_column(LargeBinary)
+    seq_blob: Mapped[bytes] = mapped_column(LargeBinary)
+    length_blob: Mapped[bytes] = mapped_column(LargeBinary)
+    raw_blob: Mapped[bytes] = mapped_column(LargeBinary)
+
+
+class UndefinedPacketChunk(Base):
+    """Raw packets of one APID the dictionary did not define (no time known): sequence counts, lengths, bytes."""
+
+    __tablename__ = "undefined_packet_chunk"
+    __table_args__ = (Index("ix_undefined_packet_chunk_apid", "satellite_id", "apid"),)
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    satellite_id: Mapped[int] = mapped_column(ForeignKey("satellite.id"))
+    upload_id: Mapped[int] = mapped_column(ForeignKey("upload.id"))
+    apid: Mapped[int] = mapped_column(Integer)
+    n_packets: Mapped[int] = mapped_column(Integer)
     seq_blob: Mapped[bytes] = mapped_column(LargeBinary)
     length_blob: Mapped[bytes] = mapped_column(LargeBinary)
     raw_blob: Mapped[bytes] = mapped_column(LargeBinary)

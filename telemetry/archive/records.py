@@ -29,6 +29,7 @@ class IngestResult:
     samples_accepted: int = 0
     alarm_events: int = 0
     gaps: list[Gap] = field(default_factory=list)
+    duplicates_by_apid: dict[int, int] = field(default_factory=dict)
 
     def as_report(self) -> dict[str, Any]:
         """JSON-ready dictionary of the result."""

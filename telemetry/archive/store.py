@@ -31,6 +31,7 @@ from telemetry.archive.models import (
     Pass,
     Satellite,
     Tle,
+    UndefinedPacketChunk,
     Upload,
     ValueChunk,
 )
@@ -46,7 +47,7 @@ from telemetry.archive.records import (
 from telemetry.limits import LimitSet, level_changes, limit_levels
 
 if TYPE_CHECKING:
-    from telemetry.ingest_report import DecodeResult
+    from telemetry.ingest_report import DecodeResult, IngestReport, UndefinedPackets
 
 __all__ = ["Archive", "CHUNK_PACKETS"]
 
@@ -56,6 +57,7 @@ CHUNK_PACKETS = 16_384
 SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundStation, Tle, Pass))
 UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
 ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
+UNDEFINED = cast(Table, UndefinedPacketChunk.__table__)
 
 
 def _now_ns() -> int:
@@ -176,11 +178,16 @@ class Archive:
         sha256: str | None = None,
         limits: Mapping[str, LimitSet] | None = None,
         decode_report: Mapping[str, object] | None = None,
+        undefined: Sequence[UndefinedPackets] = (),
     ) -> IngestResult:
-        """Commit decoded batches atomically as one upload (duplicates dropped, limits checked)."""
+        """Commit decoded batches atomically as one upload (duplicates dropped, limits checked).
+
+        Raw packets of undefined APIDs are kept with the upload; a repeated upload adds nothing and
+        reports, per APID, how many of its packets are already archived.
+        """
         if not uploaded_by:
             raise ValueError("uploaded_by: the uploader's name is required")
-        batches = list(batches)
+        batches = _merge_by_apid(list(batches))
         checksum = sha256 or _batches_sha256(batches)
         sat_id = self.satellite_id(satellite)
         with self._writer.begin() as conn:
@@ -189,9 +196,12 @@ class Archive:
                 select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == checksum)
             ).scalar()
             if existing is not None:
-                return IngestResult(upload_id=int(existing), duplicate_upload=True)
+                archived = {b.apid: self._drop_archived(conn, sat_id, _order_and_dedupe(b)[0])[1] for b in batches}
+                return IngestResult(upload_id=int(existing), duplicate_upload=True,
+                                    packets_duplicate=sum(archived.values()), duplicates_by_apid=archived)
             upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, checksum)
-            result = self._write_batches(conn, sat_id, upload_id, _merge_by_apid(batches), limits or {})
+            result = self._write_batches(conn, sat_id, upload_id, batches, limits or {})
+            self._write_undefined(conn, sat_id, upload_id, undefined)
             report = {**result.as_report(), "decode": dict(decode_report or {})}
             conn.execute(
                 update(UPLOAD)
@@ -223,7 +233,101 @@ class Archive:
             sha256=sha256,
             limits=limits,
             decode_report=decoded.report.to_dict(),
+            undefined=decoded.undefined,
         )
+
+    def ingest_results(
+        self,
+        satellite: str,
+        results: Iterable[DecodeResult],
+        *,
+        source: str,
+        uploaded_by: str,
+        sha256: str,
+        limits: Mapping[str, LimitSet] | None = None,
+        report: IngestReport | None = None,
+    ) -> IngestResult:
+        """Commit the decoded chunks of one input (consumed one at a time: bounded memory) as one upload.
+
+        The upload's stored report is ``report`` as it stands once every chunk is consumed. A repeated
+        upload (same SHA-256) adds nothing and reports, per APID, how many of its packets are archived.
+        """
+        if not uploaded_by:
+            raise ValueError("uploaded_by: the uploader's name is required")
+        sat_id = self.satellite_id(satellite)
+        with self._writer.begin() as conn:
+            self._lock_satellite(conn, sat_id)
+            existing = conn.execute(
+                select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == sha256)
+            ).scalar()
+            upload_id = int(existing) if existing is not None else self._insert_upload(
+                conn, sat_id, source, uploaded_by, sha256)
+            parts: list[IngestResult] = []
+            archived: dict[int, int] = {}
+            for decoded in results:
+                batches = _merge_by_apid([PacketBatch.from_sample_batch(b) for b in decoded.batches])
+                if existing is not None:
+                    for b in batches:
+                        n = self._drop_archived(conn, sat_id, _order_and_dedupe(b)[0])[1]
+                        archived[b.apid] = archived.get(b.apid, 0) + n
+                    continue
+                parts.append(self._write_batches(conn, sat_id, upload_id, batches, limits or {}))
+                self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
+            if existing is not None:
+                return IngestResult(upload_id, True, packets_duplicate=sum(archived.values()),
+                                    duplicates_by_apid=archived)
+            by_apid: dict[int, int] = {}
+            for part in parts:
+                for apid, n in part.duplicates_by_apid.items():
+                    by_apid[apid] = by_apid.get(apid, 0) + n
+            result = IngestResult(
+                upload_id, False, sum(p.packets_accepted for p in parts), sum(p.packets_duplicate for p in parts),
+                sum(p.samples_accepted for p in parts), sum(p.alarm_events for p in parts),
+                [g for p in parts for g in p.gaps], by_apid,
+            )
+            stored = {**result.as_report(), "decode": report.to_dict() if report else {}}
+            conn.execute(
+                update(UPLOAD).where(UPLOAD.c.id == upload_id).values(
+                    packets_accepted=result.packets_accepted, samples_accepted=result.samples_accepted,
+                    report_json=json.dumps(stored))
+            )
+        return result
+
+    def _write_undefined(
+        self, conn: Connection, sat_id: int, upload_id: int, undefined: Sequence[UndefinedPackets]
+    ) -> None:
+        rows = [
+            {
+                "satellite_id": sat_id,
+                "upload_id": upload_id,
+                "apid": u.apid,
+                "n_packets": len(u.packet_lengths),
+                "seq_blob": encode_int64(np.asarray(u.sequence_count, dtype=np.int64)),
+                "length_blob": encode_int64(np.asarray(u.packet_lengths, dtype=np.int64)),
+                "raw_blob": encode_raw(np.ascontiguousarray(u.packets, dtype=np.uint8).tobytes()),
+            }
+            for u in undefined
+            if len(u.packet_lengths)
+        ]
+        if rows:
+            conn.execute(insert(UNDEFINED), rows)
+
+    def undefined_packets(self, satellite: str, apid: int | None = None) -> dict[int, list[bytes]]:
+        """Raw packets of APIDs that had no definition when ingested, per APID, in upload order (byte-exact)."""
+        sat_id = self._known_satellite(satellite)
+        query = select(UNDEFINED.c.apid, UNDEFINED.c.length_blob, UNDEFINED.c.raw_blob).where(
+            UNDEFINED.c.satellite_id == sat_id
+        )
+        if apid is not None:
+            query = query.where(UNDEFINED.c.apid == apid)
+        out: dict[int, list[bytes]] = {}
+        with self.engine.connect() as conn:
+            for row_apid, length_blob, raw_blob in conn.execute(query.order_by(UNDEFINED.c.id)):
+                ends = np.cumsum(decode_int64(length_blob))
+                raw = decode_raw(raw_blob)
+                starts = np.concatenate(([0], ends[:-1]))
+                out.setdefault(int(row_apid), []).extend(raw[a:b] for a, b in zip(starts.tolist(), ends.tolist()))
+        return out
 
     def _lock_satellite(self, conn: Connection, sat_id: int) -> None:
         if self._is_postgres:
@@ -248,10 +352,12 @@ class Archive:
         accepted = duplicates = samples = 0
         gaps: list[Gap] = []
         changes: list[alarm_state.LevelChange] = []
+        by_apid: dict[int, int] = {}
         for batch in batches:
             ordered, n_dup_inside = _order_and_dedupe(batch)
             fresh, n_dup_archived = self._drop_archived(conn, sat_id, ordered)
             duplicates += n_dup_inside + n_dup_archived
+            by_apid[batch.apid] = n_dup_inside + n_dup_archived
             if fresh.n_packets == 0:
                 continue
             self._write_chunks(conn, sat_id, upload_id, fresh)
@@ -261,7 +367,7 @@ class Archive:
             changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
         changes.sort(key=lambda c: c.t_ns)
         n_events = alarm_state.apply_level_changes(conn, sat_id, upload_id, changes) if changes else 0
-        return IngestResult(upload_id, False, accepted, duplicates, samples, n_events, gaps)
+        return IngestResult(upload_id, False, accepted, duplicates, samples, n_events, gaps, by_apid)
 
     def _drop_archived(self, conn: Connection, sat_id: int, batch: PacketBatch) -> tuple[PacketBatch, int]:
         t, seq = batch.t_utc_ns, batch.seq_count
@@ -330,9 +436,7 @@ class Archive:
             )
         )
         ids = {}
-        for name, param_id, param_apid in rows:
-            if param_apid != apid:
-                raise ValueError(f"values[{name!r}]: parameter already archived under APID {param_apid}, not {apid}")
+        for name, param_id, _ in rows:  # a parameter telemetered in several packets is one series
             ids[name] = int(param_id)
         missing = [{"satellite_id": sat_id, "name": n, "apid": apid} for n in names if n not in ids]
         if missing:
@@ -364,7 +468,7 @@ class Archive:
         ]
 
     def parameters(self, satellite: str) -> dict[str, int]:
-        """Archived parameter names of ``satellite`` with their APID."""
+        """Archived parameter names of ``satellite`` with the APID that first carried each."""
         sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
             return dict(conn.execute(select(PARAM.c.name, PARAM.c.apid).where(PARAM.c.satellite_id == sat_id)).all())
@@ -385,7 +489,6 @@ class Archive:
                 .join(VALUE, VALUE.c.chunk_id == CHUNK.c.id)
                 .where(
                     CHUNK.c.satellite_id == sat_id,
-                    CHUNK.c.apid == param.apid,
                     VALUE.c.parameter_id == param.id,
                     CHUNK.c.t_start_ns <= t1_ns,
                     CHUNK.c.t_end_ns >= t0_ns,

@@ -148,5 +148,5 @@ def test_noaa20_packet_with_impossible_cds_time_is_quarantined(raw_bytes: bytes)
     data[100 * 71 + 8 : 100 * 71 + 12] = (90_000_000).to_bytes(4, "big")
     result = decode_stream(bytes(data), load_dictionary("noaa20_apid11_xtce.yaml"))
     assert [(q.reason, q.offset, q.detail) for q in result.report.quarantined] == [
-        ("time_out_of_range", 100 * 71, "invalid time code field")]
+        ("invalid_time", 100 * 71, "invalid time code field")]
     assert result.report.packets_accepted == 199

@@ -126,8 +126,8 @@ def test_header_fields_contradicting_a_telemetry_packet_are_bad_header(octet: in
     assert result.report.packets_accepted == 9
 
 
-def test_quarantine_records_name_the_apid_of_a_version_0_header() -> None:
-    """Unknown APID 1,793 = 0x701 (uses the top APID bits) is reported as such; garbage has no APID."""
+def test_undefined_apid_is_counted_and_kept_raw_garbage_is_quarantined() -> None:
+    """APID 1,793 = 0x701 (uses the top APID bits) has no definition: counted and kept byte-exact; garbage has no APID."""
     from telemetry.ccsds import encode_primary_headers
 
     rows = packets(reference().packets[HK], 3)
@@ -135,7 +135,11 @@ def test_quarantine_records_name_the_apid_of_a_version_0_header() -> None:
     stream = rows[0].tobytes() + stranger + rows[1].tobytes() + b"\xff" * 9 + rows[2].tobytes()
     result = decode_stream(stream, reference(), now_utc_ns=NOW_UTC_NS)
     assert [(q.reason, q.apid, q.offset, q.length) for q in result.report.quarantined] == [
-        ("unknown_apid", 1_793, 126, 20), ("bad_header", None, 272, 9)]
+        ("bad_header", None, 272, 9)]
+    assert result.report.undefined_apids == {1_793: 1}
+    assert [(u.apid, u.packets.tobytes(), u.sequence_count.tolist()) for u in result.undefined] == [
+        (1_793, stranger, [5])]
+    assert result.report.packets_accepted == 3
 
 
 PASS_GAP_S = 5_400  # 90 min between two passes: 21,600 ACS_HK packets, more than the 16,384 count range

@@ -1,0 +1,74 @@
+"""Packet files of any size: decoded chunk by chunk (bounded memory) and archived as one upload.
+
+A chunk ends on a packet boundary (:func:`telemetry.decoding.decode_stream` with ``final=False``
+leaves a trailing, possibly cut segment for the next chunk), so chunked and whole-file decoding
+frame the same packets. Peak memory is a few times CHUNK_OCTETS whatever the file size
+(benchmarks/ingest_memory.py measures it).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Iterator, Mapping
+from pathlib import Path
+from typing import BinaryIO
+
+from telemetry.archive import Archive, IngestResult
+from telemetry.decoding import decode_stream
+from telemetry.dictionary import Dictionary
+from telemetry.ingest_report import DecodeResult, IngestReport
+from telemetry.limits import LimitSet
+
+__all__ = ["CHUNK_OCTETS", "decode_chunks", "file_sha256", "ingest_packet_file"]
+
+CHUNK_OCTETS = 16 << 20  # 16 MiB: decode cost per chunk is flat above ~1 MiB, memory grows with it
+
+
+def decode_chunks(
+    stream: BinaryIO, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None,
+    chunk_octets: int = CHUNK_OCTETS,
+) -> Iterator[tuple[int, DecodeResult]]:
+    """(byte offset of the chunk, its decode result) for consecutive chunks of a packet stream."""
+    pending, offset, eof = b"", 0, False
+    while not eof:
+        more = stream.read(chunk_octets)
+        eof = not more
+        pending += more
+        if not pending:
+            return
+        result = decode_stream(pending, dictionary, source=source, now_utc_ns=now_utc_ns, final=eof)
+        yield offset, result
+        offset += result.consumed
+        pending = pending[result.consumed :]
+
+
+def file_sha256(path: Path, block: int = 1 << 20) -> str:
+    """SHA-256 of a file, read in blocks."""
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        while chunk := f.read(block):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def ingest_packet_file(
+    archive: Archive | None, path: Path, dictionary: Dictionary, *, satellite: str, uploaded_by: str,
+    limits: Mapping[str, LimitSet] | None = None, now_utc_ns: int | None = None, chunk_octets: int = CHUNK_OCTETS,
+    source: str | None = None,
+) -> tuple[IngestReport, IngestResult | None]:
+    """Decode a packet file chunk by chunk and archive it as one upload (archive None: decode and report only)."""
+    report = IngestReport(source=source or str(path))
+
+    def results() -> Iterator[DecodeResult]:
+        with path.open("rb") as f:
+            for offset, result in decode_chunks(f, dictionary, report.source, now_utc_ns, chunk_octets):
+                report.absorb(result.report, offset)
+                yield result
+
+    if archive is None:
+        for _ in results():
+            pass
+        return report, None
+    stored = archive.ingest_results(satellite, results(), source=report.source, uploaded_by=uploaded_by,
+                                    sha256=file_sha256(path), limits=limits, report=report)
+    return report, stored
