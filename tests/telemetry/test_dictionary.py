@@ -87,7 +87,8 @@ def test_reference_dictionary_carries_the_acs_housekeeping_of_issue_5() -> None:
 
 def test_every_shipped_yaml_loads() -> None:
     for path in SHIPPED.glob("*.yaml"):
-        assert load_dictionary(path).packets, path.name
+        if not path.name.endswith(".attitude.yaml"):  # attitude mappings beside dictionaries (issue 11)
+            assert load_dictionary(path).packets, path.name
 
 
 XTCE_WITH_CALIBRATION = """<?xml version='1.0' encoding='UTF-8'?>
