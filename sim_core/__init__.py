@@ -2,3 +2,9 @@
 
 No I/O, no web, no database (DESIGN.md). SI units inside; quaternions scalar-first Hamilton.
 """
+
+from pathlib import Path as _Path
+
+from sim_core.compiled_cache import guard as _guard_compiled_cache
+
+_guard_compiled_cache(_Path(__file__).parent)  # numba caches never outlive a change of any sim_core source

@@ -281,10 +281,13 @@ def _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, t_u, bdot_gain, m
 
 @njit(cache=True, nogil=True)
 def fly_variant(
-    x0, p: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
+    x0, p: PlantArrays, truth: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
     available, faults, fdir_cfg, seed, rec, ev, n_ev, shared, slot, models: SeedModels,
 ) -> None:
     """Fly one variant and fill its output record ``rec`` (samples × channels) and events ``ev``.
+
+    ``p``: the plant the onboard software models (control law, allocation, FDIR); ``truth``: the plant
+    the dynamics fly (the same arrays unless the scenario states a truth that differs).
 
     ``wheel_limits``: rows max torque, max momentum, torque quantum, per wheel.
     ``steps``: [n_steps, meas_every, ctrl_every, out_every, law_kind, estimator_kind, program_kind,
@@ -321,11 +324,11 @@ def fly_variant(
     sun_frozen = np.zeros(3)
     total_dipole = np.zeros(3)
     work = np.zeros((6, n + 3 + nq + nw))
-    j_inv = np.linalg.inv(p.inertia)
+    j_inv = np.linalg.inv(truth.inertia)
     base_friction = p.friction.copy()
-    friction = p.friction.copy()
-    plant = PlantArrays(p.inertia, p.mass_inv, p.wheel_axes, p.wheel_inertia, friction,
-                        p.flex_coupling, p.flex_mass, p.flex_freq, p.flex_decrement)
+    friction = truth.friction.copy()
+    plant = PlantArrays(truth.inertia, truth.mass_inv, truth.wheel_axes, truth.wheel_inertia, friction,
+                        truth.flex_coupling, truth.flex_mass, truth.flex_freq, truth.flex_decrement)
     g = np.zeros(3)  # lead-lag state of seed 000 eq (8)
     cmd = np.zeros(nw)
     frozen_cmd = np.zeros(nw)
@@ -569,17 +572,18 @@ def fly_variant(
             total_dipole[:] = dipole + m_res
             ext[:] = magnetic.magnetic_torque_1(total_dipole, b_body)
         if gg_on:
-            add_gravity_gradient_into(x, r, p.inertia, ext)
+            add_gravity_gradient_into(x, r, truth.inertia, ext)
         rk4_step_into(x, dt, delivered, ext, plant, work, x)
         if faults.shape[0] > 0:
-            faults_mod.lock_stuck_wheels_1(faults, t + dt, x, p, j_inv)
+            faults_mod.lock_stuck_wheels_1(faults, t + dt, x, plant, j_inv)
     else:
         shared[slot] = n_steps
 
 
-def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
+def run_batch(x0, p, truth, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
               available, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared, models: SeedModels) -> None:
-    """Fly every variant (axis 0 of x0, available, faults, fdir_cfg, seeds, rec, ev), one thread per core.
+    """Fly every variant (axis 0 of x0, available, faults, fdir_cfg, seeds, rec, ev), one thread per core;
+    ``p`` is the modelled plant, ``truth`` the flown one (see :func:`fly_variant`).
 
     ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
     random stream, so results do not depend on the thread count or order.
@@ -587,7 +591,7 @@ def run_batch(x0, p, wheel_limits, steps, times, program, orbit, env, gains, est
     from concurrent.futures import ThreadPoolExecutor
 
     def one(v: int) -> None:
-        fly_variant(x0[v], p, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
+        fly_variant(x0[v], p, truth, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
                     available[v], faults[v, : n_faults[v]], fdir_cfg[v], seeds[v], rec[v], ev[v], n_ev[v], shared,
                     1 + v, models)
 

@@ -69,12 +69,19 @@ def cluster_axes(s: Scenario) -> np.ndarray:
     return axes / np.linalg.norm(axes, axis=0)
 
 
-def plant_params(s: Scenario) -> PlantParams:
-    """Plant of seed 000 eq (1) from the scenario; hub inertia gets the wheels added if asked."""
+def plant_params(s: Scenario, truth: bool = False) -> PlantParams:
+    """Plant of seed 000 eq (1) from the scenario; hub inertia gets the wheels added if asked.
+
+    ``truth``: the plant as flown (the scenario's :class:`~sim_core.scenario.TruthSpec` inertia and wheel
+    axes where given); otherwise the modelled one the onboard software holds."""
+    t = s.truth if truth else None
     axes = cluster_axes(s)
+    if t is not None and t.wheel_axes_b is not None:
+        axes = np.asarray(t.wheel_axes_b, dtype=float).T
+        axes = axes / np.linalg.norm(axes, axis=0)
     ws = s.spacecraft.cluster.wheels
     jr = np.array([w.inertia_kg_m2 for w in ws])
-    j = np.asarray(s.spacecraft.inertia_kg_m2, dtype=float)
+    j = np.asarray(s.spacecraft.inertia_kg_m2 if t is None or t.inertia_kg_m2 is None else t.inertia_kg_m2, dtype=float)
     if not s.spacecraft.inertia_includes_wheels:
         # Basilisk's balanced wheel: J_s along the spin axis, J_t = J_s/2 across it.
         for col, js in zip(axes.T, jr):
@@ -359,7 +366,8 @@ def simulate(
     x0s = np.repeat(x0[None], nv, axis=0)
     est_init = (np.array(sn.gyro_bias_rad_s, dtype=float), mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S))
     shared = np.zeros(nv + 1, dtype=np.int64)
-    args = (x0s, packed, wheel_limits, steps, times, program, orbit_tab, env, gains, est_init, alloc,
+    flown = plant_params(s, truth=True).pack() if s.truth is not None else packed
+    args = (x0s, packed, flown, wheel_limits, steps, times, program, orbit_tab, env, gains, est_init, alloc,
             avail, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared, seed_models(s))
     _run_watched(args, shared, n_steps, progress, cancel)
     return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)

@@ -26,6 +26,7 @@ __all__ = [
     "ControllerSpec",
     "AllocationSpec",
     "FaultSpec",
+    "TruthSpec",
     "VariantSpec",
     "Scenario",
     "apply_overrides",
@@ -211,6 +212,14 @@ FAULT_TYPES = (
 )
 
 
+class TruthSpec(_Spec):
+    """Where the flown spacecraft differs from the model its onboard software (and the twin) holds:
+    the plant flies these, the control law, allocation and FDIR keep the spacecraft's nominal values."""
+
+    inertia_kg_m2: Annotated[list[Vector3], Field(min_length=3, max_length=3)] | None = None
+    wheel_axes_b: list[Vector3] | None = None  # one per wheel, as mounted
+
+
 class FaultSpec(_Spec):
     """One injected fault: target (and index), type, onset, duration and parameters."""
 
@@ -258,6 +267,20 @@ class Scenario(_Spec):
     output_dt_s: Positive = 1.0
     seed: Annotated[int, Field(ge=0)] = 0
     variants: list[VariantSpec] = Field(default_factory=lambda: [VariantSpec(name="nominal")])
+    truth: TruthSpec | None = None  # None: the flown spacecraft is the modelled one
+
+    @model_validator(mode="after")
+    def _truth_matches(self) -> "Scenario":
+        t = self.truth
+        if t is not None and t.wheel_axes_b is not None:
+            n = len(self.spacecraft.cluster.wheels)
+            if len(t.wheel_axes_b) != n or any(math.fsum(c * c for c in a) == 0.0 for a in t.wheel_axes_b):
+                raise ValueError(f"truth.wheel_axes_b: expected {n} non-zero axes (one per wheel)")
+        if t is not None and t.inertia_kg_m2 is not None:
+            j = t.inertia_kg_m2
+            if any(abs(j[i][k] - j[k][i]) > 1e-9 * abs(j[i][i]) for i in range(3) for k in range(3)):
+                raise ValueError("truth.inertia_kg_m2: not symmetric")
+        return self
 
     @field_validator("initial_q_ib")
     @classmethod

@@ -41,7 +41,7 @@ from pydantic import ValidationError
 from sim_core import environment, frames, modes, quaternion, scenario_library, sensors
 from sim_core import faults as fault_kernels
 from sim_core import fdir as onboard_fdir
-from sim_core.engine import orbit_state, simulate
+from sim_core.engine import cluster_axes, orbit_state, plant_params, simulate
 from sim_core.faults import (  # parse_fault: the grammar's home is sim_core.faults
     TARGET_CODES,
     parse_fault,
@@ -65,6 +65,9 @@ __all__ = [
     "SendReport",
     "parse_fault",
     "satellite_scenario",
+    "TruthTolerances",
+    "truth_scenario",
+    "truth_wheel_allowance_rad_s",
     "packet_series",
     "encode_stream",
     "emulate",
@@ -77,6 +80,7 @@ DEFAULT_SCENARIO = "somov-ge4-scan"
 REFERENCE_DICTIONARY = "reference_satellite.yaml"
 HK_PACKET, GPS_PACKET = "ACS_HK", "GPS_NAV"
 EMULATOR_STREAM = 5  # spawn key of the emulator's sensor noise, apart from the engine's own streams
+TRUTH_STREAM = 6  # spawn key of the draw of the satellite's truth parameters
 
 # GPS receiver: seed 003 §3.2.1.1 (SRG-10): position 15 m (2σ), velocity 1.5 m/s (2σ).
 GPS_SIGMA_R_M = 7.5
@@ -139,15 +143,72 @@ class SendReport:
     packets_resent: int = 0
 
 
+@dataclass(frozen=True)
+class TruthTolerances:
+    """How far the emulated satellite's truth may lie from the twin's nominal (drawn uniformly inside):
+    principal moments ±2 % and products ±0.5 % of the mean moment (mass properties measured before
+    launch, then propellant-free but cabled), wheel spin axes tilted ≤ 0.1° (mounting alignment),
+    gyro bias ±5e-6 rad/s (≈ 1 °/h, a tactical-grade turn-on bias) per axis, and noise streams of its own."""
+
+    inertia_rel: float = 0.02
+    product_rel: float = 0.005
+    wheel_axis_rad: float = math.radians(0.1)
+    gyro_bias_rad_s: float = 5e-6
+
+
+def _tilted(axis: np.ndarray, angle: float, rng: np.random.Generator) -> list[float]:
+    """``axis`` turned by ``angle`` about a random direction perpendicular to it."""
+    u = axis / np.linalg.norm(axis)
+    perp = np.cross(u, rng.standard_normal(3))
+    perp /= np.linalg.norm(perp)
+    return (np.cos(angle) * u + np.sin(angle) * perp).tolist()
+
+
+def truth_scenario(s: Scenario, seed: int = 0, tolerances: TruthTolerances = TruthTolerances()) -> Scenario:
+    """The same spacecraft as flown: ``s`` with truth inertia, wheel axes, gyro bias and noise seed drawn
+    within ``tolerances`` (onboard software keeps the nominal model, see :class:`sim_core.scenario.TruthSpec`)."""
+    rng = np.random.default_rng(np.random.SeedSequence([TRUTH_STREAM, seed]))
+    tol = tolerances
+    j = np.array(s.spacecraft.inertia_kg_m2, dtype=float)
+    j_true = j + np.diag(np.diag(j) * tol.inertia_rel * rng.uniform(-1.0, 1.0, 3))
+    off = np.triu(rng.uniform(-1.0, 1.0, (3, 3)), 1) * tol.product_rel * np.trace(j) / 3.0
+    j_true += off + off.T
+    axes = [_tilted(a, rng.uniform(0.0, tol.wheel_axis_rad), rng) for a in cluster_axes(s).T]
+    bias = np.array(s.sensors.gyro_bias_rad_s) + rng.uniform(-tol.gyro_bias_rad_s, tol.gyro_bias_rad_s, 3)
+    data = s.model_dump()
+    data["truth"] = {"inertia_kg_m2": j_true.tolist(), "wheel_axes_b": axes}
+    data["sensors"]["gyro_bias_rad_s"] = bias.tolist()
+    data["seed"] = s.seed + 1 + seed  # never the twin's own noise streams
+    return Scenario.model_validate(data)
+
+
+def truth_wheel_allowance_rad_s(traj: Trajectory, model: Scenario, t_from_s: float, t_to_s: float,
+                                tolerances: TruthTolerances = TruthTolerances()) -> float:
+    """Wheel-speed gap between the satellite (``traj``) and a twin synchronised at ``t_from_s`` that its truth may
+    cause by ``t_to_s``: the inertia error times the body momentum the wheels took over (spread by the cluster's
+    pseudo-inverse), plus the mounting tilt times the wheels' own speed (rad/s, a bound, not a fit)."""
+    p = plant_params(model)
+    window = (traj.t_s >= t_from_s) & (traj.t_s <= t_to_s)
+    h = traj["omega_b_rad_s"][0, window] @ p.inertia_kg_m2.T
+    dh = float(np.max(np.linalg.norm(h - h[0], axis=1)))
+    spread = np.linalg.norm(np.linalg.pinv(p.wheel_axes_b), 2) / np.min(p.wheels.inertia_kg_m2)
+    tilt = tolerances.wheel_axis_rad * float(np.max(np.abs(traj["wheel_speed_rad_s"][0, window])))
+    return (tolerances.inertia_rel + 3.0 * tolerances.product_rel) * dh * spread + tilt
+
+
 def satellite_scenario(
     scenario: str | Scenario = DEFAULT_SCENARIO,
     faults: Sequence[FaultSpec] = (),
     duration_s: float | None = None,
     start_utc: str | None = None,
     output_dt_s: float = 0.25,
+    truth_seed: int | None = 0,
 ) -> Scenario:
-    """The scenario the emulated satellite flies: one variant with the hidden faults, output at T_q (seed 000 §5)."""
+    """The scenario the emulated satellite flies: one variant with the hidden faults, output at T_q (seed 000 §5),
+    and, unless ``truth_seed`` is None, its own truth parameters (:func:`truth_scenario`)."""
     base = scenario_library.get(scenario) if isinstance(scenario, str) else scenario
+    if truth_seed is not None:
+        base = truth_scenario(base, truth_seed)
     data = base.model_dump()
     data["variants"] = [VariantSpec(name="satellite", faults=list(faults)).model_dump()]
     data["output_dt_s"] = output_dt_s
@@ -408,13 +469,15 @@ def emulate(
     dictionary: Dictionary | None = None,
     seed: int = 0,
     fdir: bool = True,
+    truth_seed: int | None = 0,
 ) -> tuple[Trajectory, dict[str, PacketSeries], PacketStream]:
-    """Fly the satellite (hidden faults, onboard FDIR on) and packetise its telemetry: trajectory, values, packets."""
+    """Fly the satellite (hidden faults, onboard FDIR on, its own truth parameters unless ``truth_seed`` is
+    None) and packetise its telemetry: trajectory, values, packets."""
     dictionary = dictionary or load_dictionary(REFERENCE_DICTIONARY)
     hk = next((p for p in dictionary.packets.values() if p.name == HK_PACKET), None)
     if hk is None or hk.period_s is None:
         raise ValueError(f"dictionary: needs packet {HK_PACKET} with a period_s")
-    s = satellite_scenario(scenario, faults, duration_s, start_utc, hk.period_s)
+    s = satellite_scenario(scenario, faults, duration_s, start_utc, hk.period_s, truth_seed)
     traj = simulate(s, fdir=fdir)
     series = packet_series(traj, s, dictionary, seed)
     return traj, series, encode_stream(series)

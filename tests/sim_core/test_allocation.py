@@ -35,8 +35,7 @@ def test_min_norm_matches_basilisk_truth():
 
 def test_min_norm_and_three_wheel_laws_equal_basilisk_rw_motor_torque():
     """Random wheel layouts, availabilities and torques through Basilisk's rwMotorTorque C module
-    (bsk, the bench extra), which drops unavailable wheels and maps with the minimum-norm inverse."""
-    pytest.importorskip("Basilisk.fswAlgorithms.rwMotorTorque")
+    (bsk, in the test extra: never skipped), which drops unavailable wheels and maps with the minimum-norm inverse."""
     from Basilisk.architecture import messaging
     from Basilisk.fswAlgorithms import rwMotorTorque
     from Basilisk.utilities import SimulationBaseClass, macros

@@ -417,9 +417,8 @@ BASILISK_REL = 1e-12  # same double-precision arithmetic, different operation or
 
 @pytest.mark.parametrize("law_type", [0, 1])
 def test_mrp_feedback_equals_basilisk_module(law_type):
-    """Random cases through Basilisk's own mrpFeedback C module (bsk, the bench extra): Ki < 0, wheel
+    """Random cases through Basilisk's own mrpFeedback C module (bsk, in the test extra: never skipped): Ki < 0, wheel
     availability honoured, both control-law types."""
-    pytest.importorskip("Basilisk.fswAlgorithms.mrpFeedback")
     from Basilisk.architecture import messaging
     from Basilisk.fswAlgorithms import mrpFeedback
 

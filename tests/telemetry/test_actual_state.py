@@ -129,19 +129,24 @@ def _twin_vs_telemetry(satellite, hypothesis: list) -> tuple[np.ndarray, np.ndar
     return wheels, attitude, gap(twin["q_prog_ib"][0], track.series["q_prog_ib"][rows])
 
 
+def _truth_allowance_rad_s(satellite) -> float:
+    traj = satellite[0]
+    return emulator.truth_wheel_allowance_rad_s(traj, scenario_library.get("somov-ge4-scan"), ALIGN_S, ALIGN_S + TWIN_S)
+
+
 def test_twin_with_the_right_fault_hypothesis_reproduces_the_telemetry(satellite) -> None:
     hypothesis = [emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S - ALIGN_S}")]
     wheels, attitude, programme = _twin_vs_telemetry(satellite, hypothesis)
     assert programme.max() < PROGRAMME_TOL_RAD  # the shifted route is the satellite's own programme
     assert attitude.max() < TWIN_ATTITUDE_TOL_RAD
-    assert wheels.max() < TWIN_WHEEL_TOL_RAD_S
+    assert wheels.max() < TWIN_WHEEL_TOL_RAD_S + _truth_allowance_rad_s(satellite)
 
 
 def test_nominal_twin_departs_from_a_satellite_with_a_hidden_wheel_failure(satellite) -> None:
     wheels, _, programme = _twin_vs_telemetry(satellite, [])
     assert programme.max() < PROGRAMME_TOL_RAD
     before = int((FAILURE_ONSET_S - ALIGN_S) / 0.25)
-    assert wheels[:before].max() < TWIN_WHEEL_TOL_RAD_S  # same flight until the wheel fails
+    assert wheels[:before].max() < TWIN_WHEEL_TOL_RAD_S + _truth_allowance_rad_s(satellite)  # same until the failure
     assert wheels[before:].max() > DIVERGED_WHEEL_RAD_S
 
 
@@ -154,8 +159,10 @@ def test_batch_of_fault_hypotheses_ranks_the_hidden_failure_first(satellite) -> 
     hypotheses.update({f"wheel {k} failure": [emulator.parse_fault(f"wheel:{k}:failure@{onset}")] for k in range(4)})
     fits = rank_hypotheses(scenario_library.get("somov-ge4-scan"), track, t_align, RANKING_S, hypotheses)
     assert fits[0].name == f"wheel {FAILED_WHEEL} failure"  # the satellite's hidden schedule
-    assert fits[0].wheel_speed_rms_rad_s < TACHOMETER_COUNT_RAD_S
-    assert min(f.wheel_speed_rms_rad_s for f in fits[1:]) > 2 * TACHOMETER_COUNT_RAD_S
+    # one count of misfit from noise, about one more from the satellite's own truth (emulator.TruthTolerances)
+    assert fits[0].wheel_speed_rms_rad_s < 2 * TACHOMETER_COUNT_RAD_S
+    assert min(f.wheel_speed_rms_rad_s for f in fits[1:]) > max(2 * TACHOMETER_COUNT_RAD_S,
+                                                                2 * fits[0].wheel_speed_rms_rad_s)
     with pytest.raises(ValueError, match="hypotheses"):
         rank_hypotheses(scenario_library.get("somov-ge4-scan"), track, t_align, RANKING_S, {})
 

@@ -1,0 +1,58 @@
+"""The numba cache never serves a caller compiled against an old callee (sim_core.compiled_cache)."""
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import sim_core
+from sim_core import compiled_cache
+
+CALLEE = "from numba import njit\n\n\n@njit(cache=True)\ndef value():\n    return {}\n"
+CALLER = "from numba import njit\n\nfrom pkg.callee import value\n\n\n@njit(cache=True)\ndef twice():\n    return 2 * value()\n"
+
+
+def _run(root: Path, guarded: bool) -> int:
+    """A fresh interpreter importing ``pkg`` (guarded like sim_core or not) and calling the cached caller."""
+    code = textwrap.dedent(f"""
+        import sys
+        from pathlib import Path
+        sys.path.insert(0, {str(root)!r})
+        if {guarded}:
+            from sim_core.compiled_cache import guard
+            guard(Path({str(root / "pkg")!r}))
+        from pkg.caller import twice
+        print(twice())
+    """)
+    env_path = str(Path(sim_core.__file__).parent.parent)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin"})
+    return int(out.stdout.strip())
+
+
+def _package(root: Path, value: int) -> None:
+    pkg = root / "pkg"
+    pkg.mkdir(exist_ok=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "caller.py").write_text(CALLER)
+    (pkg / "callee.py").write_text(CALLEE.format(value))
+
+
+def test_numba_alone_serves_a_stale_callee_and_the_guard_recompiles(tmp_path):
+    plain, guarded = tmp_path / "plain", tmp_path / "guarded"
+    for root in (plain, guarded):
+        root.mkdir()
+        _package(root, 1)
+        assert _run(root, root is guarded) == 2
+        _package(root, 5)  # the callee changes, the caller's file does not
+    assert _run(plain, False) == 2  # numba's own cache: the caller still has value() == 1 inlined
+    assert _run(guarded, True) == 10  # guarded: recompiled against the new callee
+
+
+def test_the_stamp_follows_the_sources(tmp_path):
+    _package(tmp_path, 1)
+    pkg = tmp_path / "pkg"
+    assert compiled_cache.guard(pkg) and not compiled_cache.guard(pkg)  # first call stamps, second finds it current
+    (pkg / "callee.py").write_text(CALLEE.format(3))
+    assert compiled_cache.source_hash(pkg) != compiled_cache.stamp_path(pkg).read_text().strip()
+    assert compiled_cache.guard(pkg)
