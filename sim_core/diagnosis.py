@@ -58,12 +58,16 @@ SENSOR_FAULTS = ("gyro_bias", "star_tracker_outage", "magnetometer_bias")
 MIN_SAMPLES = 60  # a minute at 1 Hz: shorter telemetry cannot separate a fault from quantisation
 UNMODELLED_TORQUE_NM = 2e-6  # σ of wheel torque the balance does not model (bearing ripple, drag): 10 % of a GG command
 PRE_ONSET_S = 300.0  # nominal data kept before the onset search window
-POST_ALARM_S = 300.0  # data after the alarm used to identify the fault
+POST_ALARM_S = 20.0  # data after the alarm used to identify the fault (latency budget 30 s)
 ONSET_MARGIN_S = 60.0  # the onset may precede the start of the alarming window by this much
 PRUNE_SIGMA = 3.0  # a wheel whose balance stays within 3σ (+ quantisation) is not suspected
 INVALID_PROBABILITY = 1e-4  # a healthy star tracker's invalid samples (Sun or Moon in the field of view)
 MAX_REMAINING_GAIN = 0.95  # a gain loss smaller than 5 % is "none" at this resolution
 MAX_LISTED = 12
+PAIR_PRIOR_LOG_ODDS = math.log(20.0)  # two wheel faults at once: 1/20 the prior of one
+FDIR_MISS_LOG_ODDS = math.log(1e4)  # the onboard FDIR isolates a healthy wheel at most once in 10^4 isolations
+ROTOR_TOLERANCE = 0.02  # torque → speed known within 2 %: rotor inertia and motor torque constant tolerances
+COUPLING_TOLERANCE = 0.5  # an estimated body rate lags a sudden change by up to half a sample at 1 Hz
 REPLAYED = 3  # wheel hypotheses flown in the twin replay
 REPLAY_ONSETS = 13  # onsets tried per replayed hypothesis
 REPLAY_LEAD_S = 60.0  # the twin starts this long before the earliest onset tried
@@ -179,6 +183,7 @@ class _Channel:
     r_var: np.ndarray
     bound: float
     templates: dict[str, np.ndarray] = field(default_factory=dict)  # per-interval effect of a unit magnitude
+    relative: np.ndarray | None = None  # bounded systematic error per interval (parameter tolerance × increment)
 
 
 def _wheel_channels(obs: Observations, wm: WheelModel, sigma_torque_nm: float) -> list[_Channel]:
@@ -199,18 +204,21 @@ def _wheel_channels(obs: Observations, wm: WheelModel, sigma_torque_nm: float) -
         jr = wm.inertia_kg_m2[p]
         coupling = np.nan_to_num(d_omega @ wm.axes_b[:, p])
         drift = dt * (u_mean - wm.coulomb_nm[p] * spin) / jr - coupling
-        templates = {"motor": dt * u_mean / jr, "friction": -dt * spin / jr, "coupling": coupling}
-        out.append(_Channel(f"wheel {p + 1}", y, drift, (dt / jr) ** 2 * u_var, r_var, obs.speed_quantum_rad_s,
-                            templates))
+        motor = dt * u_mean / jr
+        templates = {"motor": motor, "friction": -dt * spin / jr, "coupling": coupling}
+        q_var = (dt / jr) ** 2 * u_var + (0.5 * ROTOR_TOLERANCE * motor) ** 2 + (COUPLING_TOLERANCE * coupling) ** 2
+        out.append(_Channel(f"wheel {p + 1}", y, drift, q_var, r_var, obs.speed_quantum_rad_s, templates,
+                            ROTOR_TOLERANCE * np.abs(motor) + COUPLING_TOLERANCE * np.abs(coupling)))
     return out
 
 
 def _robust_var(x: np.ndarray) -> float:
-    """Variance from the median absolute deviation (1.4826 MAD)² of the finite values."""
-    x = x[np.isfinite(x)]
+    """Mean square of the finite values without their largest 1 % (a fault's step is one value; the MAD would
+    be fooled by sensors whose noise is not white, e.g. a star tracker's slowly varying error)."""
+    x = np.sort(np.abs(x[np.isfinite(x)]))
     if x.size < 3:
         return 0.0
-    return float((1.4826 * np.median(np.abs(x - np.median(x)))) ** 2)
+    return float(np.mean(x[: max(2, int(0.99 * x.size))] ** 2))
 
 
 def _kinematic_rates(q: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -226,6 +234,8 @@ def _gyro_channels(obs: Observations) -> list[_Channel]:
     rates = obs.omega_gyro_b_rad_s if obs.omega_gyro_b_rad_s is not None else obs.omega_b_rad_s
     q = obs.q_st_ib if obs.q_st_ib is not None else obs.q_est_ib
     kin = _kinematic_rates(q, obs.t_s)
+    valid = _star_tracker_valid(q) if obs.q_st_ib is not None else np.ones(q.shape[0], dtype=bool)
+    kin[~(valid[1:] & valid[:-1])] = np.nan  # no attitude, no kinematic rate
     mean_rate = 0.5 * (rates[1:] + rates[:-1])
     turn = np.abs(np.diff(rates, n=2, axis=0))  # the trapezoid's error grows with the change of the rate change
     turn = np.concatenate([turn[:1], turn], axis=0)
@@ -324,11 +334,13 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
 
     def at_bias(theta: float) -> np.ndarray:  # speed, gyro or magnetometer bias: a step in the measurement
         return run(base, theta * after_sample, no_reset)
-    return _quadratic_max(at_bias, -np.inf, np.inf, scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0)
+    # a bias below the sensor's resolution is not identifiable: rounding leaves such offsets for minutes
+    return _quadratic_max(at_bias, -np.inf, np.inf, scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0,
+                          min_abs=ch.bound)
 
 
-def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi]."""
+def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0, min_abs: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi] and |θ| ≥ min_abs."""
     if np.isfinite(hi) and np.isfinite(lo):
         p0, p1, p2 = lo, 0.5 * (lo + hi), hi
     else:
@@ -342,6 +354,7 @@ def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0) -> tuple[np.nda
         theta = np.where(a < 0.0, -b / (2.0 * a), np.where(b > 0.0, hi, lo))
     theta = np.clip(theta, lo, hi)
     theta = np.where(np.isfinite(theta), theta, p0)
+    theta = np.where(np.abs(theta) < min_abs, np.where(theta < 0.0, -min_abs, min_abs), theta)
     ll = a * theta**2 + b * theta + c
     return ll, theta
 
@@ -368,7 +381,8 @@ def _window(alarm: fd.Alarm | None, n: int, dt: float) -> tuple[int, int, int]:
 def _cut(ch: _Channel, a: int, b: int) -> _Channel:
     """The channel restricted to samples [a, b)."""
     return _Channel(ch.name, ch.y[a:b], ch.drift[a:b - 1], ch.q_var[a:b - 1], ch.r_var[a:b], ch.bound,
-                    {k: v[a:b - 1] for k, v in ch.templates.items()})
+                    {k: v[a:b - 1] for k, v in ch.templates.items()},
+                    None if ch.relative is None else ch.relative[a:b - 1])
 
 
 def _nominal(ch: _Channel) -> float:
@@ -381,8 +395,9 @@ def _suspected(ch: _Channel) -> bool:
     """Cheap pruning: does the open-loop balance leave PRUNE_SIGMA of quantisation + noise anywhere in the window?"""
     r = fd.open_loop_residual(ch.y, ch.drift)[None, :]
     dt = 1.0
+    rel = None if ch.relative is None else ch.relative[None, :]
     return fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt, n_sigma=PRUNE_SIGMA,
-                           windows_s=tuple(float(w) for w in (1, 3, 10, 30, 100, 300))) is not None
+                           windows_s=tuple(float(w) for w in (1, 3, 10, 30, 100, 300)), relative=rel) is not None
 
 
 def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None,
@@ -412,6 +427,9 @@ def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None
     st_alarm = _star_tracker_alarm(valid)
     if st_alarm is not None and (alarm is None or st_alarm < alarm.index):
         alarm = fd.Alarm(-1, st_alarm, 1, float("inf"))
+    isolated = _isolations(obs)
+    if isolated and (alarm is None or min(isolated.values()) < alarm.index):
+        alarm = fd.Alarm(-2, min(isolated.values()), int(ONSET_MARGIN_S / dt), float("inf"))
     start, stop, first = _window(alarm, t.shape[0], dt)
     stride = 1 if alarm is not None else max(1, (stop - start) // 200)
     onsets = np.arange(first - start, stop - start - 1, stride)
@@ -421,7 +439,7 @@ def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None
     suspected = []
     for p, ch in enumerate(wheels):
         cut = _cut(ch, start, stop)
-        if not _suspected(cut):
+        if not (_suspected(cut) or (p in isolated and isolated[p] < stop)):
             continue
         suspected.append(p + 1)
         nominal = _nominal(cut)
@@ -430,12 +448,13 @@ def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None
     sensor_fits = [_sensor_fit(kind, group, start, stop, onsets, tw) for kind, group in sensors.items()]
     if valid is not None:
         sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
-    hyps = _rank(fits, [f for f in sensor_fits if f is not None])
+    flagged = {p for p, k in isolated.items() if k < stop}
+    hyps = _rank(fits, [f for f in sensor_fits if f is not None], flagged)
     if scenario is not None and alarm is not None:
         hyps = _replayed(hyps, obs, scenario, start, stop, alarm.index, flyer)
     name = None
     if alarm is not None:
-        name = "star tracker" if alarm.channel < 0 else channels[alarm.channel].name
+        name = {-1: "star tracker", -2: "onboard FDIR isolation"}.get(alarm.channel) or channels[alarm.channel].name
     return Diagnosis(
         hypotheses=hyps, detected=alarm is not None, alarm_s=None if alarm is None else float(t[alarm.index]),
         alarm_channel=name, false_alarms_per_day=detection_rate_per_day(len(channels), dt),
@@ -443,12 +462,21 @@ def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None
     )
 
 
+def _isolations(obs: Observations) -> dict[int, int]:
+    """Wheel index → first sample where the onboard FDIR flags it isolated (telemetered flags)."""
+    if obs.wheel_isolated is None:
+        return {}
+    flags = np.nan_to_num(obs.wheel_isolated) > 0.5
+    return {p: int(np.argmax(flags[:, p])) for p in range(flags.shape[1]) if flags[:, p].any()}
+
+
 def _first_alarm(channels: list[_Channel], dt: float) -> fd.Alarm | None:
     """Earliest window-test alarm over all continuous channels."""
     best = None
     for i, ch in enumerate(channels):
-        r = fd.open_loop_residual(np.nan_to_num(ch.y, nan=0.0), ch.drift)[None, :]
-        a = fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt)
+        r = fd.open_loop_residual(ch.y, ch.drift)[None, :]
+        rel = None if ch.relative is None else ch.relative[None, :]
+        a = fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt, relative=rel)
         if a is not None and (best is None or a.index < best.index):
             best = fd.Alarm(i, a.index, a.window, a.ratio)
     return best
@@ -525,6 +553,9 @@ def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, sta
     ll_fine = _replay_grid(chosen, fine, obs, scenario, start, stop, flyer)
     taus = np.concatenate([grid, fine])
     all_ll = np.concatenate([ll, ll_fine], axis=1)
+    # the replay ranks the hypotheses it flies among themselves: the twin's own mismatch (inertia, alignments)
+    # weighs on every variant, so its evidence against hypotheses it did not fly would not be fair
+    ll = ll - np.max([_log_mean_exp(row) for row in ll])
     updated = {}
     for i, h in enumerate(chosen):
         onset, sigma, _ = _onset_stats(taus, all_ll[i])
@@ -559,13 +590,19 @@ def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:
                    for h, s in zip(hyps, post)), key=lambda h: -h.log_evidence)
 
 
-def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit]) -> list[Hypothesis]:
-    """Singles, pairs of wheel faults on different wheels, sensors and "none", scored by posterior probability."""
-    hyps = [Hypothesis("none", None, None, None, None, 0.0)]
+def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: set[int] = frozenset()) -> list[Hypothesis]:
+    """Singles, pairs of wheel faults on different wheels (prior odds PAIR_PRIOR_LOG_ODDS), sensors and "none",
+    scored by posterior probability; each wheel the onboard FDIR isolated that a hypothesis leaves healthy costs
+    FDIR_MISS_LOG_ODDS."""
+    def unexplained(*wheels: int) -> float:
+        return -FDIR_MISS_LOG_ODDS * len(set(flagged) - set(wheels))
+
+    hyps = [Hypothesis("none", None, None, None, None, unexplained())]
     for f in wheel_fits:
-        hyps.append(Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta))
+        hyps.append(Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude,
+                               f.delta + unexplained(f.channel)))
     for f in sensor_fits:
-        hyps.append(Hypothesis(f.fault, None, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta))
+        hyps.append(Hypothesis(f.fault, None, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained()))
     by_wheel: dict[int, list[_Fit]] = {}
     for f in wheel_fits:
         by_wheel.setdefault(f.channel, []).append(f)
@@ -574,5 +611,5 @@ def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit]) -> list[Hypothesis]:
             for b in by_wheel[q]:
                 hyps.append(Hypothesis(f"{a.fault}+{b.fault}", [p + 1, q + 1], min(a.onset_s, b.onset_s),
                                        max(a.onset_sigma_s, b.onset_sigma_s), [a.magnitude, b.magnitude],
-                                       a.delta + b.delta))
+                                       a.delta + b.delta + unexplained(p, q) - PAIR_PRIOR_LOG_ODDS))
     return _scored(hyps)[:MAX_LISTED]

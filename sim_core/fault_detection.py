@@ -81,23 +81,30 @@ def level_loglik(y: np.ndarray, drift: np.ndarray, q_var: np.ndarray, r_var: np.
 
 
 def open_loop_residual(y: np.ndarray, drift: np.ndarray) -> np.ndarray:
-    """r_k = y_k − y_0 − Σ_{j<k} d_j: what the drift model leaves unexplained, from the first sample."""
-    return y - y[0] - np.concatenate([[0.0], np.cumsum(drift)])
+    """r_k = y_k − y_0 − Σ_{j<k} d_j: what the drift model leaves unexplained, from the first finite sample."""
+    r = y - np.concatenate([[0.0], np.cumsum(drift)])
+    finite = np.flatnonzero(np.isfinite(r))
+    return r - (r[finite[0]] if finite.size else 0.0)
 
 
 def window_alarm(residual: np.ndarray, q_var: np.ndarray, r_var: np.ndarray, bound: float, dt_s: float,
-                 n_sigma: float = N_SIGMA, windows_s: tuple[float, ...] = WINDOWS_S) -> Alarm | None:
-    """First k where |r_k − r_{k−L}| > bound + n σ_L for some window L (residual, r_var (n_ch, n), q_var (n_ch, n−1))."""
+                 n_sigma: float = N_SIGMA, windows_s: tuple[float, ...] = WINDOWS_S,
+                 relative: np.ndarray | None = None) -> Alarm | None:
+    """First k where |r_k − r_{k−L}| > bound + |Σ_L relative| + n σ_L for some window L (residual, r_var (n_ch, n),
+    q_var (n_ch, n−1)); ``relative`` (n_ch, n−1) is a bounded systematic error per interval (e.g. a parameter
+    tolerance times the modelled increment), summed over the window."""
     best: Alarm | None = None
     n_ch, n = residual.shape
     cum_q = np.concatenate([np.zeros((n_ch, 1)), np.cumsum(q_var, axis=1)], axis=1)
+    rel = np.zeros((n_ch, n - 1)) if relative is None else relative
+    cum_rel = np.concatenate([np.zeros((n_ch, 1)), np.cumsum(rel, axis=1)], axis=1)
     for w_s in windows_s:
         lag = max(1, round(w_s / dt_s))
         if lag >= n:
             continue
         diff = residual[:, lag:] - residual[:, :-lag]
         sigma = np.sqrt(cum_q[:, lag:] - cum_q[:, :-lag] + r_var[:, lag:] + r_var[:, :-lag])
-        ratio = (np.abs(diff) - bound) / sigma
+        ratio = (np.abs(diff) - bound - np.abs(cum_rel[:, lag:] - cum_rel[:, :-lag])) / sigma
         hit = np.nan_to_num(ratio, nan=-np.inf) > n_sigma
         if not hit.any():
             continue
