@@ -12,8 +12,9 @@ batches from a worker thread so a slow database never stalls the socket.
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +31,9 @@ __all__ = [
     "LiveStats",
     "Subscriber",
     "LiveStream",
+    "LOOPBACK_SOURCES",
     "complete_prefix",
+    "source_networks",
     "warm_decoder",
     "DECODE_INTERVAL_S",
 ]
@@ -123,6 +126,8 @@ class LiveStats:
     packets_archived: int = 0
     archive_errors: int = 0
     last_archive_error: str = ""
+    connections_refused: int = 0
+    last_refused_peer: str = ""
 
 
 class Subscriber:
@@ -160,6 +165,24 @@ class Subscriber:
         return self._queue.qsize()
 
 
+LOOPBACK_SOURCES = ("127.0.0.0/8", "::1/128")  # default: only this machine may send packets
+
+
+def source_networks(sources: Sequence[str]) -> tuple[ipaddress.IPv4Network | ipaddress.IPv6Network, ...]:
+    """The networks packets may come from (ValueError naming ``allowed_sources`` for a bad entry)."""
+    try:
+        return tuple(ipaddress.ip_network(source, strict=False) for source in sources)
+    except ValueError as exc:
+        raise ValueError(f"allowed_sources: {exc}") from None
+
+
+def _allowed(host: str, networks: Sequence[ipaddress.IPv4Network | ipaddress.IPv6Network]) -> bool:
+    address = ipaddress.ip_address(host.split("%", 1)[0])
+    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+        address = address.ipv4_mapped
+    return any(address in network for network in networks)
+
+
 class LiveStream:
     """TCP listener for a CCSDS packet stream of one satellite (optionally archived)."""
 
@@ -173,9 +196,11 @@ class LiveStream:
         archive_interval_s: float = ARCHIVE_INTERVAL_S,
         archive_max_packets: int = ARCHIVE_MAX_PACKETS,
         uploaded_by: str = "live",
+        allowed_sources: Sequence[str] = LOOPBACK_SOURCES,
     ) -> None:
         if archive is not None and not satellite:
             raise ValueError("satellite: required when the stream is archived")
+        self._allowed = source_networks(allowed_sources)
         self._dictionary, self._archive, self._satellite = dictionary, archive, satellite
         self._packet_octets = dictionary.packet_octets_by_apid()
         self._limits = dict(limits or {})
@@ -224,6 +249,12 @@ class LiveStream:
         await self.flush()
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        host = str(writer.get_extra_info("peername")[0])
+        if not _allowed(host, self._allowed):  # not on the allow-list: closed before a byte is read
+            self.stats.connections_refused += 1
+            self.stats.last_refused_peer = host
+            writer.close()
+            return
         task = asyncio.current_task()
         if task is not None:
             self._connections.add(task)

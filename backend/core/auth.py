@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import secrets
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -65,6 +66,21 @@ class Authenticator:
         self._tokens, self.enabled = tokens, enabled
         self._cache: dict[str, Principal] = {}
         self._lock = threading.Lock()
+        self._watchers: dict[int, dict[int, Callable[[], None]]] = {}
+
+    def watch(self, principal: Principal, on_revoke: Callable[[], None]) -> Callable[[], None]:
+        """Call ``on_revoke`` (from any thread) when the principal's token is revoked; returns the unwatch."""
+        if principal.token_id is None:
+            return lambda: None
+        key, token_id = id(on_revoke), principal.token_id
+        with self._lock:
+            self._watchers.setdefault(token_id, {})[key] = on_revoke
+
+        def unwatch() -> None:
+            with self._lock:
+                self._watchers.get(token_id, {}).pop(key, None)
+
+        return unwatch
 
     def cached(self, token: str | None) -> Principal | None:
         """The principal if known without a database lookup (auth off, or a cached token)."""
@@ -90,10 +106,13 @@ class Authenticator:
         return principal
 
     def forget(self, token_id: int) -> None:
-        """Drop a revoked token from the cache."""
+        """Drop a revoked token from the cache and close what it opened (WebSockets, monitor sessions)."""
         with self._lock:
             for digest in [d for d, p in self._cache.items() if p.token_id == token_id]:
                 del self._cache[digest]
+            watchers = list(self._watchers.pop(token_id, {}).values())
+        for on_revoke in watchers:
+            on_revoke()
 
     def issue(self, name: str, role: Role) -> tuple[int, str]:
         """Create a token, store its hash; returns (id, plain token) — shown once, never stored."""

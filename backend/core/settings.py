@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import ipaddress
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 __all__ = ["Settings"]
@@ -23,6 +24,9 @@ class Settings(BaseSettings):
                              description="First of the 3 twin monitor ports (actual, simulated, overlay).")
     telemetry_port: int = Field(10025, ge=0, le=65535, description="TCP port of the live listener (0: any).")
     live_enabled: bool = Field(True, description="Listen for a live CCSDS packet stream over TCP.")
+    telemetry_sources: list[str] = Field(["127.0.0.0/8", "::1/128"], min_length=1,
+                                         description="Networks (CIDR) the live listener takes packets from: "
+                                                     'loopback unless set (ACS_TWIN_TELEMETRY_SOURCES=\'["10.1.0.0/16"]\').')
     live_satellite: str = Field("REFSAT", min_length=1, description="Satellite the live stream belongs to.")
     live_dictionary: str = Field("reference_satellite.yaml", description="Dictionary of the live stream.")
     auth_enabled: bool = Field(True, description="Require API tokens (turn off only locally).")
@@ -39,6 +43,13 @@ class Settings(BaseSettings):
     ws_rate_hz: float = Field(10.0, gt=0, le=100, description="Batches per second per WS client.")
     ws_buffer_items: int = Field(5_000, ge=1, description="Items buffered per WS client before thinning.")
     ws_send_timeout_s: float = Field(2.0, gt=0, description="A slower WS send drops the client.")
+
+    @field_validator("telemetry_sources")
+    @classmethod
+    def _networks(cls, sources: list[str]) -> list[str]:
+        for source in sources:
+            ipaddress.ip_network(source, strict=False)  # ValueError names the bad entry
+        return sources
 
     def resolved_database_url(self) -> str:
         """Database URL, defaulting to SQLite ``acs-twin.sqlite`` inside ``data_dir``."""

@@ -26,13 +26,15 @@ ORPHAN_EXIT_S = 20.0  # after SIGTERM the pending batches are archived within th
 
 
 def run_ingest_process(database_url: str, dictionaries_dir: str, dictionary: str, satellite: str, host: str,
-                       port: int, outbox: Any, stop: Any) -> None:
-    """Process entry: serve the live stream until ``stop`` is set (or the server dies); ("port", n) or ("error", why) first."""
+                       port: int, outbox: Any, stop: Any, sources: tuple[str, ...]) -> None:
+    """Process entry: serve the live stream (packets only from ``sources``, CIDR) until ``stop`` is set or the
+    server dies; ("port", n) or ("error", why) first."""
     from backend.core.processes import become_owned_child
 
     become_owned_child()  # SIGTERM when the server dies, even by kill -9: stop as if told to
     signal.signal(signal.SIGTERM, lambda *_: _stop_orphan(outbox, stop))
-    asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop))
+    asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop,
+                       sources))
 
 
 def _stop_orphan(outbox: Any, stop: Any) -> None:
@@ -50,7 +52,7 @@ def _offer(outbox: Any, message: tuple, tally: dict[str, int]) -> None:
 
 
 async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str, satellite: str, host: str,
-                 port: int, outbox: Any, stop: Any) -> None:
+                 port: int, outbox: Any, stop: Any, sources: tuple[str, ...]) -> None:
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
     from telemetry.archive import Archive
     from telemetry.limits import dictionary_limits
@@ -58,7 +60,8 @@ async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str
 
     archive = Archive(database_url, migrate=False)
     dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
-    stream = LiveStream(dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary))
+    stream = LiveStream(dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary),
+                        allowed_sources=sources)
     try:
         outbox.put(("port", await stream.start(host, port)))
     except OSError as exc:  # the port is taken: say by whom instead of leaving the server waiting

@@ -138,7 +138,7 @@ class TelemetryGateway:
         stop = ctx.Event()
         args = (self._settings.resolved_database_url(), str(self._settings.data_dir / "dictionaries"),
                 self._settings.live_dictionary, self._settings.live_satellite, self._settings.host,
-                self._settings.telemetry_port, outbox, stop)
+                self._settings.telemetry_port, outbox, stop, tuple(self._settings.telemetry_sources))
         live = _LiveChild(ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest",
                                       daemon=True), outbox, stop)
         self._live = live

@@ -65,6 +65,11 @@ async def _receive_commands(websocket: WebSocket, hub: Any, sub: Subscription) -
             await websocket.send_json({"type": "error", "message": str(exc), "field": field})
 
 
+async def _close_when_revoked(websocket: WebSocket, revoked: asyncio.Event) -> None:
+    await revoked.wait()
+    await websocket.close(CLOSE_UNAUTHORIZED, "token revoked")
+
+
 @router.websocket("/ws")
 async def live(websocket: WebSocket) -> None:
     """Authenticate, then run the batch sender and the command receiver until either ends."""
@@ -76,9 +81,12 @@ async def live(websocket: WebSocket) -> None:
     await websocket.accept()
     settings = services.settings
     sub = services.hub.subscribe()
+    revoked, loop = asyncio.Event(), asyncio.get_running_loop()
+    unwatch = services.auth.watch(principal, lambda: loop.call_soon_threadsafe(revoked.set))
     tasks = [asyncio.create_task(_send_batches(websocket, sub, 1.0 / settings.ws_rate_hz,
                                                settings.ws_send_timeout_s)),
-             asyncio.create_task(_receive_commands(websocket, services.hub, sub))]
+             asyncio.create_task(_receive_commands(websocket, services.hub, sub)),
+             asyncio.create_task(_close_when_revoked(websocket, revoked))]
     try:
         done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         for task in pending:
@@ -87,4 +95,5 @@ async def live(websocket: WebSocket) -> None:
             with contextlib.suppress(WebSocketDisconnect, RuntimeError, ValueError):
                 task.result()
     finally:
+        unwatch()
         services.hub.unsubscribe(sub)

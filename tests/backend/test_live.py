@@ -169,3 +169,19 @@ def test_emulated_satellite_over_tcp_reaches_archive_and_websocket(tmp_path: Pat
                               f"&max_points={sent_q0.size}", headers=bearer(viewer)).json()
     assert np.allclose(live, sent_q0, atol=QUATERNION_RESOLUTION)
     assert np.allclose(archived["values"], sent_q0, atol=QUATERNION_RESOLUTION)
+
+
+def test_revoking_a_token_closes_its_open_websocket_within_a_second(client: TestClient,
+                                                                     tokens: dict[str, str]) -> None:
+    import time
+
+    viewer = tokens["viewer"]
+    token_id = client.app.state.services.auth.resolve(viewer).token_id
+    with client.websocket_connect(f"/api/v1/ws?token={viewer}") as ws:
+        ws.send_json({"op": "subscribe", "topics": ["alarms"]})
+        start = time.monotonic()
+        assert client.delete(f"/api/v1/tokens/{token_id}", headers=bearer(tokens["admin"])).status_code == 200
+        closed = ws.receive()
+        elapsed = time.monotonic() - start
+    assert closed["type"] == "websocket.close" and closed["code"] == 4401
+    assert elapsed < 1.0

@@ -1,0 +1,50 @@
+"""The live listener's door: packets only from the allow-listed networks (loopback by default).
+
+Truth: one spoofed packet used to raise two latched red alarms (issue 16); a refused peer must
+deliver nothing at all, an allowed one everything.
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from telemetry.live import LOOPBACK_SOURCES, LiveStream, source_networks
+from tests.telemetry.packet_streams import packets, reference
+from tests.telemetry.test_live import HK_APID, SETTLE_S, drain, send
+
+
+def _deliver(sources: tuple[str, ...]) -> tuple[int, int, int]:
+    """Packets delivered, connections refused, connections served for 20 packets sent from 127.0.0.1."""
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 20, seed=3).tobytes()
+
+    async def scenario() -> tuple[int, int, int]:
+        stream = LiveStream(dictionary, allowed_sources=sources)
+        subscriber = stream.subscribe()
+        port = await stream.start()
+        try:
+            await send(port, raw)
+        except ConnectionError:
+            pass  # a refused peer may see its connection reset mid-send
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        delivered = sum(len(m.batch.sequence_count) for m in drain(subscriber))
+        return delivered, stream.stats.connections_refused, stream.stats.connections
+
+    return asyncio.run(scenario())
+
+
+def test_loopback_is_the_default_and_is_served() -> None:
+    assert LiveStream.__init__.__kwdefaults__["allowed_sources"] == LOOPBACK_SOURCES
+    assert _deliver(LOOPBACK_SOURCES) == (20, 0, 1)
+
+
+def test_a_peer_outside_the_allow_list_delivers_nothing() -> None:
+    assert _deliver(("10.0.0.0/8", "192.168.0.0/16")) == (0, 1, 0)
+
+
+def test_a_bad_network_is_named() -> None:
+    with pytest.raises(ValueError, match="allowed_sources"):
+        source_networks(["10.0.0.300/8"])
