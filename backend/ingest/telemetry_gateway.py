@@ -20,7 +20,7 @@ import multiprocessing as mp
 import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass
 from multiprocessing.process import BaseProcess
 from multiprocessing.queues import Queue
@@ -294,6 +294,13 @@ class TelemetryGateway:
         from telemetry import queries  # pyarrow: imported on first use, not at server start
 
         return queries.pass_summary(self._opened(), satellite, pass_id)
+
+    def export_stream(self, satellite: str, names: list[str], t0_ns: int,
+                      t1_ns: int) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+        """Every sample of the parameters, window by window (telemetry.export); unknown names raise now."""
+        from telemetry import export
+
+        return export.export_batches(self._opened(), satellite, names, t0_ns, t1_ns)
 
     def export_table(self, satellite: str, names: list[str], t0_ns: int, t1_ns: int) -> pa.Table:
         """Wide pyarrow table of the parameters (telemetry.queries.export_table)."""

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import io
 import re
+import tempfile
+from collections.abc import Iterator
 from datetime import datetime
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal
 
-import pyarrow.csv as pa_csv
-import pyarrow.parquet as pq
 from fastapi import APIRouter, Query
-from fastapi.responses import Response
+from fastapi.responses import Response, StreamingResponse
 from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
@@ -72,27 +71,35 @@ async def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str
     return Response(body, media_type="application/json")
 
 
-@router.get("/exports/samples", summary="Export samples as CSV or Parquet (one column per parameter)",
-            response_class=Response,
+@router.get("/exports/samples", summary="Export every sample as CSV or Parquet (t_utc + one column per parameter)",
+            response_class=StreamingResponse,
             responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}})
 def export_samples(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
                    names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"],
                                       description="Comma-separated parameter names."),
                    start: datetime | None = None, end: datetime | None = None,
-                   format: Literal["csv", "parquet"] = "csv") -> Response:
-    """Wide table: t_utc_ns, time_utc and one column per named parameter (empty where not sampled)."""
+                   format: Literal["csv", "parquet"] = "csv") -> StreamingResponse:
+    """Full resolution, the same rows as ``acs-twin export``: ``t_utc`` (ISO 8601 UTC, ns) and one column per named
+    parameter (empty where not sampled), streamed window by window (CSV) or from a temporary file (Parquet)."""
+    from telemetry.export import csv_chunks, write_export
+
     wanted = [n.strip() for n in names.split(",") if n.strip()]
     if not wanted or len(wanted) > MAX_EXPORT_PARAMETERS:
         raise ApiError(422, f"names: give 1..{MAX_EXPORT_PARAMETERS} parameter names", "names")
     t0, t1 = _window(start, end)
-    table = services.telemetry.export_table(satellite, wanted, t0, t1)
-    sink = io.BytesIO()
-    if format == "csv":
-        pa_csv.write_csv(table, sink)
-        media = "text/csv"
-    else:
-        pq.write_table(table, sink, compression="zstd")
-        media = "application/vnd.apache.parquet"
+    schema, batches = services.telemetry.export_stream(satellite, wanted, t0, t1)
     filename = re.sub(r"[^A-Za-z0-9._-]+", "_", satellite)  # a header value carries no CR/LF, quote or path
     headers = {"Content-Disposition": f'attachment; filename="{filename}-samples.{format}"'}
-    return Response(sink.getvalue(), media_type=media, headers=headers)
+    if format == "csv":
+        return StreamingResponse(csv_chunks(schema, batches), media_type="text/csv", headers=headers)
+    spool = tempfile.TemporaryFile()  # noqa: SIM115 - closed by _file_chunks once streamed
+    write_export(schema, batches, spool, "parquet")
+    spool.seek(0)
+    return StreamingResponse(_file_chunks(spool), media_type="application/vnd.apache.parquet", headers=headers)
+
+
+def _file_chunks(spool: BinaryIO, block: int = 1 << 20) -> Iterator[bytes]:
+    """A temporary file's bytes in blocks, closed (deleted) at the end."""
+    with spool:
+        while chunk := spool.read(block):
+            yield chunk

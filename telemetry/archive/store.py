@@ -501,6 +501,29 @@ class Archive:
         v = np.concatenate([decode_values(r[1], r[2]) for r in rows])
         return _ordered_window(t, v, t0_ns, t1_ns)
 
+    def series_layout(self, satellite: str, names: Sequence[str]) -> tuple[dict[str, np.dtype], np.ndarray]:
+        """Per parameter the dtype its samples were archived with (float64 when chunks differ), and the
+        (t_start_ns, t_end_ns, n_packets) of every chunk holding any of them, by start time."""
+        sat_id = self._known_satellite(satellite)
+        with self.engine.connect() as conn:
+            params = dict(conn.execute(select(PARAM.c.name, PARAM.c.id).where(
+                PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(list(names)))).all())
+            unknown = [n for n in names if n not in params]
+            if unknown:
+                raise ValueError(f"names: not archived for {satellite!r}: {unknown}")
+            kinds = conn.execute(select(VALUE.c.parameter_id, VALUE.c.dtype).where(
+                VALUE.c.parameter_id.in_(list(params.values()))).distinct()).all()
+            spans = conn.execute(
+                select(CHUNK.c.t_start_ns, CHUNK.c.t_end_ns, CHUNK.c.n_packets).where(
+                    CHUNK.c.id.in_(select(VALUE.c.chunk_id).where(VALUE.c.parameter_id.in_(list(params.values())))))
+                .order_by(CHUNK.c.t_start_ns)).all()
+        presented: dict[int, set[str]] = {}
+        for param_id, spec in kinds:
+            presented.setdefault(param_id, set()).add(spec.split("/")[-1])
+        dtypes = {n: np.dtype(next(iter(presented.get(i, {"<f8"}))) if len(presented.get(i, ())) == 1
+                              else np.float64) for n, i in params.items()}
+        return dtypes, np.array(spans, dtype=np.int64).reshape(-1, 3)
+
     def latest_values(self, satellite: str, names: Sequence[str] | None = None) -> dict[str, tuple[int, float]]:
         """Newest (t_utc_ns, value) of each parameter (all archived ones by default)."""
         sat_id = self._known_satellite(satellite)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -75,11 +76,34 @@ def test_parquet_and_csv_exports_round_trip(client: TestClient, tokens: dict[str
     viewer = bearer(tokens["viewer"])
     parquet = client.get("/api/v1/exports/samples?names=q_ib_0,q_ib_1&format=parquet", headers=viewer)
     table = pq.read_table(io.BytesIO(parquet.content)).to_pydict()
-    assert len(table["t_utc_ns"]) == N_PACKETS
+    assert len(table["t_utc"]) == N_PACKETS
     assert np.allclose(table["q_ib_0"], _csv_q0(shared_data), rtol=FLOAT32_REL, atol=0)
     text = client.get("/api/v1/exports/samples?names=q_ib_0", headers=viewer).text
     rows = list(csv.DictReader(io.StringIO(text)))
     assert len(rows) == N_PACKETS and float(rows[0]["q_ib_0"]) == pytest.approx(table["q_ib_0"][0])
+    assert re.fullmatch(r"2021-04-09T\d\d:\d\d:\d\d\.\d{9}Z", rows[0]["t_utc"])
+
+
+def test_rest_export_and_acs_twin_export_give_the_same_full_resolution_rows(
+        client: TestClient, tokens: dict[str, str], uploaded: dict, settings, tmp_path: Path, capsysbinary) -> None:
+    """Every one of the 7,200 samples (never downsampled), the same bytes through REST and the CLI, window given
+    in ISO 8601 with Z and fractional seconds."""
+    from backend.cli import main
+
+    window = "start=2021-04-09T00:10:00.5Z&end=2021-04-09T01:10:00.5Z"
+    rest = client.get(f"/api/v1/exports/samples?satellite=NOAA-20&names=q_ib_0,q_ib_3&{window}",
+                      headers=bearer(tokens["viewer"])).content
+    assert main(["export", "--db", str(settings.database_url), "--satellite", "NOAA-20", "--parameters",
+                 "q_ib_0,q_ib_3", "--start", "2021-04-09T00:10:00.5Z", "--end", "2021-04-09T01:10:00.5Z"]) == 0
+    cli = capsysbinary.readouterr().out
+    assert cli == rest
+    rows = list(csv.DictReader(io.StringIO(rest.decode())))
+    assert len(rows) == 3600 and list(rows[0]) == ["t_utc", "q_ib_0", "q_ib_3"]
+    assert rows[0]["t_utc"] > "2021-04-09T00:10:00.5" and rows[-1]["t_utc"] < "2021-04-09T01:10:00.5"
+    out = tmp_path / "all.parquet"
+    assert main(["export", "--db", str(settings.database_url), "--satellite", "NOAA-20", "--parameters",
+                 "q_ib_0", "--out", str(out)]) == 0
+    assert pq.read_table(out).num_rows == N_PACKETS
 
 
 def test_unknown_parameter_and_oversized_upload_name_the_field(tmp_path: Path, database_url: str) -> None:

@@ -1,0 +1,124 @@
+"""Full-resolution export: every archived sample of some parameters, one row per time, in bounded windows.
+
+Rows are the union of the parameters' sample times in [t0, t1]; a ``t_utc`` column (UTC, ns) and one
+column per parameter, empty where that parameter has no sample at that time. Nothing is downsampled.
+The archive is read in windows of about WINDOW_SAMPLES packets (cut between chunk starts), so memory
+stays bounded whatever the span; CSV and Parquet are written window by window.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import BinaryIO
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pa_csv
+import pyarrow.parquet as pq
+
+from telemetry.archive import Archive
+
+__all__ = ["WINDOW_SAMPLES", "export_batches", "csv_chunks", "write_export", "iso_utc_ns"]
+
+WINDOW_SAMPLES = 250_000
+
+
+def iso_utc_ns(t_ns: np.ndarray) -> np.ndarray:
+    """ISO 8601 UTC strings with nanoseconds and a ``Z`` (2021-04-09T00:00:00.000000000Z)."""
+    return np.char.add(np.datetime_as_string(np.asarray(t_ns, dtype="datetime64[ns]"), unit="ns"), "Z")
+
+
+def _windows(spans: np.ndarray, t0_ns: int, t1_ns: int) -> Iterator[tuple[int, int]]:
+    """Consecutive [start, end] windows covering [t0, t1], each cut before a chunk start once WINDOW_SAMPLES
+    packets of the chunks starting in it are reached."""
+    start, count = t0_ns, 0
+    for t_start, _, n in spans.tolist():
+        if count >= WINDOW_SAMPLES and start < t_start <= t1_ns:
+            yield start, t_start - 1
+            start, count = t_start, 0
+        count += n
+    if start <= t1_ns:
+        yield start, t1_ns
+
+
+def _schema(names: Sequence[str], dtypes: dict[str, np.dtype]) -> pa.Schema:
+    return pa.schema([("t_utc", pa.timestamp("ns", tz="UTC"))]
+                     + [(n, pa.from_numpy_dtype(dtypes[n])) for n in names])
+
+
+def export_batches(
+    archive: Archive, satellite: str, names: Sequence[str], t0_ns: int, t1_ns: int
+) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+    """The schema and the record batches (one per window, time-ordered) of the export."""
+    if not names:
+        raise ValueError("parameters: at least one parameter to export")
+    if t1_ns < t0_ns:
+        raise ValueError(f"end: {t1_ns} is before start {t0_ns}")
+    dtypes, spans = archive.series_layout(satellite, names)
+    schema = _schema(names, dtypes)
+
+    def batches() -> Iterator[pa.RecordBatch]:
+        for lo, hi in _windows(spans, t0_ns, t1_ns):
+            series = {n: archive.read_parameter(satellite, n, lo, hi) for n in names}
+            t_all = np.unique(np.concatenate([t for t, _ in series.values()]))
+            if t_all.size == 0:
+                continue
+            columns = [pa.array(t_all.astype("datetime64[ns]"), type=schema.field("t_utc").type)]
+            for n in names:
+                t, v = series[n]
+                present = np.zeros(t_all.size, dtype=bool)
+                values = np.zeros(t_all.size, dtype=dtypes[n])
+                at = np.searchsorted(t_all, t)
+                present[at], values[at] = True, v
+                columns.append(pa.array(values, mask=~present, type=schema.field(n).type))
+            yield pa.record_batch(columns, schema=schema)
+
+    return schema, batches()
+
+
+def _csv_text(batch: pa.RecordBatch, header: bool) -> bytes:
+    """CSV of one batch with t_utc as ISO 8601 ``…T…Z`` (ns)."""
+    t = batch.column(0).cast(pa.int64()).to_numpy()
+    table = pa.table([pa.array(iso_utc_ns(t)), *batch.columns[1:]], names=batch.schema.names)
+    sink = io.BytesIO()
+    pa_csv.write_csv(table, sink, pa_csv.WriteOptions(include_header=header, quoting_style="needed"))
+    return sink.getvalue()
+
+
+def csv_chunks(schema: pa.Schema, batches: Iterator[pa.RecordBatch]) -> Iterator[bytes]:
+    """The export as CSV text, window by window (the header alone when there is no sample)."""
+    first = True
+    for batch in batches:
+        yield _csv_text(batch, header=first)
+        first = False
+    if first:
+        yield (",".join(f'"{n}"' for n in schema.names) + "\n").encode()
+
+
+def write_export(schema: pa.Schema, batches: Iterator[pa.RecordBatch], sink: BinaryIO | Path, fmt: str) -> int:
+    """Write the export as ``csv`` or ``parquet`` (zstd) to a file or binary stream; the number of rows."""
+    if fmt not in ("csv", "parquet"):
+        raise ValueError(f"format: expected csv or parquet, got {fmt!r}")
+    rows = 0
+
+    def counted() -> Iterator[pa.RecordBatch]:
+        nonlocal rows
+        for batch in batches:
+            rows += batch.num_rows
+            yield batch
+
+    if fmt == "parquet":
+        with pq.ParquetWriter(sink, schema, compression="zstd") as writer:
+            for batch in counted():
+                writer.write_batch(batch)
+        return rows
+    out = sink.open("wb") if isinstance(sink, Path) else sink
+    try:
+        for text in csv_chunks(schema, counted()):
+            out.write(text)
+    finally:
+        if isinstance(sink, Path):
+            out.close()
+    return rows
