@@ -2,22 +2,26 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timezone
-from typing import Annotated, Any, Literal
+import dataclasses
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal, get_type_hints
 
 from fastapi import Path
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, create_model
+
+from telemetry.archive.records import AlarmRecord, PassRecord
 
 __all__ = ["DbId", "Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
            "JobPublic", "SeriesPublic", "FilePublic", "TwinSessionCreate", "TwinSessionPublic", "ResidualsPublic",
-           "SATELLITE_NAME"]
+           "SATELLITE_NAME", "PassPublic", "PassSummaryPublic", "AlarmActed", "SatelliteCreated", "TleStored",
+           "TlePublic"]
 
 SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)
 
 
 def _as_utc(moment: datetime) -> datetime:
     """SQLite drops the zone of stored UTC times: put it back so answers are RFC 3339."""
-    return moment.replace(tzinfo=timezone.utc) if moment.tzinfo is None else moment
+    return moment.replace(tzinfo=UTC) if moment.tzinfo is None else moment
 
 
 UtcDatetime = Annotated[datetime, AfterValidator(_as_utc)]
@@ -140,6 +144,57 @@ class ResidualsPublic(BaseModel):
     attitude_deg: list[float]
     rate_deg_s: list[float]
     wheel_speed_rpm: list[list[float]] = Field(description="One column per wheel.")
+
+
+def _record_fields(record: type) -> dict[str, Any]:
+    hints = get_type_hints(record)
+    return {f.name: (hints[f.name], ... if f.default is dataclasses.MISSING else f.default)
+            for f in dataclasses.fields(record)}
+
+
+# every field of telemetry's PassRecord (kept in step with it), plus its completeness
+PassPublic = create_model("PassPublic", __doc__="A pass and what was received in it.",
+                          **_record_fields(PassRecord),
+                          completeness=(float, Field(description="Received / (received + missing) packets.")))
+
+
+class PassSummaryPublic(BaseModel):
+    """A pass with its completeness, per-parameter count/min/max/mean and the alarms raised during it."""
+
+    pass_: PassPublic = Field(alias="pass")  # type: ignore[valid-type]
+    completeness: float
+    parameters: dict[str, dict[str, int | float]]
+    alarms: list[AlarmRecord]
+
+
+class AlarmActed(BaseModel):
+    """An operator action taken on an alarm."""
+
+    alarm_id: int
+    action: Literal["acknowledge", "shelve", "unshelve"]
+
+
+class SatelliteCreated(BaseModel):
+    """A registered satellite."""
+
+    id: int
+    name: str
+
+
+class TleStored(BaseModel):
+    """A stored two-line element set and its epoch."""
+
+    id: int
+    satellite: str
+    epoch_utc_ns: int
+
+
+class TlePublic(BaseModel):
+    """The newest two-line element set of a satellite."""
+
+    id: int
+    line1: str
+    line2: str
 
 
 class SeriesPublic(BaseModel):

@@ -9,11 +9,20 @@ from typing import Any
 from fastapi import APIRouter, Query, Request
 from pydantic import BaseModel, Field
 
-from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import DbId, SATELLITE_NAME
 from backend.core.errors import ERROR_RESPONSES, ApiError
-from backend.routes.telemetry import read_limited
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.routes.telemetry import read_limited
+from backend.schemas import (
+    SATELLITE_NAME,
+    DbId,
+    PassPublic,
+    PassSummaryPublic,
+    SatelliteCreated,
+    TlePublic,
+    TleStored,
+)
+from telemetry.archive.records import PassRecord, StationRecord
 
 router = APIRouter(tags=["passes"], responses=ERROR_RESPONSES)
 
@@ -41,11 +50,11 @@ class StationCreate(BaseModel):
     min_elevation_deg: float = Field(5.0, ge=-90, lt=90, examples=[5.0])
 
 
-def _pass_public(record: Any) -> dict[str, Any]:
+def _pass_public(record: PassRecord) -> dict[str, Any]:
     return {**asdict(record), "completeness": record.completeness}
 
 
-@router.post("/satellites", status_code=201, summary="Register a satellite")
+@router.post("/satellites", status_code=201, response_model=SatelliteCreated, summary="Register a satellite")
 def create_satellite(body: SatelliteCreate, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Id of the satellite (created on first use)."""
     sat_id = services.telemetry.archive.satellite_id(body.name, body.norad_id)
@@ -67,7 +76,8 @@ def _tle_lines(text: str) -> tuple[str, str, int]:
     return pair[0], pair[1], int(epoch_ns)
 
 
-@router.post("/satellites/{name}/tles", status_code=201, summary="Upload a TLE", openapi_extra=TLE_BODY)
+@router.post("/satellites/{name}/tles", status_code=201, response_model=TleStored, summary="Upload a TLE",
+             openapi_extra=TLE_BODY)
 async def upload_tle(name: str, request: Request, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Store a two-line element set (epoch read by SGP4)."""
     text = (await read_limited(request, MAX_TLE_BYTES)).decode("ascii", errors="replace")
@@ -77,14 +87,15 @@ async def upload_tle(name: str, request: Request, services: ServicesDep, princip
     return {"id": tle_id, "satellite": name, "epoch_utc_ns": epoch_ns}
 
 
-@router.get("/satellites/{name}/tle", summary="Newest TLE of a satellite")
+@router.get("/satellites/{name}/tle", response_model=TlePublic, summary="Newest TLE of a satellite")
 def latest_tle(name: str, services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     """The most recent TLE (id and lines)."""
     tle_id, line1, line2 = services.telemetry.archive.latest_tle(name)
     return {"id": tle_id, "line1": line1, "line2": line2}
 
 
-@router.post("/ground-stations", status_code=201, summary="Register or update a ground station")
+@router.post("/ground-stations", status_code=201, response_model=StationRecord,
+             summary="Register or update a ground station")
 def create_station(body: StationCreate, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Id of the station."""
     station_id = services.telemetry.archive.add_ground_station(body.name, body.lat_deg, body.lon_deg,
@@ -93,13 +104,13 @@ def create_station(body: StationCreate, services: ServicesDep, principal: Operat
     return {"id": station_id, **body.model_dump()}
 
 
-@router.get("/ground-stations/{name}", summary="One ground station")
+@router.get("/ground-stations/{name}", response_model=StationRecord, summary="One ground station")
 def get_station(name: str, services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     """Location and elevation mask."""
     return asdict(services.telemetry.archive.ground_station(name))
 
 
-@router.get("/passes", summary="Passes of a satellite in a time window")
+@router.get("/passes", response_model=list[PassPublic], summary="Passes of a satellite in a time window")
 def list_passes(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
                 start: datetime | None = None, end: datetime | None = None) -> list[dict[str, Any]]:
     """Predicted passes with what was received (completeness = received / expected packets)."""
@@ -107,7 +118,7 @@ def list_passes(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQ
     return [_pass_public(r) for r in records]
 
 
-@router.get("/passes/{pass_id}", summary="One pass")
+@router.get("/passes/{pass_id}", response_model=PassPublic, summary="One pass")
 def get_pass(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """The pass with this id (of the given satellite)."""
     try:
@@ -116,14 +127,16 @@ def get_pass(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str 
         raise ApiError(404, str(exc), str(exc).split(":", 1)[0]) from exc
 
 
-@router.get("/passes/{pass_id}/summary", summary="Pass summary: reception, statistics, alarms")
+@router.get("/passes/{pass_id}/summary", response_model=PassSummaryPublic,
+            summary="Pass summary: reception, statistics, alarms")
 def pass_summary(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """Completeness, per-parameter count/min/max/mean and the alarms raised during the pass."""
     summary = services.telemetry.pass_summary(satellite, pass_id)
     return {**summary, "pass": _pass_public(summary["pass"]), "alarms": [asdict(a) for a in summary["alarms"]]}
 
 
-@router.post("/satellites/{name}/passes/reception", summary="Recount reception of passes in a window")
+@router.post("/satellites/{name}/passes/reception", response_model=list[PassPublic],
+             summary="Recount reception of passes in a window")
 def record_reception(name: str, services: ServicesDep, principal: OperatorDep,
                      start: datetime | None = None, end: datetime | None = None) -> list[dict[str, Any]]:
     """Per pass: received span, packets and missing packets (sequence-count gaps) → completeness."""
@@ -132,7 +145,8 @@ def record_reception(name: str, services: ServicesDep, principal: OperatorDep,
     return [_pass_public(r) for r in records]
 
 
-@router.post("/satellites/{name}/passes/predict", summary="Predict passes over a station from the TLE")
+@router.post("/satellites/{name}/passes/predict", response_model=list[PassPublic],
+             summary="Predict passes over a station from the TLE")
 def predict_passes(name: str, services: ServicesDep, principal: OperatorDep,
                    station: str = Query(..., min_length=1, max_length=100),
                    start: datetime = Query(...), end: datetime = Query(...)) -> list[dict[str, Any]]:
