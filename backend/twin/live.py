@@ -66,10 +66,13 @@ TWIN_APID = DERIVED_APID  # the residuals are parameters derived on the ground: 
 RESYNC_S = 60.0  # segment length: see the module docstring
 STALE_S = 10.0  # no telemetry for this long (ten 1 Hz packets missed) = stale; a gap this long forces a re-sync
 RECENT_S = 600.0  # telemetry kept per satellite: the sync sample may lie before a 100 s scheduled turn
+GPS_MIN_SPAN_S = 30.0  # fixes 7.5 m noisy over 2 s tilt the fitted orbit by ~150″; over 30 s the fit is at the noise
 GPS_WINDOW_S = 60.0  # GPS fixes around the sync instant fitted into the twin's orbit (actual_state.aligned_scenario)
 EXCEED_SAMPLES = 3  # consecutive samples beyond the limits that force a re-sync (one outlier does not)
 MIN_RESYNC_S = 10.0  # residual-forced re-syncs no closer than this (a failed wheel would force one per sample)
-ARCHIVE_PERIOD_S = 2.0  # residuals committed to the archive at most this often per satellite
+ARCHIVE_PERIOD_S = 5.0  # residuals committed per satellite this often (a commit fsyncs, ~20 ms): 100 satellites
+# make 20 commits/s in the archive-writer thread; the twin itself never waits for them (published at once)
+TICK_S = 0.5  # staleness checked this often
 MAX_ISSUES = 20  # bad-input reports kept per satellite
 SAME_INSTANT_NS = 1_000_000
 # Forced re-sync / yellow limits from the reference sensors: σ_st = 3″ star tracker (the estimate's error is a few σ),
@@ -162,6 +165,7 @@ class TwinState:
     resyncs: int = 0
     forced_resyncs: int = 0
     samples_compared: int = 0
+    note: str | None = None
     issues: deque = field(default_factory=lambda: deque(maxlen=MAX_ISSUES))
 
 
@@ -336,10 +340,9 @@ class LiveTwin:
             return None
         t_sync = int(self._t[i])
         near = np.abs(self._gps_t - t_sync) <= GPS_WINDOW_S / 2 * NS_PER_S
-        if near.sum() < 3:
-            self.report(
-                "sync", f"fewer than 3 GPS fixes within {GPS_WINDOW_S / 2:.0f} s of {_iso(t_sync)}: waiting", t_sync
-            )
+        span_s = (self._gps_t[near].max() - self._gps_t[near].min()) / 1e9 if near.any() else 0.0
+        if span_s < GPS_MIN_SPAN_S:
+            self.state.note = f"waiting: the orbit fit needs GPS fixes over {GPS_MIN_SPAN_S:.0f} s, has {span_s:.0f} s"
             return None
         m, hk = self.mapping, self._hk
         track = ActualTrack(
@@ -362,6 +365,7 @@ class LiveTwin:
         twin = twin.model_copy(update={"output_dt_s": twin.measurement_dt_s})
         flown = simulate(twin, wheel_available=track.series["fault_wheel"][i][None, :] == 0.0, fdir=True)
         self.state.resyncs += 1
+        self.state.note = None
         return Segment(
             t_sync + np.round(flown.t_s * 1e9).astype(np.int64),
             flown["q_ib"][0],
@@ -480,6 +484,7 @@ class LiveTwin:
             "resyncs": s.resyncs,
             "forced_resyncs": s.forced_resyncs,
             "samples_compared": s.samples_compared,
+            "note": s.note,
             "issues": list(s.issues),
         }
 
@@ -512,6 +517,9 @@ class LiveTwins:
         self._stale_published: set[str] = set()
         self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
+        self._writer: threading.Thread | None = None
+        self._ticked_at = 0.0
+        self._writes: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self.latencies_s: deque = deque(maxlen=100_000)
 
@@ -529,17 +537,23 @@ class LiveTwins:
         """Start the worker thread (after recovering the twins from the archive)."""
         self._stop.clear()
         self._thread = threading.Thread(target=self._run, args=(recover,), name="live-twins", daemon=True)
+        self._writer = threading.Thread(target=self._write_loop, name="live-twins-archive", daemon=True)
+        self._writer.start()
         self._thread.start()
 
     def stop(self) -> None:
-        """Finish what is queued, archive pending residuals, stop the worker."""
+        """Finish what is queued, archive pending residuals, stop the worker and the writer."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(30.0)
             self._thread = None
+        if self._writer is not None:
+            self._writes.put(None)
+            self._writer.join(30.0)
+            self._writer = None
 
     def drain(self, timeout_s: float = 30.0) -> None:
-        """Wait until everything submitted so far has been processed (tests, benchmarks)."""
+        """Wait until everything submitted so far has been processed and archived (tests, benchmarks)."""
         done = threading.Event()
         self._inbox.put(done)
         done.wait(timeout_s)
@@ -571,7 +585,7 @@ class LiveTwins:
                 continue
             if isinstance(item, threading.Event):
                 self._flush_all()
-                item.set()
+                self._writes.put(item)  # set by the writer once the flushed residuals are committed
                 continue
             try:
                 self._process(*item)
@@ -635,8 +649,12 @@ class LiveTwins:
                 )
 
     def _tick(self) -> None:
-        """Publish the transition to stale once per satellite; archive residuals that waited long enough."""
+        """Publish the transition to stale once per satellite; archive residuals that waited long enough (at most
+        every TICK_S)."""
         now = self._clock()
+        if now - self._ticked_at < TICK_S:
+            return
+        self._ticked_at = now
         for satellite, twin in list(self._twins.items()):
             public = twin.public(now)
             if public["stale"] and public["telemetry_utc"] and satellite not in self._stale_published:
@@ -650,12 +668,26 @@ class LiveTwins:
             self._flush(satellite)
 
     def _flush(self, satellite: str) -> None:
-        from telemetry.archive import PacketBatch
-
+        """Hand the satellite's pending residuals to the archive writer."""
         parts = self._pending.pop(satellite, [])
         self._flushed_at[satellite] = self._clock()
+        if parts:
+            self._writes.put((satellite, parts))
+
+    def _write_loop(self) -> None:
+        """Archive-writer thread: commit residuals (one upload per satellite and flush); a marker Event is set once
+        everything queued before it is committed, None stops the thread."""
+        while (item := self._writes.get()) is not None:
+            if isinstance(item, threading.Event):
+                item.set()
+            else:
+                self._write(*item)
+
+    def _write(self, satellite: str, parts: list[dict[str, np.ndarray]]) -> None:
+        from telemetry.archive import PacketBatch
+
         archive = self._archive()
-        if not parts or archive is None:
+        if archive is None:
             return
         columns = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
         t = columns.pop("t_utc_ns")
