@@ -196,5 +196,7 @@ def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading
                               name="demo-twin", daemon=True)
     thread.start()
     urls = ", ".join(f"{role} {url}" for role, url in monitor_urls(settings).items())
-    print(f"  monitors  {urls} (after ~{WARMUP_S + TWIN_S:.0f} s of telemetry; log {settings.data_dir / 'twin.log'})")
+    gate = "open with ?token=<API token>, " if settings.auth_enabled else ""
+    print(f"  monitors  {urls} ({gate}after ~{WARMUP_S + TWIN_S:.0f} s of telemetry; "
+          f"log {settings.data_dir / 'twin.log'})")
     return thread

@@ -54,6 +54,7 @@ def _start_when_admitted(services: Any, body: Any, stop: Any) -> Any:
 def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, stop: Any) -> Any:
     """Wait for telemetry, start a nominal twin session, wait for it, serve the monitors; their handles."""
     from backend.schemas import TwinSessionCreate
+    from backend.twin.monitor_gate import MonitorGate
     from backend.twin.session_service import session_feed
     from frontend.monitors import serve_monitors
 
@@ -76,6 +77,8 @@ def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, s
     while services.job_repo.get(session.job_id).status in ("queued", "running") and not stop.is_set():
         time.sleep(1.0)
     feed = session_feed(services, session.id)
-    handles = serve_monitors(feed, host=services.settings.host, ports=monitor_ports)
-    _log(services, f"monitors: {handles.urls()}")
+    handles = serve_monitors(feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0))  # private ports
+    for role, public in monitor_ports.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
+        MonitorGate(services.auth, services.settings.host, public, handles.ports[role]).start()
+    _log(services, f"monitors: {monitor_ports} (token-gated) -> viser on {handles.ports}")
     return handles

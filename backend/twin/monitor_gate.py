@@ -1,0 +1,143 @@
+"""The door of the 3D monitors: viser listens on a private loopback port, this gate on the public one.
+
+Every TCP connection to a monitor starts with an HTTP request (the page, its assets, the viser
+WebSocket handshake). The gate reads that request head and lets the connection through (bytes
+spliced both ways to viser) only for a valid API token of at least ``viewer``: ``?token=`` on the
+page URL (answered with a redirect that stores it in an HttpOnly, SameSite=Strict cookie, which the
+browser then sends with the assets and the WebSocket handshake) or that cookie. Revoking the token
+closes its open monitor connections at once (Authenticator.watch). With auth off every caller passes.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import threading
+from http.cookies import SimpleCookie
+from typing import Any
+from urllib.parse import parse_qsl, urlencode, urlsplit
+
+from backend.core.auth import Authenticator, Role
+
+__all__ = ["COOKIE", "MonitorGate"]
+
+COOKIE = "acs_twin_monitor"
+HEAD_LIMIT = 16_384  # an HTTP request head longer than this is refused
+HEAD_TIMEOUT_S = 10.0
+SPLICE_BYTES = 1 << 16
+
+
+def _answer(status: str, headers: dict[str, str] | None = None) -> bytes:
+    lines = [f"HTTP/1.1 {status}", "Content-Length: 0", "Connection: close",
+             *(f"{k}: {v}" for k, v in (headers or {}).items())]
+    return ("\r\n".join(lines) + "\r\n\r\n").encode()
+
+
+def _token_of(head: bytes) -> tuple[str | None, str | None]:
+    """(token from ?token=, token from the cookie) of a request head."""
+    lines = head.decode("latin-1").split("\r\n")
+    target = lines[0].split(" ")[1] if len(lines[0].split(" ")) >= 2 else "/"
+    query = dict(parse_qsl(urlsplit(target).query))
+    cookie = None
+    for line in lines[1:]:
+        name, _, value = line.partition(":")
+        if name.strip().lower() == "cookie":
+            jar = SimpleCookie()
+            with contextlib.suppress(Exception):
+                jar.load(value.strip())
+            if COOKIE in jar:
+                cookie = jar[COOKIE].value
+    return query.get("token"), cookie
+
+
+def _without_token(head: bytes) -> str:
+    target = urlsplit(head.decode("latin-1").split("\r\n")[0].split(" ")[1])
+    query = urlencode([(k, v) for k, v in parse_qsl(target.query) if k != "token"])
+    return target.path + (f"?{query}" if query else "")
+
+
+class MonitorGate:
+    """A token-checking TCP front for one viser server, running its own event loop in a daemon thread."""
+
+    def __init__(self, auth: Authenticator, host: str, public_port: int, private_port: int) -> None:
+        self._auth, self._host, self._public, self._private = auth, host, public_port, private_port
+        self._loop = asyncio.new_event_loop()
+        self._server: asyncio.Server | None = None
+        self._ready = threading.Event()
+        self.port = public_port
+        self.refused = 0
+
+    def start(self) -> int:
+        """Listen on the public port (0: any); returns the bound port."""
+        threading.Thread(target=self._loop.run_forever, name=f"monitor-gate-{self._public}", daemon=True).start()
+        future = asyncio.run_coroutine_threadsafe(asyncio.start_server(self._handle, self._host, self._public),
+                                                  self._loop)
+        self._server = future.result(30)
+        self.port = int(self._server.sockets[0].getsockname()[1])
+        return self.port
+
+    def stop(self) -> None:
+        """Stop listening and the loop (open connections are dropped)."""
+        if self._server is not None:
+            self._loop.call_soon_threadsafe(self._server.close)
+        self._loop.call_soon_threadsafe(self._loop.stop)
+
+    async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+        try:
+            head = await asyncio.wait_for(reader.readuntil(b"\r\n\r\n"), HEAD_TIMEOUT_S)
+        except (asyncio.IncompleteReadError, asyncio.LimitOverrunError, TimeoutError, ConnectionError):
+            writer.close()
+            return
+        if len(head) > HEAD_LIMIT:
+            await self._refuse(writer, "431 Request Header Fields Too Large")
+            return
+        from_query, from_cookie = _token_of(head)
+        principal = await asyncio.to_thread(self._auth.resolve, from_query or from_cookie)
+        if principal is None or principal.role < Role.viewer:
+            await self._refuse(writer, "401 Unauthorized")
+            return
+        if from_query and self._auth.enabled:  # keep the token out of the page URL: store it in a cookie
+            cookie = f"{COOKIE}={from_query}; HttpOnly; SameSite=Strict; Path=/"
+            writer.write(_answer("303 See Other", {"Location": _without_token(head), "Set-Cookie": cookie}))
+            await writer.drain()
+            writer.close()
+            return
+        await self._splice(head, reader, writer, principal)
+
+    async def _refuse(self, writer: asyncio.StreamWriter, status: str) -> None:
+        self.refused += 1
+        writer.write(_answer(status))
+        with contextlib.suppress(ConnectionError):
+            await writer.drain()
+        writer.close()
+
+    async def _splice(self, head: bytes, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
+                      principal: Any) -> None:
+        try:
+            upstream_reader, upstream_writer = await asyncio.open_connection("127.0.0.1", self._private)
+        except OSError:
+            await self._refuse(writer, "502 Bad Gateway")
+            return
+        upstream_writer.write(head)
+        pipes = [asyncio.ensure_future(self._pipe(reader, upstream_writer)),
+                 asyncio.ensure_future(self._pipe(upstream_reader, writer))]
+        loop = asyncio.get_running_loop()
+        unwatch = self._auth.watch(principal, lambda: loop.call_soon_threadsafe(_cancel, pipes))
+        try:
+            await asyncio.wait(pipes, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            unwatch()
+            _cancel(pipes)
+            for w in (writer, upstream_writer):
+                w.close()
+
+    @staticmethod
+    async def _pipe(source: asyncio.StreamReader, sink: asyncio.StreamWriter) -> None:
+        while data := await source.read(SPLICE_BYTES):
+            sink.write(data)
+            await sink.drain()
+
+
+def _cancel(tasks: list[asyncio.Future]) -> None:
+    for task in tasks:
+        task.cancel()
