@@ -14,7 +14,7 @@ from telemetry.archive.records import AlarmRecord, PassRecord
 __all__ = ["DbId", "Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
            "JobPublic", "SeriesPublic", "FilePublic", "TwinSessionCreate", "TwinSessionPublic", "ResidualsPublic",
            "SATELLITE_NAME", "PassPublic", "PassSummaryPublic", "AlarmActed", "SatelliteCreated", "TleStored",
-           "TlePublic"]
+           "TlePublic", "IngestReportPublic", "DictionaryStored", "LatestValue"]
 
 SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)
 
@@ -195,6 +195,30 @@ class TlePublic(BaseModel):
     id: int
     line1: str
     line2: str
+
+
+class IngestReportPublic(BaseModel):
+    """What an upload did: the archive's tallies, the decoder's report and the passes it attached to."""
+
+    satellite: str
+    dictionary: str
+    archive: dict[str, Any] = Field(description="Upload id, packets and samples accepted, duplicates, gaps, alarms.")
+    decoding: dict[str, Any] = Field(description="The decoder's report: packets read, quarantined and why.")
+    passes: list[PassPublic] = Field(default_factory=list)  # type: ignore[valid-type]
+
+
+class DictionaryStored(BaseModel):
+    """A stored telemetry dictionary and its packets (APID as text → packet name)."""
+
+    name: str
+    packets: dict[str, str]
+
+
+class LatestValue(BaseModel):
+    """The newest sample of a parameter."""
+
+    t_utc_ns: int
+    value: float
 
 
 class SeriesPublic(BaseModel):

@@ -13,10 +13,10 @@ from fastapi.responses import Response, StreamingResponse
 from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
-from backend.schemas import SATELLITE_NAME
-from backend.deps import ServicesDep, ViewerDep
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
+from backend.deps import ServicesDep, ViewerDep
+from backend.schemas import SATELLITE_NAME, LatestValue
 
 router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
 
@@ -47,7 +47,7 @@ def list_parameters(services: ServicesDep, _: ViewerDep, satellite: str = Satell
     return services.telemetry.archive.parameters(satellite)
 
 
-@router.get("/parameters/latest", summary="Newest value of each parameter")
+@router.get("/parameters/latest", response_model=dict[str, LatestValue], summary="Newest value of each parameter")
 def latest_values(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """{name: {t_utc_ns, value}} for every archived parameter."""
     latest = services.telemetry.archive.latest_values(satellite)

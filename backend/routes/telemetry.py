@@ -8,9 +8,10 @@ from typing import Any, Literal
 from fastapi import APIRouter, Query, Request
 from starlette.concurrency import run_in_threadpool
 
-from backend.schemas import SATELLITE_NAME
-from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.core.errors import ERROR_RESPONSES, ApiError
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.schemas import SATELLITE_NAME, DictionaryStored, IngestReportPublic
+from telemetry.archive.records import UploadRecord
 
 router = APIRouter(tags=["telemetry"], responses=ERROR_RESPONSES)
 
@@ -41,7 +42,8 @@ def _parse_failure(exc: Exception, field: str) -> ApiError:
     return ApiError(422, f"{field}: could not be read: {exc}", field)
 
 
-@router.post("/telemetry/uploads", summary="Upload telemetry (CCSDS packets, CSV or JSONL)",
+@router.post("/telemetry/uploads", response_model=IngestReportPublic,
+             summary="Upload telemetry (CCSDS packets, CSV or JSONL)",
              openapi_extra=BINARY_BODY)
 async def upload_telemetry(
     request: Request, services: ServicesDep, principal: OperatorDep,
@@ -65,7 +67,8 @@ async def upload_telemetry(
     return report
 
 
-@router.get("/telemetry/uploads", summary="Uploads of a satellite (who, when, source, report)")
+@router.get("/telemetry/uploads", response_model=list[UploadRecord],
+            summary="Uploads of a satellite (who, when, source, report)")
 def list_uploads(services: ServicesDep, _: ViewerDep,
                  satellite: str = Query("NOAA-20", min_length=1, max_length=100)) -> list[dict[str, Any]]:
     """Every upload with its checksum, tallies and stored ingest report, oldest first."""
@@ -78,7 +81,8 @@ def list_dictionaries(services: ServicesDep, _: ViewerDep) -> list[str]:
     return services.telemetry.dictionaries.names()
 
 
-@router.post("/dictionaries/{name}", status_code=201, summary="Upload a dictionary (YAML, XTCE, ccsdspy CSV)",
+@router.post("/dictionaries/{name}", status_code=201, response_model=DictionaryStored,
+             summary="Upload a dictionary (YAML, XTCE, ccsdspy CSV)",
              openapi_extra=DEFINITION_BODY)
 async def upload_dictionary(
     name: str, request: Request, services: ServicesDep, principal: OperatorDep,
