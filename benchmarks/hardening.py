@@ -1,0 +1,252 @@
+"""Hardening figures (issue 16): kill -9 trials, leaked processes after stops, health p99 during a big upload.
+
+    .venv/bin/python benchmarks/hardening.py [--kill-trials 20] [--stops 20] [--upload-mb 200]
+
+Each run starts the real ``acs-twin serve`` (SQLite in a fresh data directory, auth off, demo
+emulator on, free loopback ports) as its own process:
+  * kill -9 trials: while a thread uploads slices of the real NOAA-20 diary (600 packets each, one
+    satellite name per upload) the server is killed with SIGKILL at a random instant; it is started
+    again on the same ports and data, and every upload that was answered 200 (acknowledged) must be
+    in the archive with all its accepted samples. Lost = acknowledged samples not found afterwards.
+    The server's children (live-ingest process, emulator, job workers) must all be gone after each kill.
+  * stops: SIGTERM and SIGINT alternately; the children still running afterwards are counted.
+  * health during an upload: GET /api/v1/health every 10 ms while --upload-mb of CCSDS packets
+    (the diary repeated) are POSTed; p50/p99 of the health answers and the server's peak RSS rise.
+Targets: 0 samples lost, 0 processes leaked, health p99 < 100 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+DIARY = REPO.parent / "shared/data/real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
+PACKET_OCTETS = 71  # the diary's APID 11 packets
+SLICE_PACKETS = 600
+START_TIMEOUT_S = 180.0
+GONE_TIMEOUT_S = 25.0
+
+
+def free_port() -> int:
+    """A TCP port free on loopback now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def descendants(pid: int) -> set[int]:
+    """Living processes below ``pid`` (zombies excluded), from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if fields[0] != "Z":
+            children.setdefault(int(fields[1]), []).append(int(entry.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def running(pids: set[int]) -> set[int]:
+    """The ``pids`` still running (zombies count as gone)."""
+    alive = set()
+    for pid in pids:
+        try:
+            if (Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]) != "Z":
+                alive.add(pid)
+        except OSError:
+            pass
+    return alive
+
+
+def wait_gone(pids: set[int]) -> set[int]:
+    """Poll until none of ``pids`` runs; those left after GONE_TIMEOUT_S."""
+    deadline = time.monotonic() + GONE_TIMEOUT_S
+    while (left := running(pids)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return left
+
+
+class Server:
+    """``python -m backend serve`` with the demo emulator, on fixed ports and a data directory."""
+
+    def __init__(self, data_dir: Path, api: int, telemetry: int, viewer: int, *extra: str) -> None:
+        env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": str(telemetry),
+               "ACS_TWIN_VIEWER_PORT": str(viewer), "PYTHONPATH": str(REPO)}
+        env.pop("ACS_TWIN_DATABASE_URL", None)
+        command = [sys.executable, "-m", "backend", "serve", "--port", str(api), "--no-auth", *extra]
+        self.process = subprocess.Popen(command,
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=REPO)
+        self.http = httpx.Client(base_url=f"http://127.0.0.1:{api}/api/v1", timeout=60.0)
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while time.monotonic() < deadline:
+            try:
+                if self.http.get("/health", timeout=2.0).status_code == 200:
+                    break
+            except httpx.TransportError:
+                time.sleep(0.2)
+        else:
+            raise RuntimeError("server did not answer")
+
+    def children(self, count: int = 2) -> set[int]:
+        """Its descendants once there are ``count`` (ingest process + emulator)."""
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while len(found := descendants(self.process.pid)) < count and time.monotonic() < deadline:
+            time.sleep(0.2)
+        return found
+
+    def rss_kb(self, key: str = "VmRSS") -> int:
+        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1])
+        return 0
+
+
+def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
+    """(acknowledged uploads, acknowledged samples, samples lost, processes leaked) over ``trials`` kill -9s."""
+    data_dir = Path(tempfile.mkdtemp(prefix="acs-hardening-"))
+    ports = (free_port(), free_port(), free_port())
+    acknowledged: dict[str, int] = {}
+    leaked = 0
+    rng = random.Random(16)
+    n_slices = len(diary) // (PACKET_OCTETS * SLICE_PACKETS)
+    for trial in range(trials):
+        server = Server(data_dir, *ports)
+        children = server.children()
+        stop = threading.Event()
+
+        def upload(trial: int = trial, server: Server = server, stop: threading.Event = stop) -> None:
+            k = 0
+            while not stop.is_set():
+                at = (k % n_slices) * PACKET_OCTETS * SLICE_PACKETS
+                satellite = f"KILL-{trial}-{k}"
+                try:
+                    answer = server.http.post("/telemetry/uploads", params={"satellite": satellite},
+                                              content=diary[at : at + PACKET_OCTETS * SLICE_PACKETS])
+                except httpx.TransportError:
+                    return  # killed mid-request: not acknowledged
+                if answer.status_code == 200:
+                    acknowledged[satellite] = answer.json()["archive"]["packets_accepted"]
+                k += 1
+
+        sender = threading.Thread(target=upload)
+        sender.start()
+        time.sleep(rng.uniform(1.0, 4.0))
+        server.process.kill()
+        server.process.wait(30)
+        stop.set()
+        sender.join(60)
+        leaked += len(wait_gone(children))
+        print(f"  kill -9 trial {trial + 1}/{trials}: {len(acknowledged)} uploads acknowledged so far, "
+              f"children left {len(running(children))}", flush=True)
+    server = Server(data_dir, *ports)
+    lost = 0
+    for satellite, accepted in acknowledged.items():
+        found = server.http.get("/parameters/ADCFAQ4/samples", params={"satellite": satellite,
+                                "start": "2021-04-09T00:00:00Z", "end": "2021-04-10T00:00:00Z",
+                                "max_points": 100_000})
+        count = len(found.json().get("values", [])) if found.status_code == 200 else 0
+        lost += max(accepted - count, 0)
+    children = server.children()
+    server.process.send_signal(signal.SIGTERM)
+    server.process.wait(60)
+    leaked += len(wait_gone(children))
+    return len(acknowledged), sum(acknowledged.values()), lost, leaked
+
+
+def stop_trials(stops: int) -> int:
+    """Processes left running after ``stops`` SIGTERM / SIGINT stops (alternating)."""
+    data_dir = Path(tempfile.mkdtemp(prefix="acs-hardening-"))
+    leaked = 0
+    for k in range(stops):
+        server = Server(data_dir, free_port(), free_port(), free_port())
+        children = server.children()
+        server.process.send_signal(signal.SIGTERM if k % 2 == 0 else signal.SIGINT)
+        server.process.wait(60)
+        left = wait_gone(children)
+        leaked += len(left)
+        print(f"  stop {k + 1}/{stops} ({'SIGTERM' if k % 2 == 0 else 'SIGINT'}): "
+              f"{len(children)} children, {len(left)} left", flush=True)
+    return leaked
+
+
+def health_during_upload(upload_mb: float, diary: bytes) -> tuple[float, float, int, float, int]:
+    """(health p50 ms, p99 ms, health requests, upload seconds, peak RSS rise kB) during one big upload."""
+    data_dir = Path(tempfile.mkdtemp(prefix="acs-hardening-"))
+    server = Server(data_dir, free_port(), free_port(), free_port(), "--no-emulator")
+    server.children(1)
+    time.sleep(5.0)  # start-up work (ingest process imports) done: measure the upload alone
+    body = diary * int(np.ceil(upload_mb * 1e6 / len(diary)))
+    body = body[: int(upload_mb * 1e6) // PACKET_OCTETS * PACKET_OCTETS]
+    Path(f"/proc/{server.process.pid}/clear_refs").write_text("5")
+    before = server.rss_kb()
+    latencies: list[float] = []
+    done = threading.Event()
+
+    def probe() -> None:
+        with httpx.Client(base_url=server.http.base_url, timeout=10.0) as client:
+            while not done.is_set():
+                start = time.perf_counter()
+                client.get("/health")
+                latencies.append((time.perf_counter() - start) * 1e3)
+                time.sleep(0.01)
+
+    prober = threading.Thread(target=probe)
+    prober.start()
+    start = time.perf_counter()
+    answer = server.http.post("/telemetry/uploads", params={"satellite": "BIG"}, content=body, timeout=600.0)
+    elapsed = time.perf_counter() - start
+    done.set()
+    prober.join()
+    rise = server.rss_kb("VmHWM") - before
+    assert answer.status_code == 200, answer.text[:300]
+    children = server.children(1)
+    server.process.send_signal(signal.SIGTERM)
+    server.process.wait(60)
+    wait_gone(children)
+    return float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)), len(latencies), elapsed, rise
+
+
+def main() -> None:
+    """Run the three measurements and print the figures against their targets."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--kill-trials", type=int, default=20)
+    parser.add_argument("--stops", type=int, default=20)
+    parser.add_argument("--upload-mb", type=float, default=200.0)
+    args = parser.parse_args()
+    diary = DIARY.read_bytes()
+    if args.upload_mb > 0:
+        p50, p99, n, seconds, rise = health_during_upload(args.upload_mb, diary)
+        print(f"health during a {args.upload_mb:g} MB upload ({seconds:.1f} s): {n} requests, p50 {p50:.1f} ms, "
+              f"p99 {p99:.1f} ms (target < 100 ms); server peak RSS rise {rise / 1000:.0f} MB", flush=True)
+    if args.kill_trials > 0:
+        uploads, samples, lost, leaked = kill_trials(args.kill_trials, diary)
+        print(f"kill -9 trials: {args.kill_trials}, acknowledged uploads {uploads} ({samples} samples), "
+              f"samples lost {lost} (target 0), processes leaked {leaked} (target 0)", flush=True)
+    if args.stops > 0:
+        leaked = stop_trials(args.stops)
+        print(f"stops (SIGTERM/SIGINT alternately): {args.stops}, processes leaked {leaked} (target 0)", flush=True)
+
+
+if __name__ == "__main__":
+    main()
