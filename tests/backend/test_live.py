@@ -20,17 +20,14 @@ from tests.backend.conftest import bearer, make_settings
 
 QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
 LIVE_ARCHIVE_TIMEOUT_S = 10.0  # archive flushes every 0.5 s; margin for a loaded machine
-PUBLISH_BUDGET_S = 1.0  # 100k publishes to a stalled subscriber: must not wait on it (≈ 0.1 s here)
 
 
 def test_publish_never_waits_and_a_full_subscriber_keeps_the_newest_items() -> None:
     hub = LiveHub(capacity=10)
     stalled = hub.subscribe(["parameters/*"])
     other = hub.subscribe(["alarms"])
-    started = time.perf_counter()
-    for i in range(100_000):
+    for i in range(100_000):  # a publish that waited on the stalled subscriber would never finish
         hub.publish("parameters/q", i)
-    assert time.perf_counter() - started < PUBLISH_BUDGET_S
     assert stalled.dropped == 100_000 - 10
     assert [item["data"] for item in stalled.drain()] == list(range(99_990, 100_000))
     assert other.drain() == []
