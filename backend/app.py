@@ -23,11 +23,11 @@ Errors are JSON `{"message", "field", "status"}`."""
 
 
 def _routers() -> list:
-    from backend.routes import (alarms, health, live, parameters, passes, satellites, simulations, telemetry, tokens,
-                                twin)
+    from backend.routes import (alarms, diagnoses, health, live, parameters, passes, satellites, simulations,
+                                telemetry, tokens, twin)
 
     return [health.router, tokens.router, telemetry.router, parameters.router, passes.router,
-            alarms.router, simulations.router, twin.router, live.router, satellites.router]
+            alarms.router, simulations.router, twin.router, live.router, satellites.router, diagnoses.router]
 
 
 def monitor_urls(settings: Settings) -> dict[str, str]:

@@ -237,3 +237,29 @@ class FilePublic(BaseModel):
     name: str
     size_bytes: int
     url: str
+
+
+class DiagnosisCreate(BaseModel):
+    """Which satellite and telemetry window to diagnose, with the scenario its ACS flies."""
+
+    satellite: str = Field("REFSAT", min_length=1, max_length=100)
+    dictionary: str = Field("reference_satellite.yaml", max_length=130)
+    scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
+    start_utc: datetime = Field(examples=["2026-03-20T00:00:00Z"])
+    end_utc: datetime = Field(examples=["2026-03-20T00:20:00Z"], description="At most 24 h after start_utc.")
+
+
+class DiagnosisPublic(BaseModel):
+    """A diagnosis run: its state and, once succeeded, the ranked hypotheses (backend.twin.diagnosis JSON)."""
+
+    id: str
+    satellite: str
+    scenario: str
+    start_utc: str
+    end_utc: str
+    status: Literal["running", "succeeded", "failed"]
+    error: str | None = None
+    created_by: str
+    result: dict[str, Any] | None = Field(None, description="hypotheses best first (fault, wheel, onset_utc, "
+                                          "onset_sigma_s, magnitude, score = posterior), confidence, detection, "
+                                          "suspected_wheels, untestable")

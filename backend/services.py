@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -17,6 +17,7 @@ from backend.core.token_repository import TokenRepository
 from backend.twin.session_repository import TwinSessionRepository
 from backend.core.settings import Settings
 from backend.ingest.telemetry_gateway import TelemetryGateway
+from backend.twin.diagnosis import DiagnosisRuns
 from backend.twin.live import LiveTwins
 
 __all__ = ["Services", "build_services"]
@@ -38,10 +39,12 @@ class Services:
     telemetry: TelemetryGateway
     twin_sessions: TwinSessionRepository
     twins: LiveTwins
+    diagnoses: DiagnosisRuns = field(default_factory=DiagnosisRuns)
 
     def close(self) -> None:
         """Stop jobs and the telemetry side, dispose of the engine."""
         self.jobs.stop()
+        self.diagnoses.close()
         self.telemetry.close()
         self.engine.dispose()
 

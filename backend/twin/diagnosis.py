@@ -30,7 +30,10 @@ from telemetry.dictionary import Dictionary
 from telemetry.housekeeping import observations, read_batches
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["diagnose_batches", "diagnose_file", "result_json", "scenario_wheels"]
+__all__ = ["MAX_WINDOW_S", "DiagnosisRuns", "diagnose_batches", "diagnose_file", "result_json", "scenario_wheels",
+           "start_archived"]
+
+MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a few seconds of diagnosis
 
 
 def scenario_wheels(scenario: Scenario) -> WheelModel:
@@ -94,3 +97,82 @@ def diagnose_file(path: str | Path, dictionary: Dictionary, scenario: Scenario, 
                   flyer: Callable[[Scenario], Any] | None = None) -> dict[str, Any]:
     """Diagnose a packet file or a ground CSV/JSONL file (``acs-twin diagnose``)."""
     return diagnose_batches(read_batches(path, dictionary), dictionary, scenario, satellite, flyer)
+
+
+class DiagnosisRuns:
+    """Diagnoses started over REST: one worker thread, results kept in memory (lost on restart) newest last."""
+
+    def __init__(self, keep: int = 200) -> None:
+        import threading
+        from concurrent.futures import ThreadPoolExecutor
+
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnosis")
+        self._runs: dict[str, dict[str, Any]] = {}
+        self._lock = threading.Lock()
+        self._keep = keep
+
+    def start(self, read_batches_of: Callable[[], tuple[list[SampleBatch], Dictionary]], scenario: Scenario,
+              record: dict[str, Any]) -> dict[str, Any]:
+        """Queue a diagnosis of the batches ``read_batches_of`` returns; the run record (status running)."""
+        import uuid
+
+        run = {**record, "id": uuid.uuid4().hex, "status": "running", "error": None, "result": None}
+        with self._lock:
+            self._runs[run["id"]] = run
+            for old in list(self._runs)[: max(0, len(self._runs) - self._keep)]:
+                del self._runs[old]
+
+        def work() -> None:
+            try:
+                batches, dictionary = read_batches_of()
+                result = diagnose_batches(batches, dictionary, scenario)  # the archive keys the satellite
+                run.update(status="succeeded", result=result)
+            except ValueError as exc:
+                run.update(status="failed", error=str(exc))
+            except Exception as exc:  # noqa: BLE001 (reported to the operator, the server keeps running)
+                run.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+
+        self._pool.submit(work)
+        return dict(run)
+
+    def get(self, run_id: str) -> dict[str, Any] | None:
+        """The run record, None if unknown."""
+        with self._lock:
+            run = self._runs.get(run_id)
+            return None if run is None else dict(run)
+
+    def list(self) -> list[dict[str, Any]]:
+        """All kept runs, newest first."""
+        with self._lock:
+            return [dict(r) for r in reversed(self._runs.values())]
+
+    def close(self) -> None:
+        """Stop taking runs; a running one finishes in its thread."""
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
+    """Check a REST request (window, dictionary, scenario) and queue its diagnosis on archived packets."""
+    from backend.core.errors import ApiError
+    from sim_core import scenario_library
+    from telemetry.decoding import decode_stream
+
+    t0, t1 = body.start_utc.timestamp(), body.end_utc.timestamp()
+    if not 0.0 < t1 - t0 <= MAX_WINDOW_S:
+        raise ApiError(422, f"end_utc: must be after start_utc and within {MAX_WINDOW_S:.0f} s of it", "end_utc")
+    try:
+        dictionary = services.telemetry.dictionaries.load(body.dictionary)
+        scenario = scenario_library.get(body.scenario)
+    except ValueError as exc:
+        raise ApiError(422, str(exc), "scenario" if "scenario" in str(exc) else "dictionary") from None
+    archive = services.telemetry.archive
+
+    def read() -> tuple[list[SampleBatch], Dictionary]:
+        packets = archive.replay(body.satellite, int(t0 * 1e9), int(t1 * 1e9))
+        if not packets:
+            raise ValueError(f"telemetry: no archived packets of {body.satellite!r} in the window")
+        return decode_stream(b"".join(p for _, p in packets), dictionary, source="diagnosis").batches, dictionary
+
+    record = {"satellite": body.satellite, "scenario": body.scenario, "created_by": actor,
+              "start_utc": _utc(t0, 0.0), "end_utc": _utc(t1, 0.0)}
+    return services.diagnoses.start(read, scenario, record)

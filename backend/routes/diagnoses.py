@@ -1,0 +1,37 @@
+"""Diagnoses: start one on a satellite and telemetry window, poll it, read the ranked hypotheses."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+from starlette.concurrency import run_in_threadpool
+
+from backend.core.errors import ERROR_RESPONSES, ApiError
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.schemas import DiagnosisCreate, DiagnosisPublic
+from backend.twin.diagnosis import start_archived
+
+router = APIRouter(tags=["diagnosis"], responses=ERROR_RESPONSES)
+
+
+@router.post("/diagnoses", status_code=202, response_model=DiagnosisPublic,
+             summary="Diagnose archived telemetry of a satellite")
+async def create_diagnosis(body: DiagnosisCreate, services: ServicesDep, principal: OperatorDep) -> DiagnosisPublic:
+    """Detect, name and rank the fault in [start_utc, end_utc]; poll GET /diagnoses/{id} for the result."""
+    run = await run_in_threadpool(start_archived, services, body, principal.name)
+    services.audit.record(principal.name, "diagnosis.create", f"diagnoses/{run['id']}", {"satellite": body.satellite})
+    return DiagnosisPublic(**run)
+
+
+@router.get("/diagnoses", response_model=list[DiagnosisPublic], summary="Diagnoses, newest first")
+def list_diagnoses(services: ServicesDep, _: ViewerDep) -> list[DiagnosisPublic]:
+    """Every diagnosis the server keeps (in memory), with its state and result."""
+    return [DiagnosisPublic(**r) for r in services.diagnoses.list()]
+
+
+@router.get("/diagnoses/{diagnosis_id}", response_model=DiagnosisPublic, summary="One diagnosis")
+def get_diagnosis(diagnosis_id: str, services: ServicesDep, _: ViewerDep) -> DiagnosisPublic:
+    """State (running, succeeded, failed with the reason) and, once succeeded, the ranked hypotheses."""
+    run = services.diagnoses.get(diagnosis_id)
+    if run is None:
+        raise ApiError(404, f"no diagnosis {diagnosis_id!r}", "diagnosis_id")
+    return DiagnosisPublic(**run)
