@@ -1,4 +1,4 @@
-"""Live telemetry (issue 5): TCP listener -> decode -> publish to subscribers -> archive in batches.
+"""Live telemetry (issue 5): a link (TCP, or memory in tests) -> decode -> publish to subscribers -> archive in batches.
 
 The stream is a sequence of CCSDS space packets framed by their packet data length field
 (CCSDS 133.0-B-2 §4.1.3.5: total length = field + 7 octets).  Complete packets are decoded in
@@ -14,8 +14,9 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -31,6 +32,10 @@ __all__ = [
     "LiveStats",
     "Subscriber",
     "LiveStream",
+    "Link",
+    "TcpLink",
+    "MemoryLink",
+    "MemoryConnection",
     "LOOPBACK_SOURCES",
     "complete_prefix",
     "source_networks",
@@ -183,9 +188,115 @@ def _allowed(host: str, networks: Sequence[ipaddress.IPv4Network | ipaddress.IPv
     return any(address in network for network in networks)
 
 
-class LiveStream:
-    """TCP listener for a CCSDS packet stream of one satellite (optionally archived)."""
+class Peer(Protocol):
+    """The writing end of one connection as the stream uses it: who it is, and closing it."""
 
+    def get_extra_info(self, name: str, default: Any = None) -> Any: ...
+
+    def close(self) -> None: ...
+
+
+ConnectionHandler = Callable[[asyncio.StreamReader, Peer], Coroutine[Any, Any, None]]
+
+
+class Link(Protocol):
+    """Where a live stream's bytes come from (like httpx's transports): TCP in service, memory in tests."""
+
+    async def open(self, handle: ConnectionHandler) -> int:
+        """Start accepting connections, each served by ``handle``; the bound port (0 without one)."""
+        ...
+
+    def close(self) -> None:
+        """Accept no new connection."""
+        ...
+
+    async def wait_closed(self) -> None:
+        """Wait until the link has released what it holds."""
+        ...
+
+
+class TcpLink:
+    """The live link over TCP: a listener on host:port (0 = any free port)."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
+        self._host, self._port = host, port
+        self._server: asyncio.Server | None = None
+
+    async def open(self, handle: ConnectionHandler) -> int:
+        """Listen; the bound port."""
+        self._server = await asyncio.start_server(handle, self._host, self._port)
+        return int(self._server.sockets[0].getsockname()[1])
+
+    def close(self) -> None:
+        """Stop listening."""
+        if self._server is not None:
+            self._server.close()
+
+    async def wait_closed(self) -> None:
+        """Wait for the listener to close."""
+        if self._server is not None:
+            await self._server.wait_closed()
+
+
+class MemoryConnection:
+    """One in-memory connection: bytes written here reach the stream's reader directly, no socket."""
+
+    def __init__(self, reader: asyncio.StreamReader, peer: tuple[str, int]) -> None:
+        self.reader, self._peer = reader, peer
+        self.closed_by_stream = False
+        self.served: asyncio.Task[None] | None = None
+
+    def write(self, data: bytes) -> None:
+        """Send bytes to the stream (any split: the stream frames packets by their length field)."""
+        self.reader.feed_data(data)
+
+    async def aclose(self) -> None:
+        """End of stream; returns once the stream has decoded and delivered everything sent."""
+        self.reader.feed_eof()
+        if self.served is not None:
+            await self.served
+
+    def get_extra_info(self, name: str, default: Any = None) -> Any:
+        """``peername`` as a socket would give it."""
+        return self._peer if name == "peername" else default
+
+    def close(self) -> None:
+        """Called by the stream when it is done with the connection."""
+        self.closed_by_stream = True
+
+
+class MemoryLink:
+    """The live link in memory, for tests: :meth:`connect` opens a connection from ``peer_host``."""
+
+    def __init__(self, peer_host: str = "127.0.0.1") -> None:
+        self._peer_host = peer_host
+        self._handle: ConnectionHandler | None = None
+        self._connections = 0
+
+    async def open(self, handle: ConnectionHandler) -> int:
+        """Accept connections (there is no port)."""
+        self._handle = handle
+        return 0
+
+    def connect(self) -> MemoryConnection:
+        """A new connection served by the stream (call inside the running event loop)."""
+        if self._handle is None:
+            raise RuntimeError("link: not open (start the stream first)")
+        self._connections += 1
+        connection = MemoryConnection(asyncio.StreamReader(), (self._peer_host, self._connections))
+        connection.served = asyncio.create_task(self._handle(connection.reader, connection))
+        return connection
+
+    def close(self) -> None:
+        """Accept no new connection."""
+        self._handle = None
+
+    async def wait_closed(self) -> None:
+        """Nothing held."""
+
+
+class LiveStream:
+    """Listener for a CCSDS packet stream of one satellite (optionally archived), over a :class:`Link`."""
     def __init__(
         self,
         dictionary: Dictionary,
@@ -209,10 +320,10 @@ class LiveStream:
         self._pending: list[SampleBatch] = []
         self._pending_packets = 0
         self._flush_lock = asyncio.Lock()
-        self._server: asyncio.Server | None = None
-        self._connections: set[asyncio.Task] = set()
-        self._flushes: set[asyncio.Task] = set()
-        self._flusher: asyncio.Task | None = None
+        self._link: Link | None = None
+        self._connections: set[asyncio.Task[None]] = set()
+        self._flushes: set[asyncio.Task[None]] = set()
+        self._flusher: asyncio.Task[None] | None = None
         self._flush_count = 0
         self.stats = LiveStats()
 
@@ -226,29 +337,31 @@ class LiveStream:
         """Stop delivering to ``subscriber``."""
         self._subscribers.remove(subscriber)
 
-    async def start(self, host: str = "127.0.0.1", port: int = 0) -> int:
-        """Warm the decoder, then listen on host:port (0 = any free port); returns the bound port."""
+    async def start(self, host: str = "127.0.0.1", port: int = 0, *, link: Link | None = None) -> int:
+        """Warm the decoder, then accept connections on ``link`` (default: TCP on host:port, 0 = any free
+        port); returns the bound port (0 for a link without one)."""
         await asyncio.to_thread(warm_decoder, self._dictionary)
-        self._server = await asyncio.start_server(self._handle, host, port)
+        self._link = TcpLink(host, port) if link is None else link
+        bound = await self._link.open(self._handle)
         if self._archive is not None:
             self._flusher = asyncio.create_task(self._flush_periodically())
-        return int(self._server.sockets[0].getsockname()[1])
+        return bound
 
     async def stop(self) -> None:
         """Close the listener and its connections, then archive what is pending."""
-        if self._server is not None:
-            self._server.close()
+        if self._link is not None:
+            self._link.close()
         for task in list(self._connections):
             task.cancel()
         await asyncio.gather(*self._connections, *self._flushes, return_exceptions=True)
         if self._flusher is not None:
             self._flusher.cancel()
             await asyncio.gather(self._flusher, return_exceptions=True)
-        if self._server is not None:
-            await self._server.wait_closed()
+        if self._link is not None:
+            await self._link.wait_closed()
         await self.flush()
 
-    async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+    async def _handle(self, reader: asyncio.StreamReader, writer: Peer) -> None:
         host = str(writer.get_extra_info("peername")[0])
         if not _allowed(host, self._allowed):  # not on the allow-list: closed before a byte is read
             self.stats.connections_refused += 1
