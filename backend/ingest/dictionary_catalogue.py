@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from backend.core.errors import ApiError
+from telemetry.dictionary import Dictionary
 
 __all__ = ["DICTIONARY_SUFFIXES", "DictionaryCatalogue"]
 
@@ -46,7 +47,7 @@ class DictionaryCatalogue:
 
     def __init__(self, folder: Path) -> None:
         self._folder = folder
-        self._cache: dict[str, Any] = {}
+        self._cache: dict[str, Dictionary] = {}
         self._lock = threading.Lock()
 
     def names(self) -> list[str]:
@@ -65,7 +66,7 @@ class DictionaryCatalogue:
         except (OSError, ValueError):
             return {}  # meta lost or torn: a CSV then asks for its APID, YAML/XTCE need none
 
-    def load(self, name: str) -> Any:
+    def load(self, name: str) -> Dictionary:
         """The telemetry.dictionary.Dictionary called ``name`` (ValueError naming ``dictionary``)."""
         from telemetry.dictionary import load_dictionary
 
@@ -93,7 +94,7 @@ class DictionaryCatalogue:
         """Version of the uploaded dictionary ``name`` (0: none uploaded)."""
         return int(self._meta(name).get("version", 1)) if (self._folder / name).is_file() else 0
 
-    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None) -> tuple[Any, int]:
+    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None) -> tuple[Dictionary, int]:
         """Store an uploaded definition (YAML, XTCE or ccsdspy CSV + APID) once it loads; (dictionary, version).
 
         Shipped dictionaries are read-only (409): loosening their limits would silence real alarms.

@@ -7,9 +7,15 @@ monitors (frontend.monitors). Runs in a daemon thread; every step is logged to d
 
 from __future__ import annotations
 
+import threading
 import time
 from datetime import UTC, datetime
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from backend.schemas import TwinSessionCreate, TwinSessionPublic
+    from backend.services import Services
+    from frontend.monitors import MonitorHandles
 
 __all__ = ["run_demo_twin", "WARMUP_S", "TWIN_S"]
 
@@ -19,7 +25,7 @@ POLL_S = 5.0
 HK_APID = 256  # reference satellite ACS_HK
 
 
-def _telemetry_span_ns(services: Any, satellite: str) -> tuple[int, int] | None:
+def _telemetry_span_ns(services: Services, satellite: str) -> tuple[int, int] | None:
     from backend.core.errors import ApiError
 
     try:
@@ -30,12 +36,13 @@ def _telemetry_span_ns(services: Any, satellite: str) -> tuple[int, int] | None:
     return None if t is None or t.size == 0 else (int(t[0]), int(t[-1]))
 
 
-def _log(services: Any, text: str) -> None:
+def _log(services: Services, text: str) -> None:
     with (services.settings.data_dir / "twin.log").open("a") as log:
         log.write(f"{datetime.now(UTC).isoformat()} {text}\n")
 
 
-def _start_when_admitted(services: Any, body: Any, stop: Any) -> Any:
+def _start_when_admitted(services: Services, body: TwinSessionCreate,
+                         stop: threading.Event) -> TwinSessionPublic | None:
     """The twin session, retried while the job queue is full (429) instead of giving up; None if stopped."""
     from backend.core.errors import ApiError
     from backend.twin.session_service import start_session
@@ -51,7 +58,8 @@ def _start_when_admitted(services: Any, body: Any, stop: Any) -> Any:
     return None
 
 
-def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, stop: Any) -> Any:
+def run_demo_twin(services: Services, monitor_ports: dict[str, int], scenario: str,
+                  stop: threading.Event) -> MonitorHandles | None:
     """Wait for telemetry, start a nominal twin session, wait for it, serve the monitors; their handles."""
     from backend.schemas import TwinSessionCreate
     from backend.twin.monitor_gate import MonitorGate
@@ -74,7 +82,8 @@ def run_demo_twin(services: Any, monitor_ports: dict[str, int], scenario: str, s
     if session is None:
         return None
     _log(services, f"twin session {session.id} aligned at {align.isoformat()}, job {session.job_id}")
-    while services.job_repo.get(session.job_id).status in ("queued", "running") and not stop.is_set():
+    while (job := services.job_repo.get(session.job_id)) is not None and job.status in ("queued", "running") \
+            and not stop.is_set():
         time.sleep(1.0)
     feed = session_feed(services, session.id)
     handles = serve_monitors(feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0))  # private ports

@@ -9,13 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from frontend.feed import DEFAULT_STATIONS, FeedWindow, GroundStation, attitude_error_rad
 from sim_core import quaternion
 from sim_core.attitude_spline import AttitudeSpline
+from telemetry.actual_state import ActualTrack
+from telemetry.archive.records import AlarmRecord
 
 __all__ = ["SessionFeed"]
 
@@ -26,7 +27,7 @@ SAME_INSTANT_S = 1e-3  # twin output and telemetry times within 1 ms are one ins
 class SessionFeed:
     """TwinFeed of one twin session: telemetry (actual) against the twin's trajectory (simulated)."""
 
-    def __init__(self, track: Any, twin_npz: Path, align_utc_ns: int, alarms: Sequence[Any] = (),
+    def __init__(self, track: ActualTrack, twin_npz: Path, align_utc_ns: int, alarms: Sequence[AlarmRecord] = (),
                  stations: Sequence[GroundStation] = DEFAULT_STATIONS) -> None:
         self._track, self._alarms, self._stations = track, list(alarms), list(stations)
         self._t = track.t_utc_ns / NS_PER_S

@@ -17,7 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from backend.ingest.ports import TelemetryArchive
 from sim_core import quaternion
+from telemetry.actual_state import ActualTrack
+from telemetry.dictionary import Dictionary
 
 __all__ = ["GPS_MARGIN_S", "actual_track_between", "twin_start", "Residuals", "residuals", "variant_names"]
 
@@ -25,7 +28,8 @@ GPS_MARGIN_S = 60.0  # telemetry read before the alignment instant: the GPS fixe
 TIME_MATCH_NS = 1_000_000  # twin output and telemetry samples closer than 1 ms are the same instant
 
 
-def actual_track_between(archive: Any, dictionary: Any, satellite: str, t0_ns: int, t1_ns: int) -> Any:
+def actual_track_between(archive: TelemetryArchive, dictionary: Dictionary, satellite: str, t0_ns: int,
+                         t1_ns: int) -> ActualTrack:
     """Replay and decode archived packets of [t0_ns, t1_ns] into the actual track (ValueError if none)."""
     from telemetry.actual_state import actual_track
     from telemetry.decoding import decode_stream
@@ -37,7 +41,7 @@ def actual_track_between(archive: Any, dictionary: Any, satellite: str, t0_ns: i
     return actual_track(decoded.batches)
 
 
-def twin_start(track: Any, scenario: str, align_ns: int, duration_s: float, faults: list[str],
+def twin_start(track: ActualTrack, scenario: str, align_ns: int, duration_s: float, faults: list[str],
                epoch_ns: int | None = None, alternatives: dict[str, list[str]] | None = None,
                ) -> tuple[int, dict[str, Any], dict[str, Any]]:
     """(alignment sample time, twin scenario JSON, engine options) at the first ACS_HK sample ≥ align_ns.
@@ -88,7 +92,7 @@ class Residuals:
                 "wheel_speed_max_rpm": float(np.abs(self.wheel_speed_rad_s).max(initial=0.0) * 30.0 / np.pi)}
 
 
-def residuals(track: Any, trajectory_npz: Path, align_ns: int, variant: int = 0) -> Residuals:
+def residuals(track: ActualTrack, trajectory_npz: Path, align_ns: int, variant: int = 0) -> Residuals:
     """Residuals of one variant of the twin's trajectory.npz against the actual track (seed 000 §7 monitors)."""
     with np.load(trajectory_npz) as twin:
         if not 0 <= variant < twin["q_ib"].shape[0]:
