@@ -198,8 +198,10 @@ class TlePublic(BaseModel):
 
 
 class IngestReportPublic(BaseModel):
-    """What an upload did: the archive's tallies, the decoder's report and the passes it attached to."""
+    """What an upload did: the archive's tallies, the decoder's report and the passes it attached to (further
+    keys the ingest pipeline reports pass through unchanged)."""
 
+    model_config = ConfigDict(extra="allow")
     satellite: str
     dictionary: str
     archive: dict[str, Any] = Field(description="Upload id, packets and samples accepted, duplicates, gaps, alarms.")
