@@ -159,8 +159,10 @@ PassPublic = create_model("PassPublic", __doc__="A pass and what was received in
 
 
 class PassSummaryPublic(BaseModel):
-    """A pass with its completeness, per-parameter count/min/max/mean and the alarms raised during it."""
+    """A pass with its completeness, per-parameter count/min/max/mean and the alarms raised during it (further
+    keys of telemetry.queries.pass_summary pass through unchanged)."""
 
+    model_config = ConfigDict(extra="allow")
     pass_: PassPublic = Field(alias="pass")  # type: ignore[valid-type]
     completeness: float
     parameters: dict[str, dict[str, int | float]]
