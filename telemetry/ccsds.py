@@ -37,6 +37,7 @@ __all__ = [
     "crc16_ccitt",
     "frame_stream",
     "Frames",
+    "unwrap_packets",
 ]
 
 PRIMARY_HEADER_OCTETS = 6
@@ -281,7 +282,7 @@ _CRC_TABLES = _crc16_tables()
 _CRC_TABLE = _CRC_TABLES[0].astype(np.uint16)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _crc16_1(buf: np.ndarray, start: int, stop: int, tables: np.ndarray) -> int:
     """CRC-16/CCITT (preset 0xFFFF) of buf[start:stop], four octets per step by linearity (compiled kernel)."""
     crc = 0xFFFF
@@ -309,7 +310,7 @@ def crc16_ccitt(data: bytes | np.ndarray) -> np.ndarray | int:
     return crc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _header_fits(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
     """True when a known, right-length, complete packet (CRC valid where defined) starts at p."""
     n = buf.shape[0]
@@ -324,7 +325,7 @@ def _header_fits(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, 
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _well_formed(buf: np.ndarray, p: int) -> bool:
     """A version-0 header at p whose packet ends within buf (any APID)."""
     n = buf.shape[0]
@@ -333,7 +334,7 @@ def _well_formed(buf: np.ndarray, p: int) -> bool:
     return p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 <= n
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
     """Why no packet of the dictionary starts at p (a FrameCode)."""
     n = buf.shape[0]
@@ -354,7 +355,7 @@ def _classify(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, tab
     return _TRUNCATED
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
     """True when exactly one idle packet (APID 2047, CCSDS 133.0-B-2 §4.1.3.3.4.4) spans [p, q)."""
     if not _well_formed(buf, p) or (((np.int64(buf[p]) & 7) << 8) | buf[p + 1]) != IDLE_APID:
@@ -362,7 +363,7 @@ def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
     return p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 == q
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _links_confirm(buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
     """True when the data ends at q, a dictionary packet fits at q, or UNDEFINED_CHAIN well-formed, unsegmented
     telemetry packets follow one another from q (each where the previous one's length field ends) before either.
@@ -381,7 +382,7 @@ def _links_confirm(buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _undefined_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
     """A well-formed packet of an APID without definition at p, its length field confirmed by the links from p."""
     if not _well_formed(buf, p) or lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]] != 0:
@@ -389,7 +390,7 @@ def _undefined_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.n
     return _links_confirm(buf, p, lengths, crc, table)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _other_length_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
     """A well-formed packet of a defined APID whose length differs from its definition, its length field confirmed
     by the links from its end; the decoder reports the length mismatch."""
@@ -402,7 +403,7 @@ def _other_length_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: n
     return _links_confirm(buf, q, lengths, crc, table)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
     """First q in [start, stop) where a dictionary packet fits, else stop."""
     q = start
@@ -411,7 +412,7 @@ def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: 
     return q
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, keep_undefined: bool):
     """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them.
 
@@ -463,6 +464,32 @@ def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: 
         k += 1
         p = q
     return offsets[:k], sizes[:k], codes[:k]
+
+
+@njit(cache=True, nogil=True)
+def _unwrap_kernel(buf: np.ndarray, prefix: int, suffix: int) -> tuple[np.ndarray, int]:
+    """Packets with their fixed prefix/suffix removed, and the octets of buf consumed (whole wrapped packets)."""
+    out = np.empty(buf.shape[0], dtype=np.uint8)
+    n, p, k = buf.shape[0], 0, 0
+    while p + prefix + PRIMARY_HEADER_OCTETS <= n:
+        q = p + prefix
+        size = ((np.int64(buf[q + 4]) << 8) | buf[q + 5]) + PRIMARY_HEADER_OCTETS + 1
+        if q + size + suffix > n:
+            break
+        out[k : k + size] = buf[q : q + size]
+        k += size
+        p = q + size + suffix
+    return out[:k], p
+
+
+def unwrap_packets(data: bytes | np.ndarray, prefix_octets: int, suffix_octets: int) -> tuple[np.ndarray, int]:
+    """The packet stream inside fixed-size wrappers (e.g. a 4-octet ground-station header before each packet),
+    walking each packet's length field; and how many octets of data that consumed (whole wrapped packets)."""
+    buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
+    if prefix_octets < 0 or suffix_octets < 0:
+        raise ValueError("packet_prefix_octets, packet_suffix_octets: must be >= 0")
+    packets, consumed = _unwrap_kernel(buf, prefix_octets, suffix_octets)
+    return packets, int(consumed)
 
 
 @dataclass(frozen=True)

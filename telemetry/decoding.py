@@ -41,7 +41,7 @@ __all__ = [
 ]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gather(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np.ndarray:
     """Copy the packets starting at offset into rows of an (n, L) matrix (compiled kernel)."""
     out = np.empty((offset.shape[0], packet_octets), dtype=np.uint8)
@@ -58,7 +58,7 @@ def packet_matrix(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np
     return _gather(buf, offset, packet_octets)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _bit_patterns(packets: np.ndarray, first: np.ndarray, last: np.ndarray, shift: np.ndarray,
                   mask: np.ndarray) -> np.ndarray:
     """(F, n) uint64 big-endian bit patterns of F fields in n packets, one pass over each packet (compiled kernel).
@@ -158,7 +158,7 @@ def derive(d: DerivedParameter, values: dict[str, np.ndarray], time_code: ccsds.
     return _error_angle(estimated, program)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _error_angle(estimated: np.ndarray, program: np.ndarray) -> np.ndarray:
     """Angle 2·atan2(|e|, |e0|) of E = Λ̃^p ∘ Λ per row (seed 000 §4), via sim_core.quaternion.multiply_1."""
     out = np.empty(estimated.shape[0])
@@ -252,7 +252,7 @@ def _union(parts: list[tuple[np.ndarray, dict[str, np.ndarray]]], n: int) -> dic
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _gather_octets(buf: np.ndarray, offset: np.ndarray, length: np.ndarray) -> np.ndarray:
     """The packets at offset (of the given lengths) back to back (compiled kernel)."""
     out = np.empty(length.sum(), dtype=np.uint8)
@@ -277,6 +277,72 @@ def _packet_times(
     return ccsds.decode_time(t_fields, code), ["" if v else "invalid time code field" for v in valid.tolist()]
 
 
+def _group_values(
+    buf: np.ndarray, offset: np.ndarray, groups: list[tuple[np.ndarray, PacketDefinition]], n: int
+) -> tuple[np.ndarray, dict[int, str], list[tuple[np.ndarray, dict[str, np.ndarray]]], list[np.ndarray]]:
+    """Times, time problems by packet index, calibrated values and packet rows of each fixed-layout group."""
+    t = np.full(n, INVALID_TIME, dtype=np.int64)
+    problems: dict[int, str] = {}
+    parts, rows_by_group = [], []
+    for idx, layout in groups:
+        rows = packet_matrix(buf, offset[idx], layout.packet_octets)
+        raw = decode_raw(rows, layout)
+        t[idx], why = _packet_times(rows, raw, layout)
+        problems.update((i, w) for i, w in zip(idx.tolist(), why) if w)
+        parts.append((idx, {p.name: calibrate(raw[p.name], p) for p in layout.parameters}))
+        rows_by_group.append(rows)
+    return t, problems, parts, rows_by_group
+
+
+def _xtce_values(
+    buf: np.ndarray, offset: np.ndarray, length: np.ndarray, definition: PacketDefinition
+) -> tuple[np.ndarray, dict[int, str], list[tuple[np.ndarray, dict[str, np.ndarray]]], dict[int, str]]:
+    """Packets of a polymorphic or dynamically sized XTCE definition parsed one by one by space_packet_parser:
+    times, time problems, numeric values (raw codes for enumerations, NaN where a container lacks a parameter)
+    and the packets it could not parse (shorter than their container)."""
+    source = definition.xtce
+    assert source is not None
+    n = offset.shape[0]
+    calibrated = {name: np.full(n, np.nan) for name in source.numeric}
+    raw = {name: np.full(n, np.nan) for name in source.numeric}
+    short: dict[int, str] = {}
+    for i, (o, size) in enumerate(zip(offset.tolist(), length.tolist())):
+        try:
+            packet = source.definition.parse_bytes(bytes(buf[o : o + size]))
+        except Exception as exc:  # spp raises its own errors (EOFError, ValueError …) for a packet it cannot read
+            short[i] = f"space_packet_parser: {type(exc).__name__}: {exc}"[:200]
+            continue
+        for name, value in packet.items():
+            if name in raw:
+                raw[name][i] = float(value.raw_value)
+                calibrated[name][i] = float(value) if isinstance(value, (int, float)) else float(value.raw_value)
+    values = {name: _narrow(v) for name, v in calibrated.items() if not np.all(np.isnan(v))}
+    codes = {name: _narrow(v) for name, v in raw.items()}
+    t = np.full(n, INVALID_TIME, dtype=np.int64)
+    problems: dict[int, str] = {}
+    ok = np.setdiff1d(np.arange(n), list(short))
+    if definition.time_fields is not None:
+        missing = [k for k in definition.time_fields.names if np.isnan(raw[k][ok]).any()]
+        if missing:
+            problems.update((int(i), f"time fields {missing} absent") for i in ok if np.isnan(raw[missing[0]][i]))
+        good = np.array([i for i in ok.tolist() if i not in problems], dtype=np.int64)
+        t[good], why = field_times({k: codes[k][good].astype(np.int64) for k in definition.time_fields.names},
+                                   definition.time_fields)
+        problems.update((int(i), TIME_PROBLEMS[c]) for i, c in zip(good.tolist(), why.tolist()) if c)
+    else:
+        rows = packet_matrix(buf, offset[ok], ccsds.PRIMARY_HEADER_OCTETS + definition.time_code.octets)
+        t[ok], why = _packet_times(rows, {}, definition)
+        problems.update((int(i), w) for i, w in zip(ok.tolist(), why) if w)
+    return t, problems, [(np.arange(n), values)], short
+
+
+def _narrow(column: np.ndarray) -> np.ndarray:
+    """int64 when every value is a whole number that float64 holds exactly, else the float64 column with NaN."""
+    if not np.isnan(column).any() and np.all(np.abs(column) < 2**53) and np.all(column == np.round(column)):
+        return column.astype(np.int64)
+    return column
+
+
 def _decode_apid(
     buf: np.ndarray, offset: np.ndarray, definition: PacketDefinition, window: tuple[int | None, int | None],
     report: IngestReport,
@@ -298,7 +364,13 @@ def _decode_apid(
                                 int(headers.sequence_count[i]), detail=HEADER_PROBLEMS[mismatch[i]])
                for i in np.flatnonzero(mismatch)]
     dropped = mismatch != 0
-    groups, short = _layout_groups(buf, offset, length, definition)
+    if definition.xtce is not None:
+        groups: list[tuple[np.ndarray, PacketDefinition]] = []
+        rows_by_group: list[np.ndarray] = []
+        t, time_problems, parts, short = _xtce_values(buf, offset, length, definition)
+    else:
+        groups, short = _layout_groups(buf, offset, length, definition)
+        t, time_problems, parts, rows_by_group = _group_values(buf, offset, groups, n)
     for i, why in short.items():
         if not dropped[i]:
             records.append(QuarantineRecord(int(offset[i]), int(length[i]), "bad_length", apid,
@@ -308,27 +380,21 @@ def _decode_apid(
     if not definition.variable:
         summary.definition_octets = definition.packet_octets
         summary.longer_than_definition = int(np.count_nonzero(length > definition.packet_octets))
-    t = np.full(n, INVALID_TIME, dtype=np.int64)
-    parts, rows_by_group = [], []
-    for idx, layout in groups:
-        rows = packet_matrix(buf, offset[idx], layout.packet_octets)
-        raw = decode_raw(rows, layout)
-        t[idx], problems = _packet_times(rows, raw, layout)
-        for i, why in zip(idx.tolist(), problems):
-            if why and not dropped[i]:
-                dropped[i] = True
-                records.append(QuarantineRecord(int(offset[i]), int(length[i]), "invalid_time", apid,
-                                                int(headers.sequence_count[i]), detail=why))
-        parts.append((idx, {p.name: calibrate(raw[p.name], p) for p in layout.parameters}))
-        rows_by_group.append(rows)
+    for i, why in time_problems.items():
+        if not dropped[i]:
+            dropped[i] = True
+            records.append(QuarantineRecord(int(offset[i]), int(length[i]), "invalid_time", apid,
+                                            int(headers.sequence_count[i]), detail=why))
     keep = np.flatnonzero(~dropped)
     verdict = validate_packets(apid, offset[keep], headers.sequence_count[keep], t[keep], 0, *window,
                                period_s=definition.period_s)
     accepted = keep[verdict.accepted]
-    values = {name: v[accepted] for name, v in _union(parts, n).items()}
+    in_order = accepted.size == n and bool(np.all(accepted == np.arange(n)))  # the usual case: no copy needed
+    values = {name: v if in_order else v[accepted] for name, v in _union(parts, n).items()}
     for d in definition.derived:
         values[d.name] = derive(d, values, definition.time_code)
-    same_length = len(groups) == 1 and groups[0][1].packet_octets == int(length[0]) and len(groups[0][0]) == n
+    same_length = (len(groups) == 1 and groups[0][1].packet_octets == int(length[0]) and len(groups[0][0]) == n
+                   and bool(np.all(length == length[0])))
     lengths = None if same_length else length[accepted]
     packets = (rows_by_group[0][accepted] if same_length
                else _gather_octets(buf, offset[accepted], length[accepted]))
@@ -385,17 +451,26 @@ def decode_stream(
     prefix, a longer one quarantines them as bad_length); variable layouts take any length;
     confirmed packets of undefined APIDs are counted and kept raw. With final=False (a chunk of a
     longer stream) a trailing segment the chunk may have cut is left out: ``consumed`` says where
-    the next chunk starts.
+    the next chunk starts. A dictionary with packet_prefix_octets / packet_suffix_octets has each packet
+    unwrapped first (report offsets then count packet octets only).
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
+    wrapped, octets_in = dictionary.packet_prefix_octets or dictionary.packet_suffix_octets, int(buf.shape[0])
+    if wrapped:
+        buf, taken = ccsds.unwrap_packets(buf, dictionary.packet_prefix_octets, dictionary.packet_suffix_octets)
     lengths = {a: 0 if p.variable else p.packet_octets for a, p in dictionary.packets.items()}
     frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True)
-    consumed = int(buf.shape[0]) if final else _complete_end(buf, frames)
+    consumed = int(buf.shape[0]) if final or wrapped else _complete_end(buf, frames)
     if consumed < buf.shape[0]:
         buf = buf[:consumed]
         frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True)
+    if wrapped:  # offsets below count unwrapped packet octets; the chunk consumed whole wrapped packets
+        consumed = taken
     report = IngestReport(source=source, octets=int(buf.shape[0]))
     report.quarantined.extend(_frame_records(buf, frames))
+    if wrapped and final and consumed < octets_in:
+        report.quarantined.append(QuarantineRecord(int(buf.shape[0]), octets_in - consumed, "truncated",
+                                                   detail="incomplete wrapped packet at the end of the data"))
     report.idle_packets = int(np.count_nonzero(frames.code == ccsds.FrameCode.IDLE))
     undefined = _undefined_packets(buf, frames, report)
     offset = frames.offset[frames.code == ccsds.FrameCode.OK]

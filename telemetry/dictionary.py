@@ -25,6 +25,7 @@ __all__ = [
     "Limits",
     "Parameter",
     "FieldSpec",
+    "XtceSource",
     "DerivedParameter",
     "PacketDefinition",
     "Dictionary",
@@ -147,6 +148,15 @@ class FieldSpec:
 
 
 @dataclass(frozen=True)
+class XtceSource:
+    """Packets parsed one by one by space-packet-parser: its definition, the containers, their numeric parameters."""
+
+    definition: Any = field(compare=False, repr=False)
+    containers: tuple[str, ...] = ()
+    numeric: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class PacketDefinition:
     """A telemetry packet type: APID, length, time (secondary-header code or named fields), CRC, fields.
 
@@ -166,11 +176,12 @@ class PacketDefinition:
     derived: tuple[DerivedParameter, ...] = ()
     time_fields: TimeFields | None = None
     fields: tuple[FieldSpec, ...] = ()
+    xtce: XtceSource | None = None
 
     @property
     def variable(self) -> bool:
-        """True when the layout depends on the packet length or on a field's value."""
-        return bool(self.fields)
+        """True when the layout depends on the packet length or on a field's value (or space-packet-parser reads it)."""
+        return bool(self.fields) or self.xtce is not None
 
     @property
     def count_fields(self) -> tuple[str, ...]:
@@ -195,7 +206,7 @@ class PacketDefinition:
         fixed_names = {p.name for p in self.parameters}
         if any(c not in fixed_names for c in self.count_fields):
             raise ValueError(f"{self.name}: array size fields {self.count_fields} must precede every variable array")
-        if self.time_fields is not None:
+        if self.time_fields is not None and self.xtce is None:
             names = fixed_names
             missing = [n for n in self.time_fields.names if n not in names]
             if missing:
@@ -234,6 +245,8 @@ class Dictionary:
     description: str = ""
     satellite: str = ""
     notes: tuple[str, ...] = ()
+    packet_prefix_octets: int = 0
+    packet_suffix_octets: int = 0
 
     @property
     def satellite_name(self) -> str:
@@ -421,6 +434,8 @@ def load_yaml(path: str | Path) -> Dictionary:
         valid_until_utc_ns=parse_utc_ns(valid["until"]) if "until" in valid else None,
         description=str(doc.get("description", "")),
         satellite=str(doc.get("satellite", "")),
+        packet_prefix_octets=int(doc.get("packet_prefix_octets", 0)),
+        packet_suffix_octets=int(doc.get("packet_suffix_octets", 0)),
     )
 
 
@@ -563,6 +578,8 @@ def merge_dictionaries(parts: list[Dictionary], name: str | None = None) -> Dict
         valid_until_utc_ns=min(highs) if highs else None,
         satellite=next((d.satellite for d in parts if d.satellite), ""),
         notes=tuple(n for d in parts for n in d.notes),
+        packet_prefix_octets=max(d.packet_prefix_octets for d in parts),
+        packet_suffix_octets=max(d.packet_suffix_octets for d in parts),
     )
 
 
@@ -627,40 +644,93 @@ def _xtce_apid(definition: Any, container: Any) -> int | None:
     return None
 
 
+def _xtce_chain(definition: Any, container: Any) -> list[Any]:
+    """A container and its bases, root first."""
+    chain, c = [], container
+    while c is not None:
+        chain.insert(0, c)
+        c = definition.containers.get(c.base_container_name) if c.base_container_name else None
+    return chain
+
+
+def _xtce_fixed(definition: Any, container: Any, apid: int, time_code: TimeCode | None,
+                time_fields: TimeFields | None) -> PacketDefinition:
+    """The fixed layout of a container (ValueError when an entry has no fixed size or is not numeric)."""
+    params, bit = [], 0
+    for entry in (e for c in _xtce_chain(definition, container) for e in _xtce_entries(c)):
+        size = getattr(entry.parameter_type.encoding, "size_in_bits", None)
+        if not isinstance(size, int):
+            raise ValueError(f"{entry.name}: no fixed size")
+        if bit >= PRIMARY_HEADER_BITS:
+            params.append(_xtce_parameter(entry, bit))
+        bit += size
+    if bit % 8:
+        raise ValueError(f"{container.name}: layout ends at bit {bit}, not on an octet boundary")
+    return PacketDefinition(
+        name=container.name, apid=apid, packet_octets=bit // 8, parameters=tuple(params), time_code=time_code,
+        time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
+        description=container.short_description or container.long_description or "",
+    )
+
+
+def _xtce_numeric_names(definition: Any, containers: list[Any]) -> tuple[str, ...]:
+    """Integer, float, enumerated and boolean parameters the containers (and their bases) carry, in order."""
+    from space_packet_parser.xtce import encodings
+
+    names: dict[str, None] = {}
+    for container in containers:
+        for entry in (e for c in _xtce_chain(definition, container) for e in _xtce_entries(c)):
+            encoding = getattr(entry.parameter_type, "encoding", None)
+            if isinstance(encoding, (encodings.IntegerDataEncoding, encodings.FloatDataEncoding)):
+                names.setdefault(entry.name)
+    return tuple(names)
+
+
+def _restricts_beyond_apid(definition: Any, container: Any) -> bool:
+    """True when a container (or a base) is selected by more than the APID (XTCE polymorphism)."""
+    return any(getattr(r, "referenced_parameter", None) not in ("PKT_APID", "APID", "CCSDS_APID", "VERSION", "TYPE")
+               for c in _xtce_chain(definition, container) for r in c.restriction_criteria)
+
+
 def load_xtce(
     path: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None
 ) -> Dictionary:
-    """A dictionary of the concrete, APID-selected containers of an XTCE file (space-packet-parser reads it)."""
+    """A dictionary of the APID-selected containers of an XTCE file (space-packet-parser reads it).
+
+    An APID whose one concrete container has a fixed, numeric layout decodes in bulk (ours); an APID with
+    polymorphic containers (inheritance with restriction criteria beyond the APID) or with dynamically
+    sized or non-numeric entries is parsed packet by packet by space-packet-parser (``PacketDefinition.xtce``),
+    its numeric parameters kept under their XTCE names (one series per name across containers).
+    """
     import space_packet_parser as spp
 
     definition = spp.load_xtce(Path(path))
-    packets = {}
+    by_apid: dict[int, list[Any]] = {}
     for container in definition.containers.values():
         apid = _xtce_apid(definition, container)
-        if container.abstract or apid is None:
-            continue
-        chain, c = [], container
-        while c is not None:
-            chain.insert(0, c)
-            c = definition.containers.get(c.base_container_name) if c.base_container_name else None
-        params, bit = [], 0
-        for entry in (e for c in chain for e in _xtce_entries(c)):
-            if bit >= PRIMARY_HEADER_BITS:
-                params.append(_xtce_parameter(entry, bit))
-            bit += int(entry.parameter_type.encoding.size_in_bits)
-        if bit % 8:
-            raise ValueError(f"{container.name}: layout ends at bit {bit}, not on an octet boundary")
-        if apid in packets:
-            raise ValueError(f"{container.name}: APID {apid} already belongs to {packets[apid].name} "
-                             "(one fixed layout per APID)")
+        if not container.abstract and apid is not None:
+            by_apid.setdefault(apid, []).append(container)
+    packets = {}
+    for apid, containers in by_apid.items():
+        polymorphic = len(containers) > 1
+        if polymorphic and not any(_restricts_beyond_apid(definition, c) for c in containers):
+            raise ValueError(f"{containers[1].name}: APID {apid} already belongs to {containers[0].name} "
+                             "(two containers, no restriction to tell them apart)")
+        if not polymorphic:
+            try:
+                packets[apid] = _xtce_fixed(definition, containers[0], apid, time_code, time_fields)
+                continue
+            except (ValueError, AttributeError, TypeError):
+                pass  # dynamic sizes or non-numeric entries: space-packet-parser reads them
+        numeric = _xtce_numeric_names(definition, containers)
+        chains = [_xtce_chain(definition, c) for c in containers]
+        shared = [c for k, c in enumerate(chains[0]) if all(len(ch) > k and ch[k] is c for ch in chains)]
+        base = shared[-1] if shared else containers[0]  # the deepest container they all extend
         packets[apid] = PacketDefinition(
-            name=container.name,
-            apid=apid,
-            packet_octets=bit // 8,
-            parameters=tuple(params),
-            time_code=time_code,
-            time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
-            description=container.short_description or container.long_description or "",
+            name=base.name, apid=apid, packet_octets=PRIMARY_HEADER_OCTETS + 1, parameters=(), time_code=time_code,
+            time_fields=time_fields.bound_to(numeric) if time_fields else None,
+            description=base.short_description or base.long_description or "",
+            xtce=XtceSource(definition, tuple(c.name for c in containers), numeric),
         )
     if not packets:
         raise ValueError(f"{path}: no concrete container selects an APID")

@@ -9,7 +9,7 @@ frame the same packets. Peak memory is a few times CHUNK_OCTETS whatever the fil
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import BinaryIO
 
@@ -54,15 +54,20 @@ def file_sha256(path: Path, block: int = 1 << 20) -> str:
 def ingest_packet_file(
     archive: Archive | None, path: Path, dictionary: Dictionary, *, satellite: str, uploaded_by: str,
     limits: Mapping[str, LimitSet] | None = None, now_utc_ns: int | None = None, chunk_octets: int = CHUNK_OCTETS,
-    source: str | None = None,
+    source: str | None = None, on_chunk: Callable[[DecodeResult], None] | None = None,
 ) -> tuple[IngestReport, IngestResult | None]:
-    """Decode a packet file chunk by chunk and archive it as one upload (archive None: decode and report only)."""
+    """Decode a packet file chunk by chunk and archive it as one upload (archive None: decode and report only).
+
+    on_chunk sees each chunk's decode result before it is archived.
+    """
     report = IngestReport(source=source or str(path))
 
     def results() -> Iterator[DecodeResult]:
         with path.open("rb") as f:
             for offset, result in decode_chunks(f, dictionary, report.source, now_utc_ns, chunk_octets):
                 report.absorb(result.report, offset)
+                if on_chunk is not None:
+                    on_chunk(result)
                 yield result
 
     if archive is None:

@@ -16,6 +16,7 @@ import argparse
 import getpass
 import hashlib
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -41,6 +42,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="time from packet fields: year=F,doy=F,hour=F,minute=F,second=F,microsecond=F (or month=, "
                         "day=, millisecond=) or coarse=F,fine=F,fine_bits=N,epoch=ISO[,time_scale=TAI]; "
                         "field names may use * wildcards (year=*_HDR_YEAR)")
+    p.add_argument("--packet-prefix", type=int, default=0, metavar="OCTETS",
+                   help="fixed-size header before every packet (frame or ground-station header), stripped")
+    p.add_argument("--packet-suffix", type=int, default=0, metavar="OCTETS",
+                   help="fixed-size trailer after every packet, stripped")
     p.add_argument("--user", default=None, help="who uploads (default: the login name)")
     p.add_argument("--dry-run", action="store_true", help="decode and validate only; store nothing")
     p.set_defaults(handler=run)
@@ -79,6 +84,9 @@ def run(args: argparse.Namespace) -> int:
         if not args.path.is_file():
             raise ValueError(f"path: no file {args.path}")
         dictionary = load_dictionaries(args.dictionary, args.apid, args.time_code, args.time_fields)
+        if args.packet_prefix or args.packet_suffix:
+            dictionary = replace(dictionary, packet_prefix_octets=args.packet_prefix,
+                                 packet_suffix_octets=args.packet_suffix)
         archive = None
         if not args.dry_run:
             from backend.core.settings import Settings

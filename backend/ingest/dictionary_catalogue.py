@@ -78,7 +78,8 @@ class DictionaryCatalogue:
         try:
             if uploaded.is_file():
                 meta = self._meta(name)
-                dictionary = load_dictionary(uploaded, apid=meta.get("apid"), time_code=meta.get("time_code"))
+                dictionary = load_dictionary(uploaded, apid=meta.get("apid"), time_code=meta.get("time_code"),
+                                             time_fields=meta.get("time_fields"))
             else:
                 dictionary = load_dictionary(name)
         except ValueError:
@@ -94,7 +95,8 @@ class DictionaryCatalogue:
         """Version of the uploaded dictionary ``name`` (0: none uploaded)."""
         return int(self._meta(name).get("version", 1)) if (self._folder / name).is_file() else 0
 
-    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None) -> tuple[Dictionary, int]:
+    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None,
+            time_fields: str | None = None) -> tuple[Dictionary, int]:
         """Store an uploaded definition (YAML, XTCE or ccsdspy CSV + APID) once it loads; (dictionary, version).
 
         Shipped dictionaries are read-only (409): loosening their limits would silence real alarms.
@@ -114,7 +116,7 @@ class DictionaryCatalogue:
                 path.replace(kept)  # the file is loaded under its own name (a CSV's stem names its packet)
             _write_atomically(path, content)
             try:
-                dictionary = load_dictionary(path, apid=apid, time_code=time_code)
+                dictionary = load_dictionary(path, apid=apid, time_code=time_code, time_fields=time_fields)
             except Exception:
                 path.unlink()
                 if previous:
@@ -122,7 +124,7 @@ class DictionaryCatalogue:
                 raise
             if previous:
                 (self._folder / f"{name}.meta.json").replace(kept.with_name(f"{kept.name}.meta.json"))
-            meta = {"apid": apid, "time_code": time_code, "version": previous + 1}
+            meta = {"apid": apid, "time_code": time_code, "time_fields": time_fields, "version": previous + 1}
             _write_atomically(self._folder / f"{name}.meta.json", json.dumps(meta).encode())
             self._cache[name] = dictionary
         return dictionary, previous + 1

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass
 from multiprocessing.process import BaseProcess
 from multiprocessing.queues import Queue
 from multiprocessing.synchronize import Event
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -219,6 +220,48 @@ class TelemetryGateway:
         dictionary = self.dictionaries.load(dictionary_name)
         decoded = decoding.decode_stream(data, dictionary, source=source)
         return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
+
+    def ingest_packet_file(self, satellite: str, path: Path, dictionary_name: str, source: str,
+                           uploaded_by: str) -> dict[str, Any]:
+        """Decode a CCSDS packet file on disk chunk by chunk (bounded memory) and archive it as one upload.
+
+        Subscribers and commit listeners get the batches of a file of one chunk (telemetry.packet_files
+        .CHUNK_OCTETS); a longer file is an archive backfill: archived, caches invalidated, passes made from
+        its data, but not replayed to live subscribers ("published": false in the report).
+        """
+        from telemetry import packet_files, passes
+
+        dictionary = self.dictionaries.load(dictionary_name)
+        first: list[SampleBatch] = []
+        spans: list[tuple[int, int]] = []
+        chunks = 0
+
+        def on_chunk(result: DecodeResult) -> None:
+            nonlocal chunks
+            chunks += 1
+            spans.extend((int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in result.batches if len(b.t_utc_ns))
+            first.extend(result.batches if chunks == 1 else [])
+            if chunks == 2:
+                first.clear()
+
+        report, result = packet_files.ingest_packet_file(
+            self._opened(), path, dictionary, satellite=satellite, uploaded_by=uploaded_by,
+            limits=dictionary_limits(dictionary), source=source, on_chunk=on_chunk)
+        assert result is not None
+        span = (min(s[0] for s in spans), max(s[1] for s in spans)) if spans else None
+        if span:
+            self._samples.invalidate(satellite, *span)
+        made: list[PassRecord] = []
+        if not result.duplicate_upload:
+            if chunks == 1:
+                self._publish(satellite, first, result.alarm_events)
+                for listener in self._committed:
+                    listener(satellite, dictionary_name, first)
+            if span:
+                made = passes.passes_from_data(self._opened(), satellite, *span)
+        return {"satellite": satellite, "dictionary": dictionary_name_of(dictionary),
+                "archive": result.as_report(), "decoding": report.to_dict(), "published": chunks == 1,
+                "passes": [{**asdict(p), "completeness": p.completeness} for p in made]}
 
     def ingest_ground_file(self, satellite: str, data: bytes, kind: str, dictionary_name: str,
                            source: str, uploaded_by: str) -> dict[str, Any]:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any, Literal
 
 from fastapi import APIRouter, Query, Request
@@ -38,6 +41,29 @@ async def read_limited(request: Request, max_bytes: int) -> bytes:
     return bytes(body)
 
 
+async def spool_limited(request: Request, max_bytes: int, folder: Path) -> Path:
+    """The request body streamed to a new file in folder (413 naming max_upload_mb past max_bytes, 422 if empty)."""
+    declared = request.headers.get("content-length")
+    if declared and declared.isdigit() and int(declared) > max_bytes:
+        raise ApiError(413, f"body of {int(declared)} bytes over max_upload_mb", "max_upload_mb")
+    folder.mkdir(parents=True, exist_ok=True)
+    handle, name = tempfile.mkstemp(prefix="upload-", suffix=".ccsds", dir=folder)
+    path, size = Path(name), 0
+    try:
+        with os.fdopen(handle, "wb") as f:
+            async for chunk in request.stream():
+                size += len(chunk)
+                if size > max_bytes:
+                    raise ApiError(413, f"body over max_upload_mb ({max_bytes} bytes)", "max_upload_mb")
+                f.write(chunk)
+        if size == 0:
+            raise ApiError(422, "body: empty upload", "body")
+    except BaseException:
+        path.unlink(missing_ok=True)
+        raise
+    return path
+
+
 def _parse_failure(exc: Exception, field: str) -> ApiError:
     return ApiError(422, f"{field}: could not be read: {exc}", field)
 
@@ -52,17 +78,28 @@ async def upload_telemetry(
     format: Literal["ccsds", "csv", "jsonl"] = Query("ccsds"),
     source: str = Query("upload", max_length=200),
 ) -> dict[str, Any]:
-    """Decode, validate, archive (limits checked, duplicates dropped) and return the ingest report."""
-    data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
+    """Decode, validate, archive (limits checked, duplicates dropped) and return the ingest report.
+
+    CCSDS packets stream to a file on disk as they arrive and decode chunk by chunk in a worker thread,
+    so neither memory nor the event loop follows the upload's size.
+    """
     gateway = services.telemetry
+    max_bytes = int(services.settings.max_upload_mb * 1e6)
     if format == "ccsds":
-        report = await run_in_threadpool(gateway.ingest_packets, satellite, data, dictionary, source,
-                                         principal.name)
+        path = await spool_limited(request, max_bytes, services.settings.data_dir / "uploads")
+        try:
+            size = path.stat().st_size
+            report = await run_in_threadpool(gateway.ingest_packet_file, satellite, path, dictionary, source,
+                                             principal.name)
+        finally:
+            path.unlink(missing_ok=True)
     else:
+        data = await read_limited(request, max_bytes)
+        size = len(data)
         report = await run_in_threadpool(gateway.ingest_ground_file, satellite, data, format, dictionary,
                                          source, principal.name)
     services.audit.record(principal.name, "telemetry.upload", f"satellite/{satellite}",
-                          {"bytes": len(data), "format": format, "upload_id": report["archive"]["upload_id"],
+                          {"bytes": size, "format": format, "upload_id": report["archive"]["upload_id"],
                            "packets_accepted": report["archive"]["packets_accepted"]})
     return report
 
@@ -88,11 +125,15 @@ async def upload_dictionary(
     name: str, request: Request, services: ServicesDep, principal: OperatorDep,
     apid: int | None = Query(None, ge=0, le=2046, description="APID of a ccsdspy CSV layout."),
     time_code: str | None = Query(None, max_length=200, description="Time code spec for CSV/XTCE."),
+    time_fields: str | None = Query(None, max_length=500, examples=[
+        "year=*_YEAR,doy=*_DAY,hour=*_HOUR,minute=*_MIN,second=*_SEC,microsecond=*_USEC"],
+        description="Time from packet fields for CSV/XTCE (as acs-twin ingest --time-fields)."),
 ) -> dict[str, Any]:
     """Store a definition for a new spacecraft or APID once it loads; lists its packets."""
     data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
     try:
-        loaded, version = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code)
+        loaded, version = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code,
+                                                  time_fields)
     except (ValueError, ApiError):
         raise
     except Exception as exc:  # a malformed XML/YAML file raises its parser's own errors

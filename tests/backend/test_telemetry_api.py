@@ -179,3 +179,33 @@ def test_stations_tles_and_passes(client: TestClient, tokens: dict[str, str]) ->
     assert missing.status_code == 404 and missing.json()["field"] == "pass_id"
     bad = client.post("/api/v1/satellites/VANGUARD/tles", content="1 garbage", headers=operator)
     assert bad.status_code == 422 and bad.json()["field"] == "body"
+
+
+CYGNSS = Path(__file__).parents[1] / "data" / "cygnss_f7"
+CYGNSS_TIME = "year=*_HDR_YEAR,doy=*_HDR_DAY,hour=*_HDR_HOUR,minute=*_HDR_MIN,second=*_HDR_SEC,microsecond=*_HDR_USEC"
+
+
+def test_foreign_mission_through_the_api_time_fields_and_undefined_apids(
+        client: TestClient, tokens: dict[str, str]) -> None:
+    """A CYGNSS ccsdspy CSV uploaded with its APID and time fields; the mixed L0 stream uploaded against it:
+    APID 393's 40 packets archived with the values ccsdspy reads, the 6 other APIDs counted and kept raw,
+    the same upload again is a no-op reporting its duplicates per APID."""
+    import ccsdspy
+    from ccsdspy.utils import split_by_apid
+
+    operator, viewer = bearer(tokens["operator"]), bearer(tokens["viewer"])
+    layout = (CYGNSS / "ccsdspy" / "apid00393.csv").read_bytes()
+    made = client.post("/api/v1/dictionaries/cygnss_adcsio.csv", params={"apid": 393, "time_fields": CYGNSS_TIME},
+                       content=layout, headers=operator)
+    assert made.status_code == 201, made.json()
+    stream = (CYGNSS / "CYGNSS_F7_L0_2022_086_10_15_V01_F__first101pkts.tlm").read_bytes()
+    url = "/api/v1/telemetry/uploads?satellite=CYGNSS-FM07&dictionary=cygnss_adcsio.csv"
+    report = client.post(url, content=stream, headers=operator).json()
+    assert report["archive"]["packets_accepted"] == 40 and report["published"] is True
+    assert report["decoding"]["undefined_apids"] == {"384": 4, "386": 4, "391": 1, "392": 4, "394": 39, "1313": 9}
+    theirs = ccsdspy.FixedLength.from_file(str(CYGNSS / "ccsdspy" / "apid00393.csv")).load(
+        split_by_apid(io.BytesIO(stream))[393])
+    samples = client.get("/api/v1/parameters/ADCS_NST_Q1/samples?satellite=CYGNSS-FM07", headers=viewer).json()
+    assert samples["values"] == theirs["ADCS_NST_Q1"].astype(float).tolist()
+    again = client.post(url, content=stream, headers=operator).json()["archive"]
+    assert again["duplicate_upload"] is True and again["duplicates_by_apid"] == {"393": 40}

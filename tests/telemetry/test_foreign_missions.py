@@ -285,3 +285,63 @@ def test_acs_twin_ingest_of_a_foreign_mission_then_reingest_adds_nothing(tmp_pat
     with Archive(url) as archive:
         assert archive.upload_contents(first["archive"]["upload_id"]) == before
         assert len(archive.uploads("CYGNSS-FM07")) == 1
+
+
+IMAP = DATA / "imap_idex_suda"
+IMAP_XTCE = IMAP / "suda_combined_science_definition.xml"
+IMAP_TIME = "coarse=SHCOARSE,fine=SHFINE,fine_bits=16,epoch=2010-01-01T00:00:00Z"
+
+
+def _spp_columns(data: bytes, skip: int = 0) -> tuple[Counter, dict[str, list]]:
+    """space_packet_parser's own reading: packets per APID and, per parameter, the value of each packet (None where
+    its container has no such parameter); enumerations as their raw codes, as we archive them."""
+    import space_packet_parser as spp
+
+    definition = spp.load_xtce(IMAP_XTCE)
+    packets = [definition.parse_bytes(raw) for raw in spp.ccsds_generator(data, skip_header_bytes=skip)]
+    counts = Counter(int(p["PKT_APID"].raw_value) for p in packets)
+    names = dict.fromkeys(k for p in packets for k, v in p.items() if not isinstance(v.raw_value, bytes))
+    columns = {n: [(p[n] if isinstance(p[n], (int, float)) else p[n].raw_value) if n in p else None for p in packets]
+               for n in names}
+    return counts, columns
+
+
+def _same(ours: np.ndarray, theirs: list) -> bool:
+    expected = np.array([np.nan if v is None else float(v) for v in theirs])
+    return bool(np.array_equal(np.asarray(ours, dtype=np.float64), expected, equal_nan=True))
+
+
+def test_imap_idex_polymorphic_xtce_decodes_as_space_packet_parser_reads_it() -> None:
+    """IDEX science packets (APID 1424, 4 lengths, containers chosen by IDX__SCI0TYPE, a dynamically sized waveform):
+    78 packets, every numeric parameter of every container as space_packet_parser gives it, one series per name."""
+    data = (IMAP / "sciData_2023_052_14_45_05").read_bytes()
+    result = decode_stream(data, load_dictionary(IMAP_XTCE, time_fields=IMAP_TIME))
+    counts, theirs = _spp_columns(data)
+    assert {a: s.accepted for a, s in result.report.apids.items()} == dict(counts) == {1424: 78}
+    assert result.report.quarantined == [] and result.report.apids[1424].packet_octets == {
+        304: 6, 1072: 18, 2908: 18, 4080: 36}
+    [batch] = result.batches
+    assert np.all(np.diff(batch.t_utc_ns) > 0)  # time order is file order here: rows line up with spp's
+    assert set(batch.values) == set(theirs)
+    assert [n for n, column in theirs.items() if not _same(batch.values[n], column)] == []
+    assert batch.packets.tobytes() == data  # byte-exact packets of four lengths
+
+
+def test_suda_packets_behind_a_4_octet_header_through_acs_twin_ingest(tmp_path: Path, capsys) -> None:
+    """SUDA's 13 packets each follow a 4-octet ground header (space_packet_parser's skip_header_bytes=4):
+    --packet-prefix 4 strips it; counts and values as space_packet_parser reads them, archived under XTCE names."""
+    from backend.cli import main
+    from telemetry.archive import Archive
+
+    path = IMAP / "sciData_2022_130_17_41_53.spl"
+    url = f"sqlite:///{tmp_path / 'suda.db'}"
+    assert main(["ingest", str(path), "--dictionary", str(IMAP_XTCE), "--time-fields", IMAP_TIME,
+                 "--packet-prefix", "4", "--satellite", "SUDA", "--db", url, "--user", "ops"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    counts, theirs = _spp_columns(path.read_bytes(), skip=4)
+    assert {int(a): s["accepted"] for a, s in report["decode"]["apids"].items()} == dict(counts) == {1425: 13}
+    assert report["decode"]["quarantined_count"] == 0 and report["archive"]["packets_accepted"] == 13
+    with Archive(url) as archive:
+        for name in ("IDX__SCIFETCHTYPE", "IDX__SCIFETCHEVTNUM", "IDX__CRCSCIFETCHPKT", "SHFINE"):
+            _, v = archive.read_parameter("SUDA", name, 0, 2**62)
+            assert _same(v, theirs[name]), name

@@ -1,0 +1,244 @@
+"""Other missions' packets (tests/data, issue 12): our decode + archive beside ccsdspy and space_packet_parser.
+
+    .venv/bin/python benchmarks/foreign.py [--mb 40] [--memory-gb 1]
+
+Each real file is replicated to about --mb MB with every copy shifted in time (and its sequence
+counts continued), so every packet is new to the archive. Per case, in one run on the same bytes:
+ours = ``telemetry.packet_files.ingest_packet_file`` (framing, validation, decode, commit to a fresh
+SQLite archive; chunked), theirs = the peer's decode alone (ccsdspy: ``split_by_apid`` then
+``FixedLength/VariableLength.load`` per defined APID; space_packet_parser: ``ccsds_generator`` +
+``parse_bytes`` per packet). Samples = packets x numeric fields decoded. Prints samples/s and the ratio.
+--memory-gb: peak RSS (ru_maxrss of a child ``acs-twin ingest`` process) for a CYGNSS mixed file of that size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT / "tests" / "data"
+SHARED = ROOT.parent / "shared" / "data" / "real" / "noaa20_jpss1_apid11"
+CYGNSS_STREAM = DATA / "cygnss_f7" / "CYGNSS_F7_L0_2022_086_10_15_V01_F__first101pkts.tlm"
+CYGNSS_TIME = "year=*_HDR_YEAR,doy=*_HDR_DAY,hour=*_HDR_HOUR,minute=*_HDR_MIN,second=*_HDR_SEC,microsecond=*_HDR_USEC"
+ECM_TIME = "coarse=*SCLK Time second,fine=*SCLK Time subsec,fine_bits=16,epoch=2000-01-01T11:58:55.816Z"
+IMAP_TIME = "coarse=SHCOARSE,fine=SHFINE,fine_bits=16,epoch=2010-01-01T00:00:00Z"
+
+
+def _packets(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Offsets, lengths and APIDs of the packets of a clean stream."""
+    offsets, p = [], 0
+    while p < len(data):
+        offsets.append(p)
+        p += ((data[p + 4] << 8) | data[p + 5]) + 7
+    off = np.array(offsets, dtype=np.int64)
+    buf = np.frombuffer(data, np.uint8)
+    length = ((buf[off + 4].astype(np.int64) << 8) | buf[off + 5]) + 7
+    return off, length, ((buf[off].astype(np.int64) & 7) << 8) | buf[off + 1]
+
+
+def _put(rows: np.ndarray, bit: int, bits: int, value: np.ndarray) -> None:
+    """Write a big-endian bit field into every row (one copy of the file per row)."""
+    first, last = bit // 8, (bit + bits - 1) // 8
+    word = np.zeros(rows.shape[0], dtype=np.uint64)
+    for k in range(first, last + 1):
+        word = (word << np.uint64(8)) | rows[:, k].astype(np.uint64)
+    shift = np.uint64(8 * (last + 1) - bit - bits)
+    mask = np.uint64((1 << bits) - 1) << shift
+    word = (word & ~mask) | ((value.astype(np.uint64) << shift) & mask)
+    for k in range(last, first - 1, -1):
+        rows[:, k] = (word & np.uint64(0xFF)).astype(np.uint8)
+        word >>= np.uint64(8)
+
+
+def replicate(data: bytes, copies: int, out: Path, shift: Callable[[np.ndarray, np.ndarray, int], None],
+              block: int = 500) -> None:
+    """Write ``copies`` copies of a packet file; shift(rows, copy_index, packet_offset) moves each copy's time;
+    sequence counts continue per APID across copies."""
+    off, _, apid = _packets(data)
+    base = np.frombuffer(data, np.uint8)
+    per_apid = {int(a): np.flatnonzero(apid == a) for a in np.unique(apid)}
+    with out.open("wb") as f:
+        for start in range(0, copies, block):
+            k = np.arange(start, min(start + block, copies), dtype=np.int64)
+            rows = np.tile(base, (k.size, 1))
+            for a, members in per_apid.items():
+                for j, i in enumerate(members.tolist()):
+                    _put(rows, 8 * int(off[i]) + 18, 14, (k * members.size + j) % 16384)
+                    if a in shift.apids:  # type: ignore[attr-defined]
+                        shift(rows, k, int(off[i]))
+            f.write(rows.tobytes())
+
+
+def _calendar_shift(dictionary) -> Callable:
+    """Copy k of a CYGNSS file: hour k % 24, day of year 1 + k // 24 % 360, year 1990 + k // 8640."""
+    fields = {a: {p.name.rsplit("_", 1)[-1]: p for p in d.parameters if "_HDR_" in p.name}
+              for a, d in dictionary.packets.items()}
+
+    def shift(rows: np.ndarray, k: np.ndarray, offset: int) -> None:
+        a = ((int(rows[0, offset]) & 7) << 8) | int(rows[0, offset + 1])
+        f = fields[a]
+        _put(rows, 8 * offset + f["YEAR"].bit_offset, 12, 1990 + k // 8640)
+        _put(rows, 8 * offset + f["DAY"].bit_offset, 9, 1 + (k // 24) % 360)
+        _put(rows, 8 * offset + f["HOUR"].bit_offset, 5, k % 24)
+
+    shift.apids = set(fields)  # type: ignore[attr-defined]
+    return shift
+
+
+def _coarse_shift(apids: set[int], bit: int, step_s: int) -> Callable:
+    """Copy k: the 32-bit coarse counter at ``bit`` (from the packet start) + k * step_s."""
+    def shift(rows: np.ndarray, k: np.ndarray, offset: int) -> None:
+        first = offset + bit // 8
+        coarse = (rows[:, first : first + 4].astype(np.int64) * (1 << np.arange(24, -8, -8))).sum(axis=1)
+        _put(rows, 8 * offset + bit, 32, coarse + k * step_s)
+
+    shift.apids = apids  # type: ignore[attr-defined]
+    return shift
+
+
+def _cds_day_shift() -> Callable:
+    """Copy k of the NOAA-20 diary: CDS day + k."""
+    def shift(rows: np.ndarray, k: np.ndarray, offset: int) -> None:
+        day = rows[:, offset + 6].astype(np.int64) * 256 + rows[:, offset + 7]
+        _put(rows, 8 * offset + 48, 16, day + k)
+
+    shift.apids = {11}  # type: ignore[attr-defined]
+    return shift
+
+
+def ours(path: Path, dictionary, workdir: Path) -> tuple[float, int]:
+    """Seconds and samples of decode + archive (fresh SQLite) of a packet file."""
+    from telemetry.archive import Archive
+    from telemetry.packet_files import ingest_packet_file
+
+    from telemetry.decoding import decode_stream
+
+    with path.open("rb") as f:
+        decode_stream(f.read(1 << 16), dictionary, final=False)  # numba kernels loaded before timing
+    url = f"sqlite:///{workdir / f'{path.stem}.db'}"
+    with Archive(url) as archive:
+        t0 = time.perf_counter()
+        report, stored = ingest_packet_file(archive, path, dictionary, satellite="BENCH", uploaded_by="bench")
+        elapsed = time.perf_counter() - t0
+    assert stored is not None and stored.packets_accepted == report.packets_accepted, report.reason_counts()
+    return elapsed, report.samples_accepted
+
+
+def ccsdspy_mixed(path: Path, definitions: dict[int, Path]) -> tuple[float, int]:
+    """ccsdspy: split the mixed file by APID, load each defined APID with its CSV; seconds and values decoded."""
+    import ccsdspy
+    from ccsdspy.utils import split_by_apid
+
+    t0 = time.perf_counter()
+    streams = split_by_apid(str(path))
+    samples = 0
+    for apid, csv in definitions.items():
+        try:
+            packet = ccsdspy.FixedLength.from_file(str(csv))
+        except ValueError:
+            packet = ccsdspy.VariableLength.from_file(str(csv))
+        result = packet.load(streams[apid])
+        samples += sum(np.asarray(v).size if v.dtype != object else sum(x.size for x in v) for v in result.values())
+    return time.perf_counter() - t0, samples
+
+
+def spp_parse(path: Path, xtce: Path, skip: int = 0) -> tuple[float, int]:
+    """space_packet_parser: every packet parsed with the XTCE; seconds and numeric values decoded."""
+    import space_packet_parser as spp
+
+    definition = spp.load_xtce(xtce)
+    data = path.read_bytes()
+    t0 = time.perf_counter()
+    packets = [definition.parse_bytes(raw) for raw in spp.ccsds_generator(data, skip_header_bytes=skip)]
+    elapsed = time.perf_counter() - t0
+    return elapsed, sum(sum(not isinstance(v.raw_value, bytes) for v in p.values()) for p in packets)
+
+
+def line(name: str, size: int, mine: tuple[float, int], theirs: tuple[float, int], peer: str) -> None:
+    ours_rate, peer_rate = mine[1] / mine[0], theirs[1] / theirs[0]
+    print(f"{name:<44} {size / 1e6:6.1f} MB  ours {ours_rate / 1e6:7.2f} M samples/s ({mine[1]:,} in {mine[0]:.2f} s)"
+          f"  {peer} {peer_rate / 1e6:7.3f} M/s ({theirs[1]:,} in {theirs[0]:.2f} s)"
+          f"  ratio {ours_rate / peer_rate:6.1f}x")
+
+
+def cases(mb: float, workdir: Path) -> None:
+    from telemetry.dictionary import load_dictionary
+
+    cygnss = load_dictionary(DATA / "cygnss_f7" / "ccsdspy", time_fields=CYGNSS_TIME)
+    path = workdir / "cygnss.tlm"
+    data = CYGNSS_STREAM.read_bytes()
+    replicate(data, int(mb * 1e6 / len(data)), path, _calendar_shift(cygnss))
+    defs = {a: DATA / "cygnss_f7" / "ccsdspy" / f"apid{a:05d}.csv" for a in cygnss.packets}
+    line("CYGNSS mixed, 6 fixed APIDs, ccsdspy CSV", path.stat().st_size, ours(path, cygnss, workdir),
+         ccsdspy_mixed(path, defs), "ccsdspy")
+    ecm_dir = DATA / "europa_clipper_ecm" / "defs"
+    for apid, label in ((1227, "ECM 1227 fixed 24-bit, ccsdspy CSV"), (1223, "ECM 1223 variable (expand), ccsdspy")):
+        dictionary = load_dictionary(ecm_dir / f"apid{apid:05d}.csv", apid=apid, time_fields=ECM_TIME)
+        data = (DATA / "europa_clipper_ecm" / "ecm_raw2.bin").read_bytes()
+        path = workdir / f"ecm{apid}.bin"
+        replicate(data, int(mb * 1e6 / len(data)), path, _coarse_shift({apid}, 48, 1000))
+        line(label, path.stat().st_size, ours(path, dictionary, workdir),
+             ccsdspy_mixed(path, {apid: ecm_dir / f"apid{apid:05d}.csv"}), "ccsdspy")
+    if SHARED.exists():
+        noaa = load_dictionary("noaa20_apid11_xtce.yaml")
+        path = workdir / "noaa.dat"
+        data = (SHARED / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
+        replicate(data, max(int(mb * 1e6 / len(data)), 1), path, _cds_day_shift())
+        line("NOAA-20 fixed, XTCE", path.stat().st_size, ours(path, noaa, workdir),
+             spp_parse(path, SHARED / "jpss1_geolocation_xtce_v1.xml"), "spp")
+    imap = DATA / "imap_idex_suda"
+    idex = load_dictionary(imap / "suda_combined_science_definition.xml", time_fields=IMAP_TIME)
+    data = (imap / "sciData_2023_052_14_45_05").read_bytes()
+    path = workdir / "idex.bin"
+    replicate(data, max(int(mb / 10 * 1e6 / len(data)), 1), path, _coarse_shift({1424}, 48, 10_000))
+    line("IDEX polymorphic variable, XTCE (spp path)", path.stat().st_size,
+         ours(path, idex, workdir), spp_parse(path, imap / "suda_combined_science_definition.xml"), "spp")
+
+
+def memory(gb: float, workdir: Path) -> None:
+    """Peak RSS of ``acs-twin ingest`` (decode + archive to SQLite) of a CYGNSS mixed file of ``gb`` GB."""
+    from telemetry.dictionary import load_dictionary
+
+    cygnss = load_dictionary(DATA / "cygnss_f7" / "ccsdspy", time_fields=CYGNSS_TIME)
+    path = workdir / "big.tlm"
+    data = CYGNSS_STREAM.read_bytes()
+    replicate(data, int(gb * 1e9 / len(data)), path, _calendar_shift(cygnss), block=2000)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "backend", "ingest", str(path), "--dictionary",
+                           str(DATA / "cygnss_f7" / "ccsdspy"), "--time-fields", CYGNSS_TIME, "--satellite", "BIG",
+                           "--db", f"sqlite:///{workdir / 'big.db'}", "--user", "bench"],
+                          capture_output=True, text=True, cwd=ROOT)
+    elapsed = time.perf_counter() - t0
+    peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    report = json.loads(done.stdout)
+    print(f"memory: {path.stat().st_size / 1e9:.2f} GB mixed CYGNSS file, acs-twin ingest peak RSS {peak_mb:.0f} MB "
+          f"(before: {before / 1024:.0f} MB), {report['archive']['packets_accepted']:,} packets, "
+          f"{report['archive']['samples_accepted']:,} samples in {elapsed:.0f} s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mb", type=float, default=40.0, help="size of each replicated file (MB)")
+    parser.add_argument("--memory-gb", type=float, default=0.0, help="also measure peak RSS for a file this large")
+    parser.add_argument("--skip-throughput", action="store_true")
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        if not args.skip_throughput:
+            cases(args.mb, Path(tmp))
+        if args.memory_gb:
+            memory(args.memory_gb, Path(tmp))
+
+
+if __name__ == "__main__":
+    main()
