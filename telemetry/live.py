@@ -389,6 +389,8 @@ class LiveStream:
                 arrived.clear()
                 self._process_complete(buffer, peer)
                 await asyncio.sleep(DECODE_INTERVAL_S)
+        except asyncio.CancelledError:
+            pass  # stop(): end quietly (a cancelled connection task makes asyncio's stream callback log a traceback)
         finally:
             receiving.cancel()
             self._process_complete(buffer, peer)

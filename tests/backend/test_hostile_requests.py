@@ -87,7 +87,8 @@ def test_pass_prediction_over_two_millennia_is_refused_by_span(server: Server, s
     lines = (shared_data / TLE_FILE).read_text().splitlines()
     at = lines.index("NOAA 20 (JPSS-1)")
     assert server.http.post("/ground-stations", json=STATION).status_code == 201
-    assert server.http.post("/satellites/NOAA-20/tles", content=f"{lines[at + 1]}\n{lines[at + 2]}\n").status_code == 201
+    tle = f"{lines[at + 1]}\n{lines[at + 2]}\n"
+    assert server.http.post("/satellites/NOAA-20/tles", content=tle).status_code == 201
     for start in ("0001-01-01T00:00:00Z", "1700-01-01T00:00:00Z", "2020-01-01T00:00:00Z"):
         answer = server.bounded(f"pass prediction {start[:4]} to 2026", "POST", "/satellites/NOAA-20/passes/predict",
                                 params={"station": "Fairbanks", "start": start, "end": "2026-01-01T00:00:00Z"})

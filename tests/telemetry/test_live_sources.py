@@ -7,6 +7,7 @@ deliver nothing at all, an allowed one everything.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 import pytest
 
@@ -24,10 +25,8 @@ def _deliver(sources: tuple[str, ...]) -> tuple[int, int, int]:
         stream = LiveStream(dictionary, allowed_sources=sources)
         subscriber = stream.subscribe()
         port = await stream.start()
-        try:
+        with contextlib.suppress(ConnectionError):  # a refused peer may see its connection reset mid-send
             await send(port, raw)
-        except ConnectionError:
-            pass  # a refused peer may see its connection reset mid-send
         await asyncio.sleep(SETTLE_S)
         await stream.stop()
         delivered = sum(len(m.batch.sequence_count) for m in drain(subscriber))
@@ -48,3 +47,23 @@ def test_a_peer_outside_the_allow_list_delivers_nothing() -> None:
 def test_a_bad_network_is_named() -> None:
     with pytest.raises(ValueError, match="allowed_sources"):
         source_networks(["10.0.0.300/8"])
+
+
+def test_stopping_with_a_sender_connected_logs_nothing() -> None:
+    """A stop of the server used to print asyncio's traceback for each open connection (issue 16)."""
+    errors: list[dict] = []
+
+    async def scenario() -> None:
+        asyncio.get_running_loop().set_exception_handler(lambda _, context: errors.append(context))
+        stream = LiveStream(reference())
+        port = await stream.start()
+        _, writer = await asyncio.open_connection("127.0.0.1", port)
+        writer.write(packets(reference().packets[HK_APID], 5, seed=4).tobytes())
+        await writer.drain()
+        await asyncio.sleep(SETTLE_S)
+        await stream.stop()
+        await asyncio.sleep(0.1)
+        writer.close()
+
+    asyncio.run(scenario())
+    assert errors == []
