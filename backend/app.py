@@ -6,11 +6,12 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from fastapi.responses import HTMLResponse, RedirectResponse
 
 from backend.core.errors import install_error_handlers
 from backend.core.request_bounds import JsonBodyBounds
-from backend.services import build_services
 from backend.core.settings import Settings
+from backend.services import build_services
 
 __all__ = ["create_app", "monitor_urls", "API_PREFIX"]
 
@@ -23,10 +24,10 @@ Errors are JSON `{"message", "field", "status"}`."""
 
 
 def _routers() -> list:
-    from backend.routes import (alarms, diagnoses, health, live, parameters, passes, satellites, simulations,
-                                telemetry, tokens, twin)
+    from backend.routes import (alarms, console, diagnoses, health, live, parameters, passes, satellites,
+                                simulations, telemetry, tokens, twin)
 
-    return [health.router, tokens.router, telemetry.router, parameters.router, passes.router,
+    return [health.router, tokens.router, telemetry.router, console.router, parameters.router, passes.router,
             alarms.router, simulations.router, twin.router, live.router, satellites.router, diagnoses.router]
 
 
@@ -37,7 +38,8 @@ def monitor_urls(settings: Settings) -> dict[str, str]:
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
-    """A new app with its own database engine, job manager and live hub; the dashboard at /dashboard."""
+    """A new app with its own database engine, job manager and live hub; the dashboard at / and /dashboard,
+    the API documentation at /docs (vendored Swagger UI, works offline)."""
     settings = settings or Settings()
     services = build_services(settings)
 
@@ -54,13 +56,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             services.twins.stop()
             services.close()
 
-    app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan)
+    app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan, docs_url=None,
+                  redoc_url=None)
     app.state.services = services
     install_error_handlers(app)
     app.add_middleware(JsonBodyBounds, max_bytes=int(settings.max_json_kb * 1000))
     for router in _routers():
         app.include_router(router, prefix=API_PREFIX)
-    from frontend.dashboard_site import dashboard_app
+    from frontend.dashboard_site import dashboard_app, offline_docs_html
+
+    @app.get("/", include_in_schema=False)
+    def root() -> RedirectResponse:
+        return RedirectResponse("/dashboard/")
+
+    @app.get("/docs", include_in_schema=False)
+    def docs() -> HTMLResponse:
+        return offline_docs_html(app.openapi_url or "/openapi.json", app.title)
 
     app.mount("/dashboard", dashboard_app(monitor_urls(settings), API_PREFIX))
     return app

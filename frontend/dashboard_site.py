@@ -8,9 +8,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["DASHBOARD_DIR", "dashboard_app", "dashboard_config"]
+__all__ = ["DASHBOARD_DIR", "SWAGGER_UI", "dashboard_app", "dashboard_config", "offline_docs_html"]
 
 DASHBOARD_DIR = Path(__file__).resolve().parent / "dashboard"
+SWAGGER_UI = "/dashboard/vendor/swagger-ui"  # vendored Swagger UI (see its PROVENANCE.md), served with the dashboard
 
 
 def dashboard_config(monitor_urls: dict[str, str] | None = None, api_base: str = "/api/v1") -> dict:
@@ -40,3 +41,12 @@ def dashboard_app(monitor_urls: dict[str, str] | None = None, api_base: str = "/
         Route("/config.json", config_json),
         Mount("/", StaticFiles(directory=DASHBOARD_DIR, html=True)),
     ])
+
+
+def offline_docs_html(openapi_url: str, title: str):
+    """Swagger UI page for the API, its script and style from the vendored copy instead of a CDN."""
+    from fastapi.openapi.docs import get_swagger_ui_html
+
+    return get_swagger_ui_html(openapi_url=openapi_url, title=f"{title} — API", swagger_favicon_url="data:,",
+                               swagger_js_url=f"{SWAGGER_UI}/swagger-ui-bundle.js",
+                               swagger_css_url=f"{SWAGGER_UI}/swagger-ui.css")

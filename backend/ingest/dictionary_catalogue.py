@@ -128,3 +128,41 @@ class DictionaryCatalogue:
             _write_atomically(self._folder / f"{name}.meta.json", json.dumps(meta).encode())
             self._cache[name] = dictionary
         return dictionary, previous + 1
+
+    def describe(self, archived: dict[str, int]) -> dict[str, dict[str, Any]]:
+        """Units, description, enumeration and limits of archived parameters ({name: APID}).
+
+        The archive does not record which dictionary decoded a sample, so each name takes its entry from the
+        dictionary that defines the most of the satellite's (name, APID) pairs; ties go to the first by file
+        name. Names no known dictionary defines are left out; an unreadable dictionary is skipped.
+        """
+        wanted = set(archived.items())
+        best: list[tuple[int, str, dict[tuple[str, int], dict[str, Any]]]] = []
+        for name in self.names():
+            try:
+                entries = _entries(self.load(name))
+            except Exception:  # noqa: BLE001 - one broken upload must not hide the others' units
+                continue
+            best.append((-len(wanted & entries.keys()), name, entries))
+        described: dict[str, dict[str, Any]] = {}
+        for _, _, entries in sorted(best, key=lambda b: (b[0], b[1])):
+            for key in wanted & entries.keys():
+                described.setdefault(key[0], entries[key])
+        return described
+
+
+def _limits(limits: Any) -> dict[str, float | None]:
+    return {k: getattr(limits, k) for k in ("yellow_low", "yellow_high", "red_low", "red_high")}
+
+
+def _entries(dictionary: Any) -> dict[tuple[str, int], dict[str, Any]]:
+    """(name, APID) -> JSON-ready entry of every raw and derived parameter of a dictionary."""
+    entries = {}
+    for apid, packet in dictionary.packets.items():
+        for p in packet.parameters:
+            entries[(p.name, apid)] = {"units": p.units, "description": p.description, "limits": _limits(p.limits),
+                                       "enumeration": {str(k): v for k, v in p.enumeration.items()} or None}
+        for d in packet.derived:
+            entries[(d.name, apid)] = {"units": d.units, "description": d.description, "limits": _limits(d.limits),
+                                       "enumeration": None}
+    return entries

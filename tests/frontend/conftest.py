@@ -30,7 +30,7 @@ name: NOAA-20 with a limit on the attitude scalar
 packets:
   - name: JPSS_ATT_EPHEM
     apid: 11
-    layout_from: {ccsdspy_csv: ccsdspy_jpss1_geolocation.csv}
+    layout_from: {ccsdspy_csv: jpss1_geolocation_upload.csv}
     time_code: {format: CDS, day_octets: 2, submillisecond_octets: 2, epoch_utc: "1958-01-01T00:00:00Z"}
     derived:
       - {name: q0_watch, kind: alias, inputs: [ADCFAQ4], limits: {yellow_high: 0.9, red_high: 0.99}}
@@ -142,7 +142,8 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
                params={"station": "Svalbard", "start": DIARY_START, "end": DIARY_END}).raise_for_status()
         passes = c.post("/api/v1/satellites/NOAA-20/passes/reception").json()
         layout = (shared_data / NOAA20_PACKETS.parent / "ccsdspy_jpss1_geolocation.csv").read_bytes()
-        c.post("/api/v1/dictionaries/ccsdspy_jpss1_geolocation.csv?apid=11", content=layout).raise_for_status()
+        # shipped dictionaries are read-only: an operator uploads the same layout under a name of their own
+        c.post("/api/v1/dictionaries/jpss1_geolocation_upload.csv?apid=11", content=layout).raise_for_status()
         c.post("/api/v1/dictionaries/limited.yaml", content=LIMITED_DICTIONARY.encode()).raise_for_status()
         c.post(f"/api/v1/telemetry/uploads?satellite={ALARM_SATELLITE}&dictionary=limited.yaml",
                content=(shared_data / NOAA20_PACKETS).read_bytes()).raise_for_status()
