@@ -119,9 +119,8 @@ def _cds_day_shift() -> Callable:
 def ours(path: Path, dictionary, workdir: Path) -> tuple[float, int]:
     """Seconds and samples of decode + archive (fresh SQLite) of a packet file."""
     from telemetry.archive import Archive
-    from telemetry.packet_files import ingest_packet_file
-
     from telemetry.decoding import decode_stream
+    from telemetry.packet_files import ingest_packet_file
 
     with path.open("rb") as f:
         decode_stream(f.read(1 << 16), dictionary, final=False)  # numba kernels loaded before timing

@@ -1,0 +1,94 @@
+"""Upload responsiveness (issue 12): GET /health latency while a large packet file is uploaded to the server.
+
+    .venv/bin/python benchmarks/upload_health.py [--mb 200]
+
+Starts ``acs-twin serve`` (its own process, SQLite, auth on; benchmarks/api_load.py helpers), uploads the
+CYGNSS FM07 L0 stream (tests/data) replicated to --mb MB with every copy shifted in time (all packets
+new) against a ccsdspy CSV dictionary uploaded with its time fields, and meanwhile asks GET /api/v1/health
+every 20 ms from another thread. Prints the health p50/p99/max during the upload, the upload time and the
+archive's tally. Target: p99 < 100 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from api_load import free_port, make_tokens, start_server  # noqa: E402
+from foreign import CYGNSS_STREAM, CYGNSS_TIME, DATA, _calendar_shift, replicate  # noqa: E402
+
+
+def poll_health(base: str, stop: threading.Event, out: list[float]) -> None:
+    """Latency (s) of GET /health every 20 ms until stop is set."""
+    with httpx.Client(timeout=30) as client:
+        while not stop.is_set():
+            t0 = time.perf_counter()
+            client.get(f"{base}/health")
+            out.append(time.perf_counter() - t0)
+            time.sleep(0.02)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mb", type=float, default=200.0)
+    args = parser.parse_args()
+    from telemetry.dictionary import load_dictionary
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        cygnss = load_dictionary(DATA / "cygnss_f7" / "ccsdspy", time_fields=CYGNSS_TIME)
+        path = work / "upload.tlm"
+        data = CYGNSS_STREAM.read_bytes()
+        replicate(data, int(args.mb * 1e6 / len(data)), path, _calendar_shift(cygnss), block=2000)
+        data_dir = work / "data"
+        tokens = make_tokens(data_dir)
+        port = free_port()
+        server = start_server(data_dir, port, free_port())
+        base = f"http://127.0.0.1:{port}/api/v1"
+        operator = {"Authorization": f"Bearer {tokens['operator']}"}
+        try:
+            layout = (DATA / "cygnss_f7" / "ccsdspy" / "apid00393.csv").read_bytes()
+            made = httpx.post(f"{base}/dictionaries/cygnss_adcsio.csv",
+                              params={"apid": 393, "time_fields": CYGNSS_TIME},
+                              content=layout, headers=operator, timeout=60)
+            made.raise_for_status()
+            idle: list[float] = []
+            stop = threading.Event()
+            for _ in range(50):
+                t0 = time.perf_counter()
+                httpx.get(f"{base}/health")
+                idle.append(time.perf_counter() - t0)
+            busy: list[float] = []
+            poller = threading.Thread(target=poll_health, args=(base, stop, busy))
+            poller.start()
+            t0 = time.perf_counter()
+            with path.open("rb") as f:
+                answer = httpx.post(f"{base}/telemetry/uploads",
+                                    params={"satellite": "CYGNSS-FM07", "dictionary": "cygnss_adcsio.csv"},
+                                    content=f, headers=operator, timeout=3600)
+            elapsed = time.perf_counter() - t0
+            stop.set()
+            poller.join()
+            answer.raise_for_status()
+            archive = answer.json()["archive"]
+            ms = np.array(busy) * 1e3
+            size_mb = path.stat().st_size / 1e6
+            print(f"upload of {size_mb:.0f} MB: {elapsed:.1f} s, {archive['packets_accepted']:,} packets "
+                  f"archived ({archive['samples_accepted']:,} samples); health during it: {len(ms)} requests, "
+                  f"p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms, max {ms.max():.1f} ms "
+                  f"(idle p50 {np.median(idle) * 1e3:.1f} ms)")
+        finally:
+            server.terminate()
+            server.wait(30)
+
+
+if __name__ == "__main__":
+    main()
