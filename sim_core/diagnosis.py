@@ -64,7 +64,8 @@ PRUNE_SIGMA = 3.0  # a wheel whose balance stays within 3σ (+ quantisation) is 
 INVALID_PROBABILITY = 1e-4  # a healthy star tracker's invalid samples (Sun or Moon in the field of view)
 MAX_REMAINING_GAIN = 0.95  # a gain loss smaller than 5 % is "none" at this resolution
 MAX_LISTED = 12
-PAIR_PRIOR_LOG_ODDS = math.log(20.0)  # two wheel faults at once: 1/20 the prior of one
+UNRESOLVED_FRICTION_NM = 1.0  # no data after the onset: a friction would have to be absurd to show
+PAIR_PRIOR_LOG_ODDS = math.log(100.0)  # two wheel faults within one diagnosis window: 1/100 the prior of one
 FDIR_MISS_LOG_ODDS = math.log(1e4)  # the onboard FDIR isolates a healthy wheel at most once in 10^4 isolations
 ROTOR_TOLERANCE = 0.02  # torque → speed known within 2 %: rotor inertia and motor torque constant tolerances
 COUPLING_TOLERANCE = 0.5  # an estimated body rate lags a sudden change by up to half a sample at 1 Hz
@@ -330,7 +331,11 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
     if kind == "friction":
         def at(theta: float) -> np.ndarray:
             return run(base + theta * after * ch.templates["friction"], zero_off, no_reset)
-        return _quadratic_max(at, 0.0, np.inf, scale=1e-3)
+        # a friction that does not move the wheel by one tachometer count after its onset is not resolved
+        per_nm = np.abs(after * ch.templates["friction"]).sum(axis=1)
+        with np.errstate(divide="ignore"):
+            resolvable = np.where(per_nm > 0.0, ch.bound / per_nm, UNRESOLVED_FRICTION_NM)
+        return _quadratic_max(at, 0.0, np.inf, scale=1e-3, min_abs=resolvable)
 
     def at_bias(theta: float) -> np.ndarray:  # speed, gyro or magnetometer bias: a step in the measurement
         return run(base, theta * after_sample, no_reset)
@@ -339,7 +344,8 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
                           min_abs=ch.bound)
 
 
-def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0, min_abs: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0,
+                   min_abs: float | np.ndarray = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi] and |θ| ≥ min_abs."""
     if np.isfinite(hi) and np.isfinite(lo):
         p0, p1, p2 = lo, 0.5 * (lo + hi), hi
