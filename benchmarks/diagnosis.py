@@ -29,6 +29,7 @@ SCENARIO = "somov-ge4-scan"
 DURATION_S = 1200.0
 ONSET_RANGE_S = (150.0, 800.0)
 CATEGORIES = ("failure", "gain_loss", "friction", "stuck", "double", "gyro_bias", "star_tracker_outage", "none")
+CHUNK = 40
 TYPE_CODES = {"failure": "failure", "gain_loss": "gain", "friction": "friction", "stuck": "stuck"}
 
 
@@ -217,7 +218,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         run_case(cases[0])  # warm this process too
         start = time.perf_counter()
-        outcomes = cluster.map_cases(client, run_case, cases)
+        outcomes = []
+        for i in range(0, len(cases), CHUNK):  # chunks, so that a long campaign reports as it goes
+            outcomes += cluster.map_cases(client, run_case, cases[i:i + CHUNK])
+            part = score(outcomes)
+            print(f"  {len(outcomes)} cases: top-1 {100 * part['top1']:.1f} %, top-3 {100 * part['top3']:.1f} %, "
+                  f"{time.perf_counter() - start:.0f} s", flush=True)
         wall_dask = time.perf_counter() - start
         sub = cases[: args.serial_cases]
         start = time.perf_counter()
