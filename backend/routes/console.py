@@ -11,12 +11,11 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import ServicesDep, ViewerDep
 from backend.routes.alarms import ShelveRequest
+from backend.twin.live import STALE_S
 from backend.twin.twin_sessions import GPS_MARGIN_S
 
 router = APIRouter(tags=["console"], responses=ERROR_RESPONSES)
 
-# a satellite is stale when its newest sample is older than this: ten periods of 1 Hz housekeeping
-STALE_AFTER_S = 10.0
 SEVERITIES = {"yellow": "warning", "red": "critical"}
 
 
@@ -27,7 +26,7 @@ def constants(services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     shelve = ShelveRequest.model_fields["duration_s"].metadata
     return {
         "gps_margin_s": GPS_MARGIN_S,
-        "stale_after_s": STALE_AFTER_S,
+        "stale_after_s": STALE_S,  # the live twin's own threshold: one home for "stale"
         "max_points": settings.max_points,
         "ws_rate_hz": settings.ws_rate_hz,
         "shelve_max_s": next(m.le for m in shelve if getattr(m, "le", None) is not None),

@@ -8,7 +8,7 @@ import time
 
 from fastapi.testclient import TestClient
 
-from backend.routes.console import STALE_AFTER_S
+from backend.twin.live import STALE_S
 from backend.twin.twin_sessions import GPS_MARGIN_S
 from tests.backend.conftest import bearer
 
@@ -30,7 +30,7 @@ def _upload_fault_flag(client: TestClient, token: str, values: list[float]) -> d
 
 def test_constants_are_the_servers_own(client: TestClient, tokens: dict[str, str]) -> None:
     body = client.get("/api/v1/constants", headers=bearer(tokens["viewer"])).json()
-    assert body["gps_margin_s"] == GPS_MARGIN_S and body["stale_after_s"] == STALE_AFTER_S
+    assert body["gps_margin_s"] == GPS_MARGIN_S and body["stale_after_s"] == STALE_S
     assert body["severities"] == {"yellow": "warning", "red": "critical"} and body["shelve_max_s"] == 30 * 86_400
     assert client.get("/api/v1/constants").status_code == 401
 

@@ -18,7 +18,7 @@ packets:
   - name: CONSOLE_HK
     apid: 300
     period_s: 1.0
-    packet_octets: 50
+    packet_octets: 54
     time_code: {{format: CUC, coarse_octets: 4, fine_octets: 2, time_scale: UTC, epoch: "2000-01-01T00:00:00Z"}}
     parameters:
       - {{name: temp_probe_degc, type: float, bits: 32, units: degC, description: "probe temperature"}}
@@ -33,6 +33,8 @@ packets:
       - {{name: q_ib_3, type: float, bits: 32, units: '1', description: "q_ib z"}}
       - {{name: fault_wheel_1, type: uint, bits: 8, description: "FDIR: wheel 1 isolated",
          enumeration: {{0: OK, 1: FAULT}}, limits: {{yellow_high: 0.5, red_high: 0.5}}}}
+      - {{name: twin_attitude_residual_arcsec, type: float, bits: 32, units: arcsec,
+         description: "actual vs twin attitude (named as the live twin archives it)"}}
 """
 COLUMNS = [
     "temp_probe_degc",
@@ -45,6 +47,7 @@ COLUMNS = [
     "q_ib_2",
     "q_ib_3",
     "fault_wheel_1",
+    "twin_attitude_residual_arcsec",
 ]
 N = 600  # ten minutes at 1 Hz
 FLIP_AT = 300  # the quaternion's sign flips here (same attitude, other hemisphere)
@@ -68,6 +71,7 @@ def history(end_unix_s: float, n: int = N) -> tuple[np.ndarray, dict[str, np.nda
         "q_ib_2": q[2],
         "q_ib_3": q[3],
         "fault_wheel_1": np.zeros(n),
+        "twin_attitude_residual_arcsec": 3.0 + np.sin(20 * phase),
     }
     return t, values
 

@@ -19,6 +19,7 @@ import httpx
 import numpy as np
 import pytest
 
+from backend.twin.live import STALE_S as STALE_AFTER_S  # the threshold the page reads from /constants
 from tests.frontend import console_data as data
 from tests.frontend.conftest import _start_uvicorn, free_port
 
@@ -31,7 +32,6 @@ VIEWPORTS = [{"width": 1280, "height": 720}, {"width": 1920, "height": 1080}]
 LOAD_MS = 20_000
 TICK_MARGIN_PX = 4  # the label must fit inside the axis box with this much to spare
 ISO_UTC = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d{3})?Z$"
-STALE_AFTER_S = 10.0  # backend/routes/console.py STALE_AFTER_S
 LIVE_AGE_S = 7.0  # a live sample this old is fresh, and stale a few seconds later
 
 
@@ -136,6 +136,10 @@ def test_tick_labels_keep_their_sign_and_fit_and_values_carry_units(browser, con
         assert "THREE_AXIS" in axes["mode"]["ticks"]
         q = np.array(axes["q_ib_0"]["y"])
         assert np.max(np.abs(np.diff(q))) < 0.01 and "hemisphere-continuous" in axes["q_ib_0"]["title"]
+        # residuals (actual - twin) are plotted beside the telemetry without being asked for
+        residual = page.evaluate(AXIS_JS, "#residual-plots")
+        assert [a["title"].split(" ")[0] for a in residual] == ["twin_attitude_residual_arcsec"]
+        assert residual[0]["label"] == "arcsec"
         # the whole window: the newest archived sample is the last one plotted
         assert abs(axes["temp_probe_degc"]["t"][-1] - console["end"]) < 1e-3
 

@@ -192,11 +192,18 @@ async function loadTwin() {
   showTwin(twin);
 }
 
+/** The live twin's state in one line (GET /satellites/{name}/twin and the WebSocket topic "twin"). */
 function showTwin(twin) {
   if (!twin) { fill($("twin-state")); return; }
   const residual = twin.attitude_residual_arcsec;
-  fill($("twin-state"), `twin: ${residual === null || residual === undefined ? "no ACS model configured" : `attitude residual ${residual.toFixed(1)} arcsec`}`,
-    twin.twin_utc ? ` · twin at ${twin.twin_utc}` : "", twin.telemetry_utc ? ` · telemetry at ${twin.telemetry_utc}` : "");
+  const parts = [`twin ${twin.state || "?"}`];
+  if (residual !== null && residual !== undefined) parts.push(`attitude residual ${residual.toFixed(1)} arcsec`);
+  else parts.push(twin.model_note || "no ACS model configured");
+  if (Number.isFinite(twin.twin_behind_telemetry_s)) parts.push(`${twin.twin_behind_telemetry_s.toFixed(1)} s behind telemetry`);
+  if (twin.issues && twin.issues.length) parts.push(`${twin.issues.length} input issue(s): ${twin.issues[0].message}`);
+  const box = $("twin-state");
+  box.className = twin.stale ? "stale" : "";
+  fill(box, parts.join(" · "));
 }
 
 on("plotted", ({ first, last }) => trimLiveWindow(first, last));
