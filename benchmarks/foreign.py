@@ -79,17 +79,30 @@ def replicate(data: bytes, copies: int, out: Path, shift: Callable[[np.ndarray, 
             f.write(rows.tobytes())
 
 
-def _calendar_shift(dictionary) -> Callable:
-    """Copy k of a CYGNSS file: hour k % 24, day of year 1 + k // 24 % 360, year 1990 + k // 8640."""
+def _calendar_shift(dictionary, step_s: int = 120) -> Callable:
+    """Copy k of a CYGNSS file: every packet's calendar time + k * step_s (the file spans 75 s: copies follow on)."""
     fields = {a: {p.name.rsplit("_", 1)[-1]: p for p in d.parameters if "_HDR_" in p.name}
               for a, d in dictionary.packets.items()}
 
+    def get(row: np.ndarray, bit: int, bits: int) -> int:
+        first, last = bit // 8, (bit + bits - 1) // 8
+        word = int.from_bytes(row[first : last + 1].tobytes(), "big")
+        return (word >> (8 * (last + 1) - bit - bits)) & ((1 << bits) - 1)
+
     def shift(rows: np.ndarray, k: np.ndarray, offset: int) -> None:
         a = ((int(rows[0, offset]) & 7) << 8) | int(rows[0, offset + 1])
-        f = fields[a]
-        _put(rows, 8 * offset + f["YEAR"].bit_offset, 12, 1990 + k // 8640)
-        _put(rows, 8 * offset + f["DAY"].bit_offset, 9, 1 + (k // 24) % 360)
-        _put(rows, 8 * offset + f["HOUR"].bit_offset, 5, k % 24)
+        f = {name: (8 * offset + p.bit_offset, p.bit_length) for name, p in fields[a].items()}
+        year, doy, hour, minute, sec = (get(rows[0], *f[n]) for n in ("YEAR", "DAY", "HOUR", "MIN", "SEC"))
+        start = np.datetime64(f"{year}-01-01T00:00:00", "s") + np.timedelta64(
+            (doy - 1) * 86_400 + hour * 3_600 + minute * 60 + sec, "s")
+        t = start + (k * step_s).astype("timedelta64[s]")
+        years = t.astype("datetime64[Y]")
+        _put(rows, *f["YEAR"], years.astype(np.int64) + 1970)
+        _put(rows, *f["DAY"], (t.astype("datetime64[D]") - years.astype("datetime64[D]")).astype(np.int64) + 1)
+        of_day = (t - t.astype("datetime64[D]")).astype(np.int64)
+        _put(rows, *f["HOUR"], of_day // 3_600)
+        _put(rows, *f["MIN"], of_day // 60 % 60)
+        _put(rows, *f["SEC"], of_day % 60)
 
     shift.apids = set(fields)  # type: ignore[attr-defined]
     return shift
@@ -192,7 +205,7 @@ def cases(mb: float, workdir: Path) -> None:
         noaa = load_dictionary("noaa20_apid11_xtce.yaml")
         path = workdir / "noaa.dat"
         data = (SHARED / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
-        replicate(data, max(int(mb * 1e6 / len(data)), 1), path, _cds_day_shift())
+        replicate(data, max(int(mb / 4 * 1e6 / len(data)), 1), path, _cds_day_shift())  # spp: ~0.1 M values/s
         line("NOAA-20 fixed, XTCE", path.stat().st_size, ours(path, noaa, workdir),
              spp_parse(path, SHARED / "jpss1_geolocation_xtce_v1.xml"), "spp")
     imap = DATA / "imap_idex_suda"
