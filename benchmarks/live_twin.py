@@ -1,6 +1,6 @@
 """Live twin benchmark (issue 11): a fleet of emulated satellites at 1 Hz, each with its live twin, in real time.
 
-    .venv/bin/python benchmarks/live_twin.py [--satellites 100] [--seconds 90] [--no-archive-telemetry]
+    .venv/bin/python benchmarks/live_twin.py [--satellites 100] [--seconds 150] [--no-archive-telemetry] [--exact-model]
     .venv/bin/python benchmarks/live_twin.py --startup       # acs-twin serve --no-auth: API, demo twin, monitors
 
 Fleet: one nominal flight of the reference satellite (somov-ge4-scan, emulated, ACS_HK thinned to 1 Hz + GPS at
@@ -40,13 +40,14 @@ TELEMETRY_COMMIT_S = 5  # each satellite's telemetry committed every 5 s (the li
 TARGET_LAG_P99_S = 2.0
 
 
-def _flight(seconds: float) -> list:
-    """Decoded nominal flight: ACS_HK thinned to 1 Hz, GPS_NAV at 1 Hz."""
+def _flight(seconds: float, exact_model: bool = False) -> list:
+    """Decoded nominal flight: ACS_HK thinned to 1 Hz, GPS_NAV at 1 Hz; the satellite flies its own truth
+    (telemetry.emulator.TruthTolerances) unless ``exact_model``."""
     from telemetry.decoding import decode_stream
     from telemetry.dictionary import load_dictionary
-    from telemetry.emulator import demo_pass_bytes
+    from telemetry.emulator import emulate
 
-    data = demo_pass_bytes("somov-ge4-scan", 0.0, seconds, [], start_utc=EPOCH)
+    data = emulate("somov-ge4-scan", [], seconds, EPOCH, truth_seed=None if exact_model else 0)[2].data
     batches = decode_stream(data, load_dictionary("reference_satellite.yaml"), source="bench").batches
     out = []
     for b in batches:
@@ -92,7 +93,7 @@ class _Hub:
         return topic == "twin"
 
 
-def fleet(n_satellites: int, seconds: int, archive_telemetry: bool) -> None:
+def fleet(n_satellites: int, seconds: int, archive_telemetry: bool, exact_model: bool = False) -> None:
     """Stream the fleet in real time through LiveTwins and print lag, CPU and residual figures."""
     from backend.twin.live import LiveTwins
     from telemetry.archive import Archive
@@ -100,7 +101,7 @@ def fleet(n_satellites: int, seconds: int, archive_telemetry: bool) -> None:
 
     flight_s = SETTLE_S + seconds + 5
     t_build = time.perf_counter()
-    batches = _flight(flight_s)
+    batches = _flight(flight_s, exact_model)
     print(f"emulated flight of {flight_s:.0f} s in {time.perf_counter() - t_build:.1f} s")
     t0_ns = int(min(b.t_utc_ns[0] for b in batches))
     with tempfile.TemporaryDirectory() as tmp:
@@ -271,11 +272,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=int, default=150)
     parser.add_argument("--no-archive-telemetry", action="store_true")
     parser.add_argument("--startup", action="store_true")
+    parser.add_argument("--exact-model", action="store_true", help="the satellite flies the twin's model exactly")
     args = parser.parse_args()
     if args.startup:
         startup()
     else:
-        fleet(args.satellites, args.seconds, not args.no_archive_telemetry)
+        fleet(args.satellites, args.seconds, not args.no_archive_telemetry, args.exact_model)
 
 
 if __name__ == "__main__":

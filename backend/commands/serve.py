@@ -147,6 +147,9 @@ def run(args: argparse.Namespace) -> int:
     def on_started() -> None:  # the one-time admin token is issued only once the server really is up
         _announce(settings, app.state.services)
         port = app.state.services.telemetry.live_port
+        if not args.no_emulator:  # the demo satellite's route starts with the emulator's flight
+            app.state.services.twins.register_model(settings.live_satellite, args.emulator_scenario, None,
+                                                    from_run=True)
         emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario, port)
         if emulator is not None:
             children["emulator"] = emulator
@@ -187,9 +190,9 @@ def _announce(settings: Any, services: Any) -> None:
 
 
 def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading.Event) -> threading.Thread:
-    """Thread: the demo twin session and its 3D monitors once telemetry has arrived (see backend.twin.demo_twin)."""
+    """Thread: the 3D monitors on the demo satellite's live twin once its first samples arrived (demo_twin)."""
     from backend.app import monitor_urls
-    from backend.twin.demo_twin import TWIN_S, WARMUP_S, run_demo_twin
+    from backend.twin.demo_twin import run_demo_twin
 
     ports = {role: int(url.rsplit(":", 1)[1]) for role, url in monitor_urls(settings).items()}
     thread = threading.Thread(target=run_demo_twin, args=(services, ports, scenario, stop),
@@ -197,6 +200,5 @@ def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading
     thread.start()
     urls = ", ".join(f"{role} {url}" for role, url in monitor_urls(settings).items())
     gate = "open with ?token=<API token>, " if settings.auth_enabled else ""
-    print(f"  monitors  {urls} ({gate}after ~{WARMUP_S + TWIN_S:.0f} s of telemetry; "
-          f"log {settings.data_dir / 'twin.log'})")
+    print(f"  monitors  {urls} ({gate}live twin, once the first packets arrived; log {settings.data_dir / 'twin.log'})")
     return thread

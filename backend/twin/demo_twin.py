@@ -1,39 +1,25 @@
-"""The twin that ``acs-twin serve`` runs beside the demo satellite, shown on the 3D monitors.
+"""The 3D monitors ``acs-twin serve`` runs beside its live satellite: they follow the satellite's live twin.
 
-Once the live satellite has sent enough telemetry (GPS fixes for the orbit fit plus a stretch to
-compare), a nominal twin session is aligned to it and flown; its SessionFeed then drives the
-monitors (frontend.monitors). Runs in a daemon thread; every step is logged to data_dir/twin.log.
+No one-shot replay: the demo satellite is just the first satellite with a live twin (backend.twin.live). Its
+route starts with each run of telemetry (the emulator starts with the server), so the twin is told so; once
+the twin holds attitude and GPS samples the monitors start on a LiveFeed in live follow (a few seconds behind
+real time; STALE in the alarm list when telemetry stops), viser on private loopback ports behind the token gate
+(backend.twin.monitor_gate) on the public ones. Runs in a daemon thread; steps are logged to data_dir/twin.log.
 """
 
 from __future__ import annotations
 
 import threading
-import time
 from datetime import UTC, datetime
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from backend.schemas import TwinSessionCreate, TwinSessionPublic
     from backend.services import Services
     from frontend.monitors import MonitorHandles
 
-__all__ = ["run_demo_twin", "WARMUP_S", "TWIN_S"]
+__all__ = ["run_demo_twin", "POLL_S"]
 
-WARMUP_S = 60.0  # GPS fixes the orbit fit needs before the alignment instant (twin_sessions.GPS_MARGIN_S)
-TWIN_S = 120.0  # simulated seconds of the demo twin (compared with as much telemetry)
-POLL_S = 5.0
-HK_APID = 256  # reference satellite ACS_HK
-
-
-def _telemetry_span_ns(services: Services, satellite: str) -> tuple[int, int] | None:
-    from backend.core.errors import ApiError
-
-    try:
-        keys = services.telemetry.archive.packet_keys(satellite, 0, 2**62, apid=HK_APID)
-    except (ValueError, ApiError):  # archive not open yet, or nothing archived for the satellite yet
-        return None
-    t = keys.get(HK_APID, (None,))[0]
-    return None if t is None or t.size == 0 else (int(t[0]), int(t[-1]))
+POLL_S = 0.5  # how often the start-up checks whether the live twin has its first samples
 
 
 def _log(services: Services, text: str) -> None:
@@ -41,53 +27,35 @@ def _log(services: Services, text: str) -> None:
         log.write(f"{datetime.now(UTC).isoformat()} {text}\n")
 
 
-def _start_when_admitted(services: Services, body: TwinSessionCreate,
-                         stop: threading.Event) -> TwinSessionPublic | None:
-    """The twin session, retried while the job queue is full (429) instead of giving up; None if stopped."""
-    from backend.core.errors import ApiError
-    from backend.twin.session_service import start_session
-
-    while not stop.is_set():
-        try:
-            return start_session(services, body, "acs-twin serve")
-        except ApiError as exc:
-            if exc.status != 429:
-                raise
-            _log(services, f"job queue full, retrying the twin session in {POLL_S:g} s")
-            stop.wait(POLL_S)
-    return None
-
-
 def run_demo_twin(services: Services, monitor_ports: dict[str, int], scenario: str,
                   stop: threading.Event) -> MonitorHandles | None:
-    """Wait for telemetry, start a nominal twin session, wait for it, serve the monitors; their handles."""
-    from backend.schemas import TwinSessionCreate
+    """Wait for the live satellite's first samples, serve the monitors on its live twin in live follow; handles."""
+    from backend.twin.live_feed import LiveFeed
     from backend.twin.monitor_gate import MonitorGate
-    from backend.twin.session_service import session_feed
     from frontend.monitors import serve_monitors
 
     satellite = services.settings.live_satellite
+    twins = services.twins
+
+    def alarms() -> list[Any]:
+        archive = services.telemetry.opened_archive()
+        try:
+            return [] if archive is None else list(archive.alarms(satellite))
+        except ValueError:  # nothing archived for the satellite yet
+            return []
+
     while not stop.is_set():
-        span = _telemetry_span_ns(services, satellite)
-        if span is not None and (span[1] - span[0]) / 1e9 >= WARMUP_S + TWIN_S:
+        recent = twins.recent(satellite)
+        if recent and recent["t_ns"].size >= 2 and recent["gps_t_ns"].size >= 3:
             break
         stop.wait(POLL_S)
     else:
         return None
-    align = datetime.fromtimestamp((span[0] + WARMUP_S * 1e9) / 1e9, tz=UTC)
-    epoch = datetime.fromtimestamp(span[0] / 1e9, tz=UTC)  # the emulator flies from its first packet
-    body = TwinSessionCreate(satellite=satellite, dictionary=services.settings.live_dictionary,
-                             scenario=scenario, align_utc=align, duration_s=TWIN_S, scenario_epoch_utc=epoch)
-    session = _start_when_admitted(services, body, stop)
-    if session is None:
-        return None
-    _log(services, f"twin session {session.id} aligned at {align.isoformat()}, job {session.job_id}")
-    while (job := services.job_repo.get(session.job_id)) is not None and job.status in ("queued", "running") \
-            and not stop.is_set():
-        time.sleep(1.0)
-    feed = session_feed(services, session.id)
+    feed = LiveFeed(twins, satellite, alarms)
     handles = serve_monitors(feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0))  # private ports
+    handles.clock.follow_live(True)
     for role, public in monitor_ports.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
         MonitorGate(services.auth, services.settings.host, public, handles.ports[role]).start()
-    _log(services, f"monitors: {monitor_ports} (token-gated) -> viser on {handles.ports}")
+    _log(services, f"monitors on the live twin of {satellite} ({scenario}): {monitor_ports} (token-gated) -> "
+                   f"viser on {handles.ports}")
     return handles

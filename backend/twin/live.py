@@ -188,8 +188,10 @@ class LiveTwin:
         model: Scenario | None,
         epoch_ns: int | None = None,
         resync_s: float = RESYNC_S,
+        epoch_from_run: bool = False,
     ) -> None:
         self.mapping, self.model, self._epoch_ns, self._resync_s = mapping, model, epoch_ns, resync_s
+        self._epoch_from_run = epoch_from_run  # the route starts with each run of telemetry (an emulator's flight)
         self.state = TwinState(
             satellite, mapping.dictionary, mapping.acs_model if model is not None else None, state=WAITING
         )
@@ -200,6 +202,8 @@ class LiveTwin:
         self._gps: dict[str, np.ndarray] = {}
         self._segment: Segment | None = None
         self._last_forced_ns = -(2**62)
+        self._twin_t = np.empty(0, np.int64)
+        self._twin_q = np.empty((0, 4))
 
     # --- bad input -------------------------------------------------------------------------------
     def report(self, kind: str, message: str, t_ns: int | None = None) -> None:
@@ -228,6 +232,8 @@ class LiveTwin:
         self._t, self._hk, self._q = np.empty(0, np.int64), {}, np.empty((0, 4))
         self._segment = None
         self.state.state = WAITING
+        if self._epoch_from_run:
+            self._epoch_ns = None
 
     def _add_gps(self, batch: Any) -> None:
         cols = self._columns(batch, self.mapping.orbit_parameters())
@@ -437,6 +443,11 @@ class LiveTwin:
         s.rate_residual_b_rad_s = [float(c[-1]) for c in columns[1:4]]
         s.wheel_speed_residual_rad_s = [float(c[-1]) for c in columns[4:]]
         s.samples_compared += int(t.size)
+        keep = self._twin_t < t[0]  # a re-sync after time went back replaces what the twin said there
+        self._twin_t = np.concatenate([self._twin_t[keep], t])
+        self._twin_q = np.concatenate([self._twin_q[keep], q_twin])
+        first = int(np.searchsorted(self._twin_t, self._twin_t[-1] - int(RECENT_S * NS_PER_S)))
+        self._twin_t, self._twin_q = self._twin_t[first:], self._twin_q[first:]
         return {"t_utc_ns": t, **dict(zip(names, columns))}
 
     def _first_exceedance(self, res: dict[str, np.ndarray], seg: Segment) -> int | None:
@@ -452,6 +463,20 @@ class LiveTwin:
         t = res["t_utc_ns"]
         hits = hits[t[hits] - max(seg.start_ns, self._last_forced_ns) >= MIN_RESYNC_S * NS_PER_S]
         return None if hits.size == 0 else int(hits[0]) + EXCEED_SAMPLES
+
+    def recent(self) -> dict[str, Any]:
+        """Copies of the recent telemetry and twin samples (the live 3D monitors' feed): UTC ns times, actual and
+        twin q_ib, the mapped HK columns and the GPS fixes."""
+        return {
+            "t_ns": self._t.copy(),
+            "q_ib": self._q.copy(),
+            "hk": {n: c.copy() for n, c in self._hk.items()},
+            "twin_t_ns": self._twin_t.copy(),
+            "twin_q_ib": self._twin_q.copy(),
+            "gps_t_ns": self._gps_t.copy(),
+            "gps": {n: c.copy() for n, c in self._gps.items()},
+            "mapping": self.mapping,
+        }
 
     def public(self, now_unix_s: float) -> dict[str, Any]:
         """The twin state as JSON (see routes/satellites.py for the shape)."""
@@ -510,7 +535,7 @@ class LiveTwins:
         self._on_archived, self._clock = on_archived, clock
         self._folders = [*mapping_folders, SHIPPED_MAPPINGS]
         self._twins: dict[str, LiveTwin] = {}
-        self._models: dict[str, tuple[str, int | None]] = {}
+        self._models: dict[str, tuple[str, int | None, bool]] = {}
         self._inbox: queue.Queue = queue.Queue()
         self._pending: dict[str, list[dict[str, np.ndarray]]] = {}
         self._flushed_at: dict[str, float] = {}
@@ -523,10 +548,11 @@ class LiveTwins:
         self._stop = threading.Event()
         self.latencies_s: deque = deque(maxlen=100_000)
 
-    def register_model(self, satellite: str, scenario: str, epoch_ns: int | None) -> None:
-        """Tell the twin of ``satellite`` when its route started (e.g. the demo emulator's start)."""
+    def register_model(self, satellite: str, scenario: str, epoch_ns: int | None, from_run: bool = False) -> None:
+        """Tell the twin of ``satellite`` its scenario and when its route started (``from_run``: with each run of
+        telemetry after a gap, like the demo emulator started with the server)."""
         with self._lock:
-            self._models[satellite] = (scenario, epoch_ns)
+            self._models[satellite] = (scenario, epoch_ns, from_run)
             self._twins.pop(satellite, None)
 
     def submit(self, satellite: str, dictionary_name: str, batches: Sequence[Any]) -> None:
@@ -563,6 +589,12 @@ class LiveTwins:
         """Satellites that have a twin."""
         with self._lock:
             return sorted(self._twins)
+
+    def recent(self, satellite: str) -> dict[str, Any] | None:
+        """The satellite twin's recent samples (LiveTwin.recent), None without a twin."""
+        with self._lock:
+            twin = self._twins.get(satellite)
+            return None if twin is None else twin.recent()
 
     def state(self, satellite: str) -> dict[str, Any] | None:
         """Public state of the twin of ``satellite`` (None if it has none)."""
@@ -602,16 +634,16 @@ class LiveTwins:
         if mapping is None:
             return twin
         mapping.check(self._dictionary(dictionary_name))
-        scenario, epoch_ns = self._models.get(satellite, (mapping.acs_model, None))
+        scenario, epoch_ns, from_run = self._models.get(satellite, (mapping.acs_model, None, False))
         model = None
         if scenario is not None:
             from sim_core import scenario_library
 
             model = scenario_library.get(scenario)
-            if epoch_ns is None:
+            if epoch_ns is None and not from_run:
                 epoch_ns = self._first_telemetry_ns(satellite)
         with self._lock:
-            self._twins[satellite] = twin = LiveTwin(satellite, mapping, model, epoch_ns)
+            self._twins[satellite] = twin = LiveTwin(satellite, mapping, model, epoch_ns, epoch_from_run=from_run)
         return twin
 
     def _first_telemetry_ns(self, satellite: str) -> int | None:

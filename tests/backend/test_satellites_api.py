@@ -12,7 +12,7 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.core.auth import Role
-from telemetry.emulator import demo_pass_bytes
+from telemetry.emulator import emulate
 from tests.backend.conftest import bearer, make_settings
 
 NOAA20 = Path("real/noaa20_jpss1_apid11")
@@ -25,7 +25,7 @@ STAR_TRACKER_SIGMA_ARCSEC = 3.0  # somov-ge4-scan
 @pytest.fixture(scope="module")
 def reference_pass() -> bytes:
     """Four minutes of the emulated reference satellite (nominal), as its packets."""
-    return demo_pass_bytes("somov-ge4-scan", 0.0, PASS_S, [], start_utc=EPOCH)
+    return emulate("somov-ge4-scan", [], PASS_S, EPOCH, truth_seed=None)[2].data
 
 
 def _upload(client: TestClient, token: str, satellite: str, dictionary: str, data: bytes) -> dict:

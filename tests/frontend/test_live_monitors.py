@@ -1,0 +1,115 @@
+"""The 3D monitors on a live twin (backend.twin.live_feed) in a real browser: in live follow the displayed instant
+moves on with the telemetry without a reload, and a STALE warning shows once it stops."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from backend.twin.live import STALE_S, LiveTwins
+from backend.twin.live_feed import LiveFeed
+from frontend.monitors import serve_monitors
+from telemetry.decoding import decode_stream
+from telemetry.dictionary import load_dictionary
+from telemetry.emulator import demo_pass_bytes
+from tests.frontend.conftest import free_port
+from tests.frontend.test_browser import PAINT_TIMEOUT_S, _displayed_utc, _wait_for
+
+pytestmark = pytest.mark.browser
+
+FLIGHT_S = 120
+FIRST_S = 40  # telemetry present before the monitors start (the orbit needs GPS fixes)
+FOLLOW_TOLERANCE_S = 3.0  # live follow shows the newest sample within the feed's snapshot and panel periods
+
+
+class _Clock:
+    """Wall clock that a test can move forward (to make the stream stale without waiting)."""
+
+    def __init__(self) -> None:
+        self.offset_s = 0.0
+
+    def __call__(self) -> float:
+        return time.time() + self.offset_s
+
+
+def _seconds() -> list[list]:
+    data = demo_pass_bytes("somov-ge4-scan", 0.0, float(FLIGHT_S), [], start_utc="2026-03-20T00:00:00Z")
+    batches = decode_stream(data, load_dictionary("reference_satellite.yaml"), source="test").batches
+    t0 = min(int(b.t_utc_ns[0]) for b in batches)
+    out = []
+    for k in range(FLIGHT_S):
+        lo, hi = t0 + k * 10**9, t0 + (k + 1) * 10**9
+        out.append(
+            [
+                dataclasses.replace(
+                    b,
+                    t_utc_ns=b.t_utc_ns[s],
+                    sequence_count=b.sequence_count[s],
+                    packets=None,
+                    values={n: np.asarray(v)[s] for n, v in b.values.items()},
+                )
+                for b in batches
+                if (s := (b.t_utc_ns >= lo) & (b.t_utc_ns < hi)).any()
+            ]
+        )
+    return out
+
+
+def _page_text(page) -> str:
+    return page.evaluate("() => document.body.innerText")
+
+
+def test_monitors_follow_the_live_twin_and_warn_when_it_goes_stale(browser):
+    clock = _Clock()
+    twins = LiveTwins(
+        lambda: None,
+        type("Hub", (), {"publish": lambda *a: None, "wants_any": lambda *a: False})(),
+        load_dictionary,
+        clock=clock,
+    )
+    twins.register_model("REFSAT", "somov-ge4-scan", None, from_run=True)
+    twins.start(recover=False)
+    seconds = _seconds()
+    for second in seconds[:FIRST_S]:
+        twins.submit("REFSAT", "reference_satellite.yaml", second)
+    twins.drain()
+    handles = serve_monitors(
+        LiveFeed(twins, "REFSAT", clock=clock), ports={r: free_port() for r in ("actual", "simulated", "overlay")}
+    )
+    handles.clock.follow_live(True)
+    stop = threading.Event()
+
+    def stream() -> None:  # one second of telemetry every 0.5 s of wall time
+        for second in seconds[FIRST_S:]:
+            if stop.wait(0.5):
+                return
+            twins.submit("REFSAT", "reference_satellite.yaml", second)
+
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    feeder = threading.Thread(target=stream, daemon=True)
+    try:
+        page.goto(handles.urls()["overlay"])
+        _wait_for(lambda: _displayed_utc(page) is not None, PAINT_TIMEOUT_S, "the monitor's panel")
+        first = _displayed_utc(page)
+        feeder.start()
+        feeder.join()
+        twins.drain()
+        newest = twins.state("REFSAT")["telemetry_utc"]
+        _wait_for(
+            lambda: _displayed_utc(page) == newest,
+            FOLLOW_TOLERANCE_S + 10.0,
+            f"the monitor at the newest sample {newest} (was {first})",
+        )
+        assert _displayed_utc(page) > first  # moved on by itself: no reload
+        assert "STALE" not in _page_text(page)
+        clock.offset_s = STALE_S + 5.0
+        _wait_for(lambda: "STALE" in _page_text(page), 15.0, "the stale warning")
+    finally:
+        stop.set()
+        page.close()
+        handles.stop()
+        twins.stop()
