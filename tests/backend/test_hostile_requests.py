@@ -76,7 +76,10 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
         yield running
     finally:
         process.send_signal(signal.SIGTERM)
-        process.wait(60)
+        try:
+            process.wait(120)
+        finally:
+            process.kill()
 
 
 def _field(response: httpx.Response) -> str:
@@ -93,10 +96,10 @@ def test_pass_prediction_over_two_millennia_is_refused_by_span(server: Server, s
         answer = server.bounded(f"pass prediction {start[:4]} to 2026", "POST", "/satellites/NOAA-20/passes/predict",
                                 params={"station": "Fairbanks", "start": start, "end": "2026-01-01T00:00:00Z"})
         assert answer.status_code == 422 and _field(answer) in ("start", "end"), answer.json()
-    fine = server.bounded("pass prediction of 31 days", "POST", "/satellites/NOAA-20/passes/predict",
-                          params={"station": "Fairbanks", "start": "2021-04-01T00:00:00Z",
-                                  "end": "2021-05-02T00:00:00Z"})
-    assert fine.status_code == 200 and len(fine.json()) > 30
+    fine = server.bounded("pass prediction of 7 days", "POST", "/satellites/NOAA-20/passes/predict",
+                          params={"station": "Fairbanks", "start": "2021-04-05T00:00:00Z",
+                                  "end": "2021-04-12T00:00:00Z"})
+    assert fine.status_code == 200 and len(fine.json()) > 7
 
 
 def test_csv_dictionary_with_a_hundred_million_element_array_is_refused(server: Server) -> None:
