@@ -178,8 +178,9 @@ class SampleBatch:
 
     @property
     def n_samples(self) -> int:
-        """Number of parameter samples (packets × parameters)."""
-        return len(self.t_utc_ns) * len(self.values)
+        """Number of parameter samples (packets × parameters, less the NaN where a layout lacks a parameter)."""
+        n = len(self.t_utc_ns)
+        return sum(n - int(np.count_nonzero(np.isnan(v))) if v.dtype.kind == "f" else n for v in self.values.values())
 
 
 @dataclass(frozen=True)

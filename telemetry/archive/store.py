@@ -362,7 +362,8 @@ class Archive:
                 continue
             self._write_chunks(conn, sat_id, upload_id, fresh)
             accepted += fresh.n_packets
-            samples += fresh.n_packets * len(fresh.values)
+            samples += sum(fresh.n_packets - int(np.count_nonzero(np.isnan(v))) if np.asarray(v).dtype.kind == "f"
+                           else fresh.n_packets for v in fresh.values.values())  # NaN: no such element
             gaps.extend(_gaps_of(fresh) if fresh.raw else [])  # ground files carry no sequence counts
             changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
         changes.sort(key=lambda c: c.t_ns)
