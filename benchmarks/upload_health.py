@@ -12,6 +12,8 @@ archive's tally. Target: p99 < 100 ms.
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
 import sys
 import tempfile
 import threading
@@ -22,8 +24,24 @@ import httpx
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from api_load import free_port, make_tokens, start_server  # noqa: E402
+from api_load import free_port, make_tokens  # noqa: E402
 from foreign import CYGNSS_STREAM, CYGNSS_TIME, DATA, _calendar_shift, replicate  # noqa: E402
+
+
+def start_server(data_dir: Path, port: int, deadline_s: float = 300.0) -> subprocess.Popen:
+    """``acs-twin serve`` in its own process (no live stream), waited for up to deadline_s (a loaded machine)."""
+    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_LIVE_ENABLED": "false"}
+    server = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(port)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        try:
+            httpx.get(f"http://127.0.0.1:{port}/api/v1/health", timeout=1.0)
+            return server
+        except httpx.TransportError:
+            time.sleep(0.5)
+    server.kill()
+    raise SystemExit("server did not start")
 
 
 def poll_health(base: str, stop: threading.Event, out: list[float]) -> None:
@@ -51,7 +69,7 @@ def main() -> None:
         data_dir = work / "data"
         tokens = make_tokens(data_dir)
         port = free_port()
-        server = start_server(data_dir, port, free_port())
+        server = start_server(data_dir, port)
         base = f"http://127.0.0.1:{port}/api/v1"
         operator = {"Authorization": f"Bearer {tokens['operator']}"}
         try:
