@@ -15,7 +15,13 @@ import queue
 import signal
 import threading
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from multiprocessing.queues import Queue
+    from multiprocessing.synchronize import Event
+
+    Outbox = Queue[tuple[str, Any]]  # ("port" | "error" | "batch" | "stats", payload) to the server
 
 __all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 
@@ -26,7 +32,7 @@ ORPHAN_EXIT_S = 20.0  # after SIGTERM the pending batches are archived within th
 
 
 def run_ingest_process(database_url: str, dictionaries_dir: str, dictionary: str, satellite: str, host: str,
-                       port: int, outbox: Any, stop: Any, sources: tuple[str, ...]) -> None:
+                       port: int, outbox: Outbox, stop: Event, sources: tuple[str, ...]) -> None:
     """Process entry: serve the live stream (packets only from ``sources``, CIDR) until ``stop`` is set or the
     server dies; ("port", n) or ("error", why) first."""
     from backend.core.processes import become_owned_child
@@ -37,14 +43,14 @@ def run_ingest_process(database_url: str, dictionaries_dir: str, dictionary: str
                        sources))
 
 
-def _stop_orphan(outbox: Any, stop: Any) -> None:
+def _stop_orphan(outbox: Outbox, stop: Event) -> None:
     """SIGTERM: archive what is pending, never wait for the server to read the outbox, exit within a bound."""
     outbox.cancel_join_thread()
     stop.set()
     threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,)).start()
 
 
-def _offer(outbox: Any, message: tuple, tally: dict[str, int]) -> None:
+def _offer(outbox: Outbox, message: tuple[str, Any], tally: dict[str, int]) -> None:
     try:
         outbox.put_nowait(message)
     except queue.Full:
@@ -52,7 +58,7 @@ def _offer(outbox: Any, message: tuple, tally: dict[str, int]) -> None:
 
 
 async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str, satellite: str, host: str,
-                 port: int, outbox: Any, stop: Any, sources: tuple[str, ...]) -> None:
+                 port: int, outbox: Outbox, stop: Event, sources: tuple[str, ...]) -> None:
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
     from telemetry.archive import Archive
     from telemetry.limits import dictionary_limits
