@@ -71,6 +71,7 @@ session.onUnauthorized = () => {
 
 async function boot() {
   clearTimeout(retryTimer);
+  if (session.token) { notice(null); await enter(); return; }  // a refused token or a silent server says so there
   let health;
   try {
     health = await api("/health");
@@ -180,11 +181,15 @@ async function selectSatellite(name) {
   loadPasses().catch((err) => setStatus(errorText(err), true));
   loadAlarms().catch((err) => setStatus(errorText(err), true));
   loadTwin();
+  // the archive's newest sample time (GET /satellites) lets the plots start before the latest values arrive
+  const listed = state.satellites.find((s) => s.name === name);
+  const known = listed && listed.latest_telemetry_utc ? Date.parse(listed.latest_telemetry_utc) / 1000 : null;
+  if (known !== null) followLive(known);
   const newest = await loadLatest(latest).catch((err) => { setStatus(errorText(err), true); return null; });
   if (newest !== null) state.lastPacketS[name] = Math.max(state.lastPacketS[name] ?? -Infinity, newest);
   renderAges();
   setStatus(`${name} · newest telemetry ${isoUtc(newest)}`);
-  followLive(newest);  // plots the newest telemetry (emits "window")
+  if (known === null) followLive(newest);  // plots the newest telemetry (emits "window")
 }
 
 async function loadTwin() {
