@@ -36,7 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 DIARY = REPO.parent / "shared/data/real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 PACKET_OCTETS = 71  # the diary's APID 11 packets
 SLICE_PACKETS = 600
-START_TIMEOUT_S = 180.0
+START_TIMEOUT_S = 300.0  # a loaded 2-core machine
 GONE_TIMEOUT_S = 25.0
 
 
