@@ -169,7 +169,7 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
         lost += max(accepted - count, 0)
     children = server.children()
     server.process.send_signal(signal.SIGTERM)
-    server.process.wait(60)
+    server.process.wait(300)
     leaked += len(wait_gone(children))
     return len(acknowledged), sum(acknowledged.values()), lost, leaked
 
@@ -182,7 +182,7 @@ def stop_trials(stops: int) -> int:
         server = Server(data_dir, free_port(), free_port(), free_port())
         children = server.children()
         server.process.send_signal(signal.SIGTERM if k % 2 == 0 else signal.SIGINT)
-        server.process.wait(60)
+        server.process.wait(300)
         left = wait_gone(children)
         leaked += len(left)
         print(f"  stop {k + 1}/{stops} ({'SIGTERM' if k % 2 == 0 else 'SIGINT'}): "
@@ -222,7 +222,7 @@ def health_during_upload(upload_mb: float, diary: bytes) -> tuple[float, float, 
     assert answer.status_code == 200, answer.text[:300]
     children = server.children(1)
     server.process.send_signal(signal.SIGTERM)
-    server.process.wait(60)
+    server.process.wait(300)
     wait_gone(children)
     return float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)), len(latencies), elapsed, rise
 
