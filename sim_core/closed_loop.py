@@ -358,7 +358,7 @@ def fly_variant(
     out_i = 0
     fdir_on = fdir_cfg[FD_ON] != 0.0
     rate_noise, nis_max, n_sigma = fdir_cfg[FD_RATE_NOISE], fdir_cfg[FD_NIS_MAX], fdir_cfg[FD_N_SIGMA]
-    wheel_fd = np.zeros((fdir.WHEEL_STATE_ROWS, nw))
+    wheel_fd = fdir.wheel_state_1(nw)
     star_fd = np.zeros(fdir.STAR_STATE_SIZE)
     star_fd[0:4] = np.nan
     gyro_fd = np.zeros(fdir.GYRO_STATE_SIZE)
@@ -366,6 +366,7 @@ def fly_variant(
     gyro_fd[fdir.GS_SIGMA_U] = times[12]
     sigma_u = times[12]
     mag_fd = np.full(fdir.MAG_STATE_SIZE, np.nan)
+    earth_fd = np.zeros(fdir.EARTH_STATE_SIZE)
     w_prev = np.zeros(3)
     md_torque = np.zeros(3)
     j_eff = p.inertia.copy()
@@ -449,6 +450,9 @@ def fly_variant(
                                                      gyro_noise, times[12], n_sigma, ev, n_ev)
                 if not st_ok:
                     nadir, earth_ok = _earth_sensor_nadir_1(faults, t, x, r)
+                    if fdir_on and earth_ok:
+                        earth_ok = fdir.earth_sensor_check_1(earth_fd, q_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD,
+                                                             ev, n_ev, t)
                     if fdir_on and earth_ok and st_raw_ok:
                         st_ok = fdir.star_readmit_1(star_fd, q_est, q_m, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD,
                                                     n_sigma, ev, n_ev, t)

@@ -65,9 +65,11 @@ __all__ = [
     "star_nis_threshold",
     "gaussian_sigmas",
     "wheel_state",
+    "wheel_state_1",
     "star_state",
     "gyro_state",
     "mag_state",
+    "ACC_WINDOWS_PERIODS",
     "wheel_bound_1",
     "wheel_residual_1",
     "wheel_decoupling_1",
@@ -77,9 +79,12 @@ __all__ = [
     "star_tracker_check_1",
     "star_readmit_1",
     "star_reset_1",
+    "earth_sensor_check_1",
+    "EARTH_STATE_SIZE",
     "gyro_drift_step_1",
     "magnetometer_check_1",
     "wheel_residuals",
+    "observable_time",
     "describe_event",
 ]
 
@@ -93,11 +98,13 @@ NUMERICAL_FLOOR_NMS = 1e-9  # momentum round-off of RK4 on N·m·s-sized states,
 MAG_MODEL_ERROR_T = 20e-9  # onboard field table vs truth: linear interpolation of a 30 s table, a few nT
 
 EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED = 1, 4, 5, 6
-T_GYRO, T_STAR, T_MAG = 1, 2, 4  # sim_core.closed_loop.TARGET_CODES
+T_GYRO, T_STAR, T_EARTH, T_MAG = 1, 2, 3, 4  # sim_core.faults.TARGET_CODES
 
 # Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
 WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR, WS_COUPLING, WS_W = range(9)
-WHEEL_STATE_ROWS = 11  # WS_W..WS_W+2: the body rate at the hold (same in every column)
+WS_ACC = 11  # accumulated tests: per window (length, stagger) rows Σ r, Σ bound without the quantum, periods
+ACC_WINDOWS_PERIODS = (15, 50, 150)  # 30 s, 100 s, 300 s at T_u = 2 s; each twice, staggered by half a length
+WHEEL_STATE_ROWS = WS_ACC + 3 * 2 * len(ACC_WINDOWS_PERIODS)  # WS_W..WS_W+2: body rate at the hold
 # Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
 # innovation (3), in-jump flag.
 SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM, SS_ZLAST = 0, 4, 5, 6, 9, 10, 11, 12, 15
@@ -109,6 +116,9 @@ NOISE_RATIO = 2.0  # scatter above 2σ (well beyond ±16 %) is noise; a jumped t
 GS_QINT, GS_QST0, GS_T0, GS_WPREV, GS_BREF = 0, 4, 8, 9, 12
 GS_N, GS_COUNT, GS_ISOLATED, GS_SIGMA_U, GS_TREF = 15, 16, 17, 18, 19
 GYRO_STATE_SIZE = 20
+# Earth-sensor state: consecutive rejections, isolated flag.
+ES_COUNT, ES_ISOLATED = 0, 1
+EARTH_STATE_SIZE = 2
 # Magnetometer state: time of the last rejected sample (NaN: none yet).
 MS_LAST = 0
 MAG_STATE_SIZE = 1
@@ -133,7 +143,16 @@ def wheel_state(n_wheels: int) -> np.ndarray:
     """Fresh wheel FDIR state (rows WS_*, one column per wheel)."""
     if n_wheels < 1:
         raise ValueError("n_wheels: must be at least 1")
-    return np.zeros((WHEEL_STATE_ROWS, n_wheels))
+    return wheel_state_1(n_wheels)
+
+
+@njit(cache=True)
+def wheel_state_1(n_wheels: int) -> np.ndarray:
+    """Compiled :func:`wheel_state`: zeros, the second window of each length started half-way."""
+    state = np.zeros((WHEEL_STATE_ROWS, n_wheels))
+    for i in range(len(ACC_WINDOWS_PERIODS)):
+        state[WS_ACC + 3 * (2 * i + 1) + 2, :] = ACC_WINDOWS_PERIODS[i] // 2
+    return state
 
 
 def star_state() -> np.ndarray:
@@ -198,6 +217,33 @@ def wheel_decoupling_1(axes: np.ndarray, inertia: np.ndarray, j_inv: np.ndarray)
 
 
 @njit(cache=True)
+def _clear_windows_1(state: np.ndarray, p: int) -> None:
+    """Restart the sums of wheel p's accumulated windows (their period counters keep the stagger)."""
+    for w in range(2 * len(ACC_WINDOWS_PERIODS)):
+        state[WS_ACC + 3 * w:WS_ACC + 3 * w + 2, p] = 0.0
+
+
+@njit(cache=True)
+def _accumulate_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum: float) -> bool:
+    """Add one period to every accumulated window of wheel p; True if one exceeds its bound.
+
+    Over a window the tachometer errors telescope (Σ J ΔΩ̃ = J (Ω̃_N − Ω̃_0), two readings each within
+    ±q/2: at most one quantum J q, exactly, so it needs no safety factor), while the missing momentum of a
+    dead or weak motor adds up; the other bound terms add up and keep WHEEL_SAFETY."""
+    hit = False
+    for i in range(len(ACC_WINDOWS_PERIODS)):
+        for s in range(2):
+            row = WS_ACC + 3 * (2 * i + s)
+            if state[row + 2, p] >= ACC_WINDOWS_PERIODS[i]:
+                state[row:row + 3, p] = 0.0
+            state[row, p] += r
+            state[row + 1, p] += b_rest
+            state[row + 2, p] += 1.0
+            hit = hit or abs(state[row, p]) > WHEEL_SAFETY * state[row + 1, p] + b_quantum
+    return hit
+
+
+@njit(cache=True)
 def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, inertia: np.ndarray,
                   max_momentum: np.ndarray, friction: np.ndarray, tach_q: float, t_u: float, decouple: np.ndarray,
                   available: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
@@ -213,7 +259,7 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, ine
     reconfiguration 4 → 3 → 2 + MD).
     """
     nw = speeds.shape[0]
-    raw, bound = np.zeros(nw), np.zeros(nw)
+    raw, bound, quantum = np.zeros(nw), np.zeros(nw), inertia * tach_q
     tested = np.zeros(nw, dtype=np.bool_)
     dw = 0.0
     for i in range(3):
@@ -235,12 +281,20 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, ine
     for p in range(nw):
         if not tested[p]:
             state[WS_COUNT, p] = 0.0
+            _clear_windows_1(state, p)
             continue
-        r, b = 0.0, 0.0
+        r, b, bq = 0.0, 0.0, 0.0
         for q in range(nw):
             r += decouple[p, q] * raw[q]
             b += abs(decouple[p, q]) * bound[q]
-        if abs(r) <= WHEEL_SAFETY * b:
+            bq += abs(decouple[p, q]) * quantum[q]
+        if b - bq > bq:  # the period is ruled by what the model cannot predict (a seizure's kick): not summed
+            _clear_windows_1(state, p)
+            accumulated = False
+        else:
+            accumulated = _accumulate_1(state, p, r, b - bq, bq)
+        exceeded = accumulated or abs(r) > WHEEL_SAFETY * b
+        if not exceeded:
             state[WS_COUNT, p] = 0.0
             continue
         state[WS_COUNT, p] += 1.0
@@ -405,6 +459,29 @@ def star_readmit_1(state: np.ndarray, q_est: np.ndarray, q_meas: np.ndarray, p_c
     state[SS_Z:SS_Z + 3] = 0.0
     _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_STAR + 2)
     return True
+
+
+@njit(cache=True)
+def earth_sensor_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, nadir_b: np.ndarray,
+                         nadir_ref_i: np.ndarray, sigma_earth: float, ev: np.ndarray, n_ev: np.ndarray,
+                         t: float) -> bool:
+    """Screen an earth-sensor nadir (seed 002 eq 14) against the MEKF's prediction: the NIS of the two-axis
+    angle |b̂ × b|² / (σ² + the largest attitude variance) above the χ²(2) quantile −2 ln P_FA is rejected;
+    ``CONFIRM_PERIODS`` rejections in a row isolate it (event argument SENSOR_ARG + 10·T_EARTH). True: use it."""
+    ref = nadir_ref_i / np.sqrt(nadir_ref_i @ nadir_ref_i)
+    pred = conjugate_rotate_1(q_est, ref)
+    d = np.cross(pred, nadir_b)
+    s2 = sigma_earth**2 + max(p_cov[0, 0], p_cov[1, 1], p_cov[2, 2])
+    if (d @ d) / s2 <= -2.0 * np.log(FALSE_ALARM_PROBABILITY):
+        state[ES_COUNT] = 0.0
+        return True
+    state[ES_COUNT] += 1.0
+    if state[ES_COUNT] == 1.0:
+        _emit(ev, n_ev, t, EV_DETECTED, SENSOR_ARG + 10 * T_EARTH)
+    if state[ES_COUNT] == CONFIRM_PERIODS and state[ES_ISOLATED] == 0.0:
+        state[ES_ISOLATED] = 1.0
+        _emit(ev, n_ev, t, EV_ISOLATED, SENSOR_ARG + 10 * T_EARTH)
+    return False
 
 
 @njit(cache=True)
@@ -619,7 +696,22 @@ def _residual_table(w, axial, m, j, f, q, rate_noise, t_u):
     return r, b
 
 
-_TARGET_NAMES = {1: "gyro", 2: "star_tracker", 4: "magnetometer"}
+def observable_time(t_s: np.ndarray, torque_cmd_nm: np.ndarray, torque_nm: np.ndarray, onset_s: float,
+                    inertia_kg_m2: float, tach_quantum_rad_s: float) -> float | None:
+    """When a wheel fault becomes observable: the first sample time at which the momentum it withheld,
+    |∫ (m_cmd − m_delivered) dt| from ``onset_s``, reaches one tachometer quantum of momentum J_r q (no reading
+    can tell less from quantisation); None if it never does. Series sampled uniformly at ``t_s``."""
+    t = np.asarray(t_s, dtype=float)
+    if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0.0):
+        raise ValueError("t_s: expected at least two increasing sample times")
+    after = t >= onset_s
+    gap = np.asarray(torque_cmd_nm, dtype=float)[after] - np.asarray(torque_nm, dtype=float)[after]
+    withheld = np.abs(np.cumsum(gap) * (t[1] - t[0]))
+    hit = np.nonzero(withheld >= inertia_kg_m2 * tach_quantum_rad_s)[0]
+    return float(t[after][hit[0]]) if hit.size else None
+
+
+_TARGET_NAMES = {1: "gyro", 2: "star_tracker", 3: "earth_sensor", 4: "magnetometer"}
 
 
 def describe_event(name: str, arg: int) -> str:
@@ -627,7 +719,7 @@ def describe_event(name: str, arg: int) -> str:
     if arg >= SENSOR_ARG:
         code, axis = divmod(arg - SENSOR_ARG, 10)
         sensor = _TARGET_NAMES.get(code, f"sensor {code}")
-        return sensor if name == "reconfigured" or code == T_STAR else f"{sensor} axis {'xyz'[axis]}"
+        return sensor if name == "reconfigured" or code in (T_STAR, T_EARTH) else f"{sensor} axis {'xyz'[axis]}"
     if name == "reconfigured":
         wheels = [str(p + 1) for p in range(8) if arg >> p & 1]
         return "wheels " + ",".join(wheels) if wheels else "no wheels"
