@@ -500,6 +500,7 @@ class LiveTwin:
             if s.twin_utc_ns is None or s.telemetry_utc_ns is None
             else (s.telemetry_utc_ns - s.twin_utc_ns) / 1e9,
             "synchronised_utc": _iso(s.synchronised_utc_ns),
+            "route_epoch_utc": _iso(self._epoch_ns) if self.model is not None else None,
             "horizon_utc": _iso(s.horizon_utc_ns),
             "actual_q_ib": s.actual_q_ib,
             "twin_q_ib": s.twin_q_ib,

@@ -7,6 +7,7 @@ simulation, compare its output with telemetry), so the demo twin and the API sha
 from __future__ import annotations
 
 import uuid
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -43,13 +44,48 @@ def session_public(services: Services, row: TwinSessionRow) -> TwinSessionPublic
                              progress=services.jobs.progress(row.job_id) or (job.progress if job else 0.0))
 
 
+def _live_defaults(services: Services, body: TwinSessionCreate) -> tuple[int, int | None]:
+    """(alignment instant, route epoch): align_utc or the live twin's newest synchronisation point, and the live
+    twin's route epoch (None: the library scenario's)."""
+    state = services.twins.state(body.satellite) or {}
+    epoch = state.get("route_epoch_utc")
+    epoch_ns = None if epoch is None else utc_ns(datetime.fromisoformat(epoch.replace("Z", "+00:00")), 0)
+    if body.align_utc is not None:
+        return utc_ns(body.align_utc, 0), epoch_ns
+    synced = state.get("synchronised_utc")
+    if synced is None:
+        raise ApiError(422, f"align_utc: the live twin of {body.satellite!r} has not synchronised yet; give align_utc",
+                       "align_utc")
+    return utc_ns(datetime.fromisoformat(synced.replace("Z", "+00:00")), 0), epoch_ns
+
+
+def _verdict(names: list[str], found: list[Residuals]) -> tuple[str | None, str]:
+    """The best-fitting variant among those whose RMS residuals stay within the live twin's limits, or none."""
+    from backend.twin.live import ATTITUDE_LIMIT_ARCSEC, WHEEL_LIMIT_RAD_S
+
+    limit_att, limit_wheel = ATTITUDE_LIMIT_ARCSEC * np.pi / 648_000.0, WHEEL_LIMIT_RAD_S
+    scores = {}
+    for name, r in zip(names, found):
+        if r.t_s.size == 0:
+            continue
+        att = float(np.sqrt(np.mean(r.attitude_rad**2)))
+        wheel = float(np.sqrt(np.mean(r.wheel_speed_rad_s**2)))
+        if att <= limit_att and wheel <= limit_wheel:
+            scores[name] = att / limit_att + wheel / limit_wheel
+    limits = f"attitude RMS <= {ATTITUDE_LIMIT_ARCSEC:g} arcsec, wheel RMS <= {WHEEL_LIMIT_RAD_S * 30 / np.pi:g} rpm"
+    if not scores:
+        return None, f"none fits: every variant leaves residuals beyond the sensors' noise ({limits})"
+    best = min(scores, key=scores.__getitem__)
+    return best, f"{best} fits best of {len(scores)} fitting variant(s) ({limits})"
+
+
 def start_session(services: Services, body: TwinSessionCreate, actor: str) -> TwinSessionPublic:
     """Align a twin to archived telemetry and queue its simulation; the session as answered by the API."""
-    align_ns = utc_ns(body.align_utc, 0)
+    align_ns, live_epoch_ns = _live_defaults(services, body)
     dictionary = services.telemetry.dictionaries.load(body.dictionary)
     track = actual_track_between(services.telemetry.archive, dictionary, body.satellite,
                                  align_ns - int(GPS_MARGIN_S * NS_PER_S), align_ns + int(body.duration_s * NS_PER_S))
-    epoch_ns = None if body.scenario_epoch_utc is None else utc_ns(body.scenario_epoch_utc, 0)
+    epoch_ns = live_epoch_ns if body.scenario_epoch_utc is None else utc_ns(body.scenario_epoch_utc, 0)
     t_align, scenario, options = twin_start(track, body.scenario, align_ns, body.duration_s, body.faults, epoch_ns,
                                             body.alternatives)
     job_id = services.jobs.submit(scenario, actor, options)
@@ -104,7 +140,9 @@ def session_residuals(services: Services, session_id: str, variant: int, max_poi
                                chosen.wheel_speed_rad_s * 30.0 / np.pi])
     keep = minmax_indices(columns, max_points) if chosen.t_s.size else np.arange(0)
     summaries = {name: r.summary() for name, r in zip(names, found)}
+    best, verdict = _verdict(names, found)
     return ResidualsPublic(session_id=session_id, variant=names[variant], summary=summaries[names[variant]],
+                           best_match=best, verdict=verdict,
                            summaries=summaries, t_s=chosen.t_s[keep].tolist(),
                            attitude_deg=columns[keep, 0].tolist(), rate_deg_s=columns[keep, 1].tolist(),
                            wheel_speed_rpm=columns[keep, 2:].tolist())

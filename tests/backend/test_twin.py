@@ -73,6 +73,13 @@ def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_de
         residuals = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals", headers=operator).json()
         nominal = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals?variant=1", headers=operator).json()
         feed = session_feed(client.app.state.services, right.json()["id"])
+        wrong = client.post("/api/v1/twin/sessions", headers=operator, json={  # every hypothesis names another wheel
+            "satellite": "REFSAT", "align_utc": align, "duration_s": TWIN_S, "faults": [f"wheel:3:failure@{0}"],
+            "alternatives": {"wheel-0-fails": ["wheel:0:failure@0"]}})
+        assert _wait(client, wrong.json()["id"], operator)["status"] == "succeeded"
+        none_fits = client.get(f"/api/v1/twin/sessions/{wrong.json()['id']}/residuals", headers=operator).json()
+    assert residuals["best_match"] == "twin" and residuals["verdict"].startswith("twin fits best")
+    assert none_fits["best_match"] is None and none_fits["verdict"].startswith("none fits")
     _check_feed(feed, residuals["summary"])
     right_summary, nominal_summary = residuals["summaries"]["twin"], residuals["summaries"]["nominal"]
     assert nominal["summary"] == nominal_summary and nominal["variant"] == "nominal"
