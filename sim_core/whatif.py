@@ -36,6 +36,7 @@ __all__ = [
     "TurnRate",
     "kappa_fraction",
     "configuration_table",
+    "pair_limit",
     "ROUTE_FLOWN_ARCSEC",
 ]
 
@@ -315,9 +316,38 @@ def kappa_fraction(scenario: Scenario, available: np.ndarray) -> float | None:
     return float(np.mean(np.abs(kappa) <= allocation.KAPPA_MAX))
 
 
+def pair_limit(traj: Trajectory, s: Scenario, v: int, mask: np.ndarray, kappa_fraction_: float) -> str:
+    """Why a wheel pair + MD misses the scanning accuracy, with figures (seed 000 §3): the pair has no torque
+    about e_pq = a_p × a_q, which only the MD gives, L × B ⊥ B, so a torque τ about e_pq needs
+    |L| ≥ |τ| / (|B| √(1 − κ²)) with κ = ⟨e_pq, b̂⟩, and the allocation uses the MD only where |κ| ≤ 1/2."""
+    axes = engine.plant_params(s).wheel_axes_b[:, np.asarray(mask, dtype=bool)]
+    e = np.cross(axes[:, 0], axes[:, 1])
+    e /= np.linalg.norm(e)
+    obs = traj["observing"][v] > 0
+    t0 = traj.extra["epoch_unix_s"]
+    b_eci = environment.magnetic_field_eci_t(traj["r_eci_m"][v, obs], t0 + traj.t_s[obs], s.magnetic_model)
+    b_body = np.array([conjugate_rotate_1(q, b) for q, b in zip(traj["q_ib"][v, obs], b_eci)])
+    b_norm = np.linalg.norm(b_body, axis=1)
+    kappa = b_body @ e / b_norm
+    tau = np.abs(traj["control_torque_b_nm"][v, obs] @ e)
+    need = tau / (b_norm * np.sqrt(np.maximum(1.0 - kappa**2, 1e-12)))
+    limit = s.spacecraft.md_max_dipole_am2
+    window = np.abs(kappa) <= allocation.KAPPA_MAX
+    parts = [f"MD allowed (|κ| ≤ 1/2) {window.mean():.0%} of the scan, {kappa_fraction_:.0%} of a nadir orbit"]
+    parts.append(f"torque about e_pq asked up to {tau.max():.2e} N·m, needing {need.max():.1f} A·m² "
+                 f"(limit {limit:.0f} A·m²)")
+    causes = []
+    if window.mean() < 1.0:
+        causes.append("geometry")
+    if need.max() > limit:
+        causes.append("dipole limit")
+    return f"{' and '.join(causes) or 'loop design'}: " + "; ".join(parts)
+
+
 def configuration_table(scenario: Scenario) -> list[dict]:
     """Seed 000 §3/§5 for every wheel configuration (nominal, 4 singles, 6 pairs + MD) from one batch:
-    pointing RMS/max while scanning, |κ| ≤ 1/2 orbit fraction, fastest feasible roll, route flown."""
+    pointing RMS/max while scanning, |κ| ≤ 1/2 orbit fraction, fastest feasible roll, route flown, and for a
+    pair that misses the scanning accuracy the reason with figures (:func:`pair_limit`)."""
     from sim_core.faults import configuration_variants
 
     variants, masks = configuration_variants(len(scenario.spacecraft.cluster.wheels))
@@ -342,4 +372,6 @@ def configuration_table(scenario: Scenario) -> list[dict]:
             "route_flown": bool(np.max(scan) <= ROUTE_FLOWN_ARCSEC and metrics["fault_mode_time_s"] == 0.0),
             "md_saturation_time_s": metrics["md_saturation_time_s"],
         })
+        rows[-1]["why_not_flown"] = None if rows[-1]["route_flown"] or mask.sum() != 2 else \
+            pair_limit(traj, s, v, mask, rows[-1]["kappa_fraction"])
     return rows

@@ -14,6 +14,7 @@ COLUMNS = (
     ("kappa_fraction", "orbit with \\|κ\\| ≤ 1/2", "{:.0%}"),
     ("max_roll_rate_deg_s", "fastest feasible roll (°/s)", "{:.3f}"),
     ("route_flown", "route flown", "{}"),
+    ("why_not_flown", "why not (pairs)", "{}"),
 )
 
 
