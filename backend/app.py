@@ -24,11 +24,35 @@ Errors are JSON `{"message", "field", "status"}`."""
 
 
 def _routers() -> list:
-    from backend.routes import (alarms, console, diagnoses, health, live, parameters, passes, satellites,
-                                simulations, telemetry, tokens, twin)
+    from backend.routes import (
+        alarms,
+        console,
+        diagnoses,
+        health,
+        live,
+        parameters,
+        passes,
+        satellites,
+        simulations,
+        telemetry,
+        tokens,
+        twin,
+    )
 
-    return [health.router, tokens.router, telemetry.router, console.router, parameters.router, passes.router,
-            alarms.router, simulations.router, twin.router, live.router, satellites.router, diagnoses.router]
+    return [
+        health.router,
+        tokens.router,
+        telemetry.router,
+        console.router,
+        parameters.router,
+        passes.router,
+        alarms.router,
+        simulations.router,
+        twin.router,
+        live.router,
+        satellites.router,
+        diagnoses.router,
+    ]
 
 
 def monitor_urls(settings: Settings) -> dict[str, str]:
@@ -56,8 +80,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             services.twins.stop()
             services.close()
 
-    app = FastAPI(title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan, docs_url=None,
-                  redoc_url=None)
+    app = FastAPI(
+        title="acs-twin", version="1", description=DESCRIPTION, lifespan=lifespan, docs_url=None, redoc_url=None
+    )
     app.state.services = services
     install_error_handlers(app)
     app.add_middleware(JsonBodyBounds, max_bytes=int(settings.max_json_kb * 1000))

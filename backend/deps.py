@@ -29,18 +29,22 @@ ServicesDep = Annotated[Services, Depends(get_services)]
 def require(role: Role) -> Callable[..., Awaitable[Principal]]:
     """Dependency: the caller's principal, 401 without a valid token, 403 below ``role``."""
 
-    async def check(services: ServicesDep,
-                    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> Principal:
+    async def check(
+        services: ServicesDep, credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]
+    ) -> Principal:
         token = credentials.credentials if credentials else None
         principal = services.auth.cached(token)
         if principal is None and token:
             principal = await run_in_threadpool(services.auth.resolve, token)
         if principal is None:
-            raise ApiError(401, "missing or unknown API token: send 'Authorization: Bearer <token>'",
-                           "Authorization", headers={"WWW-Authenticate": "Bearer"})
+            raise ApiError(
+                401,
+                "missing or unknown API token: send 'Authorization: Bearer <token>'",
+                "Authorization",
+                headers={"WWW-Authenticate": "Bearer"},
+            )
         if principal.role < role:
-            raise ApiError(403, f"role {principal.role.name} may not do this: needs {role.name}",
-                           "Authorization")
+            raise ApiError(403, f"role {principal.role.name} may not do this: needs {role.name}", "Authorization")
         return principal
 
     return check

@@ -11,10 +11,31 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, Field, create_model
 
 from telemetry.archive.records import AlarmRecord, PassRecord
 
-__all__ = ["DbId", "Health", "TokenCreate", "TokenPublic", "TokenIssued", "AuditPublic", "JobAccepted",
-           "JobPublic", "SeriesPublic", "FilePublic", "TwinSessionCreate", "TwinSessionPublic", "ResidualsPublic",
-           "SATELLITE_NAME", "PassPublic", "PassSummaryPublic", "AlarmActed", "SatelliteCreated", "TleStored",
-           "TlePublic", "IngestReportPublic", "DictionaryStored", "LatestValue"]
+__all__ = [
+    "DbId",
+    "Health",
+    "TokenCreate",
+    "TokenPublic",
+    "TokenIssued",
+    "AuditPublic",
+    "JobAccepted",
+    "JobPublic",
+    "SeriesPublic",
+    "FilePublic",
+    "TwinSessionCreate",
+    "TwinSessionPublic",
+    "ResidualsPublic",
+    "SATELLITE_NAME",
+    "PassPublic",
+    "PassSummaryPublic",
+    "AlarmActed",
+    "SatelliteCreated",
+    "TleStored",
+    "TlePublic",
+    "IngestReportPublic",
+    "DictionaryStored",
+    "LatestValue",
+]
 
 SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)
 
@@ -104,18 +125,30 @@ class TwinSessionCreate(BaseModel):
     satellite: str = Field("REFSAT", min_length=1, max_length=100)
     dictionary: str = Field("reference_satellite.yaml", max_length=130)
     scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
-    align_utc: datetime | None = Field(None, description="Start of the twin (the first ACS_HK sample at or after "
-                                       "it); default: the newest synchronisation point of the satellite's live twin.",
-                                       examples=["2026-03-20T00:05:00Z"])
+    align_utc: datetime | None = Field(
+        None,
+        description="Start of the twin (the first ACS_HK sample at or after "
+        "it); default: the newest synchronisation point of the satellite's live twin.",
+        examples=["2026-03-20T00:05:00Z"],
+    )
     duration_s: float = Field(gt=0, le=86_400, examples=[200.0])
-    alternatives: dict[str, list[str]] = Field(default_factory=dict, max_length=15,
-                                               examples=[{"nominal": [], "wheel-2-fails": ["wheel:2:failure@30"]}],
-                                               description="What-if variants flown from the same state.")
-    scenario_epoch_utc: datetime | None = Field(None, description="When the satellite started the scenario's "
-                                                "route (default: the live twin's, else the library scenario's epoch).")
-    faults: list[str] = Field(default_factory=list, max_length=16, examples=[["wheel:1:failure@50"]],
-                              description="Hypothesis, TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V] "
-                                          "(onset in s after align).")
+    alternatives: dict[str, list[str]] = Field(
+        default_factory=dict,
+        max_length=15,
+        examples=[{"nominal": [], "wheel-2-fails": ["wheel:2:failure@30"]}],
+        description="What-if variants flown from the same state.",
+    )
+    scenario_epoch_utc: datetime | None = Field(
+        None,
+        description="When the satellite started the scenario's "
+        "route (default: the live twin's, else the library scenario's epoch).",
+    )
+    faults: list[str] = Field(
+        default_factory=list,
+        max_length=16,
+        examples=[["wheel:1:failure@50"]],
+        description="Hypothesis, TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V] (onset in s after align).",
+    )
 
 
 class TwinSessionPublic(BaseModel):
@@ -145,21 +178,28 @@ class ResidualsPublic(BaseModel):
     attitude_deg: list[float]
     rate_deg_s: list[float]
     wheel_speed_rpm: list[list[float]] = Field(description="One column per wheel.")
-    best_match: str | None = Field(description="The variant closest to the telemetry among those that fit it (RMS "
-                                   "residuals within the live twin's sensor-noise limits); null when none fits.")
+    best_match: str | None = Field(
+        description="The variant closest to the telemetry among those that fit it (RMS "
+        "residuals within the live twin's sensor-noise limits); null when none fits."
+    )
     verdict: str = Field(description="Which variant fits best, or that none fits, with the limits used.")
 
 
 def _record_fields(record: type) -> dict[str, Any]:
     hints = get_type_hints(record)
-    return {f.name: (hints[f.name], ... if f.default is dataclasses.MISSING else f.default)
-            for f in dataclasses.fields(record)}
+    return {
+        f.name: (hints[f.name], ... if f.default is dataclasses.MISSING else f.default)
+        for f in dataclasses.fields(record)
+    }
 
 
 # every field of telemetry's PassRecord (kept in step with it), plus its completeness
-PassPublic = create_model("PassPublic", __doc__="A pass and what was received in it.",
-                          **_record_fields(PassRecord),
-                          completeness=(float, Field(description="Received / (received + missing) packets.")))
+PassPublic = create_model(
+    "PassPublic",
+    __doc__="A pass and what was received in it.",
+    **_record_fields(PassRecord),
+    completeness=(float, Field(description="Received / (received + missing) packets.")),
+)
 
 
 class PassSummaryPublic(BaseModel):
@@ -268,6 +308,9 @@ class DiagnosisPublic(BaseModel):
     status: Literal["running", "succeeded", "failed"]
     error: str | None = None
     created_by: str
-    result: dict[str, Any] | None = Field(None, description="hypotheses best first (fault, wheel, onset_utc, "
-                                          "onset_sigma_s, magnitude, score = posterior), confidence, detection, "
-                                          "suspected_wheels, untestable")
+    result: dict[str, Any] | None = Field(
+        None,
+        description="hypotheses best first (fault, wheel, onset_utc, "
+        "onset_sigma_s, magnitude, score = posterior), confidence, detection, "
+        "suspected_wheels, untestable",
+    )

@@ -7,18 +7,18 @@ from dataclasses import dataclass, field
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
+from backend.core.audit_repository import AuditRepository
 from backend.core.auth import Authenticator
 from backend.core.database import create_schema, make_engine, make_session_factory
-from backend.jobs.jobs import JobManager
-from backend.ingest.live_hub import LiveHub
-from backend.core.audit_repository import AuditRepository
-from backend.jobs.job_repository import JobRepository
-from backend.core.token_repository import TokenRepository
-from backend.twin.session_repository import TwinSessionRepository
 from backend.core.settings import Settings
+from backend.core.token_repository import TokenRepository
+from backend.ingest.live_hub import LiveHub
 from backend.ingest.telemetry_gateway import TelemetryGateway
+from backend.jobs.job_repository import JobRepository
+from backend.jobs.jobs import JobManager
 from backend.twin.diagnosis import DiagnosisRuns
 from backend.twin.live import LiveTwins
+from backend.twin.session_repository import TwinSessionRepository
 
 __all__ = ["Services", "build_services"]
 
@@ -58,10 +58,25 @@ def build_services(settings: Settings) -> Services:
     tokens, job_repo = TokenRepository(sessions), JobRepository(sessions)
     hub = LiveHub(settings.ws_buffer_items)
     telemetry = TelemetryGateway(settings, hub)
-    twins = LiveTwins(telemetry.opened_archive, hub, telemetry.dictionaries.load, telemetry.invalidate,
-                      mapping_folders=[settings.data_dir / "dictionaries"])
+    twins = LiveTwins(
+        telemetry.opened_archive,
+        hub,
+        telemetry.dictionaries.load,
+        telemetry.invalidate,
+        mapping_folders=[settings.data_dir / "dictionaries"],
+    )
     telemetry.on_commit(twins.submit)
-    return Services(settings=settings, engine=engine, sessions=sessions, tokens=tokens,
-                    audit=AuditRepository(sessions), job_repo=job_repo,
-                    jobs=JobManager(settings, job_repo), auth=Authenticator(tokens, settings.auth_enabled),
-                    hub=hub, telemetry=telemetry, twin_sessions=TwinSessionRepository(sessions), twins=twins)
+    return Services(
+        settings=settings,
+        engine=engine,
+        sessions=sessions,
+        tokens=tokens,
+        audit=AuditRepository(sessions),
+        job_repo=job_repo,
+        jobs=JobManager(settings, job_repo),
+        auth=Authenticator(tokens, settings.auth_enabled),
+        hub=hub,
+        telemetry=telemetry,
+        twin_sessions=TwinSessionRepository(sessions),
+        twins=twins,
+    )

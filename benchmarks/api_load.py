@@ -60,8 +60,8 @@ def free_port() -> int:
 def make_tokens(data_dir: Path) -> dict[str, str]:
     """Viewer and operator tokens issued in the server's database before it starts."""
     from backend.core.auth import Role
-    from backend.services import build_services
     from backend.core.settings import Settings
+    from backend.services import build_services
 
     services = build_services(Settings(data_dir=data_dir))
     tokens = {role.name: services.auth.issue(f"bench-{role.name}", role)[1] for role in (Role.viewer, Role.operator)}
@@ -71,10 +71,19 @@ def make_tokens(data_dir: Path) -> dict[str, str]:
 
 def start_server(data_dir: Path, port: int, live_port: int) -> subprocess.Popen:
     """``acs-twin serve`` in its own process, live stream of the reference satellite on live_port."""
-    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": str(live_port),
-           "ACS_TWIN_LIVE_DICTIONARY": "reference_satellite.yaml", "ACS_TWIN_LIVE_SATELLITE": "REFSAT"}
-    server = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(port)], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    env = {
+        **os.environ,
+        "ACS_TWIN_DATA_DIR": str(data_dir),
+        "ACS_TWIN_TELEMETRY_PORT": str(live_port),
+        "ACS_TWIN_LIVE_DICTIONARY": "reference_satellite.yaml",
+        "ACS_TWIN_LIVE_SATELLITE": "REFSAT",
+    }
+    server = subprocess.Popen(
+        [sys.executable, "-m", "backend", "serve", "--port", str(port)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT,
+    )
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
         try:
@@ -93,8 +102,10 @@ def live_sender(port: int, seconds: float, rate_hz: float) -> None:
 
     packet = load_dictionary("reference_satellite.yaml").packets[256]
     rng = np.random.default_rng(6)
-    values = {p.name: (rng.normal(0.0, 0.01, LIVE_BURST) if p.data_type == "float" else np.zeros(LIVE_BURST))
-              for p in packet.parameters}
+    values = {
+        p.name: (rng.normal(0.0, 0.01, LIVE_BURST) if p.data_type == "float" else np.zeros(LIVE_BURST))
+        for p in packet.parameters
+    }
     period = LIVE_BURST / rate_hz
     with socket.create_connection(("127.0.0.1", port)) as link:
         link.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
@@ -118,18 +129,23 @@ def run_wrk(url: str, token: str, seconds: int, connections: int, script: Path |
     latency = {q: float(v) * unit[u] for q, v, u in re.findall(r"^\s+(50|99)%\s+([\d.]+)(us|ms|s)", out, re.M)}
     non_2xx = re.search(r"Non-2xx or 3xx responses: (\d+)", out)
     errors = re.search(r"Socket errors: connect (\d+), read (\d+), write (\d+), timeout (\d+)", out)
-    return {"rps": float(re.search(r"Requests/sec:\s+([\d.]+)", out).group(1)),
-            "p50_ms": latency["50"], "p99_ms": latency["99"],
-            "non_2xx": float(non_2xx.group(1)) if non_2xx else 0.0,
-            "socket_errors": float(sum(int(g) for g in errors.groups())) if errors else 0.0}
+    return {
+        "rps": float(re.search(r"Requests/sec:\s+([\d.]+)", out).group(1)),
+        "p50_ms": latency["50"],
+        "p99_ms": latency["99"],
+        "non_2xx": float(non_2xx.group(1)) if non_2xx else 0.0,
+        "socket_errors": float(sum(int(g) for g in errors.groups())) if errors else 0.0,
+    }
 
 
 def report(name: str, figures: dict[str, float]) -> bool:
     """Print one run's figures against the target; True when it meets it."""
     ok = figures["rps"] >= TARGET_RPS and figures["p99_ms"] < TARGET_P99_MS and figures["non_2xx"] == 0
-    print(f"  {name:10s} {figures['rps']:8.0f} req/s   p50 {figures['p50_ms']:6.2f} ms   "
-          f"p99 {figures['p99_ms']:6.2f} ms   non-2xx {figures['non_2xx']:.0f}   "
-          f"socket errors {figures['socket_errors']:.0f}   {'meets' if ok else 'MISSES'} target")
+    print(
+        f"  {name:10s} {figures['rps']:8.0f} req/s   p50 {figures['p50_ms']:6.2f} ms   "
+        f"p99 {figures['p99_ms']:6.2f} ms   non-2xx {figures['non_2xx']:.0f}   "
+        f"socket errors {figures['socket_errors']:.0f}   {'meets' if ok else 'MISSES'} target"
+    )
     return ok
 
 
@@ -148,28 +164,39 @@ def main() -> None:
     server = start_server(data_dir, port, live_port)
     base = f"http://127.0.0.1:{port}/api/v1"
     try:
-        upload = httpx.post(f"{base}/telemetry/uploads", content=DIARY.read_bytes(), timeout=120,
-                            headers={"Authorization": f"Bearer {tokens['operator']}"}).json()
+        upload = httpx.post(
+            f"{base}/telemetry/uploads",
+            content=DIARY.read_bytes(),
+            timeout=120,
+            headers={"Authorization": f"Bearer {tokens['operator']}"},
+        ).json()
         print(f"uploaded NOAA-20 diary: {upload['archive']['packets_accepted']} packets")
         script = data_dir / "distinct.lua"
         script.write_text(DISTINCT_LUA)
         stream_s = 2 * args.seconds + 10
-        sender = multiprocessing.get_context("spawn").Process(target=live_sender,
-                                                              args=(live_port, stream_s, args.live_rate))
+        sender = multiprocessing.get_context("spawn").Process(
+            target=live_sender, args=(live_port, stream_s, args.live_rate)
+        )
         sender.start()
         time.sleep(2.0)
         before = httpx.get(f"{base}/health").json()["live"]
-        dashboard = run_wrk(f"{base}/parameters/q_ib_0/samples?{WINDOW}", tokens["viewer"], args.seconds,
-                            args.connections, None)
-        distinct = run_wrk(f"{base}/parameters/q_ib_0/samples", tokens["viewer"], args.seconds,
-                           args.connections, script)
+        dashboard = run_wrk(
+            f"{base}/parameters/q_ib_0/samples?{WINDOW}", tokens["viewer"], args.seconds, args.connections, None
+        )
+        distinct = run_wrk(
+            f"{base}/parameters/q_ib_0/samples", tokens["viewer"], args.seconds, args.connections, script
+        )
         after = httpx.get(f"{base}/health").json()["live"]
         sender.join(stream_s + 30)
         rate = (after["packets_received"] - before["packets_received"]) / (2 * args.seconds)
-        print(f"live stream during the runs: {rate:.0f} packets/s received "
-              f"({after['packets_archived']} archived in total, {after['archive_errors']} archive errors)")
-        print(f"GET /api/v1/parameters/q_ib_0/samples (max_points=1000), wrk -t2 -c{args.connections}, "
-              f"{args.seconds} s each, target >= {TARGET_RPS:.0f} req/s with p99 < {TARGET_P99_MS:.0f} ms:")
+        print(
+            f"live stream during the runs: {rate:.0f} packets/s received "
+            f"({after['packets_archived']} archived in total, {after['archive_errors']} archive errors)"
+        )
+        print(
+            f"GET /api/v1/parameters/q_ib_0/samples (max_points=1000), wrk -t2 -c{args.connections}, "
+            f"{args.seconds} s each, target >= {TARGET_RPS:.0f} req/s with p99 < {TARGET_P99_MS:.0f} ms:"
+        )
         report("dashboard", dashboard)
         report("distinct", distinct)
     finally:

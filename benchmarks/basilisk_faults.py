@@ -117,8 +117,9 @@ def fly(kind: str, wheel: int, onset_s: float, magnitude: float, duration_s: flo
     sim.AddModelToTask("dynTask", gg)
     factory = simIncludeRW.rwFactory()
     for axis, rpm in zip(peer.wheel_axes_b(), peer.WHEEL_START_RPM):
-        factory.create("Honeywell_HR12", list(axis), maxMomentum=peer.WHEEL_MAX_MOMENTUM_NMS, Omega=rpm,
-                       useMaxTorque=False)
+        factory.create(
+            "Honeywell_HR12", list(axis), maxMomentum=peer.WHEEL_MAX_MOMENTUM_NMS, Omega=rpm, useMaxTorque=False
+        )
     js = float(next(iter(factory.rwList.values())).Js)
     rw = reactionWheelStateEffector.ReactionWheelStateEffector()
     factory.addToSpacecraft("wheels", rw, sc)
@@ -213,9 +214,15 @@ def write_csv(path: Path, series: dict[str, np.ndarray], epoch: datetime) -> Non
     q = _q_ib(series["sigma_bn"])
     qp = _q_ib(series["sigma_rn"])
     speed = TACHOMETER_QUANTUM_RAD_S * np.round(series["speed"] / TACHOMETER_QUANTUM_RAD_S)
-    cols = (["t_utc"] + [f"q_st_ib_{i}" for i in range(4)] + [f"q_est_ib_{i}" for i in range(4)]
-            + [f"q_prog_ib_{i}" for i in range(4)] + [f"omega_est_b_rad_s_{a}" for a in "xyz"]
-            + [f"wheel_speed_rad_s_{w}" for w in range(1, 5)] + [f"wheel_torque_cmd_nm_{w}" for w in range(1, 5)])
+    cols = (
+        ["t_utc"]
+        + [f"q_st_ib_{i}" for i in range(4)]
+        + [f"q_est_ib_{i}" for i in range(4)]
+        + [f"q_prog_ib_{i}" for i in range(4)]
+        + [f"omega_est_b_rad_s_{a}" for a in "xyz"]
+        + [f"wheel_speed_rad_s_{w}" for w in range(1, 5)]
+        + [f"wheel_torque_cmd_nm_{w}" for w in range(1, 5)]
+    )
     lines = [",".join(cols)]
     for k in range(t.shape[0]):
         stamp = (epoch + timedelta(seconds=float(t[k] - t[0]))).strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"

@@ -78,10 +78,12 @@ def ccsdspy_layout(packet: PacketDefinition):
     """ccsdspy FixedLength of our layout (bit offsets from the first octet of the packet)."""
     import ccsdspy
 
-    return ccsdspy.FixedLength([
-        ccsdspy.PacketField(name=p.name, data_type=p.data_type, bit_length=p.bit_length, bit_offset=p.bit_offset)
-        for p in packet.parameters
-    ])
+    return ccsdspy.FixedLength(
+        [
+            ccsdspy.PacketField(name=p.name, data_type=p.data_type, bit_length=p.bit_length, bit_offset=p.bit_offset)
+            for p in packet.parameters
+        ]
+    )
 
 
 def main() -> None:
@@ -102,25 +104,32 @@ def main() -> None:
         seconds, result = best_of(args.repeats, lambda: decode_stream(stream, dictionary, now_utc_ns=NOW_UTC_NS))
         r = result.report
         assert not r.quarantined and r.duplicates == 0
-        print(f"{scale:>5}x {len(stream) / 1e6:8.1f} {r.packets_accepted:9d} {r.samples_accepted:11d} "
-              f"{seconds:8.3f} {r.samples_accepted / seconds / 1e6:11.2f} {len(stream) / seconds / 1e6:7.0f}")
-    frame_s, _ = best_of(args.repeats, lambda: ccsds.frame_stream(stream, dictionary.packet_octets_by_apid(),
-                                                                  dictionary.crc_apids()))
+        print(
+            f"{scale:>5}x {len(stream) / 1e6:8.1f} {r.packets_accepted:9d} {r.samples_accepted:11d} "
+            f"{seconds:8.3f} {r.samples_accepted / seconds / 1e6:11.2f} {len(stream) / seconds / 1e6:7.0f}"
+        )
+    frame_s, _ = best_of(
+        args.repeats, lambda: ccsds.frame_stream(stream, dictionary.packet_octets_by_apid(), dictionary.crc_apids())
+    )
     packet = dictionary.packets[256]
     buf = np.frombuffer(stream, np.uint8)
     hk_offsets = np.arange(len(hk)) * packet.packet_octets
     gather_s, _ = best_of(args.repeats, lambda: packet_matrix(buf, hk_offsets, packet.packet_octets))
     decode_s, _ = best_of(args.repeats, lambda: decode_packets(hk, packet))
     n_hk = len(hk) * (len(packet.parameters) + len(packet.derived))
-    print(f"phases at the last scale: framing+CRC {frame_s:.3f} s ({len(stream) / frame_s / 1e6:.0f} MB/s); "
-          f"ACS_HK gather {gather_s:.3f} s; ACS_HK decode+calibrate {decode_s:.3f} s "
-          f"({n_hk / decode_s / 1e6:.1f} Msamples/s)")
+    print(
+        f"phases at the last scale: framing+CRC {frame_s:.3f} s ({len(stream) / frame_s / 1e6:.0f} MB/s); "
+        f"ACS_HK gather {gather_s:.3f} s; ACS_HK decode+calibrate {decode_s:.3f} s "
+        f"({n_hk / decode_s / 1e6:.1f} Msamples/s)"
+    )
     layout = ccsdspy_layout(packet)
     hk_bytes = hk.tobytes()
     theirs_s, _ = best_of(args.repeats, lambda: layout.load(BytesIO(hk_bytes)))
     ours_s, _ = best_of(args.repeats, lambda: decode_stream(hk_bytes, dictionary, now_utc_ns=NOW_UTC_NS))
-    print(f"ACS_HK only, {len(hk)} packets x {len(packet.parameters)} fields: ccsdspy {theirs_s:.3f} s, "
-          f"ours (full pipeline) {ours_s:.3f} s -> {theirs_s / ours_s:.1f}x")
+    print(
+        f"ACS_HK only, {len(hk)} packets x {len(packet.parameters)} fields: ccsdspy {theirs_s:.3f} s, "
+        f"ours (full pipeline) {ours_s:.3f} s -> {theirs_s / ours_s:.1f}x"
+    )
     if NOAA.is_dir():
         import ccsdspy
 
@@ -129,8 +138,10 @@ def main() -> None:
         definition = ccsdspy.FixedLength.from_file(str(NOAA / "ccsdspy_jpss1_geolocation.csv"))
         theirs_s, _ = best_of(args.repeats, lambda: definition.load(BytesIO(raw)))
         ours_s, _ = best_of(args.repeats, lambda: decode_stream(raw, noaa))
-        print(f"NOAA-20 7,200 packets x 20 fields: ccsdspy {theirs_s * 1e3:.1f} ms, ours (full pipeline) "
-              f"{ours_s * 1e3:.1f} ms -> {theirs_s / ours_s:.1f}x")
+        print(
+            f"NOAA-20 7,200 packets x 20 fields: ccsdspy {theirs_s * 1e3:.1f} ms, ours (full pipeline) "
+            f"{ours_s * 1e3:.1f} ms -> {theirs_s / ours_s:.1f}x"
+        )
 
 
 if __name__ == "__main__":

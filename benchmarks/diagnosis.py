@@ -67,8 +67,16 @@ def draw_cases(n: int, seed: int = 14) -> list[Case]:
             kinds = [str(k) for k in rng.choice(list(TYPE_CODES), 2)]
             onsets = [onset, float(np.clip(onset + rng.uniform(-100, 100), *ONSET_RANGE_S))]
             pairs = sorted(zip(wheels, kinds, onsets))
-            cases.append(Case(i, "+".join(k for _, k, _ in pairs), [w for w, _, _ in pairs], [o for *_, o in pairs],
-                              [_wheel_fault(rng, k) for _, k, _ in pairs], i))
+            cases.append(
+                Case(
+                    i,
+                    "+".join(k for _, k, _ in pairs),
+                    [w for w, _, _ in pairs],
+                    [o for *_, o in pairs],
+                    [_wheel_fault(rng, k) for _, k, _ in pairs],
+                    i,
+                )
+            )
         elif cat == "gyro_bias":
             cases.append(Case(i, cat, None, [onset], [float(rng.uniform(2e-5, 1e-4) * rng.choice([-1, 1]))], i))
         else:
@@ -89,8 +97,11 @@ def _faults(case: Case) -> list:
     if case.fault == "none":
         return []
     if case.fault == "gyro_bias":
-        return [FaultSpec(target="gyro", index=case.index % 3, type="bias", onset_s=case.onsets_s[0],
-                          value=case.magnitudes[0])]
+        return [
+            FaultSpec(
+                target="gyro", index=case.index % 3, type="bias", onset_s=case.onsets_s[0], value=case.magnitudes[0]
+            )
+        ]
     if case.fault == "star_tracker_outage":
         return [FaultSpec(target="star_tracker", index=0, type="failure", onset_s=case.onsets_s[0])]
     wheels = case.wheel if isinstance(case.wheel, list) else [case.wheel]
@@ -111,8 +122,9 @@ def run_case(case: Case) -> dict:
 
     dictionary = load_dictionary(emulator.REFERENCE_DICTIONARY)
     epoch = f"2026-0{1 + case.index % 9}-1{case.index % 10}T0{case.index % 10}:00:00Z"
-    _, _, stream = emulator.emulate(flown_scenario(), _faults(case), DURATION_S, epoch, dictionary,
-                                    seed=case.seed, truth_seed=1000 + case.seed)
+    _, _, stream = emulator.emulate(
+        flown_scenario(), _faults(case), DURATION_S, epoch, dictionary, seed=case.seed, truth_seed=1000 + case.seed
+    )
     batches = decode_stream(stream.data, dictionary).batches
     start = time.perf_counter()
     result = diagnose_batches(batches, dictionary, scenario_library.get(SCENARIO))
@@ -155,11 +167,17 @@ def score(outcomes: list[dict]) -> dict:
         return float(np.percentile(a, q)) if a else float("nan")
 
     return {
-        "cases": n, "top1": top1 / n, "top3": top3 / n,
-        "onset_error_median_s": pct(onset_err, 50), "onset_error_p95_s": pct(onset_err, 95),
-        "gain_error_median": pct(gain_err, 50), "gain_error_p95": pct(gain_err, 95),
-        "friction_error_median_nm": pct(fric_err, 50), "friction_error_p95_nm": pct(fric_err, 95),
-        "latency_median_s": pct(latency, 50), "latency_max_s": max(latency) if latency else float("nan"),
+        "cases": n,
+        "top1": top1 / n,
+        "top3": top3 / n,
+        "onset_error_median_s": pct(onset_err, 50),
+        "onset_error_p95_s": pct(onset_err, 95),
+        "gain_error_median": pct(gain_err, 50),
+        "gain_error_p95": pct(gain_err, 95),
+        "friction_error_median_nm": pct(fric_err, 50),
+        "friction_error_p95_nm": pct(fric_err, 95),
+        "latency_median_s": pct(latency, 50),
+        "latency_max_s": max(latency) if latency else float("nan"),
         "misses": misses,
     }
 
@@ -182,18 +200,32 @@ def false_alarms_24h() -> tuple[int, float]:
         return np.stack([v[f"{prefix}_{c}"] for c in comps], axis=1).astype(float)
 
     t = (hk.t_utc_ns[keep] - hk.t_utc_ns[0]) / 1e9
-    obs = Observations(t_s=t, epoch_unix_s=0.0, q_est_ib=stack("q_est_ib", "0123"),
-                       omega_b_rad_s=stack("omega_est_b_rad_s", "xyz"),
-                       wheel_speed_rad_s=q * np.round(stack("wheel_speed_rad_s", "1234") / q),
-                       wheel_torque_cmd_nm=1e-5 * np.round(stack("wheel_torque_cmd_nm", "1234") / 1e-5),
-                       speed_quantum_rad_s=q, torque_quantum_nm=1e-5, q_st_ib=stack("q_st_ib", "0123"),
-                       omega_gyro_b_rad_s=stack("omega_gyro_b_rad_s", "xyz"))
+    obs = Observations(
+        t_s=t,
+        epoch_unix_s=0.0,
+        q_est_ib=stack("q_est_ib", "0123"),
+        omega_b_rad_s=stack("omega_est_b_rad_s", "xyz"),
+        wheel_speed_rad_s=q * np.round(stack("wheel_speed_rad_s", "1234") / q),
+        wheel_torque_cmd_nm=1e-5 * np.round(stack("wheel_torque_cmd_nm", "1234") / 1e-5),
+        speed_quantum_rad_s=q,
+        torque_quantum_nm=1e-5,
+        q_st_ib=stack("q_st_ib", "0123"),
+        omega_gyro_b_rad_s=stack("omega_gyro_b_rad_s", "xyz"),
+    )
     nominal = scenario_library.get(SCENARIO)
     alarms, cursor = 0, 0
     wm = scenario_wheels(nominal)
     while cursor < t.shape[0] - diagnosis.MIN_SAMPLES:  # restart the detector after each alarm
-        chunk = Observations(**{**obs.__dict__, **{k: (a[cursor:] if isinstance(a, np.ndarray) else a)
-                                                   for k, a in obs.__dict__.items() if k != "epoch_unix_s"}})
+        chunk = Observations(
+            **{
+                **obs.__dict__,
+                **{
+                    k: (a[cursor:] if isinstance(a, np.ndarray) else a)
+                    for k, a in obs.__dict__.items()
+                    if k != "epoch_unix_s"
+                },
+            }
+        )
         d = diagnosis.diagnose(chunk, wm)
         if not d.detected:
             break
@@ -220,10 +252,13 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         outcomes = []
         for i in range(0, len(cases), CHUNK):  # chunks, so that a long campaign reports as it goes
-            outcomes += cluster.map_cases(client, run_case, cases[i:i + CHUNK])
+            outcomes += cluster.map_cases(client, run_case, cases[i : i + CHUNK])
             part = score(outcomes)
-            print(f"  {len(outcomes)} cases: top-1 {100 * part['top1']:.1f} %, top-3 {100 * part['top3']:.1f} %, "
-                  f"{time.perf_counter() - start:.0f} s", flush=True)
+            print(
+                f"  {len(outcomes)} cases: top-1 {100 * part['top1']:.1f} %, top-3 {100 * part['top3']:.1f} %, "
+                f"{time.perf_counter() - start:.0f} s",
+                flush=True,
+            )
         wall_dask = time.perf_counter() - start
         sub = cases[: args.serial_cases]
         start = time.perf_counter()
@@ -240,12 +275,18 @@ def main(argv: list[str] | None = None) -> int:
     print(f"top-1 (fault type and wheel): {100 * s['top1']:.1f} %   top-3: {100 * s['top3']:.1f} %")
     print(f"onset error (top-1 right): median {s['onset_error_median_s']:.1f} s, p95 {s['onset_error_p95_s']:.1f} s")
     print(f"gain estimate error: median {s['gain_error_median']:.3f}, p95 {s['gain_error_p95']:.3f}")
-    print(f"friction estimate error: median {1e3 * s['friction_error_median_nm']:.3f} mN·m, "
-          f"p95 {1e3 * s['friction_error_p95_nm']:.3f} mN·m")
-    print(f"latency alarm -> ranked result (20 s of telemetry + compute): median {s['latency_median_s']:.1f} s, "
-          f"max {s['latency_max_s']:.1f} s")
-    print(f"speed-up on {args.workers} Dask workers: {len(sub)} cases serial {wall_serial:.1f} s, "
-          f"Dask {wall_sub_dask:.1f} s -> {wall_serial / wall_sub_dask:.2f}x; results identical: {same}")
+    print(
+        f"friction estimate error: median {1e3 * s['friction_error_median_nm']:.3f} mN·m, "
+        f"p95 {1e3 * s['friction_error_p95_nm']:.3f} mN·m"
+    )
+    print(
+        f"latency alarm -> ranked result (20 s of telemetry + compute): median {s['latency_median_s']:.1f} s, "
+        f"max {s['latency_max_s']:.1f} s"
+    )
+    print(
+        f"speed-up on {args.workers} Dask workers: {len(sub)} cases serial {wall_serial:.1f} s, "
+        f"Dask {wall_sub_dask:.1f} s -> {wall_serial / wall_sub_dask:.2f}x; results identical: {same}"
+    )
     print("misses (truth fault, truth wheel, top-1, its score):")
     for m in s["misses"]:
         print("  ", m)

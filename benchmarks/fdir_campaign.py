@@ -44,8 +44,10 @@ def run_kind(name: str, n: int, seed: int) -> dict:
     """Fly n randomised cases of one fault kind; classify each."""
     kind, params = KINDS[name]
     variants = faults.random_wheel_failures(n, ONSETS_S, seed=seed, kind=kind)
-    variants = [VariantSpec(name=v.name, faults=[faults.wheel_failure(v.faults[0].index, v.faults[0].onset_s, kind,
-                                                                      **params)]) for v in variants]
+    variants = [
+        VariantSpec(name=v.name, faults=[faults.wheel_failure(v.faults[0].index, v.faults[0].onset_s, kind, **params)])
+        for v in variants
+    ]
     s = campaign_scenario(variants, ONSETS_S[1] + TAIL_S)
     start = time.perf_counter()
     traj = engine.simulate(s)
@@ -54,8 +56,14 @@ def run_kind(name: str, n: int, seed: int) -> dict:
     out = {"delays": [], "late": 0, "never": 0, "unobservable": 0, "wrong": 0, "early": 0, "wall": wall}
     for v, spec in enumerate(variants):
         f = spec.faults[0]
-        seen = fdir.observable_time(traj.t_s, traj["wheel_torque_cmd_nm"][v, :, f.index],
-                                    traj["wheel_torque_nm"][v, :, f.index], f.onset_s, j_r[f.index], TACH_QUANTUM_RAD_S)
+        seen = fdir.observable_time(
+            traj.t_s,
+            traj["wheel_torque_cmd_nm"][v, :, f.index],
+            traj["wheel_torque_nm"][v, :, f.index],
+            f.onset_s,
+            j_r[f.index],
+            TACH_QUANTUM_RAD_S,
+        )
         isolated = [(t, arg) for t, ev, arg in traj.events[v] if ev == "fault_isolated" and arg < 100]
         if any(arg != f.index for _, arg in isolated):
             out["wrong"] += 1
@@ -84,22 +92,31 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-24h", action="store_true", help="skip the 24 h nominal false-alarm run")
     args = ap.parse_args()
-    print(f"somov-ge4-scan, tachometer quantum 0.25 rpm, gyro noise "
-          f"{scenario_library.get('somov-ge4-scan').sensors.gyro_noise_rad_s:g} rad/s, MEKF, onsets U{ONSETS_S} s")
+    print(
+        f"somov-ge4-scan, tachometer quantum 0.25 rpm, gyro noise "
+        f"{scenario_library.get('somov-ge4-scan').sensors.gyro_noise_rad_s:g} rad/s, MEKF, onsets U{ONSETS_S} s"
+    )
     for k, name in enumerate(KINDS):
         r = run_kind(name, args.cases, args.seed + k)
         d = np.array(r["delays"])
         inside = int(np.sum(d <= ISOLATION_WINDOW_S))
         observable = args.cases - r["unobservable"] - r["wrong"]
         print(f"\n{name}: {args.cases} cases in {r['wall']:.1f} s")
-        print(f"  isolated right within {ISOLATION_WINDOW_S:.0f} s of observability: {inside}/{args.cases} "
-              f"({inside}/{observable} of the observable)")
-        print(f"  isolated later: {r['late']}, never isolated: {r['never']}, wrong wheel: {r['wrong']}, "
-              f"never observable in the run: {r['unobservable']}")
+        print(
+            f"  isolated right within {ISOLATION_WINDOW_S:.0f} s of observability: {inside}/{args.cases} "
+            f"({inside}/{observable} of the observable)"
+        )
+        print(
+            f"  isolated later: {r['late']}, never isolated: {r['never']}, wrong wheel: {r['wrong']}, "
+            f"never observable in the run: {r['unobservable']}"
+        )
         if d.size:
             q = np.percentile(d, [0, 50, 90, 99, 100])
-            print("  delay from observability (s): min {:.1f}  median {:.1f}  p90 {:.1f}  p99 {:.1f}  max {:.1f}"
-                  .format(*q))
+            print(
+                "  delay from observability (s): min {:.1f}  median {:.1f}  p90 {:.1f}  p99 {:.1f}  max {:.1f}".format(
+                    *q
+                )
+            )
             hist, edges = np.histogram(d, bins=[-1e9, 0, 10, 20, 30, 45, 60, 120, 1e9])
             labels = ["<0", "0-10", "10-20", "20-30", "30-45", "45-60", "60-120", ">120"]
             print("  histogram: " + "  ".join(f"{lab}: {h}" for lab, h in zip(labels, hist)))

@@ -60,8 +60,9 @@ def _put(rows: np.ndarray, bit: int, bits: int, value: np.ndarray) -> None:
         word >>= np.uint64(8)
 
 
-def replicate(data: bytes, copies: int, out: Path, shift: Callable[[np.ndarray, np.ndarray, int], None],
-              block: int = 500) -> None:
+def replicate(
+    data: bytes, copies: int, out: Path, shift: Callable[[np.ndarray, np.ndarray, int], None], block: int = 500
+) -> None:
     """Write ``copies`` copies of a packet file; shift(rows, copy_index, packet_offset) moves each copy's time;
     sequence counts continue per APID across copies."""
     off, _, apid = _packets(data)
@@ -81,8 +82,10 @@ def replicate(data: bytes, copies: int, out: Path, shift: Callable[[np.ndarray, 
 
 def _calendar_shift(dictionary, step_s: int = 120) -> Callable:
     """Copy k of a CYGNSS file: every packet's calendar time + k * step_s (the file spans 75 s: copies follow on)."""
-    fields = {a: {p.name.rsplit("_", 1)[-1]: p for p in d.parameters if "_HDR_" in p.name}
-              for a, d in dictionary.packets.items()}
+    fields = {
+        a: {p.name.rsplit("_", 1)[-1]: p for p in d.parameters if "_HDR_" in p.name}
+        for a, d in dictionary.packets.items()
+    }
 
     def get(row: np.ndarray, bit: int, bits: int) -> int:
         first, last = bit // 8, (bit + bits - 1) // 8
@@ -94,7 +97,8 @@ def _calendar_shift(dictionary, step_s: int = 120) -> Callable:
         f = {name: (8 * offset + p.bit_offset, p.bit_length) for name, p in fields[a].items()}
         year, doy, hour, minute, sec = (get(rows[0], *f[n]) for n in ("YEAR", "DAY", "HOUR", "MIN", "SEC"))
         start = np.datetime64(f"{year}-01-01T00:00:00", "s") + np.timedelta64(
-            (doy - 1) * 86_400 + hour * 3_600 + minute * 60 + sec, "s")
+            (doy - 1) * 86_400 + hour * 3_600 + minute * 60 + sec, "s"
+        )
         t = start + (k * step_s).astype("timedelta64[s]")
         years = t.astype("datetime64[Y]")
         _put(rows, *f["YEAR"], years.astype(np.int64) + 1970)
@@ -110,6 +114,7 @@ def _calendar_shift(dictionary, step_s: int = 120) -> Callable:
 
 def _coarse_shift(apids: set[int], bit: int, step_s: int) -> Callable:
     """Copy k: the 32-bit coarse counter at ``bit`` (from the packet start) + k * step_s."""
+
     def shift(rows: np.ndarray, k: np.ndarray, offset: int) -> None:
         first = offset + bit // 8
         coarse = (rows[:, first : first + 4].astype(np.int64) * (1 << np.arange(24, -8, -8))).sum(axis=1)
@@ -121,6 +126,7 @@ def _coarse_shift(apids: set[int], bit: int, step_s: int) -> Callable:
 
 def _cds_day_shift() -> Callable:
     """Copy k of the NOAA-20 diary: CDS day + k."""
+
     def shift(rows: np.ndarray, k: np.ndarray, offset: int) -> None:
         day = rows[:, offset + 6].astype(np.int64) * 256 + rows[:, offset + 7]
         _put(rows, 8 * offset + 48, 16, day + k)
@@ -178,9 +184,11 @@ def spp_parse(path: Path, xtce: Path, skip: int = 0) -> tuple[float, int]:
 
 def line(name: str, size: int, mine: tuple[float, int], theirs: tuple[float, int], peer: str) -> None:
     ours_rate, peer_rate = mine[1] / mine[0], theirs[1] / theirs[0]
-    print(f"{name:<44} {size / 1e6:6.1f} MB  ours {ours_rate / 1e6:7.2f} M samples/s ({mine[1]:,} in {mine[0]:.2f} s)"
-          f"  {peer} {peer_rate / 1e6:7.3f} M/s ({theirs[1]:,} in {theirs[0]:.2f} s)"
-          f"  ratio {ours_rate / peer_rate:6.1f}x")
+    print(
+        f"{name:<44} {size / 1e6:6.1f} MB  ours {ours_rate / 1e6:7.2f} M samples/s ({mine[1]:,} in {mine[0]:.2f} s)"
+        f"  {peer} {peer_rate / 1e6:7.3f} M/s ({theirs[1]:,} in {theirs[0]:.2f} s)"
+        f"  ratio {ours_rate / peer_rate:6.1f}x"
+    )
 
 
 def cases(mb: float, workdir: Path) -> None:
@@ -191,30 +199,50 @@ def cases(mb: float, workdir: Path) -> None:
     data = CYGNSS_STREAM.read_bytes()
     replicate(data, int(mb * 1e6 / len(data)), path, _calendar_shift(cygnss))
     defs = {a: DATA / "cygnss_f7" / "ccsdspy" / f"apid{a:05d}.csv" for a in cygnss.packets}
-    line("CYGNSS mixed, 6 fixed APIDs, ccsdspy CSV", path.stat().st_size, ours(path, cygnss, workdir),
-         ccsdspy_mixed(path, defs), "ccsdspy")
+    line(
+        "CYGNSS mixed, 6 fixed APIDs, ccsdspy CSV",
+        path.stat().st_size,
+        ours(path, cygnss, workdir),
+        ccsdspy_mixed(path, defs),
+        "ccsdspy",
+    )
     ecm_dir = DATA / "europa_clipper_ecm" / "defs"
     for apid, label in ((1227, "ECM 1227 fixed 24-bit, ccsdspy CSV"), (1223, "ECM 1223 variable (expand), ccsdspy")):
         dictionary = load_dictionary(ecm_dir / f"apid{apid:05d}.csv", apid=apid, time_fields=ECM_TIME)
         data = (DATA / "europa_clipper_ecm" / "ecm_raw2.bin").read_bytes()
         path = workdir / f"ecm{apid}.bin"
         replicate(data, int(mb * 1e6 / len(data)), path, _coarse_shift({apid}, 48, 1000))
-        line(label, path.stat().st_size, ours(path, dictionary, workdir),
-             ccsdspy_mixed(path, {apid: ecm_dir / f"apid{apid:05d}.csv"}), "ccsdspy")
+        line(
+            label,
+            path.stat().st_size,
+            ours(path, dictionary, workdir),
+            ccsdspy_mixed(path, {apid: ecm_dir / f"apid{apid:05d}.csv"}),
+            "ccsdspy",
+        )
     if SHARED.exists():
         noaa = load_dictionary("noaa20_apid11_xtce.yaml")
         path = workdir / "noaa.dat"
         data = (SHARED / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
         replicate(data, max(int(mb / 4 * 1e6 / len(data)), 1), path, _cds_day_shift())  # spp: ~0.1 M values/s
-        line("NOAA-20 fixed, XTCE", path.stat().st_size, ours(path, noaa, workdir),
-             spp_parse(path, SHARED / "jpss1_geolocation_xtce_v1.xml"), "spp")
+        line(
+            "NOAA-20 fixed, XTCE",
+            path.stat().st_size,
+            ours(path, noaa, workdir),
+            spp_parse(path, SHARED / "jpss1_geolocation_xtce_v1.xml"),
+            "spp",
+        )
     imap = DATA / "imap_idex_suda"
     idex = load_dictionary(imap / "suda_combined_science_definition.xml", time_fields=IMAP_TIME)
     data = (imap / "sciData_2023_052_14_45_05").read_bytes()
     path = workdir / "idex.bin"
     replicate(data, max(int(mb / 10 * 1e6 / len(data)), 1), path, _coarse_shift({1424}, 48, 10_000))
-    line("IDEX polymorphic variable, XTCE (spp path)", path.stat().st_size,
-         ours(path, idex, workdir), spp_parse(path, imap / "suda_combined_science_definition.xml"), "spp")
+    line(
+        "IDEX polymorphic variable, XTCE (spp path)",
+        path.stat().st_size,
+        ours(path, idex, workdir),
+        spp_parse(path, imap / "suda_combined_science_definition.xml"),
+        "spp",
+    )
 
 
 def memory(gb: float, workdir: Path) -> None:
@@ -227,16 +255,36 @@ def memory(gb: float, workdir: Path) -> None:
     replicate(data, int(gb * 1e9 / len(data)), path, _calendar_shift(cygnss), block=2000)
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "backend", "ingest", str(path), "--dictionary",
-                           str(DATA / "cygnss_f7" / "ccsdspy"), "--time-fields", CYGNSS_TIME, "--satellite", "BIG",
-                           "--db", f"sqlite:///{workdir / 'big.db'}", "--user", "bench"],
-                          capture_output=True, text=True, cwd=ROOT)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "backend",
+            "ingest",
+            str(path),
+            "--dictionary",
+            str(DATA / "cygnss_f7" / "ccsdspy"),
+            "--time-fields",
+            CYGNSS_TIME,
+            "--satellite",
+            "BIG",
+            "--db",
+            f"sqlite:///{workdir / 'big.db'}",
+            "--user",
+            "bench",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     elapsed = time.perf_counter() - t0
     peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     report = json.loads(done.stdout)
-    print(f"memory: {path.stat().st_size / 1e9:.2f} GB mixed CYGNSS file, acs-twin ingest peak RSS {peak_mb:.0f} MB "
-          f"(before: {before / 1024:.0f} MB), {report['archive']['packets_accepted']:,} packets, "
-          f"{report['archive']['samples_accepted']:,} samples in {elapsed:.0f} s")
+    print(
+        f"memory: {path.stat().st_size / 1e9:.2f} GB mixed CYGNSS file, acs-twin ingest peak RSS {peak_mb:.0f} MB "
+        f"(before: {before / 1024:.0f} MB), {report['archive']['packets_accepted']:,} packets, "
+        f"{report['archive']['samples_accepted']:,} samples in {elapsed:.0f} s"
+    )
 
 
 def main() -> None:

@@ -91,12 +91,18 @@ class Server:
     """``python -m backend serve`` with the demo emulator, on fixed ports and a data directory."""
 
     def __init__(self, data_dir: Path, api: int, telemetry: int, viewer: int, *extra: str) -> None:
-        env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": str(telemetry),
-               "ACS_TWIN_VIEWER_PORT": str(viewer), "PYTHONPATH": str(REPO)}
+        env = {
+            **os.environ,
+            "ACS_TWIN_DATA_DIR": str(data_dir),
+            "ACS_TWIN_TELEMETRY_PORT": str(telemetry),
+            "ACS_TWIN_VIEWER_PORT": str(viewer),
+            "PYTHONPATH": str(REPO),
+        }
         env.pop("ACS_TWIN_DATABASE_URL", None)
         command = [sys.executable, "-m", "backend", "serve", "--port", str(api), "--no-auth", *extra]
-        self.process = subprocess.Popen(command,
-                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=REPO)
+        self.process = subprocess.Popen(
+            command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=REPO
+        )
         self.http = httpx.Client(base_url=f"http://127.0.0.1:{api}/api/v1", timeout=60.0)
         deadline = time.monotonic() + START_TIMEOUT_S
         while time.monotonic() < deadline:
@@ -141,8 +147,11 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
                 at = (k % n_slices) * PACKET_OCTETS * SLICE_PACKETS
                 satellite = f"KILL-{trial}-{k}"
                 try:
-                    answer = server.http.post("/telemetry/uploads", params={"satellite": satellite},
-                                              content=diary[at : at + PACKET_OCTETS * SLICE_PACKETS])
+                    answer = server.http.post(
+                        "/telemetry/uploads",
+                        params={"satellite": satellite},
+                        content=diary[at : at + PACKET_OCTETS * SLICE_PACKETS],
+                    )
                 except httpx.TransportError:
                     return  # killed mid-request: not acknowledged
                 if answer.status_code == 200:
@@ -157,14 +166,23 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
         stop.set()
         sender.join(60)
         leaked += len(wait_gone(children))
-        print(f"  kill -9 trial {trial + 1}/{trials}: {len(acknowledged)} uploads acknowledged so far, "
-              f"children left {len(running(children))}", flush=True)
+        print(
+            f"  kill -9 trial {trial + 1}/{trials}: {len(acknowledged)} uploads acknowledged so far, "
+            f"children left {len(running(children))}",
+            flush=True,
+        )
     server = Server(data_dir, *ports)
     lost = 0
     for satellite, accepted in acknowledged.items():
-        found = server.http.get("/parameters/ADCFAQ4/samples", params={"satellite": satellite,
-                                "start": "2021-04-09T00:00:00Z", "end": "2021-04-10T00:00:00Z",
-                                "max_points": 100_000})
+        found = server.http.get(
+            "/parameters/ADCFAQ4/samples",
+            params={
+                "satellite": satellite,
+                "start": "2021-04-09T00:00:00Z",
+                "end": "2021-04-10T00:00:00Z",
+                "max_points": 100_000,
+            },
+        )
         count = len(found.json().get("values", [])) if found.status_code == 200 else 0
         lost += max(accepted - count, 0)
     children = server.children()
@@ -185,8 +203,11 @@ def stop_trials(stops: int) -> int:
         server.process.wait(300)
         left = wait_gone(children)
         leaked += len(left)
-        print(f"  stop {k + 1}/{stops} ({'SIGTERM' if k % 2 == 0 else 'SIGINT'}): "
-              f"{len(children)} children, {len(left)} left", flush=True)
+        print(
+            f"  stop {k + 1}/{stops} ({'SIGTERM' if k % 2 == 0 else 'SIGINT'}): "
+            f"{len(children)} children, {len(left)} left",
+            flush=True,
+        )
     return leaked
 
 
@@ -237,12 +258,18 @@ def main() -> None:
     diary = DIARY.read_bytes()
     if args.upload_mb > 0:
         p50, p99, n, seconds, rise = health_during_upload(args.upload_mb, diary)
-        print(f"health during a {args.upload_mb:g} MB upload ({seconds:.1f} s): {n} requests, p50 {p50:.1f} ms, "
-              f"p99 {p99:.1f} ms (target < 100 ms); server peak RSS rise {rise / 1000:.0f} MB", flush=True)
+        print(
+            f"health during a {args.upload_mb:g} MB upload ({seconds:.1f} s): {n} requests, p50 {p50:.1f} ms, "
+            f"p99 {p99:.1f} ms (target < 100 ms); server peak RSS rise {rise / 1000:.0f} MB",
+            flush=True,
+        )
     if args.kill_trials > 0:
         uploads, samples, lost, leaked = kill_trials(args.kill_trials, diary)
-        print(f"kill -9 trials: {args.kill_trials}, acknowledged uploads {uploads} ({samples} samples), "
-              f"samples lost {lost} (target 0), processes leaked {leaked} (target 0)", flush=True)
+        print(
+            f"kill -9 trials: {args.kill_trials}, acknowledged uploads {uploads} ({samples} samples), "
+            f"samples lost {lost} (target 0), processes leaked {leaked} (target 0)",
+            flush=True,
+        )
     if args.stops > 0:
         leaked = stop_trials(args.stops)
         print(f"stops (SIGTERM/SIGINT alternately): {args.stops}, processes leaked {leaked} (target 0)", flush=True)

@@ -121,7 +121,8 @@ def bench_chunk_sizes(workdir: Path) -> None:
                 downsample(archive, "REF", "omega_est_b_rad_s_x", int(t[0]), int(t[0]) + 600 * 10**9, 1_000)
             query_ms = (time.perf_counter() - start) / QUERY_REPEATS * 1e3
         cells.append(
-            f"{size:,}: commit {result.samples_accepted / commit_s / 1e6:.1f} M samples/s, 10-min query {query_ms:.2f} ms"
+            f"{size:,}: commit {result.samples_accepted / commit_s / 1e6:.1f} M samples/s, "
+            f"10-min query {query_ms:.2f} ms"
         )
     store.CHUNK_PACKETS = chosen
     print(f"packets per chunk (archive uses {chosen:,}): " + "; ".join(cells))

@@ -38,9 +38,7 @@ def wheel_axes_b() -> np.ndarray:
     """Spin axes (4, 3) in body axes: 30° from +x, clocked 0/90/180/270° about it."""
     cant = np.radians(WHEEL_CANT_DEG)
     clock = np.radians(WHEEL_CLOCK_DEG)
-    return np.stack(
-        [np.full(4, np.cos(cant)), np.sin(cant) * np.cos(clock), np.sin(cant) * np.sin(clock)], axis=1
-    )
+    return np.stack([np.full(4, np.cos(cant)), np.sin(cant) * np.cos(clock), np.sin(cant) * np.sin(clock)], axis=1)
 
 
 def reference_mrps() -> tuple[np.ndarray, np.ndarray]:
@@ -135,9 +133,7 @@ def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), rec
     veh_msg = messaging.VehicleConfigMsg().write(veh)
     rw_params = factory.getConfigMessage()
     avail = messaging.RWAvailabilityMsgPayload()
-    avail.wheelAvailability = [
-        messaging.UNAVAILABLE if i in failed_wheels else messaging.AVAILABLE for i in range(4)
-    ]
+    avail.wheelAvailability = [messaging.UNAVAILABLE if i in failed_wheels else messaging.AVAILABLE for i in range(4)]
     avail_msg = messaging.RWAvailabilityMsg().write(avail)
 
     oe = orbitalMotion.ClassicElements()

@@ -71,24 +71,35 @@ def one_orbit(repeats: int) -> None:
     n = min(err_ours.size, err_bsk.size)
     # At the reference switch (t = 1000 s) Basilisk logs the old reference's error, we the new one's.
     steady = np.abs(traj.t_s[:n] - 1000.0) > 0.25
-    print(f"one orbit (5,801 s): acs-twin {t_ours:.3f} s, Basilisk {t_bsk:.3f} s "
-          f"(runs {[round(x, 3) for x in ours]} vs {[round(x, 3) for x in theirs]})")
-    print(f"  ratio Basilisk / acs-twin = {t_bsk / t_ours:.2f}x (target >= 4x); "
-          f"acs-twin runs {5801.0 / t_ours:,.0f}x real time")
-    print(f"  settling to {SETTLE_DEG} deg after the second slew: acs-twin "
-          f"{_settling_after(traj.t_s, err_ours, 1000.0):.1f} s, Basilisk {_settling_after(peer.t_s, err_bsk, 1000.0):.1f} s")
-    print(f"  largest difference of the attitude-error angle between the two: "
-          f"{np.max(np.abs(err_ours[:n] - err_bsk[:n])[steady]):.2e} deg; final wheel speeds (rpm) acs-twin "
-          f"{np.round(traj['wheel_speed_rad_s'][0, -1] * 30 / np.pi, 2)}, Basilisk "
-          f"{np.round(peer.omega_rw_rad_s[-1] * 30 / np.pi, 2)}")
+    print(
+        f"one orbit (5,801 s): acs-twin {t_ours:.3f} s, Basilisk {t_bsk:.3f} s "
+        f"(runs {[round(x, 3) for x in ours]} vs {[round(x, 3) for x in theirs]})"
+    )
+    print(
+        f"  ratio Basilisk / acs-twin = {t_bsk / t_ours:.2f}x (target >= 4x); "
+        f"acs-twin runs {5801.0 / t_ours:,.0f}x real time"
+    )
+    print(
+        f"  settling to {SETTLE_DEG} deg after the second slew: acs-twin "
+        f"{_settling_after(traj.t_s, err_ours, 1000.0):.1f} s, "
+        f"Basilisk {_settling_after(peer.t_s, err_bsk, 1000.0):.1f} s"
+    )
+    print(
+        f"  largest difference of the attitude-error angle between the two: "
+        f"{np.max(np.abs(err_ours[:n] - err_bsk[:n])[steady]):.2e} deg; final wheel speeds (rpm) acs-twin "
+        f"{np.round(traj['wheel_speed_rad_s'][0, -1] * 30 / np.pi, 2)}, Basilisk "
+        f"{np.round(peer.omega_rw_rad_s[-1] * 30 / np.pi, 2)}"
+    )
 
 
 def fault_variants(repeats: int) -> None:
     """The 11 wheel-fault configurations: one acs-twin batch vs 11 Basilisk runs on a pool."""
     base = scenario_library.get("peer-basilisk-rw4")
     variants = [
-        VariantSpec(name="nominal" if not fs else "fail " + "+".join(str(i + 1) for i in fs),
-                    faults=[FaultSpec(target="wheel", index=i, type="failure") for i in fs])
+        VariantSpec(
+            name="nominal" if not fs else "fail " + "+".join(str(i + 1) for i in fs),
+            faults=[FaultSpec(target="wheel", index=i, type="failure") for i in fs],
+        )
         for fs in FAULT_SETS
     ]
     scenario = base.model_copy(update={"variants": variants})
@@ -104,8 +115,10 @@ def fault_variants(repeats: int) -> None:
             list(pool.map(_basilisk_job, FAULT_SETS))
             theirs.append(time.perf_counter() - start)
     t_ours, t_bsk = statistics.median(ours), statistics.median(theirs)
-    print(f"11 wheel-fault variants, one orbit each ({workers} cores): acs-twin {t_ours:.3f} s, "
-          f"Basilisk {t_bsk:.3f} s -> ratio {t_bsk / t_ours:.2f}x (target >= 10x)")
+    print(
+        f"11 wheel-fault variants, one orbit each ({workers} cores): acs-twin {t_ours:.3f} s, "
+        f"Basilisk {t_bsk:.3f} s -> ratio {t_bsk / t_ours:.2f}x (target >= 10x)"
+    )
 
 
 def day_of_scanning() -> None:
@@ -114,8 +127,11 @@ def day_of_scanning() -> None:
     _ours(scenario)  # compile/cache for this configuration
     dt, traj = _ours(scenario)
     summary = traj.summary()
-    print(f"24 h of somov-ge4-scan: {dt:.2f} s (target < 10 s), {86400 / dt:,.0f}x real time; "
-          f"scanning RMS {summary['pointing_error_rms_arcsec']:.2f} arcsec, max {summary['pointing_error_max_arcsec']:.2f}")
+    print(
+        f"24 h of somov-ge4-scan: {dt:.2f} s (target < 10 s), {86400 / dt:,.0f}x real time; "
+        f"scanning RMS {summary['pointing_error_rms_arcsec']:.2f} arcsec, "
+        f"max {summary['pointing_error_max_arcsec']:.2f}"
+    )
 
 
 def main() -> None:

@@ -31,8 +31,12 @@ from foreign import CYGNSS_STREAM, CYGNSS_TIME, DATA, _calendar_shift, replicate
 def start_server(data_dir: Path, port: int, deadline_s: float = 300.0) -> subprocess.Popen:
     """``acs-twin serve`` in its own process (no live stream), waited for up to deadline_s (a loaded machine)."""
     env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_LIVE_ENABLED": "false"}
-    server = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(port)], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    server = subprocess.Popen(
+        [sys.executable, "-m", "backend", "serve", "--port", str(port)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT,
+    )
     end = time.monotonic() + deadline_s
     while time.monotonic() < end:
         try:
@@ -74,9 +78,13 @@ def main() -> None:
         operator = {"Authorization": f"Bearer {tokens['operator']}"}
         try:
             layout = (DATA / "cygnss_f7" / "ccsdspy" / "apid00393.csv").read_bytes()
-            made = httpx.post(f"{base}/dictionaries/cygnss_adcsio.csv",
-                              params={"apid": 393, "time_fields": CYGNSS_TIME},
-                              content=layout, headers=operator, timeout=60)
+            made = httpx.post(
+                f"{base}/dictionaries/cygnss_adcsio.csv",
+                params={"apid": 393, "time_fields": CYGNSS_TIME},
+                content=layout,
+                headers=operator,
+                timeout=60,
+            )
             made.raise_for_status()
             idle: list[float] = []
             stop = threading.Event()
@@ -89,9 +97,13 @@ def main() -> None:
             poller.start()
             t0 = time.perf_counter()
             with path.open("rb") as f:
-                answer = httpx.post(f"{base}/telemetry/uploads",
-                                    params={"satellite": "CYGNSS-FM07", "dictionary": "cygnss_adcsio.csv"},
-                                    content=f, headers=operator, timeout=3600)
+                answer = httpx.post(
+                    f"{base}/telemetry/uploads",
+                    params={"satellite": "CYGNSS-FM07", "dictionary": "cygnss_adcsio.csv"},
+                    content=f,
+                    headers=operator,
+                    timeout=3600,
+                )
             elapsed = time.perf_counter() - t0
             stop.set()
             poller.join()
@@ -99,10 +111,12 @@ def main() -> None:
             archive = answer.json()["archive"]
             ms = np.array(busy) * 1e3
             size_mb = path.stat().st_size / 1e6
-            print(f"upload of {size_mb:.0f} MB: {elapsed:.1f} s, {archive['packets_accepted']:,} packets "
-                  f"archived ({archive['samples_accepted']:,} samples); health during it: {len(ms)} requests, "
-                  f"p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms, max {ms.max():.1f} ms "
-                  f"(idle p50 {np.median(idle) * 1e3:.1f} ms)")
+            print(
+                f"upload of {size_mb:.0f} MB: {elapsed:.1f} s, {archive['packets_accepted']:,} packets "
+                f"archived ({archive['samples_accepted']:,} samples); health during it: {len(ms)} requests, "
+                f"p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms, max {ms.max():.1f} ms "
+                f"(idle p50 {np.median(idle) * 1e3:.1f} ms)"
+            )
         finally:
             server.terminate()
             server.wait(30)

@@ -29,9 +29,19 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 CHROMIUM = "/usr/bin/chromium"
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                  "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--use-gl=angle",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 N_SAMPLES = 10_000
 DRAW_HOOK = """
 (() => {
@@ -54,8 +64,16 @@ def twin_trajectory():
     from sim_core.scenario import FaultSpec, VariantSpec, apply_overrides
 
     s = apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=600"])
-    s = s.model_copy(update={"variants": [VariantSpec(name="nominal"), VariantSpec(
-        name="rw1-failure", faults=[FaultSpec(target="wheel", index=0, type="failure", onset_s=200.0)])]})
+    s = s.model_copy(
+        update={
+            "variants": [
+                VariantSpec(name="nominal"),
+                VariantSpec(
+                    name="rw1-failure", faults=[FaultSpec(target="wheel", index=0, type="failure", onset_s=200.0)]
+                ),
+            ]
+        }
+    )
     return engine.simulate(s)
 
 
@@ -65,8 +83,9 @@ def serve(ports_file: str) -> None:
     from frontend.monitors import serve_monitors
 
     feed = TrajectoryFeed(twin_trajectory(), actual_variant=0, simulated_variant=1)
-    handles = serve_monitors(feed, ports={"actual": _free_port(), "simulated": _free_port()},
-                             roles=("actual", "simulated"))
+    handles = serve_monitors(
+        feed, ports={"actual": _free_port(), "simulated": _free_port()}, roles=("actual", "simulated")
+    )
     handles.clock.set_speed(10.0)
     handles.clock.play()
     Path(ports_file).write_text(json.dumps(handles.ports))
@@ -123,8 +142,10 @@ def bench_playback_and_paint(seconds: float) -> None:
                 page.wait_for_function("window.__globeDrawnAt !== undefined", timeout=60_000)
                 first_paint_s = page.evaluate("window.__globeDrawnAt") / 1e3
                 share = _earth_share(page.screenshot())
-                print(f"first paint ({role} monitor): {first_paint_s:.2f} s, globe covers {100 * share:.0f} % "
-                      f"of the scene  (target < 3 s; load average {os.getloadavg()[0]:.1f})")
+                print(
+                    f"first paint ({role} monitor): {first_paint_s:.2f} s, globe covers {100 * share:.0f} % "
+                    f"of the scene  (target < 3 s; load average {os.getloadavg()[0]:.1f})"
+                )
                 context.close()
             pages = [browser.new_page(viewport={"width": 1280, "height": 800}) for _ in ports]
             for page, port in zip(pages, ports.values()):
@@ -134,8 +155,10 @@ def bench_playback_and_paint(seconds: float) -> None:
             time.sleep(seconds)
             cpu1, wall1 = _cpu_s(proc.pid), time.perf_counter()
             load = (cpu1 - cpu0) / (wall1 - wall0)
-            print(f"30 Hz playback to two connected monitors: {100 * load:.1f} % of one core over "
-                  f"{wall1 - wall0:.1f} s  (target < 25 %; load average {os.getloadavg()[0]:.1f})")
+            print(
+                f"30 Hz playback to two connected monitors: {100 * load:.1f} % of one core over "
+                f"{wall1 - wall0:.1f} s  (target < 25 %; load average {os.getloadavg()[0]:.1f})"
+            )
             browser.close()
     finally:
         proc.terminate()
@@ -159,8 +182,10 @@ def bench_geometry() -> None:
         camera.ccd_line_ecef_m(r, c_eb, np.radians(2.0), 9)
         camera.ground_trace_ecef_m(r)
         best = min(best, time.perf_counter() - start)
-    print(f"footprint (16 rays) + CCD line (9 rays) + ground trace, {N_SAMPLES:,} samples: "
-          f"{1e3 * best:.2f} ms  (target < 10 ms)")
+    print(
+        f"footprint (16 rays) + CCD line (9 rays) + ground trace, {N_SAMPLES:,} samples: "
+        f"{1e3 * best:.2f} ms  (target < 10 ms)"
+    )
 
 
 def main() -> None:

@@ -37,16 +37,22 @@ def dashboard_app(monitor_urls: dict[str, str] | None = None, api_base: str = "/
     async def config_json(request) -> JSONResponse:
         return JSONResponse(config, headers={"Cache-Control": "no-store"})
 
-    return Starlette(routes=[
-        Route("/config.json", config_json),
-        Mount("/", StaticFiles(directory=DASHBOARD_DIR, html=True)),
-    ])
+    return Starlette(
+        routes=[
+            Route("/config.json", config_json),
+            Mount("/", StaticFiles(directory=DASHBOARD_DIR, html=True)),
+        ]
+    )
 
 
 def offline_docs_html(openapi_url: str, title: str):
     """Swagger UI page for the API, its script and style from the vendored copy instead of a CDN."""
     from fastapi.openapi.docs import get_swagger_ui_html
 
-    return get_swagger_ui_html(openapi_url=openapi_url, title=f"{title} — API", swagger_favicon_url="data:,",
-                               swagger_js_url=f"{SWAGGER_UI}/swagger-ui-bundle.js",
-                               swagger_css_url=f"{SWAGGER_UI}/swagger-ui.css")
+    return get_swagger_ui_html(
+        openapi_url=openapi_url,
+        title=f"{title} — API",
+        swagger_favicon_url="data:,",
+        swagger_js_url=f"{SWAGGER_UI}/swagger-ui-bundle.js",
+        swagger_css_url=f"{SWAGGER_UI}/swagger-ui.css",
+    )

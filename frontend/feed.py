@@ -103,8 +103,10 @@ class TrajectoryFeed:
         stations: tuple[GroundStation, ...] = DEFAULT_STATIONS,
     ) -> None:
         simulated = actual if simulated is None else simulated
-        for traj, v, name in ((actual, actual_variant, "actual_variant"), (simulated, simulated_variant,
-                                                                           "simulated_variant")):
+        for traj, v, name in (
+            (actual, actual_variant, "actual_variant"),
+            (simulated, simulated_variant, "simulated_variant"),
+        ):
             if not 0 <= v < traj.n_variants:
                 raise ValueError(f"{name}: {v} is not a variant of {traj.scenario_name!r}")
         if "epoch_unix_s" not in actual.extra:
@@ -112,10 +114,12 @@ class TrajectoryFeed:
         self._a, self._s, self._va, self._vs = actual, simulated, actual_variant, simulated_variant
         self._t = actual.t_s + actual.extra["epoch_unix_s"]
         t_sim = simulated.t_s + simulated.extra.get("epoch_unix_s", actual.extra["epoch_unix_s"])
-        self._spline_a = AttitudeSpline(self._t, actual["q_ib"][actual_variant],
-                                        actual["omega_b_rad_s"][actual_variant])
-        self._spline_s = AttitudeSpline(t_sim, simulated["q_ib"][simulated_variant],
-                                        simulated["omega_b_rad_s"][simulated_variant])
+        self._spline_a = AttitudeSpline(
+            self._t, actual["q_ib"][actual_variant], actual["omega_b_rad_s"][actual_variant]
+        )
+        self._spline_s = AttitudeSpline(
+            t_sim, simulated["q_ib"][simulated_variant], simulated["omega_b_rad_s"][simulated_variant]
+        )
         self._stations = list(stations)
         self._orbit_t, self._orbit_r, self._orbit_v = _orbit_table(self._t, actual["r_eci_m"][actual_variant])
 
@@ -182,7 +186,8 @@ def _active_events(events: list[tuple[float, str, int]], t_s: float) -> list[str
         elif name in _TRANSIENT_EVENTS and t_s - t_ev <= TRANSIENT_ALARM_S:
             transient[(name, arg)] = t_ev
     return [f"fault {arg} since t+{t0:.1f} s" for arg, t0 in faults.items()] + [
-        f"{name} ({arg}) at t+{t0:.1f} s" for (name, arg), t0 in transient.items()]
+        f"{name} ({arg}) at t+{t0:.1f} s" for (name, arg), t0 in transient.items()
+    ]
 
 
 def _orbit_table(t_unix_s: np.ndarray, r_eci_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -63,8 +63,13 @@ def earth_glb(night_lights: bool = True) -> bytes:
         emissiveTexture=Image.open(NIGHT_IMAGE) if night_lights else None,
         emissiveFactor=[NIGHT_LIGHTS_GAIN] * 3 if night_lights else None,
     )
-    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, vertex_normals=normals, process=False,
-                           visual=trimesh.visual.TextureVisuals(uv=uv, material=material))
+    mesh = trimesh.Trimesh(
+        vertices=vertices,
+        faces=faces,
+        vertex_normals=normals,
+        process=False,
+        visual=trimesh.visual.TextureVisuals(uv=uv, material=material),
+    )
     buffer = io.BytesIO()
     buffer.write(trimesh.Scene(mesh).export(file_type="glb"))
     return buffer.getvalue()

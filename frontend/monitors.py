@@ -58,7 +58,7 @@ def camera_pose(preset: str, f: TwinFrame, v_eci: np.ndarray) -> tuple[np.ndarra
 class MonitorHandles:
     """Running monitors: servers and real ports by role, the shared clock, and the render loop."""
 
-    servers: dict[str, "viser.ViserServer"]
+    servers: dict[str, viser.ViserServer]
     clock: PlaybackClock
     geometry: TwinGeometry
     scenes: dict[str, TwinScene]
@@ -214,8 +214,7 @@ def serve_monitors(
         scenes[role] = TwinScene(server, role, geometry)
         _initial_camera(server, geometry.frame(clock.t_unix_s))
         panels[role] = TwinPanels(server, role, clock, n_wheels)
-    handles = MonitorHandles(servers=servers, clock=clock, geometry=geometry, scenes=scenes, panels=panels,
-                             host=host)
+    handles = MonitorHandles(servers=servers, clock=clock, geometry=geometry, scenes=scenes, panels=panels, host=host)
     handles.render()
     handles.update_panels()
     if start:

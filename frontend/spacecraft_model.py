@@ -36,13 +36,15 @@ def spacecraft_meshes() -> dict[str, list]:
     for side in (-1.0, 1.0):
         wing = trimesh.creation.box(extents=(0.04, ARRAY_SPAN_M, ARRAY_CHORD_M))
         wing.apply_translation((0.0, side * (by / 2 + 0.1 + ARRAY_SPAN_M / 2), 0.0))
-        boom = trimesh.creation.cylinder(radius=0.03, height=0.2,
-                                         transform=trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+        boom = trimesh.creation.cylinder(
+            radius=0.03, height=0.2, transform=trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0))
+        )
         boom.apply_translation((0.0, side * (by / 2 + 0.05), 0.0))
         wings += [wing, boom]
     along_x = trimesh.transformations.rotation_matrix(np.pi / 2, (0, 1, 0))
-    barrel = trimesh.creation.cylinder(radius=TELESCOPE_RADIUS_M, height=TELESCOPE_LENGTH_M, sections=32,
-                                       transform=along_x)
+    barrel = trimesh.creation.cylinder(
+        radius=TELESCOPE_RADIUS_M, height=TELESCOPE_LENGTH_M, sections=32, transform=along_x
+    )
     barrel.apply_translation((bx / 2 + TELESCOPE_LENGTH_M / 2, 0.0, 0.0))
     return {"bus": [bus], "array": wings, "telescope": [barrel]}
 

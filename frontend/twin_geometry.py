@@ -77,7 +77,8 @@ class TwinGeometry:
         self.station_ecef = [frames.geodetic_to_ecef(s.lat_deg, s.lon_deg, 0.0) / SCENE_UNIT_M for s in self.stations]
         self.station_circles_ecef = [
             camera.station_visibility_circle_ecef_m(s.lat_deg, s.lon_deg, altitude, s.min_elevation_deg) / SCENE_UNIT_M
-            for s in self.stations]
+            for s in self.stations
+        ]
 
     def eci_to_ecef(self, t_unix_s: np.ndarray) -> np.ndarray:
         """ECI → ECEF rotation W · R3(ERA(UT1)) · C with C, W, DUT1 frozen at the pass start, (N, 3, 3)."""
@@ -131,7 +132,8 @@ class TwinGeometry:
             q_simulated=q_s,
             los_actual_ecef=camera.line_of_sight_ecef_m(r_e, c_a) / SCENE_UNIT_M,
             los_simulated_ecef=camera.line_of_sight_ecef_m(r_e, c_s) / SCENE_UNIT_M,
-            footprint_actual_ecef=camera.footprint_ecef_m(r_e, c_a, fov.half_across_rad, fov.half_along_rad) / SCENE_UNIT_M,
+            footprint_actual_ecef=camera.footprint_ecef_m(r_e, c_a, fov.half_across_rad, fov.half_along_rad)
+            / SCENE_UNIT_M,
             footprint_simulated_ecef=camera.footprint_ecef_m(r_e, c_s, fov.half_across_rad, fov.half_along_rad)
             / SCENE_UNIT_M,
             ccd_actual_ecef=camera.ccd_line_ecef_m(r_e, c_a, fov.half_across_rad) / SCENE_UNIT_M,

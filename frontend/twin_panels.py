@@ -6,7 +6,7 @@ moment, mode and fault flags, active alarms (seed 000 §7 in-flight support).
 from __future__ import annotations
 
 import threading
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -31,7 +31,7 @@ MD_COLOURS = ("#e6194b", "#3cb44b", "#4363d8")
 
 def format_utc(t_unix_s: float) -> str:
     """ISO-8601 UTC with milliseconds, as the panels show time."""
-    return datetime.fromtimestamp(t_unix_s, tz=timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return datetime.fromtimestamp(t_unix_s, tz=UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def _plot_scales() -> dict:
@@ -52,40 +52,53 @@ def _empty(n_series: int) -> tuple[np.ndarray, ...]:
 class TwinPanels:
     """GUI of one viser server, bound to the shared clock; camera preset chosen per browser client."""
 
-    def __init__(self, server: "viser.ViserServer", role: str, clock: PlaybackClock, n_wheels: int) -> None:
+    def __init__(self, server: viser.ViserServer, role: str, clock: PlaybackClock, n_wheels: int) -> None:
         self.server, self.role, self.clock = server, role, clock
         self.camera_preset: dict[int, str] = {}
         self._lock = threading.Lock()
         gui = server.gui
-        gui.configure_theme(show_share_button=False, dark_mode=True, control_width="large",
-                            titlebar_content=None, show_logo=False)
+        gui.configure_theme(
+            show_share_button=False, dark_mode=True, control_width="large", titlebar_content=None, show_logo=False
+        )
         gui.add_markdown(f"**acs-twin — {role} monitor**")
         t0, t1 = clock.span_unix_s()
         with gui.add_folder("Playback"):
             self.time_text = gui.add_text("UTC", initial_value=format_utc(clock.t_unix_s), disabled=True)
-            self.slider = gui.add_slider("Timeline (s)", min=0.0, max=max(t1 - t0, 1.0), step=0.25,
-                                         initial_value=clock.t_unix_s - t0)
+            self.slider = gui.add_slider(
+                "Timeline (s)", min=0.0, max=max(t1 - t0, 1.0), step=0.25, initial_value=clock.t_unix_s - t0
+            )
             self.play = gui.add_button_group("Replay", ("play", "pause"))
             self.speed = gui.add_dropdown("Speed", tuple(f"x{s:g}" for s in SPEEDS), initial_value=f"x{clock.speed:g}")
             self.live = gui.add_checkbox("Live follow", initial_value=clock.live)
             self.camera = gui.add_button_group("Camera", CAMERA_PRESETS)
         with gui.add_folder("Attitude error (actual − simulated)"):
             self.error_plot = gui.add_uplot(
-                data=_empty(1), series=({"label": "t − now (s)"},
-                                                       {"label": "error (arcsec)", "stroke": "#ff5050"}),
-                scales=_plot_scales(), axes=_axes(), aspect=2.0)
+                data=_empty(1),
+                series=({"label": "t − now (s)"}, {"label": "error (arcsec)", "stroke": "#ff5050"}),
+                scales=_plot_scales(),
+                axes=_axes(),
+                aspect=2.0,
+            )
         with gui.add_folder("Wheel speeds (rpm)", expand_by_default=False):
             self.wheel_plot = gui.add_uplot(
                 data=_empty(n_wheels),
-                series=({"label": "t − now (s)"},) + tuple(
-                    {"label": f"RW{k + 1}", "stroke": WHEEL_COLOURS[k % len(WHEEL_COLOURS)]} for k in range(n_wheels)),
-                scales=_plot_scales(), axes=_axes(), aspect=2.0)
+                series=({"label": "t − now (s)"},)
+                + tuple(
+                    {"label": f"RW{k + 1}", "stroke": WHEEL_COLOURS[k % len(WHEEL_COLOURS)]} for k in range(n_wheels)
+                ),
+                scales=_plot_scales(),
+                axes=_axes(),
+                aspect=2.0,
+            )
         with gui.add_folder("MD moment (A·m²)", expand_by_default=False):
             self.md_plot = gui.add_uplot(
                 data=_empty(3),
-                series=({"label": "t − now (s)"},) + tuple(
-                    {"label": f"m{'xyz'[k]}", "stroke": MD_COLOURS[k]} for k in range(3)),
-                scales=_plot_scales(), axes=_axes(), aspect=2.0)
+                series=({"label": "t − now (s)"},)
+                + tuple({"label": f"m{'xyz'[k]}", "stroke": MD_COLOURS[k]} for k in range(3)),
+                scales=_plot_scales(),
+                axes=_axes(),
+                aspect=2.0,
+            )
         with gui.add_folder("Mode and flags"):
             self.flags = gui.add_markdown("—")
             self.image_motion = gui.add_markdown("—")
@@ -142,17 +155,22 @@ class TwinPanels:
     def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str], image_motion_rad_s: np.ndarray) -> None:
         """Plots of the last PLOT_WINDOW_S, mode/flags, image motion and alarms (a few times per second)."""
         along, across = np.asarray(image_motion_rad_s) * 1e3
-        self.image_motion.content = ("image motion at the boresight: off the Earth" if np.isnan(along) else
-                                     f"image motion at the boresight: along {along:+.2f}, across {across:+.2f} mrad/s")
+        self.image_motion.content = (
+            "image motion at the boresight: off the Earth"
+            if np.isnan(along)
+            else f"image motion at the boresight: along {along:+.2f}, across {across:+.2f} mrad/s"
+        )
         x = w.t_unix_s - t_unix_s
         if x.size >= 2:
             self.error_plot.data = (x, w.error_angle_rad * ARCSEC_PER_RAD)
-            self.wheel_plot.data = (x,) + tuple(w.wheel_speed_rad_s[:, k] * RPM_PER_RAD_S
-                                                for k in range(w.wheel_speed_rad_s.shape[1]))
+            self.wheel_plot.data = (x,) + tuple(
+                w.wheel_speed_rad_s[:, k] * RPM_PER_RAD_S for k in range(w.wheel_speed_rad_s.shape[1])
+            )
             self.md_plot.data = (x,) + tuple(w.md_dipole_am2[:, k] for k in range(3))
         if x.size:
             self.flags.content = (
                 f"mode **{int(w.mode[-1])}** · fault flags **0x{int(w.fault_flags[-1]):04x}** · "
                 f"{'**scanning**' if w.observing[-1] else 'not scanning'} · "
-                f"error **{w.error_angle_rad[-1] * ARCSEC_PER_RAD:.1f}″**")
+                f"error **{w.error_angle_rad[-1] * ARCSEC_PER_RAD:.1f}″**"
+            )
         self.alarms.content = "\n".join(f"- {a}" for a in alarms) if alarms else "none"

@@ -53,7 +53,7 @@ def _closed(points: np.ndarray) -> np.ndarray:
 class TwinScene:
     """The scene graph of one monitor role, built once, updated per playback frame."""
 
-    def __init__(self, server: "viser.ViserServer", role: Role, geometry: TwinGeometry) -> None:
+    def __init__(self, server: viser.ViserServer, role: Role, geometry: TwinGeometry) -> None:
         if role not in ROLES:
             raise ValueError(f"role: expected one of {ROLES}, got {role!r}")
         self.server, self.role, self.geometry = server, role, geometry
@@ -71,25 +71,41 @@ class TwinScene:
         self.sun = s.add_light_directional("/sun", intensity=SUN_INTENSITY)
         self.earth = s.add_frame("/earth", show_axes=False)
         s.add_glb("/earth/globe", globe.earth_glb(), cast_shadow=False, receive_shadow=False)
-        for k, (name, pos, circle) in enumerate(zip([st.name for st in g.stations], g.station_ecef,
-                                                    g.station_circles_ecef)):
+        for k, (name, pos, circle) in enumerate(
+            zip([st.name for st in g.stations], g.station_ecef, g.station_circles_ecef)
+        ):
             s.add_icosphere(f"/earth/stations/{k}", radius=0.006, color=STATION, position=tuple(pos * 1.001))
             s.add_label(f"/earth/stations/{k}/label", name, font_screen_scale=0.7, depth_test=True)
-            s.add_line_segments(f"/earth/station_circles/{k}", polyline_segments(_closed(circle) * 1.001),
-                                STATION, thickness=LINE_PX, thickness_units="screen")
+            s.add_line_segments(
+                f"/earth/station_circles/{k}",
+                polyline_segments(_closed(circle) * 1.001),
+                STATION,
+                thickness=LINE_PX,
+                thickness_units="screen",
+            )
         for side, pts in (("left", g.survey_left_ecef), ("right", g.survey_right_ecef)):
-            s.add_line_segments(f"/earth/survey_{side}", polyline_segments(pts * 1.0005), SURVEY,
-                                thickness=1.0, thickness_units="screen")
-        self.trace_past = s.add_line_segments("/earth/trace_past", np.zeros((1, 2, 3)), PAST,
-                                              thickness=LINE_PX, thickness_units="screen")
-        self.trace_future = s.add_line_segments("/earth/trace_future", np.zeros((1, 2, 3)), FUTURE,
-                                                thickness=LINE_PX, thickness_units="screen")
-        self.orbit_past = s.add_line_segments("/orbit_past", np.zeros((1, 2, 3)), ORBIT_PAST,
-                                              thickness=LINE_PX, thickness_units="screen")
-        self.orbit_future = s.add_line_segments("/orbit_future", np.zeros((1, 2, 3)), ORBIT_FUTURE,
-                                                thickness=LINE_PX, thickness_units="screen")
-        self.terminator = s.add_line_segments("/earth/terminator", np.zeros((1, 2, 3)), TERMINATOR,
-                                              thickness=LINE_PX, thickness_units="screen")
+            s.add_line_segments(
+                f"/earth/survey_{side}",
+                polyline_segments(pts * 1.0005),
+                SURVEY,
+                thickness=1.0,
+                thickness_units="screen",
+            )
+        self.trace_past = s.add_line_segments(
+            "/earth/trace_past", np.zeros((1, 2, 3)), PAST, thickness=LINE_PX, thickness_units="screen"
+        )
+        self.trace_future = s.add_line_segments(
+            "/earth/trace_future", np.zeros((1, 2, 3)), FUTURE, thickness=LINE_PX, thickness_units="screen"
+        )
+        self.orbit_past = s.add_line_segments(
+            "/orbit_past", np.zeros((1, 2, 3)), ORBIT_PAST, thickness=LINE_PX, thickness_units="screen"
+        )
+        self.orbit_future = s.add_line_segments(
+            "/orbit_future", np.zeros((1, 2, 3)), ORBIT_FUTURE, thickness=LINE_PX, thickness_units="screen"
+        )
+        self.terminator = s.add_line_segments(
+            "/earth/terminator", np.zeros((1, 2, 3)), TERMINATOR, thickness=LINE_PX, thickness_units="screen"
+        )
         self.sats, self.los, self.footprints, self.ccd = {}, {}, {}, {}
         scale = MODEL_SIZE_EARTH_RADII / spacecraft_model.MODEL_EXTENT_M
         for side in self.sides:
@@ -98,15 +114,19 @@ class TwinScene:
             node = s.add_frame(f"/sat_{side}", show_axes=False)
             s.add_glb(f"/sat_{side}/model", spacecraft_model.spacecraft_glb(ghost), scale=scale)
             s.add_frame(f"/sat_{side}/axes", axes_length=AXES_LENGTH, axes_radius=AXES_LENGTH / 80)
-            s.add_label(f"/sat_{side}/label", side, font_screen_scale=0.8,
-                        anchor="bottom-left" if ghost else "top-left")
+            s.add_label(
+                f"/sat_{side}/label", side, font_screen_scale=0.8, anchor="bottom-left" if ghost else "top-left"
+            )
             self.sats[side] = node
-            self.los[side] = s.add_line_segments(f"/earth/los_{side}", np.zeros((1, 2, 3)), colour,
-                                                 thickness=1.5, thickness_units="screen")
-            self.footprints[side] = s.add_line_segments(f"/earth/footprint_{side}", np.zeros((1, 2, 3)), colour,
-                                                        thickness=LINE_PX, thickness_units="screen")
-            self.ccd[side] = s.add_line_segments(f"/earth/ccd_{side}", np.zeros((1, 2, 3)), (255, 255, 255),
-                                                 thickness=LINE_PX, thickness_units="screen")
+            self.los[side] = s.add_line_segments(
+                f"/earth/los_{side}", np.zeros((1, 2, 3)), colour, thickness=1.5, thickness_units="screen"
+            )
+            self.footprints[side] = s.add_line_segments(
+                f"/earth/footprint_{side}", np.zeros((1, 2, 3)), colour, thickness=LINE_PX, thickness_units="screen"
+            )
+            self.ccd[side] = s.add_line_segments(
+                f"/earth/ccd_{side}", np.zeros((1, 2, 3)), (255, 255, 255), thickness=LINE_PX, thickness_units="screen"
+            )
 
     def rebuild(self, geometry: TwinGeometry) -> None:
         """Redraw every node for another feed's geometry (viser replaces nodes of the same name)."""
@@ -123,9 +143,9 @@ class TwinScene:
             if f.trace_split != self._trace_split:
                 self._trace_split = f.trace_split
                 k = int(np.clip(f.trace_split, 1, len(g.track_t) - 1))
-                _set_segments(self.trace_past, polyline_segments(g.trace_ecef[:k + 1] * 1.0005))
+                _set_segments(self.trace_past, polyline_segments(g.trace_ecef[: k + 1] * 1.0005))
                 _set_segments(self.trace_future, polyline_segments(g.trace_ecef[k:] * 1.0005))
-                _set_segments(self.orbit_past, polyline_segments(g.orbit_eci[:k + 1]))
+                _set_segments(self.orbit_past, polyline_segments(g.orbit_eci[: k + 1]))
                 _set_segments(self.orbit_future, polyline_segments(g.orbit_eci[k:]))
                 _set_segments(self.terminator, polyline_segments(f.terminator_ecef * 1.001))
             m = _ecef_of(f)
@@ -147,7 +167,7 @@ def _ecef_of(f: TwinFrame) -> np.ndarray:
     return quaternion.to_dcm(f.earth_wxyz).T
 
 
-def _set_segments(handle: "viser.LineSegmentsHandle", segments: np.ndarray, visible: bool = True) -> None:
+def _set_segments(handle: viser.LineSegmentsHandle, segments: np.ndarray, visible: bool = True) -> None:
     """Replace a line set's segments; hide it when there is nothing (or nothing wanted) to draw."""
     if segments.shape[0]:
         handle.points = segments

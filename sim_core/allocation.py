@@ -125,8 +125,14 @@ class AllocationConfig:
         """Parameter vector for the kernels of seed 000 eq (6) and §3, indexed by the P_* constants."""
         return np.array(
             [
-                self.law4, self.gamma_rad, self.rho, self.mu_rho_per_s, self.phi_rho_per_s, self.h_max_nms,
-                self.l_max_am2, self.md_law,
+                self.law4,
+                self.gamma_rad,
+                self.rho,
+                self.mu_rho_per_s,
+                self.phi_rho_per_s,
+                self.h_max_nms,
+                self.l_max_am2,
+                self.md_law,
             ],
             dtype=np.float64,
         )
@@ -245,7 +251,11 @@ def _solve3(m: np.ndarray, i0: int, i1: int, i2: int, rhs: np.ndarray) -> tuple[
     r = (rhs[0], rhs[1], rhs[2])
     det = _triple(c0, c1, c2)
     x = np.zeros(3)
-    norms = np.sqrt((c0[0] ** 2 + c0[1] ** 2 + c0[2] ** 2) * (c1[0] ** 2 + c1[1] ** 2 + c1[2] ** 2) * (c2[0] ** 2 + c2[1] ** 2 + c2[2] ** 2))
+    norms = np.sqrt(
+        (c0[0] ** 2 + c0[1] ** 2 + c0[2] ** 2)
+        * (c1[0] ** 2 + c1[1] ** 2 + c1[2] ** 2)
+        * (c2[0] ** 2 + c2[1] ** 2 + c2[2] ** 2)
+    )
     if abs(det) <= _SINGULAR_PIVOT * norms:
         return x, False
     x[0] = _triple(r, c1, c2) / det
@@ -382,7 +392,11 @@ def allocate_1(
         return STATUS_TOO_FEW_WHEELS
     if n_on == 2:
         mp, mq, dip, status = _two_wheels_md(
-            axes_b[:, idx[0]].copy(), axes_b[:, idx[1]].copy(), torque_req_b, b_field_b_t, params[P_L_MAX],
+            axes_b[:, idx[0]].copy(),
+            axes_b[:, idx[1]].copy(),
+            torque_req_b,
+            b_field_b_t,
+            params[P_L_MAX],
             int(params[P_MD_LAW]),
         )
         wheel_torque_out[idx[0]], wheel_torque_out[idx[1]] = mp, mq
@@ -455,7 +469,9 @@ def distribute_momentum(
     flat = drf.reshape(-1, 3)
     out = np.array([distribute_momentum_1(row, config.gamma_rad, config.rho) for row in flat])
     if not np.all(np.isfinite(out)):
-        raise ValueError("momentum_b_nms: outside the domain of the distribution law (|y|, |z| < 2 cos γ · h^m in DRF axes)")
+        raise ValueError(
+            "momentum_b_nms: outside the domain of the distribution law (|y|, |z| < 2 cos γ · h^m in DRF axes)"
+        )
     return out.reshape(momentum.shape[:-1] + (4,)) * config.h_max_nms
 
 
@@ -481,12 +497,16 @@ def allocate(
     if config.law4 == LAW_GE_DISTRIBUTION and n == 4:
         _check_ge_axes(axes, config.gamma_rad)
     shape = np.broadcast_shapes(torque.shape[:-1], mask.shape[:-1], h.shape[:-1], b.shape[:-1])
-    torque, mask, h, b = (np.broadcast_to(v, shape + v.shape[-1:]).reshape(-1, v.shape[-1]) for v in (torque, mask, h, b))
+    torque, mask, h, b = (
+        np.broadcast_to(v, shape + v.shape[-1:]).reshape(-1, v.shape[-1]) for v in (torque, mask, h, b)
+    )
     params = config.as_array()
     wheel = np.zeros((torque.shape[0], n))
     dipole = np.zeros((torque.shape[0], 3))
     status = np.empty(torque.shape[0], dtype=np.int64)
     axes_c = np.ascontiguousarray(axes)
     for i in range(torque.shape[0]):
-        status[i] = allocate_1(torque[i].copy(), axes_c, mask[i].copy(), h[i].copy(), b[i].copy(), params, wheel[i], dipole[i])
+        status[i] = allocate_1(
+            torque[i].copy(), axes_c, mask[i].copy(), h[i].copy(), b[i].copy(), params, wheel[i], dipole[i]
+        )
     return wheel.reshape(shape + (n,)), dipole.reshape(shape + (3,)), status.reshape(shape)

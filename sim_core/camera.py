@@ -82,7 +82,7 @@ def body_to_ecef_dcm(q_ib: np.ndarray, eci_to_ecef: np.ndarray) -> np.ndarray:
 
 
 def intersect_ellipsoid(origin_m: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """First point where the ray origin + s·d (s ≥ 0) meets the WGS84 ellipsoid, NaN on a miss (seed 000 §6 LOS point)."""
+    """First point where the ray origin + s·d (s ≥ 0) meets the WGS84 ellipsoid, NaN on a miss (seed 000 §6 LOS)."""
     o, d = np.broadcast_arrays(_vectors(origin_m, "origin_m"), _vectors(direction, "direction"))
     if np.any(np.all(d == 0.0, axis=-1)):
         raise ValueError("direction: zero vector has no direction")
@@ -187,7 +187,7 @@ def footprint_ecef_m(
 
 
 def ccd_line_ecef_m(r_ecef_m: np.ndarray, c_eb: np.ndarray, half_across_rad: float, n_points: int = 9) -> np.ndarray:
-    """Projection of the CCD line (body x–z plane, ±half_across about +x) on the ellipsoid, (..., n, 3) (seed 000 §6)."""
+    """Projection of the CCD line (body x–z plane, ±half_across about +x) on the ellipsoid, (..., n, 3), seed 000 §6."""
     ta = np.tan(_half_angle(half_across_rad, "half_across_rad"))
     z = np.linspace(-ta, ta, _count(n_points, "n_points", 2))
     rays = np.stack([np.ones_like(z), np.zeros_like(z), z], axis=-1)
@@ -261,7 +261,8 @@ def station_visibility_circle_ecef_m(
     """Ground circle around a station inside which a satellite at the given altitude is above the mask, (n, 3) ECEF m.
 
     Spherical Earth of the local geocentric radius R: the Earth-central angle is
-    λ = arccos(R cos ε / (R + h)) − ε (triangle Earth centre–station–satellite); the circle is the set of sub-satellite points
+    λ = arccos(R cos ε / (R + h)) − ε (triangle Earth centre–station–satellite); the circle is the set of
+    sub-satellite points
     at angle λ from the station, put on the ellipsoid along their geocentric directions.
     """
     if not -90.0 <= lat_deg <= 90.0:

@@ -93,8 +93,9 @@ def record_width(n_wheels: int) -> int:
 
 
 @njit(cache=True)
-def hermite_orbit_into(table: np.ndarray, t0: float, step: float, t: float, r: np.ndarray, v: np.ndarray,
-                       acc: np.ndarray) -> None:
+def hermite_orbit_into(
+    table: np.ndarray, t0: float, step: float, t: float, r: np.ndarray, v: np.ndarray, acc: np.ndarray
+) -> None:
     """ECI r, v, a at t from a table of rows (r, v, a) every ``step`` s by cubic Hermite interpolation, in place."""
     u = (t - t0) / step
     i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
@@ -103,7 +104,9 @@ def hermite_orbit_into(table: np.ndarray, t0: float, step: float, t: float, r: n
     h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
     d00, d10, d01, d11 = (6 * s2 - 6 * s) / step, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / step, 3 * s2 - 2 * s
     for j in range(3):
-        r[j] = h00 * table[i, j] + h10 * step * table[i, 3 + j] + h01 * table[i + 1, j] + h11 * step * table[i + 1, 3 + j]
+        r[j] = (
+            h00 * table[i, j] + h10 * step * table[i, 3 + j] + h01 * table[i + 1, j] + h11 * step * table[i + 1, 3 + j]
+        )
         v[j] = d00 * table[i, j] + d10 * table[i, 3 + j] + d01 * table[i + 1, j] + d11 * table[i + 1, 3 + j]
         acc[j] = (1 - s) * table[i, 6 + j] + s * table[i + 1, 6 + j]
 
@@ -142,8 +145,9 @@ def add_gravity_gradient_into(x: np.ndarray, r_eci: np.ndarray, inertia: np.ndar
 
 
 @njit(cache=True)
-def limit_motor_torque_into(m: np.ndarray, x: np.ndarray, i0: int, inertia: np.ndarray, max_torque: np.ndarray,
-                            max_momentum: np.ndarray) -> None:
+def limit_motor_torque_into(
+    m: np.ndarray, x: np.ndarray, i0: int, inertia: np.ndarray, max_torque: np.ndarray, max_momentum: np.ndarray
+) -> None:
     """Seed 000 eq (2) on the delivered torques in place (as wheels.limited_motor_torque_1)."""
     for p in range(m.shape[0]):
         mm = min(max_torque[p], max(-max_torque[p], m[p]))
@@ -154,8 +158,19 @@ def limit_motor_torque_into(m: np.ndarray, x: np.ndarray, i0: int, inertia: np.n
 
 
 @njit(cache=True)
-def _program_1(kind: int, steps_t: np.ndarray, steps_q: np.ndarray, route: np.ndarray, t: float,
-               t0_unix: float, r: np.ndarray, v: np.ndarray, a: np.ndarray, c_pn: np.ndarray, dut1: float):
+def _program_1(
+    kind: int,
+    steps_t: np.ndarray,
+    steps_q: np.ndarray,
+    route: np.ndarray,
+    t: float,
+    t0_unix: float,
+    r: np.ndarray,
+    v: np.ndarray,
+    a: np.ndarray,
+    c_pn: np.ndarray,
+    dut1: float,
+):
     """Λ^p, ω^p, ω̇^p (program axes) and the observing flag at t (seed 000 §2, seed 001)."""
     if kind == PROGRAM_INERTIAL:
         k = 0
@@ -183,8 +198,17 @@ def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.nda
 
 
 @njit(cache=True)
-def _earth_and_field_update_1(nadir: np.ndarray, earth_ok: bool, r: np.ndarray, b_eci: np.ndarray, mag: np.ndarray,
-                              mag_noise: float, q_est: np.ndarray, bias_est: np.ndarray, p_cov: np.ndarray) -> None:
+def _earth_and_field_update_1(
+    nadir: np.ndarray,
+    earth_ok: bool,
+    r: np.ndarray,
+    b_eci: np.ndarray,
+    mag: np.ndarray,
+    mag_noise: float,
+    q_est: np.ndarray,
+    bias_est: np.ndarray,
+    p_cov: np.ndarray,
+) -> None:
     """Without a star-tracker sample: MEKF updates on the earth sensor's nadir (seed 002 eq 14) and on
     the magnetometer's field direction (seed 003 §3.2)."""
     if earth_ok:
@@ -195,8 +219,16 @@ def _earth_and_field_update_1(nadir: np.ndarray, earth_ok: bool, r: np.ndarray, 
 
 
 @njit(cache=True)
-def _sun_direction_1(faults: np.ndarray, t: float, x: np.ndarray, q_est: np.ndarray, sun_eci: np.ndarray,
-                     r: np.ndarray, sigma: float, frozen: np.ndarray) -> np.ndarray:
+def _sun_direction_1(
+    faults: np.ndarray,
+    t: float,
+    x: np.ndarray,
+    q_est: np.ndarray,
+    sun_eci: np.ndarray,
+    r: np.ndarray,
+    sigma: float,
+    frozen: np.ndarray,
+) -> np.ndarray:
     """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1) under its faults; in eclipse
     or when failed, the ephemeris Sun seen through the attitude estimate."""
     normals = np.random.standard_normal(3)
@@ -260,8 +292,26 @@ def _mode_program_1(mode: int, q_est, r, v, a, sun_b, q_p, w_p, wd_p) -> None:
 
 
 @njit(cache=True)
-def _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, t_u, bdot_gain, md_max, p, available, h_wheels,
-                    alloc_params, wheel_limits, body_torque, cmd, dipole, wheel_out, dip_out) -> None:
+def _rate_damping_1(
+    mode,
+    w_est,
+    mag,
+    mag_prev,
+    have_mag_prev,
+    t_u,
+    bdot_gain,
+    md_max,
+    p,
+    available,
+    h_wheels,
+    alloc_params,
+    wheel_limits,
+    body_torque,
+    cmd,
+    dipole,
+    wheel_out,
+    dip_out,
+) -> None:
     """Rate damping (seed 001 initial mode, seed 003 eq 29–30): B-dot above 1 °/s or in the fault mode;
     below it the wheels brake the body (−J ω / RATE_DAMPING_TAU_S) while the rods unload the cluster."""
     body_torque[:] = 0.0
@@ -281,8 +331,28 @@ def _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, t_u, bdot_gain, m
 
 @njit(cache=True, nogil=True)
 def fly_variant(
-    x0, p: PlantArrays, truth: PlantArrays, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-    available, faults, fdir_cfg, seed, rec, ev, n_ev, shared, slot, models: SeedModels,
+    x0,
+    p: PlantArrays,
+    truth: PlantArrays,
+    wheel_limits,
+    steps,
+    times,
+    program,
+    orbit,
+    env,
+    gains,
+    est,
+    alloc_params,
+    available,
+    faults,
+    fdir_cfg,
+    seed,
+    rec,
+    ev,
+    n_ev,
+    shared,
+    slot,
+    models: SeedModels,
 ) -> None:
     """Fly one variant and fill its output record ``rec`` (samples × channels) and events ``ev``.
 
@@ -327,8 +397,17 @@ def fly_variant(
     j_inv = np.linalg.inv(truth.inertia)
     base_friction = p.friction.copy()
     friction = truth.friction.copy()
-    plant = PlantArrays(truth.inertia, truth.mass_inv, truth.wheel_axes, truth.wheel_inertia, friction,
-                        truth.flex_coupling, truth.flex_mass, truth.flex_freq, truth.flex_decrement)
+    plant = PlantArrays(
+        truth.inertia,
+        truth.mass_inv,
+        truth.wheel_axes,
+        truth.wheel_inertia,
+        friction,
+        truth.flex_coupling,
+        truth.flex_mass,
+        truth.flex_freq,
+        truth.flex_decrement,
+    )
     g = np.zeros(3)  # lead-lag state of seed 000 eq (8)
     cmd = np.zeros(nw)
     frozen_cmd = np.zeros(nw)
@@ -387,7 +466,7 @@ def fly_variant(
     mode = int(times[TM_INITIAL]) if modes_on else -1
     mode_state = np.full(modes.STATE_SIZE, np.nan)
     mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
-    mode_thresholds = times[TM_THRESHOLDS:TM_THRESHOLDS + 5].copy()
+    mode_thresholds = times[TM_THRESHOLDS : TM_THRESHOLDS + 5].copy()
     mag_prev = np.zeros(3)
     have_mag_prev = False
     j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
@@ -413,8 +492,16 @@ def fly_variant(
         if k % meas_every == 0:
             normals = np.random.standard_normal(6)
             drift_normals = np.random.standard_normal(3) if markov_on else np.zeros(3)
-            w_meas, _ = sensors.gyro_1(x[4:7], gyro_bias, gyro_drift, gyro_noise3, markov_decay, markov_step, np.inf,
-                                       np.concatenate((normals[0:3], drift_normals)))
+            w_meas, _ = sensors.gyro_1(
+                x[4:7],
+                gyro_bias,
+                gyro_drift,
+                gyro_noise3,
+                markov_decay,
+                markov_step,
+                np.inf,
+                np.concatenate((normals[0:3], drift_normals)),
+            )
             gyro_ok = faults_mod.sensor_faults_1(faults, T_GYRO, t, w_meas, gyro_frozen, gyro_noise, normals[0:3])
             sig3 = np.full(3, st_sigma)
             q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, 1e9, normals[3:6])
@@ -422,8 +509,9 @@ def fly_variant(
             mag[:] = b_body + mag_noise * np.random.standard_normal(3)
             faults_mod.sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
             if fdir_on:
-                fdir.magnetometer_check_1(mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma,
-                                          ev, n_ev, t)
+                fdir.magnetometer_check_1(
+                    mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma, ev, n_ev, t
+                )
             if est_kind == ESTIMATOR_TRUTH:
                 q_est[:] = x[0:4]
                 w_est[:] = x[4:7]
@@ -436,26 +524,48 @@ def fly_variant(
                 if k > 0 and gyro_ok:
                     # mean of the samples bracketing the step: the held sample's ½ ω̇ T_q² error would
                     # make the filter overconfident in manoeuvres (and the FDIR innovation test with it)
-                    mekf.mekf_propagate_1(q_est, bias_est, p_cov, 0.5 * (w_meas + w_prev), meas_every * dt,
-                                          gyro_noise * np.sqrt(meas_every * dt), sigma_u)
+                    mekf.mekf_propagate_1(
+                        q_est,
+                        bias_est,
+                        p_cov,
+                        0.5 * (w_meas + w_prev),
+                        meas_every * dt,
+                        gyro_noise * np.sqrt(meas_every * dt),
+                        sigma_u,
+                    )
                 w_prev[:] = w_meas
                 st_raw_ok = st_ok
                 if fdir_on and st_ok:
-                    st_scale = fdir.star_tracker_check_1(star_fd, q_est, p_cov, q_m, sig3, nis_max,
-                                                         gyro_fd[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t)
+                    st_scale = fdir.star_tracker_check_1(
+                        star_fd, q_est, p_cov, q_m, sig3, nis_max, gyro_fd[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t
+                    )
                     st_ok = st_scale > 0.0
                     sig3 *= max(st_scale, 1.0)
                 if fdir_on and gyro_ok:
-                    sigma_u = fdir.gyro_drift_step_1(gyro_fd, t, w_meas, meas_every * dt, q_m, st_ok, st_sigma,
-                                                     gyro_noise, times[12], n_sigma, ev, n_ev)
+                    sigma_u = fdir.gyro_drift_step_1(
+                        gyro_fd,
+                        t,
+                        w_meas,
+                        meas_every * dt,
+                        q_m,
+                        st_ok,
+                        st_sigma,
+                        gyro_noise,
+                        times[12],
+                        n_sigma,
+                        ev,
+                        n_ev,
+                    )
                 if not st_ok:
                     nadir, earth_ok = _earth_sensor_nadir_1(faults, t, x, r)
                     if fdir_on and earth_ok:
-                        earth_ok = fdir.earth_sensor_check_1(earth_fd, q_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD,
-                                                             ev, n_ev, t)
+                        earth_ok = fdir.earth_sensor_check_1(
+                            earth_fd, q_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD, ev, n_ev, t
+                        )
                     if fdir_on and earth_ok and st_raw_ok:
-                        st_ok = fdir.star_readmit_1(star_fd, q_est, q_m, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD,
-                                                    n_sigma, ev, n_ev, t)
+                        st_ok = fdir.star_readmit_1(
+                            star_fd, q_est, q_m, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD, n_sigma, ev, n_ev, t
+                        )
                     if not st_ok:
                         _earth_and_field_update_1(nadir, earth_ok, r, b_eci, mag, mag_noise, q_est, bias_est, p_cov)
                 if st_ok:
@@ -470,33 +580,64 @@ def fly_variant(
             q_p, w_p, wd_p, observing = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
             if modes_on:
                 q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), r, v, a)
-                sun_b = _sun_direction_1(faults, t, x, q_est, environment.sun_position_1(t0_unix + t), r,
-                                         models.sun_sensor_sigma_rad, sun_frozen)
-                new_mode = modes.mode_step_1(mode_state, mode_thresholds, t, np.sqrt(w_est @ w_est), attitude_valid,
-                                             _angle_between_1(SUN_AXIS_B, sun_b), _attitude_difference_1(q_est, q_orf),
-                                             True, np.sum(available) < 2, False)
+                sun_b = _sun_direction_1(
+                    faults,
+                    t,
+                    x,
+                    q_est,
+                    environment.sun_position_1(t0_unix + t),
+                    r,
+                    models.sun_sensor_sigma_rad,
+                    sun_frozen,
+                )
+                new_mode = modes.mode_step_1(
+                    mode_state,
+                    mode_thresholds,
+                    t,
+                    np.sqrt(w_est @ w_est),
+                    attitude_valid,
+                    _angle_between_1(SUN_AXIS_B, sun_b),
+                    _attitude_difference_1(q_est, q_orf),
+                    True,
+                    np.sum(available) < 2,
+                    False,
+                )
                 if new_mode != mode:
                     _event(ev, n_ev, t, EV_MODE_CHANGE, new_mode)
                     g[:] = 0.0
                     mode = new_mode
                 if mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF:
                     _mode_program_1(mode, q_est, r, v, a, sun_b, q_p, w_p, wd_p)
-                    observing = False
-            speeds = x[7 + 2 * nq: 7 + 2 * nq + nw].copy()
+            speeds = x[7 + 2 * nq : 7 + 2 * nq + nw].copy()
             if tach_q > 0.0:
                 speeds = tach_q * np.floor(speeds / tach_q + 0.5)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
                 n_before = np.sum(available)
-                fdir.wheel_check_1(wheel_fd, speeds, w_est, p.wheel_inertia, wheel_limits[1], base_friction, tach_q,
-                                   ctrl_every * dt, decouple, available, ev, n_ev, t)
+                fdir.wheel_check_1(
+                    wheel_fd,
+                    speeds,
+                    w_est,
+                    p.wheel_inertia,
+                    wheel_limits[1],
+                    base_friction,
+                    tach_q,
+                    ctrl_every * dt,
+                    decouple,
+                    available,
+                    ev,
+                    n_ev,
+                    t,
+                )
                 if est_kind == ESTIMATOR_MEKF and np.sum(available) < n_before:
                     fdir.star_reset_1(star_fd, p_cov, STAR_RESET_SIGMA_RAD)
             coarse = mode == modes.MODE_SUN_SAFE or (
-                mode == modes.MODE_ORF and _attitude_difference_1(q_est, q_p) > FINE_POINTING_RAD)
+                mode == modes.MODE_ORF and _attitude_difference_1(q_est, q_p) > FINE_POINTING_RAD
+            )
             if modes_on and coarse:
-                body_torque = control.quaternion_pd_step(q_est, w_est, q_p, w_p, acq_kp, acq_kd) \
-                    + control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
+                body_torque = control.quaternion_pd_step(
+                    q_est, w_est, q_p, w_p, acq_kp, acq_kd
+                ) + control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
             elif law_kind == LAW_SEED000:
                 body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
                 if times[T_GYRO_COMPENSATION] != 0.0:
@@ -510,14 +651,26 @@ def fly_variant(
                 sigma = e[1:] / (1.0 + e[0])
                 w_rn_b = conjugate_rotate_1(e, w_p)
                 wd_rn_b = conjugate_rotate_1(e, wd_p)
-                body_torque = control.mrp_feedback_step(sigma, w_est - w_rn_b, w_rn_b, wd_rn_b, p.inertia,
-                                                        p.wheel_axes, p.wheel_inertia, speeds, available,
-                                                        mrp_k, mrp_p, mrp_law)
+                body_torque = control.mrp_feedback_step(
+                    sigma,
+                    w_est - w_rn_b,
+                    w_rn_b,
+                    wd_rn_b,
+                    p.inertia,
+                    p.wheel_axes,
+                    p.wheel_inertia,
+                    speeds,
+                    available,
+                    mrp_k,
+                    mrp_p,
+                    mrp_law,
+                )
             else:
                 body_torque = control.quaternion_pd_step(q_est, w_est, q_p, w_p, pd_kp, pd_kd)
             faults_mod.controller_faults_1(faults, t, body_torque, frozen_torque)
-            status = allocation.allocate_1(body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params,
-                                           wheel_out, dip_out)
+            status = allocation.allocate_1(
+                body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params, wheel_out, dip_out
+            )
             for w in range(nw):
                 cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
             dipole[:] = dip_out
@@ -526,12 +679,30 @@ def fly_variant(
                 dipole[i] = min(max(dipole[i], -md_max), md_max)
             if modes_on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
                 # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
-                dipole[:] = control.unloading_dipole_step(mag, p.wheel_axes @ h_wheels, np.zeros(3),
-                                                          UNLOADING_GAIN_PER_S, md_max)
+                dipole[:] = control.unloading_dipole_step(
+                    mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, md_max
+                )
             if modes_on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
-                _rate_damping_1(mode, w_est, mag, mag_prev, have_mag_prev, ctrl_every * dt, times[TM_BDOT_GAIN], md_max,
-                                p, available, h_wheels, alloc_params, wheel_limits, body_torque, cmd, dipole,
-                                wheel_out, dip_out)
+                _rate_damping_1(
+                    mode,
+                    w_est,
+                    mag,
+                    mag_prev,
+                    have_mag_prev,
+                    ctrl_every * dt,
+                    times[TM_BDOT_GAIN],
+                    md_max,
+                    p,
+                    available,
+                    h_wheels,
+                    alloc_params,
+                    wheel_limits,
+                    body_torque,
+                    cmd,
+                    dipole,
+                    wheel_out,
+                    dip_out,
+                )
             mag_prev[:] = mag
             have_mag_prev = True
             md_on = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
@@ -539,30 +710,44 @@ def fly_variant(
                 md_torque[0] = dipole[1] * mag[2] - dipole[2] * mag[1]
                 md_torque[1] = dipole[2] * mag[0] - dipole[0] * mag[2]
                 md_torque[2] = dipole[0] * mag[1] - dipole[1] * mag[0]
-                fdir.wheel_hold_1(wheel_fd, speeds, w_est, p.wheel_axes, cmd, p.wheel_inertia, wheel_limits[0],
-                                  wheel_limits[1], base_friction, p.inertia, j_eff_inv, md_torque,
-                                  fdir_cfg[FD_DIST_TORQUE], rate_noise, ctrl_every * dt)
+                fdir.wheel_hold_1(
+                    wheel_fd,
+                    speeds,
+                    w_est,
+                    p.wheel_axes,
+                    cmd,
+                    p.wheel_inertia,
+                    wheel_limits[0],
+                    wheel_limits[1],
+                    base_friction,
+                    p.inertia,
+                    j_eff_inv,
+                    md_torque,
+                    fdir_cfg[FD_DIST_TORQUE],
+                    rate_noise,
+                    ctrl_every * dt,
+                )
 
         if k % out_every == 0 and out_i < rec.shape[0]:
             row = rec[out_i]
-            row[R_Q:R_Q + 4] = x[0:4]
-            row[R_W:R_W + 3] = x[4:7]
-            row[R_QE:R_QE + 4] = q_est
-            row[R_WE:R_WE + 3] = w_est
+            row[R_Q : R_Q + 4] = x[0:4]
+            row[R_W : R_W + 3] = x[4:7]
+            row[R_QE : R_QE + 4] = q_est
+            row[R_WE : R_WE + 3] = w_est
             q_now, w_now, _, obs_now = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
-            row[R_QP:R_QP + 4] = q_now
+            row[R_QP : R_QP + 4] = q_now
             e = multiply_1(np.array([q_now[0], -q_now[1], -q_now[2], -q_now[3]]), x[0:4])
-            row[R_WP:R_WP + 3] = conjugate_rotate_1(e, w_now)
-            row[R_MD:R_MD + 3] = dipole
-            row[R_TORQUE:R_TORQUE + 3] = body_torque
-            row[R_R:R_R + 3] = r
+            row[R_WP : R_WP + 3] = conjugate_rotate_1(e, w_now)
+            row[R_MD : R_MD + 3] = dipole
+            row[R_TORQUE : R_TORQUE + 3] = body_torque
+            row[R_R : R_R + 3] = r
             row[R_OBS] = 1.0 if obs_now else 0.0
             row[R_STATUS] = status
             row[R_FAULTS] = flags
             row[R_MODE] = mode
-            row[R_WHEELS:R_WHEELS + nw] = x[7 + 2 * nq: 7 + 2 * nq + nw]
-            row[R_WHEELS + nw:R_WHEELS + 2 * nw] = cmd
-            row[R_WHEELS + 2 * nw:R_WHEELS + 3 * nw] = delivered
+            row[R_WHEELS : R_WHEELS + nw] = x[7 + 2 * nq : 7 + 2 * nq + nw]
+            row[R_WHEELS + nw : R_WHEELS + 2 * nw] = cmd
+            row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = delivered
             for w in range(nw):
                 row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
             out_i += 1
@@ -584,8 +769,30 @@ def fly_variant(
         shared[slot] = n_steps
 
 
-def run_batch(x0, p, truth, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-              available, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared, models: SeedModels) -> None:
+def run_batch(
+    x0,
+    p,
+    truth,
+    wheel_limits,
+    steps,
+    times,
+    program,
+    orbit,
+    env,
+    gains,
+    est,
+    alloc_params,
+    available,
+    faults,
+    n_faults,
+    fdir_cfg,
+    seeds,
+    rec,
+    ev,
+    n_ev,
+    shared,
+    models: SeedModels,
+) -> None:
     """Fly every variant (axis 0 of x0, available, faults, fdir_cfg, seeds, rec, ev), one thread per core;
     ``p`` is the modelled plant, ``truth`` the flown one (see :func:`fly_variant`).
 
@@ -595,9 +802,30 @@ def run_batch(x0, p, truth, wheel_limits, steps, times, program, orbit, env, gai
     from concurrent.futures import ThreadPoolExecutor
 
     def one(v: int) -> None:
-        fly_variant(x0[v], p, truth, wheel_limits, steps, times, program, orbit, env, gains, est, alloc_params,
-                    available[v], faults[v, : n_faults[v]], fdir_cfg[v], seeds[v], rec[v], ev[v], n_ev[v], shared,
-                    1 + v, models)
+        fly_variant(
+            x0[v],
+            p,
+            truth,
+            wheel_limits,
+            steps,
+            times,
+            program,
+            orbit,
+            env,
+            gains,
+            est,
+            alloc_params,
+            available[v],
+            faults[v, : n_faults[v]],
+            fdir_cfg[v],
+            seeds[v],
+            rec[v],
+            ev[v],
+            n_ev[v],
+            shared,
+            1 + v,
+            models,
+        )
 
     n = x0.shape[0]
     if n == 1:

@@ -288,7 +288,9 @@ def closed_loop_matrix(gains: DigitalLawGains = DigitalLawGains(), delay_periods
     return phi
 
 
-def loop_response(omega_rad_s: np.ndarray, gains: DigitalLawGains = DigitalLawGains(), delay_periods: int = 0) -> np.ndarray:
+def loop_response(
+    omega_rad_s: np.ndarray, gains: DigitalLawGains = DigitalLawGains(), delay_periods: int = 0
+) -> np.ndarray:
     """Open-loop frequency response L(e^{jωT}) = C(z) P(z) z^{−d} of the linearised loop (seed 000 eqs 3, 8)."""
     t = gains.t_u_s
     k, p, b, _ = gains.as_array()
@@ -382,7 +384,9 @@ def _limit_dipole(dipole: np.ndarray, l_max: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def bdot_dipole_step(b_now_b_t: np.ndarray, b_prev_b_t: np.ndarray, dt_s: float, gain: float, l_max_am2: float) -> np.ndarray:
+def bdot_dipole_step(
+    b_now_b_t: np.ndarray, b_prev_b_t: np.ndarray, dt_s: float, gain: float, l_max_am2: float
+) -> np.ndarray:
     """B-dot dipole L = −k Ḃ, Ḃ ≈ (B_k − B_{k−1})/Δt from magnetometer samples (seed 003 eq 30), |l_i| ≤ l^m.
 
     Seed 003 prints M = −k B under the name B-dot; the law it names (its ref. 25) uses Ḃ.
@@ -462,7 +466,9 @@ def mrp_feedback_step(
     h = _mv3(inertia, omega)
     for i in range(gs_b.shape[1]):
         if available[i]:
-            spin = js_kg_m2[i] * (omega[0] * gs_b[0, i] + omega[1] * gs_b[1, i] + omega[2] * gs_b[2, i] + wheel_speed_rad_s[i])
+            spin = js_kg_m2[i] * (
+                omega[0] * gs_b[0, i] + omega[1] * gs_b[1, i] + omega[2] * gs_b[2, i] + wheel_speed_rad_s[i]
+            )
             for r in range(3):
                 h[r] += spin * gs_b[r, i]
     gyro = np.cross(omega_rn_b if law_type == 0 else omega, h)
@@ -509,6 +515,9 @@ def mrp_feedback(
     flat = [np.broadcast_to(f, shape + f.shape[-1:]).reshape(batch, f.shape[-1]).copy() for f in fields]
     j = _as_inertia(inertia_kg_m2)
     out = np.array(
-        [mrp_feedback_step(s, wbr, wrn, dwrn, j, gs, js, ws, av, k_nm, p_nms, law_type) for s, wbr, wrn, dwrn, ws, av in zip(*flat)]
+        [
+            mrp_feedback_step(s, wbr, wrn, dwrn, j, gs, js, ws, av, k_nm, p_nms, law_type)
+            for s, wbr, wrn, dwrn, ws, av in zip(*flat)
+        ]
     )
     return out.reshape(shape + (3,))

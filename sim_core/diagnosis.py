@@ -130,15 +130,21 @@ class WheelModel:
     control_dt_s: float
 
 
-def wheel_model(axes_b: np.ndarray, inertia_kg_m2: np.ndarray, max_torque_nm: np.ndarray, coulomb_nm: np.ndarray,
-                control_dt_s: float) -> WheelModel:
+def wheel_model(
+    axes_b: np.ndarray,
+    inertia_kg_m2: np.ndarray,
+    max_torque_nm: np.ndarray,
+    coulomb_nm: np.ndarray,
+    control_dt_s: float,
+) -> WheelModel:
     """A checked :class:`WheelModel` (arrays as float64)."""
     axes = np.asarray(axes_b, dtype=float)
     jr = np.asarray(inertia_kg_m2, dtype=float)
     if axes.ndim != 2 or axes.shape[0] != 3 or axes.shape[1] != jr.shape[0]:
         raise ValueError("wheel model: axes_b must be (3, n_wheels) with one inertia per wheel")
-    return WheelModel(axes, jr, np.asarray(max_torque_nm, dtype=float), np.asarray(coulomb_nm, dtype=float),
-                      float(control_dt_s))
+    return WheelModel(
+        axes, jr, np.asarray(max_torque_nm, dtype=float), np.asarray(coulomb_nm, dtype=float), float(control_dt_s)
+    )
 
 
 @dataclass(frozen=True)
@@ -208,8 +214,18 @@ def _wheel_channels(obs: Observations, wm: WheelModel, sigma_torque_nm: float) -
         motor = dt * u_mean / jr
         templates = {"motor": motor, "friction": -dt * spin / jr, "coupling": coupling}
         q_var = (dt / jr) ** 2 * u_var + (0.5 * ROTOR_TOLERANCE * motor) ** 2 + (COUPLING_TOLERANCE * coupling) ** 2
-        out.append(_Channel(f"wheel {p + 1}", y, drift, q_var, r_var, obs.speed_quantum_rad_s, templates,
-                            ROTOR_TOLERANCE * np.abs(motor) + COUPLING_TOLERANCE * np.abs(coupling)))
+        out.append(
+            _Channel(
+                f"wheel {p + 1}",
+                y,
+                drift,
+                q_var,
+                r_var,
+                obs.speed_quantum_rad_s,
+                templates,
+                ROTOR_TOLERANCE * np.abs(motor) + COUPLING_TOLERANCE * np.abs(coupling),
+            )
+        )
     return out
 
 
@@ -258,8 +274,16 @@ def _magnetometer_channels(obs: Observations) -> list[_Channel]:
         y = y_all[:, axis]
         q_var = max(_robust_var(np.diff(y)), 1e-22)
         n = y.shape[0]
-        out.append(_Channel(f"magnetometer {'xyz'[axis]}", y, np.zeros(n - 1), np.full(n - 1, 0.5 * q_var),
-                            np.full(n, 0.25 * q_var), 0.0))
+        out.append(
+            _Channel(
+                f"magnetometer {'xyz'[axis]}",
+                y,
+                np.zeros(n - 1),
+                np.full(n - 1, 0.5 * q_var),
+                np.full(n, 0.25 * q_var),
+                0.0,
+            )
+        )
     return out
 
 
@@ -313,8 +337,14 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
     base = np.broadcast_to(ch.drift, (g, n - 1))
 
     def run(drift: np.ndarray, offset: np.ndarray, reset: np.ndarray) -> np.ndarray:
-        return fd.level_loglik(ch.y, np.ascontiguousarray(drift), ch.q_var, ch.r_var, np.ascontiguousarray(offset),
-                               np.ascontiguousarray(reset))
+        return fd.level_loglik(
+            ch.y,
+            np.ascontiguousarray(drift),
+            ch.q_var,
+            ch.r_var,
+            np.ascontiguousarray(offset),
+            np.ascontiguousarray(reset),
+        )
 
     if kind == "stuck":
         reset = after_sample.astype(np.bool_)
@@ -325,12 +355,15 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
 
         def at(theta: float) -> np.ndarray:
             return run(lost + theta * after * ch.templates["motor"], zero_off, no_reset)
+
         if not quadratic:
             return at(0.0), np.full(g, np.nan)
         return _quadratic_max(at, 0.0, MAX_REMAINING_GAIN)
     if kind == "friction":
+
         def at(theta: float) -> np.ndarray:
             return run(base + theta * after * ch.templates["friction"], zero_off, no_reset)
+
         # a friction that does not move the wheel by one tachometer count after its onset is not resolved
         per_nm = np.abs(after * ch.templates["friction"]).sum(axis=1)
         with np.errstate(divide="ignore"):
@@ -339,13 +372,16 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
 
     def at_bias(theta: float) -> np.ndarray:  # speed, gyro or magnetometer bias: a step in the measurement
         return run(base, theta * after_sample, no_reset)
+
     # a bias below the sensor's resolution is not identifiable: rounding leaves such offsets for minutes
-    return _quadratic_max(at_bias, -np.inf, np.inf, scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0,
-                          min_abs=ch.bound)
+    return _quadratic_max(
+        at_bias, -np.inf, np.inf, scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0, min_abs=ch.bound
+    )
 
 
-def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0,
-                   min_abs: float | np.ndarray = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def _quadratic_max(
+    at, lo: float, hi: float, scale: float = 1.0, min_abs: float | np.ndarray = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi] and |θ| ≥ min_abs."""
     if np.isfinite(hi) and np.isfinite(lo):
         p0, p1, p2 = lo, 0.5 * (lo + hi), hi
@@ -365,8 +401,9 @@ def _quadratic_max(at, lo: float, hi: float, scale: float = 1.0,
     return ll, theta
 
 
-def _fit(ch: _Channel, index: int, kind: str, onsets: np.ndarray, t_s: np.ndarray, nominal: float,
-         n_params: int) -> _Fit:
+def _fit(
+    ch: _Channel, index: int, kind: str, onsets: np.ndarray, t_s: np.ndarray, nominal: float, n_params: int
+) -> _Fit:
     """Onset-marginal, magnitude-penalised log evidence of one fault in one channel."""
     quadratic = kind not in ("failure", "stuck")
     ll, theta = _profile(ch, onsets, kind, quadratic)
@@ -386,15 +423,25 @@ def _window(alarm: fd.Alarm | None, n: int, dt: float) -> tuple[int, int, int]:
 
 def _cut(ch: _Channel, a: int, b: int) -> _Channel:
     """The channel restricted to samples [a, b)."""
-    return _Channel(ch.name, ch.y[a:b], ch.drift[a:b - 1], ch.q_var[a:b - 1], ch.r_var[a:b], ch.bound,
-                    {k: v[a:b - 1] for k, v in ch.templates.items()},
-                    None if ch.relative is None else ch.relative[a:b - 1])
+    return _Channel(
+        ch.name,
+        ch.y[a:b],
+        ch.drift[a : b - 1],
+        ch.q_var[a : b - 1],
+        ch.r_var[a:b],
+        ch.bound,
+        {k: v[a : b - 1] for k, v in ch.templates.items()},
+        None if ch.relative is None else ch.relative[a : b - 1],
+    )
 
 
 def _nominal(ch: _Channel) -> float:
     n = ch.y.shape[0]
-    return float(fd.level_loglik(ch.y, ch.drift[None, :].copy(), ch.q_var, ch.r_var, np.zeros((1, n)),
-                                 np.zeros((1, n), dtype=np.bool_))[0])
+    return float(
+        fd.level_loglik(
+            ch.y, ch.drift[None, :].copy(), ch.q_var, ch.r_var, np.zeros((1, n)), np.zeros((1, n), dtype=np.bool_)
+        )[0]
+    )
 
 
 def _suspected(ch: _Channel) -> bool:
@@ -402,18 +449,35 @@ def _suspected(ch: _Channel) -> bool:
     r = fd.open_loop_residual(ch.y, ch.drift)[None, :]
     dt = 1.0
     rel = None if ch.relative is None else ch.relative[None, :]
-    return fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt, n_sigma=PRUNE_SIGMA,
-                           windows_s=tuple(float(w) for w in (1, 3, 10, 30, 100, 300)), relative=rel) is not None
+    return (
+        fd.window_alarm(
+            r,
+            ch.q_var[None, :],
+            ch.r_var[None, :],
+            ch.bound,
+            dt,
+            n_sigma=PRUNE_SIGMA,
+            windows_s=tuple(float(w) for w in (1, 3, 10, 30, 100, 300)),
+            relative=rel,
+        )
+        is not None
+    )
 
 
-def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None,
-             sigma_torque_nm: float = UNMODELLED_TORQUE_NM, flyer: Callable[[Scenario], object] | None = None
-             ) -> Diagnosis:
+def diagnose(
+    obs: Observations,
+    wm: WheelModel,
+    scenario: Scenario | None = None,
+    sigma_torque_nm: float = UNMODELLED_TORQUE_NM,
+    flyer: Callable[[Scenario], object] | None = None,
+) -> Diagnosis:
     """Detect, prune, fit and rank the fault hypotheses of the spacecraft on ``obs`` (module docstring);
     with ``scenario``, the top wheel hypotheses are replayed in the twin (``flyer``: how a batch is flown)."""
     if wm.axes_b.shape[1] != obs.n_wheels:
-        raise ValueError(f"telemetry: {obs.n_wheels} wheels telemetered, the scenario's spacecraft has "
-                         f"{wm.axes_b.shape[1]} (telemetry from another spacecraft?)")
+        raise ValueError(
+            f"telemetry: {obs.n_wheels} wheels telemetered, the scenario's spacecraft has "
+            f"{wm.axes_b.shape[1]} (telemetry from another spacecraft?)"
+        )
     t = obs.t_s
     dt = float(np.median(np.diff(t)))
     wheels = _wheel_channels(obs, wm, sigma_torque_nm)
@@ -462,9 +526,14 @@ def diagnose(obs: Observations, wm: WheelModel, scenario: Scenario | None = None
     if alarm is not None:
         name = {-1: "star tracker", -2: "onboard FDIR isolation"}.get(alarm.channel) or channels[alarm.channel].name
     return Diagnosis(
-        hypotheses=hyps, detected=alarm is not None, alarm_s=None if alarm is None else float(t[alarm.index]),
-        alarm_channel=name, false_alarms_per_day=detection_rate_per_day(len(channels), dt),
-        window_s=(float(t[start]), float(t[stop - 1])), suspected_wheels=suspected, untestable=untestable,
+        hypotheses=hyps,
+        detected=alarm is not None,
+        alarm_s=None if alarm is None else float(t[alarm.index]),
+        alarm_channel=name,
+        false_alarms_per_day=detection_rate_per_day(len(channels), dt),
+        window_s=(float(t[start]), float(t[stop - 1])),
+        suspected_wheels=suspected,
+        untestable=untestable,
     )
 
 
@@ -501,8 +570,9 @@ def _star_tracker_alarm(valid: np.ndarray | None) -> int | None:
     return int(hits[0] + STAR_OUTAGE_RUN - 1) if hits.size else None
 
 
-def _sensor_fit(kind: str, group: list[_Channel], start: int, stop: int, onsets: np.ndarray,
-                tw: np.ndarray) -> _Fit | None:
+def _sensor_fit(
+    kind: str, group: list[_Channel], start: int, stop: int, onsets: np.ndarray, tw: np.ndarray
+) -> _Fit | None:
     """A bias step common in onset to the three axes of a sensor: sum of per-axis profiles."""
     total = None
     thetas = []
@@ -537,8 +607,15 @@ def _outage_fit(valid: np.ndarray, onsets: np.ndarray, tw: np.ndarray) -> _Fit:
     return _Fit("star_tracker_outage", -1, _log_mean_exp(ll) - nominal, onset, sigma, None)
 
 
-def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, start: int, stop: int, alarm: int,
-              flyer: Callable[[Scenario], object] | None) -> list[Hypothesis]:
+def _replayed(
+    hyps: list[Hypothesis],
+    obs: Observations,
+    scenario: Scenario,
+    start: int,
+    stop: int,
+    alarm: int,
+    flyer: Callable[[Scenario], object] | None,
+) -> list[Hypothesis]:
     """Add the twin replay's evidence (commands and attitude, onset re-estimated on a common coarse-then-fine
     grid) to the top wheel hypotheses and re-rank (:mod:`sim_core.twin_replay`)."""
     t = obs.t_s
@@ -566,24 +643,51 @@ def _replayed(hyps: list[Hypothesis], obs: Observations, scenario: Scenario, sta
     for i, h in enumerate(chosen):
         onset, sigma, _ = _onset_stats(taus, all_ll[i])
         evidence = _log_mean_exp(ll[i])  # the coarse grid spans the onset prior; fine points refine the onset
-        updated[id(h)] = Hypothesis(h.fault, h.wheel, onset, max(sigma, float(np.diff(fine).min(initial=1.0))),
-                                    h.magnitude, h.log_evidence + evidence)
+        updated[id(h)] = Hypothesis(
+            h.fault,
+            h.wheel,
+            onset,
+            max(sigma, float(np.diff(fine).min(initial=1.0))),
+            h.magnitude,
+            h.log_evidence + evidence,
+        )
     return _scored([updated.get(id(h), h) for h in hyps])
 
 
-def _replay_grid(chosen: list[Hypothesis], grid: np.ndarray, obs: Observations, scenario: Scenario, start: int,
-                 stop: int, flyer: Callable[[Scenario], object] | None) -> np.ndarray:
+def _replay_grid(
+    chosen: list[Hypothesis],
+    grid: np.ndarray,
+    obs: Observations,
+    scenario: Scenario,
+    start: int,
+    stop: int,
+    flyer: Callable[[Scenario], object] | None,
+) -> np.ndarray:
     """Replay log-likelihood (hypotheses × onsets) relative to the no-fault variant."""
     t = obs.t_s
     fdir = scenario.fdir or (obs.wheel_isolated is not None and bool(np.any(obs.wheel_isolated[start:stop] > 0)))
     scenario = scenario.model_copy(update={"fdir": fdir})
     first = max(0, min(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start))
     reference = max(int(np.searchsorted(t, grid[0])), first + 2)
-    candidates = [(fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau))
-                  for h in chosen for tau in grid]
-    ll = replay_scores(scenario, t, obs.epoch_unix_s, obs.q_est_ib, obs.omega_b_rad_s, obs.wheel_speed_rad_s,
-                       obs.wheel_torque_cmd_nm, candidates, first, stop, reference, obs.torque_quantum_nm, flyer,
-                       q_prog_ib=obs.q_prog_ib)
+    candidates = [
+        (fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau)) for h in chosen for tau in grid
+    ]
+    ll = replay_scores(
+        scenario,
+        t,
+        obs.epoch_unix_s,
+        obs.q_est_ib,
+        obs.omega_b_rad_s,
+        obs.wheel_speed_rad_s,
+        obs.wheel_torque_cmd_nm,
+        candidates,
+        first,
+        stop,
+        reference,
+        obs.torque_quantum_nm,
+        flyer,
+        q_prog_ib=obs.q_prog_ib,
+    )
     return (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
 
 
@@ -592,21 +696,30 @@ def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:
     ev = np.array([h.log_evidence for h in hyps])
     post = np.exp(ev - ev.max())
     post /= post.sum()
-    return sorted((Hypothesis(h.fault, h.wheel, h.onset_s, h.onset_sigma_s, h.magnitude, h.log_evidence, float(s))
-                   for h, s in zip(hyps, post)), key=lambda h: -h.log_evidence)
+    return sorted(
+        (
+            Hypothesis(h.fault, h.wheel, h.onset_s, h.onset_sigma_s, h.magnitude, h.log_evidence, float(s))
+            for h, s in zip(hyps, post)
+        ),
+        key=lambda h: -h.log_evidence,
+    )
 
 
 def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: set[int] = frozenset()) -> list[Hypothesis]:
     """Singles, pairs of wheel faults on different wheels (prior odds PAIR_PRIOR_LOG_ODDS), sensors and "none",
     scored by posterior probability; each wheel the onboard FDIR isolated that a hypothesis leaves healthy costs
     FDIR_MISS_LOG_ODDS."""
+
     def unexplained(*wheels: int) -> float:
         return -FDIR_MISS_LOG_ODDS * len(set(flagged) - set(wheels))
 
     hyps = [Hypothesis("none", None, None, None, None, unexplained())]
     for f in wheel_fits:
-        hyps.append(Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude,
-                               f.delta + unexplained(f.channel)))
+        hyps.append(
+            Hypothesis(
+                f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained(f.channel)
+            )
+        )
     for f in sensor_fits:
         hyps.append(Hypothesis(f.fault, None, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained()))
     by_wheel: dict[int, list[_Fit]] = {}
@@ -615,7 +728,14 @@ def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: set[int] = f
     for p, q in combinations(sorted(by_wheel), 2):
         for a in by_wheel[p]:
             for b in by_wheel[q]:
-                hyps.append(Hypothesis(f"{a.fault}+{b.fault}", [p + 1, q + 1], min(a.onset_s, b.onset_s),
-                                       max(a.onset_sigma_s, b.onset_sigma_s), [a.magnitude, b.magnitude],
-                                       a.delta + b.delta + unexplained(p, q) - PAIR_PRIOR_LOG_ODDS))
+                hyps.append(
+                    Hypothesis(
+                        f"{a.fault}+{b.fault}",
+                        [p + 1, q + 1],
+                        min(a.onset_s, b.onset_s),
+                        max(a.onset_sigma_s, b.onset_sigma_s),
+                        [a.magnitude, b.magnitude],
+                        a.delta + b.delta + unexplained(p, q) - PAIR_PRIOR_LOG_ODDS,
+                    )
+                )
     return _scored(hyps)[:MAX_LISTED]

@@ -45,7 +45,9 @@ def design_rates(gains_1_s: np.ndarray, orbit_rate_rad_s: float) -> np.ndarray:
     return np.concatenate([[-kt + 0j], roots])
 
 
-def observer_discretisation(gains_1_s: np.ndarray, orbit_rate_rad_s: float, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+def observer_discretisation(
+    gains_1_s: np.ndarray, orbit_rate_rad_s: float, dt_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Exact ZOH (Φ (3, 3), Γ (3, 6)) of seed 002 eq (15) over dt, inputs u = (ω_g, φ_m, θ_m, ω_o)."""
     kp, kt, ky = _gains(gains_1_s, orbit_rate_rad_s)
     if not (np.isfinite(dt_s) and dt_s > 0.0):
@@ -62,7 +64,13 @@ def observer_discretisation(gains_1_s: np.ndarray, orbit_rate_rad_s: float, dt_s
 
 @njit(cache=True)
 def observer_step_1(
-    angles3: np.ndarray, phi: np.ndarray, gamma: np.ndarray, omega_gyro_b: np.ndarray, roll_meas: float, pitch_meas: float, orbit_rate: float
+    angles3: np.ndarray,
+    phi: np.ndarray,
+    gamma: np.ndarray,
+    omega_gyro_b: np.ndarray,
+    roll_meas: float,
+    pitch_meas: float,
+    orbit_rate: float,
 ) -> None:
     """Advance (φ̂, θ̂, ψ̂) in place by one held-input step of seed 002 eq (15)."""
     u = np.empty(6)

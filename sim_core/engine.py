@@ -36,8 +36,17 @@ from sim_core.scenario import Scenario
 from sim_core.spacecraft import PlantParams, pack_state
 from sim_core.trajectory import EVENT_NAMES, Trajectory
 
-__all__ = ["simulate", "plant_params", "orbit_state", "allocation_params", "program_along", "ProgramSamples",
-           "orbit_period_s", "turn_peak_rate", "MAX_EVENTS"]
+__all__ = [
+    "simulate",
+    "plant_params",
+    "orbit_state",
+    "allocation_params",
+    "program_along",
+    "ProgramSamples",
+    "orbit_period_s",
+    "turn_peak_rate",
+    "MAX_EVENTS",
+]
 
 ORBIT_TABLE_STEP_S = 10.0  # Hermite error ~ (ωh)⁴ r / 384 ≈ 0.2 mm at LEO
 FIELD_TABLE_STEP_S = 30.0  # linear error ~ (2ω h)² B / 8 ≈ 1e-4 B (a few nT)
@@ -110,7 +119,11 @@ def orbit_state(s: Scenario) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndar
     """Callable t_unix_s → ECI r, v, a of the scenario's orbit (circular, J2 or SGP4)."""
     o = s.orbit
     t0 = _epoch_unix_s(o.epoch_utc)
-    inc = o.inclination_deg if o.inclination_deg is not None else float(orbit.sun_synchronous_inclination_deg(o.altitude_m))
+    inc = (
+        o.inclination_deg
+        if o.inclination_deg is not None
+        else float(orbit.sun_synchronous_inclination_deg(o.altitude_m))
+    )
     if o.kind == "tle":
         sat = orbit.parse_tle(o.tle_line1, o.tle_line2)
 
@@ -120,6 +133,7 @@ def orbit_state(s: Scenario) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndar
 
         return state
     if o.kind == "circular":
+
         def state(t):
             r, v = orbit.circular_orbit(np.asarray(t) - t0, o.altitude_m, inc, o.raan_deg, o.arg_latitude_deg)
             rn = np.linalg.norm(r, axis=-1, keepdims=True)
@@ -174,10 +188,7 @@ def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, 
         steps_q = quaternion.normalize(np.array([q for _, q in g.inertial_steps], dtype=float))
         order = np.argsort(steps_t)
         return closed_loop.PROGRAM_INERTIAL, (steps_t[order], steps_q[order], np.zeros((1, guidance.ROW_SIZE)))
-    if g.kind == "orf":
-        segs = [guidance.OrfHold(s.duration_s + 2 * s.control_dt_s)]
-    else:
-        segs = _route_segments(s)
+    segs = [guidance.OrfHold(s.duration_s + 2 * s.control_dt_s)] if g.kind == "orf" else _route_segments(s)
     route = guidance.compile_route(segs, t0, state, c_pn, dut1, w_pm)
     return closed_loop.PROGRAM_ROUTE, (np.zeros(1), np.array([[1.0, 0, 0, 0]]), np.ascontiguousarray(route))
 
@@ -196,8 +207,12 @@ def _mode_settings(s: Scenario, field_eci_t: np.ndarray) -> list[float]:
     n = np.sqrt(orbit.MU_EARTH_M3_S2 / a**3)
     j_min = float(np.min(np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2, dtype=float))))
     gain = 2.0 * n * 2.0 * j_min / float(np.mean(np.sum(field_eci_t**2, axis=1)))
-    initial = {"rate_damping": modes.MODE_RATE_DAMPING, "sun_safe": modes.MODE_SUN_SAFE, "orf": modes.MODE_ORF,
-               "route": modes.MODE_ROUTE}[s.initial_mode]
+    initial = {
+        "rate_damping": modes.MODE_RATE_DAMPING,
+        "sun_safe": modes.MODE_SUN_SAFE,
+        "orf": modes.MODE_ORF,
+        "route": modes.MODE_ROUTE,
+    }[s.initial_mode]
     return [1.0, float(initial), gain, *modes.ModeThresholds().to_array()]
 
 
@@ -205,12 +220,19 @@ def allocation_params(s: Scenario) -> np.ndarray:
     """Parameter vector of ``allocation.allocate_1`` for the scenario's cluster (seed 000 eq 6, §3)."""
     a = s.allocation
     ws = s.spacecraft.cluster.wheels
-    law4 = allocation.LAW_GE_DISTRIBUTION if (a.kind == "ge_explicit" and s.spacecraft.cluster.geometry == "ge") \
+    law4 = (
+        allocation.LAW_GE_DISTRIBUTION
+        if (a.kind == "ge_explicit" and s.spacecraft.cluster.geometry == "ge")
         else allocation.LAW_PSEUDO_INVERSE
+    )
     return allocation.AllocationConfig(
-        law4=law4, gamma_rad=np.radians(min(s.spacecraft.cluster.gamma_deg, 44.9)), rho=a.rho,
-        mu_rho_per_s=a.mu_rho_per_s, phi_rho_per_s=a.phi_rho_per_s,
-        h_max_nms=min(w.max_momentum_nms for w in ws), l_max_am2=max(s.spacecraft.md_max_dipole_am2, 1e-9),
+        law4=law4,
+        gamma_rad=np.radians(min(s.spacecraft.cluster.gamma_deg, 44.9)),
+        rho=a.rho,
+        mu_rho_per_s=a.mu_rho_per_s,
+        phi_rho_per_s=a.phi_rho_per_s,
+        h_max_nms=min(w.max_momentum_nms for w in ws),
+        l_max_am2=max(s.spacecraft.md_max_dipole_am2, 1e-9),
     ).as_array()
 
 
@@ -288,9 +310,12 @@ def turn_peak_rate(s: Scenario, route_index: int) -> float:
 def seed_models(s: Scenario) -> closed_loop.SeedModels:
     """The scenario's residual dipole, gyro Markov drift and Sun sensor for the loop (zero = off)."""
     sn = s.sensors
-    return closed_loop.SeedModels(np.array(s.spacecraft.residual_dipole_am2, dtype=float),
-                                  float(sn.gyro_markov_sigma_rad_s), float(sn.gyro_markov_tau_s),
-                                  float(sn.sun_sensor_sigma_rad))
+    return closed_loop.SeedModels(
+        np.array(s.spacecraft.residual_dipole_am2, dtype=float),
+        float(sn.gyro_markov_sigma_rad_s),
+        float(sn.gyro_markov_tau_s),
+        float(sn.sun_sensor_sigma_rad),
+    )
 
 
 class Cancelled(RuntimeError):
@@ -309,8 +334,8 @@ def simulate(
     ``wheel_available`` (variants × wheels, optional): which wheels the onboard allocation may use
     from the start (a reconfigured cluster); default all. ``fdir`` (one flag, or one per variant;
     default: the scenario's ``fdir`` field) switches on the onboard FDIR of :mod:`sim_core.fdir`,
-    which may drop wheels as it isolates them. ``progress`` gets the fraction done every ``PROGRESS_POLL_S``; ``cancel`` returning True
-    stops the run and raises :class:`Cancelled`.
+    which may drop wheels as it isolates them. ``progress`` gets the fraction done every ``PROGRESS_POLL_S``;
+    ``cancel`` returning True stops the run and raises :class:`Cancelled`.
     """
     s = scenario
     start = time.perf_counter()
@@ -333,22 +358,43 @@ def simulate(
     n_steps = int(round(s.duration_s / dt))
     every = [int(round(getattr(s, name) / dt)) for name in ("measurement_dt_s", "control_dt_s", "output_dt_s")]
     n_out = -(-n_steps // every[2])
-    law = {"seed000": closed_loop.LAW_SEED000, "mrp_feedback": closed_loop.LAW_MRP_FEEDBACK,
-           "quaternion_pd": closed_loop.LAW_QUATERNION_PD}[s.controller.kind]
-    est = {"truth": closed_loop.ESTIMATOR_TRUTH, "star_tracker": closed_loop.ESTIMATOR_STAR_TRACKER,
-           "mekf": closed_loop.ESTIMATOR_MEKF}[s.estimator.kind]
+    law = {
+        "seed000": closed_loop.LAW_SEED000,
+        "mrp_feedback": closed_loop.LAW_MRP_FEEDBACK,
+        "quaternion_pd": closed_loop.LAW_QUATERNION_PD,
+    }[s.controller.kind]
+    est = {
+        "truth": closed_loop.ESTIMATOR_TRUTH,
+        "star_tracker": closed_loop.ESTIMATOR_STAR_TRACKER,
+        "mekf": closed_loop.ESTIMATOR_MEKF,
+    }[s.estimator.kind]
     steps = np.array([n_steps, *every, law, est, prog_kind, int(s.gravity_gradient), 0], dtype=np.int64)
     c = s.controller
     sn = s.sensors
     field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
-    times = np.array([
-        dt, t0, s.spacecraft.md_max_dipole_am2, dut1, sn.star_tracker_sigma_arcsec * ARCSEC, sn.gyro_noise_rad_s,
-        sn.magnetometer_noise_t, sn.tachometer_quantum_rad_s, c.pd_kp_nm, c.pd_kd_nms, c.mrp_k_nm, c.mrp_p_nms,
-        sn.gyro_drift_density_rad_s_sqrt_s, *_mode_settings(s, field_tab[0]), float(c.gyroscopic_compensation),
-    ])
+    times = np.array(
+        [
+            dt,
+            t0,
+            s.spacecraft.md_max_dipole_am2,
+            dut1,
+            sn.star_tracker_sigma_arcsec * ARCSEC,
+            sn.gyro_noise_rad_s,
+            sn.magnetometer_noise_t,
+            sn.tachometer_quantum_rad_s,
+            c.pd_kp_nm,
+            c.pd_kd_nms,
+            c.mrp_k_nm,
+            c.mrp_p_nms,
+            sn.gyro_drift_density_rad_s_sqrt_s,
+            *_mode_settings(s, field_tab[0]),
+            float(c.gyroscopic_compensation),
+        ]
+    )
     ws = s.spacecraft.cluster.wheels
-    wheel_limits = np.array([[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws],
-                             [w.torque_quantum_nm for w in ws]])
+    wheel_limits = np.array(
+        [[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws], [w.torque_quantum_nm for w in ws]]
+    )
     gains = DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array()
     alloc = allocation_params(s)
     fdir_cfg = _fdir_config(s, s.fdir if fdir is None else fdir)
@@ -367,8 +413,30 @@ def simulate(
     est_init = (np.array(sn.gyro_bias_rad_s, dtype=float), mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S))
     shared = np.zeros(nv + 1, dtype=np.int64)
     flown = plant_params(s, truth=True).pack() if s.truth is not None else packed
-    args = (x0s, packed, flown, wheel_limits, steps, times, program, orbit_tab, env, gains, est_init, alloc,
-            avail, faults, n_faults, fdir_cfg, seeds, rec, ev, n_ev, shared, seed_models(s))
+    args = (
+        x0s,
+        packed,
+        flown,
+        wheel_limits,
+        steps,
+        times,
+        program,
+        orbit_tab,
+        env,
+        gains,
+        est_init,
+        alloc,
+        avail,
+        faults,
+        n_faults,
+        fdir_cfg,
+        seeds,
+        rec,
+        ev,
+        n_ev,
+        shared,
+        seed_models(s),
+    )
     _run_watched(args, shared, n_steps, progress, cancel)
     return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)
 
@@ -396,27 +464,29 @@ def _trajectory(s: Scenario, rec, ev, n_ev, nw: int, span: float, params: PlantP
     cl = closed_loop
     w0 = cl.R_WHEELS
     series = {
-        "q_ib": rec[..., cl.R_Q:cl.R_Q + 4],
-        "omega_b_rad_s": rec[..., cl.R_W:cl.R_W + 3],
-        "q_est_ib": rec[..., cl.R_QE:cl.R_QE + 4],
-        "omega_est_b_rad_s": rec[..., cl.R_WE:cl.R_WE + 3],
-        "q_prog_ib": rec[..., cl.R_QP:cl.R_QP + 4],
-        "omega_prog_b_rad_s": rec[..., cl.R_WP:cl.R_WP + 3],
-        "md_dipole_am2": rec[..., cl.R_MD:cl.R_MD + 3],
-        "control_torque_b_nm": rec[..., cl.R_TORQUE:cl.R_TORQUE + 3],
-        "r_eci_m": rec[..., cl.R_R:cl.R_R + 3],
+        "q_ib": rec[..., cl.R_Q : cl.R_Q + 4],
+        "omega_b_rad_s": rec[..., cl.R_W : cl.R_W + 3],
+        "q_est_ib": rec[..., cl.R_QE : cl.R_QE + 4],
+        "omega_est_b_rad_s": rec[..., cl.R_WE : cl.R_WE + 3],
+        "q_prog_ib": rec[..., cl.R_QP : cl.R_QP + 4],
+        "omega_prog_b_rad_s": rec[..., cl.R_WP : cl.R_WP + 3],
+        "md_dipole_am2": rec[..., cl.R_MD : cl.R_MD + 3],
+        "control_torque_b_nm": rec[..., cl.R_TORQUE : cl.R_TORQUE + 3],
+        "r_eci_m": rec[..., cl.R_R : cl.R_R + 3],
         "observing": rec[..., cl.R_OBS],
         "allocation_status": rec[..., cl.R_STATUS].astype(np.int64),
         "fault_flags": rec[..., cl.R_FAULTS].astype(np.int64),
         "mode": rec[..., cl.R_MODE].astype(np.int64),
-        "wheel_speed_rad_s": rec[..., w0:w0 + nw],
-        "wheel_torque_cmd_nm": rec[..., w0 + nw:w0 + 2 * nw],
-        "wheel_torque_nm": rec[..., w0 + 2 * nw:w0 + 3 * nw],
-        "wheel_available": rec[..., w0 + 3 * nw:w0 + 4 * nw] > 0.5,
+        "wheel_speed_rad_s": rec[..., w0 : w0 + nw],
+        "wheel_torque_cmd_nm": rec[..., w0 + nw : w0 + 2 * nw],
+        "wheel_torque_nm": rec[..., w0 + 2 * nw : w0 + 3 * nw],
+        "wheel_available": rec[..., w0 + 3 * nw : w0 + 4 * nw] > 0.5,
     }
     events = [
-        [(float(ev[v, i, 0]), EVENT_NAMES.get(int(ev[v, i, 1]), str(int(ev[v, i, 1]))), int(ev[v, i, 2]))
-         for i in range(int(n_ev[v, 0]))]
+        [
+            (float(ev[v, i, 0]), EVENT_NAMES.get(int(ev[v, i, 1]), str(int(ev[v, i, 1]))), int(ev[v, i, 2]))
+            for i in range(int(n_ev[v, 0]))
+        ]
         for v in range(len(s.variants))
     ]
     t = np.arange(rec.shape[1]) * s.output_dt_s

@@ -69,21 +69,41 @@ _CHUNK_S = 3600.0  # one IGRF date per hour of data
 _MODELS = ("igrf", "dipole")
 _IGRF_NMAX = 13
 # Schmidt recursion constants K[n, m] = √(n² − m²) (0 where m ≥ n), tabulated once for the kernel.
-_SCHMIDT_K = np.sqrt(np.maximum(np.subtract.outer(np.arange(_IGRF_NMAX + 1) ** 2, np.arange(_IGRF_NMAX + 1) ** 2), 0)
-                     .astype(float))
+_SCHMIDT_K = np.sqrt(
+    np.maximum(np.subtract.outer(np.arange(_IGRF_NMAX + 1) ** 2, np.arange(_IGRF_NMAX + 1) ** 2), 0).astype(float)
+)
 _R_EARTH_M = frames.WGS84_A_M
 
 # Vallado Table 8-4: base altitude (m), base density (kg/m³), scale height (m).
 _ATMOSPHERE_TABLE = np.array(
     [
-        [0, 1.225, 7.249], [25, 3.899e-2, 6.349], [30, 1.774e-2, 6.682], [40, 3.972e-3, 7.554],
-        [50, 1.057e-3, 8.382], [60, 3.206e-4, 7.714], [70, 8.770e-5, 6.549], [80, 1.905e-5, 5.799],
-        [90, 3.396e-6, 5.382], [100, 5.297e-7, 5.877], [110, 9.661e-8, 7.263], [120, 2.438e-8, 9.473],
-        [130, 8.484e-9, 12.636], [140, 3.845e-9, 16.149], [150, 2.070e-9, 22.523],
-        [180, 5.464e-10, 29.740], [200, 2.789e-10, 37.105], [250, 7.248e-11, 45.546],
-        [300, 2.418e-11, 53.628], [350, 9.518e-12, 53.298], [400, 3.725e-12, 58.515],
-        [450, 1.585e-12, 60.828], [500, 6.967e-13, 63.822], [600, 1.454e-13, 71.835],
-        [700, 3.614e-14, 88.667], [800, 1.170e-14, 124.64], [900, 5.245e-15, 181.05],
+        [0, 1.225, 7.249],
+        [25, 3.899e-2, 6.349],
+        [30, 1.774e-2, 6.682],
+        [40, 3.972e-3, 7.554],
+        [50, 1.057e-3, 8.382],
+        [60, 3.206e-4, 7.714],
+        [70, 8.770e-5, 6.549],
+        [80, 1.905e-5, 5.799],
+        [90, 3.396e-6, 5.382],
+        [100, 5.297e-7, 5.877],
+        [110, 9.661e-8, 7.263],
+        [120, 2.438e-8, 9.473],
+        [130, 8.484e-9, 12.636],
+        [140, 3.845e-9, 16.149],
+        [150, 2.070e-9, 22.523],
+        [180, 5.464e-10, 29.740],
+        [200, 2.789e-10, 37.105],
+        [250, 7.248e-11, 45.546],
+        [300, 2.418e-11, 53.628],
+        [350, 9.518e-12, 53.298],
+        [400, 3.725e-12, 58.515],
+        [450, 1.585e-12, 60.828],
+        [500, 6.967e-13, 63.822],
+        [600, 1.454e-13, 71.835],
+        [700, 3.614e-14, 88.667],
+        [800, 1.170e-14, 124.64],
+        [900, 5.245e-15, 181.05],
         [1000, 3.019e-15, 268.00],
     ]
 ) * np.array([1e3, 1.0, 1e3])
@@ -114,7 +134,7 @@ def _igrf_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from ppigrf.ppigrf import read_shc, shc_fn
 
     g_frame, h_frame = read_shc(shc_fn)
-    epochs = np.array([d.replace(tzinfo=dt.timezone.utc).timestamp() for d in g_frame.index])
+    epochs = np.array([d.replace(tzinfo=dt.UTC).timestamp() for d in g_frame.index])
     size = 1 + max(n for n, _ in g_frame.columns)
     g, h = np.zeros((epochs.size, size, size)), np.zeros((epochs.size, size, size))
     for n, m in g_frame.columns:
@@ -126,7 +146,7 @@ def _igrf_table() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def _check_igrf_span(t_unix_s: np.ndarray) -> None:
     epochs = _igrf_table()[0]
     if np.any(t_unix_s < epochs[0]) or np.any(t_unix_s > epochs[-1]):
-        first, last = (dt.datetime.fromtimestamp(e, dt.timezone.utc).date() for e in (epochs[0], epochs[-1]))
+        first, last = (dt.datetime.fromtimestamp(e, dt.UTC).date() for e in (epochs[0], epochs[-1]))
         raise ValueError(f"t_unix_s: IGRF-14 covers {first} to {last}")
 
 
@@ -339,9 +359,7 @@ def illumination_1(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> float:
         return 1.0 - (b * b) / (a * a)
     x = (c * c + a * a - b * b) / (2.0 * c)
     y = np.sqrt(max(0.0, a * a - x * x))
-    area = a * a * np.arccos(max(-1.0, min(1.0, x / a))) + b * b * np.arccos(
-        max(-1.0, min(1.0, (c - x) / b))
-    ) - c * y
+    area = a * a * np.arccos(max(-1.0, min(1.0, x / a))) + b * b * np.arccos(max(-1.0, min(1.0, (c - x) / b))) - c * y
     return 1.0 - area / (np.pi * a * a)
 
 
@@ -422,8 +440,12 @@ def gravity_gradient_torque_nm(r_eci_m: np.ndarray, q_ib: np.ndarray, inertia_kg
 
 @njit(cache=True)
 def aerodynamic_torque_1(
-    v_rel_b_m_s: np.ndarray, density_kg_m3: float, drag_coefficient: float,
-    normals_b: np.ndarray, areas_m2: np.ndarray, centroids_b_m: np.ndarray,
+    v_rel_b_m_s: np.ndarray,
+    density_kg_m3: float,
+    drag_coefficient: float,
+    normals_b: np.ndarray,
+    areas_m2: np.ndarray,
+    centroids_b_m: np.ndarray,
 ) -> np.ndarray:
     """Flat-plate free-molecular drag torque Σ c_i × (−½ ρ C_D A_i cos θ_i |v| v) (N·m, body axes)."""
     speed = np.sqrt(v_rel_b_m_s @ v_rel_b_m_s)
@@ -440,9 +462,14 @@ def aerodynamic_torque_1(
 
 @njit(cache=True)
 def solar_pressure_torque_1(
-    sun_b_unit: np.ndarray, sun_distance_m: float, illumination: float,
-    normals_b: np.ndarray, areas_m2: np.ndarray, centroids_b_m: np.ndarray,
-    specular: np.ndarray, diffuse: np.ndarray,
+    sun_b_unit: np.ndarray,
+    sun_distance_m: float,
+    illumination: float,
+    normals_b: np.ndarray,
+    areas_m2: np.ndarray,
+    centroids_b_m: np.ndarray,
+    specular: np.ndarray,
+    diffuse: np.ndarray,
 ) -> np.ndarray:
     """Flat-plate SRP torque, F = −P A cos θ [(1 − ρs) ŝ + 2(ρs cos θ + ρd/3) n̂] (M&G eq 3.73), N·m."""
     p = SOLAR_PRESSURE_1AU_N_M2 * (AU_M / sun_distance_m) ** 2 * illumination
@@ -450,8 +477,11 @@ def solar_pressure_torque_1(
     for i in range(areas_m2.size):
         cos_t = normals_b[i] @ sun_b_unit
         if cos_t > 0.0:
-            force = -p * areas_m2[i] * cos_t * (
-                (1.0 - specular[i]) * sun_b_unit + 2.0 * (specular[i] * cos_t + diffuse[i] / 3.0) * normals_b[i]
+            force = (
+                -p
+                * areas_m2[i]
+                * cos_t
+                * ((1.0 - specular[i]) * sun_b_unit + 2.0 * (specular[i] * cos_t + diffuse[i] / 3.0) * normals_b[i])
             )
             torque += np.cross(centroids_b_m[i], force)
     return torque
@@ -479,8 +509,13 @@ def _fractions(values: np.ndarray, size: int, name: str) -> np.ndarray:
 
 
 def aerodynamic_torque_nm(
-    r_eci_m: np.ndarray, v_eci_m_s: np.ndarray, q_ib: np.ndarray,
-    normals_b: np.ndarray, areas_m2: np.ndarray, centroids_b_m: np.ndarray, drag_coefficient: float = 2.2,
+    r_eci_m: np.ndarray,
+    v_eci_m_s: np.ndarray,
+    q_ib: np.ndarray,
+    normals_b: np.ndarray,
+    areas_m2: np.ndarray,
+    centroids_b_m: np.ndarray,
+    drag_coefficient: float = 2.2,
 ) -> np.ndarray:
     """Drag torque (N·m, body axes) along an orbit: v_rel = v − ω⊕ẑ × r, ρ of Vallado Table 8-4 (M^d of seed 000 eq 1).
 
@@ -499,11 +534,16 @@ def aerodynamic_torque_nm(
 
 
 def solar_pressure_torque_nm(
-    r_eci_m: np.ndarray, t_unix_s: np.ndarray | float, q_ib: np.ndarray,
-    normals_b: np.ndarray, areas_m2: np.ndarray, centroids_b_m: np.ndarray,
-    specular: np.ndarray | float = 0.0, diffuse: np.ndarray | float = 0.0,
+    r_eci_m: np.ndarray,
+    t_unix_s: np.ndarray | float,
+    q_ib: np.ndarray,
+    normals_b: np.ndarray,
+    areas_m2: np.ndarray,
+    centroids_b_m: np.ndarray,
+    specular: np.ndarray | float = 0.0,
+    diffuse: np.ndarray | float = 0.0,
 ) -> np.ndarray:
-    """Solar-pressure torque (N·m, body axes) along an orbit with the Almanac Sun and the conical shadow (M^d, seed 000 eq 1)."""
+    """Solar-pressure torque (N·m, body axes) along an orbit, Almanac Sun and conical shadow (M^d, seed 000 eq 1)."""
     r = _vectors(r_eci_m, "r_eci_m").reshape(-1, 3)
     t = np.broadcast_to(_times(t_unix_s), r.shape[:1])
     n, a, c = _plates(normals_b, areas_m2, centroids_b_m)

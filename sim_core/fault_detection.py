@@ -49,8 +49,9 @@ class Alarm(NamedTuple):
 
 
 @njit(cache=True)
-def level_loglik(y: np.ndarray, drift: np.ndarray, q_var: np.ndarray, r_var: np.ndarray, offset: np.ndarray,
-                 reset: np.ndarray) -> np.ndarray:
+def level_loglik(
+    y: np.ndarray, drift: np.ndarray, q_var: np.ndarray, r_var: np.ndarray, offset: np.ndarray, reset: np.ndarray
+) -> np.ndarray:
     """Log-likelihood (B,) of y (n,) under B local-level models x_{k+1} = x_k + drift[b, k] (+ N(0, q_var[k])),
     y_k = x_k + offset[b, k] + N(0, r_var[k]); reset[b, k] forces x_k = 0 exactly (seized rotor). NaN y: no update.
 
@@ -87,9 +88,16 @@ def open_loop_residual(y: np.ndarray, drift: np.ndarray) -> np.ndarray:
     return r - (r[finite[0]] if finite.size else 0.0)
 
 
-def window_alarm(residual: np.ndarray, q_var: np.ndarray, r_var: np.ndarray, bound: float, dt_s: float,
-                 n_sigma: float = N_SIGMA, windows_s: tuple[float, ...] = WINDOWS_S,
-                 relative: np.ndarray | None = None) -> Alarm | None:
+def window_alarm(
+    residual: np.ndarray,
+    q_var: np.ndarray,
+    r_var: np.ndarray,
+    bound: float,
+    dt_s: float,
+    n_sigma: float = N_SIGMA,
+    windows_s: tuple[float, ...] = WINDOWS_S,
+    relative: np.ndarray | None = None,
+) -> Alarm | None:
     """First k where |r_k − r_{k−L}| > bound + |Σ_L relative| + n σ_L for some window L (residual, r_var (n_ch, n),
     q_var (n_ch, n−1)); ``relative`` (n_ch, n−1) is a bounded systematic error per interval (e.g. a parameter
     tolerance times the modelled increment), summed over the window."""
@@ -122,8 +130,9 @@ def _first_hit(hit: np.ndarray) -> tuple[int, int]:
     return ch, int(cols[ch])
 
 
-def false_alarms_per_day(n_channels: int, dt_s: float, n_sigma: float = N_SIGMA,
-                         n_windows: int = len(WINDOWS_S)) -> float:
+def false_alarms_per_day(
+    n_channels: int, dt_s: float, n_sigma: float = N_SIGMA, n_windows: int = len(WINDOWS_S)
+) -> float:
     """Union bound on window-test false alarms per day: 86,400/dt × windows × channels × 2Φ(−n)."""
     tail = math.erfc(n_sigma / math.sqrt(2.0))
     return 86_400.0 / dt_s * n_windows * n_channels * tail

@@ -72,10 +72,27 @@ __all__ = [
 # Fault table columns and codes (fault_table builds the table from FaultSpec).
 F_TARGET, F_INDEX, F_TYPE, F_ONSET, F_END, F_GAIN, F_VALUE, F_PERIOD, F_DUTY = range(9)
 FAULT_COLUMNS = 9
-TARGET_CODES = {"wheel": 0, "gyro": 1, "star_tracker": 2, "earth_sensor": 3, "magnetometer": 4,
-                "sun_sensor": 5, "controller": 6, "md_rod": 7}
-TYPE_CODES = {"failure": 0, "stuck": 1, "gain": 2, "bias": 3, "drift": 4, "intermittent": 5,
-              "noise": 6, "friction": 7, "frozen": 8}
+TARGET_CODES = {
+    "wheel": 0,
+    "gyro": 1,
+    "star_tracker": 2,
+    "earth_sensor": 3,
+    "magnetometer": 4,
+    "sun_sensor": 5,
+    "controller": 6,
+    "md_rod": 7,
+}
+TYPE_CODES = {
+    "failure": 0,
+    "stuck": 1,
+    "gain": 2,
+    "bias": 3,
+    "drift": 4,
+    "intermittent": 5,
+    "noise": 6,
+    "friction": 7,
+    "frozen": 8,
+}
 T_WHEEL, T_GYRO, T_STAR, T_EARTH, T_MAG, T_SUN, T_CTRL, T_ROD = range(8)
 Y_FAIL, Y_STUCK, Y_GAIN, Y_BIAS, Y_DRIFT, Y_INTERMITTENT, Y_NOISE, Y_FRICTION, Y_FROZEN = range(9)
 EV_FAULT_ONSET, EV_FAULT_CLEARED = 2, 3  # sim_core.trajectory.EVENT_NAMES
@@ -90,7 +107,6 @@ SEED002_MAGNITUDES = {
     "noise_10": 10.0,  # seed 002 §3.2.4: 10σ
     "noise_50": 50.0,  # and 50σ
 }
-
 
 
 # --- grammar -------------------------------------------------------------------------------------
@@ -144,8 +160,17 @@ def fault_table(variants: Sequence[VariantSpec]) -> tuple[np.ndarray, np.ndarray
     for i, v in enumerate(variants):
         for j, f in enumerate(v.faults):
             end = np.inf if f.duration_s is None else f.onset_s + f.duration_s
-            table[i, j] = [TARGET_CODES[f.target], f.index, TYPE_CODES[f.type], f.onset_s, end,
-                           f.gain, f.value, f.period_s or 0.0, f.duty]
+            table[i, j] = [
+                TARGET_CODES[f.target],
+                f.index,
+                TYPE_CODES[f.type],
+                f.onset_s,
+                end,
+                f.gain,
+                f.value,
+                f.period_s or 0.0,
+                f.duty,
+            ]
         counts[i] = len(v.faults)
     return table, counts
 
@@ -188,8 +213,9 @@ def fault_transitions_1(faults: np.ndarray, t: float, state: np.ndarray, ev: np.
 
 
 @njit(cache=True)
-def sensor_faults_1(faults: np.ndarray, target: int, t: float, value: np.ndarray, frozen: np.ndarray,
-                    sigma: float, normals: np.ndarray) -> bool:
+def sensor_faults_1(
+    faults: np.ndarray, target: int, t: float, value: np.ndarray, frozen: np.ndarray, sigma: float, normals: np.ndarray
+) -> bool:
     """A sensor's faults (seed 002 §3.2 catalogue) on its sample in place: gain, bias, intermittent bias,
     drift value·(t − onset), noise scaled to value·σ (``sigma·normals`` is the sample's noise) on axis
     ``index``, frozen (holds ``frozen``); returns False while the sensor has failed."""
@@ -206,7 +232,7 @@ def sensor_faults_1(faults: np.ndarray, target: int, t: float, value: np.ndarray
             value[:] = frozen
         elif kind == Y_GAIN:
             value[axis] *= row[F_GAIN]
-        elif kind == Y_BIAS or kind == Y_INTERMITTENT:
+        elif kind in (Y_BIAS, Y_INTERMITTENT):
             value[axis] += row[F_VALUE]
         elif kind == Y_DRIFT:
             value[axis] += row[F_VALUE] * (t - row[F_ONSET])
@@ -235,8 +261,9 @@ def _small_rotation_1(rot: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def star_tracker_faults_1(faults: np.ndarray, t: float, q_m: np.ndarray, frozen_q: np.ndarray, sigma: float,
-                          normals: np.ndarray) -> bool:
+def star_tracker_faults_1(
+    faults: np.ndarray, t: float, q_m: np.ndarray, frozen_q: np.ndarray, sigma: float, normals: np.ndarray
+) -> bool:
     """Star-tracker faults on Λ^m in place: Λ^m ∘ Λ^f with Λ^f the rotation the faults' bias, drift,
     gain-free noise give (seed 000 §4); frozen holds ``frozen_q`` (updated while not frozen); False if failed."""
     rot = np.zeros(3)
@@ -265,7 +292,7 @@ def wheel_commands_1(faults: np.ndarray, t: float, cmd: np.ndarray, frozen_cmd: 
         if int(row[F_TARGET]) != T_WHEEL or not fault_active_1(row, t):
             continue
         kind, p = int(row[F_TYPE]), int(row[F_INDEX])
-        if kind == Y_FAIL or kind == Y_INTERMITTENT or kind == Y_STUCK:
+        if kind in (Y_FAIL, Y_INTERMITTENT, Y_STUCK):
             out[p] = 0.0
         elif kind == Y_GAIN:
             out[p] *= row[F_GAIN]
@@ -310,7 +337,7 @@ def controller_faults_1(faults: np.ndarray, t: float, torque: np.ndarray, frozen
         if int(row[F_TARGET]) != T_CTRL or not fault_active_1(row, t):
             continue
         kind, axis = int(row[F_TYPE]), min(int(row[F_INDEX]), 2)
-        if kind == Y_FAIL or kind == Y_INTERMITTENT:
+        if kind in (Y_FAIL, Y_INTERMITTENT):
             torque[:] = 0.0
         elif kind == Y_GAIN:
             torque *= row[F_GAIN]
@@ -328,7 +355,7 @@ def rod_faults_1(faults: np.ndarray, t: float, dipole: np.ndarray) -> None:
         if int(row[F_TARGET]) != T_ROD or not fault_active_1(row, t):
             continue
         kind, i = int(row[F_TYPE]), min(int(row[F_INDEX]), 2)
-        if kind == Y_FAIL or kind == Y_STUCK:
+        if kind in (Y_FAIL, Y_STUCK):
             dipole[i] = 0.0
         elif kind == Y_GAIN:
             dipole[i] *= row[F_GAIN]
@@ -337,8 +364,9 @@ def rod_faults_1(faults: np.ndarray, t: float, dipole: np.ndarray) -> None:
 
 
 @njit(cache=True)
-def sensor_fault_series(faults: np.ndarray, target: int, t_s: np.ndarray, samples: np.ndarray,
-                        noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def sensor_fault_series(
+    faults: np.ndarray, target: int, t_s: np.ndarray, samples: np.ndarray, noise: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`sensor_faults_1` over (n, k) samples with their realised noise; frozen holds the previous
     output sample. Returns (samples under the faults, failed mask)."""
     out = samples.copy()
@@ -350,8 +378,9 @@ def sensor_fault_series(faults: np.ndarray, target: int, t_s: np.ndarray, sample
 
 
 @njit(cache=True)
-def star_tracker_fault_series(faults: np.ndarray, t_s: np.ndarray, q_m: np.ndarray,
-                              noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def star_tracker_fault_series(
+    faults: np.ndarray, t_s: np.ndarray, q_m: np.ndarray, noise: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`star_tracker_faults_1` over (n, 4) quaternions with their realised noise rotation vectors."""
     out = q_m.copy()
     failed = np.zeros(t_s.shape[0], dtype=np.bool_)
@@ -362,6 +391,7 @@ def star_tracker_fault_series(faults: np.ndarray, t_s: np.ndarray, q_m: np.ndarr
 
 
 # --- catalogue -----------------------------------------------------------------------------------
+
 
 def wheel_failure(index: int, onset_s: float = 0.0, kind: str = "failure", **params: float) -> FaultSpec:
     """One wheel fault (seed 000 §3 failed wheel; seed 002 §3.2.2 multiplicative/stuck), validated."""
@@ -407,14 +437,17 @@ def seed002_fault_sets(onset_s: float = SEED002_ONSET_S) -> dict[str, list[Fault
     """Seed 002 §3.2 experiments as named fault sets for the three-wheel ``song-table1`` bus."""
     m = SEED002_MAGNITUDES
     gyro_drift = [FaultSpec(target="gyro", index=0, type="drift", onset_s=onset_s, value=m["gyro_drift_rad_s2"])]
-    att_drift = [FaultSpec(target="star_tracker", index=0, type="drift", onset_s=onset_s,
-                           value=m["attitude_drift_rad_s"])]
+    att_drift = [
+        FaultSpec(target="star_tracker", index=0, type="drift", onset_s=onset_s, value=m["attitude_drift_rad_s"])
+    ]
     return {
         "nominal": [],
-        "controller intermittent 7-8 s": [FaultSpec(target="controller", type="intermittent", onset_s=onset_s,
-                                                    duration_s=1.0)],
-        "controller abrupt 7 s": [FaultSpec(target="controller", index=0, type="bias", onset_s=onset_s,
-                                            value=m["controller_bias_nm"])],
+        "controller intermittent 7-8 s": [
+            FaultSpec(target="controller", type="intermittent", onset_s=onset_s, duration_s=1.0)
+        ],
+        "controller abrupt 7 s": [
+            FaultSpec(target="controller", index=0, type="bias", onset_s=onset_s, value=m["controller_bias_nm"])
+        ],
         "wheel 3 multiplicative": [wheel_failure(2, onset_s, "gain", gain=m["wheel_gain"])],
         "wheel 3 stuck": [wheel_failure(2, onset_s, "stuck")],
         "wheels 1,2": [wheel_failure(0, onset_s), wheel_failure(1, onset_s)],
@@ -435,8 +468,9 @@ def seed000_two_wheels(onset_s: float = 0.0) -> tuple[list[FaultSpec], np.ndarra
     return [wheel_failure(0, onset_s), wheel_failure(2, onset_s)], mask
 
 
-def random_wheel_failures(n: int, onset_range_s: tuple[float, float], n_wheels: int = 4, seed: int = 0,
-                          kind: str = "failure") -> list[VariantSpec]:
+def random_wheel_failures(
+    n: int, onset_range_s: tuple[float, float], n_wheels: int = 4, seed: int = 0, kind: str = "failure"
+) -> list[VariantSpec]:
     """``n`` variants, each with one wheel (uniformly drawn) failing at a uniform onset time."""
     lo, hi = onset_range_s
     if n < 1:
@@ -446,5 +480,7 @@ def random_wheel_failures(n: int, onset_range_s: tuple[float, float], n_wheels: 
     rng = np.random.default_rng(seed)
     wheels = rng.integers(0, n_wheels, n)
     onsets = rng.uniform(lo, hi, n)
-    return [VariantSpec(name=f"wheel {w + 1} {kind} at {t:.1f} s", faults=[wheel_failure(int(w), float(t), kind)])
-            for w, t in zip(wheels, onsets)]
+    return [
+        VariantSpec(name=f"wheel {w + 1} {kind} at {t:.1f} s", faults=[wheel_failure(int(w), float(t), kind)])
+        for w, t in zip(wheels, onsets)
+    ]

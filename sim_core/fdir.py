@@ -158,7 +158,7 @@ def wheel_state_1(n_wheels: int) -> np.ndarray:
 def star_state() -> np.ndarray:
     """Fresh star-tracker FDIR state (no previous reading)."""
     s = np.zeros(STAR_STATE_SIZE)
-    s[SS_PREV:SS_PREV + 4] = np.nan
+    s[SS_PREV : SS_PREV + 4] = np.nan
     return s
 
 
@@ -185,8 +185,16 @@ def _emit(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> No
 
 
 @njit(cache=True)
-def wheel_bound_1(inertia: float, speed_prev: float, speed_now: float, tach_q: float, rate_noise: float,
-                  t_u: float, friction: np.ndarray, p: int) -> float:
+def wheel_bound_1(
+    inertia: float,
+    speed_prev: float,
+    speed_now: float,
+    tach_q: float,
+    rate_noise: float,
+    t_u: float,
+    friction: np.ndarray,
+    p: int,
+) -> float:
     """Bound on |r_p| of a healthy wheel: J (q + δω) + T_u (m^f(Ω_hi) − m^f(Ω_lo)) (seed 000 eq 1, seed 002 eq 4)."""
     lo = min(speed_prev, speed_now) - 0.5 * tach_q
     hi = max(speed_prev, speed_now) + 0.5 * tach_q
@@ -195,11 +203,20 @@ def wheel_bound_1(inertia: float, speed_prev: float, speed_now: float, tach_q: f
 
 
 @njit(cache=True)
-def wheel_residual_1(inertia: float, speed_prev: float, speed_now: float, axial_rate_change: float, torque: float,
-                     t_u: float, friction: np.ndarray, p: int) -> float:
+def wheel_residual_1(
+    inertia: float,
+    speed_prev: float,
+    speed_now: float,
+    axial_rate_change: float,
+    torque: float,
+    t_u: float,
+    friction: np.ndarray,
+    p: int,
+) -> float:
     """Momentum residual r_p of one wheel over one control period, N·m·s (seed 000 eq 1)."""
-    f_mean = 0.5 * (friction_torque_one_wheel(speed_prev, friction, p)
-                    + friction_torque_one_wheel(speed_now, friction, p))
+    f_mean = 0.5 * (
+        friction_torque_one_wheel(speed_prev, friction, p) + friction_torque_one_wheel(speed_now, friction, p)
+    )
     return inertia * (speed_now - speed_prev + axial_rate_change) - t_u * (torque - f_mean)
 
 
@@ -220,7 +237,7 @@ def wheel_decoupling_1(axes: np.ndarray, inertia: np.ndarray, j_inv: np.ndarray)
 def _clear_windows_1(state: np.ndarray, p: int) -> None:
     """Restart the sums of wheel p's accumulated windows (their period counters keep the stagger)."""
     for w in range(2 * len(ACC_WINDOWS_PERIODS)):
-        state[WS_ACC + 3 * w:WS_ACC + 3 * w + 2, p] = 0.0
+        state[WS_ACC + 3 * w : WS_ACC + 3 * w + 2, p] = 0.0
 
 
 @njit(cache=True)
@@ -235,7 +252,7 @@ def _accumulate_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum:
         for s in range(2):
             row = WS_ACC + 3 * (2 * i + s)
             if state[row + 2, p] >= ACC_WINDOWS_PERIODS[i]:
-                state[row:row + 3, p] = 0.0
+                state[row : row + 3, p] = 0.0
             state[row, p] += r
             state[row + 1, p] += b_rest
             state[row + 2, p] += 1.0
@@ -244,9 +261,21 @@ def _accumulate_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum:
 
 
 @njit(cache=True)
-def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, inertia: np.ndarray,
-                  max_momentum: np.ndarray, friction: np.ndarray, tach_q: float, t_u: float, decouple: np.ndarray,
-                  available: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+def wheel_check_1(
+    state: np.ndarray,
+    speeds: np.ndarray,
+    w_body: np.ndarray,
+    inertia: np.ndarray,
+    max_momentum: np.ndarray,
+    friction: np.ndarray,
+    tach_q: float,
+    t_u: float,
+    decouple: np.ndarray,
+    available: np.ndarray,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+) -> bool:
     """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
 
     ``speeds``: tachometer readings at t (rad/s); ``state`` holds the previous reading, the
@@ -273,10 +302,19 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, ine
             bound[p] = abs(torque) * t_u  # the motor's momentum limit may cut the torque: untested
             continue
         tested[p] = available[p]  # dropped wheels still enter the decoupling (a rubbing one still pushes)
-        raw[p] = wheel_residual_1(inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u,
-                                  friction, p)
-        bound[p] = wheel_bound_1(inertia[p], state[WS_SPEED, p], speeds[p], tach_q,
-                                 state[WS_AXIAL_ERR, p] + state[WS_COUPLING, p] * dw, t_u, friction, p)
+        raw[p] = wheel_residual_1(
+            inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u, friction, p
+        )
+        bound[p] = wheel_bound_1(
+            inertia[p],
+            state[WS_SPEED, p],
+            speeds[p],
+            tach_q,
+            state[WS_AXIAL_ERR, p] + state[WS_COUPLING, p] * dw,
+            t_u,
+            friction,
+            p,
+        )
     changed = False
     for p in range(nw):
         if not tested[p]:
@@ -319,10 +357,23 @@ def wheel_check_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, ine
 
 
 @njit(cache=True)
-def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes: np.ndarray, cmd: np.ndarray,
-                 inertia: np.ndarray, max_torque: np.ndarray, max_momentum: np.ndarray, friction: np.ndarray,
-                 j_body: np.ndarray, j_inv: np.ndarray, md_torque_b: np.ndarray, dist_torque: float, rate_noise: float,
-                 t_u: float) -> None:
+def wheel_hold_1(
+    state: np.ndarray,
+    speeds: np.ndarray,
+    w_body: np.ndarray,
+    axes: np.ndarray,
+    cmd: np.ndarray,
+    inertia: np.ndarray,
+    max_torque: np.ndarray,
+    max_momentum: np.ndarray,
+    friction: np.ndarray,
+    j_body: np.ndarray,
+    j_inv: np.ndarray,
+    md_torque_b: np.ndarray,
+    dist_torque: float,
+    rate_noise: float,
+    t_u: float,
+) -> None:
     """Remember the readings, the torque the motor will deliver for ``cmd`` (seed 000 eq 2–3) and the body-rate
     change Δω^pred = J_e⁻¹(−A(m − m^f) − ω̂ × G + L × B) T_u the model predicts (seed 000 eq 1).
 
@@ -350,7 +401,7 @@ def wheel_hold_1(state: np.ndarray, speeds: np.ndarray, w_body: np.ndarray, axes
         state[WS_AXIAL, p] = axes[0, p] * dw[0] + axes[1, p] * dw[1] + axes[2, p] * dw[2]
         state[WS_AXIAL_ERR, p] = err
         state[WS_COUPLING, p] = j_inv_norm * t_u * np.sqrt(g @ g)  # |Δ(ω × G)| ≤ |Δω| |G| over the period
-        state[WS_W:WS_W + 3, p] = w_body
+        state[WS_W : WS_W + 3, p] = w_body
         state[WS_TORQUE, p] = limited[p]
         state[WS_VALID, p] = 1.0
 
@@ -374,8 +425,9 @@ def _rotvec_between_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def star_innovation_1(q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
-                      sigma3: np.ndarray) -> tuple[np.ndarray, float]:
+def star_innovation_1(
+    q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray, sigma3: np.ndarray
+) -> tuple[np.ndarray, float]:
     """Innovation z = rotvec(Λ̂̃ ∘ Λ^m) and zᵀ(P_θθ + diag σ²)⁻¹z, χ²(3) if consistent (seed 000 §4)."""
     z = _rotvec_between_1(q_est, q_meas)
     s = np.empty((3, 3))
@@ -387,9 +439,18 @@ def star_innovation_1(q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
 
 
 @njit(cache=True)
-def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, q_meas: np.ndarray,
-                         sigma3: np.ndarray, nis_max: float, gyro_suspect: bool, ev: np.ndarray, n_ev: np.ndarray,
-                         t: float) -> float:
+def star_tracker_check_1(
+    state: np.ndarray,
+    q_est: np.ndarray,
+    p_cov: np.ndarray,
+    q_meas: np.ndarray,
+    sigma3: np.ndarray,
+    nis_max: float,
+    gyro_suspect: bool,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+) -> float:
     """Screen one star-tracker sample; returns the factor on σ to update with, or 0 to reject it.
 
     seed 000 §4: Λ^m = Λ ∘ Λ^n with σ per axis; the innovation z = rotvec(Λ̂̃ ∘ Λ^m) has covariance
@@ -409,9 +470,14 @@ def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray
     for i in range(3):
         d = z[i] - state[SS_Z + i]
         step += d * d / (2.0 * sig[i] * sig[i]) if sig[i] > 0.0 else 0.0
-    frozen = sigma3[0] > 0.0 and q_meas[0] == state[SS_PREV] and q_meas[1] == state[SS_PREV + 1] \
-        and q_meas[2] == state[SS_PREV + 2] and q_meas[3] == state[SS_PREV + 3]
-    state[SS_PREV:SS_PREV + 4] = q_meas
+    frozen = (
+        sigma3[0] > 0.0
+        and q_meas[0] == state[SS_PREV]
+        and q_meas[1] == state[SS_PREV + 1]
+        and q_meas[2] == state[SS_PREV + 2]
+        and q_meas[3] == state[SS_PREV + 3]
+    )
+    state[SS_PREV : SS_PREV + 4] = q_meas
     jumped = (nis > nis_max and step > nis_max) or (state[SS_JUMP] != 0.0 and (nis > nis_max or step > nis_max))
     if gyro_suspect:
         jumped = False
@@ -420,7 +486,7 @@ def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray
     if not frozen and not jumped:
         state[SS_COUNT] = 0.0
         state[SS_JUMP] = 0.0
-        state[SS_Z:SS_Z + 3] = z
+        state[SS_Z : SS_Z + 3] = z
         return scale
     state[SS_JUMP] = 1.0 if jumped else state[SS_JUMP]
     state[SS_COUNT] += 1.0
@@ -436,9 +502,19 @@ def star_tracker_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray
 
 
 @njit(cache=True)
-def star_readmit_1(state: np.ndarray, q_est: np.ndarray, q_meas: np.ndarray, p_cov: np.ndarray, nadir_b: np.ndarray,
-                   nadir_ref_i: np.ndarray, sigma_earth: float, n_sigma: float, ev: np.ndarray, n_ev: np.ndarray,
-                   t: float) -> bool:
+def star_readmit_1(
+    state: np.ndarray,
+    q_est: np.ndarray,
+    q_meas: np.ndarray,
+    p_cov: np.ndarray,
+    nadir_b: np.ndarray,
+    nadir_ref_i: np.ndarray,
+    sigma_earth: float,
+    n_sigma: float,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+) -> bool:
     """Third-sensor vote on a rejected star-tracker sample (seed 002 eq 14 earth sensor): if the earth
     sensor's nadir agrees with the star tracker and not with the estimate, the estimate was wrong (a
     kick the propagation missed), so the tracker is re-admitted and the attitude covariance opened."""
@@ -456,15 +532,23 @@ def star_readmit_1(state: np.ndarray, q_est: np.ndarray, q_meas: np.ndarray, p_c
     state[SS_JUMP] = 0.0
     state[SS_COUNT] = 0.0
     state[SS_ISOLATED] = 0.0
-    state[SS_Z:SS_Z + 3] = 0.0
+    state[SS_Z : SS_Z + 3] = 0.0
     _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_STAR + 2)
     return True
 
 
 @njit(cache=True)
-def earth_sensor_check_1(state: np.ndarray, q_est: np.ndarray, p_cov: np.ndarray, nadir_b: np.ndarray,
-                         nadir_ref_i: np.ndarray, sigma_earth: float, ev: np.ndarray, n_ev: np.ndarray,
-                         t: float) -> bool:
+def earth_sensor_check_1(
+    state: np.ndarray,
+    q_est: np.ndarray,
+    p_cov: np.ndarray,
+    nadir_b: np.ndarray,
+    nadir_ref_i: np.ndarray,
+    sigma_earth: float,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+) -> bool:
     """Screen an earth-sensor nadir (seed 002 eq 14) against the MEKF's prediction: the NIS of the two-axis
     angle |b̂ × b|² / (σ² + the largest attitude variance) above the χ²(2) quantile −2 ln P_FA is rejected;
     ``CONFIRM_PERIODS`` rejections in a row isolate it (event argument SENSOR_ARG + 10·T_EARTH). True: use it."""
@@ -493,27 +577,28 @@ def star_reset_1(state: np.ndarray, p_cov: np.ndarray, sigma_att: float) -> None
     state[SS_JUMP] = 0.0
     state[SS_COUNT] = 0.0
     state[SS_ISOLATED] = 0.0
-    state[SS_Z:SS_Z + 3] = 0.0
+    state[SS_Z : SS_Z + 3] = 0.0
     for i in range(3):
         p_cov[i, i] += sigma_att * sigma_att
 
 
 @njit(cache=True)
-def _noise_or_jump_1(state: np.ndarray, z: np.ndarray, p_cov: np.ndarray, sigma3: np.ndarray,
-                     ev: np.ndarray, n_ev: np.ndarray, t: float) -> None:
+def _noise_or_jump_1(
+    state: np.ndarray, z: np.ndarray, p_cov: np.ndarray, sigma3: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float
+) -> None:
     """Noise or jump? While the tracker is suspect, the scatter of *consecutive* innovation differences
     (free of the estimate's own error) over NOISE_WINDOW samples: a self-consistent tracker (scatter
     within NOISE_RATIO of its σ) is offset — a jump, keep rejecting; a scattered one is noisy: σ is
     rescaled to the scatter and the tracker trusted again (in-jump and isolated flags cleared)."""
     n = state[SS_N]
     if n == 0.0:
-        state[SS_SUM:SS_SUM + 3] = 0.0
-        state[SS_ZLAST:SS_ZLAST + 3] = z
+        state[SS_SUM : SS_SUM + 3] = 0.0
+        state[SS_ZLAST : SS_ZLAST + 3] = z
         state[SS_N] = 1.0
         return
-    d = z - state[SS_ZLAST:SS_ZLAST + 3]
-    state[SS_ZLAST:SS_ZLAST + 3] = z
-    state[SS_SUM:SS_SUM + 3] += d * d
+    d = z - state[SS_ZLAST : SS_ZLAST + 3]
+    state[SS_ZLAST : SS_ZLAST + 3] = z
+    state[SS_SUM : SS_SUM + 3] += d * d
     state[SS_N] = n + 1.0
     if n < NOISE_WINDOW:
         return
@@ -546,9 +631,20 @@ def _integrate_rate_1(q: np.ndarray, w: np.ndarray, dt: float) -> None:
 
 
 @njit(cache=True)
-def gyro_drift_step_1(state: np.ndarray, t: float, w_meas: np.ndarray, dt: float, q_star: np.ndarray,
-                      star_ok: bool, sigma_st: float, sigma_g: float, sigma_rw: float, n_sigma: float,
-                      ev: np.ndarray, n_ev: np.ndarray) -> float:
+def gyro_drift_step_1(
+    state: np.ndarray,
+    t: float,
+    w_meas: np.ndarray,
+    dt: float,
+    q_star: np.ndarray,
+    star_ok: bool,
+    sigma_st: float,
+    sigma_g: float,
+    sigma_rw: float,
+    n_sigma: float,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> float:
     """One T_q step of the gyro-vs-star-tracker drift test; returns the MEKF bias process noise to use.
 
     Seed 002 eq 13 gyro (bias + drift + noise) against seed 000 §4 star tracker: over a window W
@@ -557,37 +653,41 @@ def gyro_drift_step_1(state: np.ndarray, t: float, w_meas: np.ndarray, dt: float
     """
     if np.isnan(state[GS_T0]):
         if star_ok:
-            state[GS_QINT], state[GS_QINT + 1:GS_QINT + 4] = 1.0, 0.0
-            state[GS_QST0:GS_QST0 + 4] = q_star
+            state[GS_QINT], state[GS_QINT + 1 : GS_QINT + 4] = 1.0, 0.0
+            state[GS_QST0 : GS_QST0 + 4] = q_star
             state[GS_T0] = t
-            state[GS_WPREV:GS_WPREV + 3] = w_meas
+            state[GS_WPREV : GS_WPREV + 3] = w_meas
         return state[GS_SIGMA_U]
-    q_int = state[GS_QINT:GS_QINT + 4].copy()
-    w_mid = 0.5 * (w_meas + state[GS_WPREV:GS_WPREV + 3])
+    q_int = state[GS_QINT : GS_QINT + 4].copy()
+    w_mid = 0.5 * (w_meas + state[GS_WPREV : GS_WPREV + 3])
     _integrate_rate_1(q_int, w_mid, dt)
-    state[GS_QINT:GS_QINT + 4] = q_int
-    state[GS_WPREV:GS_WPREV + 3] = w_meas
+    state[GS_QINT : GS_QINT + 4] = q_int
+    state[GS_WPREV : GS_WPREV + 3] = w_meas
     width = t - state[GS_T0]
     if width < GYRO_WINDOW_S or not star_ok:
         return state[GS_SIGMA_U]
     rel_st = np.empty(4)
-    q0 = state[GS_QST0:GS_QST0 + 4]
+    q0 = state[GS_QST0 : GS_QST0 + 4]
     rel_st[:] = _conj_mul_1(q0, q_star)
     d = _rotvec_between_1(q_int, rel_st)
     rate_err = -d / width
-    state[GS_QINT], state[GS_QINT + 1:GS_QINT + 4] = 1.0, 0.0
-    state[GS_QST0:GS_QST0 + 4] = q_star
+    state[GS_QINT], state[GS_QINT + 1 : GS_QINT + 4] = 1.0, 0.0
+    state[GS_QST0 : GS_QST0 + 4] = q_star
     state[GS_T0] = t
     n = state[GS_N]
     if n < GYRO_CALIBRATION_WINDOWS:
-        state[GS_BREF:GS_BREF + 3] = (state[GS_BREF:GS_BREF + 3] * n + rate_err) / (n + 1.0)
+        state[GS_BREF : GS_BREF + 3] = (state[GS_BREF : GS_BREF + 3] * n + rate_err) / (n + 1.0)
         state[GS_N] = n + 1.0
         state[GS_TREF] = t
         return state[GS_SIGMA_U]
     elapsed = t - state[GS_TREF]
-    noise = np.sqrt(2.0 * sigma_st * sigma_st / (width * width) + sigma_g * sigma_g * dt / width
-                    + sigma_rw * sigma_rw * elapsed + sigma_g * sigma_g * dt / (width * GYRO_CALIBRATION_WINDOWS))
-    change = rate_err - state[GS_BREF:GS_BREF + 3]
+    noise = np.sqrt(
+        2.0 * sigma_st * sigma_st / (width * width)
+        + sigma_g * sigma_g * dt / width
+        + sigma_rw * sigma_rw * elapsed
+        + sigma_g * sigma_g * dt / (width * GYRO_CALIBRATION_WINDOWS)
+    )
+    change = rate_err - state[GS_BREF : GS_BREF + 3]
     worst, axis = 0.0, 0
     for i in range(3):
         if abs(change[i]) > worst:
@@ -620,8 +720,16 @@ def _conj_mul_1(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def magnetometer_check_1(state: np.ndarray, b_meas: np.ndarray, b_model: np.ndarray, sigma_mag: float,
-                         n_sigma: float, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+def magnetometer_check_1(
+    state: np.ndarray,
+    b_meas: np.ndarray,
+    b_model: np.ndarray,
+    sigma_mag: float,
+    n_sigma: float,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+) -> bool:
     """Screen one magnetometer sample by its magnitude against the model's; replace a spike in place.
 
     Seed 003 eq 26 field B: | |B̃| − |B_model| | ≤ n_σ σ_mag + model error holds whatever the attitude
@@ -696,8 +804,14 @@ def _residual_table(w, axial, m, j, f, q, rate_noise, t_u):
     return r, b
 
 
-def observable_time(t_s: np.ndarray, torque_cmd_nm: np.ndarray, torque_nm: np.ndarray, onset_s: float,
-                    inertia_kg_m2: float, tach_quantum_rad_s: float) -> float | None:
+def observable_time(
+    t_s: np.ndarray,
+    torque_cmd_nm: np.ndarray,
+    torque_nm: np.ndarray,
+    onset_s: float,
+    inertia_kg_m2: float,
+    tach_quantum_rad_s: float,
+) -> float | None:
     """When a wheel fault becomes observable: the first sample time at which the momentum it withheld,
     |∫ (m_cmd − m_delivered) dt| from ``onset_s``, reaches one tachometer quantum of momentum J_r q (no reading
     can tell less from quantisation); None if it never does. Series sampled uniformly at ``t_s``."""

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import functools
 import warnings
-from typing import TYPE_CHECKING
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
@@ -112,8 +112,8 @@ def _vectors(v: np.ndarray, name: str) -> np.ndarray:
     return v
 
 
-def skyfield_time(t_unix_s: np.ndarray) -> "Time":
-    """skyfield Time of Unix UTC seconds, for skyfield-backed models (days split off so leap seconds are not double-counted)."""
+def skyfield_time(t_unix_s: np.ndarray) -> Time:
+    """skyfield Time of Unix UTC seconds, for skyfield models (days split off: leap seconds not double-counted)."""
     days = np.floor(t_unix_s / 86400.0)
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*has expired.*")
@@ -220,9 +220,7 @@ def teme_to_eci(
     return np.einsum("...ij,...j->...i", mt, r), np.einsum("...ij,...j->...i", mt, v)
 
 
-def geodetic_to_ecef(
-    lat_deg: np.ndarray | float, lon_deg: np.ndarray | float, alt_m: np.ndarray | float
-) -> np.ndarray:
+def geodetic_to_ecef(lat_deg: np.ndarray | float, lon_deg: np.ndarray | float, alt_m: np.ndarray | float) -> np.ndarray:
     """WGS84 geodetic latitude, longitude, ellipsoidal height → ECEF (m), shape (..., 3)."""
     lat = np.radians(_times(lat_deg, "lat_deg"))
     lon = np.radians(_times(lon_deg, "lon_deg"))

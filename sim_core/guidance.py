@@ -82,8 +82,11 @@ def _orf_rate_1(r_eci: np.ndarray, v_eci: np.ndarray, a_eci: np.ndarray) -> tupl
     r2 = r_eci[0] ** 2 + r_eci[1] ** 2 + r_eci[2] ** 2
     rv = r_eci[0] * v_eci[0] + r_eci[1] * v_eci[1] + r_eci[2] * v_eci[2]
     a_normal = (a_eci[0] * hx + a_eci[1] * hy + a_eci[2] * hz) / h
-    h_dot = (hx * (r_eci[1] * a_eci[2] - r_eci[2] * a_eci[1]) + hy * (r_eci[2] * a_eci[0] - r_eci[0] * a_eci[2])
-             + hz * (r_eci[0] * a_eci[1] - r_eci[1] * a_eci[0])) / h
+    h_dot = (
+        hx * (r_eci[1] * a_eci[2] - r_eci[2] * a_eci[1])
+        + hy * (r_eci[2] * a_eci[0] - r_eci[0] * a_eci[2])
+        + hz * (r_eci[0] * a_eci[1] - r_eci[1] * a_eci[0])
+    ) / h
     return -np.sqrt(r2) * a_normal / h, -h / r2, -h_dot / r2 + 2.0 * h * rv / (r2 * r2)
 
 
@@ -263,8 +266,9 @@ def _check_segments(segments: Sequence[Segment]) -> None:
                 if not np.isfinite(getattr(seg, name)):
                     raise ValueError(f"segments[{i}].{name}: must be a finite angle in degrees")
         is_turn = isinstance(seg, Turn)
-        if is_turn and (i == 0 or i == len(segments) - 1 or isinstance(segments[i - 1], Turn)
-                        or isinstance(segments[i + 1], Turn)):
+        if is_turn and (
+            i == 0 or i == len(segments) - 1 or isinstance(segments[i - 1], Turn) or isinstance(segments[i + 1], Turn)
+        ):
             raise ValueError(f"segments[{i}]: a Turn must sit between two non-turn segments")
 
 
@@ -328,8 +332,11 @@ def compile_route(
 def turn_envelopes(route: np.ndarray) -> list[tuple[int, TurnEnvelope]]:
     """(segment index, seed 001 envelope) of every turn of a compiled route, for feasibility checks."""
     route = _route_array(route)
-    return [(i, turn_envelope(row[COL_PLAN : COL_PLAN + PLAN_SIZE])) for i, row in enumerate(route)
-            if int(row[COL_KIND]) == KIND_TURN]
+    return [
+        (i, turn_envelope(row[COL_PLAN : COL_PLAN + PLAN_SIZE]))
+        for i, row in enumerate(route)
+        if int(row[COL_KIND]) == KIND_TURN
+    ]
 
 
 def _route_array(route: np.ndarray) -> np.ndarray:
@@ -432,10 +439,15 @@ def target_pointing_program(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Vectorised :func:`target_pointing_1` over n samples of spacecraft and target ECI motion."""
     n = np.atleast_2d(r_eci_m).shape[0]
-    states = _state_arrays(n, r_eci_m=np.atleast_2d(r_eci_m), v_eci_m_s=np.atleast_2d(v_eci_m_s),
-                           a_eci_m_s2=np.atleast_2d(a_eci_m_s2), r_target_eci_m=np.atleast_2d(r_target_eci_m),
-                           v_target_eci_m_s=np.atleast_2d(v_target_eci_m_s),
-                           a_target_eci_m_s2=np.atleast_2d(a_target_eci_m_s2))
+    states = _state_arrays(
+        n,
+        r_eci_m=np.atleast_2d(r_eci_m),
+        v_eci_m_s=np.atleast_2d(v_eci_m_s),
+        a_eci_m_s2=np.atleast_2d(a_eci_m_s2),
+        r_target_eci_m=np.atleast_2d(r_target_eci_m),
+        v_target_eci_m_s=np.atleast_2d(v_target_eci_m_s),
+        a_target_eci_m_s2=np.atleast_2d(a_target_eci_m_s2),
+    )
     u = np.asarray(yaw_ref_eci, dtype=float)
     if u.shape != (3,) or not np.isfinite(np.linalg.norm(u)) or np.linalg.norm(u) == 0.0:
         raise ValueError("yaw_ref_eci: expected a non-zero finite ECI direction")

@@ -25,8 +25,13 @@ REFERENCE_RTOL = 1e-12  # DOP853 tolerance of the reference path (near float64 r
 
 @njit(cache=True)
 def rk4_step_into(
-    x: np.ndarray, dt: float, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays,
-    work: np.ndarray, out: np.ndarray,
+    x: np.ndarray,
+    dt: float,
+    wheel_motor_torque: np.ndarray,
+    ext_torque_b: np.ndarray,
+    p: PlantArrays,
+    work: np.ndarray,
+    out: np.ndarray,
 ) -> None:
     """RK4 step of seed 000 eq (1) into ``out`` (may alias x); ``work`` is scratch of shape (6, len(x))."""
     n = x.shape[0]
@@ -64,8 +69,12 @@ def rk4_step_1(
 
 @njit(cache=True)
 def rk4_propagate_1(
-    x0: np.ndarray, dt: float, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray,
-    p: PlantArrays, every: int,
+    x0: np.ndarray,
+    dt: float,
+    wheel_motor_torque: np.ndarray,
+    ext_torque_b: np.ndarray,
+    p: PlantArrays,
+    every: int,
 ) -> np.ndarray:
     """RK4 over len(torque rows) steps; returns x at steps 0, every, 2·every, … (compiled kernel)."""
     n_steps = wheel_motor_torque.shape[0]
@@ -112,8 +121,12 @@ def rk4_step(
 
 
 def rk4_propagate(
-    x0: ArrayLike, dt_s: float, wheel_motor_torque_nm: ArrayLike, ext_torque_b_nm: ArrayLike,
-    params: PlantParams, every: int = 1,
+    x0: ArrayLike,
+    dt_s: float,
+    wheel_motor_torque_nm: ArrayLike,
+    ext_torque_b_nm: ArrayLike,
+    params: PlantParams,
+    every: int = 1,
 ) -> np.ndarray:
     """States every ``every`` RK4 steps under per-step torques of shape (n_steps, n_w) and (n_steps, 3)."""
     n_steps = np.shape(wheel_motor_torque_nm)[0] if np.ndim(wheel_motor_torque_nm) == 2 else -1

@@ -33,7 +33,9 @@ __all__ = [
 ]
 
 
-def process_noise_from_gyro(noise_std_rad_s: float, dt_s: float, drift_density_rad_s_sqrt_s: float) -> tuple[float, float]:
+def process_noise_from_gyro(
+    noise_std_rad_s: float, dt_s: float, drift_density_rad_s_sqrt_s: float
+) -> tuple[float, float]:
     """(σ_v, σ_u) of the MEKF from seed 002 eq 13's per-sample noise n_g and drift density n_d.
 
     A white sample of standard deviation σ_g held over dt adds σ_g² dt² of attitude variance, the
@@ -76,7 +78,13 @@ def _sandwich6(m: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def mekf_propagate_1(
-    q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, omega_meas_b: np.ndarray, dt: float, sigma_v: float, sigma_u: float
+    q_ib: np.ndarray,
+    bias_b: np.ndarray,
+    p_cov: np.ndarray,
+    omega_meas_b: np.ndarray,
+    dt: float,
+    sigma_v: float,
+    sigma_u: float,
 ) -> None:
     """Propagate the MEKF in place over dt with a held gyro sample (seed 000 eq 1 kinematics, Farrenkopf noise).
 
@@ -141,7 +149,9 @@ def mekf_propagate_1(
 
 
 @njit(cache=True)
-def mekf_update_1(q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, q_meas_ib: np.ndarray, sigma3: np.ndarray) -> float:
+def mekf_update_1(
+    q_ib: np.ndarray, bias_b: np.ndarray, p_cov: np.ndarray, q_meas_ib: np.ndarray, sigma3: np.ndarray
+) -> float:
     """Star-tracker update in place (measurement Λ^m = Λ ∘ Λ^n, seed 000 §4); returns the innovation NIS.
 
     Residual z = rotation vector of Λ̂̃ ∘ Λ^m, H = [I 0], Joseph-form covariance update

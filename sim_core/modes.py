@@ -114,8 +114,16 @@ def _held_1(state: np.ndarray, slot: int, holds: bool, t: float, confirm: float)
 
 @njit(cache=True)
 def _next_mode_1(
-    mode: int, p: np.ndarray, rate: float, fault: bool, recovered: bool, lost: bool, damped: bool, sun: bool,
-    route_window: bool, pointing_error: float,
+    mode: int,
+    p: np.ndarray,
+    rate: float,
+    fault: bool,
+    recovered: bool,
+    lost: bool,
+    damped: bool,
+    sun: bool,
+    route_window: bool,
+    pointing_error: float,
 ) -> int:
     """The transition table of the module docstring, in priority order."""
     if mode == MODE_FAULT:
@@ -124,7 +132,7 @@ def _next_mode_1(
         return MODE_FAULT
     if mode != MODE_RATE_DAMPING and rate > p[P_RATE_LOST]:
         return MODE_RATE_DAMPING
-    if (mode == MODE_ORF or mode == MODE_ROUTE) and lost:
+    if (mode in (MODE_ORF, MODE_ROUTE)) and lost:
         return MODE_SUN_SAFE
     if mode == MODE_RATE_DAMPING and damped:
         return MODE_SUN_SAFE
@@ -171,7 +179,9 @@ def _run_1(state, p, t, rate, valid, sun, pointing, window, fault, recovered):
     k = 0
     for i in range(n):
         before = int(state[S_MODE])
-        modes[i] = mode_step_1(state, p, t[i], rate[i], valid[i], sun[i], pointing[i], window[i], fault[i], recovered[i])
+        modes[i] = mode_step_1(
+            state, p, t[i], rate[i], valid[i], sun[i], pointing[i], window[i], fault[i], recovered[i]
+        )
         if modes[i] != before:
             events[k, 0], events[k, 1], events[k, 2] = t[i], before, modes[i]
             k += 1
@@ -194,7 +204,11 @@ def run_modes(
     t = np.asarray(t_s, dtype=float)
     if t.ndim != 1 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0.0):
         raise ValueError("t_s: expected a finite, strictly increasing 1-D array of times")
-    floats = {"rate_norm_rad_s": rate_norm_rad_s, "sun_error_rad": sun_error_rad, "pointing_error_rad": pointing_error_rad}
+    floats = {
+        "rate_norm_rad_s": rate_norm_rad_s,
+        "sun_error_rad": sun_error_rad,
+        "pointing_error_rad": pointing_error_rad,
+    }
     flags = {"attitude_valid": attitude_valid, "route_window": route_window, "fault": fault, "recovered": recovered}
     arrays = {}
     for name, x in {**floats, **flags}.items():
@@ -204,7 +218,15 @@ def run_modes(
         arrays[name] = x
     state = initial_state(initial_mode, float(t[0]) if t.size else 0.0)
     modes, events = _run_1(
-        state, thresholds.to_array(), t, arrays["rate_norm_rad_s"], arrays["attitude_valid"], arrays["sun_error_rad"],
-        arrays["pointing_error_rad"], arrays["route_window"], arrays["fault"], arrays["recovered"],
+        state,
+        thresholds.to_array(),
+        t,
+        arrays["rate_norm_rad_s"],
+        arrays["attitude_valid"],
+        arrays["sun_error_rad"],
+        arrays["pointing_error_rad"],
+        arrays["route_window"],
+        arrays["fault"],
+        arrays["recovered"],
     )
     return ModeHistory(modes, events[:, 0], events[:, 1].astype(np.int64), events[:, 2].astype(np.int64))

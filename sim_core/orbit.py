@@ -64,8 +64,12 @@ def circular_orbit(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Circular Keplerian orbit r(t), v(t) in ECI (two-body problem, seed 003 §3.2.3.2.1 Keplerian OP)."""
     t = np.atleast_1d(_finite(t_s, "t_s"))
-    for value, name in ((altitude_m, "altitude_m"), (inclination_deg, "inclination_deg"), (raan_deg, "raan_deg"),
-                        (arg_latitude0_deg, "arg_latitude0_deg")):
+    for value, name in (
+        (altitude_m, "altitude_m"),
+        (inclination_deg, "inclination_deg"),
+        (raan_deg, "raan_deg"),
+        (arg_latitude0_deg, "arg_latitude0_deg"),
+    ):
         _finite(value, name)
     if altitude_m <= -R_EARTH_M:
         raise ValueError("altitude_m: orbit radius must be positive")
@@ -134,11 +138,23 @@ def sun_synchronous_inclination_deg(altitude_m: np.ndarray | float, eccentricity
 # --- SGP4 (Vallado's reference implementation through the `sgp4` package, WGS72 as the TLEs) ----
 
 _TLE_FIELDS = {
-    1: (("satellite_number", 3, 7, "id"), ("epoch_year", 19, 20, "int"), ("epoch_day", 21, 32, "float"),
-        ("mean_motion_dot", 34, 43, "float"), ("mean_motion_ddot", 45, 52, "exp"), ("bstar", 54, 61, "exp")),
-    2: (("satellite_number", 3, 7, "id"), ("inclination_deg", 9, 16, "float"), ("raan_deg", 18, 25, "float"),
-        ("eccentricity", 27, 33, "digits"), ("arg_perigee_deg", 35, 42, "float"),
-        ("mean_anomaly_deg", 44, 51, "float"), ("mean_motion_rev_day", 53, 63, "float")),
+    1: (
+        ("satellite_number", 3, 7, "id"),
+        ("epoch_year", 19, 20, "int"),
+        ("epoch_day", 21, 32, "float"),
+        ("mean_motion_dot", 34, 43, "float"),
+        ("mean_motion_ddot", 45, 52, "exp"),
+        ("bstar", 54, 61, "exp"),
+    ),
+    2: (
+        ("satellite_number", 3, 7, "id"),
+        ("inclination_deg", 9, 16, "float"),
+        ("raan_deg", 18, 25, "float"),
+        ("eccentricity", 27, 33, "digits"),
+        ("arg_perigee_deg", 35, 42, "float"),
+        ("mean_anomaly_deg", 44, 51, "float"),
+        ("mean_motion_rev_day", 53, 63, "float"),
+    ),
 }
 
 
@@ -180,7 +196,9 @@ def parse_tle(line1: str, line2: str, verify_checksum: bool = True) -> Satrec:
         if verify_checksum and (not line[68].isdigit() or int(line[68]) != _tle_checksum(line)):
             raise ValueError(f"TLE line {no} column 69 (checksum): {line[68]!r}, computed {_tle_checksum(line)}")
     if line1[2:7] != line2[2:7]:
-        raise ValueError(f"TLE line 2 columns 3-7 (satellite_number): {line2[2:7]!r} differs from line 1 {line1[2:7]!r}")
+        raise ValueError(
+            f"TLE line 2 columns 3-7 (satellite_number): {line2[2:7]!r} differs from line 1 {line1[2:7]!r}"
+        )
     inc, n = float(line2[8:16]), float(line2[52:63])
     if not 0.0 <= inc <= 180.0:
         raise ValueError(f"TLE line 2 columns 9-16 (inclination_deg): {inc} outside [0, 180]")
@@ -214,9 +232,7 @@ def sgp4_teme(satrec: Satrec, t_unix_s: np.ndarray | float) -> tuple[np.ndarray,
     return _sgp4(satrec, 2440587.5 + days, (t - days * 86400.0) / 86400.0)
 
 
-def sgp4_teme_since_epoch(
-    satrec: Satrec, minutes: np.ndarray | float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sgp4_teme_since_epoch(satrec: Satrec, minutes: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """SGP4 TEME r (m), v (m/s), error code at minutes since the TLE epoch (exact epoch arithmetic)."""
     whole, fraction = np.divmod(np.atleast_1d(_finite(minutes, "minutes")) / 1440.0, 1.0)
     return _sgp4(satrec, satrec.jdsatepoch + whole, satrec.jdsatepochF + fraction)

@@ -32,13 +32,11 @@ class RigidSpinScenario(BaseModel):
     kind: str = Field("rigid-spin", pattern="^rigid-spin$")
     duration_s: float = Field(10.0, gt=0, examples=[10.0])
     dt_s: float = Field(0.01, gt=0, le=10.0, examples=[0.01])
-    inertia_kg_m2: list[list[float]] = Field([[35.0, 30.0, 25.0]], min_length=1,
-                                             examples=[[[500.0, 200.0, 300.0]]])
-    omega0_rad_s: list[list[float]] = Field([[0.01, -0.02, 0.03]], min_length=1,
-                                            examples=[[[0.5, -0.4, 0.7]]])
+    inertia_kg_m2: list[list[float]] = Field([[35.0, 30.0, 25.0]], min_length=1, examples=[[[500.0, 200.0, 300.0]]])
+    omega0_rad_s: list[list[float]] = Field([[0.01, -0.02, 0.03]], min_length=1, examples=[[[0.5, -0.4, 0.7]]])
 
     @model_validator(mode="after")
-    def _shapes(self) -> "RigidSpinScenario":
+    def _shapes(self) -> RigidSpinScenario:
         if any(len(row) != 3 or min(row) <= 0 for row in self.inertia_kg_m2):
             raise ValueError("inertia_kg_m2: each row must be 3 positive principal moments")
         if any(len(row) != 3 for row in self.omega0_rad_s):
@@ -90,8 +88,7 @@ class RigidSpinTrajectory:
 
     def to_npz(self, path: Path) -> None:
         """Write the arrays to one .npz file."""
-        np.savez(path, t_s=self.t_s, q_ib=self.q_ib, omega_b_rad_s=self.omega_b_rad_s,
-                 inertia_kg_m2=self.inertia_kg_m2)
+        np.savez(path, t_s=self.t_s, q_ib=self.q_ib, omega_b_rad_s=self.omega_b_rad_s, inertia_kg_m2=self.inertia_kg_m2)
 
 
 def _rates(j: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -99,8 +96,7 @@ def _rates(j: np.ndarray, q: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.
     return qt.derivative(q, w), dw
 
 
-def simulate(scenario: RigidSpinScenario,
-             progress: Callable[[float], None] | None = None) -> RigidSpinTrajectory:
+def simulate(scenario: RigidSpinScenario, progress: Callable[[float], None] | None = None) -> RigidSpinTrajectory:
     """RK4 integration of torque-free rigid-body motion (seed 000 eq 1, no wheels, no torque)."""
     j = np.asarray(scenario.inertia_kg_m2, dtype=float)
     n, dt = scenario.n_steps, scenario.duration_s / scenario.n_steps

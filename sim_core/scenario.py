@@ -66,7 +66,7 @@ class ClusterSpec(_Spec):
     wheels: list[WheelSpec] = Field(default_factory=lambda: [WheelSpec() for _ in range(4)])
 
     @model_validator(mode="after")
-    def _axes_match_wheels(self) -> "ClusterSpec":
+    def _axes_match_wheels(self) -> ClusterSpec:
         expected = {"ge": 4, "orthogonal3": 3, "skew4": 4}.get(self.geometry)
         if self.geometry == "custom":
             if not self.axes_b:
@@ -75,7 +75,9 @@ class ClusterSpec(_Spec):
             if any(math.fsum(c * c for c in a) == 0.0 for a in self.axes_b):
                 raise ValueError("spacecraft.cluster.axes_b: a zero vector has no direction")
         if len(self.wheels) != expected:
-            raise ValueError(f"spacecraft.cluster.wheels: geometry {self.geometry!r} needs {expected} wheels, got {len(self.wheels)}")
+            raise ValueError(
+                f"spacecraft.cluster.wheels: geometry {self.geometry!r} needs {expected} wheels, got {len(self.wheels)}"
+            )
         return self
 
 
@@ -114,7 +116,7 @@ class OrbitSpec(_Spec):
     tle_line2: str | None = None
 
     @model_validator(mode="after")
-    def _tle_given(self) -> "OrbitSpec":
+    def _tle_given(self) -> OrbitSpec:
         if self.kind == "tle" and not (self.tle_line1 and self.tle_line2):
             raise ValueError("orbit.tle_line1/tle_line2: both lines are required when kind is 'tle'")
         return self
@@ -160,7 +162,7 @@ class GuidanceSpec(_Spec):
     route: list[RouteSegmentSpec] = Field(default_factory=list)
 
     @model_validator(mode="after")
-    def _has_program(self) -> "GuidanceSpec":
+    def _has_program(self) -> GuidanceSpec:
         if self.kind == "inertial" and not self.inertial_steps:
             raise ValueError("guidance.inertial_steps: at least one (time_s, q_ib) step is required")
         if self.kind == "route":
@@ -270,7 +272,7 @@ class Scenario(_Spec):
     truth: TruthSpec | None = None  # None: the flown spacecraft is the modelled one
 
     @model_validator(mode="after")
-    def _truth_matches(self) -> "Scenario":
+    def _truth_matches(self) -> Scenario:
         t = self.truth
         if t is not None and t.wheel_axes_b is not None:
             n = len(self.spacecraft.cluster.wheels)
@@ -290,7 +292,7 @@ class Scenario(_Spec):
         return q
 
     @model_validator(mode="after")
-    def _rates_nest(self) -> "Scenario":
+    def _rates_nest(self) -> Scenario:
         for name in ("measurement_dt_s", "control_dt_s", "output_dt_s"):
             ratio = getattr(self, name) / self.dynamics_dt_s
             if not math.isfinite(ratio) or abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:  # denormal dt: inf
@@ -301,7 +303,9 @@ class Scenario(_Spec):
         for v in self.variants:
             for f in v.faults:
                 if f.target == "wheel" and f.index >= n_wheels:
-                    raise ValueError(f"variants[{v.name}].faults.index: wheel {f.index} does not exist (n = {n_wheels})")
+                    raise ValueError(
+                        f"variants[{v.name}].faults.index: wheel {f.index} does not exist (n = {n_wheels})"
+                    )
         return self
 
 
@@ -324,10 +328,12 @@ def apply_overrides(scenario: Scenario, assignments: list[str]) -> Scenario:
             last = depth == len(keys) - 1
             if isinstance(node, list):
                 if not key.isdigit() or int(key) >= len(node):
-                    raise ValueError(f"--set {path}: {'.'.join(keys[:depth + 1])} is not an index of a list of {len(node)}")
+                    raise ValueError(
+                        f"--set {path}: {'.'.join(keys[: depth + 1])} is not an index of a list of {len(node)}"
+                    )
                 key = int(key)  # type: ignore[assignment]
             elif not isinstance(node, dict) or key not in node:
-                raise ValueError(f"--set {path}: unknown field {'.'.join(keys[:depth + 1])!r}")
+                raise ValueError(f"--set {path}: unknown field {'.'.join(keys[: depth + 1])!r}")
             if last:
                 node[key] = value
             else:

@@ -22,7 +22,7 @@ from sim_core.scenario import (
 
 __all__ = ["SCENARIOS", "get", "names"]
 
-HR12 = dict(inertia_kg_m2=12.0 / (6000.0 * np.pi / 30.0), max_torque_nm=0.2, max_momentum_nms=12.0)
+HR12 = {"inertia_kg_m2": 12.0 / (6000.0 * np.pi / 30.0), "max_torque_nm": 0.2, "max_momentum_nms": 12.0}
 
 
 def peer_basilisk_rw4() -> Scenario:
@@ -177,17 +177,19 @@ def somov_detumble_to_scan() -> Scenario:
     """
     s = somov_ge4_scan()
     g = s.guidance.model_copy(update={"route_start_s": 7000.0})
-    return s.model_copy(update={
-        "name": "somov-detumble-to-scan",
-        "description": "Mode chain: rate damping -> Sun/safe -> ORF -> route (seed 001/003)",
-        "guidance": g,
-        "initial_mode": "rate_damping",
-        "controller": s.controller.model_copy(update={"gyroscopic_compensation": True}),
-        "initial_q_ib": [1.0, 0.0, 0.0, 0.0],
-        "initial_omega_b_rad_s": np.radians([2.0, -1.0, 1.5]).tolist(),
-        "duration_s": 7600.0,
-        "output_dt_s": 1.0,
-    })
+    return s.model_copy(
+        update={
+            "name": "somov-detumble-to-scan",
+            "description": "Mode chain: rate damping -> Sun/safe -> ORF -> route (seed 001/003)",
+            "guidance": g,
+            "initial_mode": "rate_damping",
+            "controller": s.controller.model_copy(update={"gyroscopic_compensation": True}),
+            "initial_q_ib": [1.0, 0.0, 0.0, 0.0],
+            "initial_omega_b_rad_s": np.radians([2.0, -1.0, 1.5]).tolist(),
+            "duration_s": 7600.0,
+            "output_dt_s": 1.0,
+        }
+    )
 
 
 SCENARIOS: dict[str, Callable[[], Scenario]] = {

@@ -371,9 +371,7 @@ def turn_envelope(plan: np.ndarray) -> TurnEnvelope:
     )
 
 
-def shortest_rest_to_rest_duration_s(
-    angle_rad: float, max_rate_rad_s: float, max_acceleration_rad_s2: float
-) -> float:
+def shortest_rest_to_rest_duration_s(angle_rad: float, max_rate_rad_s: float, max_acceleration_rad_s2: float) -> float:
     """Shortest τ of a seed 001 rest-to-rest turn by angle_rad within rate and acceleration limits.
 
     C1Y(τ) and Ф1Y(τ) both decrease with τ and are continuous at 144 s, so the shortest τ is the

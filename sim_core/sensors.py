@@ -136,7 +136,7 @@ def star_tracker_1(
 def star_tracker_blinded(
     q_ib: np.ndarray, sun_i: np.ndarray, r_i_m: np.ndarray, boresight_b: np.ndarray, exclusion_rad: float
 ) -> np.ndarray:
-    """True where the lit Sun lies inside the star tracker's exclusion cone (its data flagged bad, seed 003 §3.2.3.1)."""
+    """True where the lit Sun lies inside the star tracker's exclusion cone (data flagged bad, seed 003 §3.2.3.1)."""
     s_i = _vectors(sun_i, "sun_i")
     bore = _vectors(boresight_b, "boresight_b")
     _positive(exclusion_rad, "exclusion_rad")
@@ -146,7 +146,9 @@ def star_tracker_blinded(
 
 
 @njit(cache=True)
-def star_tracker_blinded_1(q_ib: np.ndarray, sun_i: np.ndarray, r_i: np.ndarray, boresight_b: np.ndarray, cos_exclusion: float) -> bool:
+def star_tracker_blinded_1(
+    q_ib: np.ndarray, sun_i: np.ndarray, r_i: np.ndarray, boresight_b: np.ndarray, cos_exclusion: float
+) -> bool:
     """Compiled test of a lit Sun inside the star tracker's exclusion cone (seed 003 §3.2.3.1 data flag)."""
     bore_i = qt.rotate_1(q_ib, boresight_b)
     sn = np.sqrt(sun_i[0] ** 2 + sun_i[1] ** 2 + sun_i[2] ** 2)
@@ -180,7 +182,9 @@ class GaussMarkovDrift:
         self.step_std = self.stationary_std * np.sqrt(1.0 - self.decay**2)
 
 
-def gauss_markov_drift(model: GaussMarkovDrift, n_steps: int, drift0: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def gauss_markov_drift(
+    model: GaussMarkovDrift, n_steps: int, drift0: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
     """Drift history d_0 … d_{n−1} (n, 3) of the Markov model starting at ``drift0`` (seed 002 eq 13)."""
     d = np.empty((n_steps, 3))
     d[0] = _vectors(drift0, "drift0")
@@ -319,7 +323,11 @@ def magnetometer(
     bias = _vectors(bias_b_t, "bias_b_t")
     sigma = float(_positive(noise_std_t, "noise_std_t"))
     _positive(range_t, "range_t")
-    b_b = qt.rotate(qt.conjugate(q), b_i) + bias + sigma * rng.standard_normal(np.broadcast_shapes(q.shape[:-1] + (3,), b_i.shape))
+    b_b = (
+        qt.rotate(qt.conjugate(q), b_i)
+        + bias
+        + sigma * rng.standard_normal(np.broadcast_shapes(q.shape[:-1] + (3,), b_i.shape))
+    )
     valid = np.all(np.abs(b_b) <= range_t, axis=-1)
     return np.clip(b_b, -range_t, range_t), valid
 
@@ -364,7 +372,7 @@ def sun_sensor(
     noise_std_rad: float,
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Unit Sun vector in body axes with angular noise; invalid in eclipse or outside the field of view (seed 003 SS)."""
+    """Unit Sun vector in body axes with angular noise; invalid in eclipse or outside the field of view (seed 003)."""
     q = qt.normalize(q_ib)
     s_i = _vectors(sun_i, "sun_i")
     bore = _vectors(boresight_b, "boresight_b")
@@ -409,7 +417,9 @@ def sun_sensor_1(
 # --- wheel tachometers: speed quantisation (seed 003 §3.2.3.1 conversion to physical units) ------
 
 
-def wheel_tachometer(speed_rad_s: np.ndarray, resolution_rad_s: float, max_speed_rad_s: float) -> tuple[np.ndarray, np.ndarray]:
+def wheel_tachometer(
+    speed_rad_s: np.ndarray, resolution_rad_s: float, max_speed_rad_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Quantised wheel speed round(Ω/q)·q with q the resolution; invalid beyond the speed range (seed 003 §3.2.3.1)."""
     speed = np.asarray(speed_rad_s, dtype=float)
     if not np.all(np.isfinite(speed)):

@@ -219,8 +219,12 @@ def angular_momentum_b_1(x: np.ndarray, p: PlantArrays) -> np.ndarray:
 
 @njit(cache=True)
 def plant_derivative_into(
-    x: np.ndarray, wheel_motor_torque: np.ndarray, ext_torque_b: np.ndarray, p: PlantArrays,
-    force: np.ndarray, out: np.ndarray,
+    x: np.ndarray,
+    wheel_motor_torque: np.ndarray,
+    ext_torque_b: np.ndarray,
+    p: PlantArrays,
+    force: np.ndarray,
+    out: np.ndarray,
 ) -> None:
     """Write ẋ of seed 000 eq (1) into ``out`` using scratch ``force`` (3+n_q+n_w); no allocation."""
     nq = p.flex_mass.shape[0]
@@ -315,8 +319,11 @@ def plant_derivative(
     x: ArrayLike, wheel_motor_torque_nm: ArrayLike | None, ext_torque_b_nm: ArrayLike | None, params: PlantParams
 ) -> np.ndarray:
     """ẋ of seed 000 eq (1) for one state (validated wrapper of ``plant_derivative_1``)."""
-    m = _finite(np.zeros(params.n_wheels) if wheel_motor_torque_nm is None else wheel_motor_torque_nm,
-                "wheel_motor_torque_nm", (params.n_wheels,))
+    m = _finite(
+        np.zeros(params.n_wheels) if wheel_motor_torque_nm is None else wheel_motor_torque_nm,
+        "wheel_motor_torque_nm",
+        (params.n_wheels,),
+    )
     t = _finite(np.zeros(3) if ext_torque_b_nm is None else ext_torque_b_nm, "ext_torque_b_nm", (3,))
     return plant_derivative_1(_state(x, params), m, t, params.pack())
 

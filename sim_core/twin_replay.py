@@ -35,15 +35,24 @@ def telemetered_steps(t_s: np.ndarray, q_prog_ib: np.ndarray, after_s: float) ->
     k0 = max(int(np.searchsorted(t_s, after_s, side="right")) - 1, 0)
     steps = [(0.0, q[k0].tolist())]
     for k in range(k0 + 1, q.shape[0]):
-        if np.all(np.isfinite(q[k])) and quaternion.angle(quaternion.multiply(quaternion.conjugate(q[k - 1]),
-                                                                               q[k])) > PROGRAM_STEP_RAD:
+        if (
+            np.all(np.isfinite(q[k]))
+            and quaternion.angle(quaternion.multiply(quaternion.conjugate(q[k - 1]), q[k])) > PROGRAM_STEP_RAD
+        ):
             steps.append((float(t_s[k] - after_s), q[k].tolist()))
     return steps
 
 
-def twin_at(base: Scenario, epoch_unix_s: float, t_s: float, q_ib: np.ndarray, omega_b: np.ndarray,
-            wheel_speed_rad_s: np.ndarray, duration_s: float,
-            program: tuple[np.ndarray, np.ndarray] | None = None) -> Scenario:
+def twin_at(
+    base: Scenario,
+    epoch_unix_s: float,
+    t_s: float,
+    q_ib: np.ndarray,
+    omega_b: np.ndarray,
+    wheel_speed_rad_s: np.ndarray,
+    duration_s: float,
+    program: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Scenario:
     """``base`` restarted at ``t_s`` after the telemetry epoch with the telemetered state (seed 000 §7 twin).
 
     An inertial programme is taken from the telemetered guidance quaternions (``program`` = (t_s, q_prog_ib))
@@ -70,8 +79,9 @@ def twin_at(base: Scenario, epoch_unix_s: float, t_s: float, q_ib: np.ndarray, o
     return Scenario.model_validate(data)
 
 
-def fault_specs(fault: str, wheel: int | list[int] | None, onset_s: float,
-                magnitude: float | list[float | None] | None) -> list[FaultSpec] | None:
+def fault_specs(
+    fault: str, wheel: int | list[int] | None, onset_s: float, magnitude: float | list[float | None] | None
+) -> list[FaultSpec] | None:
     """Engine faults of a wheel hypothesis (1-based wheels, onset after the twin's epoch); None if not flyable."""
     names = fault.split("+")
     wheels = wheel if isinstance(wheel, list) else [wheel]
@@ -85,8 +95,9 @@ def fault_specs(fault: str, wheel: int | list[int] | None, onset_s: float,
             extra["gain"] = float(m if m is not None else 0.5)
         elif name == "friction":
             extra["value"] = float(m if m is not None else 0.0)
-        out.append(FaultSpec(target="wheel", index=int(w) - 1, type=FAULT_TYPES[name], onset_s=max(onset_s, 0.0),
-                             **extra))
+        out.append(
+            FaultSpec(target="wheel", index=int(w) - 1, type=FAULT_TYPES[name], onset_s=max(onset_s, 0.0), **extra)
+        )
     return out
 
 
@@ -117,8 +128,16 @@ def replay_scores(
     """
     duration = float(t_s[stop - 1] - t_s[start]) + 1.0
     program = None if q_prog_ib is None else (t_s, q_prog_ib)
-    twin = twin_at(base, epoch_unix_s, float(t_s[start]), q_est_ib[start], omega_b[start], wheel_speed_rad_s[start],
-                   duration, program)
+    twin = twin_at(
+        base,
+        epoch_unix_s,
+        float(t_s[start]),
+        q_est_ib[start],
+        omega_b[start],
+        wheel_speed_rad_s[start],
+        duration,
+        program,
+    )
     variants = [VariantSpec(name=f"h{i}", faults=f) for i, (f, _) in enumerate(candidates)]
     variants.append(VariantSpec(name="none"))
     batch = Scenario.model_validate({**twin.model_dump(), "variants": [v.model_dump() for v in variants]})

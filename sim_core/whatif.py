@@ -207,9 +207,13 @@ def feasibility(
             first = tk if reason else None
     windows = md_windows(t[t >= t0], kappa[t >= t0]) if kappa is not None else []
     return Feasibility(
-        feasible=first is None, reason=reason or "feasible: within torque, momentum and drift limits",
-        torque_margin=1.0 - worst_m, momentum_margin=1.0 - worst_h,
-        drift_arcsec=worst_drift * ARCSEC_PER_RAD, first_violation_s=first, md_windows_s=windows,
+        feasible=first is None,
+        reason=reason or "feasible: within torque, momentum and drift limits",
+        torque_margin=1.0 - worst_m,
+        momentum_margin=1.0 - worst_h,
+        drift_arcsec=worst_drift * ARCSEC_PER_RAD,
+        first_violation_s=first,
+        md_windows_s=windows,
     )
 
 
@@ -254,7 +258,7 @@ def max_feasible_turn_rate(
     """
     i = _turn_index(scenario)
     route = scenario.guidance.route
-    pre, post = sum(seg.duration_s for seg in route[:i]), sum(seg.duration_s for seg in route[i + 1:i + 2])
+    pre, post = sum(seg.duration_s for seg in route[:i]), sum(seg.duration_s for seg in route[i + 1 : i + 2])
     route_start = scenario.guidance.route_start_s
     lo, hi = duration_range_s
     mask = None if wheel_available is None else np.asarray(wheel_available, dtype=bool)
@@ -334,8 +338,9 @@ def pair_limit(traj: Trajectory, s: Scenario, v: int, mask: np.ndarray, kappa_fr
     limit = s.spacecraft.md_max_dipole_am2
     window = np.abs(kappa) <= allocation.KAPPA_MAX
     parts = [f"MD allowed (|κ| ≤ 1/2) {window.mean():.0%} of the scan, {kappa_fraction_:.0%} of a nadir orbit"]
-    parts.append(f"torque about e_pq asked up to {tau.max():.2e} N·m, needing {need.max():.1f} A·m² "
-                 f"(limit {limit:.0f} A·m²)")
+    parts.append(
+        f"torque about e_pq asked up to {tau.max():.2e} N·m, needing {need.max():.1f} A·m² (limit {limit:.0f} A·m²)"
+    )
     causes = []
     if window.mean() < 1.0:
         causes.append("geometry")
@@ -360,18 +365,23 @@ def configuration_table(scenario: Scenario) -> list[dict]:
         scan = err[v, obs] if obs.any() else err[v]
         turn = max_feasible_turn_rate(s, mask)
         metrics = variant_metrics(traj, s, v)
-        rows.append({
-            "configuration": traj.variant_names[v],
-            "wheels": [int(p) + 1 for p in np.nonzero(mask)[0]],
-            "pointing_rms_arcsec": float(np.sqrt(np.mean(scan**2))),
-            "pointing_max_arcsec": float(np.max(scan)),
-            "kappa_fraction": kappa_fraction(s, mask),
-            "max_roll_rate_deg_s": None if np.isnan(turn.rate_rad_s) else float(np.degrees(turn.rate_rad_s)),
-            "fastest_turn_s": None if np.isnan(turn.duration_s) else float(turn.duration_s),
-            "fastest_turn_start_s": None if np.isnan(turn.start_s) else float(turn.start_s),
-            "route_flown": bool(np.max(scan) <= ROUTE_FLOWN_ARCSEC and metrics["fault_mode_time_s"] == 0.0),
-            "md_saturation_time_s": metrics["md_saturation_time_s"],
-        })
-        rows[-1]["why_not_flown"] = None if rows[-1]["route_flown"] or mask.sum() != 2 else \
-            pair_limit(traj, s, v, mask, rows[-1]["kappa_fraction"])
+        rows.append(
+            {
+                "configuration": traj.variant_names[v],
+                "wheels": [int(p) + 1 for p in np.nonzero(mask)[0]],
+                "pointing_rms_arcsec": float(np.sqrt(np.mean(scan**2))),
+                "pointing_max_arcsec": float(np.max(scan)),
+                "kappa_fraction": kappa_fraction(s, mask),
+                "max_roll_rate_deg_s": None if np.isnan(turn.rate_rad_s) else float(np.degrees(turn.rate_rad_s)),
+                "fastest_turn_s": None if np.isnan(turn.duration_s) else float(turn.duration_s),
+                "fastest_turn_start_s": None if np.isnan(turn.start_s) else float(turn.start_s),
+                "route_flown": bool(np.max(scan) <= ROUTE_FLOWN_ARCSEC and metrics["fault_mode_time_s"] == 0.0),
+                "md_saturation_time_s": metrics["md_saturation_time_s"],
+            }
+        )
+        rows[-1]["why_not_flown"] = (
+            None
+            if rows[-1]["route_flown"] or mask.sum() != 2
+            else pair_limit(traj, s, v, mask, rows[-1]["kappa_fraction"])
+        )
     return rows

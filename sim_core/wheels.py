@@ -202,10 +202,7 @@ def friction_torque_one_wheel(speed_rad_s: float, friction: np.ndarray, p: int) 
     """Resisting torque of wheel p: m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω√|Ω| (seed 000 eq 1, seed 002 eq 4)."""
     w = speed_rad_s
     sat_speed = friction[1, p]
-    if sat_speed > 0.0:
-        dry = min(1.0, max(-1.0, w / sat_speed))
-    else:
-        dry = 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
+    dry = min(1.0, max(-1.0, w / sat_speed)) if sat_speed > 0.0 else 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
     return friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w))
 
 
@@ -221,8 +218,11 @@ def friction_torque_1(speed_rad_s: np.ndarray, friction: np.ndarray) -> np.ndarr
 
 @njit(cache=True)
 def limited_motor_torque_1(
-    torque_cmd_nm: np.ndarray, speed_rad_s: np.ndarray, inertia_kg_m2: np.ndarray,
-    max_torque_nm: np.ndarray, max_momentum_nms: np.ndarray,
+    torque_cmd_nm: np.ndarray,
+    speed_rad_s: np.ndarray,
+    inertia_kg_m2: np.ndarray,
+    max_torque_nm: np.ndarray,
+    max_momentum_nms: np.ndarray,
 ) -> np.ndarray:
     """Motor torque within |m_p| ≤ m^m, none beyond |h_p| ≤ h^m (seed 000 eq 2), per wheel."""
     n = torque_cmd_nm.shape[0]
@@ -238,8 +238,12 @@ def limited_motor_torque_1(
 
 @njit(cache=True)
 def delivered_torque_1(
-    motor_torque_nm: np.ndarray, speed_rad_s: np.ndarray, t_s: float,
-    noise_nm: np.ndarray, imbalance_nm_s2: np.ndarray, white_noise: np.ndarray,
+    motor_torque_nm: np.ndarray,
+    speed_rad_s: np.ndarray,
+    t_s: float,
+    noise_nm: np.ndarray,
+    imbalance_nm_s2: np.ndarray,
+    white_noise: np.ndarray,
 ) -> np.ndarray:
     """Motor torque plus noise K_x W/|W_max| and imbalance K_d Ω² sin(Ωt) (seed 002 eq 1, 4).
 
@@ -255,8 +259,12 @@ def delivered_torque_1(
 
 @njit(cache=True)
 def motor_current_derivative_1(
-    current_a: np.ndarray, voltage_v: np.ndarray, speed_rad_s: np.ndarray,
-    inductance_h: float, resistance_ohm: float, back_emf_v_s: float,
+    current_a: np.ndarray,
+    voltage_v: np.ndarray,
+    speed_rad_s: np.ndarray,
+    inductance_h: float,
+    resistance_ohm: float,
+    back_emf_v_s: float,
 ) -> np.ndarray:
     """Armature di/dt = (u − R i − K_e Ω) / L per wheel (seed 002 eq 2)."""
     return (voltage_v - resistance_ohm * current_a - back_emf_v_s * speed_rad_s) / inductance_h
@@ -264,8 +272,13 @@ def motor_current_derivative_1(
 
 @njit(cache=True)
 def motor_current_step_1(
-    current_a: np.ndarray, voltage_v: np.ndarray, speed_rad_s: np.ndarray, dt: float,
-    inductance_h: float, resistance_ohm: float, back_emf_v_s: float,
+    current_a: np.ndarray,
+    voltage_v: np.ndarray,
+    speed_rad_s: np.ndarray,
+    dt: float,
+    inductance_h: float,
+    resistance_ohm: float,
+    back_emf_v_s: float,
 ) -> np.ndarray:
     """Exact armature current after dt with u and Ω held: i_∞ + (i − i_∞) e^{−R dt/L} (seed 002 eq 2–3).
 
@@ -279,8 +292,11 @@ def motor_current_step_1(
 
 @njit(cache=True)
 def speed_loop_torque_1(
-    speed_rad_s: np.ndarray, speed_set_rad_s: np.ndarray, torque_request_nm: np.ndarray,
-    loop_gain_nm_s: np.ndarray, torque_gain: np.ndarray,
+    speed_rad_s: np.ndarray,
+    speed_set_rad_s: np.ndarray,
+    torque_request_nm: np.ndarray,
+    loop_gain_nm_s: np.ndarray,
+    torque_gain: np.ndarray,
 ) -> np.ndarray:
     """Speed-loop motor torque −(k_Ω + k_e)(Ω − Ω_0) − k_T T_c (seed 003 eq 35), per wheel.
 
@@ -367,8 +383,9 @@ def speed_loop_torque(
     torque_gain: ArrayLike = 1.0,
 ) -> np.ndarray:
     """Speed-loop motor torque −k_w(Ω − Ω_0) − k_T T_c, N·m (seed 003 eq 35, k_w = k_Ω + k_e)."""
-    arrays = _finite_arrays(speed_rad_s=speed_rad_s, speed_set_rad_s=speed_set_rad_s,
-                            torque_request_nm=torque_request_nm)
+    arrays = _finite_arrays(
+        speed_rad_s=speed_rad_s, speed_set_rad_s=speed_set_rad_s, torque_request_nm=torque_request_nm
+    )
     n = arrays[0].shape[0]
     for name, a in zip(("speed_set_rad_s", "torque_request_nm"), arrays[1:]):
         if a.shape != (n,):

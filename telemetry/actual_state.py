@@ -25,8 +25,18 @@ from telemetry.ccsds import NS_PER_S
 from telemetry.dictionary import parse_utc_ns
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["ActualTrack", "actual_track", "fit_circular_orbit", "aligned_scenario", "aligned_wheel_available",
-           "HypothesisFit", "rank_hypotheses", "HK_SERIES", "WHEEL_SERIES", "GPS_SERIES"]
+__all__ = [
+    "ActualTrack",
+    "actual_track",
+    "fit_circular_orbit",
+    "aligned_scenario",
+    "aligned_wheel_available",
+    "HypothesisFit",
+    "rank_hypotheses",
+    "HK_SERIES",
+    "WHEEL_SERIES",
+    "GPS_SERIES",
+]
 
 # sim_core series name → (dictionary parameter prefix, component suffixes); None = a scalar parameter.
 HK_SERIES = {
@@ -186,8 +196,11 @@ def aligned_scenario(
     data["orbit"]["epoch_utc"] = f"{np.datetime64(int(t_align_utc_ns), 'ns')}Z"
     if base.orbit.kind != "tle":
         t_gps = track.gps_t_utc_ns[near] / NS_PER_S
-        data["orbit"].update(fit_circular_orbit(t_gps, track.gps["r_ecef_m"][near], track.gps["v_ecef_m_s"][near],
-                                                t_align_utc_ns / NS_PER_S))
+        data["orbit"].update(
+            fit_circular_orbit(
+                t_gps, track.gps["r_ecef_m"][near], track.gps["v_ecef_m_s"][near], t_align_utc_ns / NS_PER_S
+            )
+        )
     data["initial_q_ib"] = quaternion.normalize(track.series["q_est_ib"][k]).tolist()
     data["initial_omega_b_rad_s"] = track.series["omega_est_b_rad_s"][k].tolist()
     for wheel, speed in zip(data["spacecraft"]["cluster"]["wheels"], track.series["wheel_speed_rad_s"][k]):

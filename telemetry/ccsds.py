@@ -288,8 +288,12 @@ def _crc16_1(buf: np.ndarray, start: int, stop: int, tables: np.ndarray) -> int:
     crc = 0xFFFF
     i = start
     while i + 4 <= stop:
-        crc = (tables[3, (crc >> 8) ^ buf[i]] ^ tables[2, (crc & 0xFF) ^ buf[i + 1]]
-               ^ tables[1, buf[i + 2]] ^ tables[0, buf[i + 3]])
+        crc = (
+            tables[3, (crc >> 8) ^ buf[i]]
+            ^ tables[2, (crc & 0xFF) ^ buf[i + 1]]
+            ^ tables[1, buf[i + 2]]
+            ^ tables[0, buf[i + 3]]
+        )
         i += 4
     while i < stop:
         crc = ((crc << 8) & 0xFFFF) ^ tables[0, ((crc >> 8) ^ buf[i]) & 0xFF]

@@ -59,8 +59,9 @@ def packet_matrix(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np
 
 
 @njit(cache=True, nogil=True)
-def _bit_patterns(packets: np.ndarray, first: np.ndarray, last: np.ndarray, shift: np.ndarray,
-                  mask: np.ndarray) -> np.ndarray:
+def _bit_patterns(
+    packets: np.ndarray, first: np.ndarray, last: np.ndarray, shift: np.ndarray, mask: np.ndarray
+) -> np.ndarray:
     """(F, n) uint64 big-endian bit patterns of F fields in n packets, one pass over each packet (compiled kernel).
 
     Field f covers octets first[f]..last[f]; its value is that big-endian word >> shift[f] & mask[f].
@@ -245,7 +246,7 @@ def _union(parts: list[tuple[np.ndarray, dict[str, np.ndarray]]], n: int) -> dic
     for name in names:
         pieces = [(idx, values[name]) for idx, values in parts if name in values]
         complete = sum(len(idx) for idx, _ in pieces) == n
-        column = (np.empty(n, np.result_type(*(v for _, v in pieces))) if complete else np.full(n, np.nan))
+        column = np.empty(n, np.result_type(*(v for _, v in pieces))) if complete else np.full(n, np.nan)
         for idx, v in pieces:
             column[idx] = v
         out[name] = column
@@ -326,8 +327,9 @@ def _xtce_values(
         if missing:
             problems.update((int(i), f"time fields {missing} absent") for i in ok if np.isnan(raw[missing[0]][i]))
         good = np.array([i for i in ok.tolist() if i not in problems], dtype=np.int64)
-        t[good], why = field_times({k: codes[k][good].astype(np.int64) for k in definition.time_fields.names},
-                                   definition.time_fields)
+        t[good], why = field_times(
+            {k: codes[k][good].astype(np.int64) for k in definition.time_fields.names}, definition.time_fields
+        )
         problems.update((int(i), TIME_PROBLEMS[c]) for i, c in zip(good.tolist(), why.tolist()) if c)
     else:
         rows = packet_matrix(buf, offset[ok], ccsds.PRIMARY_HEADER_OCTETS + definition.time_code.octets)
@@ -344,13 +346,18 @@ def _narrow(column: np.ndarray) -> np.ndarray:
 
 
 def _decode_apid(
-    buf: np.ndarray, offset: np.ndarray, definition: PacketDefinition, window: tuple[int | None, int | None],
+    buf: np.ndarray,
+    offset: np.ndarray,
+    definition: PacketDefinition,
+    window: tuple[int | None, int | None],
     report: IngestReport,
 ) -> SampleBatch:
     """Validate and decode the framed packets of one APID (any lengths, fixed or variable layout)."""
     if definition.time_code is None and definition.time_fields is None:
-        raise ValueError(f"time_code: packet {definition.name} has no time code or time fields to stamp samples "
-                         "(give --time-code or --time-fields)")
+        raise ValueError(
+            f"time_code: packet {definition.name} has no time code or time fields to stamp samples "
+            "(give --time-code or --time-fields)"
+        )
     n, apid = offset.shape[0], definition.apid
     length = _packet_lengths(buf, offset)
     summary = ApidSummary(apid, definition.name)
@@ -360,9 +367,17 @@ def _decode_apid(
     mismatch = header_mismatch(headers, secondary_header=definition.time_code is not None)
     if definition.time_code is None:
         mismatch[mismatch == 1] = 0  # time in named fields: the secondary header flag is the mission's business
-    records = [QuarantineRecord(int(offset[i]), int(length[i]), "bad_header", apid,
-                                int(headers.sequence_count[i]), detail=HEADER_PROBLEMS[mismatch[i]])
-               for i in np.flatnonzero(mismatch)]
+    records = [
+        QuarantineRecord(
+            int(offset[i]),
+            int(length[i]),
+            "bad_header",
+            apid,
+            int(headers.sequence_count[i]),
+            detail=HEADER_PROBLEMS[mismatch[i]],
+        )
+        for i in np.flatnonzero(mismatch)
+    ]
     dropped = mismatch != 0
     if definition.xtce is not None:
         groups: list[tuple[np.ndarray, PacketDefinition]] = []
@@ -373,8 +388,11 @@ def _decode_apid(
         t, time_problems, parts, rows_by_group = _group_values(buf, offset, groups, n)
     for i, why in short.items():
         if not dropped[i]:
-            records.append(QuarantineRecord(int(offset[i]), int(length[i]), "bad_length", apid,
-                                            int(headers.sequence_count[i]), detail=why))
+            records.append(
+                QuarantineRecord(
+                    int(offset[i]), int(length[i]), "bad_length", apid, int(headers.sequence_count[i]), detail=why
+                )
+            )
     summary.shorter_than_definition = len(short)
     dropped[list(short)] = True
     if not definition.variable:
@@ -383,24 +401,37 @@ def _decode_apid(
     for i, why in time_problems.items():
         if not dropped[i]:
             dropped[i] = True
-            records.append(QuarantineRecord(int(offset[i]), int(length[i]), "invalid_time", apid,
-                                            int(headers.sequence_count[i]), detail=why))
+            records.append(
+                QuarantineRecord(
+                    int(offset[i]), int(length[i]), "invalid_time", apid, int(headers.sequence_count[i]), detail=why
+                )
+            )
     keep = np.flatnonzero(~dropped)
-    verdict = validate_packets(apid, offset[keep], headers.sequence_count[keep], t[keep], 0, *window,
-                               period_s=definition.period_s)
+    verdict = validate_packets(
+        apid, offset[keep], headers.sequence_count[keep], t[keep], 0, *window, period_s=definition.period_s
+    )
     accepted = keep[verdict.accepted]
     in_order = accepted.size == n and bool(np.all(accepted == np.arange(n)))  # the usual case: no copy needed
     values = {name: v if in_order else v[accepted] for name, v in _union(parts, n).items()}
     for d in definition.derived:
         values[d.name] = derive(d, values, definition.time_code)
-    same_length = (len(groups) == 1 and groups[0][1].packet_octets == int(length[0]) and len(groups[0][0]) == n
-                   and bool(np.all(length == length[0])))
+    same_length = (
+        len(groups) == 1
+        and groups[0][1].packet_octets == int(length[0])
+        and len(groups[0][0]) == n
+        and bool(np.all(length == length[0]))
+    )
     lengths = None if same_length else length[accepted]
-    packets = (rows_by_group[0][accepted] if same_length
-               else _gather_octets(buf, offset[accepted], length[accepted]))
-    batch = SampleBatch(packet=definition.name, apid=apid, t_utc_ns=t[accepted],
-                        sequence_count=headers.sequence_count[accepted], values=values, packets=packets,
-                        packet_lengths=lengths)
+    packets = rows_by_group[0][accepted] if same_length else _gather_octets(buf, offset[accepted], length[accepted])
+    batch = SampleBatch(
+        packet=definition.name,
+        apid=apid,
+        t_utc_ns=t[accepted],
+        sequence_count=headers.sequence_count[accepted],
+        values=values,
+        packets=packets,
+        packet_lengths=lengths,
+    )
     for q in verdict.quarantined:
         records.append(replace(q, length=int(length[np.searchsorted(offset, q.offset)])))
     report.quarantined.extend(records)
@@ -441,7 +472,10 @@ def _complete_end(buf: np.ndarray, frames: ccsds.Frames) -> int:
 
 
 def decode_stream(
-    data: bytes | np.ndarray, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None,
+    data: bytes | np.ndarray,
+    dictionary: Dictionary,
+    source: str = "",
+    now_utc_ns: int | None = None,
     final: bool = True,
 ) -> DecodeResult:
     """Frame, validate and decode a mixed-APID packet stream (CCSDS 133.0-B-2 §4.1) into time-ordered batches.
@@ -469,8 +503,14 @@ def decode_stream(
     report = IngestReport(source=source, octets=int(buf.shape[0]))
     report.quarantined.extend(_frame_records(buf, frames))
     if wrapped and final and consumed < octets_in:
-        report.quarantined.append(QuarantineRecord(int(buf.shape[0]), octets_in - consumed, "truncated",
-                                                   detail="incomplete wrapped packet at the end of the data"))
+        report.quarantined.append(
+            QuarantineRecord(
+                int(buf.shape[0]),
+                octets_in - consumed,
+                "truncated",
+                detail="incomplete wrapped packet at the end of the data",
+            )
+        )
     report.idle_packets = int(np.count_nonzero(frames.code == ccsds.FrameCode.IDLE))
     undefined = _undefined_packets(buf, frames, report)
     offset = frames.offset[frames.code == ccsds.FrameCode.OK]

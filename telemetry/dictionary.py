@@ -349,8 +349,17 @@ def _yaml_parameters(specs: list[dict[str, Any]], first_bit: int) -> tuple[tuple
     """Parameters laid out back to back from first_bit, and the bit after the last one."""
     params, bit = [], first_bit
     for s in specs:
-        unknown = set(s) - {"name", "type", "bits", "units", "description", "polynomial", "enumeration", "limits",
-                            "byte_order"}
+        unknown = set(s) - {
+            "name",
+            "type",
+            "bits",
+            "units",
+            "description",
+            "polynomial",
+            "enumeration",
+            "limits",
+            "byte_order",
+        }
         if unknown:
             raise ValueError(f"{s.get('name')}: unknown keys {sorted(unknown)}")
         enum = {int(k): str(v) for k, v in (s.get("enumeration") or {}).items()}
@@ -386,13 +395,13 @@ def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
     time_code = parse_time_code(spec.get("time_code"))
     time_fields = parse_time_fields(spec.get("time_fields"))
     crc = bool(spec.get("crc", False))
-    common = dict(
-        time_code=time_code,
-        time_fields=time_fields,
-        period_s=float(spec["period_s"]) if spec.get("period_s") is not None else None,
-        description=str(spec.get("description", "")),
-        derived=_derived(spec.get("derived")),
-    )
+    common = {
+        "time_code": time_code,
+        "time_fields": time_fields,
+        "period_s": float(spec["period_s"]) if spec.get("period_s") is not None else None,
+        "description": str(spec.get("description", "")),
+        "derived": _derived(spec.get("derived")),
+    }
     source = spec.get("layout_from")
     if source:
         if not isinstance(source, dict) or set(source) not in ({"xtce"}, {"ccsdspy_csv"}):
@@ -460,11 +469,15 @@ def lay_out(
         else:
             count = _fixed_count(f)
         if not (bit >= 0 and 1 <= f.bit_length <= 64 and bit + count * f.bit_length <= MAX_PACKET_BITS):
-            raise ValueError(f"{f.name}.data_type: {count} × {f.bit_length} bits from bit {bit} do not fit in the "
-                             f"largest CCSDS packet ({MAX_PACKET_BITS // 8} octets)")
+            raise ValueError(
+                f"{f.name}.data_type: {count} × {f.bit_length} bits from bit {bit} do not fit in the "
+                f"largest CCSDS packet ({MAX_PACKET_BITS // 8} octets)"
+            )
         if f.data_type in DATA_TYPES:
-            params.extend(Parameter(name, f.data_type, bit + k * f.bit_length, f.bit_length, byte_order=f.byte_order)
-                          for k, name in enumerate(f.element_names(count)))
+            params.extend(
+                Parameter(name, f.data_type, bit + k * f.bit_length, f.bit_length, byte_order=f.byte_order)
+                for k, name in enumerate(f.element_names(count))
+            )
         bit += count * f.bit_length
         end = max(end, bit)
     return tuple(params), end
@@ -493,12 +506,17 @@ def _ccsdspy_fields(path: Path) -> list[FieldSpec]:
         shape = getattr(f, "_array_shape", None)
         if isinstance(shape, int):
             shape = (shape,)
-        specs.append(FieldSpec(
-            name=f._name, data_type=f._data_type, bit_length=int(f._bit_length),
-            bit_offset=None if f._bit_offset is None else int(f._bit_offset), byte_order=f._byte_order,
-            shape=tuple(int(x) for x in shape) if isinstance(shape, tuple) else shape,
-            array_order=getattr(f, "_array_order", "C"),
-        ))
+        specs.append(
+            FieldSpec(
+                name=f._name,
+                data_type=f._data_type,
+                bit_length=int(f._bit_length),
+                bit_offset=None if f._bit_offset is None else int(f._bit_offset),
+                byte_order=f._byte_order,
+                shape=tuple(int(x) for x in shape) if isinstance(shape, tuple) else shape,
+                array_order=getattr(f, "_array_order", "C"),
+            )
+        )
     return specs
 
 
@@ -522,7 +540,11 @@ def load_ccsdspy_csv(
         raise ValueError(f"{path}: layout ends at bit {end}, not on an octet boundary")
     try:
         packet = PacketDefinition(
-            name=name or path.stem, apid=apid, packet_octets=-(-end // 8), parameters=params, time_code=time_code,
+            name=name or path.stem,
+            apid=apid,
+            packet_octets=-(-end // 8),
+            parameters=params,
+            time_code=time_code,
             time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
             fields=fields if variable else (),
         )
@@ -653,8 +675,9 @@ def _xtce_chain(definition: Any, container: Any) -> list[Any]:
     return chain
 
 
-def _xtce_fixed(definition: Any, container: Any, apid: int, time_code: TimeCode | None,
-                time_fields: TimeFields | None) -> PacketDefinition:
+def _xtce_fixed(
+    definition: Any, container: Any, apid: int, time_code: TimeCode | None, time_fields: TimeFields | None
+) -> PacketDefinition:
     """The fixed layout of a container (ValueError when an entry has no fixed size or is not numeric)."""
     params, bit = [], 0
     for entry in (e for c in _xtce_chain(definition, container) for e in _xtce_entries(c)):
@@ -667,7 +690,11 @@ def _xtce_fixed(definition: Any, container: Any, apid: int, time_code: TimeCode 
     if bit % 8:
         raise ValueError(f"{container.name}: layout ends at bit {bit}, not on an octet boundary")
     return PacketDefinition(
-        name=container.name, apid=apid, packet_octets=bit // 8, parameters=tuple(params), time_code=time_code,
+        name=container.name,
+        apid=apid,
+        packet_octets=bit // 8,
+        parameters=tuple(params),
+        time_code=time_code,
         time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
         description=container.short_description or container.long_description or "",
     )
@@ -688,13 +715,14 @@ def _xtce_numeric_names(definition: Any, containers: list[Any]) -> tuple[str, ..
 
 def _restricts_beyond_apid(definition: Any, container: Any) -> bool:
     """True when a container (or a base) is selected by more than the APID (XTCE polymorphism)."""
-    return any(getattr(r, "referenced_parameter", None) not in ("PKT_APID", "APID", "CCSDS_APID", "VERSION", "TYPE")
-               for c in _xtce_chain(definition, container) for r in c.restriction_criteria)
+    return any(
+        getattr(r, "referenced_parameter", None) not in ("PKT_APID", "APID", "CCSDS_APID", "VERSION", "TYPE")
+        for c in _xtce_chain(definition, container)
+        for r in c.restriction_criteria
+    )
 
 
-def load_xtce(
-    path: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None
-) -> Dictionary:
+def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None) -> Dictionary:
     """A dictionary of the APID-selected containers of an XTCE file (space-packet-parser reads it).
 
     An APID whose one concrete container has a fixed, numeric layout decodes in bulk (ours); an APID with
@@ -714,8 +742,10 @@ def load_xtce(
     for apid, containers in by_apid.items():
         polymorphic = len(containers) > 1
         if polymorphic and not any(_restricts_beyond_apid(definition, c) for c in containers):
-            raise ValueError(f"{containers[1].name}: APID {apid} already belongs to {containers[0].name} "
-                             "(two containers, no restriction to tell them apart)")
+            raise ValueError(
+                f"{containers[1].name}: APID {apid} already belongs to {containers[0].name} "
+                "(two containers, no restriction to tell them apart)"
+            )
         if not polymorphic:
             try:
                 packets[apid] = _xtce_fixed(definition, containers[0], apid, time_code, time_fields)
@@ -727,7 +757,11 @@ def load_xtce(
         shared = [c for k, c in enumerate(chains[0]) if all(len(ch) > k and ch[k] is c for ch in chains)]
         base = shared[-1] if shared else containers[0]  # the deepest container they all extend
         packets[apid] = PacketDefinition(
-            name=base.name, apid=apid, packet_octets=PRIMARY_HEADER_OCTETS + 1, parameters=(), time_code=time_code,
+            name=base.name,
+            apid=apid,
+            packet_octets=PRIMARY_HEADER_OCTETS + 1,
+            parameters=(),
+            time_code=time_code,
             time_fields=time_fields.bound_to(numeric) if time_fields else None,
             description=base.short_description or base.long_description or "",
             xtce=XtceSource(definition, tuple(c.name for c in containers), numeric),

@@ -29,6 +29,7 @@ injection, not something the satellite knows) are never sent; the fault shows th
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
 import time
 from collections import deque
@@ -94,10 +95,19 @@ WHEEL_TORQUE_CONSTANT_NM_A = 0.1  # K_m: the HR12-class 0.2 N·m maximum draws 2
 STAR_TRACKER_TRACKING_RATE_RAD_S = math.radians(2.0)  # validity is not telemetered; a typical tracking limit
 REWIND_S = 1.0  # on reconnect, re-send what went out in the last second (socket buffers lost with the link)
 RETRY_S = 0.5
-MODE_LABELS = {modes.MODE_RATE_DAMPING: "RATE_DAMPING", modes.MODE_SUN_SAFE: "ONE_AXIS", modes.MODE_ORF: "THREE_AXIS",
-               modes.MODE_ROUTE: "THREE_AXIS", modes.MODE_FAULT: "FAULT"}  # sim_core.modes → dictionary labels
-SENSOR_FLAGS = {"star_tracker": "fault_star_tracker", "gyro": "fault_gyro", "magnetometer": "fault_magnetometer",
-                "md_rod": "fault_md"}  # sim_core fault target → dictionary FDIR flag
+MODE_LABELS = {
+    modes.MODE_RATE_DAMPING: "RATE_DAMPING",
+    modes.MODE_SUN_SAFE: "ONE_AXIS",
+    modes.MODE_ORF: "THREE_AXIS",
+    modes.MODE_ROUTE: "THREE_AXIS",
+    modes.MODE_FAULT: "FAULT",
+}  # sim_core.modes → dictionary labels
+SENSOR_FLAGS = {
+    "star_tracker": "fault_star_tracker",
+    "gyro": "fault_gyro",
+    "magnetometer": "fault_magnetometer",
+    "md_rod": "fault_md",
+}  # sim_core fault target → dictionary FDIR flag
 
 
 @dataclass(frozen=True)
@@ -121,7 +131,7 @@ class PacketStream:
     def __len__(self) -> int:
         return int(self.ends.shape[0])
 
-    def window(self, t_start_utc_ns: int, t_stop_utc_ns: int) -> "PacketStream":
+    def window(self, t_start_utc_ns: int, t_stop_utc_ns: int) -> PacketStream:
         """The packets stamped in [t_start, t_stop), counts and bytes unchanged."""
         keep = np.flatnonzero((self.t_utc_ns >= t_start_utc_ns) & (self.t_utc_ns < t_stop_utc_ns))
         if keep.size == 0:
@@ -129,8 +139,9 @@ class PacketStream:
         lo, hi = int(keep[0]), int(keep[-1]) + 1
         starts = np.concatenate([[0], self.ends])
         base = int(starts[lo])
-        return PacketStream(self.data[base : int(self.ends[hi - 1])], self.ends[lo:hi] - base,
-                            self.t_utc_ns[lo:hi], self.apid[lo:hi])
+        return PacketStream(
+            self.data[base : int(self.ends[hi - 1])], self.ends[lo:hi] - base, self.t_utc_ns[lo:hi], self.apid[lo:hi]
+        )
 
 
 @dataclass
@@ -182,8 +193,9 @@ def truth_scenario(s: Scenario, seed: int = 0, tolerances: TruthTolerances = Tru
     return Scenario.model_validate(data)
 
 
-def truth_wheel_allowance_rad_s(traj: Trajectory, model: Scenario, t_from_s: float, t_to_s: float,
-                                tolerances: TruthTolerances = TruthTolerances()) -> float:
+def truth_wheel_allowance_rad_s(
+    traj: Trajectory, model: Scenario, t_from_s: float, t_to_s: float, tolerances: TruthTolerances = TruthTolerances()
+) -> float:
     """Wheel-speed gap between the satellite (``traj``) and a twin synchronised at ``t_from_s`` that its truth may
     cause by ``t_to_s``: the inertia error times the body momentum the wheels took over (spread by the cluster's
     pseudo-inverse), plus the mounting tilt times the wheels' own speed (rad/s, a bound, not a fit)."""
@@ -293,8 +305,11 @@ def _last_events(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray
     a mode change carries the dictionary's mode code)."""
     codes, mode_codes = _codes(definition, "fdir_event"), _codes(definition, "mode")
     hidden = {EVENT_NAMES[2], EVENT_NAMES[3]}  # fault onset/cleared: ground truth of the injection
-    known = [(t, codes[name.upper()], mode_codes[MODE_LABELS.get(arg, "THREE_AXIS")] if name == "mode_change" else arg)
-             for t, name, arg in traj.events[0] if name not in hidden]
+    known = [
+        (t, codes[name.upper()], mode_codes[MODE_LABELS.get(arg, "THREE_AXIS")] if name == "mode_change" else arg)
+        for t, name, arg in traj.events[0]
+        if name not in hidden
+    ]
     event = np.full(t_s.shape, codes["NONE"], dtype=np.int64)
     argument = np.zeros(t_s.shape, dtype=np.int64)
     if known:
@@ -313,14 +328,20 @@ def _split(prefix: str, columns: np.ndarray, suffixes: Sequence[str]) -> dict[st
 
 def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """Star-tracker quaternions Λ^m = Λ ∘ Λ^n ∘ Λ^f (seed 000 §4), Λ^f the hidden faults' rotation; zeros if failed."""
-    q_m, _ = sensors.star_tracker(sr["q_ib"], sr["omega_b_rad_s"], s.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC,
-                                  STAR_TRACKER_TRACKING_RATE_RAD_S, rng)
+    q_m, _ = sensors.star_tracker(
+        sr["q_ib"],
+        sr["omega_b_rad_s"],
+        s.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC,
+        STAR_TRACKER_TRACKING_RATE_RAD_S,
+        rng,
+    )
     e = quaternion.multiply(quaternion.conjugate(sr["q_ib"]), q_m)
     theta = 2.0 * np.arctan2(np.linalg.norm(e[:, 1:], axis=-1), e[:, 0])[:, None]
     noise = theta * e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
     table, _ = fault_kernels.fault_table(s.variants[:1])
-    q_m, failed = fault_kernels.star_tracker_fault_series(table[0], t_s, np.ascontiguousarray(q_m),
-                                                          np.ascontiguousarray(noise))
+    q_m, failed = fault_kernels.star_tracker_fault_series(
+        table[0], t_s, np.ascontiguousarray(q_m), np.ascontiguousarray(noise)
+    )
     q_m = quaternion.normalize(q_m)
     q_m[failed] = 0.0
     return q_m
@@ -334,13 +355,16 @@ def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.rando
     drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, density, s.measurement_dt_s)
     w_g, d, _ = sensors.gyro(sr["omega_b_rad_s"], bias, drift, sn.gyro_noise_rad_s, GYRO_RANGE_RAD_S, rng)
     table, _ = fault_kernels.fault_table(s.variants[:1])
-    w_g, failed = fault_kernels.sensor_fault_series(table[0], fault_kernels.T_GYRO, t_s, w_g, w_g - sr["omega_b_rad_s"] - bias - d)
+    w_g, failed = fault_kernels.sensor_fault_series(
+        table[0], fault_kernels.T_GYRO, t_s, w_g, w_g - sr["omega_b_rad_s"] - bias - d
+    )
     w_g[failed] = 0.0
     return w_g
 
 
-def _magnetometer(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range_t: float,
-                  rng: np.random.Generator) -> np.ndarray:
+def _magnetometer(
+    sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range_t: float, rng: np.random.Generator
+) -> np.ndarray:
     """Magnetometer field Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG, field model as flown) under the hidden faults; 0 if failed."""
     b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], _unix_s(s, t_s), s.magnetic_model)
     b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), s.sensors.magnetometer_noise_t, range_t, rng)
@@ -357,8 +381,9 @@ def _unix_s(s: Scenario, t_s: np.ndarray) -> np.ndarray:
     return parse_utc_ns(s.orbit.epoch_utc) / NS_PER_S + t_s
 
 
-def _hk_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray,
-               rng: np.random.Generator) -> dict[str, np.ndarray]:
+def _hk_values(
+    traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray, rng: np.random.Generator
+) -> dict[str, np.ndarray]:
     """ACS_HK engineering values at the trajectory rows (estimates, programme, actuators, sensor samples)."""
     sr = {name: series[0, rows] for name, series in traj.series.items()}
     t_s = traj.t_s[rows]
@@ -368,13 +393,16 @@ def _hk_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows
         **_split("q_st_ib", _star_tracker(sr, s, t_s, rng), "0123"),
         **_split("omega_gyro_b_rad_s", _gyro(sr, s, t_s, rng), "xyz"),
         **_split("b_mag_b_t", _magnetometer(sr, s, t_s, _representable(definition, "b_mag_b_t_x"), rng), "xyz"),
-        **_split("q_est_ib", sr["q_est_ib"], "0123"), **_split("q_prog_ib", sr["q_prog_ib"], "0123"),
+        **_split("q_est_ib", sr["q_est_ib"], "0123"),
+        **_split("q_prog_ib", sr["q_prog_ib"], "0123"),
         **_split("omega_est_b_rad_s", sr["omega_est_b_rad_s"], "xyz"),
         **_split("wheel_speed_rad_s", sr["wheel_speed_rad_s"], wheels),
         **_split("wheel_torque_cmd_nm", sr["wheel_torque_cmd_nm"], wheels),
         **_split("wheel_current_a", sr["wheel_torque_nm"] / WHEEL_TORQUE_CONSTANT_NM_A, wheels),
         **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"),
-        "mode": _mode(traj, s, definition, t_s), "fdir_event": event, "fdir_event_argument": argument,
+        "mode": _mode(traj, s, definition, t_s),
+        "fdir_event": event,
+        "fdir_event_argument": argument,
         **_fdir_flags(traj, definition, t_s),
     }
     return values
@@ -401,8 +429,14 @@ def gps_week_seconds(t_utc_ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return week, ns / NS_PER_S
 
 
-def _gps_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray,
-                t_utc_ns: np.ndarray, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def _gps_values(
+    traj: Trajectory,
+    s: Scenario,
+    definition: PacketDefinition,
+    rows: np.ndarray,
+    t_utc_ns: np.ndarray,
+    rng: np.random.Generator,
+) -> dict[str, np.ndarray]:
     """GPS_NAV engineering values: ECEF fix of the flown orbit with seed 003's receiver noise, GPS time."""
     t_unix = traj.extra["epoch_unix_s"] + traj.t_s[rows]
     r_eci = traj.series["r_eci_m"][0, rows]
@@ -412,8 +446,10 @@ def _gps_values(traj: Trajectory, s: Scenario, definition: PacketDefinition, row
     week, seconds = gps_week_seconds(t_utc_ns)
     n = rows.shape[0]
     return {
-        **_split("r_ecef_m", r_fix, "xyz"), **_split("v_ecef_m_s", v_fix, "xyz"),
-        "gps_week": week, "gps_seconds_of_week": seconds,
+        **_split("r_ecef_m", r_fix, "xyz"),
+        **_split("v_ecef_m_s", v_fix, "xyz"),
+        "gps_week": week,
+        "gps_seconds_of_week": seconds,
         "n_satellites": np.full(n, GPS_SATELLITES_TRACKED, dtype=np.int64),
         "fix_type": np.full(n, _codes(definition, "fix_type")["FIX_3D"], dtype=np.int64),
     }
@@ -429,8 +465,10 @@ def packet_series(traj: Trajectory, s: Scenario, dictionary: Dictionary, seed: i
     epoch_ns = int(round(traj.extra["epoch_unix_s"] * NS_PER_S))
     n_wheels = sum(1 for p in packets[HK_PACKET].parameters if p.name.startswith("wheel_speed_rad_s_"))
     if n_wheels != traj.series["wheel_speed_rad_s"].shape[-1]:
-        raise ValueError(f"scenario.spacecraft.cluster.wheels: the dictionary carries {n_wheels} wheels, the scenario "
-                         f"flies {traj.series['wheel_speed_rad_s'].shape[-1]}")
+        raise ValueError(
+            f"scenario.spacecraft.cluster.wheels: the dictionary carries {n_wheels} wheels, the scenario "
+            f"flies {traj.series['wheel_speed_rad_s'].shape[-1]}"
+        )
     rng = np.random.default_rng(np.random.SeedSequence([s.seed, seed, EMULATOR_STREAM]))
     out = {}
     for name, build in ((HK_PACKET, _hk_values), (GPS_PACKET, _gps_values)):
@@ -574,10 +612,8 @@ async def send_stream(
             i = j
     finally:
         writer.close()
-        try:
+        with contextlib.suppress(ConnectionError, OSError):
             await writer.wait_closed()
-        except (ConnectionError, OSError):
-            pass
     return report
 
 

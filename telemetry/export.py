@@ -44,8 +44,7 @@ def _windows(spans: np.ndarray, t0_ns: int, t1_ns: int) -> Iterator[tuple[int, i
 
 
 def _schema(names: Sequence[str], dtypes: dict[str, np.dtype]) -> pa.Schema:
-    return pa.schema([("t_utc", pa.timestamp("ns", tz="UTC"))]
-                     + [(n, pa.from_numpy_dtype(dtypes[n])) for n in names])
+    return pa.schema([("t_utc", pa.timestamp("ns", tz="UTC"))] + [(n, pa.from_numpy_dtype(dtypes[n])) for n in names])
 
 
 def export_batches(

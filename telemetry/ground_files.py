@@ -79,8 +79,14 @@ def _to_time_ns(cells: list, column: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _validate_rows(
-    columns: dict[str, list], row_offset: np.ndarray, row_length: np.ndarray, line: np.ndarray,
-    header_line: int | None, dictionary: Dictionary, report: IngestReport, now_utc_ns: int | None,
+    columns: dict[str, list],
+    row_offset: np.ndarray,
+    row_length: np.ndarray,
+    line: np.ndarray,
+    header_line: int | None,
+    dictionary: Dictionary,
+    report: IngestReport,
+    now_utc_ns: int | None,
 ) -> list[SampleBatch]:
     """Check rows column by column, then build one time-ordered batch per owning packet."""
     time_col = next((c for c in TIME_COLUMNS if c in columns), None)
@@ -104,14 +110,19 @@ def _validate_rows(
     low, high = dictionary.time_window(now_utc_ns)
     reasons[(reasons == "") & ((t < low) | (t > high))] = "time_out_of_range"
     for i in np.flatnonzero(reasons != ""):
-        report.quarantined.append(QuarantineRecord(int(row_offset[i]), int(row_length[i]), str(reasons[i]),
-                                                   line=int(line[i])))
+        report.quarantined.append(
+            QuarantineRecord(int(row_offset[i]), int(row_length[i]), str(reasons[i]), line=int(line[i]))
+        )
     good = reasons == ""
     return [_packet_batch(dictionary.packets[apid], names, t, values, good, report) for apid, names in owners.items()]
 
 
 def _packet_batch(
-    packet: PacketDefinition, names: list[str], t: np.ndarray, values: dict[str, np.ndarray], good: np.ndarray,
+    packet: PacketDefinition,
+    names: list[str],
+    t: np.ndarray,
+    values: dict[str, np.ndarray],
+    good: np.ndarray,
     report: IngestReport,
 ) -> SampleBatch:
     """Time-ordered, de-duplicated rows of one packet's columns (rows with at least one value)."""
@@ -121,9 +132,13 @@ def _packet_batch(
     repeat = np.zeros(idx.shape, dtype=bool)
     repeat[1:] = t[idx[1:]] == t[idx[:-1]]
     idx = idx[~repeat]
-    batch = SampleBatch(packet=packet.name, apid=packet.apid, t_utc_ns=t[idx],
-                        sequence_count=np.zeros(len(idx), dtype=np.uint16),
-                        values={n: values[n][idx] for n in names})
+    batch = SampleBatch(
+        packet=packet.name,
+        apid=packet.apid,
+        t_utc_ns=t[idx],
+        sequence_count=np.zeros(len(idx), dtype=np.uint16),
+        values={n: values[n][idx] for n in names},
+    )
     summary = ApidSummary(packet.apid, packet.name, len(idx), duplicates=int(repeat.sum()))
     if len(idx):
         summary.t_first_utc_ns, summary.t_last_utc_ns = int(batch.t_utc_ns[0]), int(batch.t_utc_ns[-1])
@@ -168,8 +183,9 @@ def read_ground_csv(
     short = [i for i, (fields, problem) in enumerate(parsed[1:]) if problem or len(fields) != len(header)]
     for i in short:
         detail = parsed[i + 1][1] or f"{len(body[i])} fields, header has {len(header)}"
-        report.quarantined.append(QuarantineRecord(int(row_offset[i]), int(row_length[i]), "bad_row", line=i + 2,
-                                                   detail=detail))
+        report.quarantined.append(
+            QuarantineRecord(int(row_offset[i]), int(row_length[i]), "bad_row", line=i + 2, detail=detail)
+        )
     keep = np.setdiff1d(np.arange(len(body)), short)
     kept_rows = [body[i] for i in keep] if short else body
     columns = dict(zip(header, (list(c) for c in zip(*kept_rows)))) if kept_rows else {name: [] for name in header}
@@ -202,8 +218,16 @@ def read_ground_jsonl(
     names = list(dict.fromkeys(k for _, obj in objects for k in obj))
     columns = {name: [obj.get(name) for _, obj in objects] for name in names}
     line_numbers = np.array([n for n, _ in objects], dtype=np.int64)
-    batches = _validate_rows(columns, np.array(offsets, dtype=np.int64), np.array(lengths, dtype=np.int64),
-                             line_numbers, None, dictionary, report, now_utc_ns)
+    batches = _validate_rows(
+        columns,
+        np.array(offsets, dtype=np.int64),
+        np.array(lengths, dtype=np.int64),
+        line_numbers,
+        None,
+        dictionary,
+        report,
+        now_utc_ns,
+    )
     return _finish(report, batches)
 
 

@@ -72,22 +72,30 @@ def _stack(values: dict[str, np.ndarray], prefix: str, suffixes: Iterable[str]) 
     return np.stack([values[n] for n in names], axis=-1)
 
 
-def observations(batches: list[SampleBatch], dictionary: Dictionary, satellite: str | None = None,
-                 n_wheels: int | None = None) -> Observations:
+def observations(
+    batches: list[SampleBatch], dictionary: Dictionary, satellite: str | None = None, n_wheels: int | None = None
+) -> Observations:
     """The diagnosis's :class:`Observations` from decoded batches; ValueError naming what is missing."""
     if satellite is not None and satellite != dictionary.satellite_name:
-        raise ValueError(f"--satellite {satellite!r}: the dictionary describes {dictionary.satellite_name!r} "
-                         f"(telemetry from another spacecraft?)")
+        raise ValueError(
+            f"--satellite {satellite!r}: the dictionary describes {dictionary.satellite_name!r} "
+            f"(telemetry from another spacecraft?)"
+        )
     carrying = [b for b in batches if len(b.t_utc_ns) and "wheel_speed_rad_s_1" in b.values]
     if not carrying:
         got = sorted({n for b in batches for n in b.values})[:8]
-        raise ValueError("telemetry: no wheel speeds (wheel_speed_rad_s_1 …) in the file"
-                         + (f"; it holds {got} …" if got else "; no sample was accepted") + " (another spacecraft?)")
+        raise ValueError(
+            "telemetry: no wheel speeds (wheel_speed_rad_s_1 …) in the file"
+            + (f"; it holds {got} …" if got else "; no sample was accepted")
+            + " (another spacecraft?)"
+        )
     t_ns, values = _merged(carrying)
     wheels = sorted(int(n.rsplit("_", 1)[1]) for n in values if n.startswith("wheel_speed_rad_s_"))
     if n_wheels is not None and len(wheels) != n_wheels:
-        raise ValueError(f"telemetry: {len(wheels)} wheel speeds telemetered, the scenario's spacecraft has "
-                         f"{n_wheels} wheels (telemetry from another spacecraft?)")
+        raise ValueError(
+            f"telemetry: {len(wheels)} wheel speeds telemetered, the scenario's spacecraft has "
+            f"{n_wheels} wheels (telemetry from another spacecraft?)"
+        )
     suffixes = [str(w) for w in wheels]
     missing = [f"wheel_torque_cmd_nm_{s}" for s in suffixes if f"wheel_torque_cmd_nm_{s}" not in values]
     picked: dict[str, np.ndarray] = {}
@@ -102,8 +110,10 @@ def observations(batches: list[SampleBatch], dictionary: Dictionary, satellite: 
         raise ValueError(f"telemetry: the diagnosis needs {', '.join(missing)}; the file lacks them")
     keep = _thinned(t_ns)
     if keep.shape[0] < MIN_SAMPLES:
-        raise ValueError(f"telemetry: {keep.shape[0]} housekeeping samples ({(t_ns[-1] - t_ns[0]) / NS_PER_S:.0f} s); "
-                         f"the diagnosis needs at least {MIN_SAMPLES} at ≥ {MIN_SPACING_S:g} s spacing")
+        raise ValueError(
+            f"telemetry: {keep.shape[0]} housekeeping samples ({(t_ns[-1] - t_ns[0]) / NS_PER_S:.0f} s); "
+            f"the diagnosis needs at least {MIN_SAMPLES} at ≥ {MIN_SPACING_S:g} s spacing"
+        )
     t_ns = t_ns[keep]
     quantum = _step(dictionary, "wheel_speed_rad_s_1")
     if quantum <= 0.0:
@@ -120,8 +130,9 @@ def observations(batches: list[SampleBatch], dictionary: Dictionary, satellite: 
         wheel_speed_rad_s=cut(_stack(values, "wheel_speed_rad_s", suffixes)),  # type: ignore[arg-type]
         wheel_torque_cmd_nm=cut(_stack(values, "wheel_torque_cmd_nm", suffixes)),  # type: ignore[arg-type]
         speed_quantum_rad_s=quantum,
-        torque_quantum_nm=_resolution(values["wheel_torque_cmd_nm_1"][keep],
-                                      _step(dictionary, "wheel_torque_cmd_nm_1")),
+        torque_quantum_nm=_resolution(
+            values["wheel_torque_cmd_nm_1"][keep], _step(dictionary, "wheel_torque_cmd_nm_1")
+        ),
         q_st_ib=cut(_stack(values, "q_st_ib", "0123")),
         q_prog_ib=cut(_stack(values, "q_prog_ib", "0123")),
         wheel_isolated=cut(_stack(values, "fault_wheel", suffixes)),

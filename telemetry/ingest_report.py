@@ -14,8 +14,16 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-__all__ = ["QuarantineRecord", "SequenceGap", "ApidSummary", "IngestReport", "SampleBatch", "DecodeResult", "REASONS",
-           "UndefinedPackets"]
+__all__ = [
+    "QuarantineRecord",
+    "SequenceGap",
+    "ApidSummary",
+    "IngestReport",
+    "SampleBatch",
+    "DecodeResult",
+    "REASONS",
+    "UndefinedPackets",
+]
 
 MAX_LISTED = 10_000  # quarantine records / gaps listed in one report; the rest are counted
 REASONS = (
@@ -81,8 +89,14 @@ class ApidSummary:
 
     def absorb(self, other: ApidSummary) -> None:
         """Add the tallies of the same APID from the next chunk of the input."""
-        for name in ("accepted", "duplicates", "quarantined", "missing", "longer_than_definition",
-                     "shorter_than_definition"):
+        for name in (
+            "accepted",
+            "duplicates",
+            "quarantined",
+            "missing",
+            "longer_than_definition",
+            "shorter_than_definition",
+        ):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         self.gaps.extend(other.gaps[: max(MAX_LISTED - len(self.gaps), 0)])
         for octets, n in other.packet_octets.items():

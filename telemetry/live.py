@@ -297,6 +297,7 @@ class MemoryLink:
 
 class LiveStream:
     """Listener for a CCSDS packet stream of one satellite (optionally archived), over a :class:`Link`."""
+
     def __init__(
         self,
         dictionary: Dictionary,

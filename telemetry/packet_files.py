@@ -25,7 +25,10 @@ CHUNK_OCTETS = 2 << 20  # 2 MiB: decode cost per chunk is flat above ~1 MiB, mem
 
 
 def decode_chunks(
-    stream: BinaryIO, dictionary: Dictionary, source: str = "", now_utc_ns: int | None = None,
+    stream: BinaryIO,
+    dictionary: Dictionary,
+    source: str = "",
+    now_utc_ns: int | None = None,
     chunk_octets: int = CHUNK_OCTETS,
 ) -> Iterator[tuple[int, DecodeResult]]:
     """(byte offset of the chunk, its decode result) for consecutive chunks of a packet stream."""
@@ -52,9 +55,17 @@ def file_sha256(path: Path, block: int = 1 << 20) -> str:
 
 
 def ingest_packet_file(
-    archive: Archive | None, path: Path, dictionary: Dictionary, *, satellite: str, uploaded_by: str,
-    limits: Mapping[str, LimitSet] | None = None, now_utc_ns: int | None = None, chunk_octets: int = CHUNK_OCTETS,
-    source: str | None = None, on_chunk: Callable[[DecodeResult], None] | None = None,
+    archive: Archive | None,
+    path: Path,
+    dictionary: Dictionary,
+    *,
+    satellite: str,
+    uploaded_by: str,
+    limits: Mapping[str, LimitSet] | None = None,
+    now_utc_ns: int | None = None,
+    chunk_octets: int = CHUNK_OCTETS,
+    source: str | None = None,
+    on_chunk: Callable[[DecodeResult], None] | None = None,
 ) -> tuple[IngestReport, IngestResult | None]:
     """Decode a packet file chunk by chunk and archive it as one upload (archive None: decode and report only).
 
@@ -74,6 +85,13 @@ def ingest_packet_file(
         for _ in results():
             pass
         return report, None
-    stored = archive.ingest_results(satellite, results(), source=report.source, uploaded_by=uploaded_by,
-                                    sha256=file_sha256(path), limits=limits, report=report)
+    stored = archive.ingest_results(
+        satellite,
+        results(),
+        source=report.source,
+        uploaded_by=uploaded_by,
+        sha256=file_sha256(path),
+        limits=limits,
+        report=report,
+    )
     return report, stored

@@ -38,10 +38,20 @@ TIME_PROBLEMS = (
     "fine counter wider than fine_bits",
     "coarse counter negative",
 )
-_RANGES = {"hour": (5, 0, 23), "minute": (6, 0, 59), "second": (7, 0, 60), "millisecond": (8, 0, 999),
-           "microsecond": (9, 0, 999_999)}
-_UNIT_NS = {"hour": 3_600 * NS_PER_S, "minute": 60 * NS_PER_S, "second": NS_PER_S, "millisecond": 1_000_000,
-            "microsecond": 1_000}
+_RANGES = {
+    "hour": (5, 0, 23),
+    "minute": (6, 0, 59),
+    "second": (7, 0, 60),
+    "millisecond": (8, 0, 999),
+    "microsecond": (9, 0, 999_999),
+}
+_UNIT_NS = {
+    "hour": 3_600 * NS_PER_S,
+    "minute": 60 * NS_PER_S,
+    "second": NS_PER_S,
+    "millisecond": 1_000_000,
+    "microsecond": 1_000,
+}
 
 
 @dataclass(frozen=True)
@@ -136,6 +146,7 @@ def _days_since_unix(year: np.ndarray) -> np.ndarray:
 
 def _calendar(values: Mapping[str, np.ndarray], tf: TimeFields, n: int) -> tuple[np.ndarray, np.ndarray]:
     """UTC ns and problem codes of calendar fields (UTC, day of year from 1)."""
+
     def get(key: str) -> np.ndarray:
         name = tf.field(key)
         return np.zeros(n, np.int64) if name is None else np.asarray(values[name]).astype(np.int64)
@@ -187,7 +198,9 @@ def field_times(values: Mapping[str, np.ndarray], tf: TimeFields) -> tuple[np.nd
         fine = np.asarray(values[fine_name]).astype(np.int64)
         problem[(problem == 0) & ((fine < 0) | (fine >> tf.fine_bits != 0))] = 10
         bits = tf.fine_bits
-        t += (fine * NS_PER_S + (1 << bits >> 1)) >> bits if bits <= 32 else np.rint(fine / 2.0**bits * 1e9).astype(
-            np.int64
+        t += (
+            (fine * NS_PER_S + (1 << bits >> 1)) >> bits
+            if bits <= 32
+            else np.rint(fine / 2.0**bits * 1e9).astype(np.int64)
         )
     return scale_to_utc(t, tf.time_scale), problem

@@ -236,8 +236,9 @@ def _runs(t_ns: np.ndarray, free: np.ndarray, gap_ns: int) -> list[tuple[int, in
     return [(int(t_ns[index[a]]), int(t_ns[index[b]])) for a, b in zip(starts, ends)]
 
 
-def passes_from_data(archive: Archive, satellite: str, t0_ns: int, t1_ns: int,
-                     station: str | None = None) -> list[PassRecord]:
+def passes_from_data(
+    archive: Archive, satellite: str, t0_ns: int, t1_ns: int, station: str | None = None
+) -> list[PassRecord]:
     """The passes holding the telemetry archived in [t0_ns, t1_ns], their reception recounted: predicted passes
     that cover it, and passes made from the data itself (origin "data", AOS/LOS = first/last sample, station
     ``station`` or unknown) where none does; data continuing a pass from data within DATA_PASS_GAP_S widens it."""

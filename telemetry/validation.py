@@ -24,7 +24,13 @@ from telemetry.ccsds import SEQUENCE_COUNT_MODULUS, SEQUENCE_FLAGS_UNSEGMENTED, 
 from telemetry.ingest_report import QuarantineRecord, SequenceGap
 
 __all__ = [
-    "PacketVerdict", "validate_packets", "header_mismatch", "HEADER_PROBLEMS", "ACCEPTED", "NON_MONOTONIC", "RESTART",
+    "PacketVerdict",
+    "validate_packets",
+    "header_mismatch",
+    "HEADER_PROBLEMS",
+    "ACCEPTED",
+    "NON_MONOTONIC",
+    "RESTART",
     "INVALID_TIME",
 ]
 
@@ -123,8 +129,14 @@ def validate_packets(
     high = np.iinfo(np.int64).max if valid_until_utc_ns is None else valid_until_utc_ns
     in_window = (t >= low) & (t <= high)
     quarantined = [
-        QuarantineRecord(int(offset[i]), packet_octets, "time_out_of_range", apid, int(count[i]),
-                         detail=f"t_utc_ns={int(t[i])}" if t[i] != INVALID_TIME else "invalid time code field")
+        QuarantineRecord(
+            int(offset[i]),
+            packet_octets,
+            "time_out_of_range",
+            apid,
+            int(count[i]),
+            detail=f"t_utc_ns={int(t[i])}" if t[i] != INVALID_TIME else "invalid time code field",
+        )
         for i in np.flatnonzero(~in_window)
     ]
     idx = np.flatnonzero(in_window)
@@ -140,8 +152,9 @@ def validate_packets(
     ]
     kept, missing = idx[status == ACCEPTED], missing[status == ACCEPTED]
     gaps = [
-        SequenceGap(apid, int(count[kept[j - 1]]), int(count[kept[j]]), int(missing[j]),
-                    int(t[kept[j - 1]]), int(t[kept[j]]))
+        SequenceGap(
+            apid, int(count[kept[j - 1]]), int(count[kept[j]]), int(missing[j]), int(t[kept[j - 1]]), int(t[kept[j]])
+        )
         for j in np.flatnonzero(missing != 0)
     ]
     quarantined.sort(key=lambda q: q.offset)

@@ -39,6 +39,10 @@ def test_package_imports_only_its_allowed_layers(package):
 
 
 def test_nothing_outside_backend_imports_backend():
-    users = [str(p.relative_to(ROOT)) for pkg in ("sim_core", "telemetry", "frontend")
-             for p in (ROOT / pkg).rglob("*.py") if "backend" in _imports(p)]
+    users = [
+        str(p.relative_to(ROOT))
+        for pkg in ("sim_core", "telemetry", "frontend")
+        for p in (ROOT / pkg).rglob("*.py")
+        if "backend" in _imports(p)
+    ]
     assert not users

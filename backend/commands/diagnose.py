@@ -16,8 +16,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenario", required=True, help="library scenario name or scenario JSON file the spacecraft flies")
     p.add_argument("--satellite", help="expected satellite name (checked against the dictionary)")
     p.add_argument("--json", dest="json_out", type=Path, help="write the ranked hypotheses as JSON here")
-    p.add_argument("--scheduler", help="fly the twin replays on this Dask scheduler (tcp://host:port; default "
-                   "$ACS_TWIN_DASK_SCHEDULER, else on this machine without a cluster)")
+    p.add_argument(
+        "--scheduler",
+        help="fly the twin replays on this Dask scheduler (tcp://host:port; default "
+        "$ACS_TWIN_DASK_SCHEDULER, else on this machine without a cluster)",
+    )
     p.set_defaults(handler=run)
 
 
@@ -54,8 +57,10 @@ def run(args: argparse.Namespace) -> int:
             client.close()
     det = result["detection"]
     if det["detected"]:
-        print(f"anomaly detected at {det['alarm_utc']} on {det['channel']} "
-              f"(false-alarm rate {det['false_alarms_per_day']:.1e}/day)")
+        print(
+            f"anomaly detected at {det['alarm_utc']} on {det['channel']} "
+            f"(false-alarm rate {det['false_alarms_per_day']:.1e}/day)"
+        )
     else:
         print(f"no anomaly detected (false-alarm rate {det['false_alarms_per_day']:.1e}/day)")
     for h in result["hypotheses"][:5]:

@@ -18,10 +18,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, help=f"live listener TCP port (default {DEFAULT_PORT} unless only --out)")
     p.add_argument("--rate", type=float, default=1.0, help="time acceleration (1 = real time, inf = unpaced)")
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
-    p.add_argument("--fault", action="append", default=[], metavar="TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V]",
-                   help="hidden fault, e.g. wheel:1:failure@600 (0-based sim_core index: wheel 1 = wheel_*_2)")
-    p.add_argument("--start-utc",
-                   help="epoch of the flight, ISO 8601 or 'now' (at rate 1 packets then leave at their time stamps)")
+    p.add_argument(
+        "--fault",
+        action="append",
+        default=[],
+        metavar="TARGET:INDEX:TYPE@ONSET[+DUR][,gain=G|,value=V]",
+        help="hidden fault, e.g. wheel:1:failure@600 (0-based sim_core index: wheel 1 = wheel_*_2)",
+    )
+    p.add_argument(
+        "--start-utc", help="epoch of the flight, ISO 8601 or 'now' (at rate 1 packets then leave at their time stamps)"
+    )
     p.add_argument("--attempts", type=int, help="connection attempts before giving up (default: keep trying)")
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
     p.add_argument("--out", type=Path, help="write the packets to this file (for upload) instead of only sending")
@@ -51,8 +57,11 @@ def _warn_late_faults(faults: list, duration_s: float) -> None:
     """Say so when a hidden fault begins after the end of the flight (it would never act)."""
     for f in faults:
         if f.onset_s >= duration_s:
-            print(f"warning: fault {f.target}:{f.index}:{f.type} begins at {f.onset_s:g} s, after the end of the "
-                  f"flight ({duration_s:g} s); pass --duration", file=sys.stderr)
+            print(
+                f"warning: fault {f.target}:{f.index}:{f.type} begins at {f.onset_s:g} s, after the end of the "
+                f"flight ({duration_s:g} s); pass --duration",
+                file=sys.stderr,
+            )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,8 +75,9 @@ def run(args: argparse.Namespace) -> int:
         faults = [parse_fault(text) for text in args.fault]
         if not args.rate > 0.0:
             raise ValueError(f"rate: must be > 0 (inf = unpaced), got {args.rate}")
-        traj, _, stream = emulator.emulate(_scenario(args.scenario), faults, args.duration, _start_utc(args.start_utc),
-                                           seed=args.seed)
+        traj, _, stream = emulator.emulate(
+            _scenario(args.scenario), faults, args.duration, _start_utc(args.start_utc), seed=args.seed
+        )
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -83,8 +93,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"sending to {args.host}:{port} ({pace})", flush=True)
     try:
         on_clock = args.start_utc == "now" and args.rate == 1.0
-        report = asyncio.run(emulator.send_stream(stream, args.host, port, args.rate, attempts=args.attempts,
-                                                  on_wall_clock=on_clock))
+        report = asyncio.run(
+            emulator.send_stream(stream, args.host, port, args.rate, attempts=args.attempts, on_wall_clock=on_clock)
+        )
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -20,11 +20,19 @@ COLUMNS = (
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``faults-table`` subcommand."""
-    p = sub.add_parser("faults-table", help="the 11 GE wheel configurations (nominal, singles, pairs + MD): "
-                                            "pointing, MD windows, fastest roll, route flown")
+    p = sub.add_parser(
+        "faults-table",
+        help="the 11 GE wheel configurations (nominal, singles, pairs + MD): "
+        "pointing, MD windows, fastest roll, route flown",
+    )
     p.add_argument("--scenario", default="somov-ge4-scan", help="library scenario (default: somov-ge4-scan)")
-    p.add_argument("--out", type=Path, action="append", default=[],
-                   help="also write the table to this file, Markdown for .md, JSON for .json (repeatable)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        action="append",
+        default=[],
+        help="also write the table to this file, Markdown for .md, JSON for .json (repeatable)",
+    )
     p.set_defaults(handler=run)
 
 
@@ -53,11 +61,13 @@ def _out_format(path: Path) -> str:
     try:
         return FORMATS[path.suffix.lower()]
     except KeyError:
-        raise ValueError(f"--out {path}: the file name must end in {', '.join(FORMATS)} (the format to write)") from None
+        raise ValueError(
+            f"--out {path}: the file name must end in {', '.join(FORMATS)} (the format to write)"
+        ) from None
 
 
 def run(args: argparse.Namespace) -> int:
-    """Fly the configurations, print Markdown then JSON, write each --out in its suffix's format; exit 2 on bad input."""
+    """Fly the configurations, print Markdown then JSON, write each --out in its suffix's format; exit 2 if bad."""
     from sim_core import scenario_library
     from sim_core.whatif import configuration_table
 

@@ -30,22 +30,38 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``ingest`` subcommand."""
     p = sub.add_parser("ingest", help="decode, validate and archive a CCSDS packet file or a ground CSV/JSONL file")
     p.add_argument("path", type=Path, help="packet file, or .csv / .jsonl of ground-processed values")
-    p.add_argument("--dictionary", required=True, action="append",
-                   help="dictionary: .yaml (ours), .xml (XTCE), .csv (ccsdspy) or a folder of ccsdspy CSVs "
-                        "(APID in each file name); repeat to combine; a bare name means a shipped one")
+    p.add_argument(
+        "--dictionary",
+        required=True,
+        action="append",
+        help="dictionary: .yaml (ours), .xml (XTCE), .csv (ccsdspy) or a folder of ccsdspy CSVs "
+        "(APID in each file name); repeat to combine; a bare name means a shipped one",
+    )
     p.add_argument("--db", help="SQLAlchemy URL of the archive (default: SQLite in the data directory)")
     p.add_argument("--satellite", help="satellite name in the archive (default: the dictionary's 'satellite')")
-    p.add_argument("--apid", type=int, action="append",
-                   help="APID of the packets of a ccsdspy CSV dictionary (repeat, in order, for several CSVs)")
+    p.add_argument(
+        "--apid",
+        type=int,
+        action="append",
+        help="APID of the packets of a ccsdspy CSV dictionary (repeat, in order, for several CSVs)",
+    )
     p.add_argument("--time-code", help="secondary-header time code of XTCE/CSV dictionaries: CDS, CDS-ms, CUC-4-2")
-    p.add_argument("--time-fields",
-                   help="time from packet fields: year=F,doy=F,hour=F,minute=F,second=F,microsecond=F (or month=, "
-                        "day=, millisecond=) or coarse=F,fine=F,fine_bits=N,epoch=ISO[,time_scale=TAI]; "
-                        "field names may use * wildcards (year=*_HDR_YEAR)")
-    p.add_argument("--packet-prefix", type=int, default=0, metavar="OCTETS",
-                   help="fixed-size header before every packet (frame or ground-station header), stripped")
-    p.add_argument("--packet-suffix", type=int, default=0, metavar="OCTETS",
-                   help="fixed-size trailer after every packet, stripped")
+    p.add_argument(
+        "--time-fields",
+        help="time from packet fields: year=F,doy=F,hour=F,minute=F,second=F,microsecond=F (or month=, "
+        "day=, millisecond=) or coarse=F,fine=F,fine_bits=N,epoch=ISO[,time_scale=TAI]; "
+        "field names may use * wildcards (year=*_HDR_YEAR)",
+    )
+    p.add_argument(
+        "--packet-prefix",
+        type=int,
+        default=0,
+        metavar="OCTETS",
+        help="fixed-size header before every packet (frame or ground-station header), stripped",
+    )
+    p.add_argument(
+        "--packet-suffix", type=int, default=0, metavar="OCTETS", help="fixed-size trailer after every packet, stripped"
+    )
     p.add_argument("--user", default=None, help="who uploads (default: the login name)")
     p.add_argument("--dry-run", action="store_true", help="decode and validate only; store nothing")
     p.set_defaults(handler=run)
@@ -85,8 +101,9 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"path: no file {args.path}")
         dictionary = load_dictionaries(args.dictionary, args.apid, args.time_code, args.time_fields)
         if args.packet_prefix or args.packet_suffix:
-            dictionary = replace(dictionary, packet_prefix_octets=args.packet_prefix,
-                                 packet_suffix_octets=args.packet_suffix)
+            dictionary = replace(
+                dictionary, packet_prefix_octets=args.packet_prefix, packet_suffix_octets=args.packet_suffix
+            )
         archive = None
         if not args.dry_run:
             from backend.core.settings import Settings
@@ -120,8 +137,9 @@ def _ingest(args: argparse.Namespace, dictionary: Dictionary, archive, limits) -
         return report
     from telemetry.packet_files import ingest_packet_file
 
-    decode_report, stored = ingest_packet_file(archive, args.path, dictionary, satellite=satellite,
-                                               uploaded_by=user, limits=limits)
+    decode_report, stored = ingest_packet_file(
+        archive, args.path, dictionary, satellite=satellite, uploaded_by=user, limits=limits
+    )
     report = {"decode": decode_report.to_dict()}
     if stored is not None:
         report["archive"] = stored.as_report()

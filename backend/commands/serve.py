@@ -32,8 +32,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
-    values = {"host": args.host, "port": args.port, "data_dir": args.data_dir,
-              "database_url": args.database_url, "job_workers": args.job_workers}
+    values = {
+        "host": args.host,
+        "port": args.port,
+        "data_dir": args.data_dir,
+        "database_url": args.database_url,
+        "job_workers": args.job_workers,
+    }
     out = {k: v for k, v in values.items() if v is not None}
     if args.no_auth:
         out["auth_enabled"] = False
@@ -62,9 +67,24 @@ def start_emulator(settings: Any, scenario: str, telemetry_port: int | None) -> 
     if not settings.live_enabled or not settings.telemetry_port or not telemetry_port:
         return None  # an ephemeral telemetry port (0) means no demo satellite
     log = (settings.data_dir / "emulator.log").open("ab")
-    command = [sys.executable, "-m", "backend", "emulate", "--scenario", scenario, "--host", settings.host,
-               "--port", str(telemetry_port), "--rate", "1", "--start-utc", "now",
-               "--duration", str(DEMO_FLIGHT_S)]
+    command = [
+        sys.executable,
+        "-m",
+        "backend",
+        "emulate",
+        "--scenario",
+        scenario,
+        "--host",
+        settings.host,
+        "--port",
+        str(telemetry_port),
+        "--rate",
+        "1",
+        "--start-utc",
+        "now",
+        "--duration",
+        str(DEMO_FLIGHT_S),
+    ]
     for fault in HIDDEN_FAULTS:
         command += ["--fault", fault]
     return spawn_owned(command, log)
@@ -98,8 +118,10 @@ def _port_message(what: str, host: str, port: int, knob: str, exc: OSError) -> s
     from backend.core.processes import port_holder
 
     holder = port_holder(port) or "another process"
-    return (f"acs-twin serve: the {what} port {host}:{port} is not available ({exc.strerror or exc}); "
-            f"held by {holder}. Stop it or choose another port ({knob}).")
+    return (
+        f"acs-twin serve: the {what} port {host}:{port} is not available ({exc.strerror or exc}); "
+        f"held by {holder}. Stop it or choose another port ({knob})."
+    )
 
 
 def _owned_server(config: Any, on_started: Callable[[], None]) -> Any:
@@ -148,13 +170,16 @@ def run(args: argparse.Namespace) -> int:
         _announce(settings, app.state.services)
         port = app.state.services.telemetry.live_port
         if not args.no_emulator:  # the demo satellite's route starts with the emulator's flight
-            app.state.services.twins.register_model(settings.live_satellite, args.emulator_scenario, None,
-                                                    from_run=True)
+            app.state.services.twins.register_model(
+                settings.live_satellite, args.emulator_scenario, None, from_run=True
+            )
         emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario, port)
         if emulator is not None:
             children["emulator"] = emulator
-            print(f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
-                  f"tcp://{settings.host}:{port}, log {settings.data_dir / 'emulator.log'}")
+            print(
+                f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
+                f"tcp://{settings.host}:{port}, log {settings.data_dir / 'emulator.log'}"
+            )
             children["twin"] = start_demo_twin(app.state.services, settings, args.emulator_scenario, stop)
         print(flush=True)
 
@@ -195,8 +220,9 @@ def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading
     from backend.twin.demo_twin import run_demo_twin
 
     ports = {role: int(url.rsplit(":", 1)[1]) for role, url in monitor_urls(settings).items()}
-    thread = threading.Thread(target=run_demo_twin, args=(services, ports, scenario, stop),
-                              name="demo-twin", daemon=True)
+    thread = threading.Thread(
+        target=run_demo_twin, args=(services, ports, scenario, stop), name="demo-twin", daemon=True
+    )
     thread.start()
     urls = ", ".join(f"{role} {url}" for role, url in monitor_urls(settings).items())
     gate = "open with ?token=<API token>, " if settings.auth_enabled else ""

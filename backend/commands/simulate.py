@@ -12,8 +12,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``simulate`` subcommand."""
     p = sub.add_parser("simulate", help="run a simulation scenario and write trajectory, plots and summary")
     p.add_argument("scenario", help="library name (see `acs-twin scenarios`) or a scenario JSON file")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="PATH=VALUE",
-                   help="override a field, e.g. --set sensors.star_tracker_sigma_arcsec=10 (repeatable)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="PATH=VALUE",
+        help="override a field, e.g. --set sensors.star_tracker_sigma_arcsec=10 (repeatable)",
+    )
     p.add_argument("--duration", type=float, help="simulated duration in seconds")
     p.add_argument("--out", type=Path, help="directory for trajectory.npz/csv/parquet, plots and summary.json")
     p.add_argument("--summary-json", type=Path, help="write the summary of variant 0 as JSON here")

@@ -44,8 +44,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if settings.database_url is None and not (settings.data_dir / "acs-twin.sqlite").exists():
-        print(f"error: no server database in {settings.data_dir.resolve()} (use --data-dir or --database-url)",
-              file=sys.stderr)
+        print(
+            f"error: no server database in {settings.data_dir.resolve()} (use --data-dir or --database-url)",
+            file=sys.stderr,
+        )
         return 2
     engine = make_engine(settings.resolved_database_url())
     try:
@@ -53,8 +55,9 @@ def run(args: argparse.Namespace) -> int:
         sessions = make_session_factory(engine)
         name = args.name or f"{args.role} (command line, {getpass.getuser()})"
         token_id, token = Authenticator(TokenRepository(sessions), enabled=True).issue(name, Role.parse(args.role))
-        AuditRepository(sessions).record("acs-twin token create", "token.create", f"token/{token_id}",
-                                         {"role": args.role, "name": name})
+        AuditRepository(sessions).record(
+            "acs-twin token create", "token.create", f"token/{token_id}", {"role": args.role, "name": name}
+        )
     finally:
         engine.dispose()
     print(f"{args.role} token {token_id} (shown once, stored hashed): {token}")

@@ -21,8 +21,7 @@ class AuditRepository:
 
     def record(self, actor: str, action: str, target: str, detail: dict[str, Any] | None = None) -> None:
         """Append one entry stamped now (UTC)."""
-        row = AuditRow(at=datetime.now(UTC), actor=actor, action=action,
-                       target=target, detail=detail or {})
+        row = AuditRow(at=datetime.now(UTC), actor=actor, action=action, target=target, detail=detail or {})
         with self._sessions.begin() as session:
             session.add(row)
 

@@ -25,23 +25,29 @@ class ErrorBody(BaseModel):
 class ApiError(Exception):
     """An error to answer with ``status``; ``field`` names the offending input."""
 
-    def __init__(self, status: int, message: str, field: str | None = None,
-                 headers: dict[str, str] | None = None) -> None:
+    def __init__(
+        self, status: int, message: str, field: str | None = None, headers: dict[str, str] | None = None
+    ) -> None:
         super().__init__(message)
         self.status, self.message, self.field, self.headers = status, message, field, headers
 
 
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorBody, "description": text}
-    for code, text in [(401, "Missing or unknown token"), (403, "Role too low"), (404, "Not found"),
-                       (409, "Conflicts with the current state"), (413, "Body over max_upload_mb"),
-                       (422, "Invalid input or over a limit"), (429, "Job queue full (see Retry-After)"),
-                       (503, "A telemetry component is not available in this build")]
+    for code, text in [
+        (401, "Missing or unknown token"),
+        (403, "Role too low"),
+        (404, "Not found"),
+        (409, "Conflicts with the current state"),
+        (413, "Body over max_upload_mb"),
+        (422, "Invalid input or over a limit"),
+        (429, "Job queue full (see Retry-After)"),
+        (503, "A telemetry component is not available in this build"),
+    ]
 }
 
 
-def _json(status: int, message: str, field: str | None,
-          headers: dict[str, str] | None = None) -> JSONResponse:
+def _json(status: int, message: str, field: str | None, headers: dict[str, str] | None = None) -> JSONResponse:
     body = ErrorBody(message=message, field=field, status=status).model_dump()
     return JSONResponse(body, status_code=status, headers=headers)
 

@@ -59,8 +59,9 @@ def become_owned_child() -> None:
 def spawn_owned(command: list[str], log: IO[bytes]) -> subprocess.Popen:
     """Start ``command`` in its own session, output to ``log``, told to die with this process."""
     env = {**os.environ, PARENT_ENV: str(os.getpid())}
-    return subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env,
-                            start_new_session=True)
+    return subprocess.Popen(
+        command, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env, start_new_session=True
+    )
 
 
 def stop_owned(process: subprocess.Popen | Any, grace_s: float = STOP_GRACE_S) -> None:

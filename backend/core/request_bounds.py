@@ -35,8 +35,12 @@ def json_problem(body: bytes, max_depth: int = MAX_JSON_DEPTH) -> str | None:
         depth += 1
         if depth > max_depth:
             return f"body: JSON nested deeper than {max_depth} levels"
-        level = [child for item in level if isinstance(item, (dict, list))
-                 for child in (item.values() if isinstance(item, dict) else item)]
+        level = [
+            child
+            for item in level
+            if isinstance(item, (dict, list))
+            for child in (item.values() if isinstance(item, dict) else item)
+        ]
     return None
 
 
@@ -50,8 +54,13 @@ def _is_json(scope: Scope) -> bool:
 
 async def _answer(send: Send, status: int, message: str) -> None:
     body = orjson.dumps({"message": message, "field": "body", "status": status})
-    await send({"type": "http.response.start", "status": status,
-                "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
+    await send(
+        {
+            "type": "http.response.start",
+            "status": status,
+            "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())],
+        }
+    )
     await send({"type": "http.response.body", "body": body})
 
 

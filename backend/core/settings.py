@@ -20,13 +20,17 @@ class Settings(BaseSettings):
     database_url: str | None = Field(None, description="SQLAlchemy URL; default SQLite under data_dir.")
     host: str = Field("127.0.0.1", description="Interface to bind; loopback unless told otherwise.")
     port: int = Field(8000, ge=0, le=65535, description="HTTP port of the REST/WebSocket API.")
-    viewer_port: int = Field(8080, ge=0, le=65533,
-                             description="First of the 3 twin monitor ports (actual, simulated, overlay).")
+    viewer_port: int = Field(
+        8080, ge=0, le=65533, description="First of the 3 twin monitor ports (actual, simulated, overlay)."
+    )
     telemetry_port: int = Field(10025, ge=0, le=65535, description="TCP port of the live listener (0: any).")
     live_enabled: bool = Field(True, description="Listen for a live CCSDS packet stream over TCP.")
-    telemetry_sources: list[str] = Field(["127.0.0.0/8", "::1/128"], min_length=1,
-                                         description="Networks (CIDR) the live listener takes packets from: "
-                                                     'loopback unless set (ACS_TWIN_TELEMETRY_SOURCES=\'["10.1.0.0/16"]\').')
+    telemetry_sources: list[str] = Field(
+        ["127.0.0.0/8", "::1/128"],
+        min_length=1,
+        description="Networks (CIDR) the live listener takes packets from: "
+        "loopback unless set (ACS_TWIN_TELEMETRY_SOURCES='[\"10.1.0.0/16\"]').",
+    )
     live_satellite: str = Field("REFSAT", min_length=1, description="Satellite the live stream belongs to.")
     live_dictionary: str = Field("reference_satellite.yaml", description="Dictionary of the live stream.")
     auth_enabled: bool = Field(True, description="Require API tokens (turn off only locally).")

@@ -20,8 +20,7 @@ class TokenRepository:
 
     def add(self, name: str, role: str, token_sha256: str) -> TokenRow:
         """Insert a token row and return it."""
-        row = TokenRow(name=name, role=role, token_sha256=token_sha256,
-                       created_at=datetime.now(UTC))
+        row = TokenRow(name=name, role=role, token_sha256=token_sha256, created_at=datetime.now(UTC))
         with self._sessions.begin() as session:
             session.add(row)
         return row
@@ -29,8 +28,7 @@ class TokenRepository:
     def find_active(self, token_sha256: str) -> TokenRow | None:
         """The unrevoked token with this hash, or None."""
         with self._sessions() as session:
-            stmt = select(TokenRow).where(TokenRow.token_sha256 == token_sha256,
-                                          TokenRow.revoked_at.is_(None))
+            stmt = select(TokenRow).where(TokenRow.token_sha256 == token_sha256, TokenRow.revoked_at.is_(None))
             return session.scalars(stmt).first()
 
     def list(self) -> list[TokenRow]:

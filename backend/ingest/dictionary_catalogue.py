@@ -56,8 +56,9 @@ class DictionaryCatalogue:
 
         found = {p.name for p in SHIPPED.iterdir() if p.suffix in DICTIONARY_SUFFIXES}
         if self._folder.is_dir():
-            found |= {p.name for p in self._folder.iterdir()
-                      if p.suffix in DICTIONARY_SUFFIXES and not p.name.startswith(".")}
+            found |= {
+                p.name for p in self._folder.iterdir() if p.suffix in DICTIONARY_SUFFIXES and not p.name.startswith(".")
+            }
         return sorted(found)
 
     def _meta(self, name: str) -> dict[str, Any]:
@@ -78,15 +79,20 @@ class DictionaryCatalogue:
         try:
             if uploaded.is_file():
                 meta = self._meta(name)
-                dictionary = load_dictionary(uploaded, apid=meta.get("apid"), time_code=meta.get("time_code"),
-                                             time_fields=meta.get("time_fields"))
+                dictionary = load_dictionary(
+                    uploaded,
+                    apid=meta.get("apid"),
+                    time_code=meta.get("time_code"),
+                    time_fields=meta.get("time_fields"),
+                )
             else:
                 dictionary = load_dictionary(name)
         except ValueError:
             raise
         except Exception as exc:  # a torn or corrupt file raises its parser's own errors
-            raise ValueError(f"dictionary: {name} cannot be read ({type(exc).__name__}: {exc}); "
-                             "upload it again") from exc
+            raise ValueError(
+                f"dictionary: {name} cannot be read ({type(exc).__name__}: {exc}); upload it again"
+            ) from exc
         with self._lock:
             self._cache[name] = dictionary
         return dictionary
@@ -95,8 +101,9 @@ class DictionaryCatalogue:
         """Version of the uploaded dictionary ``name`` (0: none uploaded)."""
         return int(self._meta(name).get("version", 1)) if (self._folder / name).is_file() else 0
 
-    def add(self, name: str, content: bytes, apid: int | None, time_code: str | None,
-            time_fields: str | None = None) -> tuple[Dictionary, int]:
+    def add(
+        self, name: str, content: bytes, apid: int | None, time_code: str | None, time_fields: str | None = None
+    ) -> tuple[Dictionary, int]:
         """Store an uploaded definition (YAML, XTCE or ccsdspy CSV + APID) once it loads; (dictionary, version).
 
         Shipped dictionaries are read-only (409): loosening their limits would silence real alarms.
@@ -105,8 +112,9 @@ class DictionaryCatalogue:
 
         _check_name(name)
         if (SHIPPED / name).exists():
-            raise ApiError(409, f"name: {name} is a shipped dictionary and read-only; upload under another name",
-                           "name")
+            raise ApiError(
+                409, f"name: {name} is a shipped dictionary and read-only; upload under another name", "name"
+            )
         self._folder.mkdir(parents=True, exist_ok=True)
         with self._lock:  # one upload at a time per catalogue: versions are numbered without gaps
             path, previous = self._folder / name, self.version(name)
@@ -160,9 +168,17 @@ def _entries(dictionary: Any) -> dict[tuple[str, int], dict[str, Any]]:
     entries = {}
     for apid, packet in dictionary.packets.items():
         for p in packet.parameters:
-            entries[(p.name, apid)] = {"units": p.units, "description": p.description, "limits": _limits(p.limits),
-                                       "enumeration": {str(k): v for k, v in p.enumeration.items()} or None}
+            entries[(p.name, apid)] = {
+                "units": p.units,
+                "description": p.description,
+                "limits": _limits(p.limits),
+                "enumeration": {str(k): v for k, v in p.enumeration.items()} or None,
+            }
         for d in packet.derived:
-            entries[(d.name, apid)] = {"units": d.units, "description": d.description, "limits": _limits(d.limits),
-                                       "enumeration": None}
+            entries[(d.name, apid)] = {
+                "units": d.units,
+                "description": d.description,
+                "limits": _limits(d.limits),
+                "enumeration": None,
+            }
     return entries

@@ -20,8 +20,7 @@ TOPIC_PREFIXES = ("parameters/", "alarms", "twin")
 
 def _check_topic(topic: str) -> str:
     if not (topic in ("alarms", "twin") or (topic.startswith("parameters/") and len(topic) > 11)):
-        raise ValueError(f"topics: {topic!r} is not 'parameters/<name>', 'parameters/*', "
-                         "'alarms' or 'twin'")
+        raise ValueError(f"topics: {topic!r} is not 'parameters/<name>', 'parameters/*', 'alarms' or 'twin'")
     return topic
 
 

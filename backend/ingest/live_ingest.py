@@ -31,16 +31,24 @@ STOP_POLL_S = 0.1
 ORPHAN_EXIT_S = 20.0  # after SIGTERM the pending batches are archived within this, else the process exits anyway
 
 
-def run_ingest_process(database_url: str, dictionaries_dir: str, dictionary: str, satellite: str, host: str,
-                       port: int, outbox: Outbox, stop: Event, sources: tuple[str, ...]) -> None:
+def run_ingest_process(
+    database_url: str,
+    dictionaries_dir: str,
+    dictionary: str,
+    satellite: str,
+    host: str,
+    port: int,
+    outbox: Outbox,
+    stop: Event,
+    sources: tuple[str, ...],
+) -> None:
     """Process entry: serve the live stream (packets only from ``sources``, CIDR) until ``stop`` is set or the
     server dies; ("port", n) or ("error", why) first."""
     from backend.core.processes import become_owned_child
 
     become_owned_child()  # SIGTERM when the server dies, even by kill -9: stop as if told to
     signal.signal(signal.SIGTERM, lambda *_: _stop_orphan(outbox, stop))
-    asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop,
-                       sources))
+    asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop, sources))
 
 
 def _stop_orphan(outbox: Outbox, stop: Event) -> None:
@@ -57,8 +65,17 @@ def _offer(outbox: Outbox, message: tuple[str, Any], tally: dict[str, int]) -> N
         tally["forward_dropped"] += 1
 
 
-async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str, satellite: str, host: str,
-                 port: int, outbox: Outbox, stop: Event, sources: tuple[str, ...]) -> None:
+async def _serve(
+    database_url: str,
+    dictionaries_dir: Path,
+    dictionary_name: str,
+    satellite: str,
+    host: str,
+    port: int,
+    outbox: Outbox,
+    stop: Event,
+    sources: tuple[str, ...],
+) -> None:
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
     from telemetry.archive import Archive
     from telemetry.limits import dictionary_limits
@@ -66,8 +83,9 @@ async def _serve(database_url: str, dictionaries_dir: Path, dictionary_name: str
 
     archive = Archive(database_url, migrate=False)
     dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
-    stream = LiveStream(dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary),
-                        allowed_sources=sources)
+    stream = LiveStream(
+        dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary), allowed_sources=sources
+    )
     try:
         outbox.put(("port", await stream.start(host, port)))
     except OSError as exc:  # the port is taken: say by whom instead of leaving the server waiting

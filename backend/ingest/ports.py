@@ -38,8 +38,9 @@ class TelemetryArchive(Protocol):
 
     def satellite_id(self, name: str, norad_id: int | None = None) -> int: ...
 
-    def add_ground_station(self, name: str, lat_deg: float, lon_deg: float, alt_m: float,
-                           min_elevation_deg: float) -> int: ...
+    def add_ground_station(
+        self, name: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float
+    ) -> int: ...
 
     def ground_station(self, name: str) -> StationRecord: ...
 
@@ -47,12 +48,27 @@ class TelemetryArchive(Protocol):
 
     def latest_tle(self, satellite: str, before_ns: int | None = None) -> tuple[int, str, str]: ...
 
-    def ingest(self, satellite: str, batches: Iterable[PacketBatch], *, source: str, uploaded_by: str,
-               sha256: str | None = None, limits: Mapping[str, LimitSet] | None = None,
-               decode_report: Mapping[str, object] | None = None) -> IngestResult: ...
+    def ingest(
+        self,
+        satellite: str,
+        batches: Iterable[PacketBatch],
+        *,
+        source: str,
+        uploaded_by: str,
+        sha256: str | None = None,
+        limits: Mapping[str, LimitSet] | None = None,
+        decode_report: Mapping[str, object] | None = None,
+    ) -> IngestResult: ...
 
-    def ingest_decoded(self, satellite: str, decoded: DecodeResult, *, uploaded_by: str, sha256: str | None = None,
-                       limits: Mapping[str, LimitSet] | None = None) -> IngestResult: ...
+    def ingest_decoded(
+        self,
+        satellite: str,
+        decoded: DecodeResult,
+        *,
+        uploaded_by: str,
+        sha256: str | None = None,
+        limits: Mapping[str, LimitSet] | None = None,
+    ) -> IngestResult: ...
 
     def parameters(self, satellite: str) -> dict[str, int]: ...
 
@@ -60,23 +76,27 @@ class TelemetryArchive(Protocol):
 
     def latest_values(self, satellite: str, names: Sequence[str] | None = None) -> dict[str, tuple[int, float]]: ...
 
-    def packet_keys(self, satellite: str, t0_ns: int, t1_ns: int,
-                    apid: int | None = None) -> dict[int, tuple[np.ndarray, np.ndarray]]: ...
+    def packet_keys(
+        self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None
+    ) -> dict[int, tuple[np.ndarray, np.ndarray]]: ...
 
     def replay(self, satellite: str, t0_ns: int, t1_ns: int, apid: int | None = None) -> list[tuple[int, bytes]]: ...
 
     def uploads(self, satellite: str) -> list[UploadRecord]: ...
 
-    def alarms(self, satellite: str, *, now_ns: int | None = None,
-               include_cleared: bool = False) -> list[AlarmRecord]: ...
+    def alarms(
+        self, satellite: str, *, now_ns: int | None = None, include_cleared: bool = False
+    ) -> list[AlarmRecord]: ...
 
     def alarm_events(self, alarm_id: int) -> list[AlarmEventRecord]: ...
 
-    def alarm_action(self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None,
-                     shelved_until_ns: int | None = None) -> None: ...
+    def alarm_action(
+        self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None
+    ) -> None: ...
 
-    def save_passes(self, satellite: str, station: str, passes: Iterable[tuple[int, int, int, float]],
-                    tle_id: int | None = None) -> list[int]: ...
+    def save_passes(
+        self, satellite: str, station: str, passes: Iterable[tuple[int, int, int, float]], tle_id: int | None = None
+    ) -> list[int]: ...
 
     def passes(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]: ...
 

@@ -52,8 +52,18 @@ if TYPE_CHECKING:
 __all__ = ["COMPONENTS", "TelemetryGateway"]
 
 # the parts /health lists; all are hard dependencies of the backend, so all are present
-COMPONENTS = ("archive", "queries", "decoding", "dictionary", "limits", "ground_files", "passes", "live",
-              "emulator", "engine")
+COMPONENTS = (
+    "archive",
+    "queries",
+    "decoding",
+    "dictionary",
+    "limits",
+    "ground_files",
+    "passes",
+    "live",
+    "emulator",
+    "engine",
+)
 LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
 LIVE_PASS_PERIOD_S = 10.0  # the live stream's pass from data is widened this often (a few queries each time)
 LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
@@ -137,11 +147,20 @@ class TelemetryGateway:
         ctx = mp.get_context("spawn")
         outbox: Queue[tuple[str, Any]] = ctx.Queue(OUTBOX_MESSAGES)
         stop = ctx.Event()
-        args = (self._settings.resolved_database_url(), str(self._settings.data_dir / "dictionaries"),
-                self._settings.live_dictionary, self._settings.live_satellite, self._settings.host,
-                self._settings.telemetry_port, outbox, stop, tuple(self._settings.telemetry_sources))
-        live = _LiveChild(ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest",
-                                      daemon=True), outbox, stop)
+        args = (
+            self._settings.resolved_database_url(),
+            str(self._settings.data_dir / "dictionaries"),
+            self._settings.live_dictionary,
+            self._settings.live_satellite,
+            self._settings.host,
+            self._settings.telemetry_port,
+            outbox,
+            stop,
+            tuple(self._settings.telemetry_sources),
+        )
+        live = _LiveChild(
+            ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True), outbox, stop
+        )
         self._live = live
         live.process.start()
         kind, detail = await asyncio.to_thread(_first_live_message, live)
@@ -214,15 +233,17 @@ class TelemetryGateway:
             self._archive.close()
             self._archive = None
 
-    def ingest_packets(self, satellite: str, data: bytes, dictionary_name: str, source: str,
-                       uploaded_by: str) -> dict[str, Any]:
+    def ingest_packets(
+        self, satellite: str, data: bytes, dictionary_name: str, source: str, uploaded_by: str
+    ) -> dict[str, Any]:
         """Decode a CCSDS byte stream, archive it with limit checking, publish it; the ingest report."""
         dictionary = self.dictionaries.load(dictionary_name)
         decoded = decoding.decode_stream(data, dictionary, source=source)
         return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
 
-    def ingest_packet_file(self, satellite: str, path: Path, dictionary_name: str, source: str,
-                           uploaded_by: str) -> dict[str, Any]:
+    def ingest_packet_file(
+        self, satellite: str, path: Path, dictionary_name: str, source: str, uploaded_by: str
+    ) -> dict[str, Any]:
         """Decode a CCSDS packet file on disk chunk by chunk (bounded memory) and archive it as one upload.
 
         Subscribers and commit listeners get the batches of a file of one chunk (telemetry.packet_files
@@ -245,8 +266,15 @@ class TelemetryGateway:
                 first.clear()
 
         report, result = packet_files.ingest_packet_file(
-            self._opened(), path, dictionary, satellite=satellite, uploaded_by=uploaded_by,
-            limits=dictionary_limits(dictionary), source=source, on_chunk=on_chunk)
+            self._opened(),
+            path,
+            dictionary,
+            satellite=satellite,
+            uploaded_by=uploaded_by,
+            limits=dictionary_limits(dictionary),
+            source=source,
+            on_chunk=on_chunk,
+        )
         assert result is not None
         span = (min(s[0] for s in spans), max(s[1] for s in spans)) if spans else None
         if span:
@@ -259,23 +287,31 @@ class TelemetryGateway:
                     listener(satellite, dictionary_name, first)
             if span:
                 made = passes.passes_from_data(self._opened(), satellite, *span)
-        return {"satellite": satellite, "dictionary": dictionary_name_of(dictionary),
-                "archive": result.as_report(), "decoding": report.to_dict(), "published": chunks == 1,
-                "passes": [{**asdict(p), "completeness": p.completeness} for p in made]}
+        return {
+            "satellite": satellite,
+            "dictionary": dictionary_name_of(dictionary),
+            "archive": result.as_report(),
+            "decoding": report.to_dict(),
+            "published": chunks == 1,
+            "passes": [{**asdict(p), "completeness": p.completeness} for p in made],
+        }
 
-    def ingest_ground_file(self, satellite: str, data: bytes, kind: str, dictionary_name: str,
-                           source: str, uploaded_by: str) -> dict[str, Any]:
+    def ingest_ground_file(
+        self, satellite: str, data: bytes, kind: str, dictionary_name: str, source: str, uploaded_by: str
+    ) -> dict[str, Any]:
         """Archive a CSV or JSONL ground file (telemetry.ground_files) like a packet upload."""
         dictionary = self.dictionaries.load(dictionary_name)
         read = ground_files.read_ground_csv if kind == "csv" else ground_files.read_ground_jsonl
         decoded = read(data, dictionary, source=source)
         return self._archive_and_publish(satellite, decoded, dictionary_name, source, uploaded_by)
 
-    def _archive_and_publish(self, satellite: str, decoded: DecodeResult, dictionary_name: str, source: str,
-                             uploaded_by: str) -> dict[str, Any]:
+    def _archive_and_publish(
+        self, satellite: str, decoded: DecodeResult, dictionary_name: str, source: str, uploaded_by: str
+    ) -> dict[str, Any]:
         dictionary = self.dictionaries.load(dictionary_name)
-        result = self.archive.ingest_decoded(satellite, decoded, uploaded_by=uploaded_by,
-                                             limits=dictionary_limits(dictionary))
+        result = self.archive.ingest_decoded(
+            satellite, decoded, uploaded_by=uploaded_by, limits=dictionary_limits(dictionary)
+        )
         self._invalidate_batches(satellite, decoded.batches)
         passes: list[PassRecord] = []
         if not result.duplicate_upload:
@@ -283,9 +319,13 @@ class TelemetryGateway:
             for listener in self._committed:
                 listener(satellite, dictionary_name, decoded.batches)
             passes = self.passes_from_data(satellite, decoded.batches)
-        return {"satellite": satellite, "dictionary": dictionary_name_of(dictionary),
-                "archive": result.as_report(), "decoding": decoded.report.to_dict(),
-                "passes": [{**asdict(p), "completeness": p.completeness} for p in passes]}
+        return {
+            "satellite": satellite,
+            "dictionary": dictionary_name_of(dictionary),
+            "archive": result.as_report(),
+            "decoding": decoded.report.to_dict(),
+            "passes": [{**asdict(p), "completeness": p.completeness} for p in passes],
+        }
 
     def passes_from_data(self, satellite: str, batches: list[SampleBatch]) -> list[PassRecord]:
         """The passes the batches' samples fall in, made from the data where no predicted pass covers them
@@ -302,12 +342,17 @@ class TelemetryGateway:
             for name, column in batch.values.items():
                 topic = f"parameters/{name}"
                 if self._hub.wants_any(topic):
-                    self._hub.publish(topic, {"satellite": satellite, "t_utc_ns": batch.t_utc_ns.tolist(),
-                                              "values": np.asarray(column, dtype=float).tolist()})
+                    self._hub.publish(
+                        topic,
+                        {
+                            "satellite": satellite,
+                            "t_utc_ns": batch.t_utc_ns.tolist(),
+                            "values": np.asarray(column, dtype=float).tolist(),
+                        },
+                    )
         if alarm_events and self._hub.wants_any("alarms"):
             alarms = self.archive.alarms(satellite)
-            self._hub.publish("alarms", {"satellite": satellite,
-                                         "alarms": [asdict(a) for a in alarms]})
+            self._hub.publish("alarms", {"satellite": satellite, "alarms": [asdict(a) for a in alarms]})
 
     def predict_passes(self, satellite: str, station: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
         """Passes from the newest TLE over ``station`` in [t0_ns, t1_ns] (telemetry.passes), stored."""
@@ -320,8 +365,16 @@ class TelemetryGateway:
             raise ValueError(f"end: the window spans {span_days:,.1f} days, over max_prediction_days = {limit_days:g}")
         tle_id, line1, line2 = self.archive.latest_tle(satellite, before_ns=t1_ns)
         site = self.archive.ground_station(station)
-        predicted = passes.predict_passes(line1, line2, site.lat_deg, site.lon_deg, site.alt_m,
-                                          site.min_elevation_deg, t0_ns, (t1_ns - t0_ns) / 86_400e9)
+        predicted = passes.predict_passes(
+            line1,
+            line2,
+            site.lat_deg,
+            site.lon_deg,
+            site.alt_m,
+            site.min_elevation_deg,
+            t0_ns,
+            (t1_ns - t0_ns) / 86_400e9,
+        )
         ids = set(self.archive.save_passes(satellite, station, predicted.rows(), tle_id=tle_id))
         return [p for p in self.archive.passes(satellite, t0_ns, t1_ns) if p.id in ids]
 
@@ -338,8 +391,9 @@ class TelemetryGateway:
 
         return queries.pass_summary(self._opened(), satellite, pass_id)
 
-    def export_stream(self, satellite: str, names: list[str], t0_ns: int,
-                      t1_ns: int) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+    def export_stream(
+        self, satellite: str, names: list[str], t0_ns: int, t1_ns: int
+    ) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
         """Every sample of the parameters, window by window (telemetry.export); unknown names raise now."""
         from telemetry import export
 
@@ -356,8 +410,7 @@ class TelemetryGateway:
         if spans:
             self._samples.invalidate(satellite, min(s[0] for s in spans), max(s[1] for s in spans))
 
-    def samples_from_memory(self, satellite: str, name: str, t0_ns: int, t1_ns: int,
-                            max_points: int) -> bytes | None:
+    def samples_from_memory(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes | None:
         """The answer of :meth:`samples_json` when no database access is needed (cached answer or series),
         else None; costs ≲ 1 ms, so it runs in the event loop."""
         key = (satellite, name, t0_ns, t1_ns, max_points)
@@ -368,8 +421,9 @@ class TelemetryGateway:
         whole = self._samples.series(satellite, name)
         return None if whole is None else self._answer(key, generation, *_window_of(whole, t0_ns, t1_ns))
 
-    def _read(self, satellite: str, name: str, t0_ns: int, t1_ns: int,
-              generation: int) -> tuple[np.ndarray, np.ndarray]:
+    def _read(
+        self, satellite: str, name: str, t0_ns: int, t1_ns: int, generation: int
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Samples in [t0_ns, t1_ns]: sliced from the whole cached series, read whole once, or (live) per window."""
         whole = self._samples.series(satellite, name)
         if whole is None and self._samples.hot_start_ns(satellite) is not None:
@@ -390,10 +444,16 @@ class TelemetryGateway:
 
     def _answer(self, key: tuple[str, str, int, int, int], generation: int, t: np.ndarray, v: np.ndarray) -> bytes:
         keep = minmax_indices(v, key[4]) if v.size else np.arange(0)
-        answer = orjson.dumps({"satellite": key[0], "name": key[1], "total_points": int(t.size),
-                               "t_utc_ns": np.ascontiguousarray(t[keep], dtype=np.int64),
-                               "values": np.ascontiguousarray(v[keep], dtype=np.float64)},
-                              option=orjson.OPT_SERIALIZE_NUMPY)  # NaN → null; ~16× faster than json here
+        answer = orjson.dumps(
+            {
+                "satellite": key[0],
+                "name": key[1],
+                "total_points": int(t.size),
+                "t_utc_ns": np.ascontiguousarray(t[keep], dtype=np.int64),
+                "values": np.ascontiguousarray(v[keep], dtype=np.float64),
+            },
+            option=orjson.OPT_SERIALIZE_NUMPY,
+        )  # NaN → null; ~16× faster than json here
         self._samples.store_answer(key, generation, answer)
         return answer
 

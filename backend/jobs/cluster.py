@@ -25,8 +25,16 @@ from sim_core import engine
 from sim_core.scenario import Scenario
 from sim_core.trajectory import Trajectory
 
-__all__ = ["SCHEDULER_ENV", "dask_client", "warm_engine", "fly", "flyer", "map_cases", "split_variants",
-           "merge_trajectories"]
+__all__ = [
+    "SCHEDULER_ENV",
+    "dask_client",
+    "warm_engine",
+    "fly",
+    "flyer",
+    "map_cases",
+    "split_variants",
+    "merge_trajectories",
+]
 
 SCHEDULER_ENV = "ACS_TWIN_DASK_SCHEDULER"
 SEED_STRIDE = 7919  # sim_core.engine.simulate: variant i draws from seed·1000 + 7919 i + seed_offset
@@ -56,8 +64,14 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm
         client = Client(address, timeout="10s")
     else:
         workers = n_workers or max(1, min(os.cpu_count() or 1, 4))
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address=None, silence_logs=40)
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
+            silence_logs=40,
+        )
         client = Client(cluster)
     if warm:
         client.run(warm_engine)

@@ -28,8 +28,9 @@ class JobRepository:
 
     def add(self, job_id: str, scenario: dict[str, Any], created_by: str) -> JobRow:
         """Insert a queued job."""
-        row = JobRow(id=job_id, status="queued", progress=0.0, scenario=scenario,
-                     created_by=created_by, created_at=_now())
+        row = JobRow(
+            id=job_id, status="queued", progress=0.0, scenario=scenario, created_by=created_by, created_at=_now()
+        )
         with self._sessions.begin() as session:
             session.add(row)
         return row
@@ -48,18 +49,21 @@ class JobRepository:
     def mark_running(self, job_id: str, result_dir: str) -> bool:
         """queued → running; False if the job left the queue meanwhile (cancelled)."""
         with self._sessions.begin() as session:
-            stmt = (update(JobRow).where(JobRow.id == job_id, JobRow.status == "queued")
-                    .values(status="running", started_at=_now(), result_dir=result_dir))
+            stmt = (
+                update(JobRow)
+                .where(JobRow.id == job_id, JobRow.status == "queued")
+                .values(status="running", started_at=_now(), result_dir=result_dir)
+            )
             return cast("CursorResult[Any]", session.execute(stmt)).rowcount == 1
 
     def set_progress(self, job_id: str, progress: float) -> None:
         """Store the progress fraction of a running job."""
         with self._sessions.begin() as session:
-            session.execute(update(JobRow).where(JobRow.id == job_id, JobRow.status == "running")
-                            .values(progress=progress))
+            session.execute(
+                update(JobRow).where(JobRow.id == job_id, JobRow.status == "running").values(progress=progress)
+            )
 
-    def finish(self, job_id: str, status: str, summary: dict[str, Any] | None = None,
-               error: str | None = None) -> None:
+    def finish(self, job_id: str, status: str, summary: dict[str, Any] | None = None, error: str | None = None) -> None:
         """Move an active job to a final state (a job already final is left alone)."""
         if status not in FINAL_STATES:
             raise ValueError(f"status: must be one of {FINAL_STATES}, got {status!r}")
@@ -67,13 +71,16 @@ class JobRepository:
         if summary is not None:
             values["summary"], values["progress"] = summary, 1.0
         with self._sessions.begin() as session:
-            session.execute(update(JobRow).where(JobRow.id == job_id,
-                                                 JobRow.status.in_(ACTIVE_STATES)).values(**values))
+            session.execute(
+                update(JobRow).where(JobRow.id == job_id, JobRow.status.in_(ACTIVE_STATES)).values(**values)
+            )
 
     def interrupt_active(self) -> int:
         """On start-up: jobs left queued or running by a previous server become interrupted."""
         with self._sessions.begin() as session:
-            stmt = (update(JobRow).where(JobRow.status.in_(ACTIVE_STATES))
-                    .values(status="interrupted", finished_at=_now(),
-                            error="server restarted while the job was active"))
+            stmt = (
+                update(JobRow)
+                .where(JobRow.status.in_(ACTIVE_STATES))
+                .values(status="interrupted", finished_at=_now(), error="server restarted while the job was active")
+            )
             return cast("CursorResult[Any]", session.execute(stmt)).rowcount

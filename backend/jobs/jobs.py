@@ -82,9 +82,12 @@ class JobManager:
         job_id = uuid.uuid4().hex
         with self._lock:
             if len(self._active) >= self._settings.job_queue_size:
-                raise ApiError(429, f"job queue full ({self._settings.job_queue_size} active jobs)",
-                               field="job_queue_size",
-                               headers={"Retry-After": str(self._settings.job_retry_after_s)})
+                raise ApiError(
+                    429,
+                    f"job queue full ({self._settings.job_queue_size} active jobs)",
+                    field="job_queue_size",
+                    headers={"Retry-After": str(self._settings.job_retry_after_s)},
+                )
             self._active[job_id] = _Handle(scenario, self._ctx.Value("d", 0.0), self._ctx.Event(), options or {})
             self._repo.add(job_id, scenario, created_by)
         self._queue.put(job_id)
@@ -93,14 +96,23 @@ class JobManager:
     def _check_limits(self, cost: Any) -> None:
         s = self._settings
         if cost.duration_s > s.max_sim_duration_s:
-            raise ApiError(422, f"duration_s {cost.duration_s:g} over the limit "
-                                f"max_sim_duration_s = {s.max_sim_duration_s:g}", "max_sim_duration_s")
+            raise ApiError(
+                422,
+                f"duration_s {cost.duration_s:g} over the limit max_sim_duration_s = {s.max_sim_duration_s:g}",
+                "max_sim_duration_s",
+            )
         if cost.batch_size > s.max_batch_size:
-            raise ApiError(422, f"batch size {cost.batch_size} over the limit "
-                                f"max_batch_size = {s.max_batch_size}", "max_batch_size")
+            raise ApiError(
+                422,
+                f"batch size {cost.batch_size} over the limit max_batch_size = {s.max_batch_size}",
+                "max_batch_size",
+            )
         if cost.output_bytes > s.max_output_mb * 1e6:
-            raise ApiError(422, f"output {cost.output_bytes / 1e6:.1f} MB over the limit "
-                                f"max_output_mb = {s.max_output_mb:g}", "max_output_mb")
+            raise ApiError(
+                422,
+                f"output {cost.output_bytes / 1e6:.1f} MB over the limit max_output_mb = {s.max_output_mb:g}",
+                "max_output_mb",
+            )
 
     def progress(self, job_id: str) -> float | None:
         """Live progress fraction of an active job, None when not active here."""
@@ -140,9 +152,11 @@ class JobManager:
             return
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.json").write_text(json.dumps(handle.body))
-        handle.process = self._ctx.Process(target=run_in_worker, name=f"sim-{job_id[:8]}",
-                                           args=(handle.body, str(out), handle.progress, handle.cancel,
-                                                 handle.options))
+        handle.process = self._ctx.Process(
+            target=run_in_worker,
+            name=f"sim-{job_id[:8]}",
+            args=(handle.body, str(out), handle.progress, handle.cancel, handle.options),
+        )
         handle.process.start()
         self._supervise(job_id, handle)
         self._record_outcome(job_id, handle.process.exitcode, out)
@@ -171,5 +185,6 @@ class JobManager:
         elif (out / "error.txt").exists():
             self._repo.finish(job_id, "failed", error=(out / "error.txt").read_text()[-4000:])
         else:
-            self._repo.finish(job_id, "cancelled" if exitcode in (3, -15) else "failed",
-                              error=f"worker exited with code {exitcode}")
+            self._repo.finish(
+                job_id, "cancelled" if exitcode in (3, -15) else "failed", error=f"worker exited with code {exitcode}"
+            )

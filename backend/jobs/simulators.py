@@ -97,8 +97,13 @@ def validate_scenario(body: dict[str, Any]) -> tuple[dict[str, Any], JobCost]:
     return scenario.model_dump(mode="json"), _engine_cost(scenario)
 
 
-def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], None], cancelled: Callable[[], bool],
-                options: dict[str, Any]) -> None:
+def _run_engine(
+    body: dict[str, Any],
+    out: Path,
+    progress: Callable[[float], None],
+    cancelled: Callable[[], bool],
+    options: dict[str, Any],
+) -> None:
     import numpy as np
 
     from backend.jobs.trajectory_files import write_npz
@@ -107,9 +112,13 @@ def _run_engine(body: dict[str, Any], out: Path, progress: Callable[[float], Non
 
     available = options.get("wheel_available")
     try:
-        trajectory = simulate(Scenario.model_validate(body), progress=progress, cancel=cancelled,
-                              wheel_available=None if available is None else np.asarray(available, dtype=bool),
-                              fdir=bool(options.get("fdir", False)))
+        trajectory = simulate(
+            Scenario.model_validate(body),
+            progress=progress,
+            cancel=cancelled,
+            wheel_available=None if available is None else np.asarray(available, dtype=bool),
+            fdir=bool(options.get("fdir", False)),
+        )
     except Cancelled:
         raise JobCancelled from None
     write_npz(trajectory, out / "trajectory.npz")
@@ -125,8 +134,9 @@ def _run_rigid_spin(body: dict[str, Any], out: Path, progress: Callable[[float],
     (out / "summary.json").write_text(json.dumps(trajectory.summary()))
 
 
-def run_in_worker(body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any,
-                  options: dict[str, Any] | None = None) -> None:
+def run_in_worker(
+    body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any, options: dict[str, Any] | None = None
+) -> None:
     """Worker-process entry: simulate, write trajectory.npz + summary.json, or error.txt."""
     from backend.core.processes import become_owned_child
 

@@ -15,10 +15,22 @@ __all__ = ["write_npz", "read_npz", "columns", "write_csv", "write_parquet", "wr
 
 def write_npz(traj: Trajectory, path: Path) -> Path:
     """All series (variant, sample, …), the time axis and the events as one compressed npz."""
-    meta = {"scenario": traj.scenario_name, "variants": traj.variant_names, "events": traj.events,
-            "wall_time_s": traj.wall_time_s, "simulated_time_s": traj.simulated_time_s, **traj.extra}
-    np.savez_compressed(path, t_s=traj.t_s, wheel_inertia_kg_m2=traj.wheel_inertia_kg_m2,
-                        meta=np.array(json.dumps(meta)), allow_pickle=False, **traj.series)
+    meta = {
+        "scenario": traj.scenario_name,
+        "variants": traj.variant_names,
+        "events": traj.events,
+        "wall_time_s": traj.wall_time_s,
+        "simulated_time_s": traj.simulated_time_s,
+        **traj.extra,
+    }
+    np.savez_compressed(
+        path,
+        t_s=traj.t_s,
+        wheel_inertia_kg_m2=traj.wheel_inertia_kg_m2,
+        meta=np.array(json.dumps(meta)),
+        allow_pickle=False,
+        **traj.series,
+    )
     return path
 
 
@@ -29,8 +41,17 @@ def read_npz(path: Path) -> Trajectory:
         series = {k: data[k] for k in data.files if k not in ("t_s", "wheel_inertia_kg_m2", "meta")}
         t, jr = data["t_s"], data["wheel_inertia_kg_m2"]
     events = [[tuple(e) for e in ev] for ev in meta.pop("events")]
-    return Trajectory(meta.pop("scenario"), meta.pop("variants"), t, series, events, jr,
-                      meta.pop("wall_time_s"), meta.pop("simulated_time_s"), meta)
+    return Trajectory(
+        meta.pop("scenario"),
+        meta.pop("variants"),
+        t,
+        series,
+        events,
+        jr,
+        meta.pop("wall_time_s"),
+        meta.pop("simulated_time_s"),
+        meta,
+    )
 
 
 def columns(traj: Trajectory, variant: int = 0) -> dict[str, np.ndarray]:
@@ -50,8 +71,9 @@ def columns(traj: Trajectory, variant: int = 0) -> dict[str, np.ndarray]:
 def write_csv(traj: Trajectory, path: Path, variant: int = 0) -> Path:
     """One variant as CSV with a header row."""
     cols = columns(traj, variant)
-    np.savetxt(path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="",
-               fmt="%.10g")
+    np.savetxt(
+        path, np.column_stack(list(cols.values())), delimiter=",", header=",".join(cols), comments="", fmt="%.10g"
+    )
     return path
 
 
@@ -109,8 +131,11 @@ def write_plots(traj: Trajectory, out_dir: Path, variant: int = 0) -> list[Path]
 def write_all(traj: Trajectory, out_dir: Path) -> list[Path]:
     """npz + Parquet of the batch, CSV and plots of variant 0, and the summary JSON of each variant."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [write_npz(traj, out_dir / "trajectory.npz"), write_parquet(traj, out_dir / "trajectory.parquet"),
-             write_csv(traj, out_dir / "trajectory.csv")]
+    paths = [
+        write_npz(traj, out_dir / "trajectory.npz"),
+        write_parquet(traj, out_dir / "trajectory.parquet"),
+        write_csv(traj, out_dir / "trajectory.csv"),
+    ]
     summary = out_dir / "summary.json"
     summary.write_text(json.dumps([traj.summary(v) for v in range(traj.n_variants)], indent=2))
     return paths + [summary] + write_plots(traj, out_dir)

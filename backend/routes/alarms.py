@@ -26,9 +26,12 @@ class ShelveRequest(BaseModel):
 
 
 @router.get("/alarms", response_model=list[AlarmRecord], summary="Alarms of a satellite")
-def list_alarms(services: ServicesDep, _: ViewerDep,
-                satellite: str = Query("NOAA-20", min_length=1, max_length=100),
-                include_cleared: bool = False) -> list[dict[str, Any]]:
+def list_alarms(
+    services: ServicesDep,
+    _: ViewerDep,
+    satellite: str = Query("NOAA-20", min_length=1, max_length=100),
+    include_cleared: bool = False,
+) -> list[dict[str, Any]]:
     """Active (and optionally cleared) alarms with state, severity and level."""
     return [asdict(a) for a in services.telemetry.archive.alarms(satellite, include_cleared=include_cleared)]
 
@@ -39,11 +42,13 @@ def alarm_events(alarm_id: DbId, services: ServicesDep, _: ViewerDep) -> list[di
     return [asdict(e) for e in services.telemetry.archive.alarm_events(alarm_id)]
 
 
-def _act(services: Services, principal: Principal, alarm_id: int, action: str,
-         until_ns: int | None = None) -> dict[str, Any]:
+def _act(
+    services: Services, principal: Principal, alarm_id: int, action: str, until_ns: int | None = None
+) -> dict[str, Any]:
     services.telemetry.archive.alarm_action(alarm_id, action, principal.name, shelved_until_ns=until_ns)
-    services.audit.record(principal.name, f"alarm.{action}", f"alarm/{alarm_id}",
-                          {"shelved_until_ns": until_ns} if until_ns else {})
+    services.audit.record(
+        principal.name, f"alarm.{action}", f"alarm/{alarm_id}", {"shelved_until_ns": until_ns} if until_ns else {}
+    )
     services.hub.publish("alarms", {"alarm_id": alarm_id, "action": action, "actor": principal.name})
     return {"alarm_id": alarm_id, "action": action}
 

@@ -13,8 +13,9 @@ from backend.twin.diagnosis import start_archived
 router = APIRouter(tags=["diagnosis"], responses=ERROR_RESPONSES)
 
 
-@router.post("/diagnoses", status_code=202, response_model=DiagnosisPublic,
-             summary="Diagnose archived telemetry of a satellite")
+@router.post(
+    "/diagnoses", status_code=202, response_model=DiagnosisPublic, summary="Diagnose archived telemetry of a satellite"
+)
 async def create_diagnosis(body: DiagnosisCreate, services: ServicesDep, principal: OperatorDep) -> DiagnosisPublic:
     """Detect, name and rank the fault in [start_utc, end_utc]; poll GET /diagnoses/{id} for the result."""
     run = await run_in_threadpool(start_archived, services, body, principal.name)

@@ -25,6 +25,10 @@ def health(services: ServicesDep) -> Health:
     """Answer ok after a round trip to the database."""
     with services.engine.connect() as connection:
         connection.execute(text("SELECT 1"))
-    return Health(version=_version(), database=services.engine.dialect.name,
-                  auth_enabled=services.settings.auth_enabled,
-                  components=services.telemetry.components(), live=services.telemetry.live_stats())
+    return Health(
+        version=_version(),
+        database=services.engine.dialect.name,
+        auth_enabled=services.settings.auth_enabled,
+        components=services.telemetry.components(),
+        live=services.telemetry.live_stats(),
+    )

@@ -40,7 +40,7 @@ async def _send_batches(websocket: WebSocket, sub: Subscription, period_s: float
         message = {"type": "batch", "items": items, "dropped": sub.dropped}
         try:
             await asyncio.wait_for(websocket.send_json(message), timeout_s)
-        except asyncio.TimeoutError:
+        except TimeoutError:
             await websocket.close(CLOSE_TOO_SLOW, "too slow: dropped")
             return
 
@@ -50,7 +50,7 @@ async def _receive_commands(websocket: WebSocket, hub: Any, sub: Subscription) -
         message = await websocket.receive_json()
         try:
             if not isinstance(message, dict):
-                raise ValueError("op: expected a JSON object {\"op\": ..., \"topics\": [...]}")
+                raise ValueError('op: expected a JSON object {"op": ..., "topics": [...]}')
             op, topics = message.get("op"), message.get("topics", [])
             if not isinstance(topics, list) or not all(isinstance(t, str) for t in topics):
                 raise ValueError("topics: expected a list of strings")
@@ -83,10 +83,11 @@ async def live(websocket: WebSocket) -> None:
     sub = services.hub.subscribe()
     revoked, loop = asyncio.Event(), asyncio.get_running_loop()
     unwatch = services.auth.watch(principal, lambda: loop.call_soon_threadsafe(revoked.set))
-    tasks = [asyncio.create_task(_send_batches(websocket, sub, 1.0 / settings.ws_rate_hz,
-                                               settings.ws_send_timeout_s)),
-             asyncio.create_task(_receive_commands(websocket, services.hub, sub)),
-             asyncio.create_task(_close_when_revoked(websocket, revoked))]
+    tasks = [
+        asyncio.create_task(_send_batches(websocket, sub, 1.0 / settings.ws_rate_hz, settings.ws_send_timeout_s)),
+        asyncio.create_task(_receive_commands(websocket, services.hub, sub)),
+        asyncio.create_task(_close_when_revoked(websocket, revoked)),
+    ]
     try:
         done, pending = await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
         for task in pending:

@@ -55,10 +55,15 @@ def latest_values(services: ServicesDep, _: ViewerDep, satellite: str = Satellit
 
 
 @router.get("/parameters/{name}/samples", response_model=SamplesPublic, summary="Samples of one parameter")
-async def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
-                  start: datetime | None = Query(None, examples=["2021-04-09T00:00:00Z"]),
-                  end: datetime | None = Query(None, examples=["2021-04-09T02:00:00Z"]),
-                  max_points: int = Query(1000, ge=2, le=100_000)) -> Response:
+async def samples(
+    name: str,
+    services: ServicesDep,
+    _: ViewerDep,
+    satellite: str = SatelliteQuery,
+    start: datetime | None = Query(None, examples=["2021-04-09T00:00:00Z"]),
+    end: datetime | None = Query(None, examples=["2021-04-09T02:00:00Z"]),
+    max_points: int = Query(1000, ge=2, le=100_000),
+) -> Response:
     """Samples in [start, end] (ISO 8601 UTC), min/max-bucket downsampled to at most max_points.
 
     Answers (and archived series) are cached until ingested data overlaps them; a hit never leaves the event loop.
@@ -71,14 +76,21 @@ async def samples(name: str, services: ServicesDep, _: ViewerDep, satellite: str
     return Response(body, media_type="application/json")
 
 
-@router.get("/exports/samples", summary="Export every sample as CSV or Parquet (t_utc + one column per parameter)",
-            response_class=StreamingResponse,
-            responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}})
-def export_samples(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
-                   names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"],
-                                      description="Comma-separated parameter names."),
-                   start: datetime | None = None, end: datetime | None = None,
-                   format: Literal["csv", "parquet"] = "csv") -> StreamingResponse:
+@router.get(
+    "/exports/samples",
+    summary="Export every sample as CSV or Parquet (t_utc + one column per parameter)",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}},
+)
+def export_samples(
+    services: ServicesDep,
+    _: ViewerDep,
+    satellite: str = SatelliteQuery,
+    names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"], description="Comma-separated parameter names."),
+    start: datetime | None = None,
+    end: datetime | None = None,
+    format: Literal["csv", "parquet"] = "csv",
+) -> StreamingResponse:
     """Full resolution, the same rows as ``acs-twin export``: ``t_utc`` (ISO 8601 UTC, ns) and one column per named
     parameter (empty where not sampled), streamed window by window (CSV) or from a temporary file (Parquet)."""
     from telemetry.export import csv_chunks, write_export

@@ -28,9 +28,18 @@ router = APIRouter(tags=["passes"], responses=ERROR_RESPONSES)
 
 SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 MAX_TLE_BYTES = 64_000
-TLE_BODY = {"requestBody": {"required": True, "content": {"text/plain": {"schema": {"type": "string"},
-            "example": "NOAA 20\n1 43013U 17073A   21099.50000000  .00000012  00000-0  26000-4 0  9991\n"
-                       "2 43013  98.7200  40.0000 0001500  90.0000 270.0000 14.19550000177000"}}}}
+TLE_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "text/plain": {
+                "schema": {"type": "string"},
+                "example": "NOAA 20\n1 43013U 17073A   21099.50000000  .00000012  00000-0  26000-4 0  9991\n"
+                "2 43013  98.7200  40.0000 0001500  90.0000 270.0000 14.19550000177000",
+            }
+        },
+    }
+}
 
 
 class SatelliteCreate(BaseModel):
@@ -76,8 +85,9 @@ def _tle_lines(text: str) -> tuple[str, str, int]:
     return pair[0], pair[1], int(epoch_ns)
 
 
-@router.post("/satellites/{name}/tles", status_code=201, response_model=TleStored, summary="Upload a TLE",
-             openapi_extra=TLE_BODY)
+@router.post(
+    "/satellites/{name}/tles", status_code=201, response_model=TleStored, summary="Upload a TLE", openapi_extra=TLE_BODY
+)
 async def upload_tle(name: str, request: Request, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Store a two-line element set (epoch read by SGP4)."""
     text = (await read_limited(request, MAX_TLE_BYTES)).decode("ascii", errors="replace")
@@ -94,12 +104,14 @@ def latest_tle(name: str, services: ServicesDep, _: ViewerDep) -> dict[str, Any]
     return {"id": tle_id, "line1": line1, "line2": line2}
 
 
-@router.post("/ground-stations", status_code=201, response_model=StationRecord,
-             summary="Register or update a ground station")
+@router.post(
+    "/ground-stations", status_code=201, response_model=StationRecord, summary="Register or update a ground station"
+)
 def create_station(body: StationCreate, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
     """Id of the station."""
-    station_id = services.telemetry.archive.add_ground_station(body.name, body.lat_deg, body.lon_deg,
-                                                               body.alt_m, body.min_elevation_deg)
+    station_id = services.telemetry.archive.add_ground_station(
+        body.name, body.lat_deg, body.lon_deg, body.alt_m, body.min_elevation_deg
+    )
     services.audit.record(principal.name, "station.upsert", f"ground-station/{body.name}")
     return {"id": station_id, **body.model_dump()}
 
@@ -111,8 +123,13 @@ def get_station(name: str, services: ServicesDep, _: ViewerDep) -> dict[str, Any
 
 
 @router.get("/passes", response_model=list[PassPublic], summary="Passes of a satellite in a time window")
-def list_passes(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery,
-                start: datetime | None = None, end: datetime | None = None) -> list[dict[str, Any]]:
+def list_passes(
+    services: ServicesDep,
+    _: ViewerDep,
+    satellite: str = SatelliteQuery,
+    start: datetime | None = None,
+    end: datetime | None = None,
+) -> list[dict[str, Any]]:
     """Predicted passes with what was received (completeness = received / expected packets)."""
     records = services.telemetry.archive.passes(satellite, utc_ns(start, EARLIEST_NS), utc_ns(end, LATEST_NS))
     return [_pass_public(r) for r in records]
@@ -127,29 +144,42 @@ def get_pass(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str 
         raise ApiError(404, str(exc), str(exc).split(":", 1)[0]) from exc
 
 
-@router.get("/passes/{pass_id}/summary", response_model=PassSummaryPublic,
-            summary="Pass summary: reception, statistics, alarms")
+@router.get(
+    "/passes/{pass_id}/summary", response_model=PassSummaryPublic, summary="Pass summary: reception, statistics, alarms"
+)
 def pass_summary(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """Completeness, per-parameter count/min/max/mean and the alarms raised during the pass."""
     summary = services.telemetry.pass_summary(satellite, pass_id)
     return {**summary, "pass": _pass_public(summary["pass"]), "alarms": [asdict(a) for a in summary["alarms"]]}
 
 
-@router.post("/satellites/{name}/passes/reception", response_model=list[PassPublic],
-             summary="Recount reception of passes in a window")
-def record_reception(name: str, services: ServicesDep, principal: OperatorDep,
-                     start: datetime | None = None, end: datetime | None = None) -> list[dict[str, Any]]:
+@router.post(
+    "/satellites/{name}/passes/reception",
+    response_model=list[PassPublic],
+    summary="Recount reception of passes in a window",
+)
+def record_reception(
+    name: str, services: ServicesDep, principal: OperatorDep, start: datetime | None = None, end: datetime | None = None
+) -> list[dict[str, Any]]:
     """Per pass: received span, packets and missing packets (sequence-count gaps) → completeness."""
     records = services.telemetry.record_reception(name, utc_ns(start, EARLIEST_NS), utc_ns(end, LATEST_NS))
     services.audit.record(principal.name, "passes.reception", f"satellite/{name}", {"passes": len(records)})
     return [_pass_public(r) for r in records]
 
 
-@router.post("/satellites/{name}/passes/predict", response_model=list[PassPublic],
-             summary="Predict passes over a station from the TLE")
-def predict_passes(name: str, services: ServicesDep, principal: OperatorDep,
-                   station: str = Query(..., min_length=1, max_length=100),
-                   start: datetime = Query(...), end: datetime = Query(...)) -> list[dict[str, Any]]:
+@router.post(
+    "/satellites/{name}/passes/predict",
+    response_model=list[PassPublic],
+    summary="Predict passes over a station from the TLE",
+)
+def predict_passes(
+    name: str,
+    services: ServicesDep,
+    principal: OperatorDep,
+    station: str = Query(..., min_length=1, max_length=100),
+    start: datetime = Query(...),
+    end: datetime = Query(...),
+) -> list[dict[str, Any]]:
     """Passes of the newest TLE over the station in [start, end], stored and returned."""
     passes = services.telemetry.predict_passes(name, station, utc_ns(start, 0), utc_ns(end, 0))
     services.audit.record(principal.name, "passes.predict", f"satellite/{name}", {"station": station})

@@ -10,19 +10,23 @@ from fastapi import APIRouter, Body, Query, Request
 from fastapi.openapi.models import Example
 from fastapi.responses import FileResponse
 
-from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from telemetry.downsampling import minmax_indices
 from backend.core.errors import ERROR_RESPONSES, ApiError
+from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.schemas import FilePublic, JobAccepted, JobPublic, SeriesPublic
+from telemetry.downsampling import minmax_indices
 
 router = APIRouter(tags=["simulations"], responses=ERROR_RESPONSES)
 
 SCENARIO_EXAMPLES: dict[str, Example] = {
     "rigid-spin": {
         "summary": "Torque-free spin of two bodies (built-in workload)",
-        "value": {"kind": "rigid-spin", "duration_s": 60.0, "dt_s": 0.01,
-                  "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
-                  "omega0_rad_s": [[0.01, -0.02, 0.03], [0.5, -0.4, 0.7]]},
+        "value": {
+            "kind": "rigid-spin",
+            "duration_s": 60.0,
+            "dt_s": 0.01,
+            "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
+            "omega0_rad_s": [[0.01, -0.02, 0.03], [0.5, -0.4, 0.7]],
+        },
     },
     "library": {
         "summary": "A library scenario with overrides (GET /api/v1/scenarios lists them)",
@@ -54,20 +58,23 @@ def list_scenarios(_: ViewerDep) -> list[str]:
     return library_names()
 
 
-@router.post("/simulations", response_model=JobAccepted, status_code=202,
-             summary="Queue a simulation")
-def create_simulation(request: Request, services: ServicesDep, principal: OperatorDep,
-                      scenario: dict[str, Any] = Body(..., openapi_examples=SCENARIO_EXAMPLES)) -> JobAccepted:
+@router.post("/simulations", response_model=JobAccepted, status_code=202, summary="Queue a simulation")
+def create_simulation(
+    request: Request,
+    services: ServicesDep,
+    principal: OperatorDep,
+    scenario: dict[str, Any] = Body(..., openapi_examples=SCENARIO_EXAMPLES),
+) -> JobAccepted:
     """Validate the scenario and its limits, queue it; poll the returned URL."""
     job_id = services.jobs.submit(scenario, principal.name)
-    services.audit.record(principal.name, "simulation.create", f"simulation/{job_id}",
-                          {"kind": scenario.get("kind", "engine")})
+    services.audit.record(
+        principal.name, "simulation.create", f"simulation/{job_id}", {"kind": scenario.get("kind", "engine")}
+    )
     return JobAccepted(id=job_id, status="queued", url=str(request.url_for("get_simulation", job_id=job_id)))
 
 
 @router.get("/simulations", response_model=list[JobPublic], summary="Recent simulation jobs")
-def list_simulations(services: ServicesDep, _: ViewerDep,
-                     limit: int = Query(100, ge=1, le=1000)) -> list[JobPublic]:
+def list_simulations(services: ServicesDep, _: ViewerDep, limit: int = Query(100, ge=1, le=1000)) -> list[JobPublic]:
     """Newest first."""
     return [_job(services, row.id) for row in services.job_repo.list(limit)]
 
@@ -99,13 +106,16 @@ def _result_dir(services: Any, job_id: str) -> Path:
 def list_files(job_id: str, request: Request, services: ServicesDep, _: ViewerDep) -> list[FilePublic]:
     """Files written by the job (trajectory.npz, summary.json, scenario.json)."""
     folder = _result_dir(services, job_id)
-    return [FilePublic(name=p.name, size_bytes=p.stat().st_size,
-                       url=str(request.url_for("get_file", job_id=job_id, name=p.name)))
-            for p in sorted(folder.iterdir()) if p.is_file()]
+    return [
+        FilePublic(
+            name=p.name, size_bytes=p.stat().st_size, url=str(request.url_for("get_file", job_id=job_id, name=p.name))
+        )
+        for p in sorted(folder.iterdir())
+        if p.is_file()
+    ]
 
 
-@router.get("/simulations/{job_id}/files/{name}", summary="Download a result file",
-            response_class=FileResponse)
+@router.get("/simulations/{job_id}/files/{name}", summary="Download a result file", response_class=FileResponse)
 def get_file(job_id: str, name: str, services: ServicesDep, _: ViewerDep) -> FileResponse:
     """One result file as bytes."""
     folder = _result_dir(services, job_id)
@@ -125,11 +135,19 @@ def _series_columns(array: np.ndarray, n: int, member: int, name: str) -> np.nda
     raise ApiError(422, f"{name!r} is not a time series (shape {array.shape})", "name")
 
 
-@router.get("/simulations/{job_id}/series/{name}", response_model=SeriesPublic,
-            summary="Downsampled time series of one result array")
-def get_series(job_id: str, name: str, services: ServicesDep, _: ViewerDep,
-               member: int = Query(0, ge=0, description="Batch member (fault variant)."),
-               max_points: int = Query(2000, ge=2, le=100_000)) -> SeriesPublic:
+@router.get(
+    "/simulations/{job_id}/series/{name}",
+    response_model=SeriesPublic,
+    summary="Downsampled time series of one result array",
+)
+def get_series(
+    job_id: str,
+    name: str,
+    services: ServicesDep,
+    _: ViewerDep,
+    member: int = Query(0, ge=0, description="Batch member (fault variant)."),
+    max_points: int = Query(2000, ge=2, le=100_000),
+) -> SeriesPublic:
     """Array ``name`` of trajectory.npz against t_s, min/max-bucket downsampled to max_points."""
     with np.load(_result_dir(services, job_id) / "trajectory.npz") as npz:
         if name not in npz.files or name == "t_s":
@@ -137,5 +155,10 @@ def get_series(job_id: str, name: str, services: ServicesDep, _: ViewerDep,
         t = npz["t_s"]
         y = _series_columns(npz[name], t.size, member, name)
     keep = minmax_indices(y, max_points)
-    return SeriesPublic(name=name, t_s=t[keep].tolist(), values=y[keep].tolist(),
-                        columns=[f"{name}[{i}]" for i in range(y.shape[1])], total_points=int(t.size))
+    return SeriesPublic(
+        name=name,
+        t_s=t[keep].tolist(),
+        values=y[keep].tolist(),
+        columns=[f"{name}[{i}]" for i in range(y.shape[1])],
+        total_points=int(t.size),
+    )

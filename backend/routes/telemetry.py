@@ -18,12 +18,22 @@ from telemetry.archive.records import UploadRecord
 
 router = APIRouter(tags=["telemetry"], responses=ERROR_RESPONSES)
 
-BINARY_BODY = {"requestBody": {"required": True, "content": {
-    "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
-    "text/csv": {"schema": {"type": "string"}},
-    "application/x-ndjson": {"schema": {"type": "string"}}}}}
-DEFINITION_BODY = {"requestBody": {"required": True, "content": {
-    "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}}
+BINARY_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "application/octet-stream": {"schema": {"type": "string", "format": "binary"}},
+            "text/csv": {"schema": {"type": "string"}},
+            "application/x-ndjson": {"schema": {"type": "string"}},
+        },
+    }
+}
+DEFINITION_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {"application/octet-stream": {"schema": {"type": "string", "format": "binary"}}},
+    }
+}
 
 
 async def read_limited(request: Request, max_bytes: int) -> bytes:
@@ -68,11 +78,16 @@ def _parse_failure(exc: Exception, field: str) -> ApiError:
     return ApiError(422, f"{field}: could not be read: {exc}", field)
 
 
-@router.post("/telemetry/uploads", response_model=IngestReportPublic,
-             summary="Upload telemetry (CCSDS packets, CSV or JSONL)",
-             openapi_extra=BINARY_BODY)
+@router.post(
+    "/telemetry/uploads",
+    response_model=IngestReportPublic,
+    summary="Upload telemetry (CCSDS packets, CSV or JSONL)",
+    openapi_extra=BINARY_BODY,
+)
 async def upload_telemetry(
-    request: Request, services: ServicesDep, principal: OperatorDep,
+    request: Request,
+    services: ServicesDep,
+    principal: OperatorDep,
     satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"]),
     dictionary: str = Query("noaa20_apid11_ccsdspy.yaml", examples=["noaa20_apid11_ccsdspy.yaml"]),
     format: Literal["ccsds", "csv", "jsonl"] = Query("ccsds"),
@@ -89,25 +104,39 @@ async def upload_telemetry(
         path = await spool_limited(request, max_bytes, services.settings.data_dir / "uploads")
         try:
             size = path.stat().st_size
-            report = await run_in_threadpool(gateway.ingest_packet_file, satellite, path, dictionary, source,
-                                             principal.name)
+            report = await run_in_threadpool(
+                gateway.ingest_packet_file, satellite, path, dictionary, source, principal.name
+            )
         finally:
             path.unlink(missing_ok=True)
     else:
         data = await read_limited(request, max_bytes)
         size = len(data)
-        report = await run_in_threadpool(gateway.ingest_ground_file, satellite, data, format, dictionary,
-                                         source, principal.name)
-    services.audit.record(principal.name, "telemetry.upload", f"satellite/{satellite}",
-                          {"bytes": size, "format": format, "upload_id": report["archive"]["upload_id"],
-                           "packets_accepted": report["archive"]["packets_accepted"]})
+        report = await run_in_threadpool(
+            gateway.ingest_ground_file, satellite, data, format, dictionary, source, principal.name
+        )
+    services.audit.record(
+        principal.name,
+        "telemetry.upload",
+        f"satellite/{satellite}",
+        {
+            "bytes": size,
+            "format": format,
+            "upload_id": report["archive"]["upload_id"],
+            "packets_accepted": report["archive"]["packets_accepted"],
+        },
+    )
     return report
 
 
-@router.get("/telemetry/uploads", response_model=list[UploadRecord],
-            summary="Uploads of a satellite (who, when, source, report)")
-def list_uploads(services: ServicesDep, _: ViewerDep,
-                 satellite: str = Query("NOAA-20", min_length=1, max_length=100)) -> list[dict[str, Any]]:
+@router.get(
+    "/telemetry/uploads",
+    response_model=list[UploadRecord],
+    summary="Uploads of a satellite (who, when, source, report)",
+)
+def list_uploads(
+    services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=100)
+) -> list[dict[str, Any]]:
     """Every upload with its checksum, tallies and stored ingest report, oldest first."""
     return [asdict(u) for u in services.telemetry.archive.uploads(satellite)]
 
@@ -118,26 +147,38 @@ def list_dictionaries(services: ServicesDep, _: ViewerDep) -> list[str]:
     return services.telemetry.dictionaries.names()
 
 
-@router.post("/dictionaries/{name}", status_code=201, response_model=DictionaryStored,
-             summary="Upload a dictionary (YAML, XTCE, ccsdspy CSV)",
-             openapi_extra=DEFINITION_BODY)
+@router.post(
+    "/dictionaries/{name}",
+    status_code=201,
+    response_model=DictionaryStored,
+    summary="Upload a dictionary (YAML, XTCE, ccsdspy CSV)",
+    openapi_extra=DEFINITION_BODY,
+)
 async def upload_dictionary(
-    name: str, request: Request, services: ServicesDep, principal: OperatorDep,
+    name: str,
+    request: Request,
+    services: ServicesDep,
+    principal: OperatorDep,
     apid: int | None = Query(None, ge=0, le=2046, description="APID of a ccsdspy CSV layout."),
     time_code: str | None = Query(None, max_length=200, description="Time code spec for CSV/XTCE."),
-    time_fields: str | None = Query(None, max_length=500, examples=[
-        "year=*_YEAR,doy=*_DAY,hour=*_HOUR,minute=*_MIN,second=*_SEC,microsecond=*_USEC"],
-        description="Time from packet fields for CSV/XTCE (as acs-twin ingest --time-fields)."),
+    time_fields: str | None = Query(
+        None,
+        max_length=500,
+        examples=["year=*_YEAR,doy=*_DAY,hour=*_HOUR,minute=*_MIN,second=*_SEC,microsecond=*_USEC"],
+        description="Time from packet fields for CSV/XTCE (as acs-twin ingest --time-fields).",
+    ),
 ) -> dict[str, Any]:
     """Store a definition for a new spacecraft or APID once it loads; lists its packets."""
     data = await read_limited(request, int(services.settings.max_upload_mb * 1e6))
     try:
-        loaded, version = await run_in_threadpool(services.telemetry.dictionaries.add, name, data, apid, time_code,
-                                                  time_fields)
+        loaded, version = await run_in_threadpool(
+            services.telemetry.dictionaries.add, name, data, apid, time_code, time_fields
+        )
     except (ValueError, ApiError):
         raise
     except Exception as exc:  # a malformed XML/YAML file raises its parser's own errors
         raise _parse_failure(exc, "body") from exc
-    services.audit.record(principal.name, "dictionary.upload", f"dictionary/{name}",
-                          {"bytes": len(data), "version": version})
+    services.audit.record(
+        principal.name, "dictionary.upload", f"dictionary/{name}", {"bytes": len(data), "version": version}
+    )
     return {"name": name, "packets": {str(a): p.name for a, p in loaded.packets.items()}}

@@ -5,9 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter, Query
 
 from backend.core.auth import Role
-from backend.deps import AdminDep, ServicesDep
 from backend.core.errors import ERROR_RESPONSES, ApiError
-from backend.schemas import DbId, AuditPublic, TokenCreate, TokenIssued, TokenPublic
+from backend.deps import AdminDep, ServicesDep
+from backend.schemas import AuditPublic, DbId, TokenCreate, TokenIssued, TokenPublic
 
 router = APIRouter(tags=["tokens"], responses=ERROR_RESPONSES)
 
@@ -22,8 +22,7 @@ def list_tokens(services: ServicesDep, _: AdminDep) -> list[TokenPublic]:
 def create_token(body: TokenCreate, services: ServicesDep, principal: AdminDep) -> TokenIssued:
     """Create a token; the plain token is in this answer only."""
     token_id, token = services.auth.issue(body.name, Role.parse(body.role))
-    services.audit.record(principal.name, "token.create", f"token/{token_id}",
-                          {"name": body.name, "role": body.role})
+    services.audit.record(principal.name, "token.create", f"token/{token_id}", {"name": body.name, "role": body.role})
     row = next(r for r in services.tokens.list() if r.id == token_id)
     return TokenIssued(**TokenPublic.model_validate(row).model_dump(), token=token)
 
@@ -40,9 +39,11 @@ def revoke_token(token_id: DbId, services: ServicesDep, principal: AdminDep) -> 
 
 
 @router.get("/audit", response_model=list[AuditPublic], summary="Audit log")
-def list_audit(services: ServicesDep, _: AdminDep,
-               limit: int = Query(100, ge=1, le=1000),
-               action: str | None = Query(None, max_length=50, examples=["simulation.create"])
-               ) -> list[AuditPublic]:
+def list_audit(
+    services: ServicesDep,
+    _: AdminDep,
+    limit: int = Query(100, ge=1, le=1000),
+    action: str | None = Query(None, max_length=50, examples=["simulation.create"]),
+) -> list[AuditPublic]:
     """Uploads, simulations, acknowledgements and token changes, newest first."""
     return [AuditPublic.model_validate(row) for row in services.audit.list(limit, action)]

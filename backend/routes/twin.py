@@ -13,8 +13,12 @@ from backend.twin.session_service import session_public, session_residuals, sess
 router = APIRouter(tags=["twin"], responses=ERROR_RESPONSES)
 
 
-@router.post("/twin/sessions", status_code=202, response_model=TwinSessionPublic,
-             summary="Start a twin session from archived telemetry")
+@router.post(
+    "/twin/sessions",
+    status_code=202,
+    response_model=TwinSessionPublic,
+    summary="Start a twin session from archived telemetry",
+)
 async def create_session(body: TwinSessionCreate, services: ServicesDep, principal: OperatorDep) -> TwinSessionPublic:
     """Align the twin to telemetry at align_utc, fly it with the hypothesis (a simulation job)."""
     session = await run_in_threadpool(start_session, services, body, principal.name)
@@ -23,8 +27,9 @@ async def create_session(body: TwinSessionCreate, services: ServicesDep, princip
 
 
 @router.get("/twin/sessions", response_model=list[TwinSessionPublic], summary="Twin sessions, newest first")
-def list_sessions(services: ServicesDep, _: ViewerDep,
-                  limit: int = Query(100, ge=1, le=1000)) -> list[TwinSessionPublic]:
+def list_sessions(
+    services: ServicesDep, _: ViewerDep, limit: int = Query(100, ge=1, le=1000)
+) -> list[TwinSessionPublic]:
     """Sessions with the state of their simulation."""
     return [session_public(services, row) for row in services.twin_sessions.list(limit)]
 
@@ -35,11 +40,16 @@ def get_session(session_id: str, services: ServicesDep, _: ViewerDep) -> TwinSes
     return session_public(services, session_row(services, session_id))
 
 
-@router.get("/twin/sessions/{session_id}/residuals", response_model=ResidualsPublic,
-            summary="Twin minus telemetry residuals")
-async def get_residuals(session_id: str, services: ServicesDep, _: ViewerDep,
-                        variant: int = Query(0, ge=0, le=15, description="0 = the twin, then the alternatives."),
-                        max_points: int = Query(1000, ge=2, le=100_000)) -> ResidualsPublic:
+@router.get(
+    "/twin/sessions/{session_id}/residuals", response_model=ResidualsPublic, summary="Twin minus telemetry residuals"
+)
+async def get_residuals(
+    session_id: str,
+    services: ServicesDep,
+    _: ViewerDep,
+    variant: int = Query(0, ge=0, le=15, description="0 = the twin, then the alternatives."),
+    max_points: int = Query(1000, ge=2, le=100_000),
+) -> ResidualsPublic:
     """Attitude angle (deg), rate difference (deg/s), wheel-speed differences (rpm) of one variant, downsampled;
     the summary of every variant (the what-if comparison); published on 'twin'."""
     answer = await run_in_threadpool(session_residuals, services, session_id, variant, max_points)

@@ -27,8 +27,9 @@ def _log(services: Services, text: str) -> None:
         log.write(f"{datetime.now(UTC).isoformat()} {text}\n")
 
 
-def run_demo_twin(services: Services, monitor_ports: dict[str, int], scenario: str,
-                  stop: threading.Event) -> MonitorHandles | None:
+def run_demo_twin(
+    services: Services, monitor_ports: dict[str, int], scenario: str, stop: threading.Event
+) -> MonitorHandles | None:
     """Wait for the live satellite's first samples, serve the monitors on its live twin in live follow; handles."""
     from backend.twin.live_feed import LiveFeed
     from backend.twin.monitor_gate import MonitorGate
@@ -56,6 +57,9 @@ def run_demo_twin(services: Services, monitor_ports: dict[str, int], scenario: s
     handles.clock.follow_live(True)
     for role, public in monitor_ports.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
         MonitorGate(services.auth, services.settings.host, public, handles.ports[role]).start()
-    _log(services, f"monitors on the live twin of {satellite} ({scenario}): {monitor_ports} (token-gated) -> "
-                   f"viser on {handles.ports}")
+    _log(
+        services,
+        f"monitors on the live twin of {satellite} ({scenario}): {monitor_ports} (token-gated) -> "
+        f"viser on {handles.ports}",
+    )
     return handles

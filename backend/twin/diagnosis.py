@@ -30,8 +30,15 @@ from telemetry.dictionary import Dictionary
 from telemetry.housekeeping import observations, read_batches
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["MAX_WINDOW_S", "DiagnosisRuns", "diagnose_batches", "diagnose_file", "result_json", "scenario_wheels",
-           "start_archived"]
+__all__ = [
+    "MAX_WINDOW_S",
+    "DiagnosisRuns",
+    "diagnose_batches",
+    "diagnose_file",
+    "result_json",
+    "scenario_wheels",
+    "start_archived",
+]
 
 MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a few seconds of diagnosis
 
@@ -39,8 +46,9 @@ MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a fe
 def scenario_wheels(scenario: Scenario) -> WheelModel:
     """The cluster as the momentum balance needs it, from the scenario's spacecraft (seed 000 eq 1)."""
     p = engine.plant_params(scenario)
-    return wheel_model(p.wheel_axes_b, p.wheels.inertia_kg_m2, p.wheels.max_torque_nm, p.wheels.coulomb_nm,
-                       scenario.control_dt_s)
+    return wheel_model(
+        p.wheel_axes_b, p.wheels.inertia_kg_m2, p.wheels.max_torque_nm, p.wheels.coulomb_nm, scenario.control_dt_s
+    )
 
 
 def _utc(epoch_unix_s: float, t_s: float | None) -> str | None:
@@ -82,8 +90,13 @@ def result_json(d: Diagnosis, obs: Observations, satellite: str, scenario: str) 
     }
 
 
-def diagnose_batches(batches: list[SampleBatch], dictionary: Dictionary, scenario: Scenario,
-                     satellite: str | None = None, flyer: Callable[[Scenario], Any] | None = None) -> dict[str, Any]:
+def diagnose_batches(
+    batches: list[SampleBatch],
+    dictionary: Dictionary,
+    scenario: Scenario,
+    satellite: str | None = None,
+    flyer: Callable[[Scenario], Any] | None = None,
+) -> dict[str, Any]:
     """Diagnose decoded batches of one satellite against its scenario; ValueError naming what is missing.
 
     ``flyer`` flies the replay batches (:func:`backend.jobs.cluster.flyer` for a Dask cluster)."""
@@ -93,8 +106,13 @@ def diagnose_batches(batches: list[SampleBatch], dictionary: Dictionary, scenari
     return result_json(result, obs, dictionary.satellite_name, scenario.name)
 
 
-def diagnose_file(path: str | Path, dictionary: Dictionary, scenario: Scenario, satellite: str | None = None,
-                  flyer: Callable[[Scenario], Any] | None = None) -> dict[str, Any]:
+def diagnose_file(
+    path: str | Path,
+    dictionary: Dictionary,
+    scenario: Scenario,
+    satellite: str | None = None,
+    flyer: Callable[[Scenario], Any] | None = None,
+) -> dict[str, Any]:
     """Diagnose a packet file or a ground CSV/JSONL file (``acs-twin diagnose``)."""
     return diagnose_batches(read_batches(path, dictionary), dictionary, scenario, satellite, flyer)
 
@@ -111,8 +129,12 @@ class DiagnosisRuns:
         self._lock = threading.Lock()
         self._keep = keep
 
-    def start(self, read_batches_of: Callable[[], tuple[list[SampleBatch], Dictionary]], scenario: Scenario,
-              record: dict[str, Any]) -> dict[str, Any]:
+    def start(
+        self,
+        read_batches_of: Callable[[], tuple[list[SampleBatch], Dictionary]],
+        scenario: Scenario,
+        record: dict[str, Any],
+    ) -> dict[str, Any]:
         """Queue a diagnosis of the batches ``read_batches_of`` returns; the run record (status running)."""
         import uuid
 
@@ -173,6 +195,11 @@ def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
             raise ValueError(f"telemetry: no archived packets of {body.satellite!r} in the window")
         return decode_stream(b"".join(p for _, p in packets), dictionary, source="diagnosis").batches, dictionary
 
-    record = {"satellite": body.satellite, "scenario": body.scenario, "created_by": actor,
-              "start_utc": _utc(t0, 0.0), "end_utc": _utc(t1, 0.0)}
+    record = {
+        "satellite": body.satellite,
+        "scenario": body.scenario,
+        "created_by": actor,
+        "start_utc": _utc(t0, 0.0),
+        "end_utc": _utc(t1, 0.0),
+    }
     return services.diagnoses.start(read, scenario, record)

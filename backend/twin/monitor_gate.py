@@ -28,8 +28,12 @@ SPLICE_BYTES = 1 << 16
 
 
 def _answer(status: str, headers: dict[str, str] | None = None) -> bytes:
-    lines = [f"HTTP/1.1 {status}", "Content-Length: 0", "Connection: close",
-             *(f"{k}: {v}" for k, v in (headers or {}).items())]
+    lines = [
+        f"HTTP/1.1 {status}",
+        "Content-Length: 0",
+        "Connection: close",
+        *(f"{k}: {v}" for k, v in (headers or {}).items()),
+    ]
     return ("\r\n".join(lines) + "\r\n\r\n").encode()
 
 
@@ -70,8 +74,9 @@ class MonitorGate:
     def start(self) -> int:
         """Listen on the public port (0: any); returns the bound port."""
         threading.Thread(target=self._loop.run_forever, name=f"monitor-gate-{self._public}", daemon=True).start()
-        future = asyncio.run_coroutine_threadsafe(asyncio.start_server(self._handle, self._host, self._public),
-                                                  self._loop)
+        future = asyncio.run_coroutine_threadsafe(
+            asyncio.start_server(self._handle, self._host, self._public), self._loop
+        )
         self._server = future.result(30)
         self.port = int(self._server.sockets[0].getsockname()[1])
         return self.port
@@ -111,16 +116,19 @@ class MonitorGate:
             await writer.drain()
         writer.close()
 
-    async def _splice(self, head: bytes, reader: asyncio.StreamReader, writer: asyncio.StreamWriter,
-                      principal: Any) -> None:
+    async def _splice(
+        self, head: bytes, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, principal: Any
+    ) -> None:
         try:
             upstream_reader, upstream_writer = await asyncio.open_connection("127.0.0.1", self._private)
         except OSError:
             await self._refuse(writer, "502 Bad Gateway")
             return
         upstream_writer.write(head)
-        pipes = [asyncio.ensure_future(self._pipe(reader, upstream_writer)),
-                 asyncio.ensure_future(self._pipe(upstream_reader, writer))]
+        pipes = [
+            asyncio.ensure_future(self._pipe(reader, upstream_writer)),
+            asyncio.ensure_future(self._pipe(upstream_reader, writer)),
+        ]
         loop = asyncio.get_running_loop()
         unwatch = self._auth.watch(principal, lambda: loop.call_soon_threadsafe(_cancel, pipes))
         try:

@@ -37,11 +37,19 @@ NS_PER_S = 1_000_000_000
 def session_public(services: Services, row: TwinSessionRow) -> TwinSessionPublic:
     """The session as the API shows it, with the state and progress of its simulation job."""
     job = services.job_repo.get(row.job_id)
-    return TwinSessionPublic(id=row.id, satellite=row.satellite, scenario=row.scenario,
-                             align_utc_ns=row.align_utc_ns, duration_s=row.duration_s, faults=row.faults,
-                             created_by=row.created_by, variants=["twin", *row.alternatives], job_id=row.job_id,
-                             status=job.status if job else "unknown",
-                             progress=services.jobs.progress(row.job_id) or (job.progress if job else 0.0))
+    return TwinSessionPublic(
+        id=row.id,
+        satellite=row.satellite,
+        scenario=row.scenario,
+        align_utc_ns=row.align_utc_ns,
+        duration_s=row.duration_s,
+        faults=row.faults,
+        created_by=row.created_by,
+        variants=["twin", *row.alternatives],
+        job_id=row.job_id,
+        status=job.status if job else "unknown",
+        progress=services.jobs.progress(row.job_id) or (job.progress if job else 0.0),
+    )
 
 
 def _live_defaults(services: Services, body: TwinSessionCreate) -> tuple[int, int | None]:
@@ -54,8 +62,9 @@ def _live_defaults(services: Services, body: TwinSessionCreate) -> tuple[int, in
         return utc_ns(body.align_utc, 0), epoch_ns
     synced = state.get("synchronised_utc")
     if synced is None:
-        raise ApiError(422, f"align_utc: the live twin of {body.satellite!r} has not synchronised yet; give align_utc",
-                       "align_utc")
+        raise ApiError(
+            422, f"align_utc: the live twin of {body.satellite!r} has not synchronised yet; give align_utc", "align_utc"
+        )
     return utc_ns(datetime.fromisoformat(synced.replace("Z", "+00:00")), 0), epoch_ns
 
 
@@ -83,16 +92,30 @@ def start_session(services: Services, body: TwinSessionCreate, actor: str) -> Tw
     """Align a twin to archived telemetry and queue its simulation; the session as answered by the API."""
     align_ns, live_epoch_ns = _live_defaults(services, body)
     dictionary = services.telemetry.dictionaries.load(body.dictionary)
-    track = actual_track_between(services.telemetry.archive, dictionary, body.satellite,
-                                 align_ns - int(GPS_MARGIN_S * NS_PER_S), align_ns + int(body.duration_s * NS_PER_S))
+    track = actual_track_between(
+        services.telemetry.archive,
+        dictionary,
+        body.satellite,
+        align_ns - int(GPS_MARGIN_S * NS_PER_S),
+        align_ns + int(body.duration_s * NS_PER_S),
+    )
     epoch_ns = live_epoch_ns if body.scenario_epoch_utc is None else utc_ns(body.scenario_epoch_utc, 0)
-    t_align, scenario, options = twin_start(track, body.scenario, align_ns, body.duration_s, body.faults, epoch_ns,
-                                            body.alternatives)
+    t_align, scenario, options = twin_start(
+        track, body.scenario, align_ns, body.duration_s, body.faults, epoch_ns, body.alternatives
+    )
     job_id = services.jobs.submit(scenario, actor, options)
-    row = services.twin_sessions.add(id=uuid.uuid4().hex, job_id=job_id, satellite=body.satellite,
-                                     dictionary=body.dictionary, scenario=body.scenario, align_utc_ns=t_align,
-                                     duration_s=body.duration_s, faults=body.faults, alternatives=body.alternatives,
-                                     created_by=actor)
+    row = services.twin_sessions.add(
+        id=uuid.uuid4().hex,
+        job_id=job_id,
+        satellite=body.satellite,
+        dictionary=body.dictionary,
+        scenario=body.scenario,
+        align_utc_ns=t_align,
+        duration_s=body.duration_s,
+        faults=body.faults,
+        alternatives=body.alternatives,
+        created_by=actor,
+    )
     return session_public(services, row)
 
 
@@ -136,13 +159,21 @@ def session_residuals(services: Services, session_id: str, variant: int, max_poi
     if variant >= len(names):
         raise ApiError(422, f"variant: {variant} outside 0..{len(names) - 1}", "variant")
     chosen = found[variant]
-    columns = np.column_stack([np.degrees(chosen.attitude_rad), np.degrees(chosen.rate_rad_s),
-                               chosen.wheel_speed_rad_s * 30.0 / np.pi])
+    columns = np.column_stack(
+        [np.degrees(chosen.attitude_rad), np.degrees(chosen.rate_rad_s), chosen.wheel_speed_rad_s * 30.0 / np.pi]
+    )
     keep = minmax_indices(columns, max_points) if chosen.t_s.size else np.arange(0)
     summaries = {name: r.summary() for name, r in zip(names, found)}
     best, verdict = _verdict(names, found)
-    return ResidualsPublic(session_id=session_id, variant=names[variant], summary=summaries[names[variant]],
-                           best_match=best, verdict=verdict,
-                           summaries=summaries, t_s=chosen.t_s[keep].tolist(),
-                           attitude_deg=columns[keep, 0].tolist(), rate_deg_s=columns[keep, 1].tolist(),
-                           wheel_speed_rpm=columns[keep, 2:].tolist())
+    return ResidualsPublic(
+        session_id=session_id,
+        variant=names[variant],
+        summary=summaries[names[variant]],
+        best_match=best,
+        verdict=verdict,
+        summaries=summaries,
+        t_s=chosen.t_s[keep].tolist(),
+        attitude_deg=columns[keep, 0].tolist(),
+        rate_deg_s=columns[keep, 1].tolist(),
+        wheel_speed_rpm=columns[keep, 2:].tolist(),
+    )

@@ -27,12 +27,19 @@ SAME_INSTANT_S = 1e-3  # twin output and telemetry times within 1 ms are one ins
 class SessionFeed:
     """TwinFeed of one twin session: telemetry (actual) against the twin's trajectory (simulated)."""
 
-    def __init__(self, track: ActualTrack, twin_npz: Path, align_utc_ns: int, alarms: Sequence[AlarmRecord] = (),
-                 stations: Sequence[GroundStation] = DEFAULT_STATIONS) -> None:
+    def __init__(
+        self,
+        track: ActualTrack,
+        twin_npz: Path,
+        align_utc_ns: int,
+        alarms: Sequence[AlarmRecord] = (),
+        stations: Sequence[GroundStation] = DEFAULT_STATIONS,
+    ) -> None:
         self._track, self._alarms, self._stations = track, list(alarms), list(stations)
         self._t = track.t_utc_ns / NS_PER_S
-        self._spline_a = AttitudeSpline(self._t, quaternion.normalize(track.series["q_est_ib"]),
-                                        track.series["omega_est_b_rad_s"])
+        self._spline_a = AttitudeSpline(
+            self._t, quaternion.normalize(track.series["q_est_ib"]), track.series["omega_est_b_rad_s"]
+        )
         with np.load(twin_npz) as twin:
             t_twin = align_utc_ns / NS_PER_S + twin["t_s"]
             self._spline_s = AttitudeSpline(t_twin, twin["q_ib"][0], twin["omega_b_rad_s"][0])
@@ -72,8 +79,11 @@ class SessionFeed:
     def active_alarms(self, t_unix_s: float) -> list[str]:
         """Archived alarms raised at or before t and not cleared."""
         t_ns = t_unix_s * NS_PER_S
-        return [f"{a.parameter}: {a.severity} ({a.state})" for a in self._alarms
-                if a.first_t_ns <= t_ns and a.state != "cleared"]
+        return [
+            f"{a.parameter}: {a.severity} ({a.state})"
+            for a in self._alarms
+            if a.first_t_ns <= t_ns and a.state != "cleared"
+        ]
 
     def ground_stations(self) -> list[GroundStation]:
         """Stations drawn with their visibility circles."""

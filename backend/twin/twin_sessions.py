@@ -28,8 +28,9 @@ GPS_MARGIN_S = 60.0  # telemetry read before the alignment instant: the GPS fixe
 TIME_MATCH_NS = 1_000_000  # twin output and telemetry samples closer than 1 ms are the same instant
 
 
-def actual_track_between(archive: TelemetryArchive, dictionary: Dictionary, satellite: str, t0_ns: int,
-                         t1_ns: int) -> ActualTrack:
+def actual_track_between(
+    archive: TelemetryArchive, dictionary: Dictionary, satellite: str, t0_ns: int, t1_ns: int
+) -> ActualTrack:
     """Replay and decode archived packets of [t0_ns, t1_ns] into the actual track (ValueError if none)."""
     from telemetry.actual_state import actual_track
     from telemetry.decoding import decode_stream
@@ -41,9 +42,15 @@ def actual_track_between(archive: TelemetryArchive, dictionary: Dictionary, sate
     return actual_track(decoded.batches)
 
 
-def twin_start(track: ActualTrack, scenario: str, align_ns: int, duration_s: float, faults: list[str],
-               epoch_ns: int | None = None, alternatives: dict[str, list[str]] | None = None,
-               ) -> tuple[int, dict[str, Any], dict[str, Any]]:
+def twin_start(
+    track: ActualTrack,
+    scenario: str,
+    align_ns: int,
+    duration_s: float,
+    faults: list[str],
+    epoch_ns: int | None = None,
+    alternatives: dict[str, list[str]] | None = None,
+) -> tuple[int, dict[str, Any], dict[str, Any]]:
     """(alignment sample time, twin scenario JSON, engine options) at the first ACS_HK sample ≥ align_ns.
 
     ``epoch_ns``: when the satellite started flying the scenario's route (default: the library epoch).
@@ -71,8 +78,11 @@ def twin_start(track: ActualTrack, scenario: str, align_ns: int, duration_s: flo
     for name, texts in (alternatives or {}).items():
         data["variants"].append(VariantSpec(name=name, faults=[parse_fault(t) for t in texts]).model_dump(mode="json"))
     available = np.repeat(aligned_wheel_available(track, t_align), len(data["variants"]), axis=0)
-    return t_align, type(twin).model_validate(data).model_dump(mode="json"), {"fdir": True,
-                                                                              "wheel_available": available.tolist()}
+    return (
+        t_align,
+        type(twin).model_validate(data).model_dump(mode="json"),
+        {"fdir": True, "wheel_available": available.tolist()},
+    )
 
 
 @dataclass(frozen=True)
@@ -86,10 +96,12 @@ class Residuals:
 
     def summary(self) -> dict[str, float]:
         """Largest residuals (degrees and rpm at the edge) and how many instants were compared."""
-        return {"samples": int(self.t_s.size),
-                "attitude_max_deg": float(np.degrees(self.attitude_rad.max(initial=0.0))),
-                "rate_max_deg_s": float(np.degrees(self.rate_rad_s.max(initial=0.0))),
-                "wheel_speed_max_rpm": float(np.abs(self.wheel_speed_rad_s).max(initial=0.0) * 30.0 / np.pi)}
+        return {
+            "samples": int(self.t_s.size),
+            "attitude_max_deg": float(np.degrees(self.attitude_rad.max(initial=0.0))),
+            "rate_max_deg_s": float(np.degrees(self.rate_rad_s.max(initial=0.0))),
+            "wheel_speed_max_rpm": float(np.abs(self.wheel_speed_rad_s).max(initial=0.0) * 30.0 / np.pi),
+        }
 
 
 def residuals(track: ActualTrack, trajectory_npz: Path, align_ns: int, variant: int = 0) -> Residuals:

@@ -76,8 +76,9 @@ class PacketBatch:
             return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, b"", np.zeros(n, dtype=np.int64), batch.values)
         packets = np.ascontiguousarray(batch.packets, dtype=np.uint8)
         if batch.packet_lengths is not None:
-            return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, packets.tobytes(), batch.packet_lengths,
-                       batch.values)
+            return cls(
+                batch.apid, batch.t_utc_ns, batch.sequence_count, packets.tobytes(), batch.packet_lengths, batch.values
+            )
         lengths = np.full(n, packets.shape[1] if packets.ndim == 2 else 0, dtype=np.int64)
         return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, packets.tobytes(), lengths, batch.values)
 

@@ -197,8 +197,12 @@ class Archive:
             ).scalar()
             if existing is not None:
                 archived = {b.apid: self._drop_archived(conn, sat_id, _order_and_dedupe(b)[0])[1] for b in batches}
-                return IngestResult(upload_id=int(existing), duplicate_upload=True,
-                                    packets_duplicate=sum(archived.values()), duplicates_by_apid=archived)
+                return IngestResult(
+                    upload_id=int(existing),
+                    duplicate_upload=True,
+                    packets_duplicate=sum(archived.values()),
+                    duplicates_by_apid=archived,
+                )
             upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, checksum)
             result = self._write_batches(conn, sat_id, upload_id, batches, limits or {})
             self._write_undefined(conn, sat_id, upload_id, undefined)
@@ -260,8 +264,11 @@ class Archive:
             existing = conn.execute(
                 select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == sha256)
             ).scalar()
-            upload_id = int(existing) if existing is not None else self._insert_upload(
-                conn, sat_id, source, uploaded_by, sha256)
+            upload_id = (
+                int(existing)
+                if existing is not None
+                else self._insert_upload(conn, sat_id, source, uploaded_by, sha256)
+            )
             parts: list[IngestResult] = []
             archived: dict[int, int] = {}
             for decoded in results:
@@ -274,22 +281,32 @@ class Archive:
                 parts.append(self._write_batches(conn, sat_id, upload_id, batches, limits or {}))
                 self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
             if existing is not None:
-                return IngestResult(upload_id, True, packets_duplicate=sum(archived.values()),
-                                    duplicates_by_apid=archived)
+                return IngestResult(
+                    upload_id, True, packets_duplicate=sum(archived.values()), duplicates_by_apid=archived
+                )
             by_apid: dict[int, int] = {}
             for part in parts:
                 for apid, n in part.duplicates_by_apid.items():
                     by_apid[apid] = by_apid.get(apid, 0) + n
             result = IngestResult(
-                upload_id, False, sum(p.packets_accepted for p in parts), sum(p.packets_duplicate for p in parts),
-                sum(p.samples_accepted for p in parts), sum(p.alarm_events for p in parts),
-                [g for p in parts for g in p.gaps], by_apid,
+                upload_id,
+                False,
+                sum(p.packets_accepted for p in parts),
+                sum(p.packets_duplicate for p in parts),
+                sum(p.samples_accepted for p in parts),
+                sum(p.alarm_events for p in parts),
+                [g for p in parts for g in p.gaps],
+                by_apid,
             )
             stored = {**result.as_report(), "decode": report.to_dict() if report else {}}
             conn.execute(
-                update(UPLOAD).where(UPLOAD.c.id == upload_id).values(
-                    packets_accepted=result.packets_accepted, samples_accepted=result.samples_accepted,
-                    report_json=json.dumps(stored))
+                update(UPLOAD)
+                .where(UPLOAD.c.id == upload_id)
+                .values(
+                    packets_accepted=result.packets_accepted,
+                    samples_accepted=result.samples_accepted,
+                    report_json=json.dumps(stored),
+                )
             )
         return result
 
@@ -362,8 +379,12 @@ class Archive:
                 continue
             self._write_chunks(conn, sat_id, upload_id, fresh)
             accepted += fresh.n_packets
-            samples += sum(fresh.n_packets - int(np.count_nonzero(np.isnan(v))) if np.asarray(v).dtype.kind == "f"
-                           else fresh.n_packets for v in fresh.values.values())  # NaN: no such element
+            samples += sum(
+                fresh.n_packets - int(np.count_nonzero(np.isnan(v)))
+                if np.asarray(v).dtype.kind == "f"
+                else fresh.n_packets
+                for v in fresh.values.values()
+            )  # NaN: no such element
             gaps.extend(_gaps_of(fresh) if fresh.raw else [])  # ground files carry no sequence counts
             changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
         changes.sort(key=lambda c: c.t_ns)
@@ -463,8 +484,12 @@ class Archive:
         with self.engine.connect() as conn:
             rows = conn.execute(query).all()
         return [
-            {"name": name, "norad_id": norad, "first_t_ns": None if t0 is None else int(t0),
-             "last_t_ns": None if t1 is None else int(t1)}
+            {
+                "name": name,
+                "norad_id": norad,
+                "first_t_ns": None if t0 is None else int(t0),
+                "last_t_ns": None if t1 is None else int(t1),
+            }
             for name, norad, t0, t1 in rows
         ]
 
@@ -507,22 +532,33 @@ class Archive:
         (t_start_ns, t_end_ns, n_packets) of every chunk holding any of them, by start time."""
         sat_id = self._known_satellite(satellite)
         with self.engine.connect() as conn:
-            params = dict(conn.execute(select(PARAM.c.name, PARAM.c.id).where(
-                PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(list(names)))).all())
+            params = dict(
+                conn.execute(
+                    select(PARAM.c.name, PARAM.c.id).where(
+                        PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(list(names))
+                    )
+                ).all()
+            )
             unknown = [n for n in names if n not in params]
             if unknown:
                 raise ValueError(f"names: not archived for {satellite!r}: {unknown}")
-            kinds = conn.execute(select(VALUE.c.parameter_id, VALUE.c.dtype).where(
-                VALUE.c.parameter_id.in_(list(params.values()))).distinct()).all()
+            kinds = conn.execute(
+                select(VALUE.c.parameter_id, VALUE.c.dtype)
+                .where(VALUE.c.parameter_id.in_(list(params.values())))
+                .distinct()
+            ).all()
             spans = conn.execute(
-                select(CHUNK.c.t_start_ns, CHUNK.c.t_end_ns, CHUNK.c.n_packets).where(
-                    CHUNK.c.id.in_(select(VALUE.c.chunk_id).where(VALUE.c.parameter_id.in_(list(params.values())))))
-                .order_by(CHUNK.c.t_start_ns)).all()
+                select(CHUNK.c.t_start_ns, CHUNK.c.t_end_ns, CHUNK.c.n_packets)
+                .where(CHUNK.c.id.in_(select(VALUE.c.chunk_id).where(VALUE.c.parameter_id.in_(list(params.values())))))
+                .order_by(CHUNK.c.t_start_ns)
+            ).all()
         presented: dict[int, set[str]] = {}
         for param_id, spec in kinds:
             presented.setdefault(param_id, set()).add(spec.split("/")[-1])
-        dtypes = {n: np.dtype(next(iter(presented.get(i, {"<f8"}))) if len(presented.get(i, ())) == 1
-                              else np.float64) for n, i in params.items()}
+        dtypes = {
+            n: np.dtype(next(iter(presented.get(i, {"<f8"}))) if len(presented.get(i, ())) == 1 else np.float64)
+            for n, i in params.items()
+        }
         return dtypes, np.array(spans, dtype=np.int64).reshape(-1, 3)
 
     def latest_values(self, satellite: str, names: Sequence[str] | None = None) -> dict[str, tuple[int, float]]:
@@ -618,7 +654,7 @@ class Archive:
                 select(func.coalesce(func.sum(CHUNK.c.n_packets), 0)).where(CHUNK.c.upload_id == upload_id)
             ).scalar_one()
             chunks = conn.execute(select(CHUNK.c.id, CHUNK.c.n_packets).where(CHUNK.c.upload_id == upload_id)).all()
-            n_by_chunk = {cid: n for cid, n in chunks}
+            n_by_chunk = dict(chunks)
             value_chunks = (
                 conn.execute(select(VALUE.c.chunk_id).where(VALUE.c.chunk_id.in_(list(n_by_chunk)))).scalars().all()
             )
@@ -687,21 +723,31 @@ class Archive:
                 ids.append(int(found))
         return ids
 
-    def save_data_pass(self, satellite: str, aos_ns: int, los_ns: int, station: str | None = None,
-                       pass_id: int | None = None) -> int:
+    def save_data_pass(
+        self, satellite: str, aos_ns: int, los_ns: int, station: str | None = None, pass_id: int | None = None
+    ) -> int:
         """Store (or, with ``pass_id``, widen) a pass made from received data: AOS/LOS = first/last sample."""
         if los_ns < aos_ns:
             raise ValueError(f"passes: need aos_ns <= los_ns, got {aos_ns, los_ns}")
         sat_id = self.satellite_id(satellite)
         station_id = None if station is None else self.ground_station(station).id
-        row: dict[str, Any] = {"aos_ns": int(aos_ns), "los_ns": int(los_ns),
-                               "max_elevation_ns": (int(aos_ns) + int(los_ns)) // 2}
+        row: dict[str, Any] = {
+            "aos_ns": int(aos_ns),
+            "los_ns": int(los_ns),
+            "max_elevation_ns": (int(aos_ns) + int(los_ns)) // 2,
+        }
         with self._writer.begin() as conn:
             if pass_id is not None:
                 conn.execute(update(PASS).where(PASS.c.id == pass_id, PASS.c.origin == "data").values(**row))
                 return pass_id
-            row |= {"satellite_id": sat_id, "station_id": station_id, "origin": "data", "max_elevation_deg": None,
-                    "packets_received": 0, "packets_missing": 0}
+            row |= {
+                "satellite_id": sat_id,
+                "station_id": station_id,
+                "origin": "data",
+                "max_elevation_deg": None,
+                "packets_received": 0,
+                "packets_missing": 0,
+            }
             return int(conn.execute(insert(PASS).values(**row).returning(PASS.c.id)).scalar_one())
 
     def passes(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:

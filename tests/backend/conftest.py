@@ -42,9 +42,14 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
 
 def make_settings(tmp_path: Path, database_url: str, **overrides: object) -> Settings:
     """Settings for a test app: data under tmp_path, auth on, small limits."""
-    values: dict[str, object] = {"data_dir": tmp_path / "data", "database_url": database_url,
-                                 "job_workers": 1, "job_queue_size": 2, "telemetry_port": 0,
-                                 "live_enabled": False}
+    values: dict[str, object] = {
+        "data_dir": tmp_path / "data",
+        "database_url": database_url,
+        "job_workers": 1,
+        "job_queue_size": 2,
+        "telemetry_port": 0,
+        "live_enabled": False,
+    }
     values.update(overrides)
     return Settings(**values)
 

@@ -16,8 +16,7 @@ ADMIN_PREFIXES = ("/api/v1/tokens", "/api/v1/audit")
 def _routes(client: TestClient) -> list[tuple[str, str]]:
     """Every (method, path) the OpenAPI document declares, except the public ones."""
     paths = client.get("/openapi.json").json()["paths"]
-    return [(method.upper(), path) for path, item in paths.items() if path not in PUBLIC_PATHS
-            for method in item]
+    return [(method.upper(), path) for path, item in paths.items() if path not in PUBLIC_PATHS for method in item]
 
 
 def _concrete(path: str) -> str:

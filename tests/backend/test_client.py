@@ -12,8 +12,8 @@ import pytest
 import uvicorn
 
 from backend.app import create_app
-from backend.core.auth import Role
 from backend.client import Client, ClientError
+from backend.core.auth import Role
 from backend.core.settings import Settings
 from tests.backend.conftest import free_port
 
@@ -66,8 +66,13 @@ def test_client_uploads_queries_and_gets_live_samples(server: tuple[str, dict[st
 def test_client_runs_a_simulation_with_progress_and_fetches_numpy_results(server: tuple[str, dict[str, str]]) -> None:
     url, tokens = server
     seen: list[float] = []
-    scenario = {"kind": "rigid-spin", "duration_s": 2.0, "dt_s": 0.01,
-                "inertia_kg_m2": [[35.0, 30.0, 25.0]], "omega0_rad_s": [[0.01, -0.02, 0.03]]}
+    scenario = {
+        "kind": "rigid-spin",
+        "duration_s": 2.0,
+        "dt_s": 0.01,
+        "inertia_kg_m2": [[35.0, 30.0, 25.0]],
+        "omega0_rad_s": [[0.01, -0.02, 0.03]],
+    }
     with Client(url, tokens["operator"]) as api:
         job = api.simulate(scenario, progress=seen.append, poll_s=0.1, timeout_s=60)
         arrays = api.results(job["id"])

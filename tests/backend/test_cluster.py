@@ -21,8 +21,9 @@ def client():
 def _batch() -> Scenario:
     s = scenario_library.get("somov-ge4-scan")  # MEKF with gyro and star-tracker noise: every variant draws
     variants = [VariantSpec(name="nominal")] + faults.random_wheel_failures(4, (5.0, 50.0), seed=3)
-    return Scenario.model_validate({**s.model_dump(), "duration_s": 60.0,
-                                    "variants": [v.model_dump() for v in variants]})
+    return Scenario.model_validate(
+        {**s.model_dump(), "duration_s": 60.0, "variants": [v.model_dump() for v in variants]}
+    )
 
 
 def test_split_batch_on_two_workers_equals_one_batch(client) -> None:

@@ -26,8 +26,19 @@ CASES = {
 
 def _diagnose(tmp_path: Path, telemetry: Path, *extra: str, dictionary: Path = DICTIONARY) -> tuple[int, dict]:
     out = tmp_path / "diagnosis.json"
-    code = main(["diagnose", str(telemetry), "--dictionary", str(dictionary), "--scenario", "peer-basilisk-rw4",
-                 "--json", str(out), *extra])
+    code = main(
+        [
+            "diagnose",
+            str(telemetry),
+            "--dictionary",
+            str(dictionary),
+            "--scenario",
+            "peer-basilisk-rw4",
+            "--json",
+            str(out),
+            *extra,
+        ]
+    )
     return code, (json.loads(out.read_text()) if out.exists() else {})
 
 

@@ -31,11 +31,17 @@ def test_diagnosis_started_over_rest_names_the_hidden_wheel_failure(tmp_path: Pa
     settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'diagnosis.sqlite'}")
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
-        upload = client.post("/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml",
-                             content=stream.data, headers=operator)
+        upload = client.post(
+            "/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml",
+            content=stream.data,
+            headers=operator,
+        )
         assert upload.status_code == 200, upload.json()
-        started = client.post("/api/v1/diagnoses", headers=operator, json={
-            "satellite": "REFSAT", "scenario": "somov-ge4-scan", "start_utc": _iso(t0), "end_utc": _iso(t1)})
+        started = client.post(
+            "/api/v1/diagnoses",
+            headers=operator,
+            json={"satellite": "REFSAT", "scenario": "somov-ge4-scan", "start_utc": _iso(t0), "end_utc": _iso(t1)},
+        )
         assert started.status_code == 202, started.json()
         run_id = started.json()["id"]
         deadline = time.monotonic() + POLL_TIMEOUT_S
@@ -55,13 +61,19 @@ def test_diagnosis_requests_are_checked(tmp_path: Path) -> None:
     start = datetime(2026, 3, 20, tzinfo=UTC)
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
-        too_long = client.post("/api/v1/diagnoses", headers=operator, json={
-            "start_utc": start.isoformat(), "end_utc": start.replace(day=22).isoformat()})
+        too_long = client.post(
+            "/api/v1/diagnoses",
+            headers=operator,
+            json={"start_utc": start.isoformat(), "end_utc": start.replace(day=22).isoformat()},
+        )
         assert too_long.status_code == 422 and too_long.json()["field"] == "end_utc"
         unknown = client.get("/api/v1/diagnoses/nope", headers=operator)
         assert unknown.status_code == 404 and unknown.json()["field"] == "diagnosis_id"
-        empty = client.post("/api/v1/diagnoses", headers=operator, json={
-            "start_utc": start.isoformat(), "end_utc": start.replace(hour=1).isoformat()}).json()
+        empty = client.post(
+            "/api/v1/diagnoses",
+            headers=operator,
+            json={"start_utc": start.isoformat(), "end_utc": start.replace(hour=1).isoformat()},
+        ).json()
         deadline = time.monotonic() + 30.0
         while (run := client.get(f"/api/v1/diagnoses/{empty['id']}", headers=operator).json())["status"] == "running":
             assert time.monotonic() < deadline

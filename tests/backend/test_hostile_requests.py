@@ -59,11 +59,19 @@ class Server:
 @pytest.fixture(scope="module")
 def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Server]:
     data_dir, port = tmp_path_factory.mktemp("hostile"), free_port()
-    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": "0",
-           "ACS_TWIN_VIEWER_PORT": str(free_port())}
+    env = {
+        **os.environ,
+        "ACS_TWIN_DATA_DIR": str(data_dir),
+        "ACS_TWIN_TELEMETRY_PORT": "0",
+        "ACS_TWIN_VIEWER_PORT": str(free_port()),
+    }
     env.pop("ACS_TWIN_DATABASE_URL", None)
-    process = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(port), "--no-auth",
-                                "--no-emulator"], stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT, env=env)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "backend", "serve", "--port", str(port), "--no-auth", "--no-emulator"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.STDOUT,
+        env=env,
+    )
     running = Server(process, port, data_dir)
     deadline = time.monotonic() + START_TIMEOUT_S
     while time.monotonic() < deadline:
@@ -93,18 +101,30 @@ def test_pass_prediction_over_two_millennia_is_refused_by_span(server: Server, s
     tle = f"{lines[at + 1]}\n{lines[at + 2]}\n"
     assert server.http.post("/satellites/NOAA-20/tles", content=tle).status_code == 201
     for start in ("0001-01-01T00:00:00Z", "1700-01-01T00:00:00Z", "2020-01-01T00:00:00Z"):
-        answer = server.bounded(f"pass prediction {start[:4]} to 2026", "POST", "/satellites/NOAA-20/passes/predict",
-                                params={"station": "Fairbanks", "start": start, "end": "2026-01-01T00:00:00Z"})
+        answer = server.bounded(
+            f"pass prediction {start[:4]} to 2026",
+            "POST",
+            "/satellites/NOAA-20/passes/predict",
+            params={"station": "Fairbanks", "start": start, "end": "2026-01-01T00:00:00Z"},
+        )
         assert answer.status_code == 422 and _field(answer) in ("start", "end"), answer.json()
-    fine = server.bounded("pass prediction of 7 days", "POST", "/satellites/NOAA-20/passes/predict",
-                          params={"station": "Fairbanks", "start": "2021-04-05T00:00:00Z",
-                                  "end": "2021-04-12T00:00:00Z"})
+    fine = server.bounded(
+        "pass prediction of 7 days",
+        "POST",
+        "/satellites/NOAA-20/passes/predict",
+        params={"station": "Fairbanks", "start": "2021-04-05T00:00:00Z", "end": "2021-04-12T00:00:00Z"},
+    )
     assert fine.status_code == 200 and len(fine.json()) > 7
 
 
 def test_csv_dictionary_with_a_hundred_million_element_array_is_refused(server: Server) -> None:
-    answer = server.bounded("uint(100000000) dictionary", "POST", "/dictionaries/huge.csv", params={"apid": 5},
-                            content=b"name,data_type,bit_length\nword,uint(100000000),8\n")
+    answer = server.bounded(
+        "uint(100000000) dictionary",
+        "POST",
+        "/dictionaries/huge.csv",
+        params={"apid": 5},
+        content=b"name,data_type,bit_length\nword,uint(100000000),8\n",
+    )
     assert answer.status_code == 422 and "word.data_type" in answer.json()["message"], answer.json()
 
 
@@ -123,14 +143,17 @@ def test_shipped_dictionaries_are_read_only_and_uploads_are_versioned(server: Se
     assert (server.data_dir / "dictionaries" / ".versions" / "mine.csv.v1").read_bytes() == layout
 
 
-@pytest.mark.parametrize(("case", "body", "field"), [
-    ("duration_s=Infinity", b'{"kind": "rigid-spin", "duration_s": Infinity}', "body"),
-    ("duration_s=NaN", b'{"kind": "rigid-spin", "duration_s": NaN}', "body"),
-    ("denormal dt_s", b'{"kind": "rigid-spin", "dt_s": 5e-324}', "dt_s"),
-    ("denormal dynamics_dt_s", b'{"library": "somov-ge4-scan", "set": ["dynamics_dt_s=5e-324"]}', None),
-    ("duration_s=1e300", b'{"library": "somov-ge4-scan", "set": ["duration_s=1e300"]}', "duration_s"),
-    ("JSON nested 100000 deep", b'{"kind": ' + b"[" * 100_000 + b"]" * 100_000 + b"}", "body"),
-])
+@pytest.mark.parametrize(
+    ("case", "body", "field"),
+    [
+        ("duration_s=Infinity", b'{"kind": "rigid-spin", "duration_s": Infinity}', "body"),
+        ("duration_s=NaN", b'{"kind": "rigid-spin", "duration_s": NaN}', "body"),
+        ("denormal dt_s", b'{"kind": "rigid-spin", "dt_s": 5e-324}', "dt_s"),
+        ("denormal dynamics_dt_s", b'{"library": "somov-ge4-scan", "set": ["dynamics_dt_s=5e-324"]}', None),
+        ("duration_s=1e300", b'{"library": "somov-ge4-scan", "set": ["duration_s=1e300"]}', "duration_s"),
+        ("JSON nested 100000 deep", b'{"kind": ' + b"[" * 100_000 + b"]" * 100_000 + b"}", "body"),
+    ],
+)
 def test_non_finite_huge_or_deep_simulation_bodies_are_422(server: Server, case: str, body: bytes, field) -> None:
     answer = server.bounded(case, "POST", "/simulations", content=body, headers={"content-type": "application/json"})
     assert answer.status_code == 422, answer.json()
@@ -141,18 +164,32 @@ def test_non_finite_huge_or_deep_simulation_bodies_are_422(server: Server, case:
 def test_stray_carriage_return_and_deep_jsonl_uploads_are_quarantined(server: Server) -> None:
     now_s = int(time.time()) - 3600
     csv = f"t_utc_ns,ADCFAQ4\n{now_s * 10**9},0.5\n{now_s + 1}\r000000000,0.25\n{(now_s + 2) * 10**9},0.125\n"
-    answer = server.bounded("CSV with a stray CR", "POST", "/telemetry/uploads", content=csv.encode(),
-                            params={"format": "csv", "satellite": "GROUND"})
+    answer = server.bounded(
+        "CSV with a stray CR",
+        "POST",
+        "/telemetry/uploads",
+        content=csv.encode(),
+        params={"format": "csv", "satellite": "GROUND"},
+    )
     assert answer.status_code == 200 and answer.json()["decoding"]["quarantine_reasons"] == {"bad_row": 1}
     jsonl = b"[" * 500_000 + b"]" * 500_000 + b'\n{"t_utc_ns": %d, "ADCFAQ4": 1.0}\n' % (now_s * 10**9 + 5)
-    answer = server.bounded("JSONL nested 500000 deep", "POST", "/telemetry/uploads", content=jsonl,
-                            params={"format": "jsonl", "satellite": "GROUND"})
+    answer = server.bounded(
+        "JSONL nested 500000 deep",
+        "POST",
+        "/telemetry/uploads",
+        content=jsonl,
+        params={"format": "jsonl", "satellite": "GROUND"},
+    )
     assert answer.status_code == 200 and answer.json()["decoding"]["quarantine_reasons"] == {"bad_row": 1}
 
 
 def test_satellite_name_with_cr_lf_is_refused_not_a_dropped_connection(server: Server) -> None:
-    answer = server.bounded("satellite name with CR/LF", "GET", "/exports/samples",
-                            params={"satellite": "EVIL\r\nSet-Cookie: x=1", "names": "ADCFAQ4"})
+    answer = server.bounded(
+        "satellite name with CR/LF",
+        "GET",
+        "/exports/samples",
+        params={"satellite": "EVIL\r\nSet-Cookie: x=1", "names": "ADCFAQ4"},
+    )
     assert answer.status_code == 422 and _field(answer) == "satellite", answer.json()
 
 
@@ -160,6 +197,11 @@ def test_a_half_written_dictionary_is_a_422_naming_it(server: Server) -> None:
     folder = server.data_dir / "dictionaries"
     folder.mkdir(exist_ok=True)
     (folder / "torn.yaml").write_text("packets:\n  - name: HK\n    apid: 9\n    parameters:\n      - {name: x, ty")
-    answer = server.bounded("half-written dictionary", "POST", "/telemetry/uploads", content=b"\x00" * 64,
-                            params={"dictionary": "torn.yaml", "satellite": "TORN"})
+    answer = server.bounded(
+        "half-written dictionary",
+        "POST",
+        "/telemetry/uploads",
+        content=b"\x00" * 64,
+        params={"dictionary": "torn.yaml", "satellite": "TORN"},
+    )
     assert answer.status_code == 422 and _field(answer) == "dictionary", answer.json()

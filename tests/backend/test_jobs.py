@@ -16,9 +16,13 @@ from tests.backend.conftest import bearer, make_settings
 
 JOB_TIMEOUT_S = 60.0  # spawn start-up (~1-2 s on these 2 cores) plus the run, with margin
 ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level
-SHORT_SPIN = {"kind": "rigid-spin", "duration_s": 2.0, "dt_s": 0.01,
-              "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
-              "omega0_rad_s": [[0.01, -0.02, 0.03], [0.05, -0.04, 0.07]]}
+SHORT_SPIN = {
+    "kind": "rigid-spin",
+    "duration_s": 2.0,
+    "dt_s": 0.01,
+    "inertia_kg_m2": [[35.0, 30.0, 25.0], [500.0, 200.0, 300.0]],
+    "omega0_rad_s": [[0.01, -0.02, 0.03], [0.05, -0.04, 0.07]],
+}
 LONG_SPIN = {"kind": "rigid-spin", "duration_s": 2000.0, "dt_s": 0.001}
 
 
@@ -33,7 +37,8 @@ def _wait(client: TestClient, job_id: str, token: str, states: tuple[str, ...]) 
 
 
 def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
-        client: TestClient, tokens: dict[str, str]) -> None:
+    client: TestClient, tokens: dict[str, str]
+) -> None:
     answer = client.post("/api/v1/simulations", json=SHORT_SPIN, headers=bearer(tokens["operator"]))
     assert answer.status_code == 202
     job = _wait(client, answer.json()["id"], tokens["viewer"], ("succeeded", "failed"))
@@ -42,8 +47,9 @@ def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
     assert max(job["summary"]["energy_rel_drift"]) < ENERGY_DRIFT_TOLERANCE
     files = client.get(f"/api/v1/simulations/{job['id']}/files", headers=bearer(tokens["viewer"])).json()
     assert {f["name"] for f in files} == {"scenario.json", "summary.json", "trajectory.npz"}
-    series = client.get(f"/api/v1/simulations/{job['id']}/series/omega_b_rad_s?member=1&max_points=12",
-                        headers=bearer(tokens["viewer"])).json()
+    series = client.get(
+        f"/api/v1/simulations/{job['id']}/series/omega_b_rad_s?member=1&max_points=12", headers=bearer(tokens["viewer"])
+    ).json()
     assert series["total_points"] == 201 and len(series["t_s"]) <= 12
     assert np.allclose(series["values"][0], SHORT_SPIN["omega0_rad_s"][1])
     audit = client.get("/api/v1/audit?action=simulation.create", headers=bearer(tokens["admin"])).json()
@@ -51,21 +57,22 @@ def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
 
 
 def test_over_a_limit_is_422_naming_the_limit(tmp_path: Path, database_url: str) -> None:
-    settings = make_settings(tmp_path, database_url, max_sim_duration_s=100.0, max_batch_size=2,
-                             max_output_mb=1.0)
+    settings = make_settings(tmp_path, database_url, max_sim_duration_s=100.0, max_batch_size=2, max_output_mb=1.0)
     with TestClient(create_app(settings)) as client:
         token = client.app.state.services.auth.issue("op", Role.operator)[1]
-        cases = {"max_sim_duration_s": {"kind": "rigid-spin", "duration_s": 101.0},
-                 "max_batch_size": {"kind": "rigid-spin", "inertia_kg_m2": [[1, 2, 3]] * 3,
-                                    "omega0_rad_s": [[0, 0, 1]] * 3},
-                 "max_output_mb": {"kind": "rigid-spin", "duration_s": 99.0, "dt_s": 0.001}}
+        cases = {
+            "max_sim_duration_s": {"kind": "rigid-spin", "duration_s": 101.0},
+            "max_batch_size": {"kind": "rigid-spin", "inertia_kg_m2": [[1, 2, 3]] * 3, "omega0_rad_s": [[0, 0, 1]] * 3},
+            "max_output_mb": {"kind": "rigid-spin", "duration_s": 99.0, "dt_s": 0.001},
+        }
         for limit, body in cases.items():
             answer = client.post("/api/v1/simulations", json=body, headers=bearer(token))
             assert answer.status_code == 422 and answer.json()["field"] == limit, answer.json()
 
 
 def test_full_queue_is_429_with_retry_after_and_cancel_stops_the_worker(
-        client: TestClient, tokens: dict[str, str]) -> None:
+    client: TestClient, tokens: dict[str, str]
+) -> None:
     operator = bearer(tokens["operator"])
     first = client.post("/api/v1/simulations", json=LONG_SPIN, headers=operator).json()["id"]
     second = client.post("/api/v1/simulations", json=LONG_SPIN, headers=operator).json()["id"]
@@ -111,12 +118,15 @@ def test_engine_job_returns_exactly_what_sim_core_engine_computes(tmp_path: Path
         job_id = client.post("/api/v1/simulations", json=ENGINE_BODY, headers=operator).json()["id"]
         deadline = time.monotonic() + ENGINE_JOB_TIMEOUT_S
         while (job := client.get(f"/api/v1/simulations/{job_id}", headers=operator).json())["status"] in (
-                "queued", "running"):
+            "queued",
+            "running",
+        ):
             assert time.monotonic() < deadline, job
             time.sleep(0.5)
         assert job["status"] == "succeeded", job["error"]
-        series = client.get(f"/api/v1/simulations/{job_id}/series/omega_b_rad_s?max_points=100000",
-                            headers=operator).json()
+        series = client.get(
+            f"/api/v1/simulations/{job_id}/series/omega_b_rad_s?max_points=100000", headers=operator
+        ).json()
     direct = simulate(apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=20"]))
     expected = {k: v for k, v in direct.summary(0).items() if k != "wall_time_s"}
     got = {k: v for k, v in job["summary"]["variants"][0].items() if k != "wall_time_s"}

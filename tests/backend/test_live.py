@@ -12,10 +12,10 @@ import pytest
 from fastapi.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from backend.ingest.live_hub import LiveHub
-from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
 from backend.app import create_app
 from backend.core.auth import Role
+from backend.ingest.live_hub import LiveHub
+from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
 from tests.backend.conftest import bearer, make_settings
 
 QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
@@ -59,9 +59,8 @@ def test_a_client_that_stalls_a_send_is_dropped() -> None:
 
 
 def test_websocket_batches_at_most_rate_hz_and_needs_a_token(client: TestClient, tokens: dict[str, str]) -> None:
-    with pytest.raises(WebSocketDisconnect) as refused:
-        with client.websocket_connect("/api/v1/ws") as ws:
-            ws.receive_json()
+    with pytest.raises(WebSocketDisconnect) as refused, client.websocket_connect("/api/v1/ws") as ws:
+        ws.receive_json()
     assert refused.value.code == CLOSE_UNAUTHORIZED
     hub = client.app.state.services.hub
     rate_hz = client.app.state.services.settings.ws_rate_hz
@@ -87,8 +86,9 @@ def test_websocket_batches_at_most_rate_hz_and_needs_a_token(client: TestClient,
         assert batches <= rate_hz * elapsed + 1
 
 
-def test_uploaded_packets_reach_a_websocket_subscriber(client: TestClient, tokens: dict[str, str],
-                                                       shared_data: Path) -> None:
+def test_uploaded_packets_reach_a_websocket_subscriber(
+    client: TestClient, tokens: dict[str, str], shared_data: Path
+) -> None:
     data = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
     with client.websocket_connect("/api/v1/ws", headers=bearer(tokens["viewer"])) as ws:
         ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
@@ -103,12 +103,18 @@ def test_uploaded_packets_reach_a_websocket_subscriber(client: TestClient, token
 
 
 def test_packets_streamed_over_tcp_are_archived_and_reach_a_websocket_subscriber(
-        tmp_path: Path, database_url: str, shared_data: Path) -> None:
+    tmp_path: Path, database_url: str, shared_data: Path
+) -> None:
     """End to end: TCP link (real NOAA-20 packets) → ingest process → archive and → WebSocket subscriber."""
     packets = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
     n_sent, packet_octets = 500, 71
-    settings = make_settings(tmp_path, database_url, live_enabled=True, live_satellite="NOAA-20",
-                             live_dictionary="noaa20_apid11_ccsdspy.yaml")
+    settings = make_settings(
+        tmp_path,
+        database_url,
+        live_enabled=True,
+        live_satellite="NOAA-20",
+        live_dictionary="noaa20_apid11_ccsdspy.yaml",
+    )
     with TestClient(create_app(settings)) as client:
         viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
         port = client.get("/api/v1/health").json()["live"]["port"]
@@ -162,14 +168,15 @@ def test_emulated_satellite_over_tcp_reaches_archive_and_websocket(tmp_path: Pat
         while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < len(stream):
             assert time.monotonic() < deadline, "emulated packets never reached the archive"
             time.sleep(0.1)
-        archived = client.get(f"/api/v1/parameters/q_est_ib_0/samples?satellite={settings.live_satellite}"
-                              f"&max_points={sent_q0.size}", headers=bearer(viewer)).json()
+        archived = client.get(
+            f"/api/v1/parameters/q_est_ib_0/samples?satellite={settings.live_satellite}&max_points={sent_q0.size}",
+            headers=bearer(viewer),
+        ).json()
     assert np.allclose(live, sent_q0, atol=QUATERNION_RESOLUTION)
     assert np.allclose(archived["values"], sent_q0, atol=QUATERNION_RESOLUTION)
 
 
-def test_revoking_a_token_closes_its_open_websocket_within_a_second(client: TestClient,
-                                                                     tokens: dict[str, str]) -> None:
+def test_revoking_a_token_closes_its_open_websocket_within_a_second(client: TestClient, tokens: dict[str, str]) -> None:
     import time
 
     viewer = tokens["viewer"]

@@ -57,8 +57,12 @@ def test_a_viewer_token_opens_the_page_and_is_kept_out_of_the_url(gated) -> None
 def test_revoking_the_token_closes_the_open_monitor_websocket_within_a_second(gated) -> None:
     services, gate = gated
     token_id, token = services.auth.issue("monitor viewer", Role.viewer)
-    with connect(f"ws://127.0.0.1:{gate.port}/", subprotocols=[f"viser-v{viser.__version__}"],
-                 additional_headers={"Cookie": f"{COOKIE}={token}"}, open_timeout=10) as ws:
+    with connect(
+        f"ws://127.0.0.1:{gate.port}/",
+        subprotocols=[f"viser-v{viser.__version__}"],
+        additional_headers={"Cookie": f"{COOKIE}={token}"},
+        open_timeout=10,
+    ) as ws:
         assert ws.subprotocol == f"viser-v{viser.__version__}"
         services.tokens.revoke(token_id)
         start = time.monotonic()

@@ -56,20 +56,32 @@ def _seed(client: TestClient, shared_data: Path) -> dict[str, dict[str, Any]]:
     satellite, pass_id = {"name": "NOAA-20"}, {"pass_id": passes[0]["id"]}
     return {
         f"{api}/parameters/{{name}}/samples": {"name": "ADCFAQ4"},
-        f"{api}/satellites/{{name}}/tles": satellite, f"{api}/satellites/{{name}}/tle": satellite,
+        f"{api}/satellites/{{name}}/tles": satellite,
+        f"{api}/satellites/{{name}}/tle": satellite,
         f"{api}/satellites/{{name}}/passes/reception": satellite,
         f"{api}/satellites/{{name}}/passes/predict": satellite,
-        f"{api}/satellites/{{name}}/twin": satellite, f"{api}/ground-stations/{{name}}": {"name": "Fairbanks"},
-        f"{api}/passes/{{pass_id}}": pass_id, f"{api}/passes/{{pass_id}}/summary": pass_id,
-        f"{api}/simulations/{{job_id}}": {"job_id": job}, f"{api}/simulations/{{job_id}}/files": {"job_id": job},
+        f"{api}/satellites/{{name}}/twin": satellite,
+        f"{api}/ground-stations/{{name}}": {"name": "Fairbanks"},
+        f"{api}/passes/{{pass_id}}": pass_id,
+        f"{api}/passes/{{pass_id}}/summary": pass_id,
+        f"{api}/simulations/{{job_id}}": {"job_id": job},
+        f"{api}/simulations/{{job_id}}/files": {"job_id": job},
         f"{api}/simulations/{{job_id}}/files/{{name}}": {"job_id": job, "name": series[0]["name"]},
         f"{api}/simulations/{{job_id}}/series/{{name}}": {"job_id": job, "name": "omega_b_rad_s"},
     }
 
 
 def test_api_matches_its_openapi_document(tmp_path: Path, shared_data: Path) -> None:
-    app = create_app(Settings(data_dir=tmp_path, auth_enabled=False, job_queue_size=2, max_upload_mb=1.0,
-                              telemetry_port=0, live_enabled=False))
+    app = create_app(
+        Settings(
+            data_dir=tmp_path,
+            auth_enabled=False,
+            job_queue_size=2,
+            max_upload_mb=1.0,
+            telemetry_port=0,
+            live_enabled=False,
+        )
+    )
     tally: Counter[str] = Counter()
     server_errors: list[str] = []
 
@@ -106,13 +118,18 @@ def test_api_matches_its_openapi_document(tmp_path: Path, shared_data: Path) -> 
                 if on_state and fixed is None:
                     continue
                 strategy = operation.as_strategy(generation_mode=mode, path_parameters=fixed)
-                run = settings(max_examples=EXAMPLES_PER_OPERATION, deadline=None, database=None,
-                               suppress_health_check=list(HealthCheck))(
-                    given(case=strategy)(checker(conformance=mode is GenerationMode.POSITIVE)))
+                run = settings(
+                    max_examples=EXAMPLES_PER_OPERATION,
+                    deadline=None,
+                    database=None,
+                    suppress_health_check=list(HealthCheck),
+                )(given(case=strategy)(checker(conformance=mode is GenerationMode.POSITIVE)))
                 try:
                     run()
                 except Unsatisfiable:  # nothing in this operation's schema to violate (e.g. GET /health)
                     assert mode is GenerationMode.NEGATIVE, operation.path
-    print(f"schemathesis: {tally['requests']} requests over {len(operations)} operations in "
-          f"{time.monotonic() - started:.0f} s, {len(server_errors)} server errors")
+    print(
+        f"schemathesis: {tally['requests']} requests over {len(operations)} operations in "
+        f"{time.monotonic() - started:.0f} s, {len(server_errors)} server errors"
+    )
     assert server_errors == []

@@ -33,14 +33,16 @@ def _skyfield_passes(line1: str, line2: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_predicted_passes_match_skyfield_and_reception_uses_the_diary(
-        client: TestClient, tokens: dict[str, str], shared_data: Path) -> None:
+    client: TestClient, tokens: dict[str, str], shared_data: Path
+) -> None:
     operator, viewer = bearer(tokens["operator"]), bearer(tokens["viewer"])
     line1, line2 = _noaa20_tle(shared_data)
     assert client.post("/api/v1/ground-stations", json=STATION, headers=operator).status_code == 201
     tle = client.post("/api/v1/satellites/NOAA-20/tles", content=f"{line1}\n{line2}\n", headers=operator)
     assert tle.status_code == 201
-    predicted = client.post(f"/api/v1/satellites/NOAA-20/passes/predict?station=Fairbanks&start={DAY[0]}&end={DAY[1]}",
-                            headers=operator)
+    predicted = client.post(
+        f"/api/v1/satellites/NOAA-20/passes/predict?station=Fairbanks&start={DAY[0]}&end={DAY[1]}", headers=operator
+    )
     assert predicted.status_code == 200, predicted.json()
     aos_truth, los_truth = _skyfield_passes(line1, line2)
     complete = min(len(aos_truth), len(los_truth))
@@ -52,8 +54,9 @@ def test_predicted_passes_match_skyfield_and_reception_uses_the_diary(
     assert np.all(np.abs(los[:, None] - los_truth[None, :]).min(axis=1) < EVENT_TOLERANCE_S)
 
     client.post("/api/v1/telemetry/uploads", content=(shared_data / DIARY).read_bytes(), headers=operator)
-    recounted = client.post(f"/api/v1/satellites/NOAA-20/passes/reception?start={DAY[0]}&end={DAY[1]}",
-                            headers=operator).json()
+    recounted = client.post(
+        f"/api/v1/satellites/NOAA-20/passes/reception?start={DAY[0]}&end={DAY[1]}", headers=operator
+    ).json()
     received = [p for p in recounted if p["packets_received"] > 0]
     assert received, "the two-hour diary overlaps at least one Fairbanks pass"
     first = received[0]
@@ -70,8 +73,9 @@ GROUND_CSV = "t_utc,ADCFAQ4\n2021-04-09T00:00:00Z,0.5\n2021-04-09T00:00:01Z,0.25
 
 def test_ground_csv_upload_is_archived_and_bad_rows_quarantined(client: TestClient, tokens: dict[str, str]) -> None:
     operator = bearer(tokens["operator"])
-    report = client.post("/api/v1/telemetry/uploads?format=csv&satellite=GROUND", content=GROUND_CSV,
-                         headers=operator).json()
+    report = client.post(
+        "/api/v1/telemetry/uploads?format=csv&satellite=GROUND", content=GROUND_CSV, headers=operator
+    ).json()
     assert report["archive"]["packets_accepted"] == 2
     assert report["decoding"]["quarantine_reasons"] == {"bad_row": 1}
     samples = client.get("/api/v1/parameters/ADCFAQ4/samples?satellite=GROUND", headers=operator).json()

@@ -67,11 +67,20 @@ def wait_gone(pids: set[int], timeout_s: float = GONE_TIMEOUT_S) -> set[int]:
 
 def start_server(data_dir: Path, api_port: int, telemetry_port: int, *extra: str) -> tuple[subprocess.Popen, list[str]]:
     """``python -m backend serve`` on free loopback ports with the demo emulator; its start-up lines."""
-    env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": str(telemetry_port),
-           "ACS_TWIN_VIEWER_PORT": str(free_port())}
+    env = {
+        **os.environ,
+        "ACS_TWIN_DATA_DIR": str(data_dir),
+        "ACS_TWIN_TELEMETRY_PORT": str(telemetry_port),
+        "ACS_TWIN_VIEWER_PORT": str(free_port()),
+    }
     env.pop("ACS_TWIN_DATABASE_URL", None)
-    process = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(api_port), *extra],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "backend", "serve", "--port", str(api_port), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     lines: list[str] = []
     assert process.stdout is not None
     deadline = time.monotonic() + START_TIMEOUT_S

@@ -20,8 +20,13 @@ START_TIMEOUT_S = 60.0  # cold imports of numpy/numba/sqlalchemy on a busy 2-cor
 def _serve(data_dir: Path, port: int) -> tuple[subprocess.Popen, list[str]]:
     env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_TELEMETRY_PORT": "0"}
     env.pop("ACS_TWIN_DATABASE_URL", None)
-    process = subprocess.Popen([sys.executable, "-m", "backend", "serve", "--port", str(port)],
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "backend", "serve", "--port", str(port)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     lines: list[str] = []
     assert process.stdout is not None
     while (line := process.stdout.readline()) and line.strip():
@@ -49,8 +54,9 @@ def test_first_start_prints_an_admin_token_once_and_binds_loopback(tmp_path: Pat
         found = [m.group(1) for line in lines if (m := re.search(r"admin token .*: (acs_\S+)", line))]
         assert len(found) == 1, lines
         assert any(f"http://127.0.0.1:{port}/api/v1" in line for line in lines)
-        tokens = httpx.get(f"http://127.0.0.1:{port}/api/v1/tokens",
-                           headers={"Authorization": f"Bearer {found[0]}"}).json()
+        tokens = httpx.get(
+            f"http://127.0.0.1:{port}/api/v1/tokens", headers={"Authorization": f"Bearer {found[0]}"}
+        ).json()
         assert [t["role"] for t in tokens] == ["admin"]
         assert httpx.get(f"http://127.0.0.1:{port}/api/v1/tokens").status_code == 401
     finally:

@@ -25,8 +25,11 @@ N_PACKETS = 7200  # two hours at 1 Hz (data README)
 @pytest.fixture
 def uploaded(client: TestClient, tokens: dict[str, str], shared_data: Path) -> dict:
     """The NOAA-20 packet file uploaded once by an operator; the ingest report."""
-    answer = client.post("/api/v1/telemetry/uploads?satellite=NOAA-20&source=DAT1",
-                         content=(shared_data / PACKETS).read_bytes(), headers=bearer(tokens["operator"]))
+    answer = client.post(
+        "/api/v1/telemetry/uploads?satellite=NOAA-20&source=DAT1",
+        content=(shared_data / PACKETS).read_bytes(),
+        headers=bearer(tokens["operator"]),
+    )
     assert answer.status_code == 200, answer.json()
     return answer.json()
 
@@ -37,32 +40,39 @@ def _csv_q0(shared_data: Path) -> np.ndarray:
 
 
 def test_uploaded_diary_samples_match_the_independently_decoded_csv(
-        client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path) -> None:
+    client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path
+) -> None:
     assert uploaded["archive"]["packets_accepted"] == N_PACKETS
     assert uploaded["decoding"]["quarantined_count"] == 0
-    body = client.get(f"/api/v1/parameters/q_ib_0/samples?max_points={N_PACKETS}",
-                      headers=bearer(tokens["viewer"])).json()
+    body = client.get(
+        f"/api/v1/parameters/q_ib_0/samples?max_points={N_PACKETS}", headers=bearer(tokens["viewer"])
+    ).json()
     assert body["total_points"] == N_PACKETS
     assert np.allclose(body["values"], _csv_q0(shared_data), rtol=FLOAT32_REL, atol=0)
     assert np.all(np.diff(body["t_utc_ns"]) > 0)
 
 
 def test_downsampled_samples_keep_the_extremes_and_respect_max_points(
-        client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path) -> None:
+    client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path
+) -> None:
     body = client.get("/api/v1/parameters/q_ib_0/samples?max_points=100", headers=bearer(tokens["viewer"])).json()
     truth = _csv_q0(shared_data)
     assert len(body["values"]) <= 100
     assert max(body["values"]) == pytest.approx(truth.max(), rel=FLOAT32_REL)
     assert min(body["values"]) == pytest.approx(truth.min(), rel=FLOAT32_REL)
-    window = client.get("/api/v1/parameters/q_ib_0/samples?start=2021-04-09T00:00:00Z"
-                        "&end=2021-04-09T00:00:59.5Z", headers=bearer(tokens["viewer"])).json()
+    window = client.get(
+        "/api/v1/parameters/q_ib_0/samples?start=2021-04-09T00:00:00Z&end=2021-04-09T00:00:59.5Z",
+        headers=bearer(tokens["viewer"]),
+    ).json()
     assert window["total_points"] == 60
 
 
 def test_repeated_upload_is_a_reported_no_op_and_uploads_are_audited(
-        client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path) -> None:
-    again = client.post("/api/v1/telemetry/uploads", content=(shared_data / PACKETS).read_bytes(),
-                        headers=bearer(tokens["operator"])).json()
+    client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path
+) -> None:
+    again = client.post(
+        "/api/v1/telemetry/uploads", content=(shared_data / PACKETS).read_bytes(), headers=bearer(tokens["operator"])
+    ).json()
     assert again["archive"]["duplicate_upload"] is True and again["archive"]["packets_accepted"] == 0
     audit = client.get("/api/v1/audit?action=telemetry.upload", headers=bearer(tokens["admin"])).json()
     assert len(audit) == 2 and audit[-1]["detail"]["packets_accepted"] == N_PACKETS
@@ -71,8 +81,9 @@ def test_repeated_upload_is_a_reported_no_op_and_uploads_are_audited(
     assert uploads[0]["uploaded_by"] == "test-operator" and uploads[0]["source"] == "DAT1"
 
 
-def test_parquet_and_csv_exports_round_trip(client: TestClient, tokens: dict[str, str], uploaded: dict,
-                                            shared_data: Path) -> None:
+def test_parquet_and_csv_exports_round_trip(
+    client: TestClient, tokens: dict[str, str], uploaded: dict, shared_data: Path
+) -> None:
     viewer = bearer(tokens["viewer"])
     parquet = client.get("/api/v1/exports/samples?names=q_ib_0,q_ib_1&format=parquet", headers=viewer)
     table = pq.read_table(io.BytesIO(parquet.content)).to_pydict()
@@ -85,24 +96,56 @@ def test_parquet_and_csv_exports_round_trip(client: TestClient, tokens: dict[str
 
 
 def test_rest_export_and_acs_twin_export_give_the_same_full_resolution_rows(
-        client: TestClient, tokens: dict[str, str], uploaded: dict, settings, tmp_path: Path, capsysbinary) -> None:
+    client: TestClient, tokens: dict[str, str], uploaded: dict, settings, tmp_path: Path, capsysbinary
+) -> None:
     """Every one of the 7,200 samples (never downsampled), the same bytes through REST and the CLI, window given
     in ISO 8601 with Z and fractional seconds."""
     from backend.cli import main
 
     window = "start=2021-04-09T00:10:00.5Z&end=2021-04-09T01:10:00.5Z"
-    rest = client.get(f"/api/v1/exports/samples?satellite=NOAA-20&names=q_ib_0,q_ib_3&{window}",
-                      headers=bearer(tokens["viewer"])).content
-    assert main(["export", "--db", str(settings.database_url), "--satellite", "NOAA-20", "--parameters",
-                 "q_ib_0,q_ib_3", "--start", "2021-04-09T00:10:00.5Z", "--end", "2021-04-09T01:10:00.5Z"]) == 0
+    rest = client.get(
+        f"/api/v1/exports/samples?satellite=NOAA-20&names=q_ib_0,q_ib_3&{window}", headers=bearer(tokens["viewer"])
+    ).content
+    assert (
+        main(
+            [
+                "export",
+                "--db",
+                str(settings.database_url),
+                "--satellite",
+                "NOAA-20",
+                "--parameters",
+                "q_ib_0,q_ib_3",
+                "--start",
+                "2021-04-09T00:10:00.5Z",
+                "--end",
+                "2021-04-09T01:10:00.5Z",
+            ]
+        )
+        == 0
+    )
     cli = capsysbinary.readouterr().out
     assert cli == rest
     rows = list(csv.DictReader(io.StringIO(rest.decode())))
     assert len(rows) == 3600 and list(rows[0]) == ["t_utc", "q_ib_0", "q_ib_3"]
     assert rows[0]["t_utc"] > "2021-04-09T00:10:00.5" and rows[-1]["t_utc"] < "2021-04-09T01:10:00.5"
     out = tmp_path / "all.parquet"
-    assert main(["export", "--db", str(settings.database_url), "--satellite", "NOAA-20", "--parameters",
-                 "q_ib_0", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "export",
+                "--db",
+                str(settings.database_url),
+                "--satellite",
+                "NOAA-20",
+                "--parameters",
+                "q_ib_0",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert pq.read_table(out).num_rows == N_PACKETS
 
 
@@ -129,19 +172,28 @@ packets:
 
 
 def test_uploaded_dictionary_with_limits_raises_alarms_that_operators_acknowledge_and_shelve(
-        client: TestClient, tokens: dict[str, str], shared_data: Path) -> None:
+    client: TestClient, tokens: dict[str, str], shared_data: Path
+) -> None:
     operator, viewer = bearer(tokens["operator"]), bearer(tokens["viewer"])
     layout = (shared_data / NOAA20 / "ccsdspy_jpss1_geolocation.csv").read_bytes()
-    shipped = client.post("/api/v1/dictionaries/ccsdspy_jpss1_geolocation.csv?apid=11", content=layout,
-                          headers=operator)
+    shipped = client.post(
+        "/api/v1/dictionaries/ccsdspy_jpss1_geolocation.csv?apid=11", content=layout, headers=operator
+    )
     assert shipped.status_code == 409 and shipped.json()["field"] == "name"  # shipped dictionaries are read-only
-    assert client.post("/api/v1/dictionaries/jpss1_geolocation_layout.csv?apid=11", content=layout,
-                       headers=operator).status_code == 201
+    assert (
+        client.post(
+            "/api/v1/dictionaries/jpss1_geolocation_layout.csv?apid=11", content=layout, headers=operator
+        ).status_code
+        == 201
+    )
     made = client.post("/api/v1/dictionaries/limited.yaml", content=LIMITED_DICTIONARY.encode(), headers=operator)
     assert made.status_code == 201 and made.json()["packets"] == {"11": "JPSS_ATT_EPHEM"}
     assert "limited.yaml" in client.get("/api/v1/dictionaries", headers=viewer).json()
-    report = client.post("/api/v1/telemetry/uploads?satellite=NOAA-20L&dictionary=limited.yaml",
-                         content=(shared_data / PACKETS).read_bytes(), headers=operator).json()
+    report = client.post(
+        "/api/v1/telemetry/uploads?satellite=NOAA-20L&dictionary=limited.yaml",
+        content=(shared_data / PACKETS).read_bytes(),
+        headers=operator,
+    ).json()
     assert report["archive"]["alarm_events"] > 0
     alarms = client.get("/api/v1/alarms?satellite=NOAA-20L", headers=viewer).json()
     assert [a["parameter"] for a in alarms] == ["q0_watch"]
@@ -161,8 +213,10 @@ def test_bad_dictionary_is_rejected_naming_the_body(client: TestClient, tokens: 
     assert "broken.xml" not in client.get("/api/v1/dictionaries", headers=bearer(tokens["viewer"])).json()
 
 
-VALLADO_TLE = ("1 00005U 58002B   00179.78495062  .00000023  00000-0  28098-4 0  4753\n"
-               "2 00005  34.2682 348.7242 1859667 331.7664  19.3264 10.82419157413667\n")
+VALLADO_TLE = (
+    "1 00005U 58002B   00179.78495062  .00000023  00000-0  28098-4 0  4753\n"
+    "2 00005  34.2682 348.7242 1859667 331.7664  19.3264 10.82419157413667\n"
+)
 
 
 def test_stations_tles_and_passes(client: TestClient, tokens: dict[str, str]) -> None:
@@ -186,7 +240,8 @@ CYGNSS_TIME = "year=*_HDR_YEAR,doy=*_HDR_DAY,hour=*_HDR_HOUR,minute=*_HDR_MIN,se
 
 
 def test_foreign_mission_through_the_api_time_fields_and_undefined_apids(
-        client: TestClient, tokens: dict[str, str]) -> None:
+    client: TestClient, tokens: dict[str, str]
+) -> None:
     """A CYGNSS ccsdspy CSV uploaded with its APID and time fields; the mixed L0 stream uploaded against it:
     APID 393's 40 packets archived with the values ccsdspy reads, the 6 other APIDs counted and kept raw,
     the same upload again is a no-op reporting its duplicates per APID."""
@@ -195,8 +250,12 @@ def test_foreign_mission_through_the_api_time_fields_and_undefined_apids(
 
     operator, viewer = bearer(tokens["operator"]), bearer(tokens["viewer"])
     layout = (CYGNSS / "ccsdspy" / "apid00393.csv").read_bytes()
-    made = client.post("/api/v1/dictionaries/cygnss_adcsio.csv", params={"apid": 393, "time_fields": CYGNSS_TIME},
-                       content=layout, headers=operator)
+    made = client.post(
+        "/api/v1/dictionaries/cygnss_adcsio.csv",
+        params={"apid": 393, "time_fields": CYGNSS_TIME},
+        content=layout,
+        headers=operator,
+    )
     assert made.status_code == 201, made.json()
     stream = (CYGNSS / "CYGNSS_F7_L0_2022_086_10_15_V01_F__first101pkts.tlm").read_bytes()
     url = "/api/v1/telemetry/uploads?satellite=CYGNSS-FM07&dictionary=cygnss_adcsio.csv"
@@ -204,7 +263,8 @@ def test_foreign_mission_through_the_api_time_fields_and_undefined_apids(
     assert report["archive"]["packets_accepted"] == 40 and report["published"] is True
     assert report["decoding"]["undefined_apids"] == {"384": 4, "386": 4, "391": 1, "392": 4, "394": 39, "1313": 9}
     theirs = ccsdspy.FixedLength.from_file(str(CYGNSS / "ccsdspy" / "apid00393.csv")).load(
-        split_by_apid(io.BytesIO(stream))[393])
+        split_by_apid(io.BytesIO(stream))[393]
+    )
     samples = client.get("/api/v1/parameters/ADCS_NST_Q1/samples?satellite=CYGNSS-FM07", headers=viewer).json()
     assert samples["values"] == theirs["ADCS_NST_Q1"].astype(float).tolist()
     again = client.post(url, content=stream, headers=operator).json()["archive"]

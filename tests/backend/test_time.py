@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta, timezone
 
 import numpy as np
 
@@ -17,6 +17,6 @@ def test_utc_ns_matches_numpy_datetime64_and_treats_naive_as_utc() -> None:
 
 
 def test_out_of_range_times_are_clamped_into_int64_and_none_gives_default() -> None:
-    assert utc_ns(datetime(2263, 1, 1, tzinfo=timezone.utc), 0) == BOUND_NS
+    assert utc_ns(datetime(2263, 1, 1, tzinfo=UTC), 0) == BOUND_NS
     assert utc_ns(datetime(1, 1, 1), 0) == -BOUND_NS
     assert utc_ns(None, 42) == 42

@@ -41,41 +41,64 @@ def satellite_packets() -> tuple[bytes, int, float]:
 
     fault = emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S}")
     traj, _, stream = emulator.emulate(faults=[fault])
-    allowance = emulator.truth_wheel_allowance_rad_s(traj, scenario_library.get(emulator.DEFAULT_SCENARIO), ALIGN_S,
-                                                     ALIGN_S + TWIN_S)
+    allowance = emulator.truth_wheel_allowance_rad_s(
+        traj, scenario_library.get(emulator.DEFAULT_SCENARIO), ALIGN_S, ALIGN_S + TWIN_S
+    )
     return stream.data, int(stream.t_utc_ns[0]), allowance * 30.0 / np.pi
 
 
 def _wait(client: TestClient, session_id: str, headers: dict[str, str]) -> dict:
     deadline = time.monotonic() + TWIN_TIMEOUT_S
     while (session := client.get(f"/api/v1/twin/sessions/{session_id}", headers=headers).json())["status"] in (
-            "queued", "running"):
+        "queued",
+        "running",
+    ):
         assert time.monotonic() < deadline, session
         time.sleep(0.5)
     return session
 
 
 def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_departs(
-        tmp_path: Path, satellite_packets: tuple[bytes, int, float]) -> None:
+    tmp_path: Path, satellite_packets: tuple[bytes, int, float]
+) -> None:
     data, t0_ns, truth_rpm = satellite_packets
     settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'twin.sqlite'}")
     align = np.datetime_as_string(np.datetime64(t0_ns + int(ALIGN_S * 1e9), "ns"), unit="ms") + "Z"
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
-        upload = client.post("/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml",
-                             content=data, headers=operator)
+        upload = client.post(
+            "/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml",
+            content=data,
+            headers=operator,
+        )
         assert upload.status_code == 200, upload.json()
-        right = client.post("/api/v1/twin/sessions", headers=operator, json={
-            "satellite": "REFSAT", "align_utc": align, "duration_s": TWIN_S,
-            "faults": [f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S - ALIGN_S}"], "alternatives": {"nominal": []}})
+        right = client.post(
+            "/api/v1/twin/sessions",
+            headers=operator,
+            json={
+                "satellite": "REFSAT",
+                "align_utc": align,
+                "duration_s": TWIN_S,
+                "faults": [f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S - ALIGN_S}"],
+                "alternatives": {"nominal": []},
+            },
+        )
         assert right.status_code == 202, right.json()
         assert _wait(client, right.json()["id"], operator)["status"] == "succeeded"
         residuals = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals", headers=operator).json()
         nominal = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals?variant=1", headers=operator).json()
         feed = session_feed(client.app.state.services, right.json()["id"])
-        wrong = client.post("/api/v1/twin/sessions", headers=operator, json={  # every hypothesis names another wheel
-            "satellite": "REFSAT", "align_utc": align, "duration_s": TWIN_S, "faults": [f"wheel:3:failure@{0}"],
-            "alternatives": {"wheel-0-fails": ["wheel:0:failure@0"]}})
+        wrong = client.post(
+            "/api/v1/twin/sessions",
+            headers=operator,
+            json={  # every hypothesis names another wheel
+                "satellite": "REFSAT",
+                "align_utc": align,
+                "duration_s": TWIN_S,
+                "faults": [f"wheel:3:failure@{0}"],
+                "alternatives": {"wheel-0-fails": ["wheel:0:failure@0"]},
+            },
+        )
         assert _wait(client, wrong.json()["id"], operator)["status"] == "succeeded"
         none_fits = client.get(f"/api/v1/twin/sessions/{wrong.json()['id']}/residuals", headers=operator).json()
     assert residuals["best_match"] == "twin" and residuals["verdict"].startswith("twin fits best")
@@ -105,8 +128,9 @@ def _check_feed(feed: TwinFeed, summary: dict) -> None:
     assert np.allclose(np.linalg.norm(r, axis=1), ORBIT_RADIUS_M, atol=ORBIT_RADIUS_TOL_M)
 
 
-def test_twin_without_telemetry_is_422_naming_the_field(client: TestClient, tokens: dict[str, str],
-                                                       shared_data: Path) -> None:
+def test_twin_without_telemetry_is_422_naming_the_field(
+    client: TestClient, tokens: dict[str, str], shared_data: Path
+) -> None:
     operator = bearer(tokens["operator"])
     body = {"align_utc": "2030-01-01T00:00:00Z", "duration_s": 60.0}
     unknown = client.post("/api/v1/twin/sessions", headers=operator, json=body)

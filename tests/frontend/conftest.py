@@ -17,9 +17,19 @@ from frontend.feed import TrajectoryFeed
 from sim_core.trajectory import Trajectory
 
 CHROMIUM = Path("/usr/bin/chromium")
-CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                  "--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--use-gl=angle",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+]
 NOAA20_PACKETS = Path("real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1")
 NOAA20_TLE = Path("tle/real_sso_smallsats.tle")
 STATION = {"name": "Svalbard", "lat_deg": 78.23, "lon_deg": 15.39, "alt_m": 500.0, "min_elevation_deg": 5.0}
@@ -58,12 +68,23 @@ def synthetic_trajectory(duration_s: float = 600.0, dt_s: float = 1.0, offset_de
     w_b = np.stack([quaternion.rotate(quaternion.conjugate(q[k]), w[k]) for k in range(2)])
     n = t.size
     series = {
-        "q_ib": q, "omega_b_rad_s": w_b, "r_eci_m": np.broadcast_to(r, (2, n, 3)).copy(),
+        "q_ib": q,
+        "omega_b_rad_s": w_b,
+        "r_eci_m": np.broadcast_to(r, (2, n, 3)).copy(),
         "wheel_speed_rad_s": np.stack([np.outer(np.ones(n), [100.0, -100.0, 50.0, -50.0])] * 2),
-        "md_dipole_am2": np.zeros((2, n, 3)), "observing": np.ones((2, n)), "fault_flags": np.zeros((2, n)),
+        "md_dipole_am2": np.zeros((2, n, 3)),
+        "observing": np.ones((2, n)),
+        "fault_flags": np.zeros((2, n)),
     }
-    return Trajectory("synthetic-nadir", ["nominal", "rolled"], t, series, [[], []], np.full(4, 0.0191),
-                      extra={"epoch_unix_s": 1_773_964_800.0})
+    return Trajectory(
+        "synthetic-nadir",
+        ["nominal", "rolled"],
+        t,
+        series,
+        [[], []],
+        np.full(4, 0.0191),
+        extra={"epoch_unix_s": 1_773_964_800.0},
+    )
 
 
 @pytest.fixture(scope="session")
@@ -120,8 +141,14 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
     from frontend.dashboard_site import dashboard_app
 
     tmp = tmp_path_factory.mktemp("backend")
-    settings = Settings(data_dir=tmp / "data", database_url=f"sqlite:///{tmp / 'api.sqlite'}", job_workers=1,
-                        job_queue_size=2, telemetry_port=0, live_enabled=False)
+    settings = Settings(
+        data_dir=tmp / "data",
+        database_url=f"sqlite:///{tmp / 'api.sqlite'}",
+        job_workers=1,
+        job_queue_size=2,
+        telemetry_port=0,
+        live_enabled=False,
+    )
     app = create_app(settings)
     if not any(getattr(route, "path", "") == "/dashboard" for route in app.routes):
         app.mount("/dashboard", dashboard_app({}))  # the backend mounts it itself once it ships that
@@ -133,20 +160,25 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
     base = f"http://127.0.0.1:{port}"
     h = {"Authorization": f"Bearer {token}"}
     with httpx.Client(base_url=base, headers=h, timeout=120.0) as c:
-        c.post("/api/v1/telemetry/uploads?satellite=NOAA-20", content=(shared_data / NOAA20_PACKETS).read_bytes()
-               ).raise_for_status()
+        c.post(
+            "/api/v1/telemetry/uploads?satellite=NOAA-20", content=(shared_data / NOAA20_PACKETS).read_bytes()
+        ).raise_for_status()
         tle = "\n".join((shared_data / NOAA20_TLE).read_text().splitlines()[9:12])
         c.post("/api/v1/satellites/NOAA-20/tles", content=tle).raise_for_status()
         c.post("/api/v1/ground-stations", json=STATION).raise_for_status()
-        c.post("/api/v1/satellites/NOAA-20/passes/predict",
-               params={"station": "Svalbard", "start": DIARY_START, "end": DIARY_END}).raise_for_status()
+        c.post(
+            "/api/v1/satellites/NOAA-20/passes/predict",
+            params={"station": "Svalbard", "start": DIARY_START, "end": DIARY_END},
+        ).raise_for_status()
         passes = c.post("/api/v1/satellites/NOAA-20/passes/reception").json()
         layout = (shared_data / NOAA20_PACKETS.parent / "ccsdspy_jpss1_geolocation.csv").read_bytes()
         # shipped dictionaries are read-only: an operator uploads the same layout under a name of their own
         c.post("/api/v1/dictionaries/jpss1_geolocation_upload.csv?apid=11", content=layout).raise_for_status()
         c.post("/api/v1/dictionaries/limited.yaml", content=LIMITED_DICTIONARY.encode()).raise_for_status()
-        c.post(f"/api/v1/telemetry/uploads?satellite={ALARM_SATELLITE}&dictionary=limited.yaml",
-               content=(shared_data / NOAA20_PACKETS).read_bytes()).raise_for_status()
+        c.post(
+            f"/api/v1/telemetry/uploads?satellite={ALARM_SATELLITE}&dictionary=limited.yaml",
+            content=(shared_data / NOAA20_PACKETS).read_bytes(),
+        ).raise_for_status()
     yield {"base": base, "token": token, "passes": passes}
     server.should_exit = True
     thread.join(timeout=10.0)

@@ -30,7 +30,8 @@ SCENE_FRACTION = 0.62  # left part of the page: the control panel floats on the 
 def _displayed_utc(page) -> str | None:
     return page.evaluate(
         "(p) => Array.from(document.querySelectorAll('input')).map(i => i.value).find(v => new RegExp(p).test(v))",
-        UTC_PATTERN)
+        UTC_PATTERN,
+    )
 
 
 def _wait_for(predicate, timeout_s: float, what: str) -> None:
@@ -79,8 +80,9 @@ def test_two_monitors_connected_at_once_stay_in_step_when_the_clock_moves(browse
             monitors.clock.pause()
             monitors.clock.seek(target)
             expected = format_utc(target)
-            _wait_for(lambda: [_displayed_utc(p) for p in pages] == [expected] * 2, 10.0,
-                      f"both monitors at {expected}")
+            _wait_for(
+                lambda: [_displayed_utc(p) for p in pages] == [expected] * 2, 10.0, f"both monitors at {expected}"
+            )
     finally:
         for page in pages:
             page.close()
@@ -146,8 +148,9 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
         page.wait_for_selector("#alarms tbody tr.state-shelved", timeout=10_000)
         # the diary ends back inside the limits: acknowledging clears the alarm off the active list
         page.click("#alarms tbody tr.state-shelved button:text('ack')")  # shelved alarms can be acknowledged
-        page.wait_for_function("document.querySelector('#alarms tbody').innerText.includes('no active alarms')",
-                               timeout=10_000)
+        page.wait_for_function(
+            "document.querySelector('#alarms tbody').innerText.includes('no active alarms')", timeout=10_000
+        )
         assert errors == []
     finally:
         page.close()
@@ -171,21 +174,26 @@ def emulated_telemetry(backend_server) -> int:
 
     fault = emulator.parse_fault(f"wheel:{HIDDEN_WHEEL}:failure@{HIDDEN_ONSET_S}")
     _, _, stream = emulator.emulate(faults=[fault], duration_s=EMULATED_S)
-    with httpx.Client(base_url=backend_server["base"], timeout=120.0,
-                      headers={"Authorization": f"Bearer {backend_server['token']}"}) as c:
-        c.post(f"/api/v1/telemetry/uploads?satellite={EMULATED_SATELLITE}&dictionary=reference_satellite.yaml",
-               content=stream.data).raise_for_status()
+    with httpx.Client(
+        base_url=backend_server["base"], timeout=120.0, headers={"Authorization": f"Bearer {backend_server['token']}"}
+    ) as c:
+        c.post(
+            f"/api/v1/telemetry/uploads?satellite={EMULATED_SATELLITE}&dictionary=reference_satellite.yaml",
+            content=stream.data,
+        ).raise_for_status()
     return int(stream.t_utc_ns[0])
 
 
 def _series_per_chart(page) -> list[int]:
     """Plotted series of each residual chart (legend rows minus the time axis)."""
     return page.eval_on_selector_all(
-        "#whatif-plots .twin-chart", "cs => cs.map(c => c.querySelectorAll('.u-legend .u-series').length - 1)")
+        "#whatif-plots .twin-chart", "cs => cs.map(c => c.querySelectorAll('.u-legend .u-series').length - 1)"
+    )
 
 
-def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(browser, backend_server, emulated_telemetry,
-                                                                        tmp_path):
+def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(
+    browser, backend_server, emulated_telemetry, tmp_path
+):
     page = browser.new_page(viewport={"width": 1920, "height": 1400})
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))

@@ -20,8 +20,12 @@ def test_dashboard_serves_index_script_styles_and_config():
         modules = sorted(p.name for p in (DASHBOARD_DIR / "js").glob("*.js"))
         imported = {m for p in (DASHBOARD_DIR / "js").glob("*.js") for m in IMPORT.findall(p.read_text())}
         assert imported <= set(modules) and "main.js" in modules
-        vendored = ["vendor/uplot/uPlot.iife.min.js", "vendor/uplot/uPlot.min.css",
-                    "vendor/swagger-ui/swagger-ui-bundle.js", "vendor/swagger-ui/swagger-ui.css"]
+        vendored = [
+            "vendor/uplot/uPlot.iife.min.js",
+            "vendor/uplot/uPlot.min.css",
+            "vendor/swagger-ui/swagger-ui-bundle.js",
+            "vendor/swagger-ui/swagger-ui.css",
+        ]
         for path in ["dashboard.css", *vendored] + [f"js/{m}" for m in modules]:
             answer = client.get("/" + path)
             assert answer.status_code == 200, path
@@ -55,8 +59,7 @@ def test_vendored_uplot_carries_its_mit_licence_and_provenance():
     assert "npm" in (DASHBOARD_DIR / "vendor/uplot/PROVENANCE.md").read_text()
 
 
-@pytest.mark.parametrize(("args", "field"), [(({"actual": "ftp://x"},), "monitor_urls"),
-                                             (({}, "api/v1"), "api_base")])
+@pytest.mark.parametrize(("args", "field"), [(({"actual": "ftp://x"},), "monitor_urls"), (({}, "api/v1"), "api_base")])
 def test_bad_config_names_the_field(args, field):
     with pytest.raises(ValueError, match=field):
         dashboard_config(*args)

@@ -63,8 +63,12 @@ def test_orbit_beyond_the_data_stays_on_the_j2_perturbed_circle(feed):
 
 def test_active_alarms_list_uncleared_faults_and_recent_saturations():
     traj = synthetic_trajectory()
-    traj.events[0] = [(10.0, "fault_onset", 2), (20.0, "md_saturated", 0), (30.0, "fault_onset", 1),
-                      (40.0, "fault_cleared", 1)]
+    traj.events[0] = [
+        (10.0, "fault_onset", 2),
+        (20.0, "md_saturated", 0),
+        (30.0, "fault_onset", 1),
+        (40.0, "fault_cleared", 1),
+    ]
     feed = TrajectoryFeed(traj)
     epoch = traj.extra["epoch_unix_s"]
     assert feed.active_alarms(epoch + 5.0) == []
@@ -80,11 +84,14 @@ def test_attitude_samples_are_hit_exactly(feed):
     traj = synthetic_trajectory(offset_deg=ROLL_DEG)
     t = traj.t_s[::37] + _epoch(feed)
     q = feed.attitude_simulated(t)
-    assert np.max(quaternion.angle(quaternion.multiply(quaternion.conjugate(traj["q_ib"][1][::37]), q))) < SAMPLE_TOL_RAD
+    assert (
+        np.max(quaternion.angle(quaternion.multiply(quaternion.conjugate(traj["q_ib"][1][::37]), q))) < SAMPLE_TOL_RAD
+    )
 
 
-@pytest.mark.parametrize(("kwargs", "field"), [({"actual_variant": 5}, "actual_variant"),
-                                                ({"simulated_variant": -1}, "simulated_variant")])
+@pytest.mark.parametrize(
+    ("kwargs", "field"), [({"actual_variant": 5}, "actual_variant"), ({"simulated_variant": -1}, "simulated_variant")]
+)
 def test_bad_variant_names_the_field(kwargs, field):
     with pytest.raises(ValueError, match=field):
         TrajectoryFeed(synthetic_trajectory(), **kwargs)

@@ -19,7 +19,7 @@ EARTH_GLB_MAX_BYTES = 1_000_000  # DESIGN.md: a 2048 px texture is ≈ 0.65 MB; 
 def _gltf_json(glb: bytes) -> dict:
     assert glb[:4] == b"glTF"
     n = struct.unpack("<I", glb[12:16])[0]
-    return json.loads(glb[20:20 + n])
+    return json.loads(glb[20 : 20 + n])
 
 
 def _pixel(u: float, v: float) -> np.ndarray:
@@ -30,8 +30,13 @@ def _pixel(u: float, v: float) -> np.ndarray:
 
 def _uv_of(lat_deg: float, lon_deg: float) -> np.ndarray:
     vertices, _, normals, uv = globe.earth_mesh_arrays()
-    target = np.array([np.cos(np.radians(lat_deg)) * np.cos(np.radians(lon_deg)),
-                       np.cos(np.radians(lat_deg)) * np.sin(np.radians(lon_deg)), np.sin(np.radians(lat_deg))])
+    target = np.array(
+        [
+            np.cos(np.radians(lat_deg)) * np.cos(np.radians(lon_deg)),
+            np.cos(np.radians(lat_deg)) * np.sin(np.radians(lon_deg)),
+            np.sin(np.radians(lat_deg)),
+        ]
+    )
     return uv[np.argmax(normals @ target)]
 
 

@@ -19,7 +19,12 @@ CONFIG = al.AllocationConfig()
 AXES = al.ge_axes(CONFIG.gamma_rad)
 PAIRS = [(p, q) for p in range(4) for q in range(p + 1, 4)]
 
-unit = st.tuples(*[st.floats(-1.0, 1.0)] * 3).map(np.array).filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
+unit = (
+    st.tuples(*[st.floats(-1.0, 1.0)] * 3)
+    .map(np.array)
+    .filter(lambda v: np.linalg.norm(v) > 0.1)
+    .map(lambda v: v / np.linalg.norm(v))
+)
 wheel_box = st.tuples(*[st.floats(-M_MAX_NM, M_MAX_NM)] * 4).map(np.array)
 momentum_box = st.tuples(*[st.floats(-0.95, 0.95)] * 4).map(lambda h: np.array(h) * CONFIG.h_max_nms)
 
@@ -57,7 +62,11 @@ def test_min_norm_and_three_wheel_laws_equal_basilisk_rw_motor_torque():
         rw.GsMatrix_B, rw.JsList, rw.numRW = gs.T.ravel().tolist(), [0.1] * 4, 4
         av = messaging.RWAvailabilityMsgPayload()
         av.wheelAvailability = [0 if a else 1 for a in avail]
-        msgs = [messaging.CmdTorqueBodyMsg().write(cmd), messaging.RWArrayConfigMsg().write(rw), messaging.RWAvailabilityMsg().write(av)]
+        msgs = [
+            messaging.CmdTorqueBodyMsg().write(cmd),
+            messaging.RWArrayConfigMsg().write(rw),
+            messaging.RWAvailabilityMsg().write(av),
+        ]
         for port, msg in zip((module.vehControlInMsg, module.rwParamsInMsg, module.rwAvailInMsg), msgs):
             port.subscribeTo(msg)
         sim = SimulationBaseClass.SimBaseClass()

@@ -119,7 +119,9 @@ def test_filtered_attitude_reproduces_a_constant_offset_from_the_program_exactly
 
 def test_rate_smoothing_step_response_is_geometric():
     beta, n = 0.2, 30
-    out = _run_mismatch_filter(np.array([1.0, 0, 0, 0]), np.tile([1.0, 0, 0, 0], (n, 1)), np.ones((n, 3)), 0.5, 0.1, beta, 0.25)
+    out = _run_mismatch_filter(
+        np.array([1.0, 0, 0, 0]), np.tile([1.0, 0, 0, 0], (n, 1)), np.ones((n, 3)), 0.5, 0.1, beta, 0.25
+    )
     assert np.allclose(out[:, 6], 1.0 - (1.0 - beta) ** np.arange(1, n + 1), atol=EXACT)
 
 
@@ -188,7 +190,9 @@ def test_body_rate_estimator_recovers_noaa20_orbital_rate_from_real_attitude(sha
     dt = float(np.median(np.diff(t)))
     steps = qt.normalize(qt.multiply(qt.conjugate(q[:-1]), q[1:]))  # short way: q and −q alike
     theta = 2.0 * np.arctan2(np.linalg.norm(steps[:, 1:], axis=-1), steps[:, 0])[:, None]
-    z = np.vstack([np.zeros(3), np.cumsum(theta * steps[:, 1:] / np.linalg.norm(steps[:, 1:], axis=-1, keepdims=True), axis=0)])
+    z = np.vstack(
+        [np.zeros(3), np.cumsum(theta * steps[:, 1:] / np.linalg.norm(steps[:, 1:], axis=-1, keepdims=True), axis=0)]
+    )
     time_constant = 20.0  # s: smooths the float32 quantisation, follows the orbit-scale motion
     k12, k22 = af.continuous_gains(time_constant**-4.0, 1.0)
     phi, gamma = af.body_rate_discretisation(k12, k22, dt)

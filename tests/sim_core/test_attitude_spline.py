@@ -97,8 +97,9 @@ def test_right_jacobian_is_the_derivative_of_the_exponential_and_its_inverse_inv
         np.testing.assert_allclose(jr @ attitude_spline.right_jacobian_inverse(phi), np.eye(3), atol=1e-12)
         for axis in np.eye(3):  # exp(φ)⁻¹ ∘ exp(φ + δ a) ≈ exp(J_r(φ) a δ)
             d = 1e-6
-            fwd = quaternion.multiply(quaternion.conjugate(attitude_spline.exp_rotation(phi)),
-                                      attitude_spline.exp_rotation(phi + d * axis))
+            fwd = quaternion.multiply(
+                quaternion.conjugate(attitude_spline.exp_rotation(phi)), attitude_spline.exp_rotation(phi + d * axis)
+            )
             np.testing.assert_allclose(attitude_spline.log_rotation(fwd) / d, jr @ axis, atol=1e-6)
 
 

@@ -4,7 +4,6 @@ the iterative geodetic conversion of frames.py, and the elevation angle seen fro
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

@@ -25,8 +25,13 @@ def _run(root: Path, guarded: bool) -> int:
         print(twice())
     """)
     env_path = str(Path(sim_core.__file__).parent.parent)
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin"})
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin"},
+    )
     return int(out.stdout.strip())
 
 

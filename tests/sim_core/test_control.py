@@ -25,12 +25,19 @@ ARCSEC = np.deg2rad(1.0 / 3600.0)
 GAINS = ctl.DigitalLawGains()
 J = ctl.SOMOV_INERTIA_KG_M2
 
-unit = st.tuples(*[st.floats(-1.0, 1.0)] * 3).map(np.array).filter(lambda v: np.linalg.norm(v) > 0.1).map(lambda v: v / np.linalg.norm(v))
+unit = (
+    st.tuples(*[st.floats(-1.0, 1.0)] * 3)
+    .map(np.array)
+    .filter(lambda v: np.linalg.norm(v) > 0.1)
+    .map(lambda v: v / np.linalg.norm(v))
+)
 
 
 def _controller_tf(gains=GAINS):
     """Seed 000's k(1 + τ1 s)/(1 + τ2 s) discretised by scipy's bilinear (Tustin) transform."""
-    num, den, _ = signal.cont2discrete(([gains.k_per_s2 * gains.tau1_s, gains.k_per_s2], [gains.tau2_s, 1.0]), gains.t_u_s, method="bilinear")
+    num, den, _ = signal.cont2discrete(
+        ([gains.k_per_s2 * gains.tau1_s, gains.k_per_s2], [gains.tau2_s, 1.0]), gains.t_u_s, method="bilinear"
+    )
     return np.ravel(num), np.ravel(den)
 
 
@@ -78,7 +85,9 @@ def test_closed_loop_eigenvalues_inside_unit_circle_with_margin(delay):
 @pytest.mark.parametrize("delay", [0, 1])
 def test_margins_meet_requirements_and_agree_with_scipy_freqz(delay):
     gain_margin, phase_margin, w_c = ctl.loop_margins(GAINS, delay)
-    print(f"delay {delay} T_u: GM = {20 * np.log10(gain_margin):.1f} dB, PM = {np.degrees(phase_margin):.1f} deg, crossover {w_c:.4f} rad/s")
+    print(
+        f"delay {delay} T_u: GM = {20 * np.log10(gain_margin):.1f} dB, PM = {np.degrees(phase_margin):.1f} deg, crossover {w_c:.4f} rad/s"
+    )
     if delay == 0:
         assert gain_margin > GAIN_MARGIN_MIN and phase_margin > PHASE_MARGIN_MIN
     else:
@@ -197,7 +206,11 @@ def test_feed_forward_of_eq7_flies_a_principal_axis_roll_exactly():
             ang, rate, acc = 0.5 * w_max * t1 + w_max * (t - t1), w_max, 0.0
         elif t < t3:
             tau = t - t2
-            ang, rate, acc = 0.5 * w_max * t1 + w_max * (t2 - t1) + w_max * tau - 0.5 * alpha * tau * tau, w_max - alpha * tau, -alpha
+            ang, rate, acc = (
+                0.5 * w_max * t1 + w_max * (t2 - t1) + w_max * tau - 0.5 * alpha * tau * tau,
+                w_max - alpha * tau,
+                -alpha,
+            )
         else:
             ang, rate, acc = np.deg2rad(20.0), 0.0, 0.0
         return qt.from_axis_angle(axis, ang), rate * axis, acc * axis
@@ -235,7 +248,9 @@ def test_stored_momentum_leaves_the_static_error_of_the_loop_stiffness_unless_co
                 torque = torque + ctl.gyroscopic_torque(x[4:], h_cluster, J)
 
             def f(s, torque=torque):
-                return np.concatenate([qt.derivative(s[:4], s[4:]), inv @ (torque - np.cross(s[4:], J @ s[4:] + h_cluster))])
+                return np.concatenate(
+                    [qt.derivative(s[:4], s[4:]), inv @ (torque - np.cross(s[4:], J @ s[4:] + h_cluster))]
+                )
 
             for _ in range(round(GAINS.t_u_s / dt)):
                 x = _rk4(f, x, dt)
@@ -276,8 +291,12 @@ def test_law_and_ge_allocation_fly_a_roll_on_a_four_wheel_gyrostat():
     for k in range(200):  # 400 s: f_ρ needs ≈ 250 s at the φ_ρ cap, then decays as e^{−μ_ρ t}
         q_p, w_p, wd_p = program(k * GAINS.t_u_s)
         h_body = axes @ x[7:]
-        torque = ctl.digital_law_step(x[:4], x[4:7], q_p, w_p, wd_p, g, J, gains_v) + ctl.gyroscopic_torque_1(x[4:7], J, h_body)
-        status = alloc.allocate_1(torque, axes, np.ones(4, dtype=bool), x[7:].copy(), np.array([3e-5, 0, 0]), params, wheel_torque, dipole)
+        torque = ctl.digital_law_step(x[:4], x[4:7], q_p, w_p, wd_p, g, J, gains_v) + ctl.gyroscopic_torque_1(
+            x[4:7], J, h_body
+        )
+        status = alloc.allocate_1(
+            torque, axes, np.ones(4, dtype=bool), x[7:].copy(), np.array([3e-5, 0, 0]), params, wheel_torque, dipole
+        )
         assert status == alloc.STATUS_OK
         m = np.array([ctl.wheel_torque_command_1(v, 0.0, 0.2) for v in wheel_torque])
         for _ in range(round(GAINS.t_u_s / dt)):
@@ -387,7 +406,12 @@ def test_unloading_over_an_orbit_dumps_momentum_in_every_direction():
 
 def test_mrp_feedback_matches_basilisk_unit_test_reference():
     """Inputs and reference formula of Basilisk's test_mrpFeedback.py (Ki < 0, 4 wheels, known torque 0)."""
-    sigma, w_br, w_rn, dw_rn = np.array([0.3, -0.5, 0.7]), np.array([0.010, -0.020, 0.015]), np.array([-0.02, -0.01, 0.005]), np.array([0.0002, 0.0003, 0.0001])
+    sigma, w_br, w_rn, dw_rn = (
+        np.array([0.3, -0.5, 0.7]),
+        np.array([0.010, -0.020, 0.015]),
+        np.array([-0.02, -0.01, 0.005]),
+        np.array([0.0002, 0.0003, 0.0001]),
+    )
     inertia = np.diag([1000.0, 800.0, 800.0])
     gs = np.array([[1.0, 0, 0, 0.577350269190], [0, 1.0, 0, 0.577350269190], [0, 0, 1.0, 0.577350269190]])
     js, speeds, k, p = np.full(4, 0.1), np.array([10.0, 25.0, 50.0, 100.0]), 0.15, 150.0
@@ -396,8 +420,14 @@ def test_mrp_feedback_matches_basilisk_unit_test_reference():
     lr = k * sigma + p * w_br - np.cross(w_rn, inertia @ w_bn + gs_hs) + inertia @ (-dw_rn + np.cross(w_bn, w_rn))
     got = ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, [True] * 4, k, p)
     assert np.allclose(got, -lr, atol=1e-8)  # Basilisk's accuracy in that test
-    without_wheel_2 = ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js * [1, 0, 1, 1], speeds, [True] * 4, k, p)
-    assert np.allclose(ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, [True, False, True, True], k, p), without_wheel_2, atol=EXACT)
+    without_wheel_2 = ctl.mrp_feedback(
+        sigma, w_br, w_rn, dw_rn, inertia, gs, js * [1, 0, 1, 1], speeds, [True] * 4, k, p
+    )
+    assert np.allclose(
+        ctl.mrp_feedback(sigma, w_br, w_rn, dw_rn, inertia, gs, js, speeds, [True, False, True, True], k, p),
+        without_wheel_2,
+        atol=EXACT,
+    )
 
 
 def _basilisk_step(module) -> None:
@@ -424,7 +454,12 @@ def test_mrp_feedback_equals_basilisk_module(law_type):
 
     rng = np.random.default_rng(11 + law_type)
     for _ in range(10):
-        sigma, w_br, w_rn, dw_rn = rng.uniform(-0.5, 0.5, 3), rng.normal(0, 0.02, 3), rng.normal(0, 0.01, 3), rng.normal(0, 1e-4, 3)
+        sigma, w_br, w_rn, dw_rn = (
+            rng.uniform(-0.5, 0.5, 3),
+            rng.normal(0, 0.02, 3),
+            rng.normal(0, 0.01, 3),
+            rng.normal(0, 1e-4, 3),
+        )
         root = rng.normal(size=(3, 3))
         inertia = root @ root.T + np.diag([30.0, 25.0, 20.0])
         gs = rng.normal(size=(3, 4))
@@ -434,7 +469,12 @@ def test_mrp_feedback_equals_basilisk_module(law_type):
         module = mrpFeedback.mrpFeedback()
         module.K, module.P, module.Ki, module.controlLawType = k, p, -1.0, law_type
         guid = messaging.AttGuidMsgPayload()
-        guid.sigma_BR, guid.omega_BR_B, guid.omega_RN_B, guid.domega_RN_B = sigma.tolist(), w_br.tolist(), w_rn.tolist(), dw_rn.tolist()
+        guid.sigma_BR, guid.omega_BR_B, guid.omega_RN_B, guid.domega_RN_B = (
+            sigma.tolist(),
+            w_br.tolist(),
+            w_rn.tolist(),
+            dw_rn.tolist(),
+        )
         veh = messaging.VehicleConfigMsgPayload()
         veh.ISCPntB_B = inertia.ravel().tolist()
         rw = messaging.RWArrayConfigMsgPayload()
@@ -450,7 +490,10 @@ def test_mrp_feedback_equals_basilisk_module(law_type):
             messaging.RWSpeedMsg().write(spd),
             messaging.RWAvailabilityMsg().write(av),
         ]
-        for port, msg in zip((module.guidInMsg, module.vehConfigInMsg, module.rwParamsInMsg, module.rwSpeedsInMsg, module.rwAvailInMsg), msgs):
+        for port, msg in zip(
+            (module.guidInMsg, module.vehConfigInMsg, module.rwParamsInMsg, module.rwSpeedsInMsg, module.rwAvailInMsg),
+            msgs,
+        ):
             port.subscribeTo(msg)
         _basilisk_step(module)
         expected = np.array(module.cmdTorqueOutMsg.read().torqueRequestBody)
@@ -471,7 +514,9 @@ def test_mrp_feedback_lyapunov_function_decreases_in_regulation():
     values = [lyapunov(x)]
     for _ in range(3000):  # 150 s
         sigma = qt.to_mrp(x[:4])
-        torque = ctl.mrp_feedback(sigma, x[4:], np.zeros(3), np.zeros(3), J, empty, np.zeros(0), np.zeros(0), np.zeros(0, bool), k, p, 1)
+        torque = ctl.mrp_feedback(
+            sigma, x[4:], np.zeros(3), np.zeros(3), J, empty, np.zeros(0), np.zeros(0), np.zeros(0, bool), k, p, 1
+        )
         x = _rk4(_rigid_body(torque, J), x, dt)
         x[:4] /= np.linalg.norm(x[:4])
         values.append(lyapunov(x))

@@ -48,10 +48,14 @@ def test_closed_loop_conserves_inertial_momentum_without_external_torque():
     s = apply_overrides(scenario_library.get("peer-basilisk-rw4"), ["gravity_gradient=false", "duration_s=1200"])
     traj = engine.simulate(s)
     params = engine.plant_params(s)
-    h = np.array([
-        angular_momentum_i(pack_state(params, q, w, speeds), params)
-        for q, w, speeds in zip(traj["q_ib"][0][::20], traj["omega_b_rad_s"][0][::20], traj["wheel_speed_rad_s"][0][::20])
-    ])
+    h = np.array(
+        [
+            angular_momentum_i(pack_state(params, q, w, speeds), params)
+            for q, w, speeds in zip(
+                traj["q_ib"][0][::20], traj["omega_b_rad_s"][0][::20], traj["wheel_speed_rad_s"][0][::20]
+            )
+        ]
+    )
     scale = np.sum(np.abs(traj["wheel_speed_rad_s"][0, 0]) * traj.wheel_inertia_kg_m2)  # |H| ≈ 0 here
     assert np.max(np.linalg.norm(h - h[0], axis=1)) / scale < MOMENTUM_RTOL
 
@@ -70,8 +74,9 @@ def test_somov_scan_flies_both_courses_to_arcsec_accuracy():
     summary = traj.summary()
     assert summary["observing_samples"] == 2 * 120 * 4
     assert summary["pointing_error_rms_arcsec"] < 10.0
-    roll = np.degrees(quaternion.to_euler_132(
-        quaternion.multiply(quaternion.conjugate(traj["q_prog_ib"][0]), traj["q_ib"][0]))[1])
+    roll = np.degrees(
+        quaternion.to_euler_132(quaternion.multiply(quaternion.conjugate(traj["q_prog_ib"][0]), traj["q_ib"][0]))[1]
+    )
     assert np.max(np.abs(roll[traj["observing"][0] > 0])) < 60.0 / 3600.0
 
 
@@ -79,10 +84,18 @@ def test_variant_result_does_not_depend_on_the_batch_it_runs_in():
     """Batch axis: a variant's history is identical alone or beside others (own random stream)."""
     base = apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=200"])
     alone = engine.simulate(base)
-    batch = engine.simulate(base.model_copy(update={"variants": [
-        VariantSpec(name="nominal"),
-        VariantSpec(name="wheel 1 dead", faults=[FaultSpec(target="wheel", index=0, type="failure", onset_s=50)]),
-    ]}))
+    batch = engine.simulate(
+        base.model_copy(
+            update={
+                "variants": [
+                    VariantSpec(name="nominal"),
+                    VariantSpec(
+                        name="wheel 1 dead", faults=[FaultSpec(target="wheel", index=0, type="failure", onset_s=50)]
+                    ),
+                ]
+            }
+        )
+    )
     np.testing.assert_array_equal(alone["q_ib"][0], batch["q_ib"][0])
     assert not np.array_equal(batch["wheel_speed_rad_s"][0], batch["wheel_speed_rad_s"][1])
     assert [e[1] for e in batch.events[1]] == ["fault_onset"]
@@ -91,12 +104,22 @@ def test_variant_result_does_not_depend_on_the_batch_it_runs_in():
 def test_seized_wheel_keeps_total_momentum():
     """A wheel seizing passes its momentum to the body: inertial H unchanged across the onset."""
     s = apply_overrides(scenario_library.get("peer-basilisk-rw4"), ["gravity_gradient=false", "duration_s=100"])
-    s = s.model_copy(update={"variants": [VariantSpec(name="stuck", faults=[FaultSpec(target="wheel", index=1, type="stuck", onset_s=20)])]})
+    s = s.model_copy(
+        update={
+            "variants": [
+                VariantSpec(name="stuck", faults=[FaultSpec(target="wheel", index=1, type="stuck", onset_s=20)])
+            ]
+        }
+    )
     traj = engine.simulate(s)
     params = engine.plant_params(s)
     k0, k1 = 30, 60  # 15 s and 30 s at 0.5 s output
-    h = [angular_momentum_i(pack_state(params, traj["q_ib"][0][k], traj["omega_b_rad_s"][0][k],
-                                       traj["wheel_speed_rad_s"][0][k]), params) for k in (k0, k1)]
+    h = [
+        angular_momentum_i(
+            pack_state(params, traj["q_ib"][0][k], traj["omega_b_rad_s"][0][k], traj["wheel_speed_rad_s"][0][k]), params
+        )
+        for k in (k0, k1)
+    ]
     assert traj["wheel_speed_rad_s"][0][k1, 1] == 0.0
     np.testing.assert_allclose(h[1], h[0], rtol=1e-9, atol=1e-9)
 
@@ -108,8 +131,11 @@ def test_cancel_stops_the_run():
 
 @pytest.mark.parametrize(
     "assignment, field",
-    [("controller.nonexistent=1", "controller.nonexistent"), ("duration_s=-5", "duration_s"),
-     ("spacecraft.cluster.wheels.9.inertia_kg_m2=1", "spacecraft.cluster.wheels.9")],
+    [
+        ("controller.nonexistent=1", "controller.nonexistent"),
+        ("duration_s=-5", "duration_s"),
+        ("spacecraft.cluster.wheels.9.inertia_kg_m2=1", "spacecraft.cluster.wheels.9"),
+    ],
 )
 def test_bad_overrides_name_the_field(assignment, field):
     with pytest.raises(ValueError, match=field.split(".")[0]):
@@ -178,7 +204,11 @@ def test_the_plant_flies_the_truth_and_the_software_the_model():
         wheels = (traj["wheel_speed_rad_s"][0] * p.wheels.inertia_kg_m2) @ p.wheel_axes_b.T
         return quaternion.rotate(traj["q_ib"][0], traj["omega_b_rad_s"][0] @ p.inertia_kg_m2.T + wheels)
 
-    drift = {k: np.max(np.linalg.norm(h - h[0], axis=1)) / np.linalg.norm(h[0])
-             for k, h in (("truth", h_inertial(engine.plant_params(s, truth=True))),
-                          ("model", h_inertial(engine.plant_params(s))))}
+    drift = {
+        k: np.max(np.linalg.norm(h - h[0], axis=1)) / np.linalg.norm(h[0])
+        for k, h in (
+            ("truth", h_inertial(engine.plant_params(s, truth=True))),
+            ("model", h_inertial(engine.plant_params(s))),
+        )
+    }
     assert drift["truth"] <= 1e-6 < 1e-3 <= drift["model"]

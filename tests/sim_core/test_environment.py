@@ -14,7 +14,7 @@ from sim_core import environment, frames, orbit, quaternion
 
 # NCEI prints the field to 0.1 nT: rounding alone is ±0.05 nT; the requirement is 0.5 nT.
 NCEI_TOL_NT = 0.5
-NCEI_EPOCH_UNIX_S = dt.datetime(2010, 1, 1, tzinfo=dt.timezone.utc).timestamp()
+NCEI_EPOCH_UNIX_S = dt.datetime(2010, 1, 1, tzinfo=dt.UTC).timestamp()
 
 
 def _enu(lat_deg: np.ndarray, lon_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -55,7 +55,7 @@ def test_field_synthesis_equals_ppigrf_geocentric_synthesis(model, max_degree):
     e_r = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], axis=-1)
     e_theta = np.stack([np.cos(th) * np.cos(ph), np.cos(th) * np.sin(ph), -np.sin(th)], axis=-1)
     e_phi = np.stack([-np.sin(ph), np.cos(ph), np.zeros_like(ph)], axis=-1)
-    t = dt.datetime(2024, 7, 1, 12, tzinfo=dt.timezone.utc)
+    t = dt.datetime(2024, 7, 1, 12, tzinfo=dt.UTC)
     b_nt = environment.magnetic_field_ecef_t(r_m[:, None] * e_r, t.timestamp(), model) * 1e9
     truth = ppigrf.igrf_gc(r_m / 1e3, colat, lon, t.replace(tzinfo=None), max_degree=max_degree)
     for axis, component in zip((e_r, e_theta, e_phi), truth):
@@ -106,8 +106,8 @@ SUN_DISTANCE_REL_TOL = 1e-4
 
 def test_analytic_sun_kernel_matches_skyfield_de421_within_0_02_deg():
     t = np.linspace(
-        dt.datetime(1950, 1, 1, tzinfo=dt.timezone.utc).timestamp(),
-        dt.datetime(2049, 12, 1, tzinfo=dt.timezone.utc).timestamp(),
+        dt.datetime(1950, 1, 1, tzinfo=dt.UTC).timestamp(),
+        dt.datetime(2049, 12, 1, tzinfo=dt.UTC).timestamp(),
         1500,
     )
     truth = environment.sun_position_eci_m(t)
@@ -230,7 +230,9 @@ def test_surface_torques_vanish_on_a_centred_cube_and_equal_offset_cross_force(d
     rho, cd, speed = 1e-13, 2.2, 7.6e3
     aero = environment.aerodynamic_torque_1(speed * u, rho, cd, CUBE_NORMALS, CUBE_AREAS, CUBE_CENTROIDS)
     sp, sd = np.full(6, 0.3), np.full(6, 0.1)
-    srp = environment.solar_pressure_torque_1(u, environment.AU_M, 1.0, CUBE_NORMALS, CUBE_AREAS, CUBE_CENTROIDS, sp, sd)
+    srp = environment.solar_pressure_torque_1(
+        u, environment.AU_M, 1.0, CUBE_NORMALS, CUBE_AREAS, CUBE_CENTROIDS, sp, sd
+    )
     assert np.max(np.abs(aero)) < TORQUE_TOL_NM and np.max(np.abs(srp)) < TORQUE_TOL_NM
     # Centre of mass moved by δ: the torque is −δ × F with F the total force; along an axis a cube
     # shows one face, F = −½ ρ C_D A v² û (drag) and −P A û (a black face, Sun along û).
@@ -262,7 +264,7 @@ def test_drag_torque_on_an_equatorial_orbit_matches_closed_form():
 
 
 def test_solar_pressure_torque_is_zero_in_umbra_and_full_for_a_black_plate_in_sunlight():
-    t = dt.datetime(2024, 3, 20, 12, tzinfo=dt.timezone.utc).timestamp()
+    t = dt.datetime(2024, 3, 20, 12, tzinfo=dt.UTC).timestamp()
     s_hat = environment.sun_position_1(t) / np.linalg.norm(environment.sun_position_1(t))
     r = np.stack([R_LEO_M * s_hat, -R_LEO_M * s_hat])  # sub-solar point, then behind the Earth
     q_ib = np.array([1.0, 0.0, 0.0, 0.0])
@@ -286,12 +288,18 @@ def test_solar_pressure_torque_is_zero_in_umbra_and_full_for_a_black_plate_in_su
         (lambda: environment.magnetic_field_ecef_t(np.array([[7e6, 0.0, 0.0]]), 2.0e9), "t_unix_s"),
         (lambda: environment.sun_position_eci_m(np.array([1.7e9, np.inf])), "t_unix_s"),
         (lambda: environment.illumination_fraction(np.array([np.nan, 0.0, 0.0]), SUN_AT_1AU), "r_sat_eci_m"),
-        (lambda: environment.aerodynamic_torque_nm(
-            np.ones((1, 3)) * 4e6, np.ones((1, 3)), [1.0, 0, 0, 0], [[0.0, 2.0, 0.0]], [1.0], [[0.0, 0.0, 0.0]]),
-         "normals_b"),
-        (lambda: environment.solar_pressure_torque_nm(
-            np.ones((1, 3)) * 4e6, 1.7e9, [1.0, 0, 0, 0], [[0.0, 1.0, 0.0]], [1.0], [[0.0, 0.0, 0.0]], specular=1.5),
-         "specular"),
+        (
+            lambda: environment.aerodynamic_torque_nm(
+                np.ones((1, 3)) * 4e6, np.ones((1, 3)), [1.0, 0, 0, 0], [[0.0, 2.0, 0.0]], [1.0], [[0.0, 0.0, 0.0]]
+            ),
+            "normals_b",
+        ),
+        (
+            lambda: environment.solar_pressure_torque_nm(
+                np.ones((1, 3)) * 4e6, 1.7e9, [1.0, 0, 0, 0], [[0.0, 1.0, 0.0]], [1.0], [[0.0, 0.0, 0.0]], specular=1.5
+            ),
+            "specular",
+        ),
     ],
 )
 def test_bad_input_raises_value_error_naming_the_field(call, field):

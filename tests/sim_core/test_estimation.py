@@ -136,7 +136,12 @@ def test_lsm_error_covariance_matches_r_inverse_hth():
         (lambda: est.triad([1, 0, 0], [2, 0, 0], [1, 0, 0], [0, 1, 0]), "u_b, v_b"),
         (lambda: est.triad([1, 0, 0], [0, 1, 0], [0, 0, 0], [0, 1, 0]), "u_i"),
         (lambda: est.star_tracker_lsm(np.eye(3)[:1], np.eye(3)[:1], [1, 0, 0, 0]), "stars_b"),
-        (lambda: est.star_tracker_lsm(np.array([[0, 0, 1.0], [0, 0, 1.0]]), np.array([[0, 0, 1.0], [0, 0, 1.0]]), [1, 0, 0, 0]), "collinear"),
+        (
+            lambda: est.star_tracker_lsm(
+                np.array([[0, 0, 1.0], [0, 0, 1.0]]), np.array([[0, 0, 1.0], [0, 0, 1.0]]), [1, 0, 0, 0]
+            ),
+            "collinear",
+        ),
     ],
 )
 def test_bad_input_names_the_field(call, field):

@@ -50,8 +50,10 @@ def test_window_alarm_rate_matches_the_gaussian_tail() -> None:
     n, trials, alarms = 200, 400, 0
     for _ in range(trials):
         r = np.cumsum(rng.normal(0.0, 1.0, n))[None, :]
-        alarms += fd.window_alarm(r, np.ones((1, n - 1)), np.zeros((1, n)), 0.0, 1.0, n_sigma=3.0,
-                                  windows_s=(1.0,)) is not None
+        alarms += (
+            fd.window_alarm(r, np.ones((1, n - 1)), np.zeros((1, n)), 0.0, 1.0, n_sigma=3.0, windows_s=(1.0,))
+            is not None
+        )
     per_test = math.erfc(3.0 / math.sqrt(2.0))
     expected = 1.0 - (1.0 - per_test) ** (n - 1)
     assert abs(alarms / trials - expected) < 4.0 * math.sqrt(expected * (1 - expected) / trials)

@@ -24,9 +24,16 @@ def _variants(*named: tuple[str, list[FaultSpec]]) -> list[dict]:
 # --- grammar ---------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("text", ["wheel:1:failure@600", "gyro:2:bias@10.5,value=0.0001",
-                                  "controller:0:intermittent@7+1,period_s=0.5,duty=0.25", "md_rod:2:gain@3,gain=0.5",
-                                  "sun_sensor:0:drift@1.25+100.0,value=-2e-05"])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "wheel:1:failure@600",
+        "gyro:2:bias@10.5,value=0.0001",
+        "controller:0:intermittent@7+1,period_s=0.5,duty=0.25",
+        "md_rod:2:gain@3,gain=0.5",
+        "sun_sensor:0:drift@1.25+100.0,value=-2e-05",
+    ],
+)
 def test_grammar_round_trips_and_is_the_emulators(text):
     f = faults.parse_fault(text)
     assert faults.parse_fault(faults.format_fault(f)) == f
@@ -54,8 +61,14 @@ def _x_axis(traj, v: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _pd_response(theta0: float, rate0: float, inertia: float, kp: float, kd: float, gain: float, t: np.ndarray):
     """Small-angle response J θ̈ = −g (k_p θ/2 + k_d θ̇) of seed 002's quaternion PD (eq 18) from (θ0, θ̇0)."""
-    sol = solve_ivp(lambda _, y: [y[1], -gain * (kp * y[0] / 2 + kd * y[1]) / inertia], (t[0], t[-1]),
-                    [theta0, rate0], t_eval=t, rtol=1e-9, atol=1e-12)
+    sol = solve_ivp(
+        lambda _, y: [y[1], -gain * (kp * y[0] / 2 + kd * y[1]) / inertia],
+        (t[0], t[-1]),
+        [theta0, rate0],
+        t_eval=t,
+        rtol=1e-9,
+        atol=1e-12,
+    )
     return sol.y[0]
 
 
@@ -64,9 +77,15 @@ def test_seed002_wheel_outage_and_gain_loss_follow_the_axis_dynamics():
     rate it had), a 70 % gain loss slows its PD by g = 0.3; both predicted from the state at the onset."""
     s = scenario_library.get("song-table1")
     gain = faults.SEED002_MAGNITUDES["wheel_gain"]
-    s = _with(s, duration_s=60.0, variants=_variants(
-        ("nominal", []), ("outage", [faults.wheel_failure(0, ONSET_S)]),
-        ("gain loss", [faults.wheel_failure(0, ONSET_S, "gain", gain=gain)])))
+    s = _with(
+        s,
+        duration_s=60.0,
+        variants=_variants(
+            ("nominal", []),
+            ("outage", [faults.wheel_failure(0, ONSET_S)]),
+            ("gain loss", [faults.wheel_failure(0, ONSET_S, "gain", gain=gain)]),
+        ),
+    )
     traj = engine.simulate(s)
     j, kp, kd = s.spacecraft.inertia_kg_m2[0][0], s.controller.pd_kp_nm, s.controller.pd_kd_nms
     at = round(ONSET_S / s.output_dt_s)
@@ -98,7 +117,10 @@ def _quiet(**fields) -> Scenario:
 
 def _h_inertial(traj, s: Scenario) -> np.ndarray:
     p = engine.plant_params(s)
-    h_body = traj["omega_b_rad_s"][0] @ p.inertia_kg_m2.T + (traj["wheel_speed_rad_s"][0] * p.wheels.inertia_kg_m2) @ p.wheel_axes_b.T
+    h_body = (
+        traj["omega_b_rad_s"][0] @ p.inertia_kg_m2.T
+        + (traj["wheel_speed_rad_s"][0] * p.wheels.inertia_kg_m2) @ p.wheel_axes_b.T
+    )
     return quaternion.rotate(traj["q_ib"][0], h_body)
 
 
@@ -112,8 +134,9 @@ def test_residual_dipole_changes_the_momentum_by_the_integral_of_m_cross_b():
     b_eci = environment.magnetic_field_eci_t(traj["r_eci_m"][0], t0 + traj.t_s, dipole.magnetic_model)
     b_body = quaternion.rotate(quaternion.conjugate(traj["q_ib"][0]), b_eci)
     torque_i = quaternion.rotate(traj["q_ib"][0], np.cross(np.array(m_res), b_body))
-    expected = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (torque_i[1:] + torque_i[:-1]), axis=0)
-                               * np.diff(traj.t_s)[:, None]])
+    expected = np.concatenate(
+        [np.zeros((1, 3)), np.cumsum(0.5 * (torque_i[1:] + torque_i[:-1]), axis=0) * np.diff(traj.t_s)[:, None]]
+    )
     scale = np.max(np.linalg.norm(expected, axis=1))
     assert scale > 1e-3  # N·m·s: ~1e-4 N·m of m × B over ten minutes
     assert np.max(np.linalg.norm((h - h[0]) - expected, axis=1)) <= 0.02 * scale
@@ -154,9 +177,16 @@ def test_sun_sensor_bias_tilts_the_sun_safe_pointing_by_the_bias():
     Sun sensor, so a bias b on its x component leaves the true Sun at atan(b) on the −x side."""
     bias = 0.05
     lost = faults.parse_fault("star_tracker:0:failure@0")
-    s = _with(scenario_library.get("somov-ge4-scan"), duration_s=1500.0, initial_mode="sun_safe",
-              estimator={"kind": "mekf"}, output_dt_s=5.0, variants=_variants(
-                  ("nominal", [lost]), ("sun sensor bias", [lost, faults.parse_fault(f"sun_sensor:0:bias@0,value={bias}")])))
+    s = _with(
+        scenario_library.get("somov-ge4-scan"),
+        duration_s=1500.0,
+        initial_mode="sun_safe",
+        estimator={"kind": "mekf"},
+        output_dt_s=5.0,
+        variants=_variants(
+            ("nominal", [lost]), ("sun sensor bias", [lost, faults.parse_fault(f"sun_sensor:0:bias@0,value={bias}")])
+        ),
+    )
     traj = engine.simulate(s)
     t0 = traj.extra["epoch_unix_s"]
     sun = environment.sun_position_eci_m(t0 + traj.t_s)

@@ -48,10 +48,10 @@ def test_random_failures_are_reproducible_and_in_range():
 @pytest.mark.parametrize(
     ("field", "spec"),
     [
-        ("gain", dict(target="wheel", type="gain", gain=2.5)),
-        ("onset_s", dict(target="wheel", type="failure", onset_s=-1.0)),
-        ("target", dict(target="reaction_wheel", type="failure")),
-        ("type", dict(target="wheel", type="explode")),
+        ("gain", {"target": "wheel", "type": "gain", "gain": 2.5}),
+        ("onset_s", {"target": "wheel", "type": "failure", "onset_s": -1.0}),
+        ("target", {"target": "reaction_wheel", "type": "failure"}),
+        ("type", {"target": "wheel", "type": "explode"}),
     ],
 )
 def test_bad_fault_names_the_field(field, spec):
@@ -87,8 +87,12 @@ def _h_inertial(traj, s: Scenario, v: int) -> np.ndarray:
 
 def test_dead_motor_keeps_its_momentum_and_a_seized_wheel_hands_it_to_the_body():
     onset = 20.0
-    s = _quiet([VariantSpec(name="dead", faults=[faults.wheel_failure(0, onset)]),
-                VariantSpec(name="seized", faults=[faults.wheel_failure(0, onset, "stuck")])])
+    s = _quiet(
+        [
+            VariantSpec(name="dead", faults=[faults.wheel_failure(0, onset)]),
+            VariantSpec(name="seized", faults=[faults.wheel_failure(0, onset, "stuck")]),
+        ]
+    )
     traj = engine.simulate(s)
     after = traj.t_s > onset + s.output_dt_s
     p = engine.plant_params(s)

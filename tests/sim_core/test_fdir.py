@@ -57,8 +57,9 @@ def test_quantisation_alone_never_exceeds_j_q():
     m = rng.uniform(-0.2, 0.2, N_TRIALS)
     w1 = w0 + m * T_U / J_HR12
     r0, r1 = TACH_Q * np.round(w0 / TACH_Q), TACH_Q * np.round(w1 / TACH_Q)
-    res, bound = fdir.wheel_residuals(np.stack([r0, r1]), m[None, :], np.full(N_TRIALS, J_HR12),
-                                      np.zeros((4, N_TRIALS)), TACH_Q, T_U)
+    res, bound = fdir.wheel_residuals(
+        np.stack([r0, r1]), m[None, :], np.full(N_TRIALS, J_HR12), np.zeros((4, N_TRIALS)), TACH_Q, T_U
+    )
     assert np.max(np.abs(res)) <= J_HR12 * TACH_Q + fdir.NUMERICAL_FLOOR_NMS
     assert np.all(np.abs(res) <= bound / fdir.WHEEL_SAFETY)
 
@@ -74,8 +75,9 @@ def test_body_spinning_about_an_idle_wheel_is_no_residual():
     """Torque-free wheel: J(Ω + aᵗω) is conserved, so the tachometer sees −Δ(aᵗω), which is no fault."""
     axial = np.array([0.0, 0.01])
     speed = 300.0 - axial  # relative speed falls as the body spins up about the axis
-    res, bound = fdir.wheel_residuals(speed[:, None], np.zeros((1, 1)), [J_HR12], np.zeros((4, 1)), 0.0, T_U,
-                                      axial_rate_rad_s=axial[:, None])
+    res, bound = fdir.wheel_residuals(
+        speed[:, None], np.zeros((1, 1)), [J_HR12], np.zeros((4, 1)), 0.0, T_U, axial_rate_rad_s=axial[:, None]
+    )
     assert abs(res[0, 0]) <= bound[0, 0]
     res_blind, _ = fdir.wheel_residuals(speed[:, None], np.zeros((1, 1)), [J_HR12], np.zeros((4, 1)), 0.0, T_U)
     assert abs(res_blind[0, 0]) > 1e3 * bound[0, 0]
@@ -89,12 +91,14 @@ def _check_sequence(deltas_nms: list[float], torque: float = 0.0) -> tuple[np.nd
     j = np.full(4, J_HR12)
     zeros = np.zeros((4, 4))
     for k, dh in enumerate(deltas_nms):
-        fdir.wheel_hold_1(state, speeds, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0), zeros,
-                          *RIGID)
+        fdir.wheel_hold_1(
+            state, speeds, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0), zeros, *RIGID
+        )
         speeds = speeds + torque * T_U / J_HR12
         speeds[2] += dh / J_HR12
-        fdir.wheel_check_1(state, speeds, W0, j, np.full(4, 12.0), zeros, TACH_Q, T_U, np.eye(4), available, ev, n_ev,
-                           (k + 1) * T_U)
+        fdir.wheel_check_1(
+            state, speeds, W0, j, np.full(4, 12.0), zeros, TACH_Q, T_U, np.eye(4), available, ev, n_ev, (k + 1) * T_U
+        )
     return available, ev[: n_ev[0]], state
 
 
@@ -135,12 +139,21 @@ def test_fewer_than_two_wheels_is_the_fault_mode():
     speeds = np.full(3, 50.0)
     faulty = False
     for k in range(3):
-        fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :3], np.array([0.1, 0.0, 0.0]), j, np.full(3, 0.2),
-                          np.full(3, 12.0),
-                          zeros, *RIGID)
-        faulty = fdir.wheel_check_1(state, speeds, W0, j, np.full(3, 12.0), zeros, 0.0, T_U, np.eye(3), available,
-                                     ev, n_ev,
-                                     k * T_U)
+        fdir.wheel_hold_1(
+            state,
+            speeds,
+            W0,
+            AXES4[:, :3],
+            np.array([0.1, 0.0, 0.0]),
+            j,
+            np.full(3, 0.2),
+            np.full(3, 12.0),
+            zeros,
+            *RIGID,
+        )
+        faulty = fdir.wheel_check_1(
+            state, speeds, W0, j, np.full(3, 12.0), zeros, 0.0, T_U, np.eye(3), available, ev, n_ev, k * T_U
+        )
     assert faulty
     assert (1, 4) in [(int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]  # mode_change → MODE_FAULT (4)
 
@@ -152,11 +165,21 @@ def test_wheel_near_momentum_limit_is_not_tested():
     available = np.ones(1, dtype=np.bool_)
     ev, n_ev = np.zeros((4, 3)), np.zeros(1, dtype=np.int64)
     for k in range(3):
-        fdir.wheel_hold_1(state, speeds, W0, AXES4[:, :1], np.array([0.2]), j, np.array([0.2]), np.array([12.0]),
-                          np.zeros((4, 1)), *RIGID)
-        fdir.wheel_check_1(state, speeds, W0, j, np.array([12.0]), np.zeros((4, 1)), 0.0, T_U, np.eye(1), available, ev,
-                           n_ev,
-                           k * T_U)
+        fdir.wheel_hold_1(
+            state,
+            speeds,
+            W0,
+            AXES4[:, :1],
+            np.array([0.2]),
+            j,
+            np.array([0.2]),
+            np.array([12.0]),
+            np.zeros((4, 1)),
+            *RIGID,
+        )
+        fdir.wheel_check_1(
+            state, speeds, W0, j, np.array([12.0]), np.zeros((4, 1)), 0.0, T_U, np.eye(1), available, ev, n_ev, k * T_U
+        )
     assert available[0] and n_ev[0] == 0
 
 
@@ -225,15 +248,29 @@ def test_tenfold_star_tracker_noise_is_rescaled_not_locked_out():
     sig = np.full(3, SIGMA_ST)
     ev, n_ev = np.zeros((32, 3)), np.zeros(1, dtype=np.int64)
     state, nis_max = fdir.star_state(), fdir.star_nis_threshold()
-    scales = [fdir.star_tracker_check_1(state, q, p, _star_sample(rng, q, 10 * SIGMA_ST), sig, nis_max, False, ev, n_ev,
-                                        0.25 * i) for i in range(200)]
+    scales = [
+        fdir.star_tracker_check_1(
+            state, q, p, _star_sample(rng, q, 10 * SIGMA_ST), sig, nis_max, False, ev, n_ev, 0.25 * i
+        )
+        for i in range(200)
+    ]
     assert 6.0 < state[fdir.SS_SCALE] < 14.0
     assert np.mean(np.array(scales[-100:]) > 0) > 0.99
     jumped = fdir.star_state()
     offset = np.array([np.cos(0.5 * 60 / 206265), np.sin(0.5 * 60 / 206265), 0.0, 0.0])
     for i in range(200):
-        sample = fdir.star_tracker_check_1(jumped, q, p, quaternion_mul(offset, _star_sample(rng, q, SIGMA_ST)), sig,
-                                           nis_max, False, ev, n_ev, 0.25 * i)
+        sample = fdir.star_tracker_check_1(
+            jumped,
+            q,
+            p,
+            quaternion_mul(offset, _star_sample(rng, q, SIGMA_ST)),
+            sig,
+            nis_max,
+            False,
+            ev,
+            n_ev,
+            0.25 * i,
+        )
     assert sample == 0.0 and jumped[fdir.SS_SCALE] <= 1.0
 
 
@@ -353,24 +390,43 @@ def _first(events, name: str):
 @pytest.fixture(scope="module")
 def loop_run():
     """One batch: nominal, the four single-wheel failures, and sensor faults with and without FDIR."""
-    jump = FaultSpec(target="star_tracker", index=0, type="bias", onset_s=SENSOR_ONSET_S, duration_s=60.0,
-                     value=ST_JUMP_ARCSEC * ARCSEC)
-    st = dict(target="star_tracker", onset_s=SENSOR_ONSET_S)
+    jump = FaultSpec(
+        target="star_tracker",
+        index=0,
+        type="bias",
+        onset_s=SENSOR_ONSET_S,
+        duration_s=60.0,
+        value=ST_JUMP_ARCSEC * ARCSEC,
+    )
+    st = {"target": "star_tracker", "onset_s": SENSOR_ONSET_S}
     variants = [VariantSpec(name="nominal")]
     variants += [VariantSpec(name=f"wheel {p + 1}", faults=[faults.wheel_failure(p, ONSET_S)]) for p in range(4)]
     variants += [
         VariantSpec(name="st jump", faults=[jump]),
         VariantSpec(name="st jump, no fdir", faults=[jump]),
         VariantSpec(name="st frozen", faults=[FaultSpec(**st, type="frozen", duration_s=30.0)]),
-        VariantSpec(name="gyro drift", faults=[FaultSpec(target="gyro", index=1, type="drift", onset_s=400.0,
-                                                         value=2e-8)]),
+        VariantSpec(
+            name="gyro drift", faults=[FaultSpec(target="gyro", index=1, type="drift", onset_s=400.0, value=2e-8)]
+        ),
         VariantSpec(name="st failed", faults=[FaultSpec(**st, type="failure")]),
         VariantSpec(name="wheel 2 seized", faults=[faults.wheel_failure(1, ONSET_S, "stuck")]),
         VariantSpec(name="wheel 4 friction", faults=[faults.wheel_failure(3, ONSET_S, "friction", value=5e-3)]),
         VariantSpec(name="wheel 1 half torque", faults=[faults.wheel_failure(0, ONSET_S, "gain", gain=0.5)]),
-        VariantSpec(name="mag spikes", faults=[FaultSpec(target="magnetometer", index=2, type="intermittent",
-                                                         onset_s=SENSOR_ONSET_S,
-                                                         duration_s=100.0, value=5e-6, period_s=20.0, duty=0.1)]),
+        VariantSpec(
+            name="mag spikes",
+            faults=[
+                FaultSpec(
+                    target="magnetometer",
+                    index=2,
+                    type="intermittent",
+                    onset_s=SENSOR_ONSET_S,
+                    duration_s=100.0,
+                    value=5e-6,
+                    period_s=20.0,
+                    duty=0.1,
+                )
+            ],
+        ),
     ]
     flags = [v.name != "st jump, no fdir" for v in variants]
     s = _scan(variants)
@@ -391,8 +447,9 @@ def test_abrupt_wheel_failure_is_detected_within_10_s_and_isolated_right_in_all_
     assert max(delays) < DETECTION_DELAY_MAX_S
 
 
-@pytest.mark.parametrize(("name", "wheel"),
-                         [("wheel 2 seized", 1), ("wheel 4 friction", 3), ("wheel 1 half torque", 0)])
+@pytest.mark.parametrize(
+    ("name", "wheel"), [("wheel 2 seized", 1), ("wheel 4 friction", 3), ("wheel 1 half torque", 0)]
+)
 def test_seized_rubbing_and_weak_wheels_are_isolated_too(loop_run, name, wheel):
     _, traj = loop_run
     events = [e for e in traj.events[traj.variant_names.index(name)] if e[2] < fdir.SENSOR_ARG]
@@ -465,8 +522,10 @@ def test_quantised_tachometer_dead_and_weak_wheels_are_isolated_within_60_s_of_o
     """0.25 rpm tachometer, 2e-6 rad/s gyro noise, MEKF, random wheels and onsets along the route: each fault is
     isolated on its own wheel within 60 s of withholding one quantum of momentum J_r q (fdir.observable_time)."""
     drawn = faults.random_wheel_failures(QUANTISED_CASES, (20.0, 840.0), seed=5 + len(params))
-    variants = [VariantSpec(name=v.name, faults=[faults.wheel_failure(v.faults[0].index, v.faults[0].onset_s, kind,
-                                                                      **params)]) for v in drawn]
+    variants = [
+        VariantSpec(name=v.name, faults=[faults.wheel_failure(v.faults[0].index, v.faults[0].onset_s, kind, **params)])
+        for v in drawn
+    ]
     s = _quantised(variants, duration_s=1200.0, output_dt_s=1.0)
     traj = engine.simulate(s, fdir=True)
     j_r = engine.plant_params(s).wheels.inertia_kg_m2
@@ -474,8 +533,14 @@ def test_quantised_tachometer_dead_and_weak_wheels_are_isolated_within_60_s_of_o
         f = spec.faults[0]
         isolated = [(t, w) for t, name, w in traj.events[v] if name == "fault_isolated" and w < fdir.SENSOR_ARG]
         assert isolated and {w for _, w in isolated} == {f.index}, (spec.name, traj.events[v])
-        seen = fdir.observable_time(traj.t_s, traj["wheel_torque_cmd_nm"][v, :, f.index],
-                                    traj["wheel_torque_nm"][v, :, f.index], f.onset_s, j_r[f.index], TACH_025_RPM)
+        seen = fdir.observable_time(
+            traj.t_s,
+            traj["wheel_torque_cmd_nm"][v, :, f.index],
+            traj["wheel_torque_nm"][v, :, f.index],
+            f.onset_s,
+            j_r[f.index],
+            TACH_025_RPM,
+        )
         assert seen is None or isolated[0][0] - seen <= OBSERVABLE_WINDOW_S, spec.name
 
 
@@ -512,9 +577,11 @@ def test_earth_sensor_bias_during_a_star_tracker_outage_pulls_the_estimate_by_th
     bias_rad = np.radians(0.2)
     outage = [FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]
     earth = FaultSpec(target="earth_sensor", index=0, type="bias", onset_s=SENSOR_ONSET_S, value=bias_rad)
-    s = _scan([VariantSpec(name="outage", faults=outage),
-               VariantSpec(name="outage + earth bias", faults=outage + [earth])],
-              duration_s=3000.0, output_dt_s=5.0)
+    s = _scan(
+        [VariantSpec(name="outage", faults=outage), VariantSpec(name="outage + earth bias", faults=outage + [earth])],
+        duration_s=3000.0,
+        output_dt_s=5.0,
+    )
     traj = engine.simulate(s, fdir=True)
     err = [quaternion_angle_between(traj["q_est_ib"][v, -1], traj["q_ib"][v, -1]) for v in range(2)]
     assert err[0] < EARTH_SENSOR_HOLD_ARCSEC * ARCSEC
@@ -527,8 +594,11 @@ def test_earth_sensor_jump_during_a_star_tracker_outage_is_screened_like_the_oth
     jump_rad = np.radians(1.0)
     outage = [FaultSpec(target="star_tracker", type="failure", onset_s=SENSOR_ONSET_S)]
     earth = FaultSpec(target="earth_sensor", index=0, type="bias", onset_s=SENSOR_ONSET_S + 60.0, value=jump_rad)
-    s = _scan([VariantSpec(name="screened", faults=[*outage, earth]), VariantSpec(name="no fdir", faults=[*outage, earth])],
-              duration_s=SENSOR_ONSET_S + 300.0, output_dt_s=5.0)
+    s = _scan(
+        [VariantSpec(name="screened", faults=[*outage, earth]), VariantSpec(name="no fdir", faults=[*outage, earth])],
+        duration_s=SENSOR_ONSET_S + 300.0,
+        output_dt_s=5.0,
+    )
     traj = engine.simulate(s, fdir=[True, False])
     t_iso, arg = _first(traj.events[0], "fault_isolated")
     assert arg == fdir.SENSOR_ARG + 30 and SENSOR_ONSET_S + 60.0 <= t_iso < SENSOR_ONSET_S + 61.0

@@ -13,7 +13,7 @@ from sim_core import environment, frames, orbit, quaternion
 
 # --- Vallado, "Revisiting Spacetrack Report #3", AIAA 2006-6753 Rev 2, Appendix C (and Vallado
 # Fundamentals Example 3-15): one state at 2004-04-06 07:51:28.386009 UTC in TEME, GCRF and ITRF. ---
-VALLADO_T_UNIX_S = dt.datetime(2004, 4, 6, 7, 51, 28, 386009, tzinfo=dt.timezone.utc).timestamp()
+VALLADO_T_UNIX_S = dt.datetime(2004, 4, 6, 7, 51, 28, 386009, tzinfo=dt.UTC).timestamp()
 VALLADO_R_TEME_KM = np.array([5094.18016210, 6127.64465950, 6380.34453270])
 VALLADO_V_TEME_KM_S = np.array([-4.746131487, 0.785818041, 5.531931288])
 VALLADO_R_GCRF_KM = np.array([5102.508958, 6123.011401, 6378.136928])

@@ -55,8 +55,12 @@ def kepler_state(t, a=R_ORBIT + 300e3, e=0.1, inc=1.2, raan=0.4, argp=0.9):
     edot = n / (1 - e * cos_e)
     r_pf = np.stack([a * (cos_e - e), b * sin_e, 0 * t], -1)
     v_pf = np.stack([-a * sin_e * edot, b * cos_e * edot, 0 * t], -1)
-    rot = qt.to_dcm(qt.multiply(qt.multiply(qt.from_axis_angle([0, 0, 1], raan), qt.from_axis_angle([1, 0, 0], inc)),
-                                qt.from_axis_angle([0, 0, 1], argp)))
+    rot = qt.to_dcm(
+        qt.multiply(
+            qt.multiply(qt.from_axis_angle([0, 0, 1], raan), qt.from_axis_angle([1, 0, 0], inc)),
+            qt.from_axis_angle([0, 0, 1], argp),
+        )
+    )
     r, v = r_pf @ rot.T, v_pf @ rot.T
     return r, v, -MU * r / np.linalg.norm(r, axis=1, keepdims=True) ** 3
 
@@ -106,8 +110,15 @@ def j2_orbit():
     from scipy.integrate import solve_ivp
 
     r0, v0, _ = kepler_state(np.array([0.0]), a=R_ORBIT + 100e3, e=0.05, inc=np.radians(97.8))
-    sol = solve_ivp(lambda t, y: np.concatenate([y[3:], _j2_acceleration(y[:3])]), (0.0, 7000.0),
-                    np.concatenate([r0[0], v0[0]]), method="DOP853", rtol=1e-13, atol=1e-7, dense_output=True)
+    sol = solve_ivp(
+        lambda t, y: np.concatenate([y[3:], _j2_acceleration(y[:3])]),
+        (0.0, 7000.0),
+        np.concatenate([r0[0], v0[0]]),
+        method="DOP853",
+        rtol=1e-13,
+        atol=1e-7,
+        dense_output=True,
+    )
 
     def state(t):
         y = sol.sol(np.atleast_1d(t)).T
@@ -284,7 +295,12 @@ def test_ground_target_state_is_the_derivative_of_its_eci_position():
     era = np.array([0.3, 2.0, 5.9])
     h = 1e-3  # rad
     state = lambda k, e: np.array([gd.ground_target_state_1(r_e, c_pn, w_pm, ei)[k] for ei in e])  # noqa: E731
-    d_dera = lambda k: (state(k, era - 2 * h) - 8 * state(k, era - h) + 8 * state(k, era + h) - state(k, era + 2 * h)) / (12 * h)  # noqa: E731
+
+    def d_dera(k):
+        return (state(k, era - 2 * h) - 8 * state(k, era - h) + 8 * state(k, era + h) - state(k, era + 2 * h)) / (
+            12 * h
+        )  # noqa: E731
+
     w = frames.EARTH_ROTATION_RATE_RAD_S
     assert np.max(np.abs(w * d_dera(0) - state(1, era))) < ANGLE_STENCIL_RELATIVE * np.max(np.abs(state(1, era)))
     assert np.max(np.abs(w * d_dera(1) - state(2, era))) < ANGLE_STENCIL_RELATIVE * np.max(np.abs(state(2, era)))
@@ -296,7 +312,13 @@ def test_route_through_a_ground_target_is_continuous_and_points_at_it():
     cross = np.cross(r_mid[0], v_mid[0])
     target_eci = 6378137.0 * r_mid[0] / np.linalg.norm(r_mid[0]) + 8e4 * cross / np.linalg.norm(cross)
     target = _ecef_of_eci(target_eci, t_mid)  # 80 km across track at mid-segment
-    segments = [gd.OrfHold(300.0), gd.Turn(90.0), gd.GroundTarget(60.0, tuple(target)), gd.Turn(90.0), gd.OrfHold(300.0)]
+    segments = [
+        gd.OrfHold(300.0),
+        gd.Turn(90.0),
+        gd.GroundTarget(60.0, tuple(target)),
+        gd.Turn(90.0),
+        gd.OrfHold(300.0),
+    ]
     route = gd.compile_route(segments, T0, _orbit_from_epoch, c_pn=np.eye(3), dut1_s=0.0)
     for t_join in route[1:, gd.COL_T0]:
         dq, dw = _join_mismatch(route, t_join)
@@ -315,7 +337,9 @@ def test_ground_target_route_agrees_with_the_frames_earth_orientation():
     target_ecef = target_ecef + np.array([3e4, -2e4, 1e4])
     segments = [gd.OrfHold(300.0), gd.Turn(90.0), gd.GroundTarget(60.0, tuple(target_ecef))]
     route = gd.compile_route(segments, T0, _orbit_from_epoch, c_pn=c_pn, dut1_s=dut1, w_pm=w_pm)
-    q, _, _, _ = gd.route_program(route, np.array([t_mid]), *_orbit_from_epoch(np.array([t_mid])), c_pn=c_pn, dut1_s=dut1)
+    q, _, _, _ = gd.route_program(
+        route, np.array([t_mid]), *_orbit_from_epoch(np.array([t_mid])), c_pn=c_pn, dut1_s=dut1
+    )
     los = frames.eci_to_ecef_matrix(t_mid).T @ target_ecef - r_mid
     assert np.max(np.abs(qt.rotate(q[0], [1.0, 0, 0]) - los / np.linalg.norm(los))) < FRAMES_INTERPOLATION_RAD
 

@@ -1,6 +1,5 @@
 """RK4 kernel and DOP853 reference path against Basilisk's unit-test truths and analytic solutions."""
 
-
 import numpy as np
 import pytest
 
@@ -84,8 +83,9 @@ def test_reference_path_agrees_with_rk4_on_the_wheel_case():
     """DOP853 (rtol 1e-12) and RK4 agree where RK4 is exact; the breakpoint restarts the reference."""
     params, _ = _single_axis_wheel()
     x0 = pack_state(params, [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.35], [100.0 * RPM])
-    ref = reference_propagate(x0, [0.0, 10.0], params, lambda t: np.array([0.2 if t >= 5.0 else 0.0]),
-                              breakpoints_s=[5.0])
+    ref = reference_propagate(
+        x0, [0.0, 10.0], params, lambda t: np.array([0.2 if t >= 5.0 else 0.0]), breakpoints_s=[5.0]
+    )
     assert ref[-1, 6] == pytest.approx(-0.15, rel=BACK_OF_ENVELOPE_TOL)
     assert ref[0] == pytest.approx(x0)
 
@@ -105,8 +105,6 @@ def test_rk4_rejects_a_bad_step(dt):
     params = PlantParams(np.eye(3), np.zeros((3, 0)), _no_wheels())
     with pytest.raises(ValueError, match="dt_s"):
         rk4_step(pack_state(params, [1, 0, 0, 0], [0, 0, 0]), dt, np.zeros(0), np.zeros(3), params)
-
-
 
 
 def test_rk4_rejects_torques_of_the_wrong_shape_naming_the_field():

@@ -6,9 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
 
-from sim_core import mekf
+from sim_core import mekf, sensors
 from sim_core import quaternion as qt
-from sim_core import sensors
 
 DT = 0.1  # gyro / propagation step (s)
 UPDATE_EVERY = 5  # star tracker every 0.5 s
@@ -93,7 +92,18 @@ def test_update_returns_chi_square_innovation_for_consistent_filter():
 
 def test_bad_shapes_name_the_fields():
     with pytest.raises(ValueError, match="q_meas_ib"):
-        mekf.mekf_run([1, 0, 0, 0], np.zeros(3), np.eye(6), np.zeros((3, 3)), np.zeros((2, 4)), np.ones(3, bool), 0.1, 1e-5, 1e-6, 1e-5)
+        mekf.mekf_run(
+            [1, 0, 0, 0],
+            np.zeros(3),
+            np.eye(6),
+            np.zeros((3, 3)),
+            np.zeros((2, 4)),
+            np.ones(3, bool),
+            0.1,
+            1e-5,
+            1e-6,
+            1e-5,
+        )
 
 
 @settings(max_examples=100, deadline=None)
@@ -109,7 +119,9 @@ def test_propagation_integrates_a_constant_rate_exactly_and_keeps_covariance_pos
     for _ in range(n):
         mekf.mekf_propagate_1(q, b, p, omega, dt, 1e-6, 1e-8)
     # Λ̇ = ½ Λ ∘ ω with constant ω: Λ(t) = Λ0 ∘ (cos(|ω|t/2), ω̂ sin(|ω|t/2))
-    exact = qt.multiply(q0, qt.from_axis_angle(omega, np.linalg.norm(omega) * n * dt)) if np.linalg.norm(omega) > 0 else q0
+    exact = (
+        qt.multiply(q0, qt.from_axis_angle(omega, np.linalg.norm(omega) * n * dt)) if np.linalg.norm(omega) > 0 else q0
+    )
     ROUND_OFF = 1e-13 * n  # one normalised product per step
     assert qt.angle(qt.multiply(qt.conjugate(exact), q)) < ROUND_OFF
     assert np.allclose(p, p.T, atol=0.0)

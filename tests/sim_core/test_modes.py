@@ -48,11 +48,16 @@ def oracle(x, mode=RD, th=TH):
 
 def _inputs(n, dt=1.0):
     t = dt * np.arange(n)
-    return dict(
-        t_s=t, rate_norm_rad_s=np.zeros(n), attitude_valid=np.ones(n, bool), sun_error_rad=np.zeros(n),
-        pointing_error_rad=np.zeros(n), route_window=np.zeros(n, bool), fault=np.zeros(n, bool),
-        recovered=np.zeros(n, bool),
-    )
+    return {
+        "t_s": t,
+        "rate_norm_rad_s": np.zeros(n),
+        "attitude_valid": np.ones(n, bool),
+        "sun_error_rad": np.zeros(n),
+        "pointing_error_rad": np.zeros(n),
+        "route_window": np.zeros(n, bool),
+        "fault": np.zeros(n, bool),
+        "recovered": np.zeros(n, bool),
+    }
 
 
 def test_detumble_to_route_chain_fires_at_analytic_times():
@@ -110,16 +115,16 @@ def test_property_transitions_happen_when_and_only_when_conditions_hold(seed, in
     blocks = np.repeat(np.arange(40), rng.integers(1, 25, 40))[:n]  # piecewise-constant inputs
     pick = lambda values, p=None: np.asarray(values)[rng.choice(len(values), 40, p=p)][blocks]  # noqa: E731
     t = np.cumsum(rng.uniform(1.0, 20.0, blocks.size))
-    x = dict(
-        t_s=t,
-        rate_norm_rad_s=pick([5e-4, 1e-2, 3e-2], [0.6, 0.3, 0.1]),
-        attitude_valid=pick([True, False], [0.8, 0.2]),
-        sun_error_rad=pick([0.01, 0.5]),
-        pointing_error_rad=pick([1e-4, 0.1]),
-        route_window=pick([True, False]),
-        fault=rng.random(blocks.size) < 0.01,
-        recovered=rng.random(blocks.size) < 0.05,
-    )
+    x = {
+        "t_s": t,
+        "rate_norm_rad_s": pick([5e-4, 1e-2, 3e-2], [0.6, 0.3, 0.1]),
+        "attitude_valid": pick([True, False], [0.8, 0.2]),
+        "sun_error_rad": pick([0.01, 0.5]),
+        "pointing_error_rad": pick([1e-4, 0.1]),
+        "route_window": pick([True, False]),
+        "fault": rng.random(blocks.size) < 0.01,
+        "recovered": rng.random(blocks.size) < 0.05,
+    }
     h = md.run_modes(**x, initial_mode=initial)
     expected = oracle(x, mode=initial)
     assert np.array_equal(h.mode, expected)

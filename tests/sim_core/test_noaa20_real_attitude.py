@@ -32,7 +32,7 @@ NOAA20_BODY_IN_ORF = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]
 
 
 def _unix_s(iso: str) -> float:
-    return dt.datetime.fromisoformat(iso).replace(tzinfo=dt.timezone.utc).timestamp()
+    return dt.datetime.fromisoformat(iso).replace(tzinfo=dt.UTC).timestamp()
 
 
 @pytest.fixture(scope="module")

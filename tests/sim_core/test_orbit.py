@@ -114,7 +114,11 @@ def test_propagate_tle_reports_sgp4_failure_with_time_and_reason(shared_data):
 def test_read_tle_file_names_three_line_sets(shared_data):
     sets = orbit.read_tle_file((shared_data / "tle" / "real_sso_smallsats.tle").read_text())
     assert [(name, sat.satnum) for name, sat in sets] == [
-        ("PROBA-1", 26958), ("OPS-SAT", 44878), ("OPS-SAT", 44878), ("NOAA 20 (JPSS-1)", 43013), ("NOAA 20 (JPSS-1)", 43013)
+        ("PROBA-1", 26958),
+        ("OPS-SAT", 44878),
+        ("OPS-SAT", 44878),
+        ("NOAA 20 (JPSS-1)", 43013),
+        ("NOAA 20 (JPSS-1)", 43013),
     ]
 
 
@@ -163,7 +167,12 @@ def test_j2_propagation_matches_scipy_dop853():
     r, v = orbit.propagate_j2(r0, v0, t)
     ref = solve_ivp(
         lambda _t, s: np.concatenate([s[3:], orbit.j2_acceleration(s[:3])]),
-        (0.0, t[-1]), np.concatenate([r0, v0]), method="DOP853", t_eval=t, rtol=1e-12, atol=1e-6,
+        (0.0, t[-1]),
+        np.concatenate([r0, v0]),
+        method="DOP853",
+        t_eval=t,
+        rtol=1e-12,
+        atol=1e-6,
     )
     np.testing.assert_allclose(r, ref.y[:3].T, rtol=0, atol=J2_VS_DOP853_TOL_M)
 

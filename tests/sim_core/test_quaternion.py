@@ -49,7 +49,11 @@ def test_euler_132_matches_passive_matrix_product():
 
     def turn(i, a):  # passive simple-turn matrix [a]_i of seed 000
         c, s = np.cos(a), np.sin(a)
-        m = {1: [[1, 0, 0], [0, c, s], [0, -s, c]], 2: [[c, 0, -s], [0, 1, 0], [s, 0, c]], 3: [[c, s, 0], [-s, c, 0], [0, 0, 1]]}
+        m = {
+            1: [[1, 0, 0], [0, c, s], [0, -s, c]],
+            2: [[c, 0, -s], [0, 1, 0], [s, 0, c]],
+            3: [[c, s, 0], [-s, c, 0], [0, 0, 1]],
+        }
         return np.array(m[i])
 
     c_o = turn(2, roll) @ turn(3, pitch) @ turn(1, yaw)

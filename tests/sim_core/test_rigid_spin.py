@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim_core.rigid_spin import RigidSpinScenario, simulate
 from sim_core import quaternion as qt
+from sim_core.rigid_spin import RigidSpinScenario, simulate
 
 RK4_RATE_TOLERANCE = 1e-10  # rad/s: RK4 at 0.01 s, error ∝ (ΩΔt)^4 with ΩΔt ~ 1e-2
 INERTIAL_MOMENTUM_TOLERANCE = 1e-9  # relative: H_i constant if kinematics and dynamics agree
@@ -14,8 +14,7 @@ INERTIAL_MOMENTUM_TOLERANCE = 1e-9  # relative: H_i constant if kinematics and d
 
 def test_axisymmetric_body_matches_the_exact_precession() -> None:
     j1, j3, w0 = 30.0, 50.0, np.array([0.1, -0.05, 0.4])
-    spin = RigidSpinScenario(duration_s=20.0, dt_s=0.01, inertia_kg_m2=[[j1, j1, j3]],
-                             omega0_rad_s=[w0.tolist()])
+    spin = RigidSpinScenario(duration_s=20.0, dt_s=0.01, inertia_kg_m2=[[j1, j1, j3]], omega0_rad_s=[w0.tolist()])
     trajectory = simulate(spin)
     rate = (j3 - j1) / j1 * w0[2]
     t = trajectory.t_s
@@ -27,9 +26,12 @@ def test_axisymmetric_body_matches_the_exact_precession() -> None:
 
 
 def test_inertial_angular_momentum_is_conserved_for_every_batch_member() -> None:
-    spin = RigidSpinScenario(duration_s=10.0, dt_s=0.005,
-                             inertia_kg_m2=[[500.0, 200.0, 300.0], [35.0, 30.0, 25.0]],
-                             omega0_rad_s=[[0.5, -0.4, 0.7], [0.01, 0.2, -0.03]])
+    spin = RigidSpinScenario(
+        duration_s=10.0,
+        dt_s=0.005,
+        inertia_kg_m2=[[500.0, 200.0, 300.0], [35.0, 30.0, 25.0]],
+        omega0_rad_s=[[0.5, -0.4, 0.7], [0.01, 0.2, -0.03]],
+    )
     trajectory = simulate(spin)
     h_b = trajectory.inertia_kg_m2[:, None, :] * trajectory.omega_b_rad_s
     h_i = qt.rotate(trajectory.q_ib, h_b)

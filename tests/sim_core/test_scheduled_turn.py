@@ -94,9 +94,11 @@ def test_acceleration_equals_derivative_of_rate(duration_s):
     assert np.max(np.abs(wd_numeric - wd)) < KINEMATIC_CONSISTENCY
 
 
-unit_quaternions = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(
-    lambda v: np.linalg.norm(v) > 0.1
-).map(lambda v: np.array(v) / np.linalg.norm(v))
+unit_quaternions = (
+    st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4)
+    .filter(lambda v: np.linalg.norm(v) > 0.1)
+    .map(lambda v: np.array(v) / np.linalg.norm(v))
+)
 body_rates = st.lists(st.floats(-0.05, 0.05), min_size=3, max_size=3).map(np.array)
 
 
@@ -137,10 +139,24 @@ def _trapezoid_rate(t: float, angle: float, duration: float) -> float:
 def test_rest_to_rest_single_axis_turn_follows_integrated_trapezoid(duration_s):
     angle = np.radians(20.0)
     axis = np.array([0.0, 1.0, 0.0])  # a 20° roll about y^o, seed 000 §5
-    plan = stn.plan_scheduled_turn(np.array([1.0, 0, 0, 0]), np.zeros(3), qt.from_axis_angle(axis, angle), np.zeros(3), duration_s)
+    plan = stn.plan_scheduled_turn(
+        np.array([1.0, 0, 0, 0]), np.zeros(3), qt.from_axis_angle(axis, angle), np.zeros(3), duration_s
+    )
     t = np.linspace(0.0, duration_s, 37)
     q, w, wd = stn.scheduled_turn(plan, t)
-    theta = np.array([quad(_trapezoid_rate, 0.0, ti, args=(angle, duration_s), points=[72.0, duration_s - 72.0, duration_s / 2], epsabs=1e-14)[0] for ti in t])
+    theta = np.array(
+        [
+            quad(
+                _trapezoid_rate,
+                0.0,
+                ti,
+                args=(angle, duration_s),
+                points=[72.0, duration_s - 72.0, duration_s / 2],
+                epsabs=1e-14,
+            )[0]
+            for ti in t
+        ]
+    )
     assert np.max(np.abs(q - qt.from_axis_angle(axis, theta))) < QUAD_ANGLE
     rate = np.array([_trapezoid_rate(ti, angle, duration_s) for ti in t])
     assert np.max(np.abs(w - rate[:, None] * axis)) < ROUND_OFF
@@ -179,7 +195,9 @@ def test_envelope_bounds_hold_and_are_tight_rest_to_rest():
     _, w, wd = stn.scheduled_turn(plan, t)
     assert np.max(np.linalg.norm(w, axis=1)) <= env.max_rate_bound_rad_s
     assert np.max(np.linalg.norm(wd, axis=1)) <= env.max_acceleration_bound_rad_s2
-    rest = stn.plan_scheduled_turn(np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0.0, 1.0, 0, 0]), np.zeros(3), 250.0)
+    rest = stn.plan_scheduled_turn(
+        np.array([1.0, 0, 0, 0]), np.zeros(3), np.array([0.0, 1.0, 0, 0]), np.zeros(3), 250.0
+    )
     env = stn.turn_envelope(rest)
     _, w, wd = stn.scheduled_turn(rest, np.linspace(0.0, 250.0, 5001))
     assert np.max(np.linalg.norm(w, axis=1)) == pytest.approx(env.max_rate_bound_rad_s, rel=ROUND_OFF)
@@ -193,7 +211,9 @@ def test_envelope_bounds_hold_and_are_tight_rest_to_rest():
 def test_shortest_rest_to_rest_duration_saturates_one_limit(angle_deg, max_rate_deg_s, max_acc_deg_s2):
     angle, w_max, a_max = np.radians([angle_deg, max_rate_deg_s, max_acc_deg_s2])
     tau = stn.shortest_rest_to_rest_duration_s(angle, w_max, a_max)
-    plan = stn.plan_scheduled_turn(np.array([1.0, 0, 0, 0]), np.zeros(3), qt.from_axis_angle(np.array([0.0, 1.0, 0.0]), angle), np.zeros(3), tau)
+    plan = stn.plan_scheduled_turn(
+        np.array([1.0, 0, 0, 0]), np.zeros(3), qt.from_axis_angle(np.array([0.0, 1.0, 0.0]), angle), np.zeros(3), tau
+    )
     env = stn.turn_envelope(plan)
     rate_use, acc_use = env.transition_rate_rad_s / w_max, env.transition_acceleration_rad_s2 / a_max
     assert max(rate_use, acc_use) == pytest.approx(1.0, rel=1e-12) and min(rate_use, acc_use) <= 1.0 + 1e-12
@@ -211,8 +231,14 @@ def test_shortest_rest_to_rest_duration_saturates_one_limit(angle_deg, max_rate_
     ],
 )
 def test_bad_input_names_the_field(kwargs, field):
-    good = dict(q_start=np.array([1.0, 0, 0, 0]), omega_start_b_rad_s=np.zeros(3), q_end=np.array([1.0, 0, 0, 0]),
-                omega_end_b_rad_s=np.zeros(3), duration_s=100.0, t_start_s=0.0)
+    good = {
+        "q_start": np.array([1.0, 0, 0, 0]),
+        "omega_start_b_rad_s": np.zeros(3),
+        "q_end": np.array([1.0, 0, 0, 0]),
+        "omega_end_b_rad_s": np.zeros(3),
+        "duration_s": 100.0,
+        "t_start_s": 0.0,
+    }
     with pytest.raises(ValueError, match=field):
         stn.plan_scheduled_turn(**{**good, **kwargs})
 
@@ -230,17 +256,26 @@ def test_seed_acceleration_sum_misses_the_transport_terms_we_add():
     plan = _random_plan(31, 300.0, rate_scale=0.03)
     t = _smooth_times(plan, 20, seed=4)
     tt, tau = t - plan[stn.T_START], plan[stn.TAU]
-    e1, e2, e3 = plan[stn.E1:stn.E1 + 3], plan[stn.E2:stn.E2 + 3], plan[stn.E3:stn.E3 + 3]
+    e1, e2, e3 = plan[stn.E1 : stn.E1 + 3], plan[stn.E2 : stn.E2 + 3], plan[stn.E3 : stn.E3 + 3]
     w_start, w_end, acc = plan[stn.RATE_START], plan[stn.RATE_END], plan[stn.ACC2]
     segment = stn.turn_segment(plan, t)
-    phi2 = np.where(segment == stn.SEGMENT_A, 0.5 * acc * tt**2,
-                    np.where(segment == stn.SEGMENT_B, plan[stn.ANGLE2_T1] + plan[stn.RATE2] * (tt - plan[stn.T1]),
-                             plan[stn.ANGLE2] - 0.5 * acc * (tau - tt) ** 2))
+    phi2 = np.where(
+        segment == stn.SEGMENT_A,
+        0.5 * acc * tt**2,
+        np.where(
+            segment == stn.SEGMENT_B,
+            plan[stn.ANGLE2_T1] + plan[stn.RATE2] * (tt - plan[stn.T1]),
+            plan[stn.ANGLE2] - 0.5 * acc * (tau - tt) ** 2,
+        ),
+    )
     eps2 = np.select([segment == stn.SEGMENT_A, segment == stn.SEGMENT_B], [acc, 0.0], -acc)
     lam3 = qt.from_axis_angle(np.broadcast_to(e3, (t.size, 3)), 0.5 * w_end * tt**2 / tau)
     lam23 = qt.multiply(qt.from_axis_angle(np.broadcast_to(e2, (t.size, 3)), phi2), lam3)
-    seed_eps = (qt.rotate(qt.conjugate(lam23), np.broadcast_to(-w_start / tau * e1, (t.size, 3)))
-                + qt.rotate(qt.conjugate(lam3), eps2[:, None] * e2) + w_end / tau * e3)
+    seed_eps = (
+        qt.rotate(qt.conjugate(lam23), np.broadcast_to(-w_start / tau * e1, (t.size, 3)))
+        + qt.rotate(qt.conjugate(lam3), eps2[:, None] * e2)
+        + w_end / tau * e3
+    )
     wd_true = _five_point(lambda s: stn.scheduled_turn(plan, s)[1], t)
     _, _, wd = stn.scheduled_turn(plan, t)
     assert np.max(np.abs(wd - wd_true)) < KINEMATIC_CONSISTENCY

@@ -68,7 +68,9 @@ def test_star_tracker_is_blinded_only_by_a_lit_sun_inside_its_exclusion_cone():
     blinded = sensors.star_tracker_blinded(q, sun, r, [0, 0, 1], np.radians(30.0))
     assert blinded.tolist() == [True, False, False]
     for k in range(3):
-        got = sensors.star_tracker_blinded_1(q[k], sun, r[k].astype(float), np.array([0, 0, 1.0]), np.cos(np.radians(30.0)))
+        got = sensors.star_tracker_blinded_1(
+            q[k], sun, r[k].astype(float), np.array([0, 0, 1.0]), np.cos(np.radians(30.0))
+        )
         assert got == blinded[k]
 
 
@@ -115,7 +117,9 @@ def test_gyro_kernel_equals_vectorised_model_on_the_same_draws():
     w = np.vstack([w, np.zeros((1, 3))])
     drift = d0.copy()
     for k in range(n):
-        mk, ok = sensors.gyro_1(omega[k], bias, drift, np.full(3, sigma), model.decay, model.step_std, 1.0, np.concatenate([ng[k], w[k]]))
+        mk, ok = sensors.gyro_1(
+            omega[k], bias, drift, np.full(3, sigma), model.decay, model.step_std, 1.0, np.concatenate([ng[k], w[k]])
+        )
         assert ok
         assert np.allclose(mk, meas[k], atol=EXACT)
 
@@ -136,9 +140,15 @@ def test_gyro_saturates_and_flags_out_of_range_rates():
         (lambda: sensors.star_tracker([1, 0, 0, 0], [0, 0, 0], -1.0, 1.0, np.random.default_rng()), "sigma_rad"),
         (lambda: sensors.variant_generators(1, 0), "n_variants"),
         (lambda: sensors.earth_sensor(0.0, 0.0, [0.0], 1e-3, 0.2, np.random.default_rng()), "bias_rad"),
-        (lambda: sensors.magnetometer([1, 0, 0, 0], [np.nan, 0, 0], np.zeros(3), 0.0, 1.0, np.random.default_rng()), "b_i_t"),
+        (
+            lambda: sensors.magnetometer([1, 0, 0, 0], [np.nan, 0, 0], np.zeros(3), 0.0, 1.0, np.random.default_rng()),
+            "b_i_t",
+        ),
         (lambda: sensors.wheel_tachometer([1.0], 0.0, 10.0), "resolution_rad_s"),
-        (lambda: sensors.gps_receiver(np.zeros(3), np.zeros(3), 1.0, 1.0, 1.5, np.random.default_rng()), "dropout_probability"),
+        (
+            lambda: sensors.gps_receiver(np.zeros(3), np.zeros(3), 1.0, 1.0, 1.5, np.random.default_rng()),
+            "dropout_probability",
+        ),
     ],
 )
 def test_bad_input_names_the_field(call, field):
@@ -218,7 +228,9 @@ def test_sun_sensor_is_invalid_in_eclipse_and_outside_its_field_of_view():
     s_out, v_out = sensors.sun_sensor(q[2], sun, r2, [1, 0, 0], np.radians(60.0), 0.0, rng)
     assert not v_out and np.allclose(s_out, [0, -1, 0], atol=EXACT)
     for k in range(3):
-        s1, v1 = sensors.sun_sensor_1(q[k], sun, r[k].astype(float), np.array([1.0, 0, 0]), np.cos(np.radians(60.0)), 0.0, np.zeros(3))
+        s1, v1 = sensors.sun_sensor_1(
+            q[k], sun, r[k].astype(float), np.array([1.0, 0, 0]), np.cos(np.radians(60.0)), 0.0, np.zeros(3)
+        )
         assert v1 == valid[k] and np.allclose(s1, s_b[k], atol=EXACT)
 
 

@@ -38,15 +38,24 @@ def _no_wheels() -> WheelParams:
 def _flexible_ge_plant(decrement: float = 0.0, coulomb_nm: float = 0.0, viscous: float = 0.0) -> PlantParams:
     wheels = WheelParams(np.full(4, 0.0191), coulomb_nm=coulomb_nm, coulomb_sat_speed_rad_s=1.0, viscous_nm_s=viscous)
     return PlantParams(
-        SPACECRAFT_J, ge_scheme_axes(np.deg2rad(30.0)), wheels,
-        flex_coupling=FLEX_D, flex_modal_mass=np.ones(2), flex_freq_rad_s=np.array([3.0, 7.0]),
+        SPACECRAFT_J,
+        ge_scheme_axes(np.deg2rad(30.0)),
+        wheels,
+        flex_coupling=FLEX_D,
+        flex_modal_mass=np.ones(2),
+        flex_freq_rad_s=np.array([3.0, 7.0]),
         flex_log_decrement=np.full(2, decrement),
     )
 
 
 def _spinning_state(params: PlantParams) -> np.ndarray:
-    return pack_state(params, [1.0, 0.0, 0.0, 0.0], [0.02, -0.03, 0.05],
-                      np.array([1000.0, -1000.0, 1000.0, -1000.0]) * RPM, flex_q=[0.01, -0.005])
+    return pack_state(
+        params,
+        [1.0, 0.0, 0.0, 0.0],
+        [0.02, -0.03, 0.05],
+        np.array([1000.0, -1000.0, 1000.0, -1000.0]) * RPM,
+        flex_q=[0.01, -0.005],
+    )
 
 
 def _history(params: PlantParams, x0: np.ndarray, dt: float, duration: float, samples: int = 400):
@@ -69,11 +78,13 @@ class _EulerPoinsot:
         self.m = np.sqrt(self.m2)
         self.k2 = (i2 - i1) * (self.e2 * i3 - self.m2) / ((i3 - i2) * (self.m2 - self.e2 * i1))
         self.rate = np.sqrt((i3 - i2) * (self.m2 - self.e2 * i1) / (i1 * i2 * i3))
-        self.amp = np.array([
-            np.sqrt((self.e2 * i3 - self.m2) / (i1 * (i3 - i1))),
-            np.sqrt((self.e2 * i3 - self.m2) / (i2 * (i3 - i2))),
-            np.sqrt((self.m2 - self.e2 * i1) / (i3 * (i3 - i1))),
-        ])
+        self.amp = np.array(
+            [
+                np.sqrt((self.e2 * i3 - self.m2) / (i1 * (i3 - i1))),
+                np.sqrt((self.e2 * i3 - self.m2) / (i2 * (i3 - i2))),
+                np.sqrt((self.m2 - self.e2 * i1) / (i3 * (i3 - i1))),
+            ]
+        )
 
     def omega(self, t) -> np.ndarray:
         sn, cn, dn, _ = ellipj(self.rate * np.asarray(t, dtype=float), self.k2)
@@ -93,8 +104,14 @@ class _EulerPoinsot:
         """R_NB(t) with R_NB(0) = I; the precession angle φ is the quadrature of φ̇ (scipy.quad)."""
         r0 = self._r_sb(0.0, 0.0)
         edges = np.arange(0.0, times[-1] + chunk_s, chunk_s)
-        cumulative = np.concatenate([[0.0], np.cumsum([quad(self._phi_dot, a, b, epsabs=1e-14, epsrel=1e-13)[0]
-                                                       for a, b in zip(edges[:-1], edges[1:])])])
+        cumulative = np.concatenate(
+            [
+                [0.0],
+                np.cumsum(
+                    [quad(self._phi_dot, a, b, epsabs=1e-14, epsrel=1e-13)[0] for a, b in zip(edges[:-1], edges[1:])]
+                ),
+            ]
+        )
         out = []
         for t in times:
             k = int(np.searchsorted(edges, t, side="right") - 1)
@@ -130,8 +147,9 @@ def test_rk4_matches_jacobi_elliptic_rates_at_one_millisecond():
     moments, a, c = (100.0, 200.0, 250.0), 0.4, 0.5
     params = PlantParams(np.diag(moments), np.zeros((3, 0)), _no_wheels())
     n = 100_000
-    traj = rk4_propagate(pack_state(params, [1, 0, 0, 0], [a, 0.0, c]), 1e-3, np.zeros((n, 0)), np.zeros((n, 3)),
-                         params, every=10_000)
+    traj = rk4_propagate(
+        pack_state(params, [1, 0, 0, 0], [a, 0.0, c]), 1e-3, np.zeros((n, 0)), np.zeros((n, 3)), params, every=10_000
+    )
     assert np.max(np.abs(traj[:, 4:7] - _EulerPoinsot(moments, a, c).omega(np.linspace(0, 100, 11)))) < JACOBI_TOL_RAD
 
 
@@ -170,9 +188,15 @@ def test_single_axis_flex_mode_matches_the_damped_oscillator_solution():
     oscillator; the body rate follows from the conserved J ω + d q̇.
     """
     j, d, a, om, dec = 10.0, 2.0, 1.0, 3.0, 0.1
-    params = PlantParams(np.diag([12.0, 11.0, j]), np.zeros((3, 0)), _no_wheels(),
-                         flex_coupling=[[0.0], [0.0], [d]], flex_modal_mass=[a], flex_freq_rad_s=[om],
-                         flex_log_decrement=[dec])
+    params = PlantParams(
+        np.diag([12.0, 11.0, j]),
+        np.zeros((3, 0)),
+        _no_wheels(),
+        flex_coupling=[[0.0], [0.0], [d]],
+        flex_modal_mass=[a],
+        flex_freq_rad_s=[om],
+        flex_log_decrement=[dec],
+    )
     q0, w0 = 0.02, 0.1
     x0 = pack_state(params, [1, 0, 0, 0], [0.0, 0.0, w0], flex_q=[q0])
     n = 10_000
@@ -199,12 +223,20 @@ def test_derivative_solves_the_mass_matrix_system_of_seed_000():
     jr, axes = params.wheels.inertia_kg_m2, params.wheel_axes_b
     g = SPACECRAFT_J @ w + axes @ (jr * om) + FLEX_D @ qd
     friction = 0.01 * np.clip(om / 1.0, -1, 1) + 1e-5 * om
-    f = np.concatenate([-np.cross(w, g) + ext,
-                        -np.ones(2) * (0.03 / np.pi * np.array([3.0, 7.0]) * qd + np.array([9.0, 49.0]) * q),
-                        motor - friction])
-    a_o = np.block([[SPACECRAFT_J, FLEX_D, axes * jr],
-                    [FLEX_D.T, np.eye(2), np.zeros((2, 4))],
-                    [(axes * jr).T, np.zeros((4, 2)), np.diag(jr)]])
+    f = np.concatenate(
+        [
+            -np.cross(w, g) + ext,
+            -np.ones(2) * (0.03 / np.pi * np.array([3.0, 7.0]) * qd + np.array([9.0, 49.0]) * q),
+            motor - friction,
+        ]
+    )
+    a_o = np.block(
+        [
+            [SPACECRAFT_J, FLEX_D, axes * jr],
+            [FLEX_D.T, np.eye(2), np.zeros((2, 4))],
+            [(axes * jr).T, np.zeros((4, 2)), np.diag(jr)],
+        ]
+    )
     vdot = np.linalg.solve(a_o, f)
     xdot = plant_derivative(x, motor, ext, params)
     assert np.allclose(xdot[:4], qt.derivative(x[:4], w), rtol=DERIVATIVE_RTOL, atol=0.0)
@@ -221,8 +253,12 @@ def test_momentum_and_energy_are_the_quadratic_forms_of_the_mass_matrix():
     a_o = params.mass_matrix()
     assert np.allclose(angular_momentum_b(x, params), (a_o @ v)[:3], rtol=ROUNDOFF_RTOL)
     assert kinetic_energy(x, params) == pytest.approx(0.5 * v @ a_o @ v, rel=ROUNDOFF_RTOL)
-    assert np.allclose(params.wheel_axes_b @ wheel_momentum(x, params), angular_momentum_b(x, params)
-                       - SPACECRAFT_J @ x[4:7] - FLEX_D @ x[9:11], rtol=1e-12, atol=1e-15)
+    assert np.allclose(
+        params.wheel_axes_b @ wheel_momentum(x, params),
+        angular_momentum_b(x, params) - SPACECRAFT_J @ x[4:7] - FLEX_D @ x[9:11],
+        rtol=1e-12,
+        atol=1e-15,
+    )
     strain = 0.5 * np.sum((np.array([3.0, 7.0]) * x[7:9]) ** 2)
     assert mechanical_energy(x, params) == pytest.approx(kinetic_energy(x, params) + strain, rel=ROUNDOFF_RTOL)
 
@@ -268,8 +304,14 @@ def test_bad_wheels_and_modes_are_rejected_naming_the_field():
     with pytest.raises(ValueError, match="wheels"):
         PlantParams(np.eye(3), np.zeros((3, 0)), None)
     with pytest.raises(ValueError, match="flex_freq_rad_s"):
-        PlantParams(np.eye(3), np.zeros((3, 0)), _no_wheels(), flex_coupling=np.zeros((3, 1)),
-                    flex_modal_mass=[1.0], flex_freq_rad_s=[-1.0])
+        PlantParams(
+            np.eye(3),
+            np.zeros((3, 0)),
+            _no_wheels(),
+            flex_coupling=np.zeros((3, 1)),
+            flex_modal_mass=[1.0],
+            flex_freq_rad_s=[-1.0],
+        )
     with pytest.raises(ValueError, match="flex_modal_mass.*required"):
         PlantParams(np.eye(3), np.zeros((3, 0)), _no_wheels(), flex_coupling=np.zeros((3, 1)))
 

@@ -90,7 +90,7 @@ def test_aerodynamic_drag_spin_down_matches_the_analytic_solution():
     """J Ω̇ = −K_a Ω^{3/2} (seed 002 eq 4): Ω(t) = (Ω0^{−1/2} + K_a t / (2J))^{−2}."""
     k_a, speed0 = 1e-5, 600.0
     t, speed, j_eff = _spin_down(wh.WheelParams([0.05], aero_drag_nm_s15=k_a), speed0, 20.0)
-    exact = (speed0 ** -0.5 + k_a * t / (2.0 * j_eff)) ** -2.0
+    exact = (speed0**-0.5 + k_a * t / (2.0 * j_eff)) ** -2.0
     assert np.allclose(speed, exact, rtol=SPIN_DOWN_RTOL, atol=0.0)
 
 
@@ -113,8 +113,9 @@ def test_imbalance_noise_and_delivered_torque_of_seed_002_eq_1_and_4():
     wheels = wh.WheelParams([0.02], noise_nm=1e-4, imbalance_nm_s2=1e-7)
     t = np.pi / 200.0
     assert wh.imbalance_torque(wheels, [100.0], t) == pytest.approx([1e-3], rel=1e-12)
-    total = wh.delivered_torque_1(np.array([0.05]), np.array([100.0]), t, wheels.noise_nm, wheels.imbalance_nm_s2,
-                                  np.array([-0.5]))
+    total = wh.delivered_torque_1(
+        np.array([0.05]), np.array([100.0]), t, wheels.noise_nm, wheels.imbalance_nm_s2, np.array([-0.5])
+    )
     assert total == pytest.approx([0.05 - 0.5e-4 + 1e-3], rel=1e-12)
     samples = np.concatenate([wh.noise_torque(wheels, np.random.default_rng(s)) for s in range(20_000)])
     assert np.max(np.abs(samples)) <= 1e-4
@@ -132,8 +133,15 @@ def test_armature_current_ode_matches_the_first_order_step_response():
     """L di/dt + R i + K_e Ω = u from i = 0: i(t) = (u − K_e Ω)/R (1 − e^{−Rt/L}); u = 5 V, Ω = 100 rad/s."""
     u, speed = 5.0, 100.0
     t = np.linspace(0.0, 5e-3, 26)
-    sol = solve_ivp(lambda _t, i: wh.motor_current_derivative(MOTOR, i, [u], [speed]), (0.0, t[-1]), [0.0],
-                    method="DOP853", t_eval=t, rtol=1e-12, atol=1e-15)
+    sol = solve_ivp(
+        lambda _t, i: wh.motor_current_derivative(MOTOR, i, [u], [speed]),
+        (0.0, t[-1]),
+        [0.0],
+        method="DOP853",
+        t_eval=t,
+        rtol=1e-12,
+        atol=1e-15,
+    )
     exact = (u - 0.03 * speed) / 1.0 * (1.0 - np.exp(-t / 1e-3))
     assert np.allclose(sol.y[0], exact, rtol=ODE_RTOL, atol=1e-12)
 
@@ -225,8 +233,12 @@ def test_voltage_driven_wheel_in_the_plant_follows_the_exact_linear_motor_soluti
     for _ in range(n):
         x = rk4_propagate(x, dt, MOTOR.torque_constant_nm_a * current[None, :], np.zeros((1, 3)), params)[-1]
         current = wh.motor_current_step(MOTOR, current, [volts], x[7:8], dt)
-    a = np.array([[-MOTOR.resistance_ohm / MOTOR.inductance_h, -MOTOR.back_emf_v_s / MOTOR.inductance_h],
-                  [MOTOR.torque_constant_nm_a / j_eff, 0.0]])
+    a = np.array(
+        [
+            [-MOTOR.resistance_ohm / MOTOR.inductance_h, -MOTOR.back_emf_v_s / MOTOR.inductance_h],
+            [MOTOR.torque_constant_nm_a / j_eff, 0.0],
+        ]
+    )
     aug = np.zeros((3, 3))
     aug[:2, :2], aug[0, 2] = a, volts / MOTOR.inductance_h
     exact_speed = (expm(aug * n * dt) @ np.array([0.0, 0.0, 1.0]))[1]

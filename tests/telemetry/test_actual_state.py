@@ -53,8 +53,10 @@ def satellite():
 def test_actual_track_from_shuffled_repeated_batches_restores_sim_core_layouts(satellite) -> None:
     traj, stream, batches = satellite
     dictionary = load_dictionary(emulator.REFERENCE_DICTIONARY)
-    pieces = [stream.window(int(stream.t_utc_ns[0]) + k * 60 * NS, int(stream.t_utc_ns[0]) + (k + 1) * 60 * NS)
-              for k in range(15)]
+    pieces = [
+        stream.window(int(stream.t_utc_ns[0]) + k * 60 * NS, int(stream.t_utc_ns[0]) + (k + 1) * 60 * NS)
+        for k in range(15)
+    ]
     live = [b for p in pieces for b in decode_stream(p.data, dictionary).batches]
     shuffled = [live[k] for k in np.random.default_rng(3).permutation(len(live))] + live[:4]  # repeats too
     track = actual_track(shuffled)
@@ -72,8 +74,9 @@ def test_noise_free_fixes_give_the_circular_orbit_back_exactly() -> None:
     elements = {"altitude_m": 523e3, "inclination_deg": 61.0, "raan_deg": 40.0, "arg_latitude_deg": 123.0}
     t0 = 1.77e9
     t = t0 + np.arange(-30.0, 31.0)
-    r, v = orbit.circular_orbit(t - t0, elements["altitude_m"], elements["inclination_deg"], elements["raan_deg"],
-                                elements["arg_latitude_deg"])
+    r, v = orbit.circular_orbit(
+        t - t0, elements["altitude_m"], elements["inclination_deg"], elements["raan_deg"], elements["arg_latitude_deg"]
+    )
     r_ecef, v_ecef = frames.eci_to_ecef(r, v, t)
     fitted = fit_circular_orbit(t, r_ecef, v_ecef, t0)
     assert fitted["altitude_m"] == pytest.approx(elements["altitude_m"], abs=1e-6)
@@ -86,14 +89,18 @@ def test_gps_fixes_of_the_emulated_satellite_give_its_scenario_orbit(satellite) 
     track = actual_track(batches)
     t_align = int(track.t_utc_ns[0]) + int(ALIGN_S * NS)
     near = np.abs(track.gps_t_utc_ns - t_align) <= 30 * NS
-    fitted = fit_circular_orbit(track.gps_t_utc_ns[near] / NS, track.gps["r_ecef_m"][near],
-                                track.gps["v_ecef_m_s"][near], t_align / NS)
+    fitted = fit_circular_orbit(
+        track.gps_t_utc_ns[near] / NS, track.gps["r_ecef_m"][near], track.gps["v_ecef_m_s"][near], t_align / NS
+    )
     s = scenario_library.get("somov-ge4-scan")  # circular 600 km, Sun-synchronous, RAAN 0, u0 = 0
     a = orbit.R_EARTH_M + s.orbit.altitude_m
     u = np.degrees(np.sqrt(orbit.MU_EARTH_M3_S2 / a**3) * ALIGN_S)
     assert fitted["altitude_m"] == pytest.approx(s.orbit.altitude_m, abs=NOISY_ALTITUDE_TOL_M)
-    expected = {"inclination_deg": float(orbit.sun_synchronous_inclination_deg(s.orbit.altitude_m)),
-                "raan_deg": s.orbit.raan_deg, "arg_latitude_deg": u}
+    expected = {
+        "inclination_deg": float(orbit.sun_synchronous_inclination_deg(s.orbit.altitude_m)),
+        "raan_deg": s.orbit.raan_deg,
+        "arg_latitude_deg": u,
+    }
     for key, value in expected.items():
         assert np.radians(fitted[key] - value) == pytest.approx(0.0, abs=NOISY_FIT_TOL_RAD), key
 
@@ -161,8 +168,9 @@ def test_batch_of_fault_hypotheses_ranks_the_hidden_failure_first(satellite) -> 
     assert fits[0].name == f"wheel {FAILED_WHEEL} failure"  # the satellite's hidden schedule
     # one count of misfit from noise, about one more from the satellite's own truth (emulator.TruthTolerances)
     assert fits[0].wheel_speed_rms_rad_s < 2 * TACHOMETER_COUNT_RAD_S
-    assert min(f.wheel_speed_rms_rad_s for f in fits[1:]) > max(2 * TACHOMETER_COUNT_RAD_S,
-                                                                2 * fits[0].wheel_speed_rms_rad_s)
+    assert min(f.wheel_speed_rms_rad_s for f in fits[1:]) > max(
+        2 * TACHOMETER_COUNT_RAD_S, 2 * fits[0].wheel_speed_rms_rad_s
+    )
     with pytest.raises(ValueError, match="hypotheses"):
         rank_hypotheses(scenario_library.get("somov-ge4-scan"), track, t_align, RANKING_S, {})
 

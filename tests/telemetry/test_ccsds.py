@@ -27,8 +27,8 @@ NOAA_LEN = 71
 CRC_CHECK_123456789 = 0x29B1  # CRC-16/CCITT-FALSE check value (Greg Cook's CRC catalogue)
 HALF_NS = 0.5  # decode rounds a CUC fraction to the nearest nanosecond
 ROUNDING_NS = 1  # encode rounds to the nearest tick, decode to the nearest ns: at most half a tick + 1 ns
-UNIX_EPOCH = dt.datetime(1970, 1, 1, tzinfo=dt.timezone.utc)
-CCSDS_EPOCH = dt.datetime(1958, 1, 1, tzinfo=dt.timezone.utc)
+UNIX_EPOCH = dt.datetime(1970, 1, 1, tzinfo=dt.UTC)
+CCSDS_EPOCH = dt.datetime(1958, 1, 1, tzinfo=dt.UTC)
 
 
 def test_primary_header_clause_4_1_3_byte_vector() -> None:
@@ -92,8 +92,15 @@ def test_cuc_4_2_decode_is_exact_binary_fraction(coarse: int, fine: int) -> None
     assert abs(ours - exact_ns) <= HALF_NS
 
 
-@pytest.mark.parametrize("code", [TimeCode("CUC", 4, 2), TimeCode("CUC", 2, 3), TimeCode("CDS"),
-                                  TimeCode("CDS", day_octets=3, submillisecond_octets=4)])
+@pytest.mark.parametrize(
+    "code",
+    [
+        TimeCode("CUC", 4, 2),
+        TimeCode("CUC", 2, 3),
+        TimeCode("CDS"),
+        TimeCode("CDS", day_octets=3, submillisecond_octets=4),
+    ],
+)
 def test_time_code_round_trip_within_half_a_tick(code: TimeCode) -> None:
     rng = np.random.default_rng(7)
     span_ns = (2**16 - 1) * 10**9 if code.format == "CUC" and code.coarse_octets == 2 else 60 * 365 * 86_400 * 10**9
@@ -165,8 +172,13 @@ def test_framing_with_crc_quarantines_corrupt_payload() -> None:
 
 
 def test_unknown_apid_is_quarantined_and_idle_packet_counted() -> None:
-    stream = (_packet(100, 0, 20, 1) + _packet(555, 0, 14, 2) + _packet(100, 1, 20, 3)
-              + _packet(ccsds.IDLE_APID, 0, 10, 0) + _packet(100, 2, 20, 3))
+    stream = (
+        _packet(100, 0, 20, 1)
+        + _packet(555, 0, 14, 2)
+        + _packet(100, 1, 20, 3)
+        + _packet(ccsds.IDLE_APID, 0, 10, 0)
+        + _packet(100, 2, 20, 3)
+    )
     frames = ccsds.frame_stream(stream, {100: 20})
     assert [FrameCode.NAMES[c] for c in frames.code] == ["ok", "unknown_apid", "ok", "idle", "ok"]
 
@@ -186,11 +198,13 @@ def test_tai_and_gps_time_codes_follow_skyfield_leap_seconds(scale: str) -> None
     code = TimeCode("CUC", 4, 0, epoch_ns=epoch, time_scale=scale)
     utc = [(1999, 1, 1, 0, 0, 0), (2016, 12, 31, 23, 59, 59), (2017, 1, 1, 0, 0, 0), (2021, 4, 9, 12, 0, 0)]
     t = ts.utc(*np.array(utc).T)
-    tai_label_s = [(dt.datetime(*map(int, c[:5]), tzinfo=dt.timezone.utc) - UNIX_EPOCH).total_seconds() + c[5]
-                   for c in zip(*t.tai_calendar())]
+    tai_label_s = [
+        (dt.datetime(*map(int, c[:5]), tzinfo=dt.UTC) - UNIX_EPOCH).total_seconds() + c[5]
+        for c in zip(*t.tai_calendar())
+    ]
     coarse = np.rint(np.array(tai_label_s) - epoch / 1e9 + (-19 if scale == "GPS" else 0)).astype(np.int64)
     t_field = np.stack([(coarse >> s) & 0xFF for s in (24, 16, 8, 0)], axis=1).astype(np.uint8)
-    expected = np.array([(dt.datetime(*c, tzinfo=dt.timezone.utc) - UNIX_EPOCH).total_seconds() for c in utc])
+    expected = np.array([(dt.datetime(*c, tzinfo=dt.UTC) - UNIX_EPOCH).total_seconds() for c in utc])
     np.testing.assert_array_equal(ccsds.decode_time(t_field, code), expected.astype(np.int64) * 10**9)
     np.testing.assert_array_equal(ccsds.encode_time(expected.astype(np.int64) * 10**9, code), t_field)
 
@@ -212,6 +226,7 @@ def test_cds_sub_fields_beyond_their_range_are_invalid() -> None:
     """ms of day ≤ 86,400,999 (a leap-second day) and µs of ms < 1,000 (CCSDS 301.0-B-4 §3.3.1)."""
     code = TimeCode("CDS")
     rows = [(23_109, 86_400_999, 999), (23_109, 86_401_000, 0), (23_109, 5, 1_000)]
-    fields = np.array([list(d.to_bytes(2, "big") + m.to_bytes(4, "big") + u.to_bytes(2, "big")) for d, m, u in rows],
-                      dtype=np.uint8)
+    fields = np.array(
+        [list(d.to_bytes(2, "big") + m.to_bytes(4, "big") + u.to_bytes(2, "big")) for d, m, u in rows], dtype=np.uint8
+    )
     assert ccsds.time_fields_valid(fields, code).tolist() == [True, False, False]

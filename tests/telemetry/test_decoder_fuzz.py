@@ -122,7 +122,6 @@ def test_without_crc_real_packets_around_cut_and_inserted_bytes_are_recovered(
     assert {rows[i] for i in intact} <= accepted
 
 
-
 @pytest.fixture(scope="module")
 def noaa_rows(shared_data: Path) -> list[bytes]:
     """The 7,200 real NOAA-20 packets, one bytes object each."""

@@ -24,10 +24,20 @@ from tests.telemetry.packet_streams import NOW_UTC_NS, T0_UTC_NS, engineering_va
 ANGLE_TOLERANCE_RAD = 1e-9  # float64 angle of a product of unit quaternions vs scipy's own
 FLOAT64_ROUNDING_REL = 1e-15  # same polynomial, different float64 evaluation order: a few ulp
 GRID_ROUNDING_ABS = 1e-15  # k * c1 recomputed from round(k * c1 / c1): float64 rounding of grid values
-ODD_LAYOUT = [("u3", "uint", 3), ("i13", "int", 13), ("u1", "uint", 1), ("u7", "uint", 7), ("i5", "int", 5),
-              ("f32", "float", 32), ("u11", "uint", 11), ("u64", "uint", 64), ("i64", "int", 64), ("i2", "int", 2),
-              ("u6", "uint", 6),
-              ("f64", "float", 64)]
+ODD_LAYOUT = [
+    ("u3", "uint", 3),
+    ("i13", "int", 13),
+    ("u1", "uint", 1),
+    ("u7", "uint", 7),
+    ("i5", "int", 5),
+    ("f32", "float", 32),
+    ("u11", "uint", 11),
+    ("u64", "uint", 64),
+    ("i64", "int", 64),
+    ("i2", "int", 2),
+    ("u6", "uint", 6),
+    ("f64", "float", 64),
+]
 
 
 def _odd_packet() -> PacketDefinition:
@@ -46,8 +56,10 @@ def test_unaligned_bit_fields_match_ccsdspy() -> None:
     rows = rng.integers(0, 256, (n, packet.packet_octets), dtype=np.uint8)
     rows[:, :6] = ccsds.encode_primary_headers(77, np.arange(n), packet.packet_octets)
     theirs = ccsdspy.FixedLength(
-        [ccsdspy.PacketField(name=p.name, data_type=p.data_type, bit_length=p.bit_length, bit_offset=p.bit_offset)
-         for p in packet.parameters]
+        [
+            ccsdspy.PacketField(name=p.name, data_type=p.data_type, bit_length=p.bit_length, bit_offset=p.bit_offset)
+            for p in packet.parameters
+        ]
     ).load(BytesIO(rows.tobytes()))
     ours = decode_raw(rows, packet)
     for p in packet.parameters:
@@ -70,8 +82,9 @@ def _python_bit_field(row: np.ndarray, p: Parameter) -> float | int:
 def test_polynomial_calibration_matches_numpy_polyval() -> None:
     p = Parameter("t", "int", 48, 16, polynomial=(273.15, 0.0125, -3e-7, 1e-11))
     raw = np.arange(-32768, 32768, 97)
-    np.testing.assert_allclose(calibrate(raw, p), np.polynomial.polynomial.polyval(raw, p.polynomial),
-                               rtol=FLOAT64_ROUNDING_REL)
+    np.testing.assert_allclose(
+        calibrate(raw, p), np.polynomial.polynomial.polyval(raw, p.polynomial), rtol=FLOAT64_ROUNDING_REL
+    )
 
 
 def test_attitude_error_angle_matches_scipy_relative_rotation() -> None:
@@ -93,8 +106,7 @@ def test_reference_packets_round_trip_exactly() -> None:
         rows = packets(packet, 200, seed=9)
         decoded = decode_packets(rows, packet)
         for p in packet.parameters:
-            np.testing.assert_allclose(decoded[p.name], values[p.name], rtol=0, atol=GRID_ROUNDING_ABS,
-                                       err_msg=p.name)
+            np.testing.assert_allclose(decoded[p.name], values[p.name], rtol=0, atol=GRID_ROUNDING_ABS, err_msg=p.name)
 
 
 def test_mixed_apid_stream_yields_one_time_ordered_batch_per_packet() -> None:
@@ -133,5 +145,3 @@ def test_packets_without_time_code_cannot_be_stamped() -> None:
     rows[:, :6] = ccsds.encode_primary_headers(9, np.arange(2), 8)
     with pytest.raises(ValueError, match="time_code"):
         decode_stream(rows.tobytes(), Dictionary("t", {9: packet}))
-
-

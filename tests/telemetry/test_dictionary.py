@@ -39,8 +39,10 @@ def test_xtce_and_ccsdspy_csv_give_the_same_noaa20_layout() -> None:
 def _ccsdspy_layout(parameters: tuple[Parameter, ...]) -> ccsdspy.FixedLength:
     """A ccsdspy definition with our bit offsets (both count from the first octet of the packet)."""
     return ccsdspy.FixedLength(
-        [ccsdspy.PacketField(name=p.name, data_type=p.data_type, bit_length=p.bit_length, bit_offset=p.bit_offset)
-         for p in parameters]
+        [
+            ccsdspy.PacketField(name=p.name, data_type=p.data_type, bit_length=p.bit_length, bit_offset=p.bit_offset)
+            for p in parameters
+        ]
     )
 
 
@@ -70,11 +72,17 @@ def test_reference_dictionary_carries_the_acs_housekeeping_of_issue_5() -> None:
     hk, gps = d.packets[256], d.packets[257]
     names = {p.name for p in hk.parameters} | {x.name for x in hk.derived}
     required = (
-        [f"q_st_ib_{k}" for k in range(4)] + [f"q_est_ib_{k}" for k in range(4)] + [f"q_prog_ib_{k}" for k in range(4)]
-        + [f"omega_est_b_rad_s_{a}" for a in "xyz"] + [f"omega_gyro_b_rad_s_{a}" for a in "xyz"]
-        + [f"wheel_speed_rad_s_{k}" for k in range(1, 5)] + [f"wheel_torque_cmd_nm_{k}" for k in range(1, 5)]
-        + [f"wheel_current_a_{k}" for k in range(1, 5)] + [f"md_dipole_am2_{a}" for a in "xyz"]
-        + [f"b_mag_b_t_{a}" for a in "xyz"] + ["mode", "fdir_event", "fault_wheel_1", "attitude_error_rad"]
+        [f"q_st_ib_{k}" for k in range(4)]
+        + [f"q_est_ib_{k}" for k in range(4)]
+        + [f"q_prog_ib_{k}" for k in range(4)]
+        + [f"omega_est_b_rad_s_{a}" for a in "xyz"]
+        + [f"omega_gyro_b_rad_s_{a}" for a in "xyz"]
+        + [f"wheel_speed_rad_s_{k}" for k in range(1, 5)]
+        + [f"wheel_torque_cmd_nm_{k}" for k in range(1, 5)]
+        + [f"wheel_current_a_{k}" for k in range(1, 5)]
+        + [f"md_dipole_am2_{a}" for a in "xyz"]
+        + [f"b_mag_b_t_{a}" for a in "xyz"]
+        + ["mode", "fdir_event", "fault_wheel_1", "attitude_error_rad"]
     )
     assert set(required) <= names
     assert hk.period_s == T_Q_S and hk.crc and hk.time_code == TimeCode("CUC", 4, 2, epoch_ns=946_684_800 * 10**9)
@@ -162,8 +170,12 @@ def _write_yaml(tmp_path: Path, packet: dict) -> Path:
     return path
 
 
-BASE_PACKET = {"name": "P", "apid": 5, "time_code": "CUC-4-2",
-               "parameters": [{"name": "a", "type": "uint", "bits": 16}]}
+BASE_PACKET = {
+    "name": "P",
+    "apid": 5,
+    "time_code": "CUC-4-2",
+    "parameters": [{"name": "a", "type": "uint", "bits": 16}],
+}
 
 
 @pytest.mark.parametrize(
@@ -177,8 +189,10 @@ BASE_PACKET = {"name": "P", "apid": 5, "time_code": "CUC-4-2",
         ({"time_code": "CUC-9-9"}, "time_code"),
         ({"derived": [{"name": "e", "kind": "alias", "inputs": ["zz"]}]}, "e.inputs"),
         ({"derived": [{"name": "e", "kind": "spline", "inputs": ["a"]}]}, "e.kind"),
-        ({"parameters": [{"name": "a", "type": "uint", "bits": 16, "limits": {"red_low": 5, "yellow_low": 1}}]},
-         "limits"),
+        (
+            {"parameters": [{"name": "a", "type": "uint", "bits": 16, "limits": {"red_low": 5, "yellow_low": 1}}]},
+            "limits",
+        ),
     ],
 )
 def test_bad_yaml_raises_value_error_naming_the_field(tmp_path: Path, change: dict, field: str) -> None:
@@ -204,8 +218,10 @@ def test_csv_dictionary_needs_an_apid() -> None:
 def test_ccsdspy_csv_fill_arrays_and_offsets_decode_like_ccsdspy(tmp_path: Path) -> None:
     """ccsdspy's own reading of a CSV with padding, a 1-D array and explicit offsets is the truth."""
     path = tmp_path / "layout.csv"
-    path.write_text("name,data_type,bit_length,bit_offset\nA,uint,4,48\nPAD,fill,4,52\nV,int(3),12,56\n"
-                    "F,float,32,96\nB,uint,8,136\n")
+    path.write_text(
+        "name,data_type,bit_length,bit_offset\nA,uint,4,48\nPAD,fill,4,52\nV,int(3),12,56\n"
+        "F,float,32,96\nB,uint,8,136\n"
+    )
     packet = load_ccsdspy_csv(path, apid=3).packets[3]
     assert [p.name for p in packet.parameters] == ["A", "V_0", "V_1", "V_2", "F", "B"]
     assert packet.packet_octets == 18  # bits 128..135 are an implicit gap before B

@@ -30,7 +30,7 @@ def test_matches_the_set_of_bucket_extremes_computed_one_bucket_at_a_time() -> N
     buckets, size = 40 // 4, -(-1003 // (40 // 4))
     expected = set()
     for b in range(buckets):
-        block = y[b * size:(b + 1) * size]
+        block = y[b * size : (b + 1) * size]
         for c in range(2):
             expected |= {b * size + int(np.nanargmin(block[:, c])), b * size + int(np.nanargmax(block[:, c]))}
     assert list(keep) == sorted(expected)

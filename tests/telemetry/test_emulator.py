@@ -82,7 +82,7 @@ def test_every_packet_decodes_with_its_sequence_count_and_time(nominal, decoded)
 def test_primary_headers_and_cuc_times_read_by_independent_parsers(nominal, dictionary) -> None:
     _, series, stream = nominal
     starts = np.concatenate([[0], stream.ends[:-1]])
-    epoch_2000 = dt.datetime(2000, 1, 1, tzinfo=dt.timezone.utc)
+    epoch_2000 = dt.datetime(2000, 1, 1, tzinfo=dt.UTC)
     counts: dict[int, int] = {}
     for k in range(0, len(stream), 97):
         packet = stream.data[starts[k] : stream.ends[k]]
@@ -115,16 +115,21 @@ def test_decoded_telemetry_equals_the_simulation_truth(nominal, decoded) -> None
     batches, _ = decoded
     hk = batches["ACS_HK"].values
     rows = np.arange(len(batches["ACS_HK"].t_utc_ns))
-    for prefix, key, suffixes in (("q_est_ib", "q_est_ib", "0123"), ("q_prog_ib", "q_prog_ib", "0123"),
-                                  ("omega_est_b_rad_s", "omega_est_b_rad_s", "xyz")):
+    for prefix, key, suffixes in (
+        ("q_est_ib", "q_est_ib", "0123"),
+        ("q_prog_ib", "q_prog_ib", "0123"),
+        ("omega_est_b_rad_s", "omega_est_b_rad_s", "xyz"),
+    ):
         truth = traj[key][0, rows]
         for k, sfx in enumerate(suffixes):
             np.testing.assert_allclose(hk[f"{prefix}_{sfx}"], truth[:, k], rtol=FLOAT32_REL, atol=1e-30)
     for k in range(4):
-        np.testing.assert_allclose(hk[f"wheel_speed_rad_s_{k + 1}"], traj["wheel_speed_rad_s"][0, rows, k],
-                                   atol=HALF_SPEED_COUNT_RAD_S)
-        np.testing.assert_allclose(hk[f"wheel_torque_cmd_nm_{k + 1}"], traj["wheel_torque_cmd_nm"][0, rows, k],
-                                   atol=HALF_TORQUE_COUNT_NM)
+        np.testing.assert_allclose(
+            hk[f"wheel_speed_rad_s_{k + 1}"], traj["wheel_speed_rad_s"][0, rows, k], atol=HALF_SPEED_COUNT_RAD_S
+        )
+        np.testing.assert_allclose(
+            hk[f"wheel_torque_cmd_nm_{k + 1}"], traj["wheel_torque_cmd_nm"][0, rows, k], atol=HALF_TORQUE_COUNT_NM
+        )
     e = quaternion.multiply(quaternion.conjugate(traj["q_prog_ib"][0, rows]), traj["q_est_ib"][0, rows])
     np.testing.assert_allclose(hk["attitude_error_rad"], quaternion.angle(e), atol=FLOAT32_QUATERNION_ANGLE_RAD)
 
@@ -152,7 +157,7 @@ def test_magnetometer_field_magnitude_matches_ppigrf(nominal, decoded) -> None:
     t_unix = traj.extra["epoch_unix_s"] + traj.t_s[rows]
     r_ecef = np.einsum("nij,nj->ni", frames.eci_to_ecef_matrix(t_unix), traj["r_eci_m"][0, rows])
     lat, lon, h = frames.ecef_to_geodetic(r_ecef)
-    date = dt.datetime.fromtimestamp(float(t_unix[0]), dt.timezone.utc).replace(tzinfo=None)
+    date = dt.datetime.fromtimestamp(float(t_unix[0]), dt.UTC).replace(tzinfo=None)
     be, bn, bu = ppigrf.igrf(lon, lat, h / 1e3, date)
     reference = np.sqrt(be**2 + bn**2 + bu**2).ravel() * 1e-9
     sent = np.linalg.norm(np.stack([hk[f"b_mag_b_t_{a}"][rows] for a in "xyz"], axis=-1), axis=-1)
@@ -166,7 +171,7 @@ def test_gps_fix_keeps_the_orbit_radius_and_counts_gps_time(nominal, decoded) ->
     r_fix = np.linalg.norm(np.stack([gps.values[f"r_ecef_m_{a}"] for a in "xyz"], axis=-1), axis=-1)
     residual = r_fix - np.linalg.norm(traj["r_eci_m"][0, rows], axis=-1)  # |r| is frame-invariant
     assert np.std(residual) == pytest.approx(emulator.GPS_SIGMA_R_M, rel=NOISE_STD_REL_TOL * 2)  # 900 fixes
-    first = dt.datetime.fromtimestamp(int(gps.t_utc_ns[0]) // 10**9, dt.timezone.utc)
+    first = dt.datetime.fromtimestamp(int(gps.t_utc_ns[0]) // 10**9, dt.UTC)
     days = (first.date() - dt.date(1980, 1, 6)).days
     assert gps.values["gps_week"][0] == days // 7
     seconds_of_day = first.hour * 3600 + first.minute * 60 + first.second
@@ -203,8 +208,10 @@ def test_hidden_wheel_failure_shows_in_wheel_speeds_and_onboard_fdir_flags(nomin
 
 def test_hidden_sensor_faults_show_in_the_raw_sensor_telemetry(nominal, dictionary) -> None:
     bias_rad_s, onset_s, failure_s = 1e-4, 200.0, 600.0
-    faults = [emulator.parse_fault(f"gyro:2:bias@{onset_s},value={bias_rad_s}"),
-              emulator.parse_fault(f"star_tracker:0:failure@{failure_s}")]
+    faults = [
+        emulator.parse_fault(f"gyro:2:bias@{onset_s},value={bias_rad_s}"),
+        emulator.parse_fault(f"star_tracker:0:failure@{failure_s}"),
+    ]
     traj, series, stream = emulator.emulate(faults=faults, dictionary=dictionary)
     hk = {b.packet: b for b in decode_stream(stream.data, dictionary).batches}["ACS_HK"].values
     t_s = traj.t_s[: len(hk["mode"])]
@@ -224,8 +231,13 @@ def test_hidden_sensor_faults_show_in_the_raw_sensor_telemetry(nominal, dictiona
 def test_onboard_fdir_events_set_the_isolation_flags_and_fault_mode(nominal, dictionary) -> None:
     traj, _, _ = nominal
     gyro_axis_1 = fdir.SENSOR_ARG + 10 * TARGET_CODES["gyro"] + 1  # sim_core.fdir's sensor argument
-    events = [(100.0, "fault_detected", 2), (100.5, "fault_isolated", 2), (101.0, "reconfigured", 0b1011),
-              (200.0, "fault_isolated", gyro_axis_1), (300.0, "mode_change", modes.MODE_FAULT)]
+    events = [
+        (100.0, "fault_detected", 2),
+        (100.5, "fault_isolated", 2),
+        (101.0, "reconfigured", 0b1011),
+        (200.0, "fault_isolated", gyro_axis_1),
+        (300.0, "mode_change", modes.MODE_FAULT),
+    ]
     reported = dataclasses.replace(traj, events=[events])
     s = emulator.satellite_scenario()
     hk = emulator.packet_series(reported, s, dictionary)["ACS_HK"].values
@@ -368,15 +380,18 @@ def test_cli_streams_to_a_live_listener(dictionary) -> None:
         live = LiveStream(dictionary)
         subscriber = live.subscribe(max_messages=1_000)
         port = await live.start()
-        code = await asyncio.to_thread(main, ["emulate", "--duration", "10", "--rate", "inf", "--port", str(port),
-                                              "--attempts", "3"])
+        code = await asyncio.to_thread(
+            main, ["emulate", "--duration", "10", "--rate", "inf", "--port", str(port), "--attempts", "3"]
+        )
         await asyncio.sleep(SETTLE_S)
         await live.stop()
         return code, drain(subscriber)
 
     code, messages = asyncio.run(listen())
-    received = {packet: sum(len(m.batch.t_utc_ns) for m in messages if m.batch.packet == packet)
-                for packet in ("ACS_HK", "GPS_NAV")}
+    received = {
+        packet: sum(len(m.batch.t_utc_ns) for m in messages if m.batch.packet == packet)
+        for packet in ("ACS_HK", "GPS_NAV")
+    }
     assert code == 0 and received == {"ACS_HK": 40, "GPS_NAV": 10}
 
 
@@ -432,8 +447,9 @@ def test_the_satellite_is_the_same_spacecraft_with_its_own_truth_within_the_stat
         assert np.all(np.linalg.eigvalsh(jt) > 0.0)
         tilt = np.arccos(np.clip(np.sum(np.array(s.truth.wheel_axes_b).T * axes, axis=0), -1.0, 1.0))
         assert np.all(tilt <= tol.wheel_axis_rad + 1e-12)
-        assert np.all(np.abs(np.subtract(s.sensors.gyro_bias_rad_s, model.sensors.gyro_bias_rad_s))
-                      <= tol.gyro_bias_rad_s)
+        assert np.all(
+            np.abs(np.subtract(s.sensors.gyro_bias_rad_s, model.sensors.gyro_bias_rad_s)) <= tol.gyro_bias_rad_s
+        )
         assert s.seed != model.seed and s.spacecraft == model.spacecraft  # onboard software keeps the model
     assert truths[0] == emulator.satellite_scenario(model, truth_seed=0)  # reproducible
     assert truths[0].truth != truths[1].truth

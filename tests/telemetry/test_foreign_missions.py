@@ -81,8 +81,9 @@ def test_cygnss_mixed_stream_decodes_every_apid_as_ccsdspy_reads_its_team_defini
     split = split_by_apid(io.BytesIO(data))
     assert [u.packets.tobytes() for u in result.undefined] == [split[391].getvalue()]
     for batch in result.batches:
-        _assert_same_values(batch.values, _ccsdspy_load(CYGNSS / "ccsdspy" / f"apid{batch.apid:05d}.csv",
-                                                         split[batch.apid]))
+        _assert_same_values(
+            batch.values, _ccsdspy_load(CYGNSS / "ccsdspy" / f"apid{batch.apid:05d}.csv", split[batch.apid])
+        )
 
 
 def test_cygnss_packet_time_is_the_calendar_of_its_header_fields(cygnss) -> None:
@@ -93,9 +94,15 @@ def test_cygnss_packet_time_is_the_calendar_of_its_header_fields(cygnss) -> None
         theirs = _ccsdspy_load(CYGNSS / "ccsdspy" / f"apid{batch.apid:05d}.csv", split[batch.apid])
         prefix = next(k for k in theirs if k.endswith("_HDR_YEAR"))[: -len("YEAR")]
         expected = [
-            int((dt.datetime(int(y), 1, 1) + dt.timedelta(days=int(d) - 1, hours=int(h), minutes=int(m), seconds=int(s),
-                                                          microseconds=int(us)) - dt.datetime(1970, 1, 1))
-                / dt.timedelta(microseconds=1)) * 1_000
+            int(
+                (
+                    dt.datetime(int(y), 1, 1)
+                    + dt.timedelta(days=int(d) - 1, hours=int(h), minutes=int(m), seconds=int(s), microseconds=int(us))
+                    - dt.datetime(1970, 1, 1)
+                )
+                / dt.timedelta(microseconds=1)
+            )
+            * 1_000
             for y, d, h, m, s, us in zip(*(theirs[prefix + k] for k in ("YEAR", "DAY", "HOUR", "MIN", "SEC", "USEC")))
         ]
         assert batch.t_utc_ns.tolist() == sorted(expected)
@@ -123,16 +130,21 @@ def test_europa_clipper_mixed_stream_with_variable_length_expand_and_24_bit_sign
     assert result.report.quarantined == []
     split = split_by_apid(io.BytesIO(data))
     assert {u.apid: u.packets.tobytes() for u in result.undefined} == {
-        a: split[a].getvalue() for a in counts if a not in (1223, 1227)}
+        a: split[a].getvalue() for a in counts if a not in (1223, 1227)
+    }
     for batch in result.batches:
         _assert_same_values(batch.values, _ccsdspy_load(ECM / "defs" / f"apid{batch.apid:05d}.csv", split[batch.apid]))
     by_apid = {b.apid: b for b in result.batches}
     assert sum(k.startswith("HF1223_FGX_CHANNELS_") for k in by_apid[1223].values) == 1440
     assert np.all(by_apid[1227].values["FGx_CH_134_2"] == -88)  # ccsdspy issue #76's signed 24-bit value
     sclk = by_apid[1227].values
-    expected = [int((J2000_UTC + dt.timedelta(seconds=int(c) + int(f) / 65536) - dt.datetime(1970, 1, 1))
-                    / dt.timedelta(microseconds=1)) for c, f in zip(sclk["Instrument SCLK Time second"],
-                                                                    sclk["Instrument SCLK Time subsec"])]
+    expected = [
+        int(
+            (J2000_UTC + dt.timedelta(seconds=int(c) + int(f) / 65536) - dt.datetime(1970, 1, 1))
+            / dt.timedelta(microseconds=1)
+        )
+        for c, f in zip(sclk["Instrument SCLK Time second"], sclk["Instrument SCLK Time subsec"])
+    ]
     assert np.all(np.abs(by_apid[1227].t_utc_ns // 1_000 - np.array(expected)) <= 1)
 
 
@@ -165,14 +177,17 @@ def _set_bits(packet: bytearray, offset: int, length: int, value: int) -> None:
     packet[first : last + 1] = word.to_bytes(last - first + 1, "big")
 
 
-@pytest.mark.parametrize(("field", "value", "reason", "detail"), [
-    ("ENG_ADCSIO_HDR_DAY", 400, "invalid_time", "day of year outside the year"),
-    ("ENG_ADCSIO_HDR_DAY", 0, "invalid_time", "day of year outside the year"),
-    ("ENG_ADCSIO_HDR_YEAR", 0, "invalid_time", "year outside 1..9999"),
-    ("ENG_ADCSIO_HDR_HOUR", 24, "invalid_time", "hour outside 0..23"),
-    ("ENG_ADCSIO_HDR_USEC", 1_000_000, "invalid_time", "microsecond outside 0..999999"),
-    ("ENG_ADCSIO_HDR_YEAR", 1970, "time_out_of_range", None),
-])
+@pytest.mark.parametrize(
+    ("field", "value", "reason", "detail"),
+    [
+        ("ENG_ADCSIO_HDR_DAY", 400, "invalid_time", "day of year outside the year"),
+        ("ENG_ADCSIO_HDR_DAY", 0, "invalid_time", "day of year outside the year"),
+        ("ENG_ADCSIO_HDR_YEAR", 0, "invalid_time", "year outside 1..9999"),
+        ("ENG_ADCSIO_HDR_HOUR", 24, "invalid_time", "hour outside 0..23"),
+        ("ENG_ADCSIO_HDR_USEC", 1_000_000, "invalid_time", "microsecond outside 0..999999"),
+        ("ENG_ADCSIO_HDR_YEAR", 1970, "time_out_of_range", None),
+    ],
+)
 def test_impossible_or_unset_packet_time_is_quarantined_with_its_reason(field, value, reason, detail) -> None:
     """One ENG_ADCSIO packet's time field spoiled: quarantined naming the field's problem (a 1970 stamp is out of
     the mission window), never rolled over; its 39 neighbours and the other APIDs all kept."""
@@ -245,8 +260,16 @@ def test_byte_orders_read_as_ccsdspy_reads_them(order: str) -> None:
     params, _ = lay_out(tuple(specs), 0, {})
     definition = PacketDefinition("ENG_ADCS", 392, 168, params)
     ours = decode_packets(np.frombuffer(packets, np.uint8).reshape(-1, 168), definition)
-    fields = [ccsdspy.PacketField(name=s.name, data_type=s.data_type, bit_length=s.bit_length, bit_offset=s.bit_offset,
-                                  byte_order=s.byte_order) for s in specs]
+    fields = [
+        ccsdspy.PacketField(
+            name=s.name,
+            data_type=s.data_type,
+            bit_length=s.bit_length,
+            bit_offset=s.bit_offset,
+            byte_order=s.byte_order,
+        )
+        for s in specs
+    ]
     theirs = ccsdspy.FixedLength(fields).load(io.BytesIO(packets))
     assert any(s.byte_order != "big" for s in specs)
     _assert_same_values(ours, {k: v for k, v in theirs.items() if not k.startswith("FILL") and k in ours})
@@ -259,8 +282,20 @@ def test_acs_twin_ingest_of_a_foreign_mission_then_reingest_adds_nothing(tmp_pat
     from telemetry.archive import Archive
 
     url = f"sqlite:///{tmp_path / 'archive.db'}"
-    argv = ["ingest", str(CYGNSS_STREAM), "--dictionary", str(CYGNSS / "ccsdspy"), "--time-fields", CYGNSS_TIME,
-            "--satellite", "CYGNSS-FM07", "--db", url, "--user", "ops"]
+    argv = [
+        "ingest",
+        str(CYGNSS_STREAM),
+        "--dictionary",
+        str(CYGNSS / "ccsdspy"),
+        "--time-fields",
+        CYGNSS_TIME,
+        "--satellite",
+        "CYGNSS-FM07",
+        "--db",
+        url,
+        "--user",
+        "ops",
+    ]
     assert main(argv) == 0
     first = json.loads(capsys.readouterr().out)
     counts = _apid_counts(CYGNSS_STREAM)
@@ -301,8 +336,10 @@ def _spp_columns(data: bytes, skip: int = 0) -> tuple[Counter, dict[str, list]]:
     packets = [definition.parse_bytes(raw) for raw in spp.ccsds_generator(data, skip_header_bytes=skip)]
     counts = Counter(int(p["PKT_APID"].raw_value) for p in packets)
     names = dict.fromkeys(k for p in packets for k, v in p.items() if not isinstance(v.raw_value, bytes))
-    columns = {n: [(p[n] if isinstance(p[n], (int, float)) else p[n].raw_value) if n in p else None for p in packets]
-               for n in names}
+    columns = {
+        n: [(p[n] if isinstance(p[n], (int, float)) else p[n].raw_value) if n in p else None for p in packets]
+        for n in names
+    }
     return counts, columns
 
 
@@ -319,7 +356,11 @@ def test_imap_idex_polymorphic_xtce_decodes_as_space_packet_parser_reads_it() ->
     counts, theirs = _spp_columns(data)
     assert {a: s.accepted for a, s in result.report.apids.items()} == dict(counts) == {1424: 78}
     assert result.report.quarantined == [] and result.report.apids[1424].packet_octets == {
-        304: 6, 1072: 18, 2908: 18, 4080: 36}
+        304: 6,
+        1072: 18,
+        2908: 18,
+        4080: 36,
+    }
     [batch] = result.batches
     assert np.all(np.diff(batch.t_utc_ns) > 0)  # time order is file order here: rows line up with spp's
     assert set(batch.values) == set(theirs)
@@ -335,8 +376,27 @@ def test_suda_packets_behind_a_4_octet_header_through_acs_twin_ingest(tmp_path: 
 
     path = IMAP / "sciData_2022_130_17_41_53.spl"
     url = f"sqlite:///{tmp_path / 'suda.db'}"
-    assert main(["ingest", str(path), "--dictionary", str(IMAP_XTCE), "--time-fields", IMAP_TIME,
-                 "--packet-prefix", "4", "--satellite", "SUDA", "--db", url, "--user", "ops"]) == 0
+    assert (
+        main(
+            [
+                "ingest",
+                str(path),
+                "--dictionary",
+                str(IMAP_XTCE),
+                "--time-fields",
+                IMAP_TIME,
+                "--packet-prefix",
+                "4",
+                "--satellite",
+                "SUDA",
+                "--db",
+                url,
+                "--user",
+                "ops",
+            ]
+        )
+        == 0
+    )
     report = json.loads(capsys.readouterr().out)
     counts, theirs = _spp_columns(path.read_bytes(), skip=4)
     assert {int(a): s["accepted"] for a, s in report["decode"]["apids"].items()} == dict(counts) == {1425: 13}

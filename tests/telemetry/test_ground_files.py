@@ -36,8 +36,9 @@ def test_csv_and_jsonl_give_the_packet_path_values() -> None:
     batch = _packet_batch()
     from_csv = read_ground_csv(_csv(batch, range(N)), reference(), now_utc_ns=NOW_UTC_NS)
     iso = np.datetime_as_string(batch.t_utc_ns.astype("datetime64[ns]"), unit="ns")
-    jsonl = "\n".join(json.dumps({"t_utc": iso[i] + "Z", **{c: float(batch.values[c][i]) for c in COLUMNS}})
-                      for i in range(N)).encode()
+    jsonl = "\n".join(
+        json.dumps({"t_utc": iso[i] + "Z", **{c: float(batch.values[c][i]) for c in COLUMNS}}) for i in range(N)
+    ).encode()
     from_jsonl = read_ground_jsonl(jsonl, reference(), now_utc_ns=NOW_UTC_NS)
     for result in (from_csv, from_jsonl):
         (ground,) = result.batches
@@ -57,16 +58,21 @@ def test_bad_rows_are_quarantined_with_line_and_offset() -> None:
     result = read_ground_csv(data, reference(), now_utc_ns=NOW_UTC_NS)
     starts = [0] + [i + 1 for i, b in enumerate(data) if b == 0x0A]
     assert [(q.reason, q.line, q.offset) for q in result.report.quarantined] == [
-        ("bad_row", 3, starts[2]), ("bad_row", 5, starts[4]), ("bad_row", 7, starts[6])]
+        ("bad_row", 3, starts[2]),
+        ("bad_row", 5, starts[4]),
+        ("bad_row", 7, starts[6]),
+    ]
     assert result.report.packets_accepted == 4  # 7 data rows, 3 bad
 
 
 def test_unknown_columns_out_of_window_times_duplicates_and_labels() -> None:
-    lines = ["t_utc,mode,no_such_parameter",
-             "2025-06-15T15:06:40Z,PROGRAM_TURN,1",
-             "2025-06-15T15:06:40Z,PROGRAM_TURN,1",
-             "2019-01-01T00:00:00Z,FAULT,1",
-             "2025-06-15T15:06:39.5Z,3,1"]
+    lines = [
+        "t_utc,mode,no_such_parameter",
+        "2025-06-15T15:06:40Z,PROGRAM_TURN,1",
+        "2025-06-15T15:06:40Z,PROGRAM_TURN,1",
+        "2019-01-01T00:00:00Z,FAULT,1",
+        "2025-06-15T15:06:39.5Z,3,1",
+    ]
     result = read_ground_csv(("\n".join(lines) + "\n").encode(), reference(), now_utc_ns=NOW_UTC_NS)
     report = result.report
     assert [(q.reason, q.line) for q in report.quarantined] == [("unknown_parameter", 1), ("time_out_of_range", 4)]

@@ -95,8 +95,11 @@ def test_csv_with_an_unclosed_quote_quarantines_that_line_only() -> None:
 
 def test_deeply_nested_jsonl_line_is_quarantined_and_neighbours_kept() -> None:
     t0 = NOW_UTC_NS - 10**9 * 3600
-    lines = [json.dumps({"t_utc_ns": t0, "wheel_speed_rad_s_1": 1.0}), "[" * 200_000 + "]" * 200_000,
-             json.dumps({"t_utc_ns": t0 + 10**9, "wheel_speed_rad_s_1": 2.0})]
+    lines = [
+        json.dumps({"t_utc_ns": t0, "wheel_speed_rad_s_1": 1.0}),
+        "[" * 200_000 + "]" * 200_000,
+        json.dumps({"t_utc_ns": t0 + 10**9, "wheel_speed_rad_s_1": 2.0}),
+    ]
     result = read_ground_jsonl("\n".join(lines).encode(), reference(), now_utc_ns=NOW_UTC_NS)
     assert [(q.reason, q.line) for q in result.report.quarantined] == [("bad_row", 2)]
     assert list(result.batches[0].values["wheel_speed_rad_s_1"]) == [1.0, 2.0]

@@ -57,7 +57,7 @@ def test_packets_cut_anywhere_arrive_as_decoded_offline() -> None:
 def test_a_full_subscriber_refuses_new_batches_and_its_next_message_counts_them() -> None:
     dictionary = reference()
     raw = packets(dictionary.packets[HK_APID], 40, seed=2)
-    parts = [raw[i:i + 10].tobytes() for i in range(0, 40, 10)]  # four connections of 10 packets each
+    parts = [raw[i : i + 10].tobytes() for i in range(0, 40, 10)]  # four connections of 10 packets each
 
     async def scenario() -> tuple[LiveMessage, LiveMessage, Subscriber]:
         stream, link = LiveStream(dictionary), MemoryLink()
@@ -77,11 +77,14 @@ def test_a_full_subscriber_refuses_new_batches_and_its_next_message_counts_them(
     assert int(late.batch.sequence_count[0]) == 30
 
 
-@pytest.mark.parametrize(("peer", "allowed", "accepted"), [
-    ("127.0.0.1", ("127.0.0.0/8",), True),
-    ("192.0.2.7", ("127.0.0.0/8",), False),
-    ("192.0.2.7", ("192.0.2.0/24",), True),
-])
+@pytest.mark.parametrize(
+    ("peer", "allowed", "accepted"),
+    [
+        ("127.0.0.1", ("127.0.0.0/8",), True),
+        ("192.0.2.7", ("127.0.0.0/8",), False),
+        ("192.0.2.7", ("192.0.2.0/24",), True),
+    ],
+)
 def test_the_allow_list_decides_before_a_byte_is_read(peer: str, allowed: tuple[str, ...], accepted: bool) -> None:
     dictionary = reference()
     raw = packets(dictionary.packets[HK_APID], 5, seed=3)

@@ -54,12 +54,24 @@ def test_noaa20_decodes_identically_to_published_csv(dictionary: str, raw_bytes:
     assert result.report.quarantined == [] and result.report.duplicates == 0
     (batch,) = result.batches
     v = batch.values
-    for ours, theirs in [("ADGPSPOSX", "pos_x_m"), ("ADGPSPOSY", "pos_y_m"), ("ADGPSPOSZ", "pos_z_m"),
-                         ("ADGPSVELX", "vel_x_mps"), ("ADGPSVELY", "vel_y_mps"), ("ADGPSVELZ", "vel_z_mps"),
-                         ("ADCFAQ1", "q1"), ("ADCFAQ2", "q2"), ("ADCFAQ3", "q3"), ("ADCFAQ4", "q4")]:
+    for ours, theirs in [
+        ("ADGPSPOSX", "pos_x_m"),
+        ("ADGPSPOSY", "pos_y_m"),
+        ("ADGPSPOSZ", "pos_z_m"),
+        ("ADGPSVELX", "vel_x_mps"),
+        ("ADGPSVELY", "vel_y_mps"),
+        ("ADGPSVELZ", "vel_z_mps"),
+        ("ADCFAQ1", "q1"),
+        ("ADCFAQ2", "q2"),
+        ("ADCFAQ3", "q3"),
+        ("ADCFAQ4", "q4"),
+    ]:
         np.testing.assert_array_equal(v[ours], truth[theirs], err_msg=ours)
-    for ours, theirs in [(batch.t_utc_ns, "pkt_time_utc_cds"), (v["ephem_time_utc_ns"], "ephem_time"),
-                         (v["att_time_utc_ns"], "att_time")]:
+    for ours, theirs in [
+        (batch.t_utc_ns, "pkt_time_utc_cds"),
+        (v["ephem_time_utc_ns"], "ephem_time"),
+        (v["att_time_utc_ns"], "att_time"),
+    ]:
         np.testing.assert_array_equal(ours // US, truth[theirs] // US, err_msg=theirs)
 
 
@@ -122,8 +134,16 @@ def test_acs_twin_ingest_command_stores_noaa20_once(shared_data: Path, tmp_path:
     from backend.cli import main
 
     url = f"sqlite:///{tmp_path / 'archive.sqlite'}"
-    argv = ["ingest", str(shared_data / NOAA / PACKETS), "--dictionary", "noaa20_apid11_xtce.yaml", "--db", url,
-            "--user", "tester"]
+    argv = [
+        "ingest",
+        str(shared_data / NOAA / PACKETS),
+        "--dictionary",
+        "noaa20_apid11_xtce.yaml",
+        "--db",
+        url,
+        "--user",
+        "tester",
+    ]
     assert main(argv) == 0
     first = json.loads(capsys.readouterr().out)
     assert first["decode"]["packets_accepted"] == N_PACKETS
@@ -148,5 +168,6 @@ def test_noaa20_packet_with_impossible_cds_time_is_quarantined(raw_bytes: bytes)
     data[100 * 71 + 8 : 100 * 71 + 12] = (90_000_000).to_bytes(4, "big")
     result = decode_stream(bytes(data), load_dictionary("noaa20_apid11_xtce.yaml"))
     assert [(q.reason, q.offset, q.detail) for q in result.report.quarantined] == [
-        ("invalid_time", 100 * 71, "invalid time code field")]
+        ("invalid_time", 100 * 71, "invalid time code field")
+    ]
     assert result.report.packets_accepted == 199

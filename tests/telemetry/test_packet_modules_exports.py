@@ -7,8 +7,15 @@ import inspect
 
 import pytest
 
-MODULES = ["telemetry.ccsds", "telemetry.dictionary", "telemetry.decoding", "telemetry.validation",
-           "telemetry.ingest_report", "telemetry.ground_files", "telemetry.encoding"]
+MODULES = [
+    "telemetry.ccsds",
+    "telemetry.dictionary",
+    "telemetry.decoding",
+    "telemetry.validation",
+    "telemetry.ingest_report",
+    "telemetry.ground_files",
+    "telemetry.encoding",
+]
 
 
 @pytest.mark.parametrize("module_name", MODULES)

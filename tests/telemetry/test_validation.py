@@ -60,7 +60,8 @@ def test_single_count_outlier_is_quarantined_without_a_false_gap() -> None:
     t = T0_UTC_NS + np.arange(30) * PERIOD_NS
     verdict = validate_packets(HK, np.arange(30) * 126, count, t, 126, None, None)
     assert [(q.reason, q.offset, q.sequence_count) for q in verdict.quarantined] == [
-        ("non_monotonic_sequence", 12 * 126, 9_000)]
+        ("non_monotonic_sequence", 12 * 126, 9_000)
+    ]
     assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 13, 1)]
 
 
@@ -110,9 +111,14 @@ def test_validate_packets_rejects_mismatched_arrays_naming_fields() -> None:
         validate_packets(HK, np.arange(3), np.arange(4), np.arange(3), 126, None, None)
 
 
-@pytest.mark.parametrize(("octet", "xor", "detail"), [(0, 0x10, "packet type (telecommand)"),
-                                                     (2, 0x40, "sequence flags (segmented)"),
-                                                     (0, 0x08, "secondary header flag")])
+@pytest.mark.parametrize(
+    ("octet", "xor", "detail"),
+    [
+        (0, 0x10, "packet type (telecommand)"),
+        (2, 0x40, "sequence flags (segmented)"),
+        (0, 0x08, "secondary header flag"),
+    ],
+)
 def test_header_fields_contradicting_a_telemetry_packet_are_bad_header(octet: int, xor: int, detail: str) -> None:
     """Type, sequence-flag and secondary-header bits of §4.1.3, flipped with a CRC recomputed to match."""
     from telemetry.ccsds import crc16_ccitt
@@ -134,11 +140,11 @@ def test_undefined_apid_is_counted_and_kept_raw_garbage_is_quarantined() -> None
     stranger = encode_primary_headers(1_793, np.array([5]), 20)[0].tobytes() + bytes(14)
     stream = rows[0].tobytes() + stranger + rows[1].tobytes() + b"\xff" * 9 + rows[2].tobytes()
     result = decode_stream(stream, reference(), now_utc_ns=NOW_UTC_NS)
-    assert [(q.reason, q.apid, q.offset, q.length) for q in result.report.quarantined] == [
-        ("bad_header", None, 272, 9)]
+    assert [(q.reason, q.apid, q.offset, q.length) for q in result.report.quarantined] == [("bad_header", None, 272, 9)]
     assert result.report.undefined_apids == {1_793: 1}
     assert [(u.apid, u.packets.tobytes(), u.sequence_count.tolist()) for u in result.undefined] == [
-        (1_793, stranger, [5])]
+        (1_793, stranger, [5])
+    ]
     assert result.report.packets_accepted == 3
 
 
