@@ -121,10 +121,10 @@ class JobManager:
         return None if handle is None else float(handle.progress.value)
 
     def cancel(self, job_id: str) -> bool:
-        """Request cancellation; the job is recorded cancelled at once. False if not active."""
+        """Request cancellation; the job is recorded cancelled at once. False if not active or already cancelled."""
         with self._lock:
             handle = self._active.get(job_id)
-            if handle is None:
+            if handle is None or handle.cancel.is_set():
                 return False
             handle.cancel.set()
             handle.cancel_at = time.monotonic()
