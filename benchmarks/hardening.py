@@ -59,11 +59,11 @@ def descendants(pid: int) -> set[int]:
             continue
         if fields[0] != "Z":
             children.setdefault(int(fields[1]), []).append(int(entry.name))
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
+    found, frontier = set(), [pid]
+    while frontier:
+        for child in children.get(frontier.pop(), []):
             found.add(child)
-            todo.append(child)
+            frontier.append(child)
     return found
 
 

@@ -44,11 +44,11 @@ def descendants(pid: int) -> set[int]:
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit() and (info := _ppid_and_state(int(entry.name))) and info[1] != "Z":
             children.setdefault(info[0], []).append(int(entry.name))
-    found, todo = set(), [pid]
-    while todo:
-        for child in children.get(todo.pop(), []):
+    found, frontier = set(), [pid]
+    while frontier:
+        for child in children.get(frontier.pop(), []):
             found.add(child)
-            todo.append(child)
+            frontier.append(child)
     return found
 
 
