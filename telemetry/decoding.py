@@ -1,10 +1,12 @@
 """Bulk decoding of fixed-length CCSDS packets to numpy arrays, and the stream pipeline frame → validate → decode.
 
-All fields of a packet type are read in one compiled pass over the (n, L) packet matrix (the
-covering octets of each field, big-endian, shifted and masked: any bit offset and length ≤ 64,
-spanning ≤ 8 octets); the bit patterns are then viewed as IEEE 754 floats or sign-extended
-integers, vectorised per field. No per-packet Python. Calibration: polynomial c0 + c1·x + …
-(XTCE PolynomialCalibrator semantics) or an enumeration (codes kept, labels in the dictionary).
+All fields of a packet layout are read in one compiled pass straight from the stream buffer at the
+packets' offsets (no per-packet matrix is built): the covering octets of each field, big-endian,
+shifted, masked and sign-extended (any bit offset and length ≤ 64, spanning ≤ 8 octets), into one
+(F, n) column matrix whose rows are the parameters' values (int64 rows are handed out as views).
+IEEE 754 floats and other byte orders are then converted per field. No per-packet Python.
+Calibration: polynomial c0 + c1·x + … (XTCE PolynomialCalibrator semantics) or an enumeration
+(codes kept, labels in the dictionary).
 """
 
 from __future__ import annotations
@@ -58,25 +60,6 @@ def packet_matrix(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np
     return _gather(buf, offset, packet_octets)
 
 
-@njit(cache=True, nogil=True)
-def _bit_patterns(
-    packets: np.ndarray, first: np.ndarray, last: np.ndarray, shift: np.ndarray, mask: np.ndarray
-) -> np.ndarray:
-    """(F, n) uint64 big-endian bit patterns of F fields in n packets, one pass over each packet (compiled kernel).
-
-    Field f covers octets first[f]..last[f]; its value is that big-endian word >> shift[f] & mask[f].
-    """
-    n, n_fields = packets.shape[0], first.shape[0]
-    out = np.empty((n_fields, n), dtype=np.uint64)
-    for i in range(n):
-        for f in range(n_fields):
-            word = np.uint64(0)
-            for k in range(first[f], last[f] + 1):
-                word = (word << np.uint64(8)) | np.uint64(packets[i, k])
-            out[f, i] = (word >> shift[f]) & mask[f]
-    return out
-
-
 def _reorder_octets(pattern: np.ndarray, p: Parameter) -> np.ndarray:
     """A field's bit pattern with its octets reordered as ccsdspy does (``little`` or digits like ``3412``).
 
@@ -115,18 +98,74 @@ def _raw_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
     return pattern if p.bit_length == 64 else pattern.view(np.int64)
 
 
+@njit(cache=True, nogil=True)
+def _field_columns(
+    buf: np.ndarray,
+    offset: np.ndarray,
+    first: np.ndarray,
+    last: np.ndarray,
+    shift: np.ndarray,
+    mask: np.ndarray,
+    sign: np.ndarray,
+) -> np.ndarray:
+    """(F, n) uint64 fields of the n packets at offset in buf, read in place (compiled kernel).
+
+    Field f covers octets first[f]..last[f] of its packet; its value is that big-endian word
+    >> shift[f] & mask[f], sign-extended to 64 bits (two's complement) where sign[f] has its sign bit.
+    """
+    n, n_fields = offset.shape[0], first.shape[0]
+    out = np.empty((n_fields, n), dtype=np.uint64)
+    for i in range(n):
+        o = offset[i]
+        for f in range(n_fields):
+            word = np.uint64(0)
+            for k in range(o + first[f], o + last[f] + 1):
+                word = (word << np.uint64(8)) | np.uint64(buf[k])
+            value = (word >> shift[f]) & mask[f]
+            if value & sign[f]:
+                value |= ~mask[f]
+            out[f, i] = value
+    return out
+
+
+def _layout_columns(buf: np.ndarray, offset: np.ndarray, parameters: tuple[Parameter, ...]) -> np.ndarray:
+    """(F, n) uint64 bit patterns of the parameters in the packets at offset; big-endian signed integers
+    come sign-extended (their rows viewed as int64 are the values)."""
+    bit = np.array([p.bit_offset for p in parameters], dtype=np.int64)
+    bits = np.array([p.bit_length for p in parameters], dtype=np.int64)
+    first, last = bit // 8, (bit + bits - 1) // 8
+    shift = (8 * (last + 1) - bit - bits).astype(np.uint64)
+    mask = np.array([(1 << b) - 1 for b in bits.tolist()], dtype=np.uint64)
+    sign = np.array([1 << (p.bit_length - 1) if _extends_in_kernel(p) else 0 for p in parameters], dtype=np.uint64)
+    return _field_columns(buf, np.asarray(offset, dtype=np.int64), first, last, shift, mask, sign)
+
+
+def _extends_in_kernel(p: Parameter) -> bool:
+    """Whether the kernel's sign extension gives the field's raw value (big-endian integers)."""
+    return p.data_type == "int" and p.byte_order == "big"
+
+
+def _column_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
+    """Raw value of one kernel row: a view for big-endian integers, else via :func:`_raw_value`."""
+    if _extends_in_kernel(p):
+        return pattern.view(np.int64)
+    return _raw_value(pattern, p)
+
+
+def _raw_values(buf: np.ndarray, offset: np.ndarray, parameters: tuple[Parameter, ...]) -> dict[str, np.ndarray]:
+    """Raw values of the parameters in the packets at offset of buf, by name."""
+    columns = _layout_columns(buf, offset, parameters)
+    return {p.name: _column_value(columns[f], p) for f, p in enumerate(parameters)}
+
+
 def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, np.ndarray]:
     """Raw (uncalibrated) values of every parameter of an (n, L) packet matrix (CCSDS 133.0-B-2 §4.1.4 user data)."""
     if packets.dtype != np.uint8 or packets.ndim != 2 or packets.shape[1] != definition.packet_octets:
         expected = f"(n, {definition.packet_octets}) uint8"
         raise ValueError(f"packets: expected {expected}, got {packets.dtype} {packets.shape}")
-    offset = np.array([p.bit_offset for p in definition.parameters], dtype=np.int64)
-    length = np.array([p.bit_length for p in definition.parameters], dtype=np.int64)
-    first, last = offset // 8, (offset + length - 1) // 8
-    shift = (8 * (last + 1) - offset - length).astype(np.uint64)
-    mask = np.array([(1 << b) - 1 for b in length.tolist()], dtype=np.uint64)
-    patterns = _bit_patterns(np.ascontiguousarray(packets), first, last, shift, mask)
-    return {p.name: _raw_value(patterns[f], p) for f, p in enumerate(definition.parameters)}
+    flat = np.ascontiguousarray(packets).reshape(-1)
+    offset = np.arange(packets.shape[0], dtype=np.int64) * definition.packet_octets
+    return _raw_values(flat, offset, definition.parameters)
 
 
 def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
@@ -222,7 +261,8 @@ def _layout_groups(
     counts = definition.count_fields
     keys = length[fits][:, None]
     if counts and fits.size:
-        raw = decode_raw(packet_matrix(buf, offset[fits], needed), definition)
+        fixed = tuple(p for p in definition.parameters if p.name in counts)
+        raw = _raw_values(buf, offset[fits], fixed)
         keys = np.stack([length[fits]] + [raw[c].astype(np.int64) for c in counts], axis=1)
     groups = []
     unique, inverse = np.unique(keys, axis=0, return_inverse=True)
@@ -265,34 +305,32 @@ def _gather_octets(buf: np.ndarray, offset: np.ndarray, length: np.ndarray) -> n
 
 
 def _packet_times(
-    rows: np.ndarray, raw: dict[str, np.ndarray], layout: PacketDefinition
-) -> tuple[np.ndarray, list[str]]:
-    """UTC ns of each packet of one layout and, per packet, why its time is invalid ("" = valid)."""
+    buf: np.ndarray, offset: np.ndarray, raw: dict[str, np.ndarray], layout: PacketDefinition
+) -> tuple[np.ndarray, dict[int, str]]:
+    """UTC ns of the packets at offset of one layout and, by position, why a packet's time is invalid."""
     if layout.time_fields is not None:
         t, problem = field_times(raw, layout.time_fields)
-        return t, [TIME_PROBLEMS[c] for c in problem.tolist()]
+        return t, {int(i): TIME_PROBLEMS[problem[i]] for i in np.flatnonzero(problem)}
     code = layout.time_code
     assert code is not None
-    t_fields = rows[:, ccsds.PRIMARY_HEADER_OCTETS : ccsds.PRIMARY_HEADER_OCTETS + code.octets]
+    t_fields = packet_matrix(buf, offset, ccsds.PRIMARY_HEADER_OCTETS + code.octets)[:, ccsds.PRIMARY_HEADER_OCTETS :]
     valid = ccsds.time_fields_valid(t_fields, code)
-    return ccsds.decode_time(t_fields, code), ["" if v else "invalid time code field" for v in valid.tolist()]
+    return ccsds.decode_time(t_fields, code), {int(i): "invalid time code field" for i in np.flatnonzero(~valid)}
 
 
 def _group_values(
     buf: np.ndarray, offset: np.ndarray, groups: list[tuple[np.ndarray, PacketDefinition]], n: int
-) -> tuple[np.ndarray, dict[int, str], list[tuple[np.ndarray, dict[str, np.ndarray]]], list[np.ndarray]]:
-    """Times, time problems by packet index, calibrated values and packet rows of each fixed-layout group."""
+) -> tuple[np.ndarray, dict[int, str], list[tuple[np.ndarray, dict[str, np.ndarray]]]]:
+    """Times, time problems by packet index and calibrated values of each fixed-layout group."""
     t = np.full(n, INVALID_TIME, dtype=np.int64)
     problems: dict[int, str] = {}
-    parts, rows_by_group = [], []
+    parts = []
     for idx, layout in groups:
-        rows = packet_matrix(buf, offset[idx], layout.packet_octets)
-        raw = decode_raw(rows, layout)
-        t[idx], why = _packet_times(rows, raw, layout)
-        problems.update((i, w) for i, w in zip(idx.tolist(), why) if w)
+        raw = _raw_values(buf, offset[idx], layout.parameters)
+        t[idx], why = _packet_times(buf, offset[idx], raw, layout)
+        problems.update((int(idx[i]), w) for i, w in why.items())
         parts.append((idx, {p.name: calibrate(raw[p.name], p) for p in layout.parameters}))
-        rows_by_group.append(rows)
-    return t, problems, parts, rows_by_group
+    return t, problems, parts
 
 
 def _xtce_values(
@@ -332,9 +370,8 @@ def _xtce_values(
         )
         problems.update((int(i), TIME_PROBLEMS[c]) for i, c in zip(good.tolist(), why.tolist()) if c)
     else:
-        rows = packet_matrix(buf, offset[ok], ccsds.PRIMARY_HEADER_OCTETS + definition.time_code.octets)
-        t[ok], why = _packet_times(rows, {}, definition)
-        problems.update((int(i), w) for i, w in zip(ok.tolist(), why) if w)
+        t[ok], bad_time = _packet_times(buf, offset[ok], {}, definition)
+        problems.update((int(ok[i]), w) for i, w in bad_time.items())
     return t, problems, [(np.arange(n), values)], short
 
 
@@ -380,12 +417,10 @@ def _decode_apid(
     ]
     dropped = mismatch != 0
     if definition.xtce is not None:
-        groups: list[tuple[np.ndarray, PacketDefinition]] = []
-        rows_by_group: list[np.ndarray] = []
         t, time_problems, parts, short = _xtce_values(buf, offset, length, definition)
     else:
         groups, short = _layout_groups(buf, offset, length, definition)
-        t, time_problems, parts, rows_by_group = _group_values(buf, offset, groups, n)
+        t, time_problems, parts = _group_values(buf, offset, groups, n)
     for i, why in short.items():
         if not dropped[i]:
             records.append(
@@ -415,14 +450,10 @@ def _decode_apid(
     values = {name: v if in_order else v[accepted] for name, v in _union(parts, n).items()}
     for d in definition.derived:
         values[d.name] = derive(d, values, definition.time_code)
-    same_length = (
-        len(groups) == 1
-        and groups[0][1].packet_octets == int(length[0])
-        and len(groups[0][0]) == n
-        and bool(np.all(length == length[0]))
-    )
-    lengths = None if same_length else length[accepted]
-    packets = rows_by_group[0][accepted] if same_length else _gather_octets(buf, offset[accepted], length[accepted])
+    lengths = length[accepted]
+    packets = _gather_octets(buf, offset[accepted], lengths)
+    if lengths.size and bool(np.all(lengths == lengths[0])):  # one length: the (n, L) packet matrix, a free reshape
+        packets, lengths = packets.reshape(lengths.size, int(lengths[0])), None
     batch = SampleBatch(
         packet=definition.name,
         apid=apid,

@@ -9,6 +9,8 @@ samples/s here, zlib level 1 at ~5 M samples/s, which is why the archive depends
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import zstandard
 
@@ -17,6 +19,7 @@ __all__ = [
     "encode_int64",
     "decode_int64",
     "encode_values",
+    "encode_values_range",
     "decode_values",
     "encode_raw",
     "decode_raw",
@@ -26,8 +29,16 @@ ZSTD_LEVEL = 1  # fastest level: ingest throughput matters more than a few % of 
 STORABLE_KINDS = "biuf"  # bool, signed, unsigned, float: what min/max and limits make sense on
 
 
-def _compress(data: bytes) -> bytes:
-    return zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress(data)
+_NARROW_INTS = (np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32)
+_INT_RANGES = [(t, int(np.iinfo(t).min), int(np.iinfo(t).max)) for t in _NARROW_INTS]
+_codec = threading.local()  # a ZstdCompressor is not thread-safe; making one per call costs as much as compressing
+
+
+def _compress(data: bytes | memoryview) -> bytes:
+    compressor = getattr(_codec, "compressor", None)
+    if compressor is None:
+        compressor = _codec.compressor = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+    return compressor.compress(data)
 
 
 def _decompress(blob: bytes) -> bytes:
@@ -58,21 +69,45 @@ def narrowest_exact(values: np.ndarray) -> np.ndarray:
         if np.array_equal(narrow.astype(np.float64), array, equal_nan=True):
             return narrow
     if array.dtype.kind in "iu" and array.size:
-        lo, hi = int(array.min()), int(array.max())
-        for candidate in (np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32):
-            info = np.iinfo(candidate)
-            if info.min <= lo and hi <= info.max and candidate().itemsize < array.dtype.itemsize:
-                return array.astype(candidate)
+        return _narrowest_int(array, int(array.min()), int(array.max()))
+    return array
+
+
+def _narrowest_int(array: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    """An integer column in the smallest integer dtype holding lo..hi (its own when none is smaller)."""
+    for candidate, t_min, t_max in _INT_RANGES:
+        if t_min <= lo and hi <= t_max and np.dtype(candidate).itemsize < array.dtype.itemsize:
+            return array.astype(candidate)
     return array
 
 
 def encode_values(values: np.ndarray) -> tuple[str, bytes]:
     """Compressed values and a dtype spec ``stored/presented`` to read them back losslessly."""
+    spec, blob, _, _ = encode_values_range(values)
+    return spec, blob
+
+
+def encode_values_range(values: np.ndarray) -> tuple[str, bytes, float | None, float | None]:
+    """:func:`encode_values` and the least and greatest finite value (None when there is none).
+
+    One pass finds both the range and the narrowest dtype (integers: the range is the test).
+    """
     array = np.ascontiguousarray(values)
     if array.dtype.kind not in STORABLE_KINDS:
         raise ValueError(f"values: dtype {array.dtype} is not numeric (bool, int, uint or float)")
-    stored = narrowest_exact(array)
-    return f"{stored.dtype.str}/{array.dtype.str}", _compress(stored.tobytes())
+    if array.size == 0:
+        return f"{array.dtype.str}/{array.dtype.str}", _compress(b""), None, None
+    v_min, v_max = array.min(), array.max()
+    if array.dtype.kind in "iu":
+        stored = _narrowest_int(array, int(v_min), int(v_max))
+    else:
+        stored = narrowest_exact(array)
+        if not (np.isfinite(v_min) and np.isfinite(v_max)):  # NaN (no such element) or infinities
+            finite = array[np.isfinite(array)]
+            v_min, v_max = (finite.min(), finite.max()) if finite.size else (None, None)
+    spec = f"{stored.dtype.str}/{array.dtype.str}"
+    blob = _compress(stored.data.cast("B"))
+    return spec, blob, (None if v_min is None else float(v_min)), (None if v_max is None else float(v_max))
 
 
 def decode_values(dtype_spec: str, blob: bytes) -> np.ndarray:

@@ -19,7 +19,14 @@ from sqlalchemy import Connection, Row, Table, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
 from telemetry.archive.batch import PacketBatch, sequence_gaps
-from telemetry.archive.chunks import decode_int64, decode_raw, decode_values, encode_int64, encode_raw, encode_values
+from telemetry.archive.chunks import (
+    decode_int64,
+    decode_raw,
+    decode_values,
+    encode_int64,
+    encode_raw,
+    encode_values_range,
+)
 from telemetry.archive.engine import create_archive_engine
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
@@ -54,6 +61,7 @@ __all__ = ["Archive", "CHUNK_PACKETS"]
 # Packets per chunk. benchmarks/ingest.py (bench_chunk_sizes) measures bigger chunks committing
 # faster (1k: ~7 M samples/s, 16k: 8-19 M on this shared machine) with short queries alike (2-4 ms).
 CHUNK_PACKETS = 16_384
+PENDING_OCTETS = 64 << 20  # decoded values and raw packets held back to fill archive chunks (memory bound)
 SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundStation, Tle, Pass))
 UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
 ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
@@ -271,6 +279,7 @@ class Archive:
             )
             parts: list[IngestResult] = []
             archived: dict[int, int] = {}
+            pending = _PendingBatches()
             for decoded in results:
                 batches = _merge_by_apid([PacketBatch.from_sample_batch(b) for b in decoded.batches])
                 if existing is not None:
@@ -278,8 +287,12 @@ class Archive:
                         n = self._drop_archived(conn, sat_id, _order_and_dedupe(b)[0])[1]
                         archived[b.apid] = archived.get(b.apid, 0) + n
                     continue
-                parts.append(self._write_batches(conn, sat_id, upload_id, batches, limits or {}))
+                ready = pending.add(batches)
+                if ready:
+                    parts.append(self._write_batches(conn, sat_id, upload_id, ready, limits or {}))
                 self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
+            if pending.batches:
+                parts.append(self._write_batches(conn, sat_id, upload_id, pending.flush(), limits or {}))
             if existing is not None:
                 return IngestResult(
                     upload_id, True, packets_duplicate=sum(archived.values()), duplicates_by_apid=archived
@@ -461,11 +474,14 @@ class Archive:
         for name, param_id, _ in rows:  # a parameter telemetered in several packets is one series
             ids[name] = int(param_id)
         missing = [{"satellite_id": sat_id, "name": n, "apid": apid} for n in names if n not in ids]
-        if missing:
-            new_ids = (
-                conn.execute(insert(PARAM).returning(PARAM.c.id, sort_by_parameter_order=True), missing).scalars().all()
+        if missing:  # one executemany, then one select (INSERT ... RETURNING runs a statement per row on SQLite)
+            conn.execute(insert(PARAM), missing)
+            added = conn.execute(
+                select(PARAM.c.name, PARAM.c.id).where(
+                    PARAM.c.satellite_id == sat_id, PARAM.c.name.in_([row["name"] for row in missing])
+                )
             )
-            ids.update({row["name"]: int(i) for row, i in zip(missing, new_ids)})
+            ids.update({name: int(param_id) for name, param_id in added})
         return ids
 
     # --- reading -------------------------------------------------------------------------
@@ -830,6 +846,48 @@ def _concatenate(parts: list[PacketBatch]) -> PacketBatch:
     )
 
 
+class _PendingBatches:
+    """Decoded chunks of one upload gathered per APID into archive chunks of CHUNK_PACKETS packets.
+
+    A file decoded in small chunks (bounded memory) would otherwise commit many small archive chunks,
+    each costing a row, a compression call and a min/max per parameter. An APID's packets are written
+    once CHUNK_PACKETS are pending, when its parameter set changes (polymorphic layouts), or when all
+    pending values exceed PENDING_OCTETS (the memory bound); the rest at the end of the upload.
+    """
+
+    def __init__(self) -> None:
+        self.batches: dict[int, list[PacketBatch]] = {}
+
+    def add(self, batches: Sequence[PacketBatch]) -> list[PacketBatch]:
+        """Take one decoded chunk's batches; return the merged batches to write now (often none)."""
+        ready: list[PacketBatch] = []
+        for batch in batches:
+            parts = self.batches.get(batch.apid, [])
+            if parts and list(parts[0].values) != list(batch.values):
+                ready.append(self._take(batch.apid))
+            self.batches.setdefault(batch.apid, []).append(batch)
+            if sum(p.n_packets for p in self.batches[batch.apid]) >= CHUNK_PACKETS:
+                ready.append(self._take(batch.apid))
+        if self._octets() > PENDING_OCTETS:
+            ready.extend(self.flush())
+        return ready
+
+    def flush(self) -> list[PacketBatch]:
+        """Every pending APID's packets, merged, and nothing left pending."""
+        return [self._take(apid) for apid in list(self.batches)]
+
+    def _take(self, apid: int) -> PacketBatch:
+        parts = self.batches.pop(apid)
+        return parts[0] if len(parts) == 1 else _concatenate(parts)
+
+    def _octets(self) -> int:
+        return sum(
+            len(b.raw) + sum(np.asarray(v).nbytes for v in b.values.values())
+            for parts in self.batches.values()
+            for b in parts
+        )
+
+
 def _order_and_dedupe(batch: PacketBatch) -> tuple[PacketBatch, int]:
     t, seq = batch.t_utc_ns, batch.seq_count
     if t.size > 1 and np.all(t[1:] > t[:-1]):
@@ -866,10 +924,7 @@ def _limit_changes(
 
 
 def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict:
-    dtype, blob = encode_values(values)
-    as_float = values.astype(np.float64, copy=False)
-    finite = as_float[np.isfinite(as_float)]
-    v_min, v_max = (float(finite.min()), float(finite.max())) if finite.size else (None, None)
+    dtype, blob, v_min, v_max = encode_values_range(values)
     return {
         "parameter_id": param_id,
         "chunk_id": chunk_id,

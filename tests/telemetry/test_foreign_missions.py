@@ -168,6 +168,33 @@ def test_chunked_decode_frames_the_same_packets_as_one_pass() -> None:
                 assert np.array_equal(np.concatenate([b.values[name] for b in mine]), batch.values[name])
 
 
+def test_small_decode_chunks_archive_the_same_series_in_full_archive_chunks(tmp_path: Path) -> None:
+    """ECM in 1,000-octet decode chunks: every archived series, time and undefined packet equals the one-pass
+    ingest's, and each APID's packets are committed as one archive chunk (not one per decode chunk)."""
+    from telemetry.archive import Archive
+    from telemetry.packet_files import ingest_packet_file
+
+    dictionary = load_dictionary(ECM / "defs", time_fields=ECM_TIME)
+    stored = {}
+    for chunk_octets in (1_000, 1 << 20):
+        with Archive(f"sqlite:///{tmp_path / f'{chunk_octets}.db'}") as archive:
+            report, result = ingest_packet_file(
+                archive, ECM_STREAM, dictionary, satellite="ECM", uploaded_by="ops", chunk_octets=chunk_octets
+            )
+            names = archive.parameters("ECM")
+            series = {n: archive.read_parameter("ECM", n, 0, 2**62) for n in names}
+            stored[chunk_octets] = (result.packets_accepted, series, archive.undefined_packets("ECM"))
+            chunks = archive.replay("ECM", 0, 2**62)
+            with archive.engine.connect() as conn:
+                n_chunks = conn.exec_driver_sql("SELECT COUNT(*) FROM packet_chunk").scalar_one()
+        assert len(chunks) == report.packets_accepted == sum(_apid_counts(ECM_STREAM)[a] for a in (1223, 1227))
+        assert n_chunks == 2
+    (n_small, small, undefined_small), (n_whole, whole, undefined_whole) = stored.values()
+    assert n_small == n_whole and undefined_small == undefined_whole and small.keys() == whole.keys()
+    for name, (t, v) in whole.items():
+        assert np.array_equal(small[name][0], t) and np.array_equal(small[name][1], v), name
+
+
 def _set_bits(packet: bytearray, offset: int, length: int, value: int) -> None:
     """Write value into a big-endian bit field of a packet."""
     first, last = offset // 8, (offset + length - 1) // 8
