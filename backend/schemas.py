@@ -255,6 +255,19 @@ class IngestReportPublic(BaseModel):
     passes: list[PassPublic] = Field(default_factory=list)  # type: ignore[valid-type]
 
 
+class RedecodeReportPublic(BaseModel):
+    """What decoding packets kept raw for want of a definition did (archive None: no packet of those APIDs kept)."""
+
+    satellite: str
+    dictionary: str
+    apids: list[int] = Field(description="The APIDs whose kept packets were decoded.")
+    archive: dict[str, Any] | None = Field(description="The new upload's tallies (as for an upload), or null.")
+    decoding: dict[str, Any] = Field(
+        description="The decoder's report; undefined_apids counts packets it quarantined, which stay kept raw."
+    )
+    passes: list[PassPublic] = Field(default_factory=list)  # type: ignore[valid-type]
+
+
 class DictionaryStored(BaseModel):
     """A stored telemetry dictionary and its packets (APID as text → packet name)."""
 

@@ -7,7 +7,8 @@ repeat ``--apid`` in the order of several CSVs) or a folder of ccsdspy CSVs, one
 XTCE/CSV packets is. The JSON report printed (and stored with the upload) joins the decoder's
 report (per APID: accepted, duplicates, gaps, packet lengths against the definition; quarantined
 with reasons and byte offsets; undefined APIDs kept raw) with the archive's (packets newly stored,
-duplicates already archived per APID, alarm events).
+duplicates already archived per APID, alarm events). ``acs-twin ingest --redecode --dictionary DEF
+--satellite S`` decodes the packets of S kept raw for want of a definition, now that DEF defines them.
 """
 
 from __future__ import annotations
@@ -29,7 +30,12 @@ GROUND_SUFFIXES = (".csv", ".jsonl", ".ndjson")
 def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``ingest`` subcommand."""
     p = sub.add_parser("ingest", help="decode, validate and archive a CCSDS packet file or a ground CSV/JSONL file")
-    p.add_argument("path", type=Path, help="packet file, or .csv / .jsonl of ground-processed values")
+    p.add_argument(
+        "path",
+        type=Path,
+        nargs="?",
+        help="packet file, or .csv / .jsonl of ground values (none with --redecode)",
+    )
     p.add_argument(
         "--dictionary",
         required=True,
@@ -64,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--user", default=None, help="who uploads (default: the login name)")
     p.add_argument("--dry-run", action="store_true", help="decode and validate only; store nothing")
+    p.add_argument(
+        "--redecode",
+        action="store_true",
+        help="instead of a file: decode the satellite's packets kept raw for want of a definition whose APIDs the "
+        "dictionaries define, archived as one upload (packets they quarantine stay kept)",
+    )
     p.set_defaults(handler=run)
 
 
@@ -97,8 +109,10 @@ def run(args: argparse.Namespace) -> int:
     from telemetry.limits import dictionary_limits
 
     try:
-        if not args.path.is_file():
-            raise ValueError(f"path: no file {args.path}")
+        if args.redecode and (args.path is not None or args.dry_run):
+            raise ValueError("path: --redecode takes no PATH and no --dry-run")
+        if not args.redecode and (args.path is None or not args.path.is_file()):
+            raise ValueError(f"path: no file {args.path}" if args.path else "path: give a packet file (or --redecode)")
         dictionary = load_dictionaries(args.dictionary, args.apid, args.time_code, args.time_fields)
         if args.packet_prefix or args.packet_suffix:
             dictionary = replace(
@@ -128,6 +142,13 @@ def _ingest(args: argparse.Namespace, dictionary: Dictionary, archive, limits) -
     """Decode (and archive unless dry run) the file; the report as a JSON-ready mapping."""
     satellite = args.satellite or dictionary.satellite_name
     user = args.user or getpass.getuser()
+    if args.redecode:
+        from backend.ingest.upload_decoder import RedecodeJob, redecode_kept
+
+        job = RedecodeJob(satellite, ", ".join(args.dictionary), (), user)
+        outcome = redecode_kept(archive, job, dictionary)
+        archived = None if outcome.result is None else outcome.result.as_report()
+        return {"apids": list(outcome.apids), "decode": outcome.report.to_dict(), "archive": archived}
     if args.path.suffix.lower() in GROUND_SUFFIXES:
         decoded, sha256 = _ground_file(args, dictionary)
         report = {"decode": decoded.report.to_dict()}

@@ -31,6 +31,10 @@ class ApiError(Exception):
         super().__init__(message)
         self.status, self.message, self.field, self.headers = status, message, field, headers
 
+    def __reduce__(self) -> tuple[type[ApiError], tuple[int, str, str | None, dict[str, str] | None]]:
+        """Pickled whole (it crosses from the upload decoder's process to the server)."""
+        return ApiError, (self.status, self.message, self.field, self.headers)
+
 
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     code: {"model": ErrorBody, "description": text}

@@ -38,6 +38,7 @@ from backend.ingest.dictionary_catalogue import DictionaryCatalogue
 from backend.ingest.live_hub import LiveHub
 from backend.ingest.ports import TelemetryArchive
 from backend.ingest.sample_cache import SampleCache
+from backend.ingest.upload_decoder import PacketFileJob, RedecodeJob, UploadDecoder, archive_packet_file
 from telemetry import decoding, ground_files
 from telemetry.archive import Archive
 from telemetry.archive.records import PassRecord
@@ -97,6 +98,7 @@ class TelemetryGateway:
         self._settings, self._hub = settings, hub
         self.dictionaries = DictionaryCatalogue(settings.data_dir / "dictionaries")
         self._archive: Archive | None = None
+        self._upload_decoder: UploadDecoder | None = None
         self._live: _LiveChild | None = None
         self._relay: threading.Thread | None = None
         self._live_stats: dict[str, Any] = {}
@@ -136,6 +138,7 @@ class TelemetryGateway:
     def start(self) -> None:
         """Open (and migrate) the archive on the server's database URL."""
         self._archive = Archive(self._settings.resolved_database_url())
+        self._upload_decoder = UploadDecoder(self._archive.url, self._settings.data_dir / "dictionaries")
 
     async def start_live(self) -> None:
         """Start the live-ingest process (telemetry.live) and the thread relaying it to the hub."""
@@ -228,7 +231,10 @@ class TelemetryGateway:
         return {} if self._live is None else {"port": self.live_port, **self._live_stats}
 
     def close(self) -> None:
-        """Release the archive's connections."""
+        """Stop the upload decoder (a file mid-decode is not archived) and release the archive's connections."""
+        if self._upload_decoder is not None:
+            self._upload_decoder.stop()
+            self._upload_decoder = None
         if self._archive is not None:
             self._archive.close()
             self._archive = None
@@ -244,57 +250,63 @@ class TelemetryGateway:
     def ingest_packet_file(
         self, satellite: str, path: Path, dictionary_name: str, source: str, uploaded_by: str
     ) -> dict[str, Any]:
-        """Decode a CCSDS packet file on disk chunk by chunk (bounded memory) and archive it as one upload.
+        """Decode a CCSDS packet file on disk chunk by chunk (bounded memory) and archive it as one upload
+        (blocking: call from a thread). A file of more than one chunk is decoded by the upload decoder
+        process (backend.ingest.upload_decoder), a smaller one in this thread.
 
         Subscribers and commit listeners get the batches of a file of one chunk (telemetry.packet_files
         .CHUNK_OCTETS); a longer file is an archive backfill: archived, caches invalidated, passes made from
         its data, but not replayed to live subscribers ("published": false in the report).
         """
-        from telemetry import packet_files, passes
+        from telemetry.packet_files import CHUNK_OCTETS
 
-        dictionary = self.dictionaries.load(dictionary_name)
-        first: list[SampleBatch] = []
-        spans: list[tuple[int, int]] = []
-        chunks = 0
-
-        def on_chunk(result: DecodeResult) -> None:
-            nonlocal chunks
-            chunks += 1
-            spans.extend((int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in result.batches if len(b.t_utc_ns))
-            first.extend(result.batches if chunks == 1 else [])
-            if chunks == 2:
-                first.clear()
-
-        report, result = packet_files.ingest_packet_file(
-            self._opened(),
-            path,
-            dictionary,
-            satellite=satellite,
-            uploaded_by=uploaded_by,
-            limits=dictionary_limits(dictionary),
-            source=source,
-            on_chunk=on_chunk,
-        )
-        assert result is not None
-        span = (min(s[0] for s in spans), max(s[1] for s in spans)) if spans else None
-        if span:
-            self._samples.invalidate(satellite, *span)
-        made: list[PassRecord] = []
-        if not result.duplicate_upload:
-            if chunks == 1:
-                self._publish(satellite, first, result.alarm_events)
-                for listener in self._committed:
-                    listener(satellite, dictionary_name, first)
-            if span:
-                made = passes.passes_from_data(self._opened(), satellite, *span)
+        dictionary = self.dictionaries.load(dictionary_name)  # a bad name or definition: 422 before any decode
+        job = PacketFileJob(path, satellite, dictionary_name, source, uploaded_by)
+        if path.stat().st_size > CHUNK_OCTETS:
+            outcome = self.upload_decoder.run(job)
+        else:
+            outcome = archive_packet_file(self._opened(), job, dictionary)
+        if outcome.span_ns is not None:
+            self._samples.invalidate(satellite, *outcome.span_ns)
+        if not outcome.result.duplicate_upload and outcome.chunks == 1:
+            self._publish(satellite, outcome.first_batches, outcome.result.alarm_events)
+            for listener in self._committed:
+                listener(satellite, dictionary_name, outcome.first_batches)
         return {
             "satellite": satellite,
             "dictionary": dictionary_name_of(dictionary),
-            "archive": result.as_report(),
-            "decoding": report.to_dict(),
-            "published": chunks == 1,
-            "passes": [{**asdict(p), "completeness": p.completeness} for p in made],
+            "archive": outcome.result.as_report(),
+            "decoding": outcome.report.to_dict(),
+            "published": outcome.chunks == 1,
+            "passes": [{**asdict(p), "completeness": p.completeness} for p in outcome.passes],
         }
+
+    def redecode(
+        self, satellite: str, dictionary_name: str, apids: tuple[int, ...], uploaded_by: str
+    ) -> dict[str, Any]:
+        """Decode, with a dictionary that now defines them, the packets of ``satellite`` kept raw for want of a
+        definition (all APIDs it defines, or ``apids``) and archive them as one upload, in the decoder process
+        (blocking: call from a thread). Packets it quarantines stay kept; "archive" is None when none was kept."""
+        dictionary = self.dictionaries.load(dictionary_name)
+        self._opened().undefined_counts(satellite)  # an unknown satellite: 422 before the decoder starts
+        outcome = self.upload_decoder.run(RedecodeJob(satellite, dictionary_name, apids, uploaded_by))
+        if outcome.span_ns is not None:
+            self._samples.invalidate(satellite, *outcome.span_ns)
+        return {
+            "satellite": satellite,
+            "dictionary": dictionary_name_of(dictionary),
+            "apids": list(outcome.apids),
+            "archive": None if outcome.result is None else outcome.result.as_report(),
+            "decoding": outcome.report.to_dict(),
+            "passes": [{**asdict(p), "completeness": p.completeness} for p in outcome.passes],
+        }
+
+    @property
+    def upload_decoder(self) -> UploadDecoder:
+        """The process that decodes and archives large packet files (503 until the archive is started)."""
+        if self._upload_decoder is None:
+            raise ApiError(503, "archive not started", "archive")
+        return self._upload_decoder
 
     def ingest_ground_file(
         self, satellite: str, data: bytes, kind: str, dictionary_name: str, source: str, uploaded_by: str

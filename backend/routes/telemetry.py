@@ -13,7 +13,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import SATELLITE_NAME, DictionaryStored, IngestReportPublic
+from backend.schemas import SATELLITE_NAME, DictionaryStored, IngestReportPublic, RedecodeReportPublic
 from telemetry.archive.records import UploadRecord
 
 router = APIRouter(tags=["telemetry"], responses=ERROR_RESPONSES)
@@ -139,6 +139,57 @@ def list_uploads(
 ) -> list[dict[str, Any]]:
     """Every upload with its checksum, tallies and stored ingest report, oldest first."""
     return [asdict(u) for u in services.telemetry.archive.uploads(satellite)]
+
+
+@router.get(
+    "/telemetry/undefined",
+    response_model=dict[str, int],
+    summary="Packets kept raw per APID for want of a definition",
+)
+def kept_raw(
+    services: ServicesDep,
+    _: ViewerDep,
+    satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME),
+) -> dict[str, int]:
+    """APID (as text) → packets kept raw: no definition when they came, or quarantined by a later one."""
+    return {str(a): n for a, n in services.telemetry.archive.undefined_counts(satellite).items()}
+
+
+@router.post(
+    "/telemetry/redecode",
+    response_model=RedecodeReportPublic,
+    summary="Decode packets kept raw, now that a dictionary defines their APID",
+)
+async def redecode_kept(
+    services: ServicesDep,
+    principal: OperatorDep,
+    satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME),
+    dictionary: str = Query(..., min_length=1, max_length=200, examples=["cygnss_adcs.csv"]),
+    apid: list[int] = Query(
+        [], description="Only these APIDs (repeat the key); default: every APID the dictionary defines."
+    ),
+) -> dict[str, Any]:
+    """The kept packets of the dictionary's APIDs decoded and archived as one upload, in the upload decoder process;
+    packets the dictionary quarantines stay kept (a corrected one may read them later). A second call finds
+    nothing kept and archives nothing."""
+    bad = [a for a in apid if not 0 <= a <= 2047]
+    if bad:
+        raise ApiError(422, f"apid: {bad[0]} is not an APID (0 to 2047)", "apid")
+    report = await run_in_threadpool(
+        services.telemetry.redecode, satellite, dictionary, tuple(sorted(set(apid))), principal.name
+    )
+    services.audit.record(
+        principal.name,
+        "telemetry.redecode",
+        f"satellite/{satellite}",
+        {
+            "dictionary": dictionary,
+            "apids": report["apids"],
+            "upload_id": report["archive"]["upload_id"] if report["archive"] else None,
+            "packets_accepted": report["archive"]["packets_accepted"] if report["archive"] else 0,
+        },
+    )
+    return report
 
 
 @router.get("/dictionaries", response_model=list[str], summary="Known telemetry dictionaries")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -51,10 +51,11 @@ from telemetry.archive.records import (
     StationRecord,
     UploadRecord,
 )
+from telemetry.ingest_report import UndefinedPackets
 from telemetry.limits import LimitSet, level_changes, limit_levels
 
 if TYPE_CHECKING:
-    from telemetry.ingest_report import DecodeResult, IngestReport, UndefinedPackets
+    from telemetry.ingest_report import DecodeResult, IngestReport
 
 __all__ = ["Archive", "CHUNK_PACKETS"]
 
@@ -297,31 +298,98 @@ class Archive:
                 return IngestResult(
                     upload_id, True, packets_duplicate=sum(archived.values()), duplicates_by_apid=archived
                 )
-            by_apid: dict[int, int] = {}
-            for part in parts:
-                for apid, n in part.duplicates_by_apid.items():
-                    by_apid[apid] = by_apid.get(apid, 0) + n
-            result = IngestResult(
-                upload_id,
-                False,
-                sum(p.packets_accepted for p in parts),
-                sum(p.packets_duplicate for p in parts),
-                sum(p.samples_accepted for p in parts),
-                sum(p.alarm_events for p in parts),
-                [g for p in parts for g in p.gaps],
-                by_apid,
+            return self._close_upload(conn, upload_id, parts, report)
+
+    def _close_upload(
+        self, conn: Connection, upload_id: int, parts: list[IngestResult], report: IngestReport | None
+    ) -> IngestResult:
+        """The upload's result from those of its chunks, stored on its row with the decoder's report."""
+        by_apid: dict[int, int] = {}
+        for part in parts:
+            for apid, n in part.duplicates_by_apid.items():
+                by_apid[apid] = by_apid.get(apid, 0) + n
+        result = IngestResult(
+            upload_id,
+            False,
+            sum(p.packets_accepted for p in parts),
+            sum(p.packets_duplicate for p in parts),
+            sum(p.samples_accepted for p in parts),
+            sum(p.alarm_events for p in parts),
+            [g for p in parts for g in p.gaps],
+            by_apid,
+        )
+        stored = {**result.as_report(), "decode": report.to_dict() if report else {}}
+        conn.execute(
+            update(UPLOAD)
+            .where(UPLOAD.c.id == upload_id)
+            .values(
+                packets_accepted=result.packets_accepted,
+                samples_accepted=result.samples_accepted,
+                report_json=json.dumps(stored),
             )
-            stored = {**result.as_report(), "decode": report.to_dict() if report else {}}
-            conn.execute(
-                update(UPLOAD)
-                .where(UPLOAD.c.id == upload_id)
-                .values(
-                    packets_accepted=result.packets_accepted,
-                    samples_accepted=result.samples_accepted,
-                    report_json=json.dumps(stored),
-                )
-            )
+        )
         return result
+
+    def redecode_undefined(
+        self,
+        satellite: str,
+        apids: Sequence[int],
+        decode: Callable[[bytes], DecodeResult],
+        *,
+        source: str,
+        uploaded_by: str,
+        report: IngestReport,
+        limits: Mapping[str, LimitSet] | None = None,
+    ) -> IngestResult | None:
+        """Decode the packets of ``apids`` kept raw (no definition when they came) and commit them as one upload.
+
+        ``decode(octets)`` decodes a run of whole packets (telemetry.decoding.decode_stream with the dictionary
+        that now defines them); ``report`` absorbs its reports. A kept packet leaves the keep in the transaction
+        that archives it; one the decoder quarantines stays kept (a corrected definition may read it later),
+        counted per APID in ``report.undefined_apids``. None when no packet of ``apids`` is kept.
+        """
+        if not uploaded_by:
+            raise ValueError("uploaded_by: the uploader's name is required")
+        sat_id = self._known_satellite(satellite)
+        with self._writer.begin() as conn:
+            self._lock_satellite(conn, sat_id)
+            kept = UNDEFINED.c.satellite_id == sat_id, UNDEFINED.c.apid.in_(list(apids))
+            ids = conn.execute(select(UNDEFINED.c.id).where(*kept).order_by(UNDEFINED.c.id)).scalars().all()
+            if not ids:
+                return None
+            token = f"redecode {sat_id} {ids[0]}..{ids[-1]} {_now_ns()}".encode()
+            upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, hashlib.sha256(token).hexdigest())
+            parts, offset = [], 0
+            for row_id in ids:
+                row = conn.execute(select(UNDEFINED).where(UNDEFINED.c.id == row_id)).one()
+                raw = decode_raw(row.raw_blob)
+                decoded = decode(raw)
+                report.absorb(decoded.report, offset)
+                offset += len(raw)
+                batches = _merge_by_apid([PacketBatch.from_sample_batch(b) for b in decoded.batches])
+                parts.append(self._write_batches(conn, sat_id, upload_id, batches, limits or {}))
+                self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
+                conn.execute(UNDEFINED.delete().where(UNDEFINED.c.id == row_id))
+                self._keep_quarantined(conn, row, raw, decoded, report)
+            return self._close_upload(conn, upload_id, parts, report)
+
+    def _keep_quarantined(
+        self, conn: Connection, row: Row[Any], raw: bytes, decoded: DecodeResult, report: IngestReport
+    ) -> None:
+        """Keep raw again the packets of an undefined-packet row that its new decode quarantined."""
+        lengths = decode_int64(row.length_blob)
+        starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+        quarantined = np.zeros(lengths.shape, dtype=bool)
+        for q in decoded.report.quarantined:
+            quarantined |= (starts < q.offset + q.length) & (starts + lengths > q.offset)
+        if not quarantined.any():
+            return
+        octets = np.frombuffer(raw, dtype=np.uint8)
+        picked = np.concatenate([octets[a : a + n] for a, n in zip(starts[quarantined], lengths[quarantined])])
+        seq = decode_int64(row.seq_blob)[quarantined]
+        again = UndefinedPackets(int(row.apid), picked, lengths[quarantined], seq)
+        self._write_undefined(conn, int(row.satellite_id), int(row.upload_id), [again])
+        report.undefined_apids[again.apid] = report.undefined_apids.get(again.apid, 0) + int(quarantined.sum())
 
     def _write_undefined(
         self, conn: Connection, sat_id: int, upload_id: int, undefined: Sequence[UndefinedPackets]
@@ -341,6 +409,17 @@ class Archive:
         ]
         if rows:
             conn.execute(insert(UNDEFINED), rows)
+
+    def undefined_counts(self, satellite: str) -> dict[int, int]:
+        """Packets kept raw per APID (no definition when they came, or quarantined by a later one)."""
+        sat_id = self._known_satellite(satellite)
+        query = (
+            select(UNDEFINED.c.apid, func.sum(UNDEFINED.c.n_packets))
+            .where(UNDEFINED.c.satellite_id == sat_id)
+            .group_by(UNDEFINED.c.apid)
+        )
+        with self.engine.connect() as conn:
+            return {int(a): int(n) for a, n in conn.execute(query.order_by(UNDEFINED.c.apid))}
 
     def undefined_packets(self, satellite: str, apid: int | None = None) -> dict[int, list[bytes]]:
         """Raw packets of APIDs that had no definition when ingested, per APID, in upload order (byte-exact)."""
