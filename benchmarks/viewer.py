@@ -86,13 +86,13 @@ def serve(ports_file: str) -> None:
     handles = serve_monitors(
         feed, ports={"actual": _free_port(), "simulated": _free_port()}, roles=("actual", "simulated")
     )
-    handles.clock.set_speed(10.0)
-    handles.clock.play()
     Path(ports_file).write_text(json.dumps(handles.ports))
-    while True:
-        time.sleep(1.0)
-        if not handles.clock.playing:
-            handles.clock.play()
+    while True:  # every viewer replays at x10 (each browser has its own clock)
+        for viewer in handles.all_viewers():
+            if not viewer.clock.playing:
+                viewer.clock.set_speed(10.0)
+                viewer.clock.play()
+        time.sleep(0.2)
 
 
 def _free_port() -> int:

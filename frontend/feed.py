@@ -17,7 +17,15 @@ from sim_core import orbit, quaternion
 from sim_core.attitude_spline import AttitudeSpline
 from sim_core.trajectory import Trajectory
 
-__all__ = ["GroundStation", "FeedWindow", "TwinFeed", "TrajectoryFeed", "DEFAULT_STATIONS", "attitude_error_rad"]
+__all__ = [
+    "GroundStation",
+    "FeedWindow",
+    "TwinFeed",
+    "WindowSource",
+    "TrajectoryFeed",
+    "DEFAULT_STATIONS",
+    "attitude_error_rad",
+]
 
 ORBIT_TABLE_STEP_S = 10.0  # cubic interpolation error ~ (n h)⁴ r / 384 ≈ 0.2 mm at LEO
 ORBIT_MARGIN_S = 6000.0  # extrapolate a bit more than one LEO period beyond the data, both ways
@@ -83,6 +91,19 @@ class TwinFeed(Protocol):
 
     def ground_stations(self) -> list[GroundStation]:
         """Ground stations to draw with their visibility circles."""
+        ...
+
+
+@runtime_checkable
+class WindowSource(Protocol):
+    """Past windows of the archive for replay on the monitors (implemented by the backend over its archive)."""
+
+    def archive_span_unix_s(self) -> tuple[float, float] | None:
+        """First and last archived telemetry instant (None before any data arrived)."""
+        ...
+
+    def window_feed(self, t0_unix_s: float, t1_unix_s: float) -> TwinFeed:
+        """A feed of the archived telemetry and twin in [t0, t1]; ValueError naming the field if it cannot."""
         ...
 
 

@@ -1,24 +1,29 @@
 """The twin monitors: one viser server per role (``actual``, ``simulated``, ``overlay``) so that two
-browser windows can sit on two screens (seed 000 §7), driven by one playback clock and one render
-loop that computes each frame's geometry once and sends it to every monitor.
+browser windows can sit on two screens (seed 000 §7), and one render loop for all of them.
+
+Every browser client is a viewer of its own (frontend.viewer.Viewer: clock, scene, panel): one viewer's
+playback never moves another viewer's view. The loop computes each frame's geometry once per distinct
+(geometry, instant) and sends it to every viewer at that instant, so viewers in live follow share it.
 
 Entry point for the backend's ``acs-twin serve``: :func:`serve_monitors`.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from frontend.feed import TwinFeed
-from frontend.playback import PlaybackClock
+from frontend.feed import TwinFeed, WindowSource
 from frontend.twin_geometry import TwinFrame, TwinGeometry
-from frontend.twin_panels import PLOT_WINDOW_S, TwinPanels
-from frontend.twin_scene import ROLES, Role, TwinScene
+from frontend.twin_panels import PLOT_WINDOW_S
+from frontend.twin_scene import ROLES, Role
+from frontend.viewer import Viewer
 from sim_core import quaternion
 
 if TYPE_CHECKING:
@@ -34,6 +39,9 @@ WHOLE_EARTH_DISTANCE = 3.2  # Earth radii from the centre, behind the spacecraft
 CHASE_BACK, CHASE_UP = 0.12, 0.05  # Earth radii behind and above the spacecraft
 LOS_AHEAD = 0.045  # Earth radii in front of the telescope (past the displayed model) along the boresight
 INITIAL_FOV_RAD = float(np.radians(45.0))
+WINDOW_LOADERS = 1  # archived windows load one at a time, off the render loop (live viewers never wait)
+
+log = logging.getLogger(__name__)
 
 
 def camera_pose(preset: str, f: TwinFrame, v_eci: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -56,18 +64,23 @@ def camera_pose(preset: str, f: TwinFrame, v_eci: np.ndarray) -> tuple[np.ndarra
 
 @dataclass
 class MonitorHandles:
-    """Running monitors: servers and real ports by role, the shared clock, and the render loop."""
+    """Running monitors: servers and real ports by role, the live geometry, every connected viewer, the loop."""
 
     servers: dict[str, viser.ViserServer]
-    clock: PlaybackClock
     geometry: TwinGeometry
-    scenes: dict[str, TwinScene]
-    panels: dict[str, TwinPanels]
+    n_wheels: int
     host: str
+    live: bool = False
+    windows: WindowSource | None = None
+    viewers: dict[str, dict[int, Viewer]] = field(default_factory=dict)
     frames_sent: int = 0
-    _lock: threading.Lock = field(default_factory=threading.Lock)
+    frames_computed: int = 0
+    _lock: threading.RLock = field(default_factory=threading.RLock)
     _stop: threading.Event = field(default_factory=threading.Event)
     _thread: threading.Thread | None = None
+    _loader: ThreadPoolExecutor = field(
+        default_factory=lambda: ThreadPoolExecutor(WINDOW_LOADERS, thread_name_prefix="monitor-window")
+    )
 
     @property
     def ports(self) -> dict[str, int]:
@@ -79,50 +92,81 @@ class MonitorHandles:
         h = host or self.host
         return {role: f"http://{h}:{port}/" for role, port in self.ports.items()}
 
-    def render(self, t_unix_s: float | None = None) -> TwinFrame:
-        """Compute one frame and push it to every monitor (the loop does this at FRAME_RATE_HZ)."""
+    def all_viewers(self) -> list[Viewer]:
+        """Every connected viewer of every monitor."""
         with self._lock:
-            t = self.clock.t_unix_s if t_unix_s is None else t_unix_s
-            f = self.geometry.frame(t)
-            for role, scene in self.scenes.items():
-                scene.show(f)
-                self.panels[role].show_time(f)
-                self._apply_presets(role, f)
-            self.frames_sent += 1
-            return f
+            return [v for per_role in self.viewers.values() for v in per_role.values()]
+
+    def _connect(self, role: Role, client: viser.ClientHandle) -> None:
+        """A browser connected: give it a viewer of its own (clock, scene, panel)."""
+        with self._lock:
+            geometry = self.geometry
+        viewer = Viewer(client, role, geometry, self.n_wheels, self.live, self.windows, self._loader)
+        with self._lock:
+            self.viewers.setdefault(role, {})[viewer.client_id] = viewer
+            self._render_one(viewer, {})
+
+    def _disconnect(self, role: Role, client: viser.ClientHandle) -> None:
+        with self._lock:
+            self.viewers.get(role, {}).pop(int(client.client_id), None)
+
+    def _frame(self, geometry: TwinGeometry, t: float, cache: dict) -> TwinFrame:
+        key = (id(geometry), t)
+        if key not in cache:
+            cache[key] = geometry.frame(t)
+            self.frames_computed += 1
+        return cache[key]
+
+    def _render_one(self, viewer: Viewer, cache: dict, wall_dt_s: float = 0.0) -> TwinFrame:
+        viewer.apply_pending()
+        t = viewer.clock.advance(wall_dt_s)
+        f = self._frame(viewer.geometry, t, cache)
+        viewer.scene.show(f)
+        viewer.panels.show_time(f)
+        self._apply_preset(viewer, f)
+        self.frames_sent += 1
+        return f
+
+    def render(self, wall_dt_s: float = 0.0) -> dict[int, TwinFrame]:
+        """Advance every viewer's clock by wall_dt and push its frame (the loop does this at FRAME_RATE_HZ);
+        the frame shown by each client id."""
+        cache: dict = {}
+        shown = {}
+        with self._lock:
+            for viewer in self.all_viewers():
+                try:
+                    shown[viewer.client_id] = self._render_one(viewer, cache, wall_dt_s)
+                except Exception:  # a client that went away mid-frame must not stop the others
+                    log.debug("monitor viewer %s: frame not sent", viewer.client_id, exc_info=True)
+        return shown
 
     def set_feed(self, feed: TwinFeed) -> None:
         """Show another feed (e.g. a newly finished twin session) on the running monitors, paused at its start.
 
-        The panels keep the wheel count of the first feed.
+        Viewers replaying an archived window keep it; the panels keep the wheel count of the first feed.
         """
         if not isinstance(feed, TwinFeed):
             raise ValueError("feed: does not implement frontend.feed.TwinFeed")
         geometry = TwinGeometry(feed)
         with self._lock:
             self.geometry = geometry
-            self.clock.set_span(feed.span_unix_s)
-            for scene in self.scenes.values():
-                scene.rebuild(geometry)
+            for viewer in self.all_viewers():
+                if not viewer.replaying_window:
+                    viewer.clock.set_span(feed.span_unix_s)
+                viewer.set_live_geometry(geometry)
 
-    def _apply_presets(self, role: str, f: TwinFrame) -> None:
-        presets = self.panels[role].presets()
-        if not presets:
+    def _apply_preset(self, viewer: Viewer, f: TwinFrame) -> None:
+        preset = viewer.panels.take_preset()
+        if preset is None:
             return
-        clients = self.servers[role].get_clients()
-        _, v = self.geometry.feed.orbit_eci(np.array([f.t_unix_s]))
-        for cid, preset in presets.items():
-            client = clients.get(cid)
-            if client is None:
-                continue
-            position, look_at, up = camera_pose(preset, f, v[0])
-            with client.atomic():
-                client.camera.up_direction = tuple(up)
-                client.camera.position = tuple(position)
-                client.camera.look_at = tuple(look_at)
-            if preset == "whole Earth":
-                with self.panels[role]._lock:
-                    self.panels[role].camera_preset.pop(cid, None)
+        _, v = viewer.geometry.feed.orbit_eci(np.array([f.t_unix_s]))
+        position, look_at, up = camera_pose(preset, f, v[0])
+        with viewer.client.atomic():
+            viewer.client.camera.up_direction = tuple(up)
+            viewer.client.camera.position = tuple(position)
+            viewer.client.camera.look_at = tuple(look_at)
+        if preset != "whole Earth":
+            viewer.panels.camera_preset = preset  # chase and line of sight move on with the spacecraft
 
     def extend_tracks(self) -> bool:
         """Recompute orbit, trace and survey zone once live data nears the end of the drawn tracks."""
@@ -132,19 +176,27 @@ class MonitorHandles:
         geometry = TwinGeometry(self.geometry.feed)
         with self._lock:
             self.geometry = geometry
-            for scene in self.scenes.values():
-                scene.rebuild(geometry)
+            for viewer in self.all_viewers():
+                viewer.set_live_geometry(geometry)
         return True
 
     def update_panels(self) -> None:
-        """Plots, flags and alarms of the last PLOT_WINDOW_S on every monitor."""
+        """Plots, flags and alarms of the last PLOT_WINDOW_S at each viewer's instant."""
+        cache: dict = {}
         with self._lock:
-            t = self.clock.t_unix_s
-            w = self.geometry.feed.window(t - PLOT_WINDOW_S, t)
-            alarms = self.geometry.feed.active_alarms(t)
-            motion = self.geometry.image_motion_rad_s(t)
-            for p in self.panels.values():
-                p.show_window(t, w, alarms, motion)
+            for viewer in self.all_viewers():
+                t, feed = viewer.clock.t_unix_s, viewer.geometry.feed
+                key = (id(viewer.geometry), t)
+                if key not in cache:
+                    cache[key] = (
+                        feed.window(t - PLOT_WINDOW_S, t),
+                        feed.active_alarms(t),
+                        viewer.geometry.image_motion_rad_s(t),
+                    )
+                try:
+                    viewer.panels.show_window(t, *cache[key])
+                except Exception:
+                    log.debug("monitor viewer %s: panels not sent", viewer.client_id, exc_info=True)
 
     def _loop(self, rate_hz: float) -> None:
         period = 1.0 / rate_hz
@@ -152,9 +204,8 @@ class MonitorHandles:
         next_panels = last
         while not self._stop.is_set():
             now = time.perf_counter()
-            self.clock.advance(now - last)
+            self.render(now - last)
             last = now
-            self.render()
             if now >= next_panels:
                 self.extend_tracks()
                 self.update_panels()
@@ -168,10 +219,11 @@ class MonitorHandles:
             self._thread.start()
 
     def stop(self) -> None:
-        """Stop the loop and the servers."""
+        """Stop the loop, the window loader and the servers."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+        self._loader.shutdown(wait=False, cancel_futures=True)
         for s in self.servers.values():
             s.stop()
 
@@ -185,6 +237,19 @@ def _initial_camera(server, f: TwinFrame) -> None:
     server.initial_camera.fov = INITIAL_FOV_RAD
 
 
+def _watch_clients(handles: MonitorHandles, role: Role, server: viser.ViserServer) -> None:
+    """Give every browser that connects to ``server`` a viewer of its own; drop it when the browser leaves."""
+
+    def connect(client: viser.ClientHandle) -> None:
+        handles._connect(role, client)
+
+    def disconnect(client: viser.ClientHandle) -> None:
+        handles._disconnect(role, client)
+
+    server.on_client_connect(connect)
+    server.on_client_disconnect(disconnect)
+
+
 def serve_monitors(
     feed: TwinFeed,
     host: str = "127.0.0.1",
@@ -192,8 +257,14 @@ def serve_monitors(
     roles: tuple[Role, ...] = ROLES,
     rate_hz: float = FRAME_RATE_HZ,
     start: bool = True,
+    live: bool = False,
+    windows: WindowSource | None = None,
 ) -> MonitorHandles:
-    """Start one viser server per role on host:port (real ports in ``handles.ports``) and the render loop."""
+    """Start one viser server per role on host:port (real ports in ``handles.ports``) and the render loop.
+
+    Each browser that connects gets a viewer of its own, in live follow if ``live`` (else paused at the start of
+    the feed); ``windows`` lets viewers replay any past window of the archive.
+    """
     import viser
 
     if not isinstance(feed, TwinFeed):
@@ -204,19 +275,21 @@ def serve_monitors(
         raise ValueError(f"ports: no port for role(s) {missing}")
     if not rate_hz > 0:
         raise ValueError("rate_hz: must be positive")
+    if windows is not None and not isinstance(windows, WindowSource):
+        raise ValueError("windows: does not implement frontend.feed.WindowSource")
     geometry = TwinGeometry(feed)
-    clock = PlaybackClock(feed.span_unix_s)
-    n_wheels = feed.window(*feed.span_unix_s()).wheel_speed_rad_s.shape[1]
-    servers, scenes, panels = {}, {}, {}
+    t0, t1 = feed.span_unix_s()
+    n_wheels = feed.window(t0, t1).wheel_speed_rad_s.shape[1]
+    first = geometry.frame(t1 if live else t0)
+    servers: dict[str, viser.ViserServer] = {
+        role: viser.ViserServer(host=host, port=ports[role], verbose=False) for role in roles
+    }
+    handles = MonitorHandles(
+        servers=servers, geometry=geometry, n_wheels=n_wheels, host=host, live=live, windows=windows
+    )
     for role in roles:
-        server = viser.ViserServer(host=host, port=ports[role], verbose=False)
-        servers[role] = server
-        scenes[role] = TwinScene(server, role, geometry)
-        _initial_camera(server, geometry.frame(clock.t_unix_s))
-        panels[role] = TwinPanels(server, role, clock, n_wheels)
-    handles = MonitorHandles(servers=servers, clock=clock, geometry=geometry, scenes=scenes, panels=panels, host=host)
-    handles.render()
-    handles.update_panels()
+        _initial_camera(servers[role], first)
+        _watch_clients(handles, role, servers[role])
     if start:
         handles.start(rate_hz)
     return handles

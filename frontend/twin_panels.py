@@ -1,11 +1,12 @@
-"""The control panel of one monitor: playback (time, timeline, play/pause, speed, live follow),
-camera presets, and the operator panels — attitude error (actual − simulated), wheel speeds, MD
-moment, mode and fault flags, active alarms (seed 000 §7 in-flight support).
+"""The control panel of one monitor viewer (one browser client): playback (time, timeline, play/pause, speed,
+live follow), replay of a past window of the archive, camera presets, and the operator panels — attitude error
+(actual − simulated), wheel speeds, MD moment, mode and fault flags, active alarms (seed 000 §7 in-flight support).
 """
 
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING
 
@@ -19,7 +20,7 @@ from frontend.twin_geometry import TwinFrame
 if TYPE_CHECKING:
     import viser
 
-__all__ = ["TwinPanels", "CAMERA_PRESETS", "PLOT_WINDOW_S", "format_utc"]
+__all__ = ["TwinPanels", "CAMERA_PRESETS", "PLOT_WINDOW_S", "REPLAY_LENGTHS_MIN", "format_utc", "parse_utc"]
 
 CAMERA_PRESETS = ("whole Earth", "chase", "line of sight")
 PLOT_WINDOW_S = 300.0
@@ -27,11 +28,21 @@ RPM_PER_RAD_S = 30.0 / np.pi
 ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 WHEEL_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#46f0f0")
 MD_COLOURS = ("#e6194b", "#3cb44b", "#4363d8")
+REPLAY_LENGTHS_MIN = ("5", "10", "30", "60", "120")  # replay window lengths offered (minutes)
 
 
 def format_utc(t_unix_s: float) -> str:
     """ISO-8601 UTC with milliseconds, as the panels show time."""
     return datetime.fromtimestamp(t_unix_s, tz=UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def parse_utc(text: str) -> float:
+    """UTC seconds since the Unix epoch of an ISO-8601 instant ('Z' or an offset; naive means UTC)."""
+    try:
+        t = datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
+    except ValueError:
+        raise ValueError(f"from: {text!r} is not an ISO-8601 UTC instant (e.g. 2026-03-20T00:05:00Z)") from None
+    return (t if t.tzinfo else t.replace(tzinfo=UTC)).timestamp()
 
 
 def _plot_scales() -> dict:
@@ -50,13 +61,24 @@ def _empty(n_series: int) -> tuple[np.ndarray, ...]:
 
 
 class TwinPanels:
-    """GUI of one viser server, bound to the shared clock; camera preset chosen per browser client."""
+    """GUI of one browser client (``target`` is its viser ClientHandle, or a server for a shared panel), bound to
+    the viewer's own clock; the camera preset and the replay window are this client's alone."""
 
-    def __init__(self, server: viser.ViserServer, role: str, clock: PlaybackClock, n_wheels: int) -> None:
-        self.server, self.role, self.clock = server, role, clock
-        self.camera_preset: dict[int, str] = {}
+    def __init__(
+        self,
+        target: viser.ClientHandle | viser.ViserServer,
+        role: str,
+        clock: PlaybackClock,
+        n_wheels: int,
+        archive_span: Callable[[], tuple[float, float] | None] | None = None,
+        on_live: Callable[[bool], None] | None = None,
+        on_window: Callable[[float, float], None] | None = None,
+    ) -> None:
+        self.target, self.role, self.clock = target, role, clock
+        self.camera_preset: str | None = None
+        self._archive_span, self._on_live, self._on_window = archive_span, on_live, on_window
         self._lock = threading.Lock()
-        gui = server.gui
+        gui = target.gui
         gui.configure_theme(
             show_share_button=False, dark_mode=True, control_width="large", titlebar_content=None, show_logo=False
         )
@@ -71,6 +93,15 @@ class TwinPanels:
             self.speed = gui.add_dropdown("Speed", tuple(f"x{s:g}" for s in SPEEDS), initial_value=f"x{clock.speed:g}")
             self.live = gui.add_checkbox("Live follow", initial_value=clock.live)
             self.camera = gui.add_button_group("Camera", CAMERA_PRESETS)
+        self.window_from = self.window_length = self.window_load = None
+        with gui.add_folder("Replay a past window"):
+            self.archive_text = gui.add_markdown(self._archive_note())
+            if on_window is not None:
+                span = archive_span() if archive_span is not None else None
+                self.window_from = gui.add_text("From (UTC)", initial_value=format_utc(span[0] if span else t0))
+                self.window_length = gui.add_dropdown("Length (min)", REPLAY_LENGTHS_MIN, initial_value="10")
+                self.window_load = gui.add_button("Load window")
+            self.window_status = gui.add_markdown("live" if clock.live else "—")
         with gui.add_folder("Attitude error (actual − simulated)"):
             self.error_plot = gui.add_uplot(
                 data=_empty(1),
@@ -107,6 +138,12 @@ class TwinPanels:
         gui.add_markdown(f"<small>{EARTH_CREDIT}</small>")
         self._wire()
 
+    def _archive_note(self) -> str:
+        span = self._archive_span() if self._archive_span is not None else None
+        if span is None:
+            return "no archive to replay from" if self._on_window is None else "archive: no telemetry yet"
+        return f"archive holds {format_utc(span[0])} … {format_utc(span[1])}"
+
     def _wire(self) -> None:
         clock = self.clock
 
@@ -130,18 +167,44 @@ class TwinPanels:
         @self.live.on_update
         def _(event) -> None:
             if event.client is not None:
-                clock.follow_live(bool(self.live.value))
+                if self._on_live is not None:
+                    self._on_live(bool(self.live.value))
+                else:
+                    clock.follow_live(bool(self.live.value))
 
         @self.camera.on_click
         def _(event) -> None:
             if event.client is not None:
                 with self._lock:
-                    self.camera_preset[event.client.client_id] = self.camera.value
+                    self.camera_preset = self.camera.value
 
-    def presets(self) -> dict[int, str]:
-        """Camera preset chosen by each connected client (default: whole Earth)."""
+        if self.window_load is not None:
+
+            @self.window_load.on_click
+            def _(event) -> None:
+                self.load_window()
+
+    def load_window(self) -> None:
+        """Ask for the window the panel's From and Length name (what the Load button does)."""
+        assert self.window_from is not None and self.window_length is not None and self._on_window is not None
+        try:
+            t0 = parse_utc(self.window_from.value)
+        except ValueError as exc:
+            self.show_window_status(f"not loaded: {exc}")
+            return
+        self._on_window(t0, t0 + 60.0 * float(self.window_length.value))
+
+    def show_window_status(self, text: str) -> None:
+        """What the replay-window part says (loading, replaying which window, an error)."""
+        self.window_status.content = text
+
+    def take_preset(self) -> str | None:
+        """The camera preset this client asked for (kept for the chase and line-of-sight views that move on)."""
         with self._lock:
-            return dict(self.camera_preset)
+            preset = self.camera_preset
+            if preset == "whole Earth":
+                self.camera_preset = None
+            return preset
 
     def show_time(self, f: TwinFrame) -> None:
         """Time, timeline and control states, every frame (cheap: unchanged values are not sent)."""
@@ -153,7 +216,9 @@ class TwinPanels:
         self.speed.value = f"x{self.clock.speed:g}"
 
     def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str], image_motion_rad_s: np.ndarray) -> None:
-        """Plots of the last PLOT_WINDOW_S, mode/flags, image motion and alarms (a few times per second)."""
+        """Plots of the last PLOT_WINDOW_S, mode/flags, image motion, alarms and the archive's span (a few times
+        per second)."""
+        self.archive_text.content = self._archive_note()
         along, across = np.asarray(image_motion_rad_s) * 1e3
         self.image_motion.content = (
             "image motion at the boresight: off the Earth"

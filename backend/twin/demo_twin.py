@@ -2,9 +2,10 @@
 
 No one-shot replay: the demo satellite is just the first satellite with a live twin (backend.twin.live). Its
 route starts with each run of telemetry (the emulator starts with the server), so the twin is told so; once
-the twin holds attitude and GPS samples the monitors start on a LiveFeed in live follow (a few seconds behind
-real time; STALE in the alarm list when telemetry stops), viser on private loopback ports behind the token gate
-(backend.twin.monitor_gate) on the public ones. Runs in a daemon thread; steps are logged to data_dir/twin.log.
+the twin holds attitude and GPS samples the monitors start on a LiveFeed, each viewer in live follow (a few
+seconds behind real time; STALE in the alarm list when telemetry stops) with any past window of the archive
+replayable (ArchiveWindows), viser on private loopback ports behind the token gate (backend.twin.monitor_gate)
+on the public ones. Runs in a daemon thread; steps are logged to data_dir/twin.log.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ def run_demo_twin(
     services: Services, monitor_ports: dict[str, int], scenario: str, stop: threading.Event
 ) -> MonitorHandles | None:
     """Wait for the live satellite's first samples, serve the monitors on its live twin in live follow; handles."""
-    from backend.twin.live_feed import LiveFeed
+    from backend.twin.live_feed import ArchiveWindows, LiveFeed
     from backend.twin.monitor_gate import MonitorGate
     from frontend.monitors import serve_monitors
 
@@ -53,8 +54,10 @@ def run_demo_twin(
     else:
         return None
     feed = LiveFeed(twins, satellite, alarms)
-    handles = serve_monitors(feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0))  # private ports
-    handles.clock.follow_live(True)
+    windows = ArchiveWindows(services.telemetry.opened_archive, twins, satellite, alarms)
+    handles = serve_monitors(  # private ports; every viewer starts in live follow, any past window replayable
+        feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0), live=True, windows=windows
+    )
     for role, public in monitor_ports.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
         MonitorGate(services.auth, services.settings.host, public, handles.ports[role]).start()
     _log(

@@ -11,7 +11,9 @@ declares no ACS model is *actual_only*: its attitude is followed, no twin is flo
 Residuals, twin minus telemetry at each telemetry instant: attitude angle |Λ̃_tm ∘ Λ_twin| (arcsec), body rates
 (rad/s, per axis), wheel speeds (rad/s, per wheel). They are archived as parameters of their own (APID
 ``TWIN_APID``, no raw packet) with limits, so they plot, export and raise alarms like any other, and published
-on the hub (``parameters/<name>`` and the twin state on ``twin``).
+on the hub (``parameters/<name>`` and the twin state on ``twin``). The twin's own attitude at those instants is
+archived beside them (``TWIN_ATTITUDE_PARAMETERS``, scalar-first q_ib), so that the 3D monitors replay actual and
+simulated for any past window from the archive alone (backend.twin.live_feed.ArchiveWindows).
 
 Re-sync cadence RESYNC_S = 60 s: (1) the twin restarted from telemetry stays at the sensor-noise level over a
 segment (measured: 2–4″ RMS against σ_st = 3″, wheels within one tachometer count over 60 s), so nothing is gained
@@ -52,6 +54,7 @@ __all__ = [
     "RESYNC_S",
     "STALE_S",
     "TWIN_APID",
+    "TWIN_ATTITUDE_PARAMETERS",
     "LiveTwin",
     "LiveTwins",
     "TwinState",
@@ -101,6 +104,7 @@ def residual_names(n_wheels: int) -> list[str]:
 
 
 RESIDUAL_PARAMETERS = residual_names(4)
+TWIN_ATTITUDE_PARAMETERS = tuple(f"twin_q_ib_{k}" for k in range(4))  # the twin's q_ib, scalar first
 
 
 def residual_limits(n_wheels: int) -> dict[str, LimitSet]:
@@ -448,7 +452,11 @@ class LiveTwin:
         self._twin_q = np.concatenate([self._twin_q[keep], q_twin])
         first = int(np.searchsorted(self._twin_t, self._twin_t[-1] - int(RECENT_S * NS_PER_S)))
         self._twin_t, self._twin_q = self._twin_t[first:], self._twin_q[first:]
-        return {"t_utc_ns": t, **dict(zip(names, columns))}
+        return {
+            "t_utc_ns": t,
+            **dict(zip(names, columns)),
+            **{name: q_twin[:, k] for k, name in enumerate(TWIN_ATTITUDE_PARAMETERS)},
+        }
 
     def _first_exceedance(self, res: dict[str, np.ndarray], seg: Segment) -> int | None:
         """Rows to keep when EXCEED_SAMPLES consecutive samples pass a limit (None: keep going)."""

@@ -5,6 +5,11 @@ side: the twin's attitude at the telemetry instants it was compared at (the actu
 ACS model, which the alarm panel says). The span grows as telemetry arrives, so the monitors' live follow stays a
 few seconds behind real time; the panel's alarm list starts with a STALE warning once no telemetry came for
 STALE_S. A snapshot of the twin's buffers is taken at most every SNAPSHOT_S (the render loop asks 30 times a s).
+
+Any past window (frontend.feed.WindowSource): :class:`ArchiveWindows` reads the window's archived telemetry (the
+mapped attitude, rates, wheels, mode and GPS) and the twin's archived attitude (backend.twin.live
+TWIN_ATTITUDE_PARAMETERS) into a LiveFeed that no longer moves. Loading is bounded: a window is at most
+MAX_WINDOW_S long, and its samples are cut to MAX_WINDOW_SAMPLES by telemetry.downsampling.minmax_indices.
 """
 
 from __future__ import annotations
@@ -19,12 +24,17 @@ import numpy as np
 from frontend.feed import DEFAULT_STATIONS, FeedWindow, GroundStation, attitude_error_rad
 from sim_core import quaternion
 from telemetry.actual_state import ActualTrack
+from telemetry.attitude_mapping import AttitudeMapping, actual_attitude
+from telemetry.downsampling import minmax_indices
 
-__all__ = ["LiveFeed"]
+__all__ = ["ArchiveWindows", "LiveFeed", "MAX_WINDOW_S", "MAX_WINDOW_SAMPLES"]
 
 NS_PER_S = 1e9
 SNAPSHOT_S = 0.5
 MIN_GPS_FIXES = 3  # ActualTrack.orbit_eci fits at least three
+MAX_WINDOW_S = 7200.0  # longest replay window: more than an orbit (the panel offers up to 120 min)
+MAX_WINDOW_SAMPLES = 20_000  # per series of a replay window (a 2 h window of 4 Hz housekeeping is 28,800)
+ARCHIVE_SPAN_CACHE_S = 2.0  # the archive's span is asked by every panel twice a second: one query per this
 
 
 def _interp_q(t: np.ndarray, t_tab: np.ndarray, q_tab: np.ndarray) -> np.ndarray:
@@ -147,3 +157,139 @@ class LiveFeed:
     def ground_stations(self) -> list[GroundStation]:
         """Stations drawn with their visibility circles."""
         return list(self._stations)
+
+
+class _ArchivedTwin:
+    """What LiveFeed asks a twin for (recent samples, state), frozen over an archived window."""
+
+    def __init__(self, satellite: str, recent: dict[str, Any], state: dict[str, Any]) -> None:
+        self._satellite, self._recent, self._state = satellite, recent, state
+
+    def recent(self, satellite: str) -> dict[str, Any] | None:
+        return self._recent if satellite == self._satellite else None
+
+    def state(self, satellite: str) -> dict[str, Any] | None:
+        return self._state if satellite == self._satellite else None
+
+
+def _bounded(t_ns: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Indices of the samples kept (all, or MAX_WINDOW_SAMPLES by min/max buckets: the one downsampler)."""
+    if t_ns.size <= MAX_WINDOW_SAMPLES:
+        return np.arange(t_ns.size)
+    return minmax_indices(np.nan_to_num(columns), MAX_WINDOW_SAMPLES)
+
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """q with each sample in the hemisphere of its predecessor (q and −q are one attitude; interpolation needs one)."""
+    if q.shape[0] < 2:
+        return q
+    sign = np.cumprod(np.where(np.einsum("ij,ij->i", q[1:], q[:-1]) < 0.0, -1.0, 1.0))
+    return np.concatenate([q[:1], q[1:] * sign[:, None]])
+
+
+class ArchiveWindows:
+    """Past windows of one satellite's archive for the monitors (frontend.feed.WindowSource)."""
+
+    def __init__(
+        self,
+        archive: Callable[[], Any],
+        twins: Any,
+        satellite: str,
+        alarms: Callable[[], Sequence[Any]] = tuple,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._archive, self._twins, self._satellite, self._alarms, self._clock = (
+            archive,
+            twins,
+            satellite,
+            alarms,
+            clock,
+        )
+        self._span: tuple[float, tuple[float, float] | None] = (-np.inf, None)
+        self._lock = threading.Lock()
+
+    def archive_span_unix_s(self) -> tuple[float, float] | None:
+        """First and last archived telemetry instant of the satellite (the twin's residuals not counted)."""
+        from backend.twin.live import TWIN_APID
+
+        with self._lock:
+            if self._clock() - self._span[0] < ARCHIVE_SPAN_CACHE_S:
+                return self._span[1]
+            archive = self._archive()
+            rows = [] if archive is None else archive.satellites(exclude_apids=(TWIN_APID,))
+            row = next((r for r in rows if r["name"] == self._satellite and r["last_t_ns"] is not None), None)
+            span = None if row is None else (row["first_t_ns"] / NS_PER_S, row["last_t_ns"] / NS_PER_S)
+            self._span = (self._clock(), span)
+            return span
+
+    def window_feed(self, t0_unix_s: float, t1_unix_s: float) -> LiveFeed:
+        """Archived telemetry and twin in [t0, t1] as a feed; ValueError naming the field when it cannot be."""
+        if not (np.isfinite(t0_unix_s) and np.isfinite(t1_unix_s) and t1_unix_s > t0_unix_s):
+            raise ValueError(f"window: need finite t0 < t1, got {t0_unix_s} … {t1_unix_s}")
+        if t1_unix_s - t0_unix_s > MAX_WINDOW_S:
+            raise ValueError(f"length: at most {MAX_WINDOW_S / 60:.0f} min, got {(t1_unix_s - t0_unix_s) / 60:.0f} min")
+        span = self.archive_span_unix_s()
+        if span is None or t1_unix_s < span[0] or t0_unix_s > span[1]:
+            raise ValueError(f"from: no telemetry of {self._satellite} archived in that window (archive: {span})")
+        recent = self._twins.recent(self._satellite)
+        if not recent:
+            raise ValueError(f"from: {self._satellite} has no attitude mapping (no live twin)")
+        window = self._read(recent["mapping"], int(t0_unix_s * NS_PER_S), int(t1_unix_s * NS_PER_S))
+        state = self._twins.state(self._satellite) or {}
+        frozen = _ArchivedTwin(self._satellite, window, {"model_note": state.get("model_note")})
+        try:
+            return LiveFeed(frozen, self._satellite, self._alarms)
+        except ValueError:
+            raise ValueError(
+                f"from: the window holds {window['t_ns'].size} attitude sample(s) and {window['gps_t_ns'].size} "
+                f"GPS fix(es) of {self._satellite}; the view needs 2 and {MIN_GPS_FIXES}"
+            ) from None
+
+    def _series(self, names: Sequence[str], t0_ns: int, t1_ns: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Times of the first parameter and every parameter's values there (NaN where one has no sample)."""
+        archive = self._archive()
+        if archive is None:
+            raise ValueError("from: the archive is not open")
+        t = np.empty(0, np.int64)
+        out: dict[str, np.ndarray] = {}
+        for name in names:
+            try:
+                t_n, v_n = archive.read_parameter(self._satellite, name, t0_ns, t1_ns)
+            except ValueError:  # not archived (e.g. no twin flew): a column of NaN
+                t_n, v_n = np.empty(0, np.int64), np.empty(0)
+            if not out:
+                t = t_n
+            k = np.clip(np.searchsorted(t_n, t), 0, max(t_n.size - 1, 0))
+            same = (k < t_n.size) & (t_n[k] == t) if t_n.size else np.zeros(t.size, bool)
+            out[name] = np.where(same, v_n[k] if t_n.size else np.nan, np.nan).astype(np.float64)
+        return t, out
+
+    def _read(self, m: AttitudeMapping, t0_ns: int, t1_ns: int) -> dict[str, Any]:
+        from backend.twin.live import TWIN_ATTITUDE_PARAMETERS
+
+        t, hk = self._series(m.hk_parameters(), t0_ns, t1_ns)
+        valid, q, _ = actual_attitude(m, hk)
+        t, q, hk = t[valid], q[valid], {n: c[valid] for n, c in hk.items()}
+        keep = _bounded(t, np.column_stack([q, *hk.values()]))
+        t, q, hk = t[keep], _continuous(q[keep]), {n: c[keep] for n, c in hk.items()}
+        twin_t, twin = self._series(TWIN_ATTITUDE_PARAMETERS, t0_ns, t1_ns)
+        twin_q = np.stack([twin[n] for n in TWIN_ATTITUDE_PARAMETERS], -1) if twin_t.size else np.empty((0, 4))
+        flown = np.all(np.isfinite(twin_q), axis=-1)
+        twin_t, twin_q = twin_t[flown], twin_q[flown]
+        keep = _bounded(twin_t, twin_q)
+        twin_t, twin_q = twin_t[keep], _continuous(quaternion.normalize(twin_q[keep]) if twin_t.size else twin_q)
+        gps_t, gps = (
+            self._series(m.orbit_parameters(), t0_ns, t1_ns) if m.orbit_parameters() else (np.empty(0, np.int64), {})
+        )
+        keep = _bounded(gps_t, np.column_stack(list(gps.values())) if gps else np.empty((0, 1)))
+        gps_t, gps = gps_t[keep], {n: c[keep] for n, c in gps.items()}
+        return {
+            "t_ns": t,
+            "q_ib": q,
+            "hk": hk,
+            "twin_t_ns": twin_t,
+            "twin_q_ib": twin_q,
+            "gps_t_ns": gps_t,
+            "gps": gps,
+            "mapping": m,
+        }

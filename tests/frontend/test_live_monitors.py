@@ -78,9 +78,10 @@ def test_monitors_follow_the_live_twin_and_warn_when_it_goes_stale(browser):
         twins.submit("REFSAT", "reference_satellite.yaml", second)
     twins.drain()
     handles = serve_monitors(
-        LiveFeed(twins, "REFSAT", clock=clock), ports={r: free_port() for r in ("actual", "simulated", "overlay")}
+        LiveFeed(twins, "REFSAT", clock=clock),
+        ports={r: free_port() for r in ("actual", "simulated", "overlay")},
+        live=True,
     )
-    handles.clock.follow_live(True)
     stop = threading.Event()
 
     def stream() -> None:  # one second of telemetry every 0.5 s of wall time

@@ -1,5 +1,5 @@
-"""The three monitors as real viser servers: bound to loopback on the ports they report, one clock
-moving all scenes together, camera presets, refused bad arguments."""
+"""The three monitors as real viser servers: bound to loopback on the ports they report, a clock per
+viewer (one client's playback never moves another's view), camera presets, refused bad arguments."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from frontend.monitors import camera_pose, serve_monitors
 from frontend.twin_panels import format_utc
 from frontend.twin_scene import TwinScene
 from tests.frontend.conftest import free_port
+from tests.frontend.viser_clients import viser_client, wait_for_viewers
 
 
 def test_monitors_listen_on_loopback_on_the_ports_they_report(monitors):
@@ -36,23 +37,41 @@ def test_a_busy_port_is_reported_as_the_port_really_used(twin_feed):
             handles.stop()
 
 
-def test_one_clock_moves_every_scene_and_panel_to_the_same_instant(monitors):
-    t0, t1 = monitors.clock.span_unix_s()
-    target = t0 + 123.25
-    monitors.clock.seek(target)
-    f = monitors.render()
-    assert f.t_unix_s == target
-    wxyz = {role: np.asarray(s.earth.wxyz) for role, s in monitors.scenes.items()}
-    for role in ("simulated", "overlay"):
-        np.testing.assert_array_equal(wxyz[role], wxyz["actual"])
-    assert {p.time_text.value for p in monitors.panels.values()} == {format_utc(target)}
-    np.testing.assert_allclose(monitors.scenes["overlay"].sats["actual"].wxyz, f.q_actual)
-    np.testing.assert_allclose(monitors.scenes["overlay"].sats["simulated"].wxyz, f.q_simulated)
-    assert set(monitors.scenes["actual"].sats) == {"actual"} and set(monitors.scenes["simulated"].sats) == {"simulated"}
+def test_each_viewer_has_its_own_clock_and_one_moving_leaves_the_other_where_it_was(twin_feed):
+    handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False, live=True)
+    try:
+        with viser_client(handles.ports["overlay"]), viser_client(handles.ports["overlay"]):
+            moved, watching = wait_for_viewers(handles, "overlay", 2)
+            t0, t1 = twin_feed.span_unix_s()
+            target = t0 + 123.25
+            moved.clock.seek(target)
+            computed = handles.frames_computed
+            shown = handles.render(wall_dt_s=0.5)
+            assert shown[moved.client_id].t_unix_s == target and shown[watching.client_id].t_unix_s == t1
+            assert moved.panels.time_text.value == format_utc(target)
+            assert watching.panels.time_text.value == format_utc(t1) and watching.clock.live
+            f = shown[moved.client_id]
+            np.testing.assert_allclose(moved.scene.sats["actual"].wxyz, f.q_actual)
+            np.testing.assert_allclose(moved.scene.sats["simulated"].wxyz, f.q_simulated)
+            moved.clock.set_speed(100.0)
+            moved.clock.play()
+            shown = handles.render(wall_dt_s=1.0)
+            assert shown[moved.client_id].t_unix_s == target + 100.0 and shown[watching.client_id].t_unix_s == t1
+            assert watching.clock.speed != 100.0
+            assert handles.frames_computed - computed == 4  # one frame per distinct instant and render, not per viewer
+    finally:
+        handles.stop()
+
+
+def test_a_role_shows_its_sides_only(monitors):
+    with viser_client(monitors.ports["actual"]), viser_client(monitors.ports["simulated"]):
+        (actual,) = wait_for_viewers(monitors, "actual", 1)
+        (simulated,) = wait_for_viewers(monitors, "simulated", 1)
+        assert set(actual.scene.sats) == {"actual"} and set(simulated.scene.sats) == {"simulated"}
 
 
 def test_camera_presets_look_at_the_earth_the_spacecraft_and_along_the_boresight(monitors):
-    f = monitors.geometry.frame(monitors.clock.t_unix_s)
+    f = monitors.geometry.frame(monitors.geometry.feed.span_unix_s()[0])
     _, v = monitors.geometry.feed.orbit_eci(np.array([f.t_unix_s]))
     pos, look, _ = camera_pose("whole Earth", f, v[0])
     assert np.linalg.norm(pos) > 2.0 and np.allclose(look, 0.0)
@@ -82,15 +101,17 @@ def test_set_feed_moves_running_monitors_to_the_new_feed(twin_feed):
 
     handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False)
     try:
-        later = synthetic_trajectory(duration_s=300.0)
-        later.extra["epoch_unix_s"] += 86_400.0
-        handles.set_feed(TrajectoryFeed(later))
-        t0, t1 = handles.clock.span_unix_s()
-        assert (t0, t1) == (later.extra["epoch_unix_s"], later.extra["epoch_unix_s"] + 300.0)
-        f = handles.render()
-        assert f.t_unix_s == t0 and handles.panels["overlay"].time_text.value == format_utc(t0)
-        with pytest.raises(ValueError, match="feed"):
-            handles.set_feed(object())
+        with viser_client(handles.ports["overlay"]):
+            (viewer,) = wait_for_viewers(handles, "overlay", 1)
+            later = synthetic_trajectory(duration_s=300.0)
+            later.extra["epoch_unix_s"] += 86_400.0
+            handles.set_feed(TrajectoryFeed(later))
+            t0, t1 = viewer.clock.span_unix_s()
+            assert (t0, t1) == (later.extra["epoch_unix_s"], later.extra["epoch_unix_s"] + 300.0)
+            f = handles.render()[viewer.client_id]
+            assert f.t_unix_s == t0 and viewer.panels.time_text.value == format_utc(t0)
+            with pytest.raises(ValueError, match="feed"):
+                handles.set_feed(object())
     finally:
         handles.stop()
 
@@ -110,14 +131,15 @@ class GrowingFeed:
 
 def test_live_data_nearing_the_end_of_the_drawn_tracks_extends_them(twin_feed):
     feed = GrowingFeed(twin_feed)
-    handles = serve_monitors(feed, ports={"overlay": free_port()}, roles=("overlay",), start=False)
+    handles = serve_monitors(feed, ports={"overlay": free_port()}, roles=("overlay",), start=False, live=True)
     try:
-        assert not handles.extend_tracks()
-        first_end = handles.geometry.track_t[-1]
-        feed.end = first_end - 1000.0
-        assert handles.extend_tracks()
-        assert handles.geometry.track_t[-1] > first_end
-        handles.clock.follow_live()
-        assert handles.clock.advance(0.1) == feed.end and handles.render().t_unix_s == feed.end
+        with viser_client(handles.ports["overlay"]):
+            (viewer,) = wait_for_viewers(handles, "overlay", 1)
+            assert not handles.extend_tracks()
+            first_end = handles.geometry.track_t[-1]
+            feed.end = first_end - 1000.0
+            assert handles.extend_tracks()
+            assert handles.geometry.track_t[-1] > first_end and viewer.geometry is handles.geometry
+            assert handles.render(wall_dt_s=0.1)[viewer.client_id].t_unix_s == feed.end
     finally:
         handles.stop()

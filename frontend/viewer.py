@@ -1,0 +1,136 @@
+"""One browser client of a monitor: its own playback clock, scene, panel and, in replay, its own archived window.
+
+One viewer's playback never moves another viewer's view: every viser client gets a Viewer when it connects
+(``MonitorHandles._connect``), with a clock of its own and a scene and GUI built on the client's handle (viser
+sends client-scoped nodes to that browser only). Viewers on the live feed share its geometry, and the render
+loop computes one frame per distinct (geometry, instant), so a hundred viewers in live follow cost one frame.
+
+A replay window is loaded off the render loop (a worker thread reads the archive and builds the geometry), and
+swapped in by the render loop at its next tick, so live viewers never wait for it.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from concurrent.futures import Executor
+from typing import TYPE_CHECKING
+
+from frontend.feed import WindowSource
+from frontend.playback import PlaybackClock
+from frontend.twin_geometry import TwinGeometry
+from frontend.twin_panels import TwinPanels, format_utc
+from frontend.twin_scene import Role, TwinScene
+
+if TYPE_CHECKING:
+    import viser
+
+__all__ = ["Viewer"]
+
+
+class Viewer:
+    """A client's clock, geometry (live or a replayed window), scene and panel; geometry swaps happen in the
+    render thread (:meth:`apply_pending`)."""
+
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        role: Role,
+        live_geometry: TwinGeometry,
+        n_wheels: int,
+        live: bool,
+        windows: WindowSource | None = None,
+        loader: Executor | None = None,
+    ) -> None:
+        self.client, self.role, self.live_geometry = client, role, live_geometry
+        self.geometry = live_geometry
+        self.clock = PlaybackClock(live_geometry.feed.span_unix_s)
+        if live:
+            self.clock.follow_live(True)
+        self._windows, self._loader = windows, loader
+        self._lock = threading.Lock()
+        self._pending: TwinGeometry | None = None
+        self._want_live = False
+        self.loading = False
+        self.window_load_s: float | None = None  # wall time of the last window load (request → swapped in)
+        self._requested_at = 0.0
+        self.scene = TwinScene(client, role, live_geometry)
+        self.panels = TwinPanels(
+            client,
+            role,
+            self.clock,
+            n_wheels,
+            archive_span=windows.archive_span_unix_s if windows is not None else None,
+            on_live=self.request_live,
+            on_window=self.request_window if windows is not None else None,
+        )
+
+    @property
+    def client_id(self) -> int:
+        return int(self.client.client_id)
+
+    @property
+    def replaying_window(self) -> bool:
+        """True while the viewer shows an archived window instead of the live feed."""
+        return self.geometry is not self.live_geometry
+
+    def request_live(self, on: bool) -> None:
+        """Live follow on: back to the live feed (at its newest instant); off: stay where we are."""
+        if not on:
+            self.clock.follow_live(False)
+            return
+        with self._lock:
+            self._want_live, self._pending = True, None
+        if not self.replaying_window:
+            self.clock.follow_live(True)
+
+    def request_window(self, t0_unix_s: float, t1_unix_s: float) -> None:
+        """Load the archived window [t0, t1] in the background; it replaces the view once loaded."""
+        if self._windows is None or self._loader is None:
+            raise ValueError("window: this monitor has no archive to replay from")
+        self.loading, self._requested_at = True, time.perf_counter()
+        self.panels.show_window_status(f"loading {format_utc(t0_unix_s)} + {t1_unix_s - t0_unix_s:.0f} s …")
+        self._loader.submit(self._load, t0_unix_s, t1_unix_s)
+
+    def _load(self, t0_unix_s: float, t1_unix_s: float) -> None:
+        assert self._windows is not None
+        try:
+            geometry = TwinGeometry(self._windows.window_feed(t0_unix_s, t1_unix_s))
+        except ValueError as exc:
+            self.loading = False
+            self.panels.show_window_status(f"not loaded: {exc}")
+            return
+        with self._lock:
+            self._pending, self._want_live = geometry, False
+
+    def set_live_geometry(self, geometry: TwinGeometry) -> None:
+        """The live feed's geometry changed (tracks extended, another feed): follow it if showing live (render
+        thread)."""
+        on_live = not self.replaying_window
+        self.live_geometry = geometry
+        if on_live:
+            self.geometry = geometry
+            self.scene.rebuild(geometry)
+
+    def apply_pending(self) -> None:
+        """Swap in a loaded window or go back to live (render thread)."""
+        with self._lock:
+            pending, want_live = self._pending, self._want_live
+            self._pending, self._want_live = None, False
+        if pending is not None:
+            self.geometry = pending
+            self.scene.rebuild(pending)
+            self.clock.set_span(pending.feed.span_unix_s)
+            t0, t1 = pending.feed.span_unix_s()
+            self.loading = False
+            self.window_load_s = time.perf_counter() - self._requested_at
+            self.panels.show_window_status(
+                f"replaying {format_utc(t0)} … {format_utc(t1)} (archive; loaded in {self.window_load_s:.1f} s)"
+            )
+        elif want_live:
+            if self.replaying_window:
+                self.geometry = self.live_geometry
+                self.scene.rebuild(self.live_geometry)
+                self.clock.set_span(self.live_geometry.feed.span_unix_s)
+                self.panels.show_window_status("live")
+            self.clock.follow_live(True)

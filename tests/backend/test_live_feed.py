@@ -1,0 +1,61 @@
+"""Past windows of the archive for the 3D monitors (backend.twin.live_feed.ArchiveWindows): the emulated reference
+satellite uploaded through the app, its window read back as the telemetry and the twin said it, bounded."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from backend.twin import live_feed
+from backend.twin.live_feed import MAX_WINDOW_S, ArchiveWindows
+from tests.backend.test_satellites_api import _upload, reference_pass  # noqa: F401 (the fixture)
+
+SAME_ATTITUDE = 1e-9  # |<q_a, q_b>| of one attitude read twice: float round-off only
+NS_PER_S = 1e9
+
+
+def _same_attitude(q_a: np.ndarray, q_b: np.ndarray) -> bool:
+    return bool(np.all(np.abs(np.abs(np.einsum("ij,ij->i", q_a, q_b)) - 1.0) < SAME_ATTITUDE))
+
+
+@pytest.fixture
+def windows(client: TestClient, tokens: dict[str, str], reference_pass: bytes) -> ArchiveWindows:  # noqa: F811
+    _upload(client, tokens["operator"], "REFSAT", "reference_satellite.yaml", reference_pass)
+    services = client.app.state.services
+    return ArchiveWindows(services.telemetry.opened_archive, services.twins, "REFSAT")
+
+
+def test_a_past_window_replays_the_archived_telemetry_and_the_archived_twin(
+    client: TestClient, windows: ArchiveWindows
+) -> None:
+    t0, t1 = windows.archive_span_unix_s()
+    feed = windows.window_feed(t0 + 60.0, t0 + 180.0)
+    start, end = feed.span_unix_s()
+    assert t0 + 60.0 <= start < start + 100.0 < end <= t0 + 180.0
+    recent = client.app.state.services.twins.recent("REFSAT")  # what the live twin held when it compared
+    inside = (recent["t_ns"] >= start * NS_PER_S) & (recent["t_ns"] <= end * NS_PER_S)
+    assert _same_attitude(feed.attitude_actual(recent["t_ns"][inside] / NS_PER_S), recent["q_ib"][inside])
+    flown = (recent["twin_t_ns"] >= start * NS_PER_S) & (recent["twin_t_ns"] <= end * NS_PER_S)
+    assert flown.sum() > 100
+    assert _same_attitude(feed.attitude_simulated(recent["twin_t_ns"][flown] / NS_PER_S), recent["twin_q_ib"][flown])
+    window = feed.window(start, end)
+    assert np.nanmax(window.error_angle_rad) > 0.0 and window.wheel_speed_rad_s.shape[1] == 4
+
+
+def test_loading_is_bounded_by_the_one_downsampler(windows: ArchiveWindows, monkeypatch) -> None:
+    t0, t1 = windows.archive_span_unix_s()
+    monkeypatch.setattr(live_feed, "MAX_WINDOW_SAMPLES", 200)
+    feed = windows.window_feed(t0, t1)
+    assert feed.window(t0, t1).t_unix_s.size <= 200  # 4 Hz over 4 minutes would be 960
+    assert feed.span_unix_s() == pytest.approx((t0, t1), abs=0.3)  # min/max buckets keep the ends of the span
+
+
+def test_windows_outside_the_archive_or_too_long_are_refused_naming_the_field(windows: ArchiveWindows) -> None:
+    t0, t1 = windows.archive_span_unix_s()
+    with pytest.raises(ValueError, match="^from: no telemetry"):
+        windows.window_feed(t1 + 3600.0, t1 + 4200.0)
+    with pytest.raises(ValueError, match="^length: at most"):
+        windows.window_feed(t0, t0 + MAX_WINDOW_S + 1.0)
+    with pytest.raises(ValueError, match="^window: need finite"):
+        windows.window_feed(t1, t0)
