@@ -69,19 +69,18 @@ def _live_defaults(services: Services, body: TwinSessionCreate) -> tuple[int, in
 
 
 def _verdict(names: list[str], found: list[Residuals]) -> tuple[str | None, str]:
-    """The best-fitting variant among those whose RMS residuals stay within the live twin's limits, or none."""
+    """The best-fitting variant among those whose RMS residuals (Residuals.summary) stay within the live twin's
+    limits, or none."""
     from backend.twin.live import ATTITUDE_LIMIT_ARCSEC, WHEEL_LIMIT_RAD_S
 
-    limit_att, limit_wheel = ATTITUDE_LIMIT_ARCSEC * np.pi / 648_000.0, WHEEL_LIMIT_RAD_S
+    limit_wheel_rpm = WHEEL_LIMIT_RAD_S * 30.0 / np.pi
     scores = {}
     for name, r in zip(names, found):
-        if r.t_s.size == 0:
-            continue
-        att = float(np.sqrt(np.mean(r.attitude_rad**2)))
-        wheel = float(np.sqrt(np.mean(r.wheel_speed_rad_s**2)))
-        if att <= limit_att and wheel <= limit_wheel:
-            scores[name] = att / limit_att + wheel / limit_wheel
-    limits = f"attitude RMS <= {ATTITUDE_LIMIT_ARCSEC:g} arcsec, wheel RMS <= {WHEEL_LIMIT_RAD_S * 30 / np.pi:g} rpm"
+        s = r.summary()
+        attitude, wheel = s["attitude_rms_arcsec"] / ATTITUDE_LIMIT_ARCSEC, s["wheel_speed_rms_rpm"] / limit_wheel_rpm
+        if s["samples"] and attitude <= 1.0 and wheel <= 1.0:
+            scores[name] = attitude + wheel
+    limits = f"attitude RMS <= {ATTITUDE_LIMIT_ARCSEC:g} arcsec, wheel RMS <= {limit_wheel_rpm:g} rpm"
     if not scores:
         return None, f"none fits: every variant leaves residuals beyond the sensors' noise ({limits})"
     best = min(scores, key=scores.__getitem__)

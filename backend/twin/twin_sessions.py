@@ -95,12 +95,18 @@ class Residuals:
     wheel_speed_rad_s: np.ndarray
 
     def summary(self) -> dict[str, float]:
-        """Largest residuals (degrees and rpm at the edge) and how many instants were compared."""
+        """Largest and RMS residuals (arcsec, degrees and rpm at the edge) and how many instants were compared.
+
+        The RMS figures are what the what-if verdict (session_service) holds against the sensors' noise.
+        """
+        n = self.t_s.size
         return {
-            "samples": int(self.t_s.size),
+            "samples": int(n),
             "attitude_max_deg": float(np.degrees(self.attitude_rad.max(initial=0.0))),
             "rate_max_deg_s": float(np.degrees(self.rate_rad_s.max(initial=0.0))),
             "wheel_speed_max_rpm": float(np.abs(self.wheel_speed_rad_s).max(initial=0.0) * 30.0 / np.pi),
+            "attitude_rms_arcsec": float(np.degrees(np.sqrt(np.mean(self.attitude_rad**2))) * 3600.0) if n else 0.0,
+            "wheel_speed_rms_rpm": float(np.sqrt(np.mean(self.wheel_speed_rad_s**2)) * 30.0 / np.pi) if n else 0.0,
         }
 
 

@@ -2,7 +2,8 @@
 playback leaving another's view alone: test_viewers.py), and the operator dashboard served with
 the real backend logs in, lists the NOAA-20 pass with its completeness and runs a what-if to the end;
 a what-if against the ACTUAL telemetry of an emulated satellite with a hidden wheel failure (seed 000 §7)
-plots each variant's residuals and names the right hypothesis as the best match."""
+plots each variant's residuals and names the right hypothesis as the best match, and says that none fits
+when none does."""
 
 from __future__ import annotations
 
@@ -143,6 +144,7 @@ DEFAULT_START_AFTER_S = 120.0  # dashboard default: 60 s GPS margin for the orbi
 START_TOL_S = 1e-3  # the start input keeps milliseconds
 VARIANTS = ["twin", "nominal", "rw3-stuck"]
 N_WHEELS = 4
+NO_FIT_WHEEL_RMS_RPM = 25.0  # ten times the verdict's 2.5 rpm limit: a failed wheel, not noise
 
 
 @pytest.fixture(scope="module")
@@ -214,6 +216,41 @@ def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(
         x0 = page.evaluate("acsTwin.plotsIn('#whatif-plots')[0].data[0][0]")
         assert abs(x0 - emulated_telemetry / 1e9 - TWIN_ALIGN_S) < 1.0
         page.locator("#whatif-panel").screenshot(path=tmp_path / "whatif.png")
+        assert errors == []
+    finally:
+        page.close()
+
+
+def test_what_if_where_no_hypothesis_fits_says_so_with_the_residuals(browser, backend_server, emulated_telemetry):
+    """RW2 failed in the telemetry; the twin flies nominal and the alternative sticks RW3: nothing fits, and the
+    dashboard says so (the server's verdict) instead of naming the least bad variant, with each one's residuals."""
+    page = browser.new_page(viewport={"width": 1920, "height": 1400})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(backend_server["base"] + "/dashboard/")
+        page.fill("#satellite", EMULATED_SATELLITE)
+        page.fill("#token", backend_server["token"])
+        page.click("#login button[type=submit]")
+        page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=20_000)
+        page.fill("#duration", str(TWIN_S))
+        page.fill("#onset", str(HIDDEN_ONSET_S - TWIN_ALIGN_S))
+        start = np.datetime_as_string(np.datetime64(emulated_telemetry + int(TWIN_ALIGN_S * 1e9), "ns"), unit="ms")
+        page.evaluate("(v) => { document.querySelector('#whatif-start').value = v; }", str(start))
+        page.fill("#alternatives", f"rw3-stuck: wheel:2:stuck@{HIDDEN_ONSET_S - TWIN_ALIGN_S}")
+        page.click("#whatif button[type=submit]")  # no fault ticked: the twin flies nominal
+        page.wait_for_selector("#twin-summary-table", timeout=WHATIF_TIMEOUT_MS)
+        caption = page.inner_text("#twin-summary-table caption")
+        assert caption.startswith("no hypothesis fits the telemetry"), caption
+        assert "best match" not in caption and "none fits" in caption  # the server's verdict, with its limits
+        assert page.locator("#twin-summary-table tr.best").count() == 0
+        headers = page.eval_on_selector_all("#twin-summary-table th", "hs => hs.map(h => h.innerText)")
+        rms = page.eval_on_selector_all(
+            "#twin-summary-table tbody tr",
+            "rs => rs.map(r => [r.dataset.variant, Number(r.cells[3].innerText)])",
+        )
+        assert headers[3] == "wheel RMS rpm" and [name for name, _ in rms] == VARIANTS
+        assert all(value > NO_FIT_WHEEL_RMS_RPM for _, value in rms), rms  # RW2 stopped: far beyond the 2.5 rpm noise
         assert errors == []
     finally:
         page.close()

@@ -1,6 +1,7 @@
 // What-if: a twin session aligned to the chosen window's telemetry at a start instant, flying a fault
 // hypothesis and alternatives (residuals twin − telemetry per variant on the window's time axis, the
-// best-matching variant named), or a nominal-vs-fault simulation job without telemetry.
+// server's verdict: the best match only when a variant fits within the sensors' noise, otherwise "no
+// hypothesis fits" with every variant's residuals), or a nominal-vs-fault simulation job without telemetry.
 import { api, errorText } from "./api.js";
 import { $, el, fill } from "./dom.js";
 import { inputUtc, isoUtc, utcInput } from "./format.js";
@@ -9,7 +10,10 @@ import { state } from "./state.js";
 
 const POLL_MS = 400;
 const START_MARGIN_S = 60;  // default start: this much after the GPS margin into the window
-const RANK_KEYS = ["wheel_speed_max_rpm", "attitude_max_deg", "rate_max_deg_s"];  // best-match order
+const RESIDUAL_COLUMNS = [  // [summary key, header]: the RMS pair is what the server's verdict holds against the noise
+  ["attitude_rms_arcsec", "att. RMS ″"], ["wheel_speed_rms_rpm", "wheel RMS rpm"],
+  ["attitude_max_deg", "att. max °"], ["rate_max_deg_s", "rate max °/s"], ["wheel_speed_max_rpm", "wheel max rpm"],
+];
 let pollTimer = null;
 let last = { twin: null, simulation: null, alternatives: {} };
 
@@ -122,28 +126,23 @@ function poll(path, label, done) {
   }, POLL_MS);
 }
 
-function bestVariant(summaries) {
-  // smallest largest-residual, compared key by key in RANK_KEYS order (wheel speeds first: the faults act there)
-  const better = (a, b) => {
-    for (const k of RANK_KEYS) if (summaries[a][k] !== summaries[b][k]) return summaries[a][k] < summaries[b][k];
-    return false;
-  };
-  return Object.keys(summaries).reduce((best, name) => (better(name, best) ? name : best));
+function verdictCaption(bestMatch, verdict, compared) {
+  // the server decides (GET …/residuals: best_match, verdict); the dashboard never ranks on its own
+  const head = bestMatch ? `best match with the telemetry: ${bestMatch}` : "no hypothesis fits the telemetry";
+  return el("caption", { class: bestMatch ? "fits" : "none-fits" }, `${head} — ${verdict} (${compared} instants compared)`);
 }
 
-function twinTable(variants, summaries, hypotheses) {
-  const best = bestVariant(summaries);
+function twinTable(variants, answer, hypotheses) {
+  const { summaries, best_match: bestMatch, verdict } = answer;
   const compared = variants.map((n) => summaries[n].samples).join("/");
-  const caption = el("caption", {}, `best match with the telemetry: ${best} (ranked by ${RANK_KEYS.join(", then ")};`
-    + ` ${compared} instants compared)`);
   const rows = variants.map((name) => {
     const s = summaries[name];
-    return el("tr", { class: name === best ? "best" : "", dataset: { variant: name } },
+    return el("tr", { class: name === bestMatch ? "best" : "", dataset: { variant: name } },
       el("td", {}, name), el("td", {}, hypotheses[name].join(" ") || "none"),
-      ["attitude_max_deg", "rate_max_deg_s", "wheel_speed_max_rpm"].map((k) => el("td", {}, String(Number(s[k].toPrecision(4))))));
+      RESIDUAL_COLUMNS.map(([k]) => el("td", {}, s[k] === undefined ? "—" : String(Number(s[k].toPrecision(4))))));
   });
-  return el("table", { id: "twin-summary-table" }, caption,
-    el("thead", {}, el("tr", {}, ["variant", "faults", "att. max °", "rate max °/s", "wheel max rpm"].map((h) => el("th", {}, h)))),
+  return el("table", { id: "twin-summary-table" }, verdictCaption(bestMatch, verdict, compared),
+    el("thead", {}, el("tr", {}, ["variant", "faults", ...RESIDUAL_COLUMNS.map(([, h]) => h)].map((h) => el("th", {}, h)))),
     el("tbody", {}, rows));
 }
 
@@ -152,7 +151,7 @@ async function showTwin(session) {
     api(`/twin/sessions/${session.id}/residuals?variant=${i}&max_points=1500`)));
   const hypotheses = { twin: session.faults };
   for (const name of session.variants.slice(1)) hypotheses[name] = last.alternatives[name] || [];
-  fill($("whatif-summary"), twinTable(session.variants, answers[0].summaries, hypotheses));
+  fill($("whatif-summary"), twinTable(session.variants, answers[0], hypotheses));
   last.twin = { t0: session.align_utc_ns / 1e9, answers };
   draw();
 }
