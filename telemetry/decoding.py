@@ -11,7 +11,7 @@ Calibration: polynomial c0 + c1·x + … (XTCE PolynomialCalibrator semantics) o
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -128,34 +128,78 @@ def _field_columns(
     return out
 
 
-def _layout_columns(buf: np.ndarray, offset: np.ndarray, parameters: tuple[Parameter, ...]) -> np.ndarray:
-    """(F, n) uint64 bit patterns of the parameters in the packets at offset; big-endian signed integers
-    come sign-extended (their rows viewed as int64 are the values)."""
+@dataclass(frozen=True)
+class _LayoutPlan:
+    """A fixed layout compiled for :func:`_field_columns`: kernel arrays, and the parameters whose kernel
+    row viewed as int64 is already their engineering value (big-endian integers, no calibration)."""
+
+    parameters: tuple[Parameter, ...]
+    first: np.ndarray
+    last: np.ndarray
+    shift: np.ndarray
+    mask: np.ndarray
+    sign: np.ndarray
+    plain: np.ndarray  # bool per parameter
+
+
+_PLANS: dict[int, _LayoutPlan] = {}  # by id() of a layout's parameter tuple (kept alive by the plan)
+_MAX_PLANS = 4_096
+
+
+def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
+    """The compiled plan of a layout's parameters (made once per layout)."""
+    plan = _PLANS.get(id(parameters))
+    if plan is not None and plan.parameters is parameters:
+        return plan
     bit = np.array([p.bit_offset for p in parameters], dtype=np.int64)
     bits = np.array([p.bit_length for p in parameters], dtype=np.int64)
     first, last = bit // 8, (bit + bits - 1) // 8
-    shift = (8 * (last + 1) - bit - bits).astype(np.uint64)
-    mask = np.array([(1 << b) - 1 for b in bits.tolist()], dtype=np.uint64)
-    sign = np.array([1 << (p.bit_length - 1) if _extends_in_kernel(p) else 0 for p in parameters], dtype=np.uint64)
-    return _field_columns(buf, np.asarray(offset, dtype=np.int64), first, last, shift, mask, sign)
+    extends = [p.data_type == "int" and p.byte_order == "big" for p in parameters]
+    plan = _LayoutPlan(
+        parameters,
+        first,
+        last,
+        (8 * (last + 1) - bit - bits).astype(np.uint64),
+        np.array([(1 << b) - 1 for b in bits.tolist()], dtype=np.uint64),
+        np.array([1 << (p.bit_length - 1) if e else 0 for p, e in zip(parameters, extends)], dtype=np.uint64),
+        np.array(
+            [
+                not p.polynomial and (e or (p.data_type == "uint" and p.byte_order == "big" and p.bit_length < 64))
+                for p, e in zip(parameters, extends)
+            ],
+            dtype=bool,
+        ),
+    )
+    if len(_PLANS) >= _MAX_PLANS:
+        _PLANS.clear()
+    _PLANS[id(parameters)] = plan
+    return plan
 
 
-def _extends_in_kernel(p: Parameter) -> bool:
-    """Whether the kernel's sign extension gives the field's raw value (big-endian integers)."""
-    return p.data_type == "int" and p.byte_order == "big"
+def _layout_values(
+    buf: np.ndarray, offset: np.ndarray, parameters: tuple[Parameter, ...], calibrated: bool
+) -> dict[str, np.ndarray]:
+    """Raw (calibrated=False) or engineering values of the parameters in the packets at offset of buf, by name.
 
-
-def _column_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
-    """Raw value of one kernel row: a view for big-endian integers, else via :func:`_raw_value`."""
-    if _extends_in_kernel(p):
-        return pattern.view(np.int64)
-    return _raw_value(pattern, p)
+    Big-endian integers without calibration are int64 views of the kernel's rows (no copy)."""
+    plan = _plan(parameters)
+    columns = _field_columns(
+        buf, np.asarray(offset, dtype=np.int64), plan.first, plan.last, plan.shift, plan.mask, plan.sign
+    )
+    as_int = columns.view(np.int64)
+    out = {}
+    for f, p in enumerate(parameters):
+        if plan.plain[f] or (not calibrated and plan.sign[f]):
+            out[p.name] = as_int[f]
+        else:
+            raw = as_int[f] if plan.sign[f] else _raw_value(columns[f], p)
+            out[p.name] = calibrate(raw, p) if calibrated else raw
+    return out
 
 
 def _raw_values(buf: np.ndarray, offset: np.ndarray, parameters: tuple[Parameter, ...]) -> dict[str, np.ndarray]:
     """Raw values of the parameters in the packets at offset of buf, by name."""
-    columns = _layout_columns(buf, offset, parameters)
-    return {p.name: _column_value(columns[f], p) for f, p in enumerate(parameters)}
+    return _layout_values(buf, offset, parameters, calibrated=False)
 
 
 def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, np.ndarray]:
@@ -318,6 +362,16 @@ def _packet_times(
     return ccsds.decode_time(t_fields, code), {int(i): "invalid time code field" for i in np.flatnonzero(~valid)}
 
 
+def _time_field_raws(
+    buf: np.ndarray, offset: np.ndarray, layout: PacketDefinition, values: dict[str, np.ndarray]
+) -> dict[str, np.ndarray]:
+    """Raw values of the layout's time fields (their engineering values when no calibration applies)."""
+    assert layout.time_fields is not None
+    names = set(layout.time_fields.names)
+    redo = tuple(p for p in layout.parameters if p.name in names and p.polynomial)
+    return {**values, **(_raw_values(buf, offset, redo) if redo else {})}
+
+
 def _group_values(
     buf: np.ndarray, offset: np.ndarray, groups: list[tuple[np.ndarray, PacketDefinition]], n: int
 ) -> tuple[np.ndarray, dict[int, str], list[tuple[np.ndarray, dict[str, np.ndarray]]]]:
@@ -326,10 +380,11 @@ def _group_values(
     problems: dict[int, str] = {}
     parts = []
     for idx, layout in groups:
-        raw = _raw_values(buf, offset[idx], layout.parameters)
-        t[idx], why = _packet_times(buf, offset[idx], raw, layout)
+        values = _layout_values(buf, offset[idx], layout.parameters, calibrated=True)
+        times = values if layout.time_fields is None else _time_field_raws(buf, offset[idx], layout, values)
+        t[idx], why = _packet_times(buf, offset[idx], times, layout)
         problems.update((int(idx[i]), w) for i, w in why.items())
-        parts.append((idx, {p.name: calibrate(raw[p.name], p) for p in layout.parameters}))
+        parts.append((idx, values))
     return t, problems, parts
 
 

@@ -21,7 +21,7 @@ from telemetry.limits import LimitSet
 
 __all__ = ["CHUNK_OCTETS", "decode_chunks", "file_sha256", "ingest_packet_file"]
 
-CHUNK_OCTETS = 2 << 20  # 2 MiB: decode cost per chunk is flat above ~1 MiB, memory grows with it
+CHUNK_OCTETS = 1 << 20  # 1 MiB: decode CPU +12 % vs 2 MiB, +68 % at 512 KiB; decoded values take ~35x the octets
 
 
 def decode_chunks(

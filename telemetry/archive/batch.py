@@ -48,12 +48,14 @@ class PacketBatch:
         lengths = np.asarray(self.raw_lengths)
         if lengths.shape != (n,) or int(lengths.sum()) != len(self.raw):
             raise ValueError(f"raw_lengths: expected {n} lengths summing to len(raw) = {len(self.raw)}")
-        for name, column in self.values.items():
-            if np.shape(column) != (n,):
-                raise ValueError(f"values[{name!r}]: expected shape ({n},), got {np.shape(column)}")
+        values = {name: np.asarray(column) for name, column in self.values.items()}
+        for name, column in values.items():
+            if column.shape != (n,):
+                raise ValueError(f"values[{name!r}]: expected shape ({n},), got {column.shape}")
         object.__setattr__(self, "t_utc_ns", t.astype(np.int64, copy=False))
         object.__setattr__(self, "seq_count", seq.astype(np.int64, copy=False))
         object.__setattr__(self, "raw_lengths", lengths.astype(np.int64, copy=False))
+        object.__setattr__(self, "values", values)
 
     @classmethod
     def from_packets(

@@ -62,7 +62,7 @@ __all__ = ["Archive", "CHUNK_PACKETS"]
 # Packets per chunk. benchmarks/ingest.py (bench_chunk_sizes) measures bigger chunks committing
 # faster (1k: ~7 M samples/s, 16k: 8-19 M on this shared machine) with short queries alike (2-4 ms).
 CHUNK_PACKETS = 16_384
-PENDING_OCTETS = 64 << 20  # decoded values and raw packets held back to fill archive chunks (memory bound)
+PENDING_OCTETS = 24 << 20  # decoded values and raw packets held back to fill archive chunks (memory bound)
 SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundStation, Tle, Pass))
 UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
 ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
@@ -471,11 +471,8 @@ class Archive:
                 continue
             self._write_chunks(conn, sat_id, upload_id, fresh)
             accepted += fresh.n_packets
-            samples += sum(
-                fresh.n_packets - int(np.count_nonzero(np.isnan(v)))
-                if np.asarray(v).dtype.kind == "f"
-                else fresh.n_packets
-                for v in fresh.values.values()
+            samples += fresh.n_packets * len(fresh.values) - sum(
+                int(np.count_nonzero(np.isnan(v))) for v in fresh.values.values() if v.dtype.kind == "f"
             )  # NaN: no such element
             gaps.extend(_gaps_of(fresh) if fresh.raw else [])  # ground files carry no sequence counts
             changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
@@ -930,12 +927,13 @@ class _PendingBatches:
 
     A file decoded in small chunks (bounded memory) would otherwise commit many small archive chunks,
     each costing a row, a compression call and a min/max per parameter. An APID's packets are written
-    once CHUNK_PACKETS are pending, when its parameter set changes (polymorphic layouts), or when all
-    pending values exceed PENDING_OCTETS (the memory bound); the rest at the end of the upload.
+    once CHUNK_PACKETS are pending, when its parameter set changes (polymorphic layouts), or, largest
+    first, while all pending values exceed PENDING_OCTETS (the memory bound); the rest at the end.
     """
 
     def __init__(self) -> None:
         self.batches: dict[int, list[PacketBatch]] = {}
+        self.octets: dict[int, int] = {}
 
     def add(self, batches: Sequence[PacketBatch]) -> list[PacketBatch]:
         """Take one decoded chunk's batches; return the merged batches to write now (often none)."""
@@ -945,10 +943,11 @@ class _PendingBatches:
             if parts and list(parts[0].values) != list(batch.values):
                 ready.append(self._take(batch.apid))
             self.batches.setdefault(batch.apid, []).append(batch)
+            self.octets[batch.apid] = self.octets.get(batch.apid, 0) + _batch_octets(batch)
             if sum(p.n_packets for p in self.batches[batch.apid]) >= CHUNK_PACKETS:
                 ready.append(self._take(batch.apid))
-        if self._octets() > PENDING_OCTETS:
-            ready.extend(self.flush())
+        while sum(self.octets.values()) > PENDING_OCTETS:  # the APIDs holding most memory go first
+            ready.append(self._take(max(self.octets, key=self.octets.__getitem__)))
         return ready
 
     def flush(self) -> list[PacketBatch]:
@@ -957,14 +956,13 @@ class _PendingBatches:
 
     def _take(self, apid: int) -> PacketBatch:
         parts = self.batches.pop(apid)
+        del self.octets[apid]
         return parts[0] if len(parts) == 1 else _concatenate(parts)
 
-    def _octets(self) -> int:
-        return sum(
-            len(b.raw) + sum(np.asarray(v).nbytes for v in b.values.values())
-            for parts in self.batches.values()
-            for b in parts
-        )
+
+def _batch_octets(batch: PacketBatch) -> int:
+    """Memory a batch holds: its raw packets and value columns."""
+    return len(batch.raw) + sum(v.nbytes for v in batch.values.values())
 
 
 def _order_and_dedupe(batch: PacketBatch) -> tuple[PacketBatch, int]:
