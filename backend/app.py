@@ -72,11 +72,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         services.jobs.start()
         services.telemetry.start()
         services.twins.start()  # recovers every twin from the archive in its own thread
+        services.auth.start_revocation_watch()  # revocations by other processes (acs-twin token revoke)
         await services.telemetry.start_live()
         try:
             yield
         finally:
             await services.telemetry.stop_live()
+            services.auth.stop_revocation_watch()
             services.twins.stop()
             services.close()
 

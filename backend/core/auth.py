@@ -3,11 +3,18 @@
 Why sha256 and not a slow password hash: a token carries 256 bits of entropy from ``secrets``, so
 a stolen hash cannot be brute-forced however fast the hash is; a fast, unsalted hash lets each
 request find its token by an indexed equality lookup instead of running a KDF per request.
+
+Revocation reaches every process that shares the database: a revocation here (DELETE /tokens/{id})
+forgets the token at once; one made elsewhere (``acs-twin token revoke`` is another process) is seen by
+the revocation watch, which asks the database every REVOCATION_POLL_S which of the tokens this process
+holds (cached, or with open WebSockets and monitor sessions) are revoked: one indexed query on the
+primary key, none when nothing is held. Revoked tokens' sessions close within that period.
 """
 
 from __future__ import annotations
 
 import hashlib
+import logging
 import secrets
 import threading
 from collections.abc import Callable
@@ -19,6 +26,9 @@ from backend.core.token_repository import TokenRepository
 __all__ = ["Role", "Principal", "new_token", "token_sha256", "Authenticator", "TOKEN_PREFIX"]
 
 TOKEN_PREFIX = "acs_"
+REVOCATION_POLL_S = 0.25  # a revocation by another process closes sessions within this (+ one query)
+
+log = logging.getLogger(__name__)
 
 
 class Role(IntEnum):
@@ -67,6 +77,8 @@ class Authenticator:
         self._cache: dict[str, Principal] = {}
         self._lock = threading.Lock()
         self._watchers: dict[int, dict[int, Callable[[], None]]] = {}
+        self._poll_stop = threading.Event()
+        self._poller: threading.Thread | None = None
 
     def watch(self, principal: Principal, on_revoke: Callable[[], None]) -> Callable[[], None]:
         """Call ``on_revoke`` (from any thread) when the principal's token is revoked; returns the unwatch."""
@@ -113,6 +125,44 @@ class Authenticator:
             watchers = list(self._watchers.pop(token_id, {}).values())
         for on_revoke in watchers:
             on_revoke()
+
+    def held_token_ids(self) -> set[int]:
+        """Tokens this process holds: cached for requests, or watched by open WebSockets and monitor sessions."""
+        with self._lock:
+            cached = {p.token_id for p in self._cache.values() if p.token_id is not None}
+            return cached | {token_id for token_id, watchers in self._watchers.items() if watchers}
+
+    def check_revocations(self) -> set[int]:
+        """Forget every held token the database says is revoked (by any process); the ids forgotten."""
+        held = self.held_token_ids()
+        revoked = self._tokens.revoked_among(held) if held else set()
+        for token_id in revoked:
+            self.forget(token_id)
+        return revoked
+
+    def start_revocation_watch(self, period_s: float = REVOCATION_POLL_S) -> None:
+        """Check the database for revocations every ``period_s`` in a daemon thread (no-op with auth off)."""
+        if not self.enabled or self._poller is not None:
+            return
+        self._poll_stop.clear()
+        self._poller = threading.Thread(
+            target=self._watch_revocations, args=(period_s,), name="revocation-watch", daemon=True
+        )
+        self._poller.start()
+
+    def stop_revocation_watch(self) -> None:
+        """Stop the revocation watch thread."""
+        self._poll_stop.set()
+        if self._poller is not None:
+            self._poller.join(timeout=5.0)
+            self._poller = None
+
+    def _watch_revocations(self, period_s: float) -> None:
+        while not self._poll_stop.wait(period_s):
+            try:
+                self.check_revocations()
+            except Exception:  # a database hiccup must not end the watch: the next period asks again
+                log.warning("revocation watch: database check failed", exc_info=True)
 
     def issue(self, name: str, role: Role) -> tuple[int, str]:
         """Create a token, store its hash; returns (id, plain token) — shown once, never stored."""

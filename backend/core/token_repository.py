@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from datetime import UTC, datetime
 
 from sqlalchemy import select
@@ -43,6 +44,15 @@ class TokenRepository:
             if row is not None and row.revoked_at is None:
                 row.revoked_at = datetime.now(UTC)
             return row
+
+    def revoked_among(self, token_ids: Iterable[int]) -> set[int]:
+        """Which of these token ids are revoked (by this process or any other sharing the database)."""
+        ids = sorted(set(token_ids))
+        if not ids:
+            return set()
+        with self._sessions() as session:
+            stmt = select(TokenRow.id).where(TokenRow.id.in_(ids), TokenRow.revoked_at.is_not(None))
+            return set(session.scalars(stmt))
 
     def count_active_admins(self) -> int:
         """How many unrevoked admin tokens exist (first start creates one when zero)."""
