@@ -28,7 +28,7 @@ from telemetry.ingest_report import (
     UndefinedPackets,
 )
 from telemetry.packet_time import TIME_PROBLEMS, field_times
-from telemetry.validation import HEADER_PROBLEMS, INVALID_TIME, header_mismatch, validate_packets
+from telemetry.validation import HEADER_PROBLEMS, INVALID_TIME, SequenceState, header_mismatch, validate_packets
 
 MAX_PACKET_OCTETS = ccsds.PRIMARY_HEADER_OCTETS + 65_536  # CCSDS 133.0-B-2 §4.1.3.5
 
@@ -443,8 +443,10 @@ def _decode_apid(
     definition: PacketDefinition,
     window: tuple[int | None, int | None],
     report: IngestReport,
+    carry: dict[int, SequenceState] | None = None,
 ) -> SampleBatch:
-    """Validate and decode the framed packets of one APID (any lengths, fixed or variable layout)."""
+    """Validate and decode the framed packets of one APID (any lengths, fixed or variable layout); ``carry``
+    (see decode_stream) gives and takes the last accepted packet of the APID."""
     if definition.time_code is None and definition.time_fields is None:
         raise ValueError(
             f"time_code: packet {definition.name} has no time code or time fields to stamp samples "
@@ -497,10 +499,22 @@ def _decode_apid(
                 )
             )
     keep = np.flatnonzero(~dropped)
+    previous = None if carry is None else carry.get(apid)
     verdict = validate_packets(
-        apid, offset[keep], headers.sequence_count[keep], t[keep], 0, *window, period_s=definition.period_s
+        apid,
+        offset[keep],
+        headers.sequence_count[keep],
+        t[keep],
+        0,
+        *window,
+        period_s=definition.period_s,
+        previous=previous,
     )
     accepted = keep[verdict.accepted]
+    if carry is not None:
+        state = SequenceState.after(previous, headers.sequence_count[accepted], t[accepted])
+        if state is not None:
+            carry[apid] = state
     in_order = accepted.size == n and bool(np.all(accepted == np.arange(n)))  # the usual case: no copy needed
     values = {name: v if in_order else v[accepted] for name, v in _union(parts, n).items()}
     for d in definition.derived:
@@ -563,6 +577,7 @@ def decode_stream(
     source: str = "",
     now_utc_ns: int | None = None,
     final: bool = True,
+    carry: dict[int, SequenceState] | None = None,
 ) -> DecodeResult:
     """Frame, validate and decode a mixed-APID packet stream (CCSDS 133.0-B-2 §4.1) into time-ordered batches.
 
@@ -573,6 +588,9 @@ def decode_stream(
     longer stream) a trailing segment the chunk may have cut is left out: ``consumed`` says where
     the next chunk starts. A dictionary with packet_prefix_octets / packet_suffix_octets has each packet
     unwrapped first (report offsets then count packet octets only).
+    ``carry`` (APID → telemetry.validation.SequenceState of its accepted packets) links consecutive chunks:
+    each APID's first packet is judged from the previous chunk's last (gap, step back) and repeats of recent
+    packets are duplicates, as one pass over the whole stream judges them; the entries are updated.
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
     wrapped, octets_in = dictionary.packet_prefix_octets or dictionary.packet_suffix_octets, int(buf.shape[0])
@@ -603,7 +621,7 @@ def decode_stream(
     apid = ((buf[offset].astype(np.int64) & 7) << 8) | buf[offset + 1]
     window = dictionary.time_window(now_utc_ns)
     batches = [
-        _decode_apid(buf, offset[apid == a], dictionary.packets[int(a)], window, report) for a in np.unique(apid)
+        _decode_apid(buf, offset[apid == a], dictionary.packets[int(a)], window, report, carry) for a in np.unique(apid)
     ]
     report.quarantined.sort(key=lambda q: q.offset)
     for q in report.quarantined:

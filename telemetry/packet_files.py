@@ -18,6 +18,7 @@ from telemetry.decoding import decode_stream
 from telemetry.dictionary import Dictionary
 from telemetry.ingest_report import DecodeResult, IngestReport
 from telemetry.limits import LimitSet
+from telemetry.validation import SequenceState
 
 __all__ = ["CHUNK_OCTETS", "decode_chunks", "file_sha256", "ingest_packet_file"]
 
@@ -33,13 +34,14 @@ def decode_chunks(
 ) -> Iterator[tuple[int, DecodeResult]]:
     """(byte offset of the chunk, its decode result) for consecutive chunks of a packet stream."""
     pending, offset, eof = b"", 0, False
+    carry: dict[int, SequenceState] = {}  # each APID's accepted packets: gaps and repeats across chunks
     while not eof:
         more = stream.read(chunk_octets)
         eof = not more
         pending += more
         if not pending:
             return
-        result = decode_stream(pending, dictionary, source=source, now_utc_ns=now_utc_ns, final=eof)
+        result = decode_stream(pending, dictionary, source=source, now_utc_ns=now_utc_ns, final=eof, carry=carry)
         yield offset, result
         offset += result.consumed
         pending = pending[result.consumed :]

@@ -25,6 +25,7 @@ from telemetry.ingest_report import QuarantineRecord, SequenceGap
 
 __all__ = [
     "PacketVerdict",
+    "SequenceState",
     "validate_packets",
     "header_mismatch",
     "HEADER_PROBLEMS",
@@ -39,6 +40,7 @@ NON_MONOTONIC = 1
 RESTART = -1
 HALF_RANGE = SEQUENCE_COUNT_MODULUS // 2
 INVALID_TIME = np.iinfo(np.int64).min  # stamp of a packet whose time code fields are out of range
+RECENT_PACKETS = 65_536  # keys per APID remembered across chunks (1 MiB): repeats within them are duplicates
 PERIOD_TOLERANCE = 0.05  # on-board periods drift by far less than 5 % (plus 2 packets of jitter)
 HEADER_PROBLEMS = ("", "secondary header flag", "sequence flags (segmented)", "packet type (telecommand)")
 
@@ -118,8 +120,15 @@ def validate_packets(
     valid_from_utc_ns: int | None,
     valid_until_utc_ns: int | None,
     period_s: float | None = None,
+    previous: SequenceState | None = None,
 ) -> PacketVerdict:
-    """Judge the framed packets of one APID (CCSDS 133.0-B-2 §4.1.3.4.3 sequence counts), vectorised."""
+    """Judge the framed packets of one APID (CCSDS 133.0-B-2 §4.1.3.4.3 sequence counts), vectorised.
+
+    ``previous`` holds the packets of this APID accepted before these (the earlier chunks of a file decoded in
+    chunks): the step to the first packet is judged from the last of them, and a repeat of any of its recent
+    keys is a duplicate, as one pass over the whole file judges them. Other packets older than its last are
+    judged among themselves (late arrivals; the archive drops those it already holds).
+    """
     offset = np.asarray(offset, dtype=np.int64)
     count = np.asarray(sequence_count, dtype=np.int64)
     t = np.asarray(t_utc_ns, dtype=np.int64)
@@ -141,12 +150,76 @@ def validate_packets(
     ]
     idx = np.flatnonzero(in_window)
     idx = idx[np.lexsort((count[idx], t[idx]))]
+    period_ns = int(round(period_s * 1e9)) if period_s else 0
+    if previous is None:
+        return _judged(apid, offset, count, t, idx, period_ns, packet_octets, quarantined)
+    older = t[idx] < previous.t_ns
+    seen = older & previous.holds(count[idx], t[idx])
+    early = _judged(apid, offset, count, t, idx[older & ~seen], period_ns, packet_octets, quarantined)
+    lead = offset.size  # the previous packet, appended: it leads the rest in time order
+    count, t = np.append(count, previous.count), np.append(t, previous.t_ns)
+    later = _judged(apid, offset, count, t, np.concatenate(([lead], idx[~older])), period_ns, packet_octets, [])
+    return PacketVerdict(
+        accepted=np.concatenate((early.accepted, later.accepted[1:])),
+        quarantined=sorted(early.quarantined + later.quarantined, key=lambda q: q.offset),
+        duplicates=int(seen.sum()) + early.duplicates + later.duplicates,
+        gaps=early.gaps + later.gaps,
+    )
+
+
+@dataclass(frozen=True)
+class SequenceState:
+    """The packets of one APID accepted so far in a stream decoded in chunks: the last one (sequence count and
+    time) and the keys of the newest RECENT_PACKETS (bounded memory), time-ordered."""
+
+    count: int
+    t_ns: int
+    recent_count: np.ndarray
+    recent_t_ns: np.ndarray
+
+    @classmethod
+    def after(cls, previous: SequenceState | None, count: np.ndarray, t_ns: np.ndarray) -> SequenceState | None:
+        """The state once the time-ordered accepted packets (count, t_ns) follow ``previous``."""
+        if count.size == 0:
+            return previous
+        if previous is not None:
+            count = np.concatenate((previous.recent_count, count))
+            t_ns = np.concatenate((previous.recent_t_ns, t_ns))
+            if t_ns.size > 1 and np.any(t_ns[1:] < t_ns[:-1]):  # late arrivals among them
+                order = np.argsort(t_ns, kind="stable")
+                count, t_ns = count[order], t_ns[order]
+        count, t_ns = count[-RECENT_PACKETS:].astype(np.int64), t_ns[-RECENT_PACKETS:].astype(np.int64)
+        return cls(int(count[-1]), int(t_ns[-1]), count, t_ns)
+
+    def holds(self, count: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
+        """Per packet, whether (count, t_ns) is one of the recent keys."""
+        at = np.searchsorted(self.recent_t_ns, t_ns, side="left")
+        found = np.zeros(t_ns.shape, dtype=bool)
+        for i in np.flatnonzero(at < self.recent_t_ns.size):
+            j = at[i]
+            while j < self.recent_t_ns.size and self.recent_t_ns[j] == t_ns[i]:
+                found[i] |= self.recent_count[j] == count[i]
+                j += 1
+        return found
+
+
+def _judged(
+    apid: int,
+    offset: np.ndarray,
+    count: np.ndarray,
+    t: np.ndarray,
+    idx: np.ndarray,
+    period_ns: int,
+    packet_octets: int,
+    quarantined: list[QuarantineRecord],
+) -> PacketVerdict:
+    """Verdict on the in-window packets ``idx`` in time order: exact repeats dropped, then the sequence kernel
+    (a packet at idx[0] is never a repeat nor quarantined: the first one sets the count)."""
     repeat = np.zeros(idx.shape, dtype=bool)
     repeat[1:] = (t[idx[1:]] == t[idx[:-1]]) & (count[idx[1:]] == count[idx[:-1]])
     idx = idx[~repeat]
-    period_ns = int(round(period_s * 1e9)) if period_s else 0
     status, missing = _sequence_kernel(count[idx], t[idx], period_ns)
-    quarantined += [
+    quarantined = quarantined + [
         QuarantineRecord(int(offset[i]), packet_octets, "non_monotonic_sequence", apid, int(count[i]))
         for i in idx[status == NON_MONOTONIC]
     ]
