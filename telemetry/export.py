@@ -2,8 +2,9 @@
 
 Rows are the union of the parameters' sample times in [t0, t1]; a ``t_utc`` column (UTC, ns) and one
 column per parameter, empty where that parameter has no sample at that time. Nothing is downsampled.
-The archive is read in windows of about WINDOW_SAMPLES packets (cut between chunk starts), so memory
-stays bounded whatever the span; CSV and Parquet are written window by window.
+The archive is read in windows of about WINDOW_SAMPLES samples (cut between chunk starts), so memory
+stays bounded whatever the span and the number of parameters; CSV and Parquet are written and streamed
+window by window.
 """
 
 from __future__ import annotations
@@ -20,9 +21,17 @@ import pyarrow.parquet as pq
 
 from telemetry.archive import Archive
 
-__all__ = ["WINDOW_SAMPLES", "export_batches", "csv_chunks", "write_export", "iso_utc_ns"]
+__all__ = [
+    "WINDOW_SAMPLES",
+    "export_batches",
+    "csv_chunks",
+    "parquet_chunks",
+    "rows_about",
+    "write_export",
+    "iso_utc_ns",
+]
 
-WINDOW_SAMPLES = 250_000
+WINDOW_SAMPLES = 250_000  # samples (rows × parameters) per window, at least one archive chunk: a few MB
 
 
 def iso_utc_ns(t_ns: np.ndarray) -> np.ndarray:
@@ -30,12 +39,12 @@ def iso_utc_ns(t_ns: np.ndarray) -> np.ndarray:
     return np.char.add(np.datetime_as_string(np.asarray(t_ns, dtype="datetime64[ns]"), unit="ns"), "Z")
 
 
-def _windows(spans: np.ndarray, t0_ns: int, t1_ns: int) -> Iterator[tuple[int, int]]:
-    """Consecutive [start, end] windows covering [t0, t1], each cut before a chunk start once WINDOW_SAMPLES
-    packets of the chunks starting in it are reached."""
+def _windows(spans: np.ndarray, t0_ns: int, t1_ns: int, budget: int) -> Iterator[tuple[int, int]]:
+    """Consecutive [start, end] windows covering [t0, t1], each cut before a chunk start once ``budget`` packets of
+    the chunks starting in it are reached (a window holds at least one chunk)."""
     start, count = t0_ns, 0
     for t_start, _, n in spans.tolist():
-        if count >= WINDOW_SAMPLES and start < t_start <= t1_ns:
+        if count >= budget and start < t_start <= t1_ns:
             yield start, t_start - 1
             start, count = t_start, 0
         count += n
@@ -43,23 +52,45 @@ def _windows(spans: np.ndarray, t0_ns: int, t1_ns: int) -> Iterator[tuple[int, i
         yield start, t1_ns
 
 
+def rows_about(spans: np.ndarray, t0_ns: int, t1_ns: int) -> int:
+    """The export's rows as the chunk spans tell before any is read: each chunk's packets in proportion to the part
+    of its span inside [t0, t1], summed (packets of several APIDs at one time count once per APID)."""
+    if spans.size == 0:
+        return 0
+    start, end, n = spans[:, 0].astype(float), spans[:, 1].astype(float), spans[:, 2].astype(float)
+    inside = np.clip(np.minimum(end, t1_ns) - np.maximum(start, t0_ns) + 1, 0, None)
+    return int(np.ceil(np.sum(n * inside / (end - start + 1))))
+
+
 def _schema(names: Sequence[str], dtypes: dict[str, np.dtype]) -> pa.Schema:
     return pa.schema([("t_utc", pa.timestamp("ns", tz="UTC"))] + [(n, pa.from_numpy_dtype(dtypes[n])) for n in names])
 
 
 def export_batches(
-    archive: Archive, satellite: str, names: Sequence[str], t0_ns: int, t1_ns: int
+    archive: Archive,
+    satellite: str,
+    names: Sequence[str],
+    t0_ns: int,
+    t1_ns: int,
+    max_rows: int | None = None,
 ) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
-    """The schema and the record batches (one per window, time-ordered) of the export."""
+    """The schema and the record batches (one per window of about WINDOW_SAMPLES samples, time-ordered) of the
+    export; ValueError naming ``end`` when its chunks may hold more than ``max_rows`` rows (checked first)."""
     if not names:
         raise ValueError("parameters: at least one parameter to export")
     if t1_ns < t0_ns:
         raise ValueError(f"end: {t1_ns} is before start {t0_ns}")
     dtypes, spans = archive.series_layout(satellite, names)
+    if max_rows is not None and (rows := rows_about(spans, t0_ns, t1_ns)) > max_rows:
+        raise ValueError(
+            f"end: the window holds about {rows:,} rows, over max_export_rows = {max_rows:,}; "
+            "export it in shorter windows (start/end)"
+        )
     schema = _schema(names, dtypes)
+    budget = max(WINDOW_SAMPLES // len(names), 1)  # packets per window: rows × columns stay near WINDOW_SAMPLES
 
     def batches() -> Iterator[pa.RecordBatch]:
-        for lo, hi in _windows(spans, t0_ns, t1_ns):
+        for lo, hi in _windows(spans, t0_ns, t1_ns, budget):
             series = {n: archive.read_parameter(satellite, n, lo, hi) for n in names}
             t_all = np.unique(np.concatenate([t for t, _ in series.values()]))
             if t_all.size == 0:
@@ -94,6 +125,42 @@ def csv_chunks(schema: pa.Schema, batches: Iterator[pa.RecordBatch]) -> Iterator
         first = False
     if first:
         yield (",".join(f'"{n}"' for n in schema.names) + "\n").encode()
+
+
+class _Chunks(io.RawIOBase):
+    """A write-only sink whose written bytes are taken in pieces (Parquet streamed as it is written)."""
+
+    def __init__(self) -> None:
+        self._pending: list[bytes] = []
+        self._written = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, data: bytes | bytearray | memoryview) -> int:  # type: ignore[override]
+        piece = bytes(data)
+        self._pending.append(piece)
+        self._written += len(piece)
+        return len(piece)
+
+    def tell(self) -> int:
+        return self._written
+
+    def take(self) -> bytes:
+        """The bytes written since the last take."""
+        out, self._pending = b"".join(self._pending), []
+        return out
+
+
+def parquet_chunks(schema: pa.Schema, batches: Iterator[pa.RecordBatch]) -> Iterator[bytes]:
+    """The export as a Parquet file (zstd), its bytes yielded window by window as they are written."""
+    sink = _Chunks()
+    with pq.ParquetWriter(sink, schema, compression="zstd") as writer:
+        for batch in batches:
+            writer.write_batch(batch)
+            if piece := sink.take():
+                yield piece
+    yield sink.take()
 
 
 def write_export(schema: pa.Schema, batches: Iterator[pa.RecordBatch], sink: BinaryIO | Path, fmt: str) -> int:

@@ -44,6 +44,9 @@ class Settings(BaseSettings):
     max_json_kb: float = Field(2_000.0, gt=0, description="Largest JSON request body (scenarios, settings).")
     max_prediction_days: float = Field(31.0, gt=0, le=366, description="Longest pass-prediction window.")
     max_points: int = Field(100_000, ge=2, description="Most points one time-series answer returns.")
+    max_export_rows: int = Field(
+        20_000_000, ge=1, description="Most rows one full-resolution export may hold (narrow start/end past it)."
+    )
     ws_rate_hz: float = Field(10.0, gt=0, le=100, description="Batches per second per WS client.")
     ws_buffer_items: int = Field(5_000, ge=1, description="Items buffered per WS client before thinning.")
     ws_send_timeout_s: float = Field(2.0, gt=0, description="A slower WS send drops the client.")

@@ -406,10 +406,12 @@ class TelemetryGateway:
     def export_stream(
         self, satellite: str, names: list[str], t0_ns: int, t1_ns: int
     ) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
-        """Every sample of the parameters, window by window (telemetry.export); unknown names raise now."""
+        """Every sample of the parameters, window by window (telemetry.export); unknown names and a window over
+        max_export_rows raise now (ValueError naming the field)."""
         from telemetry import export
 
-        return export.export_batches(self._opened(), satellite, names, t0_ns, t1_ns)
+        limit = self._settings.max_export_rows
+        return export.export_batches(self._opened(), satellite, names, t0_ns, t1_ns, max_rows=limit)
 
     def export_table(self, satellite: str, names: list[str], t0_ns: int, t1_ns: int) -> pa.Table:
         """Wide pyarrow table of the parameters (telemetry.queries.export_table)."""

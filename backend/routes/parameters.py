@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import re
-import tempfile
-from collections.abc import Iterator
 from datetime import datetime
-from typing import Any, BinaryIO, Literal
+from typing import Any, Literal
 
 from fastapi import APIRouter, Query
 from fastapi.responses import Response, StreamingResponse
@@ -86,14 +84,21 @@ def export_samples(
     services: ServicesDep,
     _: ViewerDep,
     satellite: str = SatelliteQuery,
-    names: str = Query(..., min_length=1, examples=["q_ib_0,q_ib_1"], description="Comma-separated parameter names."),
+    names: str = Query(
+        ...,
+        min_length=1,
+        max_length=MAX_EXPORT_PARAMETERS * 129,
+        examples=["q_ib_0,q_ib_1"],
+        description=f"Comma-separated parameter names (at most {MAX_EXPORT_PARAMETERS}).",
+    ),
     start: datetime | None = None,
     end: datetime | None = None,
     format: Literal["csv", "parquet"] = "csv",
 ) -> StreamingResponse:
     """Full resolution, the same rows as ``acs-twin export``: ``t_utc`` (ISO 8601 UTC, ns) and one column per named
-    parameter (empty where not sampled), streamed window by window (CSV) or from a temporary file (Parquet)."""
-    from telemetry.export import csv_chunks, write_export
+    parameter (empty where not sampled), read and streamed window by window (bounded memory, nothing spooled).
+    A window whose archive chunks may hold more than max_export_rows rows is a 422 naming ``end``."""
+    from telemetry.export import csv_chunks, parquet_chunks
 
     wanted = [n.strip() for n in names.split(",") if n.strip()]
     if not wanted or len(wanted) > MAX_EXPORT_PARAMETERS:
@@ -104,14 +109,6 @@ def export_samples(
     headers = {"Content-Disposition": f'attachment; filename="{filename}-samples.{format}"'}
     if format == "csv":
         return StreamingResponse(csv_chunks(schema, batches), media_type="text/csv", headers=headers)
-    spool = tempfile.TemporaryFile()  # noqa: SIM115 - closed by _file_chunks once streamed
-    write_export(schema, batches, spool, "parquet")
-    spool.seek(0)
-    return StreamingResponse(_file_chunks(spool), media_type="application/vnd.apache.parquet", headers=headers)
-
-
-def _file_chunks(spool: BinaryIO, block: int = 1 << 20) -> Iterator[bytes]:
-    """A temporary file's bytes in blocks, closed (deleted) at the end."""
-    with spool:
-        while chunk := spool.read(block):
-            yield chunk
+    return StreamingResponse(
+        parquet_chunks(schema, batches), media_type="application/vnd.apache.parquet", headers=headers
+    )
