@@ -12,6 +12,11 @@
   then the globe is checked on a screenshot.  Target < 3 s.
 * geometry: footprint polygon + CCD line + ground trace for 10,000 samples (sim_core.camera),
   best of 20.  Target < 10 ms.
+* window switch (``--window-only`` runs just this): a viewer of the live monitor (a real viser client) asks for a
+  past window of the archive (the reference satellite's emulated telemetry and its live twin, uploaded through
+  the app into SQLite); time from the request until the window is swapped into its view (archive read,
+  downsampling, geometry, scene rebuild), median of 3 per window length; the peer in the same run is the
+  switch back to the live feed (scene rebuild only).  No target in the issue; reported.
 """
 
 from __future__ import annotations
@@ -188,16 +193,91 @@ def bench_geometry() -> None:
     )
 
 
+ARCHIVE_S = 1800.0  # emulated telemetry archived for the window-switch benchmark
+WINDOW_MIN = (10, 30)
+SWITCH_REPEATS = 3
+
+
+def _wait(predicate, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise RuntimeError("window switch: timed out")
+        time.sleep(0.005)
+
+
+def bench_window_switch() -> None:
+    from fastapi.testclient import TestClient
+
+    from backend.app import create_app
+    from backend.core.auth import Role
+    from backend.core.settings import Settings
+    from backend.twin.live_feed import ArchiveWindows, LiveFeed
+    from frontend.monitors import serve_monitors
+    from telemetry.emulator import emulate
+
+    sys.path.insert(0, str(REPO))  # the tests' viser client (a WebSocket, no browser) is the set-up
+    from tests.frontend.viser_clients import viser_client, wait_for_viewers
+
+    data = emulate("somov-ge4-scan", [], ARCHIVE_S, "2026-03-20T00:00:00Z", truth_seed=None)[2].data
+    tmp = Path(tempfile.mkdtemp())
+    settings = Settings(data_dir=tmp, telemetry_port=0, live_enabled=False)
+    with TestClient(create_app(settings)) as client:
+        services = client.app.state.services
+        token = services.auth.issue("bench", Role.operator)[1]
+        client.post(
+            "/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml",
+            content=data,
+            headers={"Authorization": f"Bearer {token}"},
+        ).raise_for_status()
+        services.twins.drain(600.0)
+        windows = ArchiveWindows(services.telemetry.opened_archive, services.twins, "REFSAT")
+        handles = serve_monitors(
+            LiveFeed(services.twins, "REFSAT"),
+            ports={"overlay": _free_port()},
+            roles=("overlay",),
+            live=True,
+            windows=windows,
+        )
+        try:
+            with viser_client(handles.ports["overlay"]):
+                (viewer,) = wait_for_viewers(handles, "overlay", 1)
+                t0, _ = windows.archive_span_unix_s()
+                for minutes in WINDOW_MIN:
+                    to_window, to_live = [], []
+                    for _ in range(SWITCH_REPEATS):
+                        viewer.request_window(t0, t0 + 60.0 * minutes)
+                        _wait(lambda: viewer.replaying_window and not viewer.loading)
+                        to_window.append(viewer.window_load_s)
+                        start = time.perf_counter()
+                        viewer.request_live(True)
+                        _wait(lambda: not viewer.replaying_window and viewer.clock.live)
+                        to_live.append(time.perf_counter() - start)
+                    window_s, live_s = float(np.median(to_window)), float(np.median(to_live))
+                    print(
+                        f"viewer switch to a {minutes} min archived window: {window_s:.2f} s (median of "
+                        f"{SWITCH_REPEATS}); back to live: {live_s:.2f} s; ratio {window_s / live_s:.1f}  "
+                        f"(load average {os.getloadavg()[0]:.1f}; 2 shared cores: upper bounds)"
+                    )
+        finally:
+            handles.stop()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="CPU measurement window")
-    parser.add_argument("--skip-browser", action="store_true", help="geometry only")
+    parser.add_argument("--skip-browser", action="store_true", help="geometry and window switch only")
+    parser.add_argument("--window-only", action="store_true", help="the window-switch figure only")
     parser.add_argument("--serve", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.serve:
         serve(args.serve)
         return
+    if args.window_only:
+        bench_window_switch()
+        return
     bench_geometry()
+    bench_window_switch()
     if not args.skip_browser:
         bench_playback_and_paint(args.seconds)
 

@@ -83,6 +83,7 @@ class TwinPanels:
             show_share_button=False, dark_mode=True, control_width="large", titlebar_content=None, show_logo=False
         )
         gui.add_markdown(f"**acs-twin — {role} monitor**")
+        self.banner = gui.add_markdown("")  # STALE warning at the top, where the eye is (show_window)
         t0, t1 = clock.span_unix_s()
         with gui.add_folder("Playback"):
             self.time_text = gui.add_text("UTC", initial_value=format_utc(clock.t_unix_s), disabled=True)
@@ -219,6 +220,8 @@ class TwinPanels:
         """Plots of the last PLOT_WINDOW_S, mode/flags, image motion, alarms and the archive's span (a few times
         per second)."""
         self.archive_text.content = self._archive_note()
+        stale = [a for a in alarms if a.startswith("STALE")]
+        self.banner.content = f"### ⚠ {stale[0]}: the view is not live" if stale else ""
         along, across = np.asarray(image_motion_rad_s) * 1e3
         self.image_motion.content = (
             "image motion at the boresight: off the Earth"

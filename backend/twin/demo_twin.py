@@ -46,20 +46,37 @@ def run_demo_twin(
         except ValueError:  # nothing archived for the satellite yet
             return []
 
+    def progress() -> str:
+        recent = twins.recent(satellite)
+        if not recent:
+            return f"waiting for the first telemetry of {satellite}"
+        return (
+            f"the live twin of {satellite} holds {recent['t_ns'].size} attitude sample(s) and "
+            f"{recent['gps_t_ns'].size} GPS fix(es); the view needs 2 and 3"
+        )
+
+    gates = {  # the public ports answer from the start: a progress page until the monitors are up
+        role: MonitorGate(services.auth, services.settings.host, public, None, role=role, progress=progress)
+        for role, public in monitor_ports.items()
+    }
+    for gate in gates.values():
+        gate.start()
     while not stop.is_set():
         recent = twins.recent(satellite)
         if recent and recent["t_ns"].size >= 2 and recent["gps_t_ns"].size >= 3:
             break
         stop.wait(POLL_S)
     else:
+        for gate in gates.values():
+            gate.stop()
         return None
     feed = LiveFeed(twins, satellite, alarms)
     windows = ArchiveWindows(services.telemetry.opened_archive, twins, satellite, alarms)
     handles = serve_monitors(  # private ports; every viewer starts in live follow, any past window replayable
         feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0), live=True, windows=windows
     )
-    for role, public in monitor_ports.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
-        MonitorGate(services.auth, services.settings.host, public, handles.ports[role]).start()
+    for role, gate in gates.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
+        gate.attach(handles.ports[role])
     _log(
         services,
         f"monitors on the live twin of {satellite} ({scenario}): {monitor_ports} (token-gated) -> "

@@ -6,13 +6,21 @@ spliced both ways to viser) only for a valid API token of at least ``viewer``: `
 page URL (answered with a redirect that stores it in an HttpOnly, SameSite=Strict cookie, which the
 browser then sends with the assets and the WebSocket handshake) or that cookie. Revoking the token
 closes its open monitor connections at once (Authenticator.watch). With auth off every caller passes.
+
+The gate listens from the server's start: until its monitor is ready (:meth:`MonitorGate.attach`) an
+authorised page request gets a small page that says what the monitor waits for, with a progress bar, and
+reloads itself every STARTING_REFRESH_S, turning into the monitor once it is up (never a refused connection
+or a broken frame); a refused request gets a page saying how to open the monitor with a token.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import html
 import threading
+import time
+from collections.abc import Callable
 from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
@@ -25,6 +33,26 @@ COOKIE = "acs_twin_monitor"
 HEAD_LIMIT = 16_384  # an HTTP request head longer than this is refused
 HEAD_TIMEOUT_S = 10.0
 SPLICE_BYTES = 1 << 16
+STARTING_REFRESH_S = 2
+
+
+def _page(status: str, title: str, body: str, refresh_s: int | None = None) -> bytes:
+    """A small self-contained HTML answer (dark, like the monitors), optionally reloading itself."""
+    refresh = f'<meta http-equiv="refresh" content="{refresh_s}">' if refresh_s else ""
+    text = (
+        f'<!doctype html><html><head><meta charset="utf-8">{refresh}<title>{html.escape(title)}</title>'
+        "<style>body{background:#1a1b1e;color:#c1c2c5;font:16px system-ui,sans-serif;display:flex;"
+        "align-items:center;justify-content:center;height:100vh;margin:0}progress{width:20rem}</style></head>"
+        f"<body><main><h1>{html.escape(title)}</h1>{body}</main></body></html>"
+    ).encode()
+    head = [
+        f"HTTP/1.1 {status}",
+        "Content-Type: text/html; charset=utf-8",
+        f"Content-Length: {len(text)}",
+        "Cache-Control: no-store",
+        "Connection: close",
+    ]
+    return ("\r\n".join(head) + "\r\n\r\n").encode() + text
 
 
 def _answer(status: str, headers: dict[str, str] | None = None) -> bytes:
@@ -63,13 +91,26 @@ def _without_token(head: bytes) -> str:
 class MonitorGate:
     """A token-checking TCP front for one viser server, running its own event loop in a daemon thread."""
 
-    def __init__(self, auth: Authenticator, host: str, public_port: int, private_port: int) -> None:
+    def __init__(
+        self,
+        auth: Authenticator,
+        host: str,
+        public_port: int,
+        private_port: int | None,
+        role: str = "3D",
+        progress: Callable[[], str] = lambda: "starting",
+    ) -> None:
         self._auth, self._host, self._public, self._private = auth, host, public_port, private_port
+        self._role, self._progress, self._started = role, progress, time.monotonic()
         self._loop = asyncio.new_event_loop()
         self._server: asyncio.Server | None = None
         self._ready = threading.Event()
         self.port = public_port
         self.refused = 0
+
+    def attach(self, private_port: int) -> None:
+        """The monitor is up on this loopback port: splice authorised connections to it from now on."""
+        self._private = private_port
 
     def start(self) -> int:
         """Listen on the public port (0: any); returns the bound port."""
@@ -99,7 +140,7 @@ class MonitorGate:
         from_query, from_cookie = _token_of(head)
         principal = await asyncio.to_thread(self._auth.resolve, from_query or from_cookie)
         if principal is None or principal.role < Role.viewer:
-            await self._refuse(writer, "401 Unauthorized")
+            await self._refuse(writer, "401 Unauthorized", self._how_to_open())
             return
         if from_query and self._auth.enabled:  # keep the token out of the page URL: store it in a cookie
             cookie = f"{COOKIE}={from_query}; HttpOnly; SameSite=Strict; Path=/"
@@ -107,20 +148,56 @@ class MonitorGate:
             await writer.drain()
             writer.close()
             return
-        await self._splice(head, reader, writer, principal)
+        private = self._private
+        if private is None:
+            await self._answer(writer, self._starting_page(head))
+            return
+        await self._splice(head, reader, writer, principal, private)
 
-    async def _refuse(self, writer: asyncio.StreamWriter, status: str) -> None:
+    def _how_to_open(self) -> bytes:
+        title = f"acs-twin {self._role} monitor"
+        return _page(
+            "401 Unauthorized",
+            title,
+            "<p>This monitor needs an API token (role viewer or above): open it once as "
+            "<code>…/?token=&lt;API token&gt;</code>; the browser keeps it for the session.</p>",
+        )
+
+    def _starting_page(self, head: bytes) -> bytes:
+        if b"\r\nupgrade:" in head.lower():  # a WebSocket before the monitor is up: nothing to splice to yet
+            return _answer("503 Service Unavailable", {"Retry-After": str(STARTING_REFRESH_S)})
+        waited = time.monotonic() - self._started
+        return _page(
+            "503 Service Unavailable",
+            f"acs-twin {self._role} monitor",
+            f"<progress></progress><p>starting: {html.escape(self._progress())} ({waited:.0f} s)</p>"
+            "<p><small>This page turns into the monitor by itself once it is up.</small></p>",
+            refresh_s=STARTING_REFRESH_S,
+        )
+
+    async def _answer(self, writer: asyncio.StreamWriter, answer: bytes) -> None:
+        writer.write(answer)
+        with contextlib.suppress(ConnectionError):
+            await writer.drain()
+        writer.close()
+
+    async def _refuse(self, writer: asyncio.StreamWriter, status: str, answer: bytes | None = None) -> None:
         self.refused += 1
-        writer.write(_answer(status))
+        writer.write(answer or _answer(status))
         with contextlib.suppress(ConnectionError):
             await writer.drain()
         writer.close()
 
     async def _splice(
-        self, head: bytes, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, principal: Any
+        self,
+        head: bytes,
+        reader: asyncio.StreamReader,
+        writer: asyncio.StreamWriter,
+        principal: Any,
+        private_port: int,
     ) -> None:
         try:
-            upstream_reader, upstream_writer = await asyncio.open_connection("127.0.0.1", self._private)
+            upstream_reader, upstream_writer = await asyncio.open_connection("127.0.0.1", private_port)
         except OSError:
             await self._refuse(writer, "502 Bad Gateway")
             return

@@ -1,5 +1,6 @@
 """The 3D monitors on a live twin (backend.twin.live_feed) in a real browser: in live follow the displayed instant
-moves on with the telemetry without a reload, and a STALE warning shows once it stops."""
+moves on with the telemetry without a reload, a STALE warning shows at the top of the panel once it stops, and
+while a monitor starts its port shows progress (backend.twin.monitor_gate) and then turns into the monitor."""
 
 from __future__ import annotations
 
@@ -59,6 +60,16 @@ def _seconds() -> list[list]:
     return out
 
 
+def _utc_across_reloads(page) -> str | None:
+    """The displayed UTC, None while the page is (re)loading (the starting page reloads itself)."""
+    from playwright.sync_api import Error
+
+    try:
+        return _displayed_utc(page)
+    except Error:
+        return None
+
+
 def _page_text(page) -> str:
     return page.evaluate("() => document.body.innerText")
 
@@ -109,8 +120,40 @@ def test_monitors_follow_the_live_twin_and_warn_when_it_goes_stale(browser):
         assert "STALE" not in _page_text(page)
         clock.offset_s = STALE_S + 5.0
         _wait_for(lambda: "STALE" in _page_text(page), 15.0, "the stale warning")
+        text = _page_text(page)
+        assert text.index("STALE") < text.index("Playback")  # at the top of the panel, above every folder
+        assert "the view is not live" in text
     finally:
         stop.set()
         page.close()
         handles.stop()
         twins.stop()
+
+
+def test_a_starting_monitor_shows_progress_then_turns_into_the_monitor(browser, twin_feed, tmp_path):
+    from backend.core.auth import Role
+    from backend.core.settings import Settings
+    from backend.services import build_services
+    from backend.twin.monitor_gate import MonitorGate
+
+    services = build_services(Settings(data_dir=tmp_path))
+    _, token = services.auth.issue("monitor viewer", Role.viewer)
+    gate = MonitorGate(services.auth, "127.0.0.1", 0, None, role="overlay", progress=lambda: "waiting for REFSAT")
+    gate.start()
+    handles = None
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    try:
+        page.goto(f"http://127.0.0.1:{gate.port}/")
+        assert "?token=" in _page_text(page)  # refused, and told how to open it
+        page.goto(f"http://127.0.0.1:{gate.port}/?token={token}")
+        assert "starting: waiting for REFSAT" in _page_text(page) and page.locator("progress").count() == 1
+        assert "token=" not in page.url  # kept in a cookie, out of the address bar
+        handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",))
+        gate.attach(handles.ports["overlay"])
+        _wait_for(lambda: _utc_across_reloads(page) is not None, PAINT_TIMEOUT_S, "the page to become the monitor")
+    finally:
+        page.close()
+        if handles is not None:
+            handles.stop()
+        gate.stop()
+        services.close()
