@@ -17,8 +17,8 @@ import numpy as np
 from numba import njit
 
 from sim_core import quaternion
-from telemetry import ccsds
-from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter
+from telemetry import ccsds, xtce_bulk
+from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter, XtceSource, xtce_parameter
 from telemetry.ingest_report import (
     ApidSummary,
     DecodeResult,
@@ -397,21 +397,14 @@ def _xtce_values(
     source = definition.xtce
     assert source is not None
     n = offset.shape[0]
-    calibrated = {name: np.full(n, np.nan) for name in source.numeric}
-    raw = {name: np.full(n, np.nan) for name in source.numeric}
-    short: dict[int, str] = {}
-    for i, (o, size) in enumerate(zip(offset.tolist(), length.tolist())):
-        try:
-            packet = source.definition.parse_bytes(bytes(buf[o : o + size]))
-        except Exception as exc:  # spp raises its own errors (EOFError, ValueError …) for a packet it cannot read
-            short[i] = f"space_packet_parser: {type(exc).__name__}: {exc}"[:200]
-            continue
-        for name, value in packet.items():
-            if name in raw:
-                raw[name][i] = float(value.raw_value)
-                calibrated[name][i] = float(value) if isinstance(value, (int, float)) else float(value.raw_value)
-    values = {name: _narrow(v) for name, v in calibrated.items() if not np.all(np.isnan(v))}
-    codes = {name: _narrow(v) for name, v in raw.items()}
+    try:
+        calibrated, short = _xtce_bulk(buf, offset, length, source)
+        raw = calibrated  # the bulk walk takes no calibrated parameters: engineering value = raw number
+    except xtce_bulk.Unsupported:
+        calibrated, raw, short = _xtce_one_by_one(buf, offset, length, source)
+    values = {name: _narrow(v) for name, v in calibrated.items() if not np.isnan(v).all()}
+    timed = definition.time_fields.names if definition.time_fields is not None else ()
+    codes = {name: _narrow(raw[name]) for name in timed}
     t = np.full(n, INVALID_TIME, dtype=np.int64)
     problems: dict[int, str] = {}
     ok = np.setdiff1d(np.arange(n), list(short))
@@ -428,6 +421,55 @@ def _xtce_values(
         t[ok], bad_time = _packet_times(buf, offset[ok], {}, definition)
         problems.update((int(ok[i]), w) for i, w in bad_time.items())
     return t, problems, [(np.arange(n), values)], short
+
+
+_WALKS: dict[int, tuple[object, xtce_bulk.XtceWalk]] = {}  # by id() of a space_packet_parser definition
+
+
+def _xtce_bulk(
+    buf: np.ndarray, offset: np.ndarray, length: np.ndarray, source: XtceSource
+) -> tuple[dict[str, np.ndarray], dict[int, str]]:
+    """Numeric values (float64, NaN where a packet's container lacks the parameter) of XTCE packets decoded in
+    bulk by container (telemetry.xtce_bulk), and why packets could not be parsed; Unsupported when the walk
+    meets a construct it does not reproduce exactly."""
+    known = _WALKS.get(id(source.definition))
+    if known is None or known[0] is not source.definition:
+        known = (source.definition, xtce_bulk.XtceWalk(source.definition, xtce_parameter))
+        _WALKS[id(source.definition)] = known
+    n = offset.shape[0]
+
+    def read(positions: np.ndarray, parameters: tuple[Parameter, ...]) -> dict[str, np.ndarray]:
+        return _layout_values(buf, offset[positions], parameters, calibrated=True)
+
+    parts, failed = known[1].parse(np.arange(n), length, read)
+    columns = {name: np.full(n, np.nan) for name in source.numeric}
+    for idx, values in parts:
+        for name, v in values.items():
+            if name in columns:
+                columns[name][idx] = v
+    return columns, {i: f"space_packet_parser would fail: {why}" for i, why in failed.items()}
+
+
+def _xtce_one_by_one(
+    buf: np.ndarray, offset: np.ndarray, length: np.ndarray, source: XtceSource
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[int, str]]:
+    """Calibrated and raw numeric values of XTCE packets parsed one by one by space_packet_parser (NaN where a
+    packet's container lacks the parameter), and why packets could not be parsed."""
+    n = offset.shape[0]
+    calibrated = {name: np.full(n, np.nan) for name in source.numeric}
+    raw = {name: np.full(n, np.nan) for name in source.numeric}
+    short: dict[int, str] = {}
+    for i, (o, size) in enumerate(zip(offset.tolist(), length.tolist())):
+        try:
+            packet = source.definition.parse_bytes(bytes(buf[o : o + size]))
+        except Exception as exc:  # spp raises its own errors (EOFError, ValueError …) for a packet it cannot read
+            short[i] = f"space_packet_parser: {type(exc).__name__}: {exc}"[:200]
+            continue
+        for name, value in packet.items():
+            if name in raw:
+                raw[name][i] = float(value.raw_value)
+                calibrated[name][i] = float(value) if isinstance(value, (int, float)) else float(value.raw_value)
+    return calibrated, raw, short
 
 
 def _narrow(column: np.ndarray) -> np.ndarray:

@@ -38,6 +38,7 @@ __all__ = [
     "merge_dictionaries",
     "lay_out",
     "load_xtce",
+    "xtce_parameter",
     "parse_time_code",
     "parse_utc_ns",
     "SHIPPED",
@@ -615,8 +616,8 @@ def _xtce_entries(container: Any) -> list[Any]:
     return out
 
 
-def _xtce_parameter(param: Any, bit: int) -> Parameter:
-    """Our Parameter from a space-packet-parser XTCE parameter at a bit offset."""
+def xtce_parameter(param: Any, bit: int) -> Parameter:
+    """Our Parameter from a space-packet-parser XTCE parameter at a bit offset (ValueError: not read in bulk)."""
     from space_packet_parser.xtce import calibrators, encodings, parameter_types
 
     ptype, enc = param.parameter_type, param.parameter_type.encoding
@@ -685,7 +686,7 @@ def _xtce_fixed(
         if not isinstance(size, int):
             raise ValueError(f"{entry.name}: no fixed size")
         if bit >= PRIMARY_HEADER_BITS:
-            params.append(_xtce_parameter(entry, bit))
+            params.append(xtce_parameter(entry, bit))
         bit += size
     if bit % 8:
         raise ValueError(f"{container.name}: layout ends at bit {bit}, not on an octet boundary")

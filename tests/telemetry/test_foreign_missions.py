@@ -375,9 +375,15 @@ def _same(ours: np.ndarray, theirs: list) -> bool:
     return bool(np.array_equal(np.asarray(ours, dtype=np.float64), expected, equal_nan=True))
 
 
-def test_imap_idex_polymorphic_xtce_decodes_as_space_packet_parser_reads_it() -> None:
+def _no_packet_by_packet_parsing(*_: object) -> None:
+    raise AssertionError("space_packet_parser was called packet by packet: the bulk container walk was not taken")
+
+
+def test_imap_idex_polymorphic_xtce_decodes_as_space_packet_parser_reads_it(monkeypatch) -> None:
     """IDEX science packets (APID 1424, 4 lengths, containers chosen by IDX__SCI0TYPE, a dynamically sized waveform):
-    78 packets, every numeric parameter of every container as space_packet_parser gives it, one series per name."""
+    78 packets, every numeric parameter of every container as space_packet_parser gives it, one series per name,
+    decoded in bulk per container (telemetry.xtce_bulk), never packet by packet."""
+    monkeypatch.setattr("telemetry.decoding._xtce_one_by_one", _no_packet_by_packet_parsing)
     data = (IMAP / "sciData_2023_052_14_45_05").read_bytes()
     result = decode_stream(data, load_dictionary(IMAP_XTCE, time_fields=IMAP_TIME))
     counts, theirs = _spp_columns(data)
@@ -393,6 +399,28 @@ def test_imap_idex_polymorphic_xtce_decodes_as_space_packet_parser_reads_it() ->
     assert set(batch.values) == set(theirs)
     assert [n for n, column in theirs.items() if not _same(batch.values[n], column)] == []
     assert batch.packets.tobytes() == data  # byte-exact packets of four lengths
+
+
+def test_idex_packet_no_container_matches_is_quarantined_as_space_packet_parser_refuses_it(monkeypatch) -> None:
+    """IDX__SCI0TYPE (octet 16) set to 0 in one packet: neither inheritor of the abstract IDX_SCI0 matches, so
+    space_packet_parser refuses it; the bulk walk quarantines that packet with the reason and keeps the other 77
+    with space_packet_parser's values."""
+    import space_packet_parser as spp
+
+    monkeypatch.setattr("telemetry.decoding._xtce_one_by_one", _no_packet_by_packet_parsing)
+    data = bytearray((IMAP / "sciData_2023_052_14_45_05").read_bytes())
+    offsets = [o for o, _ in _offsets(bytes(data))]
+    data[offsets[10] + 16] = 0
+    with pytest.raises(spp.exceptions.UnrecognizedPacketTypeError):
+        spp.load_xtce(IMAP_XTCE).parse_bytes(bytes(data[offsets[10] : offsets[11]]))
+    result = decode_stream(bytes(data), load_dictionary(IMAP_XTCE, time_fields=IMAP_TIME))
+    [record] = result.report.quarantined
+    assert record.offset == offsets[10] and "no container inheriting IDX_SCI0 matches" in record.detail
+    kept = bytes(data[: offsets[10]] + data[offsets[11] :])
+    _, theirs = _spp_columns(kept)
+    [batch] = result.batches
+    assert len(batch.t_utc_ns) == 77
+    assert [n for n, column in theirs.items() if not _same(batch.values[n], column)] == []
 
 
 def test_suda_packets_behind_a_4_octet_header_through_acs_twin_ingest(tmp_path: Path, capsys) -> None:
