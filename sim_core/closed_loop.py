@@ -1,10 +1,18 @@
-"""The onboard-equivalent closed loop in one compiled function: the whole block diagram of the ACS.
+"""The onboard-equivalent closed loop: the block diagram of the ACS, one compiled call per variant.
 
-sensors (T_q) → estimator (T_q) → guidance (T_u) → control law (T_u) → allocation (T_u) →
-actuators (zero-order hold, seed 000 eq 3) → plant (RK4 at dt, seed 000 eq 1), with the faults of the
-variant applied where they act. One call flies one variant; :func:`run_batch` flies all of them in
-parallel (one variant per thread, its own random stream seeded at its start, so results do not depend
-on the thread count). Everything is plain float64/int64 arrays; :mod:`sim_core.engine` packs them.
+    sensors (T_q) → estimator (T_q) → guidance + modes (T_u) → control law (T_u) → allocation (T_u)
+    → actuators (zero-order hold, seed 000 eq 3) → disturbances → plant (RK4 at dt, seed 000 eq 1)
+
+:func:`fly_variant` is that diagram: each stage is one call of a ``_stage`` function below, and each
+stage only wires the component kernels (:mod:`~sim_core.sensors`, :mod:`~sim_core.mekf`,
+:mod:`~sim_core.guidance`, :mod:`~sim_core.modes`, :mod:`~sim_core.control`,
+:mod:`~sim_core.allocation`, :mod:`~sim_core.wheels`, :mod:`~sim_core.magnetic`,
+:mod:`~sim_core.environment`, :mod:`~sim_core.faults`, :mod:`~sim_core.fdir`,
+:mod:`~sim_core.integrators`); none of them holds physics of its own. The configuration is typed:
+:class:`LoopConfig` (shared by the batch) and :class:`Variant` (one per variant) are NamedTuples that
+numba compiles as structs. :func:`run_batch` flies all variants in parallel (one variant per thread, its
+own random stream seeded at its start, so results do not depend on the thread count).
+:mod:`sim_core.engine` builds the configuration from a :class:`~sim_core.scenario.Scenario`.
 """
 
 from __future__ import annotations
@@ -24,13 +32,15 @@ from sim_core import (
     magnetic,
     mekf,
     modes,
+    orbit,
     sensors,
+    wheels,
 )
 from sim_core import faults as faults_mod
 from sim_core.faults import T_EARTH, T_GYRO, T_MAG, T_SUN
 from sim_core.integrators import rk4_step_into
-from sim_core.quaternion import conjugate_rotate_1, multiply_1
-from sim_core.spacecraft import PlantArrays
+from sim_core.quaternion import angle_between_1, attitude_difference_1, conjugate_rotate_1, conjugate_rotate_into
+from sim_core.spacecraft import PlantArrays, free_wheel_inertia_1
 
 # Guidance kinds.
 PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
@@ -46,6 +56,7 @@ TARGET_CODES, TYPE_CODES, FAULT_COLUMNS = faults_mod.TARGET_CODES, faults_mod.TY
 EARTH_SENSOR_SIGMA_RAD = np.radians(0.05)  # static infrared earth sensor class (seed 002 eq 14 gives none)
 STAR_RESET_SIGMA_RAD = np.radians(1.0)  # attitude uncertainty re-opened after a wheel is isolated (a seizure's kick)
 MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
+STAR_TRACKER_MAX_RATE_RAD_S = 1e9  # no rate limit on the star tracker (seed 000 §4 gives none)
 
 # Event codes (sim_core.trajectory.EVENT_NAMES).
 EV_MODE_CHANGE, EV_ALLOCATION, EV_MD_SATURATED = 1, 7, 8
@@ -56,35 +67,166 @@ R_MD, R_TORQUE, R_R, R_OBS, R_STATUS, R_FAULTS = 22, 25, 28, 31, 32, 33
 R_MODE = 34  # onboard mode (sim_core.modes codes; −1 when the mode machine is off)
 R_WHEELS = 35  # then: speeds (nw), commands (nw), delivered torques (nw), availability after FDIR (nw)
 
-# Per-variant FDIR configuration (sim_core.fdir): on/off, bound on the error of a change of the
-# estimated body rate (rad/s), star-tracker χ²(3) limit, Gaussian threshold in σ, bound on the
-# external torque the loop does not model (N·m).
-FD_ON, FD_RATE_NOISE, FD_NIS_MAX, FD_N_SIGMA, FD_DIST_TORQUE = range(5)
-FDIR_CONFIG_SIZE = 5
-
-
-# ``times`` entries of the onboard mode machine (sim_core.modes), used when TM_ON is non-zero.
-TM_ON, TM_INITIAL, TM_BDOT_GAIN, TM_THRESHOLDS = 13, 14, 15, 16
-T_GYRO_COMPENSATION = 21  # ``times`` entry: add ω × (Jω + A h) to seed 000's law (7) when non-zero
 SUN_AXIS_B = np.array([0.0, 0.0, 1.0])  # solar-array normal the Sun/safe mode points at the Sun
 WHEEL_CAPTURE_RAD_S = np.radians(1.0)  # below this the wheels take over rate damping from B-dot
 RATE_DAMPING_TAU_S = 20.0  # time constant of the wheel rate brake (10 T_u at T_u = 2 s)
 FINE_POINTING_RAD = np.radians(2.0)  # ORF mode hands over from the acquisition PD to the scenario's law
 ACQUISITION_OMEGA_RAD_S = 0.02  # Sun/ORF acquisition bandwidth: slews ≤ 0.57 °/s, under the 1 °/s rate-lost limit
 UNLOADING_GAIN_PER_S = 1e-3  # seed 003 eq 29 unloading gain k: the cluster momentum decays in ~1/k s
-
-
 SUN_SENSOR_COS_HALF_FOV = -1.0  # coarse Sun sensors on every face: the whole sphere, blind only in eclipse
 
 
-class SeedModels(NamedTuple):
-    """Seed models flown when set (zero switches each off): residual dipole m_res (A·m², torque m_res × B),
-    gyro Markov drift (stationary σ, τ; seed 002 eq 13), Sun sensor noise (rad; seed 003 SS)."""
+# --- configuration (typed; numba compiles NamedTuples as structs) ---------------------------------------
 
-    residual_dipole_am2: np.ndarray
-    gyro_markov_sigma_rad_s: float
+
+class Clock(NamedTuple):
+    """Multi-rate schedule (seed 000 §4): RK4 step and the measurement, control and output periods in steps."""
+
+    n_steps: int
+    dt_s: float
+    measure_every: int  # T_q / dt
+    control_every: int  # T_u / dt
+    output_every: int
+    t0_unix_s: float  # epoch of t = 0
+    dut1_s: float  # UT1 − UTC frozen over the run (sim_core.frames)
+
+
+class Ephemeris(NamedTuple):
+    """Orbit (rows r, v, a every ``orbit_step_s``) and geomagnetic field (ECI, T) tables of the batch."""
+
+    orbit_table: np.ndarray
+    orbit_t0_s: float
+    orbit_step_s: float
+    field_table: np.ndarray
+    field_t0_s: float
+    field_step_s: float
+    c_pn: np.ndarray  # precession–nutation matrix frozen over the run
+
+
+class Program(NamedTuple):
+    """Programmed motion Λ^p(t): timed inertial steps or a compiled route (sim_core.guidance rows)."""
+
+    kind: int  # PROGRAM_*
+    steps_t: np.ndarray
+    steps_q: np.ndarray
+    route: np.ndarray
+
+
+class SensorModels(NamedTuple):
+    """Sensor models flown (seed 000 §4, seed 002 eq 13, seed 003 §3.2): zero switches a noise term off."""
+
+    star_sigma_rad: float
+    gyro_noise_rad_s: float
+    gyro_bias_rad_s: np.ndarray  # true constant bias (3,)
+    gyro_markov_sigma_rad_s: float  # stationary σ of the Markov drift (seed 002 eq 13)
     gyro_markov_tau_s: float
+    magnetometer_noise_t: float
+    tachometer_quantum_rad_s: float
     sun_sensor_sigma_rad: float
+
+
+class EstimatorConfig(NamedTuple):
+    """Attitude determination the law reads: ESTIMATOR_TRUTH, _STAR_TRACKER or _MEKF (sim_core.mekf)."""
+
+    kind: int
+    covariance0: np.ndarray  # initial MEKF covariance (6, 6)
+    gyro_drift_density: float  # σ_u the MEKF assumes for the bias random walk
+
+
+class LawConfig(NamedTuple):
+    """Control law (LAW_*): seed 000 eq (7)–(8) gains, MRP feedback (peer) or quaternion PD (seed 002 eq 18)."""
+
+    kind: int
+    digital_gains: np.ndarray  # control.DigitalLawGains.as_array
+    gyroscopic_compensation: bool  # add ω × (Jω + A h) to seed 000's law (7)
+    pd_kp_nm: float
+    pd_kd_nms: float
+    mrp_k_nm: float
+    mrp_p_nms: float
+    mrp_law_type: int
+
+
+class Actuators(NamedTuple):
+    """Wheel limits (seed 000 eq 2), torque quanta (eq 3) and the magnetic driver's dipole limit."""
+
+    max_torque_nm: np.ndarray
+    max_momentum_nms: np.ndarray
+    torque_quantum_nm: np.ndarray
+    md_max_am2: float
+    allocation: np.ndarray  # allocation.AllocationConfig.as_array
+
+
+class Disturbances(NamedTuple):
+    """External torques flown by the plant: gravity gradient and the residual dipole m_res (m_res × B)."""
+
+    gravity_gradient: bool
+    residual_dipole_am2: np.ndarray
+
+
+class ModeConfig(NamedTuple):
+    """Onboard mode machine (sim_core.modes; seed 001/003): off flies the scenario's law from t = 0."""
+
+    on: bool
+    initial: int
+    bdot_gain: float  # B-dot gain k/|B|² (A·m² per T/s)
+    thresholds: np.ndarray  # modes.ModeThresholds.to_array
+
+
+class FdirConfig(NamedTuple):
+    """Thresholds of the onboard FDIR (sim_core.fdir), from the scenario's sensor noise."""
+
+    rate_noise_rad_s: float  # bound on the error of a change of the estimated body rate
+    star_nis_max: float  # star-tracker χ²(3) limit
+    n_sigma: float  # Gaussian threshold in σ
+    disturbance_bound_nm: float  # external torque the loop does not model
+
+
+class LoopConfig(NamedTuple):
+    """Everything the batch shares: the modelled plant (law, allocation, FDIR), the flown one and each block."""
+
+    model: PlantArrays
+    truth: PlantArrays
+    clock: Clock
+    ephemeris: Ephemeris
+    program: Program
+    sensors: SensorModels
+    estimator: EstimatorConfig
+    law: LawConfig
+    actuators: Actuators
+    disturbances: Disturbances
+    modes: ModeConfig
+    fdir: FdirConfig
+
+
+class Variant(NamedTuple):
+    """One variant: initial state, wheels the allocation may use, its fault rows, FDIR on/off, random seed."""
+
+    x0: np.ndarray
+    available: np.ndarray
+    faults: np.ndarray  # sim_core.faults.fault_table rows
+    fdir_on: bool
+    seed: int
+
+
+class Batch(NamedTuple):
+    """Per-variant inputs stacked on axis 0 (``faults`` padded, ``n_faults`` rows used per variant)."""
+
+    x0: np.ndarray
+    available: np.ndarray
+    faults: np.ndarray
+    n_faults: np.ndarray
+    fdir_on: np.ndarray
+    seeds: np.ndarray
+
+
+class Record(NamedTuple):
+    """Outputs of the batch: samples × channels per variant, events (t, code, arg) and their counts, and the
+    shared progress/cancel array (``shared[0]`` non-zero cancels; ``shared[1 + v]`` steps done by variant v)."""
+
+    rec: np.ndarray
+    ev: np.ndarray
+    n_ev: np.ndarray
+    shared: np.ndarray
 
 
 def record_width(n_wheels: int) -> int:
@@ -92,154 +234,94 @@ def record_width(n_wheels: int) -> int:
     return R_WHEELS + 4 * n_wheels
 
 
-@njit(cache=True)
-def hermite_orbit_into(
-    table: np.ndarray, t0: float, step: float, t: float, r: np.ndarray, v: np.ndarray, acc: np.ndarray
-) -> None:
-    """ECI r, v, a at t from a table of rows (r, v, a) every ``step`` s by cubic Hermite interpolation, in place."""
-    u = (t - t0) / step
-    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
-    s = u - i
-    s2, s3 = s * s, s * s * s
-    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-    d00, d10, d01, d11 = (6 * s2 - 6 * s) / step, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / step, 3 * s2 - 2 * s
-    for j in range(3):
-        r[j] = (
-            h00 * table[i, j] + h10 * step * table[i, 3 + j] + h01 * table[i + 1, j] + h11 * step * table[i + 1, 3 + j]
-        )
-        v[j] = d00 * table[i, j] + d10 * table[i, 3 + j] + d01 * table[i + 1, j] + d11 * table[i + 1, 3 + j]
-        acc[j] = (1 - s) * table[i, 6 + j] + s * table[i + 1, 6 + j]
+# --- loop state (arrays the stages update in place) -------------------------------------------------------
+
+
+class Position(NamedTuple):
+    """Where the spacecraft is: ECI r, v, a and the field in ECI and body axes."""
+
+    r: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    b_eci: np.ndarray
+    b_body: np.ndarray
+
+
+class Sensed(NamedTuple):
+    """Latest samples and the sensors' own state (frozen outputs, Markov drift)."""
+
+    omega: np.ndarray  # gyro ω_g
+    omega_prev: np.ndarray
+    gyro_drift: np.ndarray
+    gyro_frozen: np.ndarray
+    star_frozen: np.ndarray
+    mag: np.ndarray
+    mag_prev: np.ndarray
+    sun_frozen: np.ndarray
+
+
+class Estimate(NamedTuple):
+    """What the law reads: attitude, body rate, and the MEKF's bias and covariance."""
+
+    q: np.ndarray
+    omega: np.ndarray
+    bias: np.ndarray
+    covariance: np.ndarray
+
+
+class Commands(NamedTuple):
+    """Control outputs: body torque, wheel commands and delivered torques, dipole, lead-lag state."""
+
+    body_torque: np.ndarray
+    frozen_torque: np.ndarray
+    lead_lag: np.ndarray  # g of seed 000 eq (8)
+    wheel_cmd: np.ndarray
+    frozen_cmd: np.ndarray
+    delivered: np.ndarray
+    dipole: np.ndarray
+    wheel_alloc: np.ndarray
+    dipole_alloc: np.ndarray
+    program: np.ndarray  # Λ^p (4), ω^p (3), ω̇^p (3) of the last control tick
+
+
+class Monitors(NamedTuple):
+    """FDIR states (sim_core.fdir) and the wheels the allocation may use."""
+
+    wheel: np.ndarray
+    star: np.ndarray
+    gyro: np.ndarray
+    mag: np.ndarray
+    earth: np.ndarray
+    available: np.ndarray
+    decouple: np.ndarray
+    j_eff_inv: np.ndarray
+
+
+# --- small pieces of the diagram ----------------------------------------------------------------------------
 
 
 @njit(cache=True)
-def linear_into(table: np.ndarray, t0: float, step: float, t: float, out: np.ndarray) -> None:
-    """Row of ``table`` (sampled every ``step`` s from t0) linearly interpolated at t, into ``out``."""
-    u = (t - t0) / step
-    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
-    s = u - i
-    for j in range(out.shape[0]):
-        out[j] = (1.0 - s) * table[i, j] + s * table[i + 1, j]
-
-
-@njit(cache=True)
-def conjugate_rotate_into(x: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
-    """Λ̃ ∘ v ∘ Λ with Λ = x[0:4] (inertial → body), written into ``out``."""
-    q0, q1, q2, q3 = x[0], -x[1], -x[2], -x[3]
-    tx = 2.0 * (q2 * v[2] - q3 * v[1])
-    ty = 2.0 * (q3 * v[0] - q1 * v[2])
-    tz = 2.0 * (q1 * v[1] - q2 * v[0])
-    out[0] = v[0] + q0 * tx + q2 * tz - q3 * ty
-    out[1] = v[1] + q0 * ty + q3 * tx - q1 * tz
-    out[2] = v[2] + q0 * tz + q1 * ty - q2 * tx
-
-
-@njit(cache=True)
-def add_gravity_gradient_into(x: np.ndarray, r_eci: np.ndarray, inertia: np.ndarray, ext: np.ndarray) -> None:
-    """ext += 3μ/r⁵ r_b × (J r_b) (environment.gravity_gradient_torque_1) without allocation."""
-    r_b = np.empty(3)
-    conjugate_rotate_into(x, r_eci, r_b)
-    tq = environment.gravity_gradient_torque_1(r_b, inertia)
-    ext[0] += tq[0]
-    ext[1] += tq[1]
-    ext[2] += tq[2]
-
-
-@njit(cache=True)
-def limit_motor_torque_into(
-    m: np.ndarray, x: np.ndarray, i0: int, inertia: np.ndarray, max_torque: np.ndarray, max_momentum: np.ndarray
-) -> None:
-    """Seed 000 eq (2) on the delivered torques in place (as wheels.limited_motor_torque_1)."""
-    for p in range(m.shape[0]):
-        mm = min(max_torque[p], max(-max_torque[p], m[p]))
-        h = inertia[p] * x[i0 + p]
-        if (h >= max_momentum[p] and mm > 0.0) or (h <= -max_momentum[p] and mm < 0.0):
-            mm = 0.0
-        m[p] = mm
-
-
-@njit(cache=True)
-def _program_1(
-    kind: int,
-    steps_t: np.ndarray,
-    steps_q: np.ndarray,
-    route: np.ndarray,
-    t: float,
-    t0_unix: float,
-    r: np.ndarray,
-    v: np.ndarray,
-    a: np.ndarray,
-    c_pn: np.ndarray,
-    dut1: float,
-):
-    """Λ^p, ω^p, ω̇^p (program axes) and the observing flag at t (seed 000 §2, seed 001)."""
-    if kind == PROGRAM_INERTIAL:
+def program_1(
+    g: Program, t: float, t0_unix: float, r: np.ndarray, v: np.ndarray, a: np.ndarray, c_pn: np.ndarray, dut1: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """Λ^p, ω^p, ω̇^p (program axes) and the observing flag of program ``g`` at t (s after the epoch t0_unix;
+    seed 000 §2, seed 001): the current inertial step, or the compiled route (sim_core.guidance.route_1)."""
+    if g.kind == PROGRAM_INERTIAL:
         k = 0
-        while k + 1 < steps_t.shape[0] and t >= steps_t[k + 1]:
+        while k + 1 < g.steps_t.shape[0] and t >= g.steps_t[k + 1]:
             k += 1
-        return steps_q[k].copy(), np.zeros(3), np.zeros(3), False
-    return guidance.route_1(route, t0_unix + t, r, v, a, c_pn, dut1)
+        return g.steps_q[k].copy(), np.zeros(3), np.zeros(3), False
+    route: tuple[np.ndarray, np.ndarray, np.ndarray, bool] = guidance.route_1(g.route, t0_unix + t, r, v, a, c_pn, dut1)
+    return route
 
 
 @njit(cache=True)
-def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Nadir direction in body axes from an earth-sensor sample (roll, pitch; seed 002 eq 14) with the
-    variant's earth-sensor faults; False if the sensor has failed."""
-    roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
-    normal = np.random.standard_normal(2)
-    angles = np.zeros(3)
-    angles[0] = roll + EARTH_SENSOR_SIGMA_RAD * normal[0]
-    angles[1] = pitch + EARTH_SENSOR_SIGMA_RAD * normal[1]
-    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3))
-    nadir = np.empty(3)
-    nadir[0] = np.cos(angles[1]) * np.cos(angles[0])
-    nadir[1] = -np.sin(angles[1])
-    nadir[2] = np.cos(angles[1]) * np.sin(angles[0])
-    return nadir, ok
-
-
-@njit(cache=True)
-def _earth_and_field_update_1(
-    nadir: np.ndarray,
-    earth_ok: bool,
-    r: np.ndarray,
-    b_eci: np.ndarray,
-    mag: np.ndarray,
-    mag_noise: float,
-    q_est: np.ndarray,
-    bias_est: np.ndarray,
-    p_cov: np.ndarray,
-) -> None:
-    """Without a star-tracker sample: MEKF updates on the earth sensor's nadir (seed 002 eq 14) and on
-    the magnetometer's field direction (seed 003 §3.2)."""
-    if earth_ok:
-        mekf.mekf_vector_update_1(q_est, bias_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD)
-    b_norm = np.sqrt(b_eci[0] ** 2 + b_eci[1] ** 2 + b_eci[2] ** 2)
-    if mag_noise > 0.0 and b_norm > 0.0:
-        mekf.mekf_vector_update_1(q_est, bias_est, p_cov, mag, b_eci, mag_noise / b_norm + MAG_DIRECTION_FLOOR_RAD)
-
-
-@njit(cache=True)
-def _sun_direction_1(
-    faults: np.ndarray,
-    t: float,
-    x: np.ndarray,
-    q_est: np.ndarray,
-    sun_eci: np.ndarray,
-    r: np.ndarray,
-    sigma: float,
-    frozen: np.ndarray,
-) -> np.ndarray:
-    """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1) under its faults; in eclipse
-    or when failed, the ephemeris Sun seen through the attitude estimate."""
-    normals = np.random.standard_normal(3)
-    s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
-    ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
-    frozen[:] = s_b
-    n = np.sqrt(s_b @ s_b)
-    if not ok or n == 0.0:
-        s_b = conjugate_rotate_1(q_est, sun_eci)
-        n = np.sqrt(s_b @ s_b)
-    return s_b / n
+def program_at(c: LoopConfig, t: float, pos: Position) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """:func:`program_1` of the configured program where the spacecraft is at t."""
+    sample: tuple[np.ndarray, np.ndarray, np.ndarray, bool] = program_1(
+        c.program, t, c.clock.t0_unix_s, pos.r, pos.v, pos.a, c.ephemeris.c_pn, c.clock.dut1_s
+    )
+    return sample
 
 
 @njit(cache=True)
@@ -250,551 +332,721 @@ def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> N
 
 
 @njit(cache=True)
-def _angle_between_1(a: np.ndarray, b: np.ndarray) -> float:
-    """Angle (rad) between two non-zero vectors."""
-    c = np.cross(a, b)
-    return np.arctan2(np.sqrt(c @ c), a @ b)
+def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Nadir in body axes from an earth-sensor sample (sensors.earth_sensor_1, seed 002 eq 14) under the
+    variant's earth-sensor faults; False if the sensor has failed."""
+    roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
+    normal = np.random.standard_normal(2)
+    meas, _ = sensors.earth_sensor_1(roll, pitch, np.zeros(2), np.full(2, EARTH_SENSOR_SIGMA_RAD), np.inf, normal)
+    angles = np.zeros(3)
+    angles[0:2] = meas
+    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3))
+    return sensors.nadir_from_roll_pitch_1(angles[0], angles[1]), ok
 
 
 @njit(cache=True)
-def _attitude_difference_1(q_a: np.ndarray, q_b: np.ndarray) -> float:
-    """Rotation angle (rad, in [0, π]) between two attitudes."""
-    d = abs(q_a[0] * q_b[0] + q_a[1] * q_b[1] + q_a[2] * q_b[2] + q_a[3] * q_b[3])
-    return 2.0 * np.arccos(min(d, 1.0))
+def _sun_direction_1(
+    c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, q_est: np.ndarray, r: np.ndarray, frozen: np.ndarray
+) -> np.ndarray:
+    """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1) under its faults; in eclipse or
+    when failed, the ephemeris Sun seen through the attitude estimate."""
+    sigma = c.sensors.sun_sensor_sigma_rad
+    sun_eci = environment.sun_position_1(c.clock.t0_unix_s + t)
+    normals = np.random.standard_normal(3)
+    s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
+    ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
+    frozen[:] = s_b
+    n = np.sqrt(s_b @ s_b)
+    if not ok or n == 0.0:
+        s_b = conjugate_rotate_1(q_est, sun_eci)
+        n = np.sqrt(s_b @ s_b)
+    unit: np.ndarray = s_b / n
+    return unit
+
+
+# --- stages --------------------------------------------------------------------------------------------
 
 
 @njit(cache=True)
-def _sun_safe_program_1(q_est: np.ndarray, s_b: np.ndarray) -> np.ndarray:
-    """One-axis Sun orientation (seed 001): the attitude nearest q_est that puts SUN_AXIS_B on the Sun
-    direction s_b (unit, body axes, as the Sun sensor sees it)."""
-    axis = np.cross(SUN_AXIS_B, s_b)
-    n = np.sqrt(axis @ axis)
-    ang = np.arctan2(n, SUN_AXIS_B @ s_b)
-    dq = np.array([1.0, 0.0, 0.0, 0.0])
-    if n > 1e-12:
-        dq[0] = np.cos(0.5 * ang)
-        dq[1:] = np.sin(0.5 * ang) * axis / n
-    return multiply_1(q_est, dq)
+def _ephemeris_stage(c: LoopConfig, t: float, x: np.ndarray, orbit_due: bool, field_due: bool, pos: Position) -> None:
+    """Orbit and field at t from the batch's tables (field rotated into body axes by the true attitude)."""
+    e = c.ephemeris
+    if orbit_due:
+        orbit.hermite_state_into(e.orbit_table, e.orbit_t0_s, e.orbit_step_s, t, pos.r, pos.v, pos.a)
+    if field_due:
+        environment.field_table_into(e.field_table, e.field_t0_s, e.field_step_s, t, pos.b_eci)
+        conjugate_rotate_into(x, pos.b_eci, pos.b_body)
 
 
 @njit(cache=True)
-def _mode_program_1(mode: int, q_est, r, v, a, sun_b, q_p, w_p, wd_p) -> None:
-    """Program of the Sun/safe and ORF modes (seed 001 one- and three-axis orientation), in place."""
-    if mode == modes.MODE_SUN_SAFE:
-        q_p[:] = _sun_safe_program_1(q_est, sun_b)
-        w_p[:] = 0.0
-        wd_p[:] = 0.0
+def _fault_stage(
+    faults: np.ndarray,
+    t: float,
+    fault_state: np.ndarray,
+    flags: int,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    cmd: Commands,
+    sensed: Sensed,
+) -> int:
+    """Fault onsets and ends at t (sim_core.faults); at a 'frozen' onset the outputs in hand are held."""
+    if faults.shape[0] == 0:
+        return flags
+    new = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
+    if new < 0:
+        new = -new - 1
+        cmd.frozen_cmd[:] = cmd.wheel_cmd
+        cmd.frozen_torque[:] = cmd.body_torque
+        sensed.gyro_frozen[:] = sensed.omega
+    return new
+
+
+@njit(cache=True)
+def _sense_stage(
+    c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, markov: np.ndarray, pos: Position, sensed: Sensed
+) -> tuple[np.ndarray, np.ndarray, bool, bool]:
+    """Gyro (seed 002 eq 13), star tracker (seed 000 §4) and magnetometer (seed 003 MAG) samples under the
+    variant's faults. ``markov``: decay and step σ of the gyro drift. Returns (star sample, its σ per axis,
+    star valid, gyro valid)."""
+    s = c.sensors
+    normals = np.random.standard_normal(6)
+    drift_normals = np.random.standard_normal(3) if s.gyro_markov_sigma_rad_s > 0.0 else np.zeros(3)
+    w_meas, _ = sensors.gyro_1(
+        x[4:7],
+        s.gyro_bias_rad_s,
+        sensed.gyro_drift,
+        np.full(3, s.gyro_noise_rad_s),
+        markov[0],
+        markov[1],
+        np.inf,
+        np.concatenate((normals[0:3], drift_normals)),
+    )
+    sensed.omega[:] = w_meas
+    gyro_ok = faults_mod.sensor_faults_1(
+        faults, T_GYRO, t, sensed.omega, sensed.gyro_frozen, s.gyro_noise_rad_s, normals[0:3]
+    )
+    sig3 = np.full(3, s.star_sigma_rad)
+    q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, STAR_TRACKER_MAX_RATE_RAD_S, normals[3:6])
+    st_ok = (
+        faults_mod.star_tracker_faults_1(faults, t, q_m, sensed.star_frozen, s.star_sigma_rad, normals[3:6]) and st_ok
+    )
+    mag, _ = sensors.magnetometer_1(
+        x[0:4], pos.b_eci, np.zeros(3), s.magnetometer_noise_t, np.inf, np.random.standard_normal(3)
+    )
+    sensed.mag[:] = mag
+    faults_mod.sensor_faults_1(faults, T_MAG, t, sensed.mag, sensed.mag, s.magnetometer_noise_t, normals[0:3])
+    return q_m, sig3, st_ok, gyro_ok
+
+
+@njit(cache=True)
+def _mekf_stage(
+    c: LoopConfig,
+    faults: np.ndarray,
+    fdir_on: bool,
+    k: int,
+    t: float,
+    x: np.ndarray,
+    pos: Position,
+    sensed: Sensed,
+    q_m: np.ndarray,
+    sig3: np.ndarray,
+    st_ok: bool,
+    gyro_ok: bool,
+    sigma_u: float,
+    est: Estimate,
+    mon: Monitors,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> tuple[bool, float]:
+    """MEKF (sim_core.mekf) on gyro + star tracker; without a star sample, on the earth sensor's nadir and the
+    magnetometer's field direction; each sensor screened by FDIR when on. Returns (attitude valid, σ_u)."""
+    s = c.sensors
+    t_q = c.clock.measure_every * c.clock.dt_s
+    fd = c.fdir
+    if k > 0 and gyro_ok:
+        # mean of the samples bracketing the step: the held sample's ½ ω̇ T_q² error would
+        # make the filter overconfident in manoeuvres (and the FDIR innovation test with it)
+        mekf.mekf_propagate_1(
+            est.q,
+            est.bias,
+            est.covariance,
+            0.5 * (sensed.omega + sensed.omega_prev),
+            t_q,
+            s.gyro_noise_rad_s * np.sqrt(t_q),
+            sigma_u,
+        )
+    sensed.omega_prev[:] = sensed.omega
+    st_raw_ok = st_ok
+    if fdir_on and st_ok:
+        st_scale = fdir.star_tracker_check_1(
+            mon.star, est.q, est.covariance, q_m, sig3, fd.star_nis_max, mon.gyro[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t
+        )
+        st_ok = st_scale > 0.0
+        sig3 *= max(st_scale, 1.0)
+    if fdir_on and gyro_ok:
+        sigma_u = fdir.gyro_drift_step_1(
+            mon.gyro,
+            t,
+            sensed.omega,
+            t_q,
+            q_m,
+            st_ok,
+            s.star_sigma_rad,
+            s.gyro_noise_rad_s,
+            c.estimator.gyro_drift_density,
+            fd.n_sigma,
+            ev,
+            n_ev,
+        )
+    if not st_ok:
+        nadir, earth_ok = _earth_sensor_nadir_1(faults, t, x, pos.r)
+        if fdir_on and earth_ok:
+            earth_ok = fdir.earth_sensor_check_1(
+                mon.earth, est.q, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD, ev, n_ev, t
+            )
+        if fdir_on and earth_ok and st_raw_ok:
+            st_ok = fdir.star_readmit_1(
+                mon.star, est.q, q_m, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD, fd.n_sigma, ev, n_ev, t
+            )
+        if not st_ok:
+            if earth_ok:
+                mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD)
+            b_norm = np.sqrt(pos.b_eci @ pos.b_eci)
+            if s.magnetometer_noise_t > 0.0 and b_norm > 0.0:
+                sigma_dir = s.magnetometer_noise_t / b_norm + MAG_DIRECTION_FLOOR_RAD
+                mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, sensed.mag, pos.b_eci, sigma_dir)
+    if st_ok:
+        mekf.mekf_update_1(est.q, est.bias, est.covariance, q_m, sig3)
+    est.omega[:] = sensed.omega - est.bias
+    return bool(st_ok), float(sigma_u)
+
+
+@njit(cache=True)
+def _estimate_stage(
+    c: LoopConfig,
+    faults: np.ndarray,
+    fdir_on: bool,
+    k: int,
+    t: float,
+    x: np.ndarray,
+    pos: Position,
+    sensed: Sensed,
+    q_m: np.ndarray,
+    sig3: np.ndarray,
+    st_ok: bool,
+    gyro_ok: bool,
+    sigma_u: float,
+    valid: bool,
+    est: Estimate,
+    mon: Monitors,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> tuple[bool, float]:
+    """The estimator the law reads (EstimatorConfig.kind): truth, star tracker + gyro as sampled, or the MEKF.
+    The magnetometer is screened first when FDIR is on. Returns (attitude valid, σ_u)."""
+    if fdir_on:
+        fdir.magnetometer_check_1(
+            mon.mag,
+            sensed.mag,
+            conjugate_rotate_1(est.q, pos.b_eci),
+            c.sensors.magnetometer_noise_t,
+            c.fdir.n_sigma,
+            ev,
+            n_ev,
+            t,
+        )
+    kind = c.estimator.kind
+    if kind == ESTIMATOR_TRUTH:
+        est.q[:] = x[0:4]
+        est.omega[:] = x[4:7]
+        return valid, sigma_u
+    if kind == ESTIMATOR_STAR_TRACKER:
+        if st_ok:
+            est.q[:] = q_m
+        if gyro_ok:
+            est.omega[:] = sensed.omega
+        return valid, sigma_u
+    result: tuple[bool, float] = _mekf_stage(
+        c, faults, fdir_on, k, t, x, pos, sensed, q_m, sig3, st_ok, gyro_ok, sigma_u, est, mon, ev, n_ev
+    )
+    return result
+
+
+@njit(cache=True)
+def _guidance_stage(
+    c: LoopConfig,
+    faults: np.ndarray,
+    t: float,
+    x: np.ndarray,
+    pos: Position,
+    mode_state: np.ndarray,
+    mode: int,
+    valid: bool,
+    est: Estimate,
+    sensed: Sensed,
+    mon: Monitors,
+    cmd: Commands,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> int:
+    """Program Λ^p, ω^p, ω̇^p into ``cmd.program``; with the mode machine on, the mode step (seed 001/003) and
+    the Sun/safe (Sun sensor) or ORF program in those modes. Returns the mode."""
+    q_p, w_p, wd_p, _ = program_at(c, t, pos)
+    if c.modes.on:
+        q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
+        sun_b = _sun_direction_1(c, faults, t, x, est.q, pos.r, sensed.sun_frozen)
+        new_mode = modes.mode_step_1(
+            mode_state,
+            c.modes.thresholds,
+            t,
+            np.sqrt(est.omega @ est.omega),
+            valid,
+            angle_between_1(SUN_AXIS_B, sun_b),
+            attitude_difference_1(est.q, q_orf),
+            True,
+            np.sum(mon.available) < 2,
+            False,
+        )
+        if new_mode != mode:
+            _event(ev, n_ev, t, EV_MODE_CHANGE, new_mode)
+            cmd.lead_lag[:] = 0.0
+            mode = new_mode
+        if mode == modes.MODE_SUN_SAFE:
+            q_p = guidance.sun_pointing_1(est.q, sun_b, SUN_AXIS_B)
+            w_p[:] = 0.0
+            wd_p[:] = 0.0
+        elif mode == modes.MODE_ORF:
+            q_p, w_p, wd_p = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
+    cmd.program[0:4] = q_p
+    cmd.program[4:7] = w_p
+    cmd.program[7:10] = wd_p
+    return mode
+
+
+@njit(cache=True)
+def _tachometer_stage(c: LoopConfig, x: np.ndarray) -> np.ndarray:
+    """Wheel speeds as the tachometers read them (sensors.wheel_tachometer_1; exact when the quantum is 0)."""
+    nq, nw = c.model.flex_mass.shape[0], c.model.wheel_inertia.shape[0]
+    speeds = x[7 + 2 * nq : 7 + 2 * nq + nw].copy()
+    quantum = c.sensors.tachometer_quantum_rad_s
+    if quantum > 0.0:
+        speeds, _ = sensors.wheel_tachometer_1(speeds, quantum, np.inf)
+    return speeds
+
+
+@njit(cache=True)
+def _law_stage(
+    c: LoopConfig,
+    mode: int,
+    est: Estimate,
+    speeds: np.ndarray,
+    h_wheels: np.ndarray,
+    available: np.ndarray,
+    cmd: Commands,
+) -> None:
+    """Body torque of the configured law (LawConfig.kind) on the estimate; in the Sun/safe mode and the ORF
+    acquisition the seed 002 eq (18) PD with gyroscopic compensation (acquisition bandwidth)."""
+    p, law = c.model, c.law
+    q_p, w_p, wd_p = cmd.program[0:4], cmd.program[4:7], cmd.program[7:10]
+    coarse = mode == modes.MODE_SUN_SAFE or (
+        mode == modes.MODE_ORF and attitude_difference_1(est.q, q_p) > FINE_POINTING_RAD
+    )
+    if c.modes.on and coarse:
+        j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
+        kp = j_max * ACQUISITION_OMEGA_RAD_S**2  # steady slew rate ≤ kp/kd = ω_n/2 per unit error
+        kd = 2.0 * j_max * ACQUISITION_OMEGA_RAD_S
+        cmd.body_torque[:] = control.quaternion_pd_step(
+            est.q, est.omega, q_p, w_p, kp, kd
+        ) + control.gyroscopic_torque_1(est.omega, p.inertia, p.wheel_axes @ h_wheels)
+    elif law.kind == LAW_SEED000:
+        cmd.body_torque[:] = control.digital_law_step(
+            est.q, est.omega, q_p, w_p, wd_p, cmd.lead_lag, p.inertia, law.digital_gains
+        )
+        if law.gyroscopic_compensation:
+            cmd.body_torque[:] += control.gyroscopic_torque_1(est.omega, p.inertia, p.wheel_axes @ h_wheels)
+    elif law.kind == LAW_MRP_FEEDBACK:
+        cmd.body_torque[:] = control.mrp_tracking_step(
+            est.q,
+            est.omega,
+            q_p,
+            w_p,
+            wd_p,
+            p.inertia,
+            p.wheel_axes,
+            p.wheel_inertia,
+            speeds,
+            available,
+            law.mrp_k_nm,
+            law.mrp_p_nms,
+            law.mrp_law_type,
+        )
     else:
-        q_o, w_o, wd_o = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), r, v, a)
-        q_p[:] = q_o
-        w_p[:] = w_o
-        wd_p[:] = wd_o
+        cmd.body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, law.pd_kp_nm, law.pd_kd_nms)
 
 
 @njit(cache=True)
-def _rate_damping_1(
-    mode,
-    w_est,
-    mag,
-    mag_prev,
-    have_mag_prev,
-    t_u,
-    bdot_gain,
-    md_max,
-    p,
-    available,
-    h_wheels,
-    alloc_params,
-    wheel_limits,
-    body_torque,
-    cmd,
-    dipole,
-    wheel_out,
-    dip_out,
+def _wheel_commands_1(act: Actuators, cmd: Commands) -> None:
+    """Quantised, limited wheel torque commands (seed 000 eq 3) from the allocation's wheel torques."""
+    for w in range(cmd.wheel_cmd.shape[0]):
+        cmd.wheel_cmd[w] = control.wheel_torque_command_1(
+            cmd.wheel_alloc[w], act.torque_quantum_nm[w], act.max_torque_nm[w]
+        )
+
+
+@njit(cache=True)
+def _rate_damping_stage(
+    c: LoopConfig,
+    mode: int,
+    est: Estimate,
+    sensed: Sensed,
+    have_mag_prev: bool,
+    h_wheels: np.ndarray,
+    available: np.ndarray,
+    cmd: Commands,
 ) -> None:
     """Rate damping (seed 001 initial mode, seed 003 eq 29–30): B-dot above 1 °/s or in the fault mode;
-    below it the wheels brake the body (−J ω / RATE_DAMPING_TAU_S) while the rods unload the cluster."""
-    body_torque[:] = 0.0
-    cmd[:] = 0.0
-    dipole[:] = 0.0
-    rate = np.sqrt(w_est @ w_est)
+    below it the wheels brake the body (control.rate_brake_torque_1) while the rods unload the cluster."""
+    p, act = c.model, c.actuators
+    t_u = c.clock.control_every * c.clock.dt_s
+    cmd.body_torque[:] = 0.0
+    cmd.wheel_cmd[:] = 0.0
+    cmd.dipole[:] = 0.0
+    rate = np.sqrt(est.omega @ est.omega)
     if mode == modes.MODE_FAULT or rate > WHEEL_CAPTURE_RAD_S or np.sum(available) < 2:
         if have_mag_prev:
-            dipole[:] = control.bdot_dipole_step(mag, mag_prev, t_u, bdot_gain, md_max)
+            cmd.dipole[:] = control.bdot_dipole_step(
+                sensed.mag, sensed.mag_prev, t_u, c.modes.bdot_gain, act.md_max_am2
+            )
         return
-    body_torque[:] = -(p.inertia @ w_est) / RATE_DAMPING_TAU_S
-    allocation.allocate_1(body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params, wheel_out, dip_out)
-    for w in range(cmd.shape[0]):
-        cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
-    dipole[:] = control.unloading_dipole_step(mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, md_max)
+    cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
+    allocation.allocate_1(
+        cmd.body_torque,
+        p.wheel_axes,
+        available,
+        h_wheels,
+        sensed.mag,
+        act.allocation,
+        cmd.wheel_alloc,
+        cmd.dipole_alloc,
+    )
+    _wheel_commands_1(act, cmd)
+    cmd.dipole[:] = control.unloading_dipole_step(
+        sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
+    )
+
+
+@njit(cache=True)
+def _allocation_stage(
+    c: LoopConfig,
+    faults: np.ndarray,
+    t: float,
+    mode: int,
+    est: Estimate,
+    sensed: Sensed,
+    have_mag_prev: bool,
+    h_wheels: np.ndarray,
+    available: np.ndarray,
+    cmd: Commands,
+) -> int:
+    """Controller faults on the body torque, then wheel torques and MD dipole (seed 000 eq 6, §3; sim_core.
+    allocation) with rod faults and the dipole limit; the modes' unloading and rate damping. Returns the
+    allocation status."""
+    p, act = c.model, c.actuators
+    faults_mod.controller_faults_1(faults, t, cmd.body_torque, cmd.frozen_torque)
+    status = allocation.allocate_1(
+        cmd.body_torque,
+        p.wheel_axes,
+        available,
+        h_wheels,
+        sensed.mag,
+        act.allocation,
+        cmd.wheel_alloc,
+        cmd.dipole_alloc,
+    )
+    _wheel_commands_1(act, cmd)
+    cmd.dipole[:] = cmd.dipole_alloc
+    faults_mod.rod_faults_1(faults, t, cmd.dipole)
+    for i in range(3):
+        cmd.dipole[i] = min(max(cmd.dipole[i], -act.md_max_am2), act.md_max_am2)
+    if c.modes.on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
+        # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
+        cmd.dipole[:] = control.unloading_dipole_step(
+            sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
+        )
+    if c.modes.on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
+        _rate_damping_stage(c, mode, est, sensed, have_mag_prev, h_wheels, available, cmd)
+    return status
+
+
+@njit(cache=True)
+def _wheel_monitor_stage(
+    c: LoopConfig, t: float, speeds: np.ndarray, est: Estimate, mon: Monitors, ev: np.ndarray, n_ev: np.ndarray
+) -> None:
+    """Wheel FDIR at T_u (sim_core.fdir.wheel_check_1); it may drop wheels from ``mon.available``. After an
+    isolation the MEKF trusts the star tracker again (a seizing wheel kicks the body)."""
+    p = c.model
+    n_before = np.sum(mon.available)
+    fdir.wheel_check_1(
+        mon.wheel,
+        speeds,
+        est.omega,
+        p.wheel_inertia,
+        c.actuators.max_momentum_nms,
+        p.friction,
+        c.sensors.tachometer_quantum_rad_s,
+        c.clock.control_every * c.clock.dt_s,
+        mon.decouple,
+        mon.available,
+        ev,
+        n_ev,
+        t,
+    )
+    if c.estimator.kind == ESTIMATOR_MEKF and np.sum(mon.available) < n_before:
+        fdir.star_reset_1(mon.star, est.covariance, STAR_RESET_SIGMA_RAD)
+
+
+@njit(cache=True)
+def _wheel_hold_stage(
+    c: LoopConfig, speeds: np.ndarray, est: Estimate, sensed: Sensed, cmd: Commands, mon: Monitors
+) -> None:
+    """Wheel FDIR's prediction for the next T_u (sim_core.fdir.wheel_hold_1) from the commands just sent and
+    the MD torque L × B (sim_core.magnetic)."""
+    p, act, fd = c.model, c.actuators, c.fdir
+    fdir.wheel_hold_1(
+        mon.wheel,
+        speeds,
+        est.omega,
+        p.wheel_axes,
+        cmd.wheel_cmd,
+        p.wheel_inertia,
+        act.max_torque_nm,
+        act.max_momentum_nms,
+        p.friction,
+        p.inertia,
+        mon.j_eff_inv,
+        magnetic.magnetic_torque_1(cmd.dipole, sensed.mag),
+        fd.disturbance_bound_nm,
+        fd.rate_noise_rad_s,
+        c.clock.control_every * c.clock.dt_s,
+    )
+
+
+@njit(cache=True)
+def _actuator_stage(c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, cmd: Commands) -> None:
+    """Delivered wheel motor torques: the held commands under wheel faults, then seed 000 eq (2) limits."""
+    p = c.model
+    nq, nw = p.flex_mass.shape[0], p.wheel_inertia.shape[0]
+    faults_mod.wheel_commands_1(faults, t, cmd.wheel_cmd, cmd.frozen_cmd, cmd.delivered)
+    wheels.limit_motor_torque_into(
+        cmd.delivered,
+        x[7 + 2 * nq : 7 + 2 * nq + nw],
+        p.wheel_inertia,
+        c.actuators.max_torque_nm,
+        c.actuators.max_momentum_nms,
+    )
+
+
+@njit(cache=True)
+def _disturbance_stage(
+    c: LoopConfig, x: np.ndarray, pos: Position, dipole: np.ndarray, magnetic_on: bool, ext: np.ndarray
+) -> None:
+    """External torque on the flown body: (MD dipole + residual dipole) × B (sim_core.magnetic) and the gravity
+    gradient (sim_core.environment) of the true inertia."""
+    ext[:] = 0.0
+    if magnetic_on:
+        ext[:] = magnetic.magnetic_torque_1(dipole + c.disturbances.residual_dipole_am2, pos.b_body)
+    if c.disturbances.gravity_gradient:
+        ext[:] += environment.gravity_gradient_torque_1(conjugate_rotate_1(x[0:4], pos.r), c.truth.inertia)
+
+
+@njit(cache=True)
+def _record_stage(
+    c: LoopConfig,
+    t: float,
+    x: np.ndarray,
+    pos: Position,
+    est: Estimate,
+    cmd: Commands,
+    mon: Monitors,
+    status: int,
+    flags: int,
+    mode: int,
+    row: np.ndarray,
+) -> None:
+    """One output sample (R_* channels): truth, estimate, program, actuators, wheels."""
+    nq, nw = c.model.flex_mass.shape[0], c.model.wheel_inertia.shape[0]
+    row[R_Q : R_Q + 4] = x[0:4]
+    row[R_W : R_W + 3] = x[4:7]
+    row[R_QE : R_QE + 4] = est.q
+    row[R_WE : R_WE + 3] = est.omega
+    q_now, w_now, _, obs_now = program_at(c, t, pos)
+    row[R_QP : R_QP + 4] = q_now
+    row[R_WP : R_WP + 3] = control.program_in_body_1(q_now, x[0:4], w_now)
+    row[R_MD : R_MD + 3] = cmd.dipole
+    row[R_TORQUE : R_TORQUE + 3] = cmd.body_torque
+    row[R_R : R_R + 3] = pos.r
+    row[R_OBS] = 1.0 if obs_now else 0.0
+    row[R_STATUS] = status
+    row[R_FAULTS] = flags
+    row[R_MODE] = mode
+    row[R_WHEELS : R_WHEELS + nw] = x[7 + 2 * nq : 7 + 2 * nq + nw]
+    row[R_WHEELS + nw : R_WHEELS + 2 * nw] = cmd.wheel_cmd
+    row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = cmd.delivered
+    for w in range(nw):
+        row[R_WHEELS + 3 * nw + w] = 1.0 if mon.available[w] else 0.0
+
+
+# --- initial state -----------------------------------------------------------------------------------------
+
+
+@njit(cache=True)
+def _markov_1(s: SensorModels, t_q: float) -> np.ndarray:
+    """Rows decay e^{−T_q/τ} and step σ √(1 − decay²) of the gyro's Markov drift (seed 002 eq 13), per axis."""
+    out = np.empty((2, 3))
+    out[0, :] = np.exp(-t_q / s.gyro_markov_tau_s)
+    out[1, :] = s.gyro_markov_sigma_rad_s * np.sqrt(1.0 - out[0] ** 2)
+    return out
+
+
+@njit(cache=True)
+def _initial_monitors(c: LoopConfig, available: np.ndarray) -> Monitors:
+    p, nw = c.model, c.model.wheel_inertia.shape[0]
+    star = np.zeros(fdir.STAR_STATE_SIZE)
+    star[0:4] = np.nan
+    gyro = np.zeros(fdir.GYRO_STATE_SIZE)
+    gyro[fdir.GS_T0] = np.nan
+    gyro[fdir.GS_SIGMA_U] = c.estimator.gyro_drift_density
+    j_eff_inv = np.linalg.inv(free_wheel_inertia_1(p))
+    return Monitors(
+        fdir.wheel_state_1(nw),
+        star,
+        gyro,
+        np.full(fdir.MAG_STATE_SIZE, np.nan),
+        np.zeros(fdir.EARTH_STATE_SIZE),
+        available.copy(),
+        fdir.wheel_decoupling_1(p.wheel_axes, p.wheel_inertia, j_eff_inv),
+        j_eff_inv,
+    )
+
+
+@njit(cache=True)
+def _flown_plant(c: LoopConfig) -> PlantArrays:
+    """The truth plant with its own friction array (wheel friction faults change it during the flight)."""
+    t = c.truth
+    return PlantArrays(
+        t.inertia,
+        t.mass_inv,
+        t.wheel_axes,
+        t.wheel_inertia,
+        t.friction.copy(),
+        t.flex_coupling,
+        t.flex_mass,
+        t.flex_freq,
+        t.flex_decrement,
+    )
+
+
+# --- the block diagram ---------------------------------------------------------------------------------------
 
 
 @njit(cache=True, nogil=True)
 def fly_variant(
-    x0,
-    p: PlantArrays,
-    truth: PlantArrays,
-    wheel_limits,
-    steps,
-    times,
-    program,
-    orbit,
-    env,
-    gains,
-    est,
-    alloc_params,
-    available,
-    faults,
-    fdir_cfg,
-    seed,
-    rec,
-    ev,
-    n_ev,
-    shared,
-    slot,
-    models: SeedModels,
+    c: LoopConfig, var: Variant, rec: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, shared: np.ndarray, slot: int
 ) -> None:
-    """Fly one variant and fill its output record ``rec`` (samples × channels) and events ``ev``.
+    """Fly one variant and fill its output record ``rec`` (samples × R_* channels) and events ``ev``.
 
-    ``p``: the plant the onboard software models (control law, allocation, FDIR); ``truth``: the plant
-    the dynamics fly (the same arrays unless the scenario states a truth that differs).
-
-    ``wheel_limits``: rows max torque, max momentum, torque quantum, per wheel.
-    ``steps``: [n_steps, meas_every, ctrl_every, out_every, law_kind, estimator_kind, program_kind,
-    gravity_gradient_on, mrp_law_type]; ``times``: [dt, t0_unix, md_max, dut1, st_sigma,
-    gyro_noise, mag_noise, tach_quantum, pd_kp, pd_kd, mrp_k, mrp_p, gyro_tau].
-    ``program``: (steps_t, steps_q, route); ``orbit``: (table, t0, step); ``env``: (B table, t0,
-    step, c_pn); ``est``: (true gyro bias (3,), initial MEKF covariance (6, 6)); ``fdir_cfg``: FD_*
-    entries (onboard FDIR of :mod:`sim_core.fdir`: wheels each T_u, star tracker, gyro drift and
-    magnetometer each T_q with the MEKF; it may drop wheels from ``available``). ``shared[0]`` non-zero
-    cancels the run (checked each T_u); ``models``: the :class:`SeedModels` switched on.
-    ``shared[slot]`` receives the number of steps done, for progress reports from another thread.
+    ``c.model`` is the plant the onboard software models (law, allocation, FDIR); ``c.truth`` the one the
+    dynamics fly. The law reads the estimator of ``c.estimator`` (truth, star tracker + gyro, or MEKF).
+    ``shared[0]`` non-zero cancels the run (checked each T_u); ``shared[slot]`` receives the steps done.
     """
-    np.random.seed(seed)
-    n_steps, meas_every, ctrl_every, out_every = steps[0], steps[1], steps[2], steps[3]
-    law_kind, est_kind, prog_kind, gg_on, mrp_law = steps[4], steps[5], steps[6], steps[7], steps[8]
-    dt, t0_unix, md_max, dut1 = times[0], times[1], times[2], times[3]
-    st_sigma, gyro_noise, mag_noise, tach_q = times[4], times[5], times[6], times[7]
-    pd_kp, pd_kd, mrp_k, mrp_p = times[8], times[9], times[10], times[11]
-    steps_t, steps_q, route = program
-    orbit_tab, orbit_t0, orbit_step = orbit
-    b_tab, b_t0, b_step, c_pn = env
-    nw = p.wheel_inertia.shape[0]
-    nq = p.flex_mass.shape[0]
-    n = x0.shape[0]
-
-    x = x0.copy()
-    m_res = models.residual_dipole_am2
-    res_on = m_res[0] != 0.0 or m_res[1] != 0.0 or m_res[2] != 0.0
-    markov_on = models.gyro_markov_sigma_rad_s > 0.0
-    markov_decay = np.full(3, np.exp(-times[0] * steps[1] / models.gyro_markov_tau_s))
-    markov_step = models.gyro_markov_sigma_rad_s * np.sqrt(1.0 - markov_decay**2)
-    gyro_drift = models.gyro_markov_sigma_rad_s * np.random.standard_normal(3) if markov_on else np.zeros(3)
-    gyro_noise3 = np.full(3, times[5])
-    sun_frozen = np.zeros(3)
-    total_dipole = np.zeros(3)
-    work = np.zeros((6, n + 3 + nq + nw))
-    j_inv = np.linalg.inv(truth.inertia)
-    base_friction = p.friction.copy()
-    friction = truth.friction.copy()
-    plant = PlantArrays(
-        truth.inertia,
-        truth.mass_inv,
-        truth.wheel_axes,
-        truth.wheel_inertia,
-        friction,
-        truth.flex_coupling,
-        truth.flex_mass,
-        truth.flex_freq,
-        truth.flex_decrement,
+    np.random.seed(var.seed)
+    clk, p = c.clock, c.model
+    nq, nw = p.flex_mass.shape[0], p.wheel_inertia.shape[0]
+    faults, fdir_on = var.faults, var.fdir_on
+    x = var.x0.copy()
+    markov = _markov_1(c.sensors, clk.measure_every * clk.dt_s)
+    sig_m = c.sensors.gyro_markov_sigma_rad_s
+    drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
+    sensed = Sensed(np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), np.zeros(3))
+    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), c.estimator.covariance0.copy())
+    cmd = Commands(
+        np.zeros(3),
+        np.zeros(3),
+        np.zeros(3),
+        np.zeros(nw),
+        np.zeros(nw),
+        np.zeros(nw),
+        np.zeros(3),
+        np.zeros(nw),
+        np.zeros(3),
+        np.zeros(10),
     )
-    g = np.zeros(3)  # lead-lag state of seed 000 eq (8)
-    cmd = np.zeros(nw)
-    frozen_cmd = np.zeros(nw)
-    delivered = np.zeros(nw)
-    dipole = np.zeros(3)
-    body_torque = np.zeros(3)
-    frozen_torque = np.zeros(3)
-    available = available.copy()
-    wheel_out = np.zeros(nw)
-    dip_out = np.zeros(3)
+    mon = _initial_monitors(c, var.available)
+    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3))
+    plant = _flown_plant(c)
+    j_inv = np.linalg.inv(c.truth.inertia)
+    work = np.zeros((6, x.shape[0] + 3 + nq + nw))
     ext = np.zeros(3)
-    q_est = x[0:4].copy()
-    w_est = x[4:7].copy()
-    bias_est = np.zeros(3)
-    gyro_bias, p_cov0 = est
-    p_cov = p_cov0.copy()
-    st_frozen = q_est.copy()
-    gyro_frozen = np.zeros(3)
-    w_meas = np.zeros(3)
-    q_p = x[0:4].copy()
-    w_p = np.zeros(3)
-    wd_p = np.zeros(3)
-    observing = False
-    status = 0
     fault_state = np.zeros(faults.shape[0], dtype=np.bool_)
-    mag = np.zeros(3)
-    out_i = 0
-    fdir_on = fdir_cfg[FD_ON] != 0.0
-    rate_noise, nis_max, n_sigma = fdir_cfg[FD_RATE_NOISE], fdir_cfg[FD_NIS_MAX], fdir_cfg[FD_N_SIGMA]
-    wheel_fd = fdir.wheel_state_1(nw)
-    star_fd = np.zeros(fdir.STAR_STATE_SIZE)
-    star_fd[0:4] = np.nan
-    gyro_fd = np.zeros(fdir.GYRO_STATE_SIZE)
-    gyro_fd[fdir.GS_T0] = np.nan
-    gyro_fd[fdir.GS_SIGMA_U] = times[12]
-    sigma_u = times[12]
-    mag_fd = np.full(fdir.MAG_STATE_SIZE, np.nan)
-    earth_fd = np.zeros(fdir.EARTH_STATE_SIZE)
-    w_prev = np.zeros(3)
-    md_torque = np.zeros(3)
-    j_eff = p.inertia.copy()
-    for w in range(nw):
-        for i in range(3):
-            for c in range(3):
-                j_eff[i, c] -= p.wheel_axes[i, w] * p.wheel_inertia[w] * p.wheel_axes[c, w]
-    j_eff_inv = np.linalg.inv(j_eff)
-    decouple = fdir.wheel_decoupling_1(p.wheel_axes, p.wheel_inertia, j_eff_inv)
-
-    r, v, a, b_eci = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    hermite_orbit_into(orbit_tab, orbit_t0, orbit_step, 0.0, r, v, a)
-    linear_into(b_tab, b_t0, b_step, 0.0, b_eci)
-    b_body = conjugate_rotate_1(x[0:4], b_eci)
-    flags = 0
-    md_on = False
-    modes_on = times[TM_ON] != 0.0
-    mode = int(times[TM_INITIAL]) if modes_on else -1
+    res = c.disturbances.residual_dipole_am2
+    res_on = res[0] != 0.0 or res[1] != 0.0 or res[2] != 0.0
+    mode = c.modes.initial if c.modes.on else -1
     mode_state = np.full(modes.STATE_SIZE, np.nan)
     mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
-    mode_thresholds = times[TM_THRESHOLDS : TM_THRESHOLDS + 5].copy()
-    mag_prev = np.zeros(3)
-    have_mag_prev = False
-    j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
-    acq_kp = j_max * ACQUISITION_OMEGA_RAD_S**2  # seed 002 eq 18 PD for the large-angle acquisitions
-    acq_kd = 2.0 * j_max * ACQUISITION_OMEGA_RAD_S  # steady slew rate ≤ kp/kd = ω_n/2 per unit error
-    attitude_valid = True
-    for k in range(n_steps):
-        t = k * dt
-        control_tick = k % ctrl_every == 0
-        if gg_on or md_on or control_tick or k % meas_every == 0 or k % out_every == 0:
-            hermite_orbit_into(orbit_tab, orbit_t0, orbit_step, t, r, v, a)
-        if md_on or res_on or k % meas_every == 0:
-            linear_into(b_tab, b_t0, b_step, t, b_eci)
-            conjugate_rotate_into(x, b_eci, b_body)
-        if faults.shape[0] > 0:
-            flags = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
-            if flags < 0:
-                flags = -flags - 1
-                frozen_cmd[:] = cmd
-                frozen_torque[:] = body_torque
-                gyro_frozen[:] = w_meas
+    sigma_u = c.estimator.gyro_drift_density
+    flags, status, out_i = 0, 0, 0
+    md_on, have_mag_prev, valid = False, False, True
+    _ephemeris_stage(c, 0.0, x, True, True, pos)
 
-        if k % meas_every == 0:
-            normals = np.random.standard_normal(6)
-            drift_normals = np.random.standard_normal(3) if markov_on else np.zeros(3)
-            w_meas, _ = sensors.gyro_1(
-                x[4:7],
-                gyro_bias,
-                gyro_drift,
-                gyro_noise3,
-                markov_decay,
-                markov_step,
-                np.inf,
-                np.concatenate((normals[0:3], drift_normals)),
+    for k in range(clk.n_steps):
+        t = k * clk.dt_s
+        measure = k % clk.measure_every == 0
+        control_tick = k % clk.control_every == 0
+        output = k % clk.output_every == 0
+        orbit_due = c.disturbances.gravity_gradient or md_on or control_tick or measure or output
+        _ephemeris_stage(c, t, x, orbit_due, md_on or res_on or measure, pos)
+        flags = _fault_stage(faults, t, fault_state, flags, ev, n_ev, cmd, sensed)
+
+        if measure:
+            q_m, sig3, st_ok, gyro_ok = _sense_stage(c, faults, t, x, markov, pos, sensed)
+            valid, sigma_u = _estimate_stage(
+                c, faults, fdir_on, k, t, x, pos, sensed, q_m, sig3, st_ok, gyro_ok, sigma_u, valid, est, mon, ev, n_ev
             )
-            gyro_ok = faults_mod.sensor_faults_1(faults, T_GYRO, t, w_meas, gyro_frozen, gyro_noise, normals[0:3])
-            sig3 = np.full(3, st_sigma)
-            q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, 1e9, normals[3:6])
-            st_ok = faults_mod.star_tracker_faults_1(faults, t, q_m, st_frozen, st_sigma, normals[3:6]) and st_ok
-            mag[:] = b_body + mag_noise * np.random.standard_normal(3)
-            faults_mod.sensor_faults_1(faults, T_MAG, t, mag, mag, mag_noise, normals[0:3])
-            if fdir_on:
-                fdir.magnetometer_check_1(
-                    mag_fd, mag, conjugate_rotate_1(q_est, b_eci), mag_noise, n_sigma, ev, n_ev, t
-                )
-            if est_kind == ESTIMATOR_TRUTH:
-                q_est[:] = x[0:4]
-                w_est[:] = x[4:7]
-            elif est_kind == ESTIMATOR_STAR_TRACKER:
-                if st_ok:
-                    q_est[:] = q_m
-                if gyro_ok:
-                    w_est[:] = w_meas
-            else:
-                if k > 0 and gyro_ok:
-                    # mean of the samples bracketing the step: the held sample's ½ ω̇ T_q² error would
-                    # make the filter overconfident in manoeuvres (and the FDIR innovation test with it)
-                    mekf.mekf_propagate_1(
-                        q_est,
-                        bias_est,
-                        p_cov,
-                        0.5 * (w_meas + w_prev),
-                        meas_every * dt,
-                        gyro_noise * np.sqrt(meas_every * dt),
-                        sigma_u,
-                    )
-                w_prev[:] = w_meas
-                st_raw_ok = st_ok
-                if fdir_on and st_ok:
-                    st_scale = fdir.star_tracker_check_1(
-                        star_fd, q_est, p_cov, q_m, sig3, nis_max, gyro_fd[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t
-                    )
-                    st_ok = st_scale > 0.0
-                    sig3 *= max(st_scale, 1.0)
-                if fdir_on and gyro_ok:
-                    sigma_u = fdir.gyro_drift_step_1(
-                        gyro_fd,
-                        t,
-                        w_meas,
-                        meas_every * dt,
-                        q_m,
-                        st_ok,
-                        st_sigma,
-                        gyro_noise,
-                        times[12],
-                        n_sigma,
-                        ev,
-                        n_ev,
-                    )
-                if not st_ok:
-                    nadir, earth_ok = _earth_sensor_nadir_1(faults, t, x, r)
-                    if fdir_on and earth_ok:
-                        earth_ok = fdir.earth_sensor_check_1(
-                            earth_fd, q_est, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD, ev, n_ev, t
-                        )
-                    if fdir_on and earth_ok and st_raw_ok:
-                        st_ok = fdir.star_readmit_1(
-                            star_fd, q_est, q_m, p_cov, nadir, -r, EARTH_SENSOR_SIGMA_RAD, n_sigma, ev, n_ev, t
-                        )
-                    if not st_ok:
-                        _earth_and_field_update_1(nadir, earth_ok, r, b_eci, mag, mag_noise, q_est, bias_est, p_cov)
-                if st_ok:
-                    mekf.mekf_update_1(q_est, bias_est, p_cov, q_m, sig3)
-                attitude_valid = st_ok
-                w_est[:] = w_meas - bias_est
 
-        if k % ctrl_every == 0:
+        if control_tick:
             shared[slot] = k
             if shared[0] != 0:
                 break
-            q_p, w_p, wd_p, observing = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
-            if modes_on:
-                q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), r, v, a)
-                sun_b = _sun_direction_1(
-                    faults,
-                    t,
-                    x,
-                    q_est,
-                    environment.sun_position_1(t0_unix + t),
-                    r,
-                    models.sun_sensor_sigma_rad,
-                    sun_frozen,
-                )
-                new_mode = modes.mode_step_1(
-                    mode_state,
-                    mode_thresholds,
-                    t,
-                    np.sqrt(w_est @ w_est),
-                    attitude_valid,
-                    _angle_between_1(SUN_AXIS_B, sun_b),
-                    _attitude_difference_1(q_est, q_orf),
-                    True,
-                    np.sum(available) < 2,
-                    False,
-                )
-                if new_mode != mode:
-                    _event(ev, n_ev, t, EV_MODE_CHANGE, new_mode)
-                    g[:] = 0.0
-                    mode = new_mode
-                if mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF:
-                    _mode_program_1(mode, q_est, r, v, a, sun_b, q_p, w_p, wd_p)
-            speeds = x[7 + 2 * nq : 7 + 2 * nq + nw].copy()
-            if tach_q > 0.0:
-                speeds = tach_q * np.floor(speeds / tach_q + 0.5)
+            mode = _guidance_stage(c, faults, t, x, pos, mode_state, mode, valid, est, sensed, mon, cmd, ev, n_ev)
+            speeds = _tachometer_stage(c, x)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
-                n_before = np.sum(available)
-                fdir.wheel_check_1(
-                    wheel_fd,
-                    speeds,
-                    w_est,
-                    p.wheel_inertia,
-                    wheel_limits[1],
-                    base_friction,
-                    tach_q,
-                    ctrl_every * dt,
-                    decouple,
-                    available,
-                    ev,
-                    n_ev,
-                    t,
-                )
-                if est_kind == ESTIMATOR_MEKF and np.sum(available) < n_before:
-                    fdir.star_reset_1(star_fd, p_cov, STAR_RESET_SIGMA_RAD)
-            coarse = mode == modes.MODE_SUN_SAFE or (
-                mode == modes.MODE_ORF and _attitude_difference_1(q_est, q_p) > FINE_POINTING_RAD
-            )
-            if modes_on and coarse:
-                body_torque = control.quaternion_pd_step(
-                    q_est, w_est, q_p, w_p, acq_kp, acq_kd
-                ) + control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
-            elif law_kind == LAW_SEED000:
-                body_torque = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, g, p.inertia, gains)
-                if times[T_GYRO_COMPENSATION] != 0.0:
-                    body_torque += control.gyroscopic_torque_1(w_est, p.inertia, p.wheel_axes @ h_wheels)
-            elif law_kind == LAW_MRP_FEEDBACK:
-                qpc = q_p.copy()
-                qpc[1:] = -qpc[1:]
-                e = multiply_1(qpc, q_est)
-                if e[0] < 0.0:
-                    e = -e
-                sigma = e[1:] / (1.0 + e[0])
-                w_rn_b = conjugate_rotate_1(e, w_p)
-                wd_rn_b = conjugate_rotate_1(e, wd_p)
-                body_torque = control.mrp_feedback_step(
-                    sigma,
-                    w_est - w_rn_b,
-                    w_rn_b,
-                    wd_rn_b,
-                    p.inertia,
-                    p.wheel_axes,
-                    p.wheel_inertia,
-                    speeds,
-                    available,
-                    mrp_k,
-                    mrp_p,
-                    mrp_law,
-                )
-            else:
-                body_torque = control.quaternion_pd_step(q_est, w_est, q_p, w_p, pd_kp, pd_kd)
-            faults_mod.controller_faults_1(faults, t, body_torque, frozen_torque)
-            status = allocation.allocate_1(
-                body_torque, p.wheel_axes, available, h_wheels, mag, alloc_params, wheel_out, dip_out
-            )
-            for w in range(nw):
-                cmd[w] = control.wheel_torque_command_1(wheel_out[w], wheel_limits[2, w], wheel_limits[0, w])
-            dipole[:] = dip_out
-            faults_mod.rod_faults_1(faults, t, dipole)
-            for i in range(3):
-                dipole[i] = min(max(dipole[i], -md_max), md_max)
-            if modes_on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
-                # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
-                dipole[:] = control.unloading_dipole_step(
-                    mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, md_max
-                )
-            if modes_on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
-                _rate_damping_1(
-                    mode,
-                    w_est,
-                    mag,
-                    mag_prev,
-                    have_mag_prev,
-                    ctrl_every * dt,
-                    times[TM_BDOT_GAIN],
-                    md_max,
-                    p,
-                    available,
-                    h_wheels,
-                    alloc_params,
-                    wheel_limits,
-                    body_torque,
-                    cmd,
-                    dipole,
-                    wheel_out,
-                    dip_out,
-                )
-            mag_prev[:] = mag
+                _wheel_monitor_stage(c, t, speeds, est, mon, ev, n_ev)
+            _law_stage(c, mode, est, speeds, h_wheels, mon.available, cmd)
+            status = _allocation_stage(c, faults, t, mode, est, sensed, have_mag_prev, h_wheels, mon.available, cmd)
+            sensed.mag_prev[:] = sensed.mag
             have_mag_prev = True
-            md_on = dipole[0] != 0.0 or dipole[1] != 0.0 or dipole[2] != 0.0
+            md_on = cmd.dipole[0] != 0.0 or cmd.dipole[1] != 0.0 or cmd.dipole[2] != 0.0
             if fdir_on:
-                md_torque[0] = dipole[1] * mag[2] - dipole[2] * mag[1]
-                md_torque[1] = dipole[2] * mag[0] - dipole[0] * mag[2]
-                md_torque[2] = dipole[0] * mag[1] - dipole[1] * mag[0]
-                fdir.wheel_hold_1(
-                    wheel_fd,
-                    speeds,
-                    w_est,
-                    p.wheel_axes,
-                    cmd,
-                    p.wheel_inertia,
-                    wheel_limits[0],
-                    wheel_limits[1],
-                    base_friction,
-                    p.inertia,
-                    j_eff_inv,
-                    md_torque,
-                    fdir_cfg[FD_DIST_TORQUE],
-                    rate_noise,
-                    ctrl_every * dt,
-                )
+                _wheel_hold_stage(c, speeds, est, sensed, cmd, mon)
 
-        if k % out_every == 0 and out_i < rec.shape[0]:
-            row = rec[out_i]
-            row[R_Q : R_Q + 4] = x[0:4]
-            row[R_W : R_W + 3] = x[4:7]
-            row[R_QE : R_QE + 4] = q_est
-            row[R_WE : R_WE + 3] = w_est
-            q_now, w_now, _, obs_now = _program_1(prog_kind, steps_t, steps_q, route, t, t0_unix, r, v, a, c_pn, dut1)
-            row[R_QP : R_QP + 4] = q_now
-            e = multiply_1(np.array([q_now[0], -q_now[1], -q_now[2], -q_now[3]]), x[0:4])
-            row[R_WP : R_WP + 3] = conjugate_rotate_1(e, w_now)
-            row[R_MD : R_MD + 3] = dipole
-            row[R_TORQUE : R_TORQUE + 3] = body_torque
-            row[R_R : R_R + 3] = r
-            row[R_OBS] = 1.0 if obs_now else 0.0
-            row[R_STATUS] = status
-            row[R_FAULTS] = flags
-            row[R_MODE] = mode
-            row[R_WHEELS : R_WHEELS + nw] = x[7 + 2 * nq : 7 + 2 * nq + nw]
-            row[R_WHEELS + nw : R_WHEELS + 2 * nw] = cmd
-            row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = delivered
-            for w in range(nw):
-                row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
+        if output and out_i < rec.shape[0]:
+            _record_stage(c, t, x, pos, est, cmd, mon, status, flags, mode, rec[out_i])
             out_i += 1
 
-        faults_mod.wheel_commands_1(faults, t, cmd, frozen_cmd, delivered)
-        limit_motor_torque_into(delivered, x, 7 + 2 * nq, p.wheel_inertia, wheel_limits[0], wheel_limits[1])
+        _actuator_stage(c, faults, t, x, cmd)
         if faults.shape[0] > 0:
-            faults_mod.extra_friction_1(faults, t, friction, base_friction)
-        ext[:] = 0.0
-        if md_on or res_on:
-            total_dipole[:] = dipole + m_res
-            ext[:] = magnetic.magnetic_torque_1(total_dipole, b_body)
-        if gg_on:
-            add_gravity_gradient_into(x, r, truth.inertia, ext)
-        rk4_step_into(x, dt, delivered, ext, plant, work, x)
+            faults_mod.extra_friction_1(faults, t, plant.friction, p.friction)
+        _disturbance_stage(c, x, pos, cmd.dipole, md_on or res_on, ext)
+        rk4_step_into(x, clk.dt_s, cmd.delivered, ext, plant, work, x)
         if faults.shape[0] > 0:
-            faults_mod.lock_stuck_wheels_1(faults, t + dt, x, plant, j_inv)
+            faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)
     else:
-        shared[slot] = n_steps
+        shared[slot] = clk.n_steps
 
 
-def run_batch(
-    x0,
-    p,
-    truth,
-    wheel_limits,
-    steps,
-    times,
-    program,
-    orbit,
-    env,
-    gains,
-    est,
-    alloc_params,
-    available,
-    faults,
-    n_faults,
-    fdir_cfg,
-    seeds,
-    rec,
-    ev,
-    n_ev,
-    shared,
-    models: SeedModels,
-) -> None:
-    """Fly every variant (axis 0 of x0, available, faults, fdir_cfg, seeds, rec, ev), one thread per core;
-    ``p`` is the modelled plant, ``truth`` the flown one (see :func:`fly_variant`).
+def run_batch(config: LoopConfig, batch: Batch, out: Record) -> None:
+    """Fly every variant of ``batch`` with ``config``, one thread per core, into ``out``.
 
     ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
     random stream, so results do not depend on the thread count or order.
@@ -802,32 +1054,16 @@ def run_batch(
     from concurrent.futures import ThreadPoolExecutor
 
     def one(v: int) -> None:
-        fly_variant(
-            x0[v],
-            p,
-            truth,
-            wheel_limits,
-            steps,
-            times,
-            program,
-            orbit,
-            env,
-            gains,
-            est,
-            alloc_params,
-            available[v],
-            faults[v, : n_faults[v]],
-            fdir_cfg[v],
-            seeds[v],
-            rec[v],
-            ev[v],
-            n_ev[v],
-            shared,
-            1 + v,
-            models,
+        var = Variant(
+            batch.x0[v],
+            batch.available[v],
+            batch.faults[v, : batch.n_faults[v]],
+            bool(batch.fdir_on[v]),
+            int(batch.seeds[v]),
         )
+        fly_variant(config, var, out.rec[v], out.ev[v], out.n_ev[v], out.shared, 1 + v)
 
-    n = x0.shape[0]
+    n = batch.x0.shape[0]
     if n == 1:
         one(0)
         return

@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 from scipy.optimize import brentq
 
-from sim_core.quaternion import multiply_1
+from sim_core.quaternion import conjugate_rotate_1, multiply_1
 
 __all__ = [
     "SOMOV_INERTIA_KG_M2",
@@ -48,6 +48,9 @@ __all__ = [
     "bdot_dipole_step",
     "unloading_dipole_step",
     "mrp_feedback_step",
+    "program_in_body_1",
+    "mrp_tracking_step",
+    "rate_brake_torque_1",
 ]
 
 # Inertia of a ~300 kg land-survey mini-satellite (seed 000 gives no J). A 300 kg bus about
@@ -521,3 +524,59 @@ def mrp_feedback(
         ]
     )
     return out.reshape(shape + (3,))
+
+
+@njit(cache=True)
+def program_in_body_1(q_p: np.ndarray, q_ib: np.ndarray, v_p: np.ndarray) -> np.ndarray:
+    """A program-axes vector (ω^p, ω̇^p) in body axes: Ẽ ∘ v ∘ E with E = Λ̃^p ∘ Λ (seed 000 §4)."""
+    e = multiply_1(np.array([q_p[0], -q_p[1], -q_p[2], -q_p[3]]), q_ib)
+    return conjugate_rotate_1(e, v_p)
+
+
+@njit(cache=True)
+def mrp_tracking_step(
+    q_ib: np.ndarray,
+    omega_b: np.ndarray,
+    q_p: np.ndarray,
+    omega_p: np.ndarray,
+    omega_dot_p: np.ndarray,
+    inertia: np.ndarray,
+    gs_b: np.ndarray,
+    js_kg_m2: np.ndarray,
+    wheel_speed_rad_s: np.ndarray,
+    available: np.ndarray,
+    k_nm: float,
+    p_nms: float,
+    law_type: int,
+) -> np.ndarray:
+    """:func:`mrp_feedback_step` on a quaternion program: σ_BR = ε/(1 + e0) of E = Λ̃^p ∘ Λ (short way),
+    ω_RN and ω̇_RN carried into body axes by E, δω = ω − ω_RN."""
+    qpc = q_p.copy()
+    qpc[1:] = -qpc[1:]
+    e = multiply_1(qpc, q_ib)
+    if e[0] < 0.0:
+        e = -e
+    sigma = e[1:] / (1.0 + e[0])
+    w_rn_b = conjugate_rotate_1(e, omega_p)
+    wd_rn_b = conjugate_rotate_1(e, omega_dot_p)
+    return mrp_feedback_step(
+        sigma,
+        omega_b - w_rn_b,
+        w_rn_b,
+        wd_rn_b,
+        inertia,
+        gs_b,
+        js_kg_m2,
+        wheel_speed_rad_s,
+        available,
+        k_nm,
+        p_nms,
+        law_type,
+    )
+
+
+@njit(cache=True)
+def rate_brake_torque_1(inertia: np.ndarray, omega_b: np.ndarray, tau_s: float) -> np.ndarray:
+    """Wheel rate brake −J ω / τ (N·m): the body rate decays with time constant τ (seed 001 rate damping)."""
+    brake: np.ndarray = -(inertia @ omega_b) / tau_s
+    return brake

@@ -46,6 +46,7 @@ __all__ = [
     "orbit_period_s",
     "turn_peak_rate",
     "MAX_EVENTS",
+    "loop_config",
 ]
 
 ORBIT_TABLE_STEP_S = 10.0  # Hermite error ~ (ωh)⁴ r / 384 ≈ 0.2 mm at LEO
@@ -56,6 +57,18 @@ PROGRESS_POLL_S = 0.2
 MEKF_SIGMA0_RAD = 1e-3  # initial attitude uncertainty of the MEKF (≈ 3.4′): the start is the program
 GG_BOUND_MARGIN = 1.5  # gravity-gradient bound 3μ/r³ (J_max − J_min), with room for eccentricity and perigee
 MEKF_BIAS0_RAD_S = 1e-5  # initial gyro-bias uncertainty (≈ 2°/h)
+
+
+LAWS = {
+    "seed000": closed_loop.LAW_SEED000,
+    "mrp_feedback": closed_loop.LAW_MRP_FEEDBACK,
+    "quaternion_pd": closed_loop.LAW_QUATERNION_PD,
+}
+ESTIMATORS = {
+    "truth": closed_loop.ESTIMATOR_TRUTH,
+    "star_tracker": closed_loop.ESTIMATOR_STAR_TRACKER,
+    "mekf": closed_loop.ESTIMATOR_MEKF,
+}
 
 
 def _epoch_unix_s(text: str) -> float:
@@ -181,28 +194,36 @@ def _route_segments(s: Scenario) -> list:
     return segs
 
 
-def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, dut1: float):
+def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, dut1: float) -> closed_loop.Program:
     g = s.guidance
     if g.kind == "inertial":
         steps_t = np.array([t for t, _ in g.inertial_steps], dtype=float)
         steps_q = quaternion.normalize(np.array([q for _, q in g.inertial_steps], dtype=float))
         order = np.argsort(steps_t)
-        return closed_loop.PROGRAM_INERTIAL, (steps_t[order], steps_q[order], np.zeros((1, guidance.ROW_SIZE)))
+        return closed_loop.Program(
+            closed_loop.PROGRAM_INERTIAL,
+            np.ascontiguousarray(steps_t[order]),
+            np.ascontiguousarray(steps_q[order]),
+            np.zeros((1, guidance.ROW_SIZE)),
+        )
     segs = [guidance.OrfHold(s.duration_s + 2 * s.control_dt_s)] if g.kind == "orf" else _route_segments(s)
     route = guidance.compile_route(segs, t0, state, c_pn, dut1, w_pm)
-    return closed_loop.PROGRAM_ROUTE, (np.zeros(1), np.array([[1.0, 0, 0, 0]]), np.ascontiguousarray(route))
+    return closed_loop.Program(
+        closed_loop.PROGRAM_ROUTE, np.zeros(1), np.array([[1.0, 0, 0, 0]]), np.ascontiguousarray(route)
+    )
 
 
-def _mode_settings(s: Scenario, field_eci_t: np.ndarray) -> list[float]:
-    """``times`` entries TM_* of the onboard mode machine (closed_loop): on, initial mode, B-dot gain
-    and the thresholds of :class:`sim_core.modes.ModeThresholds`. The route's window is always open:
-    a route begins with its ORF hold, so ORF → route happens once the ORF pointing is ready.
+def _mode_config(s: Scenario, field_eci_t: np.ndarray) -> closed_loop.ModeConfig:
+    """The onboard mode machine (sim_core.modes) of the scenario: on, initial mode, B-dot gain and the
+    thresholds of :class:`sim_core.modes.ModeThresholds`. The route's window is always open: a route
+    begins with its ORF hold, so ORF → route happens once the ORF pointing is ready.
 
     B-dot gain k/|B|² with k = 2n(1 + sin ξ)J_min (Avanzini & Giulietti 2012, ξ ≈ 90° on a polar
     or Sun-synchronous orbit), |B|² the orbit mean of the field table: L = −k Ḃ/|B|².
     """
+    thresholds = np.ascontiguousarray(modes.ModeThresholds().to_array(), dtype=float)
     if s.initial_mode is None:
-        return [0.0, 0.0, 0.0, *modes.ModeThresholds().to_array()]
+        return closed_loop.ModeConfig(False, 0, 0.0, thresholds)
     a = orbit.R_EARTH_M + s.orbit.altitude_m
     n = np.sqrt(orbit.MU_EARTH_M3_S2 / a**3)
     j_min = float(np.min(np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2, dtype=float))))
@@ -213,7 +234,7 @@ def _mode_settings(s: Scenario, field_eci_t: np.ndarray) -> list[float]:
         "orf": modes.MODE_ORF,
         "route": modes.MODE_ROUTE,
     }[s.initial_mode]
-    return [1.0, float(initial), gain, *modes.ModeThresholds().to_array()]
+    return closed_loop.ModeConfig(True, int(initial), float(gain), thresholds)
 
 
 def allocation_params(s: Scenario) -> np.ndarray:
@@ -236,24 +257,27 @@ def allocation_params(s: Scenario) -> np.ndarray:
     ).as_array()
 
 
-def _fdir_config(s: Scenario, on: bool | Sequence[bool]) -> np.ndarray:
-    """Per-variant FD_* rows: thresholds from the sensor noise of the scenario (sim_core.fdir)."""
+def _fdir_flags(s: Scenario, on: bool | Sequence[bool]) -> np.ndarray:
+    """One FDIR on/off flag per variant."""
     nv = len(s.variants)
     flags = np.broadcast_to(np.asarray(on, dtype=bool), (nv,)) if np.ndim(on) == 0 else np.asarray(on, dtype=bool)
     if flags.shape != (nv,):
         raise ValueError(f"fdir: expected one flag or {nv} flags (one per variant), got shape {flags.shape}")
+    return np.ascontiguousarray(flags)
+
+
+def _fdir_config(s: Scenario) -> closed_loop.FdirConfig:
+    """FDIR thresholds from the sensor noise of the scenario (sim_core.fdir)."""
     n_sigma = fdir_kernels.gaussian_sigmas()
     rate_noise = 0.0 if s.estimator.kind == "truth" else n_sigma * np.sqrt(2.0) * s.sensors.gyro_noise_rad_s
-    cfg = np.zeros((nv, closed_loop.FDIR_CONFIG_SIZE))
-    cfg[:, closed_loop.FD_ON] = flags
-    cfg[:, closed_loop.FD_RATE_NOISE] = rate_noise
-    cfg[:, closed_loop.FD_NIS_MAX] = fdir_kernels.star_nis_threshold()
-    cfg[:, closed_loop.FD_N_SIGMA] = n_sigma
+    bound = 0.0
     if s.gravity_gradient:
         r0 = np.linalg.norm(orbit_state(s)(np.array([_epoch_unix_s(s.orbit.epoch_utc)]))[0][0])
         eig = np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2, dtype=float))
-        cfg[:, closed_loop.FD_DIST_TORQUE] = GG_BOUND_MARGIN * 3.0 * orbit.MU_EARTH_M3_S2 / r0**3 * (eig[-1] - eig[0])
-    return cfg
+        bound = GG_BOUND_MARGIN * 3.0 * orbit.MU_EARTH_M3_S2 / r0**3 * (eig[-1] - eig[0])
+    return closed_loop.FdirConfig(
+        float(rate_noise), float(fdir_kernels.star_nis_threshold()), float(n_sigma), float(bound)
+    )
 
 
 class ProgramSamples(NamedTuple):
@@ -275,12 +299,12 @@ def program_along(s: Scenario, t_s: np.ndarray) -> ProgramSamples:
     t0 = _epoch_unix_s(s.orbit.epoch_utc)
     state = orbit_state(s)
     c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
-    kind, program = _program(s, state, t0, c_pn, w_pm, dut1)
+    g = _program(s, state, t0, c_pn, w_pm, dut1)
     r, v, a = state(t0 + t)
     q, w, wd = np.empty((t.size, 4)), np.empty((t.size, 3)), np.empty((t.size, 3))
     obs = np.empty(t.size, dtype=bool)
     for i, ti in enumerate(t):
-        q[i], w[i], wd[i], obs[i] = closed_loop._program_1(kind, *program, ti, t0, r[i], v[i], a[i], c_pn, dut1)
+        q[i], w[i], wd[i], obs[i] = closed_loop.program_1(g, ti, t0, r[i], v[i], a[i], c_pn, dut1)
     b = environment.magnetic_field_eci_t(r, t0 + t, s.magnetic_model)
     return ProgramSamples(q, w, wd, obs, r, b)
 
@@ -301,21 +325,10 @@ def turn_peak_rate(s: Scenario, route_index: int) -> float:
         raise ValueError(f"route_index: guidance.route[{route_index}] is not a turn")
     t0 = _epoch_unix_s(s.orbit.epoch_utc)
     c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
-    _, (_, _, route) = _program(s, orbit_state(s), t0, c_pn, w_pm, dut1)
+    route = _program(s, orbit_state(s), t0, c_pn, w_pm, dut1).route
     shift = 1 if g.route_start_s > 0 else 0
     envelopes = dict(guidance.turn_envelopes(route))
     return float(envelopes[route_index + shift].max_rate_bound_rad_s)
-
-
-def seed_models(s: Scenario) -> closed_loop.SeedModels:
-    """The scenario's residual dipole, gyro Markov drift and Sun sensor for the loop (zero = off)."""
-    sn = s.sensors
-    return closed_loop.SeedModels(
-        np.array(s.spacecraft.residual_dipole_am2, dtype=float),
-        float(sn.gyro_markov_sigma_rad_s),
-        float(sn.gyro_markov_tau_s),
-        float(sn.sun_sensor_sigma_rad),
-    )
 
 
 class Cancelled(RuntimeError):
@@ -340,115 +353,124 @@ def simulate(
     s = scenario
     start = time.perf_counter()
     params = plant_params(s)
-    packed = params.pack()
     nw, nv = params.n_wheels, len(s.variants)
     t0 = _epoch_unix_s(s.orbit.epoch_utc)
     state = orbit_state(s)
     c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
-    prog_kind, program = _program(s, state, t0, c_pn, w_pm, dut1)
-
+    program = _program(s, state, t0, c_pn, w_pm, dut1)
     r0, v0, a0 = state(np.array([t0]))
-    q_p0, w_p0, _, _ = closed_loop._program_1(prog_kind, *program, 0.0, t0, r0[0], v0[0], a0[0], c_pn, dut1)
+    q_p0, w_p0, _, _ = closed_loop.program_1(program, 0.0, t0, r0[0], v0[0], a0[0], c_pn, dut1)
     q_init = q_p0 if s.initial_q_ib is None else quaternion.normalize(np.array(s.initial_q_ib))
     w_init = w_p0 if s.initial_omega_b_rad_s is None else np.array(s.initial_omega_b_rad_s)
     speeds = np.array([w.initial_speed_rpm for w in s.spacecraft.cluster.wheels]) * np.pi / 30.0
     x0 = pack_state(params, q_init, w_init, speeds)
 
-    dt = s.dynamics_dt_s
-    n_steps = int(round(s.duration_s / dt))
-    every = [int(round(getattr(s, name) / dt)) for name in ("measurement_dt_s", "control_dt_s", "output_dt_s")]
-    n_out = -(-n_steps // every[2])
-    law = {
-        "seed000": closed_loop.LAW_SEED000,
-        "mrp_feedback": closed_loop.LAW_MRP_FEEDBACK,
-        "quaternion_pd": closed_loop.LAW_QUATERNION_PD,
-    }[s.controller.kind]
-    est = {
-        "truth": closed_loop.ESTIMATOR_TRUTH,
-        "star_tracker": closed_loop.ESTIMATOR_STAR_TRACKER,
-        "mekf": closed_loop.ESTIMATOR_MEKF,
-    }[s.estimator.kind]
-    steps = np.array([n_steps, *every, law, est, prog_kind, int(s.gravity_gradient), 0], dtype=np.int64)
-    c = s.controller
-    sn = s.sensors
-    field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
-    times = np.array(
-        [
-            dt,
-            t0,
-            s.spacecraft.md_max_dipole_am2,
-            dut1,
-            sn.star_tracker_sigma_arcsec * ARCSEC,
-            sn.gyro_noise_rad_s,
-            sn.magnetometer_noise_t,
-            sn.tachometer_quantum_rad_s,
-            c.pd_kp_nm,
-            c.pd_kd_nms,
-            c.mrp_k_nm,
-            c.mrp_p_nms,
-            sn.gyro_drift_density_rad_s_sqrt_s,
-            *_mode_settings(s, field_tab[0]),
-            float(c.gyroscopic_compensation),
-        ]
-    )
-    ws = s.spacecraft.cluster.wheels
-    wheel_limits = np.array(
-        [[w.max_torque_nm for w in ws], [w.max_momentum_nms for w in ws], [w.torque_quantum_nm for w in ws]]
-    )
-    gains = DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array()
-    alloc = allocation_params(s)
-    fdir_cfg = _fdir_config(s, s.fdir if fdir is None else fdir)
+    config = loop_config(s, params, state, t0, c_pn, dut1, program)
+    clock = config.clock
+    n_out = -(-clock.n_steps // clock.output_every)
     avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)
     if avail.shape != (nv, nw):
         raise ValueError(f"wheel_available: expected shape ({nv}, {nw}), got {avail.shape}")
     faults, n_faults = fault_kernels.fault_table(s.variants)
     seeds = np.array([s.seed * 1000 + i * 7919 + v.seed_offset for i, v in enumerate(s.variants)], dtype=np.int64)
-    orbit_tab = _orbit_table(state, t0, s.duration_s)
-    env = (field_tab[0], field_tab[1], field_tab[2], np.ascontiguousarray(c_pn))
-
-    rec = np.zeros((nv, n_out, closed_loop.record_width(nw)))
-    ev = np.zeros((nv, MAX_EVENTS, 3))
-    n_ev = np.zeros((nv, 1), dtype=np.int64)
-    x0s = np.repeat(x0[None], nv, axis=0)
-    est_init = (np.array(sn.gyro_bias_rad_s, dtype=float), mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S))
-    shared = np.zeros(nv + 1, dtype=np.int64)
-    flown = plant_params(s, truth=True).pack() if s.truth is not None else packed
-    args = (
-        x0s,
-        packed,
-        flown,
-        wheel_limits,
-        steps,
-        times,
-        program,
-        orbit_tab,
-        env,
-        gains,
-        est_init,
-        alloc,
-        avail,
+    batch = closed_loop.Batch(
+        np.repeat(x0[None], nv, axis=0),
+        np.ascontiguousarray(avail),
         faults,
         n_faults,
-        fdir_cfg,
+        _fdir_flags(s, s.fdir if fdir is None else fdir),
         seeds,
-        rec,
-        ev,
-        n_ev,
-        shared,
-        seed_models(s),
     )
-    _run_watched(args, shared, n_steps, progress, cancel)
-    return _trajectory(s, rec, ev, n_ev, nw, n_out * every[2] * dt, params, time.perf_counter() - start)
+    out = closed_loop.Record(
+        np.zeros((nv, n_out, closed_loop.record_width(nw))),
+        np.zeros((nv, MAX_EVENTS, 3)),
+        np.zeros((nv, 1), dtype=np.int64),
+        np.zeros(nv + 1, dtype=np.int64),
+    )
+    _run_watched(config, batch, out, clock.n_steps, progress, cancel)
+    span = n_out * clock.output_every * clock.dt_s
+    return _trajectory(s, out.rec, out.ev, out.n_ev, nw, span, params, time.perf_counter() - start)
 
 
-def _run_watched(args: tuple, shared: np.ndarray, n_steps: int, progress, cancel) -> None:
+def loop_config(
+    s: Scenario, params: PlantParams, state, t0: float, c_pn: np.ndarray, dut1: float, program: closed_loop.Program
+) -> closed_loop.LoopConfig:
+    """The typed configuration of :func:`sim_core.closed_loop.fly_variant` for the scenario: every block's
+    parameters by name (plant as modelled and as flown, clock, ephemeris tables, sensors, estimator, law,
+    actuators, disturbances, modes, FDIR)."""
+    dt = s.dynamics_dt_s
+    every = [int(round(getattr(s, name) / dt)) for name in ("measurement_dt_s", "control_dt_s", "output_dt_s")]
+    clock = closed_loop.Clock(
+        int(round(s.duration_s / dt)), float(dt), every[0], every[1], every[2], float(t0), float(dut1)
+    )
+    field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
+    orbit_tab = _orbit_table(state, t0, s.duration_s)
+    ephemeris = closed_loop.Ephemeris(*orbit_tab, *field_tab, np.ascontiguousarray(c_pn))
+    sn, c, ws = s.sensors, s.controller, s.spacecraft.cluster.wheels
+    sensor_models = closed_loop.SensorModels(
+        float(sn.star_tracker_sigma_arcsec * ARCSEC),
+        float(sn.gyro_noise_rad_s),
+        np.array(sn.gyro_bias_rad_s, dtype=float),
+        float(sn.gyro_markov_sigma_rad_s),
+        float(sn.gyro_markov_tau_s),
+        float(sn.magnetometer_noise_t),
+        float(sn.tachometer_quantum_rad_s),
+        float(sn.sun_sensor_sigma_rad),
+    )
+    estimator = closed_loop.EstimatorConfig(
+        ESTIMATORS[s.estimator.kind],
+        mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S),
+        float(sn.gyro_drift_density_rad_s_sqrt_s),
+    )
+    law = closed_loop.LawConfig(
+        LAWS[c.kind],
+        DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array(),
+        bool(c.gyroscopic_compensation),
+        float(c.pd_kp_nm),
+        float(c.pd_kd_nms),
+        float(c.mrp_k_nm),
+        float(c.mrp_p_nms),
+        0,
+    )
+    actuators = closed_loop.Actuators(
+        np.array([w.max_torque_nm for w in ws], dtype=float),
+        np.array([w.max_momentum_nms for w in ws], dtype=float),
+        np.array([w.torque_quantum_nm for w in ws], dtype=float),
+        float(s.spacecraft.md_max_dipole_am2),
+        allocation_params(s),
+    )
+    disturbances = closed_loop.Disturbances(
+        bool(s.gravity_gradient), np.array(s.spacecraft.residual_dipole_am2, dtype=float)
+    )
+    packed = params.pack()
+    flown = plant_params(s, truth=True).pack() if s.truth is not None else packed
+    return closed_loop.LoopConfig(
+        packed,
+        flown,
+        clock,
+        ephemeris,
+        program,
+        sensor_models,
+        estimator,
+        law,
+        actuators,
+        disturbances,
+        _mode_config(s, field_tab[0]),
+        _fdir_config(s),
+    )
+
+
+def _run_watched(
+    config: closed_loop.LoopConfig, batch: closed_loop.Batch, out: closed_loop.Record, n_steps: int, progress, cancel
+) -> None:
     """Run the compiled batch; if watched, in a thread while this one reports progress and polls cancel."""
     if progress is None and cancel is None:
-        closed_loop.run_batch(*args)
+        closed_loop.run_batch(config, batch, out)
         return
     import threading
 
-    worker = threading.Thread(target=closed_loop.run_batch, args=args, daemon=True)
+    shared = out.shared
+    worker = threading.Thread(target=closed_loop.run_batch, args=(config, batch, out), daemon=True)
     worker.start()
     while worker.is_alive():
         worker.join(PROGRESS_POLL_S)

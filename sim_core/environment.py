@@ -59,6 +59,7 @@ __all__ = [
     "gravity_gradient_torque_1",
     "aerodynamic_torque_1",
     "solar_pressure_torque_1",
+    "field_table_into",
 ]
 
 IGRF_REFERENCE_RADIUS_M = 6371.2e3
@@ -559,3 +560,13 @@ def solar_pressure_torque_nm(
         s_b = quaternion.rotate(quaternion.conjugate(q[k]), d / dist)
         torque[k] = solar_pressure_torque_1(s_b, dist, illumination_1(r[k], r_sun), n, a, c, spec, diff)
     return torque
+
+
+@njit(cache=True)
+def field_table_into(table: np.ndarray, t0: float, step: float, t: float, out: np.ndarray) -> None:
+    """Field (or any row) of ``table`` sampled every ``step`` s from t0, linearly interpolated at t into ``out``."""
+    u = (t - t0) / step
+    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
+    s = u - i
+    for j in range(out.shape[0]):
+        out[j] = (1.0 - s) * table[i, j] + s * table[i + 1, j]

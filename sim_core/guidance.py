@@ -41,6 +41,7 @@ __all__ = [
     "OrbitState",
     "orf_rates_1",
     "orf_hold_1",
+    "sun_pointing_1",
     "orf_hold_program",
     "orf_angles_deg",
     "target_pointing_1",
@@ -469,3 +470,17 @@ def two_course_scan(
         Turn(turn_s),
         OrfHold(course_s, roll_deg=second_roll_deg, observing=True),
     ]
+
+
+@njit(cache=True)
+def sun_pointing_1(q_ib: np.ndarray, sun_b: np.ndarray, axis_b: np.ndarray) -> np.ndarray:
+    """One-axis Sun orientation (seed 001): the attitude nearest q_ib that puts the body axis ``axis_b`` on the
+    Sun direction ``sun_b`` (unit, body axes, as the Sun sensor sees it), by the shortest rotation."""
+    axis = np.cross(axis_b, sun_b)
+    n = np.sqrt(axis @ axis)
+    ang = np.arctan2(n, axis_b @ sun_b)
+    dq = np.array([1.0, 0.0, 0.0, 0.0])
+    if n > 1e-12:
+        dq[0] = np.cos(0.5 * ang)
+        dq[1:] = np.sin(0.5 * ang) * axis / n
+    return multiply_1(q_ib, dq)

@@ -36,6 +36,7 @@ __all__ = [
     "circular_orbit_1",
     "j2_acceleration_1",
     "j2_rk4_step_1",
+    "hermite_state_into",
 ]
 
 MU_EARTH_M3_S2 = 3.986004418e14  # EGM2008 / IERS 2010
@@ -318,3 +319,23 @@ def _propagate_j2_kernel(state0: np.ndarray, t_s: np.ndarray, max_step_s: float)
         t = t_s[k]
         out[k] = s
     return out
+
+
+@njit(cache=True)
+def hermite_state_into(
+    table: np.ndarray, t0: float, step: float, t: float, r: np.ndarray, v: np.ndarray, acc: np.ndarray
+) -> None:
+    """ECI r, v, a at t from a table of rows (r, v, a) every ``step`` s from t0: cubic Hermite on (r, v),
+    linear on a, written in place (the engine tabulates the orbit once per batch)."""
+    u = (t - t0) / step
+    i = min(max(int(np.floor(u)), 0), table.shape[0] - 2)
+    s = u - i
+    s2, s3 = s * s, s * s * s
+    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
+    d00, d10, d01, d11 = (6 * s2 - 6 * s) / step, 3 * s2 - 4 * s + 1, (-6 * s2 + 6 * s) / step, 3 * s2 - 2 * s
+    for j in range(3):
+        r[j] = (
+            h00 * table[i, j] + h10 * step * table[i, 3 + j] + h01 * table[i + 1, j] + h11 * step * table[i + 1, 3 + j]
+        )
+        v[j] = d00 * table[i, j] + d10 * table[i, 3 + j] + d01 * table[i + 1, j] + d11 * table[i + 1, 3 + j]
+        acc[j] = (1 - s) * table[i, 6 + j] + s * table[i + 1, 6 + j]

@@ -28,6 +28,9 @@ __all__ = [
     "multiply_1",
     "rotate_1",
     "conjugate_rotate_1",
+    "conjugate_rotate_into",
+    "attitude_difference_1",
+    "angle_between_1",
     "normalize_1",
 ]
 
@@ -220,12 +223,35 @@ def rotate_1(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def conjugate_rotate_1(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Λ̃ ∘ v ∘ Λ (inertial → body for ``q_ib``), compiled kernel."""
-    qc = np.empty(4)
-    qc[0] = q[0]
-    qc[1] = -q[1]
-    qc[2] = -q[2]
-    qc[3] = -q[3]
-    return rotate_1(qc, v)
+    out = np.empty(3)
+    conjugate_rotate_into(q, v, out)
+    return out
+
+
+@njit(cache=True)
+def conjugate_rotate_into(q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
+    """Λ̃ ∘ v ∘ Λ with Λ = q[0:4] (inertial → body for ``q_ib``) written into ``out``, no allocation."""
+    q0, q1, q2, q3 = q[0], -q[1], -q[2], -q[3]
+    tx = 2.0 * (q2 * v[2] - q3 * v[1])
+    ty = 2.0 * (q3 * v[0] - q1 * v[2])
+    tz = 2.0 * (q1 * v[1] - q2 * v[0])
+    out[0] = v[0] + q0 * tx + q2 * tz - q3 * ty
+    out[1] = v[1] + q0 * ty + q3 * tx - q1 * tz
+    out[2] = v[2] + q0 * tz + q1 * ty - q2 * tx
+
+
+@njit(cache=True)
+def attitude_difference_1(q_a: np.ndarray, q_b: np.ndarray) -> float:
+    """Rotation angle (rad, in [0, π]) between two attitudes."""
+    d = abs(q_a[0] * q_b[0] + q_a[1] * q_b[1] + q_a[2] * q_b[2] + q_a[3] * q_b[3])
+    return float(2.0 * np.arccos(min(d, 1.0)))
+
+
+@njit(cache=True)
+def angle_between_1(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (rad) between two non-zero vectors, atan2(|a × b|, a · b)."""
+    c = np.cross(a, b)
+    return float(np.arctan2(np.sqrt(c @ c), a @ b))
 
 
 @njit(cache=True)

@@ -35,6 +35,7 @@ __all__ = [
     "gyro_1",
     "nadir_roll_pitch",
     "nadir_roll_pitch_1",
+    "nadir_from_roll_pitch_1",
     "earth_sensor",
     "earth_sensor_1",
     "magnetometer",
@@ -271,6 +272,17 @@ def nadir_roll_pitch_1(q_ib: np.ndarray, r_i: np.ndarray) -> tuple[float, float]
     rn = np.sqrt(r_i[0] ** 2 + r_i[1] ** 2 + r_i[2] ** 2)
     n_b = qt.conjugate_rotate_1(q_ib, -r_i / rn)
     return np.arctan2(n_b[2], n_b[0]), np.arcsin(min(max(-n_b[1], -1.0), 1.0))
+
+
+@njit(cache=True)
+def nadir_from_roll_pitch_1(roll: float, pitch: float) -> np.ndarray:
+    """Nadir unit vector in body axes from earth-sensor roll and pitch, n_b = (cos θ cos φ, −sin θ, cos θ sin φ)
+    (the inverse of :func:`nadir_roll_pitch_1`, seed 002 eq 14)."""
+    nadir = np.empty(3)
+    nadir[0] = np.cos(pitch) * np.cos(roll)
+    nadir[1] = -np.sin(pitch)
+    nadir[2] = np.cos(pitch) * np.sin(roll)
+    return nadir
 
 
 def earth_sensor(

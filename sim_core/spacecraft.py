@@ -39,6 +39,7 @@ __all__ = [
     "plant_derivative",
     "plant_derivative_1",
     "plant_derivative_into",
+    "free_wheel_inertia_1",
     "angular_momentum_b",
     "angular_momentum_b_1",
     "angular_momentum_i",
@@ -215,6 +216,17 @@ def angular_momentum_b_1(x: np.ndarray, p: PlantArrays) -> np.ndarray:
             acc += p.wheel_axes[i, w] * p.wheel_inertia[w] * x[7 + 2 * nq + w]
         g[i] = acc
     return g
+
+
+@njit(cache=True)
+def free_wheel_inertia_1(p: PlantArrays) -> np.ndarray:
+    """Body inertia with the wheels free to spin, J − Σ_p J_r,p a_p a_pᵗ (seed 000 eq 1, row 1 with Ω̇ eliminated)."""
+    j_eff = p.inertia.copy()
+    for w in range(p.wheel_inertia.shape[0]):
+        for i in range(3):
+            for c in range(3):
+                j_eff[i, c] -= p.wheel_axes[i, w] * p.wheel_inertia[w] * p.wheel_axes[c, w]
+    return j_eff
 
 
 @njit(cache=True)

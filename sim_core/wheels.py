@@ -49,6 +49,7 @@ __all__ = [
     "friction_torque_one_wheel",
     "limited_motor_torque",
     "limited_motor_torque_1",
+    "limit_motor_torque_into",
     "imbalance_torque",
     "noise_torque",
     "delivered_torque_1",
@@ -225,15 +226,26 @@ def limited_motor_torque_1(
     max_momentum_nms: np.ndarray,
 ) -> np.ndarray:
     """Motor torque within |m_p| ≤ m^m, none beyond |h_p| ≤ h^m (seed 000 eq 2), per wheel."""
-    n = torque_cmd_nm.shape[0]
-    out = np.empty(n)
-    for p in range(n):
-        m = min(max_torque_nm[p], max(-max_torque_nm[p], torque_cmd_nm[p]))
+    out = torque_cmd_nm.copy()
+    limit_motor_torque_into(out, speed_rad_s, inertia_kg_m2, max_torque_nm, max_momentum_nms)
+    return out
+
+
+@njit(cache=True)
+def limit_motor_torque_into(
+    torque_nm: np.ndarray,
+    speed_rad_s: np.ndarray,
+    inertia_kg_m2: np.ndarray,
+    max_torque_nm: np.ndarray,
+    max_momentum_nms: np.ndarray,
+) -> None:
+    """Seed 000 eq (2) applied in place: |m_p| ≤ m^m, and no torque driving |h_p| beyond h^m."""
+    for p in range(torque_nm.shape[0]):
+        m = min(max_torque_nm[p], max(-max_torque_nm[p], torque_nm[p]))
         h = inertia_kg_m2[p] * speed_rad_s[p]
         if (h >= max_momentum_nms[p] and m > 0.0) or (h <= -max_momentum_nms[p] and m < 0.0):
             m = 0.0
-        out[p] = m
-    return out
+        torque_nm[p] = m
 
 
 @njit(cache=True)
