@@ -402,9 +402,14 @@ def _xtce_values(
         raw = calibrated  # the bulk walk takes no calibrated parameters: engineering value = raw number
     except xtce_bulk.Unsupported:
         calibrated, raw, short = _xtce_one_by_one(buf, offset, length, source)
-    values = {name: _narrow(v) for name, v in calibrated.items() if not np.isnan(v).all()}
+    values = {
+        name: _narrow(v) if v.dtype.kind == "f" else v
+        for name, v in calibrated.items()
+        if v.dtype.kind != "f" or not np.isnan(v).all()
+    }
     timed = definition.time_fields.names if definition.time_fields is not None else ()
-    codes = {name: _narrow(raw[name]) for name in timed}
+    raw = {name: raw.get(name, np.full(n, np.nan)) for name in timed}
+    codes = {name: _narrow(raw[name]) if raw[name].dtype.kind == "f" else raw[name] for name in timed}
     t = np.full(n, INVALID_TIME, dtype=np.int64)
     problems: dict[int, str] = {}
     ok = np.setdiff1d(np.arange(n), list(short))
@@ -429,9 +434,10 @@ _WALKS: dict[int, tuple[object, xtce_bulk.XtceWalk]] = {}  # by id() of a space_
 def _xtce_bulk(
     buf: np.ndarray, offset: np.ndarray, length: np.ndarray, source: XtceSource
 ) -> tuple[dict[str, np.ndarray], dict[int, str]]:
-    """Numeric values (float64, NaN where a packet's container lacks the parameter) of XTCE packets decoded in
-    bulk by container (telemetry.xtce_bulk), and why packets could not be parsed; Unsupported when the walk
-    meets a construct it does not reproduce exactly."""
+    """Numeric values of XTCE packets decoded in bulk by container (telemetry.xtce_bulk): a parameter every
+    packet has keeps its decoded integer dtype, others are float64 with NaN where a packet's container lacks
+    them (parameters no packet has are left out); and why packets could not be parsed. Unsupported when the
+    walk meets a construct it does not reproduce exactly."""
     known = _WALKS.get(id(source.definition))
     if known is None or known[0] is not source.definition:
         known = (source.definition, xtce_bulk.XtceWalk(source.definition, xtce_parameter))
@@ -442,11 +448,19 @@ def _xtce_bulk(
         return _layout_values(buf, offset[positions], parameters, calibrated=True)
 
     parts, failed = known[1].parse(np.arange(n), length, read)
-    columns = {name: np.full(n, np.nan) for name in source.numeric}
+    numeric = set(source.numeric)
+    pieces: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for idx, values in parts:
         for name, v in values.items():
-            if name in columns:
-                columns[name][idx] = v
+            if name in numeric:
+                pieces.setdefault(name, []).append((idx, v))
+    columns = {}
+    for name, have in pieces.items():
+        whole = sum(len(idx) for idx, _ in have) == n and all(v.dtype.kind == "i" for _, v in have)
+        column = np.empty(n, np.int64) if whole else np.full(n, np.nan)
+        for idx, v in have:
+            column[idx] = v
+        columns[name] = column
     return columns, {i: f"space_packet_parser would fail: {why}" for i, why in failed.items()}
 
 
