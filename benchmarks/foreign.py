@@ -7,7 +7,8 @@ counts continued), so every packet is new to the archive. Per case, in one run o
 ours = ``telemetry.packet_files.ingest_packet_file`` (framing, validation, decode, commit to a fresh
 SQLite archive; chunked), theirs = the peer's decode alone (ccsdspy: ``split_by_apid`` then
 ``FixedLength/VariableLength.load`` per defined APID; space_packet_parser: ``ccsds_generator`` +
-``parse_bytes`` per packet). Samples = packets x numeric fields decoded. Prints samples/s and the ratio.
+``parse_bytes`` per packet). Samples = packets x numeric fields decoded. Prints samples/s and the ratio, by wall
+time and by this process's CPU time (the machine is shared: CPU time is the steadier of the two).
 --memory-gb: peak RSS (ru_maxrss of a child ``acs-twin ingest`` process) for a CYGNSS mixed file of that size.
 """
 
@@ -135,8 +136,8 @@ def _cds_day_shift() -> Callable:
     return shift
 
 
-def ours(path: Path, dictionary, workdir: Path) -> tuple[float, int]:
-    """Seconds and samples of decode + archive (fresh SQLite) of a packet file."""
+def ours(path: Path, dictionary, workdir: Path) -> tuple[float, int, float]:
+    """Seconds, samples and CPU seconds of decode + archive (fresh SQLite) of a packet file."""
     from telemetry.archive import Archive
     from telemetry.decoding import decode_stream
     from telemetry.packet_files import ingest_packet_file
@@ -145,19 +146,19 @@ def ours(path: Path, dictionary, workdir: Path) -> tuple[float, int]:
         decode_stream(f.read(1 << 16), dictionary, final=False)  # numba kernels loaded before timing
     url = f"sqlite:///{workdir / f'{path.stem}.db'}"
     with Archive(url) as archive:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         report, stored = ingest_packet_file(archive, path, dictionary, satellite="BENCH", uploaded_by="bench")
-        elapsed = time.perf_counter() - t0
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
     assert stored is not None and stored.packets_accepted == report.packets_accepted, report.reason_counts()
-    return elapsed, report.samples_accepted
+    return elapsed, report.samples_accepted, cpu
 
 
-def ccsdspy_mixed(path: Path, definitions: dict[int, Path]) -> tuple[float, int]:
-    """ccsdspy: split the mixed file by APID, load each defined APID with its CSV; seconds and values decoded."""
+def ccsdspy_mixed(path: Path, definitions: dict[int, Path]) -> tuple[float, int, float]:
+    """ccsdspy: split the mixed file by APID, load each defined APID with its CSV; seconds, values, CPU seconds."""
     import ccsdspy
     from ccsdspy.utils import split_by_apid
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     streams = split_by_apid(str(path))
     samples = 0
     for apid, csv in definitions.items():
@@ -167,27 +168,28 @@ def ccsdspy_mixed(path: Path, definitions: dict[int, Path]) -> tuple[float, int]
             packet = ccsdspy.VariableLength.from_file(str(csv))
         result = packet.load(streams[apid])
         samples += sum(np.asarray(v).size if v.dtype != object else sum(x.size for x in v) for v in result.values())
-    return time.perf_counter() - t0, samples
+    return time.perf_counter() - t0, samples, time.process_time() - c0
 
 
-def spp_parse(path: Path, xtce: Path, skip: int = 0) -> tuple[float, int]:
-    """space_packet_parser: every packet parsed with the XTCE; seconds and numeric values decoded."""
+def spp_parse(path: Path, xtce: Path, skip: int = 0) -> tuple[float, int, float]:
+    """space_packet_parser: every packet parsed with the XTCE; seconds, numeric values decoded, CPU seconds."""
     import space_packet_parser as spp
 
     definition = spp.load_xtce(xtce)
     data = path.read_bytes()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     packets = [definition.parse_bytes(raw) for raw in spp.ccsds_generator(data, skip_header_bytes=skip)]
-    elapsed = time.perf_counter() - t0
-    return elapsed, sum(sum(not isinstance(v.raw_value, bytes) for v in p.values()) for p in packets)
+    elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return elapsed, sum(sum(not isinstance(v.raw_value, bytes) for v in p.values()) for p in packets), cpu
 
 
-def line(name: str, size: int, mine: tuple[float, int], theirs: tuple[float, int], peer: str) -> None:
+def line(name: str, size: int, mine: tuple[float, int, float], theirs: tuple[float, int, float], peer: str) -> None:
     ours_rate, peer_rate = mine[1] / mine[0], theirs[1] / theirs[0]
+    cpu_ratio = (mine[1] / mine[2]) / (theirs[1] / theirs[2])
     print(
-        f"{name:<44} {size / 1e6:6.1f} MB  ours {ours_rate / 1e6:7.2f} M samples/s ({mine[1]:,} in {mine[0]:.2f} s)"
-        f"  {peer} {peer_rate / 1e6:7.3f} M/s ({theirs[1]:,} in {theirs[0]:.2f} s)"
-        f"  ratio {ours_rate / peer_rate:6.1f}x"
+        f"{name:<44} {size / 1e6:6.1f} MB  ours {ours_rate / 1e6:7.2f} M samples/s ({mine[1]:,} in {mine[0]:.2f} s,"
+        f" CPU {mine[2]:.2f} s)  {peer} {peer_rate / 1e6:7.3f} M/s ({theirs[1]:,} in {theirs[0]:.2f} s,"
+        f" CPU {theirs[2]:.2f} s)  ratio {ours_rate / peer_rate:6.1f}x (CPU {cpu_ratio:.1f}x)"
     )
 
 

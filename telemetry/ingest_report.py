@@ -194,7 +194,9 @@ class SampleBatch:
     def n_samples(self) -> int:
         """Number of parameter samples (packets × parameters, less the NaN where a layout lacks a parameter)."""
         n = len(self.t_utc_ns)
-        return sum(n - int(np.count_nonzero(np.isnan(v))) if v.dtype.kind == "f" else n for v in self.values.values())
+        return n * len(self.values) - sum(
+            int(np.count_nonzero(np.isnan(v))) for v in self.values.values() if v.dtype.kind == "f"
+        )
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ class PacketBatch:
         lengths = np.asarray(self.raw_lengths)
         if lengths.shape != (n,) or int(lengths.sum()) != len(self.raw):
             raise ValueError(f"raw_lengths: expected {n} lengths summing to len(raw) = {len(self.raw)}")
-        values = {name: np.asarray(column) for name, column in self.values.items()}
+        values = {name: c if isinstance(c, np.ndarray) else np.asarray(c) for name, c in self.values.items()}
         for name, column in values.items():
             if column.shape != (n,):
                 raise ValueError(f"values[{name!r}]: expected shape ({n},), got {column.shape}")
