@@ -27,6 +27,7 @@ __all__ = [
     "predict_station_passes",
     "assign_to_passes",
     "record_reception",
+    "merge_data_passes",
     "passes_from_data",
     "DATA_PASS_GAP_S",
     "COARSE_STEP_S",
@@ -241,7 +242,8 @@ def passes_from_data(
 ) -> list[PassRecord]:
     """The passes holding the telemetry archived in [t0_ns, t1_ns], their reception recounted: predicted passes
     that cover it, and passes made from the data itself (origin "data", AOS/LOS = first/last sample, station
-    ``station`` or unknown) where none does; data continuing a pass from data within DATA_PASS_GAP_S widens it."""
+    ``station`` or unknown) where none does; data continuing a pass from data within DATA_PASS_GAP_S widens it,
+    and passes from data it brings within DATA_PASS_GAP_S of each other become one (:func:`merge_data_passes`)."""
     gap = int(DATA_PASS_GAP_S * NS_PER_S)
     keys = archive.packet_keys(satellite, t0_ns, t1_ns)
     keys.pop(DERIVED_APID, None)
@@ -259,7 +261,41 @@ def passes_from_data(
         if near:
             p = near[0]
             touched.add(archive.save_data_pass(satellite, min(p.aos_ns, first), max(p.los_ns, last), pass_id=p.id))
+            touched.update(q.id for q in near[1:])  # merged into p below unless at another station
         else:
             touched.add(archive.save_data_pass(satellite, first, last, station))
+    touched |= merge_data_passes(archive, satellite, int(t[0]), int(t[-1]))
     span = archive.passes(satellite, int(t[0]) - gap, int(t[-1]) + gap)
     return record_reception(archive, satellite, [p for p in span if p.id in touched])
+
+
+def _same_station(group: list[PassRecord], p: PassRecord) -> bool:
+    """A pass from data joins a group unless both name different ground stations (two stations, two passes)."""
+    return p.station is None or all(q.station in (None, p.station) for q in group)
+
+
+def merge_data_passes(archive: Archive, satellite: str, t0_ns: int, t1_ns: int) -> set[int]:
+    """Merge the passes from data near [t0_ns, t1_ns] that overlap or lie within DATA_PASS_GAP_S of each other
+    (two uploads of one pass, an upload filling the gap between two, the live stream and an upload made at once)
+    into the earliest of them; ids of the merged passes (their reception is to be recounted)."""
+    gap = int(DATA_PASS_GAP_S * NS_PER_S)
+    known = archive.passes(satellite, t0_ns - gap, t1_ns + gap)
+    predicted = [(p.aos_ns, p.los_ns) for p in known if p.origin != "data"]
+    groups: list[list[PassRecord]] = []
+    for p in (p for p in known if p.origin == "data"):  # AOS order
+        los = max(q.los_ns for q in groups[-1]) if groups else None
+        if (
+            los is not None
+            and p.aos_ns <= los + gap
+            and _same_station(groups[-1], p)
+            and not any(los < a and b < p.aos_ns for a, b in predicted)  # never across a predicted pass
+        ):
+            groups[-1].append(p)
+        else:
+            groups.append([p])
+    kept: set[int] = set()
+    for group in (g for g in groups if len(g) > 1):
+        station = next((q.station for q in group if q.station is not None), None)
+        aos, los = min(q.aos_ns for q in group), max(q.los_ns for q in group)
+        kept.add(archive.merge_data_passes(satellite, group[0].id, [q.id for q in group[1:]], aos, los, station))
+    return kept

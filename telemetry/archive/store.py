@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from sqlalchemy import Connection, Row, Table, func, insert, select, update
+from sqlalchemy import Connection, Row, Table, delete, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
 from telemetry.archive.batch import PacketBatch, sequence_gaps
@@ -841,6 +841,30 @@ class Archive:
                 "packets_missing": 0,
             }
             return int(conn.execute(insert(PASS).values(**row).returning(PASS.c.id)).scalar_one())
+
+    def merge_data_passes(
+        self, satellite: str, keep_id: int, merged_ids: Sequence[int], aos_ns: int, los_ns: int, station: str | None
+    ) -> int:
+        """Make one pass from data out of several, in one transaction: ``keep_id`` spans [aos_ns, los_ns] at
+        ``station``, the ``merged_ids`` are deleted (predicted passes are never touched); the kept id."""
+        if los_ns < aos_ns:
+            raise ValueError(f"passes: need aos_ns <= los_ns, got {aos_ns, los_ns}")
+        sat_id = self.satellite_id(satellite)
+        station_id = None if station is None else self.ground_station(station).id
+        mine = (PASS.c.satellite_id == sat_id) & (PASS.c.origin == "data")
+        with self._writer.begin() as conn:
+            conn.execute(delete(PASS).where(mine, PASS.c.id.in_([int(i) for i in merged_ids if i != keep_id])))
+            conn.execute(
+                update(PASS)
+                .where(mine, PASS.c.id == keep_id)
+                .values(
+                    aos_ns=int(aos_ns),
+                    los_ns=int(los_ns),
+                    max_elevation_ns=(int(aos_ns) + int(los_ns)) // 2,
+                    station_id=station_id,
+                )
+            )
+        return keep_id
 
     def passes(self, satellite: str, t0_ns: int, t1_ns: int) -> list[PassRecord]:
         """Passes of ``satellite`` overlapping [t0_ns, t1_ns], in AOS order."""

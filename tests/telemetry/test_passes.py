@@ -10,7 +10,15 @@ import pytest
 from skyfield.api import EarthSatellite, load, wgs84
 
 from telemetry.archive import Archive, PacketBatch
-from telemetry.passes import assign_to_passes, elevation_deg, predict_passes, predict_station_passes, record_reception
+from telemetry.passes import (
+    DATA_PASS_GAP_S,
+    assign_to_passes,
+    elevation_deg,
+    passes_from_data,
+    predict_passes,
+    predict_station_passes,
+    record_reception,
+)
 from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
 
 SKYFIELD_EVENT_TOLERANCE_S = 1.0  # find_events refines rise/set/culmination to half a second
@@ -127,3 +135,53 @@ def test_received_packets_give_pass_span_and_completeness(archive: Archive, shar
     assert (updated.received_start_ns, updated.received_end_ns) == (int(t[0]), int(t[-1]))
     assert updated.completeness == pytest.approx((t.size - 4) / t.size)
     assert archive.passes("NOAA-20", 0, 2**62)[0] == updated
+
+
+def _ingest_seconds(archive: Archive, t0_ns: int, seconds: range) -> None:
+    """1 Hz packets of APID 11 at t0 + each second, sequence counts following on (no gaps)."""
+    k = np.asarray(seconds)
+    t = t0_ns + k * 10**9
+    raw = [int(s).to_bytes(8, "big") for s in k]  # distinct packets (the archive refuses an upload twice)
+    batch = PacketBatch.from_packets(11, t, k % 16_384, raw, {"x": np.zeros(k.size)})
+    archive.ingest("SAT-A", [batch], source=f"seconds {k[0]}-{k[-1]}", uploaded_by="tester")
+
+
+def test_data_filling_the_gap_between_two_passes_from_data_merges_them(archive: Archive) -> None:
+    gap_s = int(DATA_PASS_GAP_S)
+    _ingest_seconds(archive, START_NS, range(0, 300))
+    passes_from_data(archive, "SAT-A", START_NS, START_NS + 300 * 10**9)
+    later = range(300 + 2 * gap_s, 600 + 2 * gap_s)  # too far from the first: a second pass from data
+    _ingest_seconds(archive, START_NS, later)
+    passes_from_data(archive, "SAT-A", START_NS + later[0] * 10**9, START_NS + later[-1] * 10**9)
+    assert len(archive.passes("SAT-A", 0, 2**62)) == 2
+    _ingest_seconds(archive, START_NS, range(300, later[0]))  # the gap filled by a later upload
+    (merged,) = passes_from_data(archive, "SAT-A", START_NS + 300 * 10**9, START_NS + later[0] * 10**9)
+    assert archive.passes("SAT-A", 0, 2**62) == [merged]
+    assert (merged.aos_ns, merged.los_ns) == (START_NS, START_NS + later[-1] * 10**9)
+    assert (merged.packets_received, merged.packets_missing, merged.completeness) == (later[-1] + 1, 0, 1.0)
+
+
+def test_overlapping_passes_from_data_become_one_with_its_completeness_recounted(archive: Archive) -> None:
+    """Two passes made at once over overlapping data (the live stream and an upload), one more adjacent to them:
+    one pass over all three, its completeness from the sequence-count gaps of everything inside it."""
+    archive.add_ground_station("Kiruna", 67.86, 20.96, 400.0, 5.0)
+    _ingest_seconds(archive, START_NS, [*range(0, 100), *range(103, 400)])  # 3 packets lost on the link
+    first = archive.save_data_pass("SAT-A", START_NS, START_NS + 250 * 10**9)
+    second = archive.save_data_pass("SAT-A", START_NS + 200 * 10**9, START_NS + 350 * 10**9, station="Kiruna")
+    archive.save_data_pass("SAT-A", START_NS + 360 * 10**9, START_NS + 399 * 10**9)
+    (merged,) = passes_from_data(archive, "SAT-A", START_NS, START_NS + 399 * 10**9)
+    assert merged.id == first and merged.id != second and merged.station == "Kiruna"
+    assert archive.passes("SAT-A", 0, 2**62) == [merged]
+    assert (merged.aos_ns, merged.los_ns) == (START_NS, START_NS + 399 * 10**9)
+    assert (merged.packets_received, merged.packets_missing) == (397, 3)
+    assert merged.completeness == pytest.approx(397 / 400)
+
+
+def test_passes_from_data_at_two_stations_stay_apart(archive: Archive) -> None:
+    for name in ("Kiruna", "Svalbard"):
+        archive.add_ground_station(name, 70.0, 20.0, 0.0, 5.0)
+    _ingest_seconds(archive, START_NS, range(0, 200))
+    archive.save_data_pass("SAT-A", START_NS, START_NS + 120 * 10**9, station="Kiruna")
+    archive.save_data_pass("SAT-A", START_NS + 100 * 10**9, START_NS + 199 * 10**9, station="Svalbard")
+    made = passes_from_data(archive, "SAT-A", START_NS, START_NS + 199 * 10**9)
+    assert sorted(p.station for p in made) == ["Kiruna", "Svalbard"]
