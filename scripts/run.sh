@@ -11,4 +11,11 @@ if [ ! -x .venv/bin/acs-twin ] || [ pyproject.toml -nt .venv/.acs-twin-installed
   .venv/bin/python -m pip install -q -e .
   touch .venv/.acs-twin-installed
 fi
+# numba compiles on first call (minutes on a loaded machine): compile the server's kernels into its on-disk cache
+# now, once per change of the sources, so that the server, the demo's live twin and monitors start in seconds.
+if [ ! -f .venv/.acs-twin-warm ] || [ -n "$(find sim_core telemetry backend -name '*.py' -newer .venv/.acs-twin-warm -print -quit)" ]; then
+  echo "run.sh: compiling the kernels into numba's cache (once per change of the sources)" >&2
+  .venv/bin/acs-twin warm >&2
+  touch .venv/.acs-twin-warm
+fi
 exec .venv/bin/acs-twin serve "$@"

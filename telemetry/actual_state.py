@@ -151,6 +151,9 @@ def _smoothed_fixes(t_fix: np.ndarray, r_fix: np.ndarray, v_fix: np.ndarray, t: 
 def fit_circular_orbit(t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray, t0_unix_s: float) -> dict:
     """Circular-orbit elements at t0 fitted to GPS fixes: plane by least squares, radius and phase u = u0 + n (t − t0).
 
+    The plane's normal n is the one that best satisfies n·r = 0 and n·v = 0 for every fix, each row weighted by
+    its receiver noise (velocities scaled by σ_r/σ_v): positions alone fix the plane only once the fixes span an
+    arc (five fixes 1 s apart tilt it by ~40″), while the velocities fix it to a few arcseconds from three fixes.
     Returns ``altitude_m``, ``inclination_deg``, ``raan_deg``, ``arg_latitude_deg`` as
     :func:`sim_core.orbit.circular_orbit` takes them (seed 003 §3.2.3.2.1 Keplerian OP).
     """
@@ -158,7 +161,7 @@ def fit_circular_orbit(t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: n
     if t.shape[0] < MIN_GPS_FIXES:
         raise ValueError(f"t_unix_s: need at least {MIN_GPS_FIXES} GPS fixes, got {t.shape[0]}")
     r, v = frames.ecef_to_eci(r_ecef_m, v_ecef_m_s, t)
-    normal = np.linalg.svd(r)[2][-1]  # the plane through the Earth's centre nearest the fixes
+    normal = np.linalg.svd(np.concatenate([r, GPS_SIGMA_RATIO_S * v]))[2][-1]  # plane nearest the fixes (above)
     if np.dot(normal, np.cross(r, v).sum(axis=0)) < 0.0:
         normal = -normal
     node = np.cross([0.0, 0.0, 1.0], normal)

@@ -66,6 +66,7 @@ def start_emulator(settings: Any, scenario: str, telemetry_port: int | None) -> 
 
     if not settings.live_enabled or not settings.telemetry_port or not telemetry_port:
         return None  # an ephemeral telemetry port (0) means no demo satellite
+    settings.data_dir.mkdir(parents=True, exist_ok=True)  # before the app made it: the emulator starts first
     log = (settings.data_dir / "emulator.log").open("ab")
     command = [
         sys.executable,
@@ -151,10 +152,11 @@ def _owned_server(config: Any, on_started: Callable[[], None]) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Build the app from Settings, serve until SIGTERM/SIGINT; children start once it listens, stop on exit."""
-    import uvicorn
+    """Build the app from Settings, serve until SIGTERM/SIGINT; children stop on exit.
 
-    from backend.app import create_app
+    The demo emulator starts first, before the server's imports: its own imports and flight run beside the
+    server's start-up (it keeps trying to connect until the live listener is up), off the critical path.
+    """
     from backend.core.processes import stop_owned
     from backend.core.settings import Settings
 
@@ -162,29 +164,13 @@ def run(args: argparse.Namespace) -> int:
     api_socket = _bind_api_socket(settings.host, settings.port)
     if settings.live_enabled:
         _check_port_free(settings.host, settings.telemetry_port)
-    app = create_app(settings)
     children: dict[str, Any] = {}
+    if not args.no_emulator and (emulator := start_emulator(settings, args.emulator_scenario, settings.telemetry_port)):
+        children["emulator"] = emulator
     stop = threading.Event()
-
-    def on_started() -> None:  # the one-time admin token is issued only once the server really is up
-        _announce(settings, app.state.services)
-        port = app.state.services.telemetry.live_port
-        if not args.no_emulator:  # the demo satellite's route starts with the emulator's flight
-            app.state.services.twins.register_model(
-                settings.live_satellite, args.emulator_scenario, None, from_run=True
-            )
-        emulator = None if args.no_emulator else start_emulator(settings, args.emulator_scenario, port)
-        if emulator is not None:
-            children["emulator"] = emulator
-            print(
-                f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
-                f"tcp://{settings.host}:{port}, log {settings.data_dir / 'emulator.log'}"
-            )
-            children["twin"] = start_demo_twin(app.state.services, settings, args.emulator_scenario, stop)
-        print(flush=True)
-
-    server = _owned_server(uvicorn.Config(app, log_level="warning"), on_started)
     try:
+        config = _app_for(settings, args, "emulator" in children)
+        server = _owned_server(config, lambda: _on_started(config, settings, args, children, stop))
         server.run(sockets=[api_socket])
     finally:
         stop.set()
@@ -198,6 +184,33 @@ def run(args: argparse.Namespace) -> int:
         return 1
     print("acs-twin serve: stopped", flush=True)
     return 0
+
+
+def _app_for(settings: Any, args: argparse.Namespace, demo: bool) -> Any:
+    """The app (heavy imports here); the demo satellite's route starts with the emulator's flight."""
+    import uvicorn
+
+    from backend.app import create_app
+
+    app = create_app(settings)
+    if demo:
+        app.state.services.twins.register_model(settings.live_satellite, args.emulator_scenario, None, from_run=True)
+    return uvicorn.Config(app, log_level="warning")
+
+
+def _on_started(
+    app_config: Any, settings: Any, args: argparse.Namespace, children: dict, stop: threading.Event
+) -> None:
+    """Once the server listens: URLs and the one-time admin token (issued only now), the demo's monitors."""
+    services = app_config.app.state.services
+    _announce(settings, services)
+    if "emulator" in children:
+        print(
+            f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
+            f"tcp://{settings.host}:{services.telemetry.live_port}, log {settings.data_dir / 'emulator.log'}"
+        )
+        children["twin"] = start_demo_twin(services, settings, args.emulator_scenario, stop)
+    print(flush=True)
 
 
 def _announce(settings: Any, services: Any) -> None:

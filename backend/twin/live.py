@@ -39,6 +39,7 @@ import numpy as np
 
 from sim_core import quaternion
 from sim_core.scenario import Scenario
+from telemetry.actual_state import MIN_GPS_FIXES
 from telemetry.archive.batch import DERIVED_APID
 from telemetry.attitude_mapping import (
     SHIPPED_MAPPINGS,
@@ -69,12 +70,14 @@ TWIN_APID = DERIVED_APID  # the residuals are parameters derived on the ground: 
 RESYNC_S = 60.0  # segment length: see the module docstring
 STALE_S = 10.0  # no telemetry for this long (ten 1 Hz packets missed) = stale; a gap this long forces a re-sync
 RECENT_S = 600.0  # telemetry kept per satellite: the sync sample may lie before a 100 s scheduled turn
-GPS_MIN_SPAN_S = 30.0  # fixes 7.5 m noisy over 2 s tilt the fitted orbit by ~150″; over 30 s the fit is at the noise
+GPS_FULL_SPAN_S = 30.0  # a fit over 30 s of fixes is at the receiver noise; the first one, over the first three fixes
+# (positions and velocities: actual_state.fit_circular_orbit, a few arcseconds), is refined by a re-sync once the
+# fixes span this long, so that the twin propagates ~3 s after the first packets instead of 30 s
 GPS_WINDOW_S = 60.0  # GPS fixes around the sync instant fitted into the twin's orbit (actual_state.aligned_scenario)
 EXCEED_SAMPLES = 3  # consecutive samples beyond the limits that force a re-sync (one outlier does not)
 MIN_RESYNC_S = 10.0  # residual-forced re-syncs no closer than this (a failed wheel would force one per sample)
-ARCHIVE_PERIOD_S = 5.0  # residuals committed per satellite this often (a commit fsyncs, ~20 ms): 100 satellites
-# make 20 commits/s in the archive-writer thread; the twin itself never waits for them (published at once)
+ARCHIVE_PERIOD_S = 5.0  # residuals handed to the archive writer per satellite this often; the writer commits what
+# is queued in one transaction (one fsync for every satellite: Archive.ingest_many); the twin never waits for it
 TICK_S = 0.5  # staleness checked this often
 MAX_ISSUES = 20  # bad-input reports kept per satellite
 SAME_INSTANT_NS = 1_000_000
@@ -350,10 +353,10 @@ class LiveTwin:
             return None
         t_sync = int(self._t[i])
         near = np.abs(self._gps_t - t_sync) <= GPS_WINDOW_S / 2 * NS_PER_S
-        span_s = (self._gps_t[near].max() - self._gps_t[near].min()) / 1e9 if near.any() else 0.0
-        if span_s < GPS_MIN_SPAN_S:
-            self.state.note = f"waiting: the orbit fit needs GPS fixes over {GPS_MIN_SPAN_S:.0f} s, has {span_s:.0f} s"
+        if np.count_nonzero(near) < MIN_GPS_FIXES:
+            self.state.note = f"waiting: the orbit fit needs {MIN_GPS_FIXES} GPS fixes, has {np.count_nonzero(near)}"
             return None
+        span_s = (self._gps_t[near].max() - self._gps_t[near].min()) / 1e9
         m, hk = self.mapping, self._hk
         track = ActualTrack(
             self._t,
@@ -366,7 +369,8 @@ class LiveTwin:
             self._gps_t[near],
             {"r_ecef_m": _stack(self._gps, m.r_ecef_m)[near], "v_ecef_m_s": _stack(self._gps, m.v_ecef_m_s)[near]},
         )
-        duration = (int(self._t[k]) - t_sync) / 1e9 + self._resync_s
+        ahead_s = self._resync_s if span_s >= GPS_FULL_SPAN_S else max(GPS_FULL_SPAN_S - span_s, 1.0)  # then refine
+        duration = (int(self._t[k]) - t_sync) / 1e9 + ahead_s
         try:
             twin = aligned_scenario(self._model_at_epoch(), track, t_sync, duration)
         except ValueError as exc:
@@ -716,34 +720,57 @@ class LiveTwins:
             self._writes.put((satellite, parts))
 
     def _write_loop(self) -> None:
-        """Archive-writer thread: commit residuals (one upload per satellite and flush); a marker Event is set once
-        everything queued before it is committed, None stops the thread."""
-        while (item := self._writes.get()) is not None:
+        """Archive-writer thread: commit residuals, everything queued at once in one transaction (group commit: one
+        fsync for every satellite that flushed meanwhile); a marker Event is set once everything queued before it
+        is committed, None stops the thread."""
+        stop = False
+        while not stop:
+            group: list[tuple[str, list[dict[str, np.ndarray]]]] = []
+            item = self._writes.get()
+            while isinstance(item, tuple):
+                group.append(item)
+                try:
+                    item = self._writes.get_nowait()
+                except queue.Empty:
+                    item = False  # nothing more queued: commit the group
+            self._write(group)
             if isinstance(item, threading.Event):
                 item.set()
-            else:
-                self._write(*item)
+            stop = item is None
 
-    def _write(self, satellite: str, parts: list[dict[str, np.ndarray]]) -> None:
-        from telemetry.archive import PacketBatch
+    def _write(self, group: list[tuple[str, list[dict[str, np.ndarray]]]]) -> None:
+        from telemetry.archive import PacketBatch, PendingUpload
 
         archive = self._archive()
-        if archive is None:
+        if archive is None or not group:
             return
-        columns = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
-        t = columns.pop("t_utc_ns")
-        n = t.size
-        batch = PacketBatch(TWIN_APID, t, np.zeros(n, np.int64), b"", np.zeros(n, np.int64), columns)
-        n_wheels = sum(1 for name in columns if name.startswith("twin_wheel"))
+        uploads, spans = [], []
+        for satellite, parts in group:
+            columns = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
+            t = columns.pop("t_utc_ns")
+            n = t.size
+            batch = PacketBatch(TWIN_APID, t, np.zeros(n, np.int64), b"", np.zeros(n, np.int64), columns)
+            n_wheels = sum(1 for name in columns if name.startswith("twin_wheel"))
+            uploads.append(PendingUpload(satellite, [batch], "live twin", "live twin", residual_limits(n_wheels)))
+            spans.append((satellite, int(t.min()), int(t.max())))
         try:
-            archive.ingest(
-                satellite, [batch], source="live twin", uploaded_by="live twin", limits=residual_limits(n_wheels)
-            )
-        except Exception:
-            log.exception("live twin of %s: residuals not archived", satellite)
-            return
+            archive.ingest_many(uploads)
+            done = spans
+        except Exception:  # one bad upload must not cost the others theirs: one transaction each
+            log.exception("live twins: group commit failed, committing one satellite at a time")
+            done = [span for upload, span in zip(uploads, spans) if self._write_one(archive, upload)]
         if self._on_archived is not None:
-            self._on_archived(satellite, int(t.min()), int(t.max()))
+            for satellite, t0, t1 in done:
+                self._on_archived(satellite, t0, t1)
+
+    @staticmethod
+    def _write_one(archive: Any, upload: Any) -> bool:
+        try:
+            archive.ingest_many([upload])
+        except Exception:
+            log.exception("live twin of %s: residuals not archived", upload.satellite)
+            return False
+        return True
 
     def recover(self) -> None:
         """Re-create the twins of every archived satellite with a shipped mapping from its newest RECENT_S."""

@@ -8,6 +8,7 @@ from telemetry.archive.records import (
     Gap,
     IngestResult,
     PassRecord,
+    PendingUpload,
     StationRecord,
     UploadRecord,
 )
@@ -21,6 +22,7 @@ __all__ = [
     "upgrade",
     "IngestResult",
     "Gap",
+    "PendingUpload",
     "UploadRecord",
     "AlarmRecord",
     "AlarmEventRecord",

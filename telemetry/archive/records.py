@@ -2,10 +2,24 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["IngestResult", "Gap", "AlarmRecord", "AlarmEventRecord", "PassRecord", "UploadRecord", "StationRecord"]
+if TYPE_CHECKING:
+    from telemetry.archive.batch import PacketBatch
+    from telemetry.limits import LimitSet
+
+__all__ = [
+    "IngestResult",
+    "Gap",
+    "AlarmRecord",
+    "AlarmEventRecord",
+    "PassRecord",
+    "PendingUpload",
+    "UploadRecord",
+    "StationRecord",
+]
 
 
 @dataclass(frozen=True)
@@ -34,6 +48,17 @@ class IngestResult:
     def as_report(self) -> dict[str, Any]:
         """JSON-ready dictionary of the result."""
         return asdict(self)
+
+
+@dataclass(frozen=True)
+class PendingUpload:
+    """One upload to commit with others (Archive.ingest_many): whose, what, from where, by whom, its limits."""
+
+    satellite: str
+    batches: Sequence[PacketBatch]
+    source: str
+    uploaded_by: str
+    limits: Mapping[str, LimitSet] | None = None
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from backend.twin.live import ACTUAL_ONLY, PROPAGATING, WAITING, LiveTwin
+from backend.twin.live import ACTUAL_ONLY, GPS_FULL_SPAN_S, PROPAGATING, RESYNC_S, WAITING, LiveTwin
 from sim_core import scenario_library
 from telemetry.attitude_mapping import shipped_mapping
 from telemetry.decoding import decode_stream
@@ -20,6 +20,7 @@ FLIGHT_S = 560.0  # two scanning courses and the 100 s scheduled turn between th
 STAR_TRACKER_SIGMA_ARCSEC = 3.0  # somov-ge4-scan's σ: the nominal residual must stay at this level
 TRUTH_MISMATCH_ARCSEC = 5 * 3.0  # measured ≈ 10″ RMS with truth seed 0: the unestimated gyro bias dominates
 TACHOMETER_COUNT_RPM = 0.25  # reference dictionary's wheel-speed resolution
+FIRST_RESIDUALS_S = 3  # three GPS fixes at 1 Hz: the third arrives in the third second
 NOAA = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 
 
@@ -80,6 +81,21 @@ def test_nominal_twin_residual_stays_at_the_sensor_noise_through_a_scheduled_tur
     assert all(utc < "2026-03-20T00:00:30" for utc in forced)  # only while the satellite's MEKF converged
     assert twin.state.state == PROPAGATING
     assert twin.state.resyncs == pytest.approx(FLIGHT_S / 60, abs=2)  # the RESYNC_S cadence
+
+
+def test_twin_propagates_seconds_after_the_first_packets_and_refines_its_orbit(reference_batches):
+    """Synchronised on the first three GPS fixes (start-up within 15 s, issue 11), re-synchronised once the fixes
+    span GPS_FULL_SPAN_S, then on the RESYNC_S cadence."""
+    twin = _twin()
+    seconds = _seconds(reference_batches)
+    t0 = int(reference_batches[0].t_utc_ns[0])
+    first = next(k for k, second in enumerate(seconds) if twin.observe(second, 0.0) is not None)
+    assert first <= FIRST_RESIDUALS_S and twin.state.state == PROPAGATING
+    assert (twin.state.horizon_utc_ns - t0) / 1e9 <= GPS_FULL_SPAN_S + 1.0  # the first segment ends to refine
+    for second in seconds[first + 1 : int(GPS_FULL_SPAN_S) + 5]:
+        twin.observe(second, 0.0)
+    segment_s = (twin.state.horizon_utc_ns - twin.state.synchronised_utc_ns) / 1e9
+    assert twin.state.resyncs == 2 and segment_s == pytest.approx(RESYNC_S, abs=1.0)  # from the sample before
 
 
 def test_satellite_with_its_own_truth_stays_within_the_mismatch_its_tolerances_allow():

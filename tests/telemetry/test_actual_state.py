@@ -34,6 +34,8 @@ EXACT_FIT_TOL_RAD = 1e-9  # noise-free fixes: only rounding of 7,000 km position
 NOISY_FIT_TOL_RAD = 4e-5
 NOISY_ALTITUDE_TOL_M = 5.0  # σ/√60 ≈ 1 m; 5σ
 GPS_2SIGMA_R_M, GPS_2SIGMA_V_M_S = 15.0, 1.5  # one fix's 2σ (seed 003); the local cubic averages 31 of them
+# Three fixes 1 s apart: their velocities (σ_v = 0.75 m/s against |v| ≈ 7.56 km/s) hold the plane to ≈ 1e-4/√3 rad; 5σ.
+THREE_FIX_PLANE_TOL_RAD = 5 * (GPS_2SIGMA_V_M_S / 2) / 7560.0 / np.sqrt(3)
 EXTRAPOLATION_TOL_M = 100.0  # fitted plane tilt (5σ ≈ 4e-5 rad, above) over ±300 s of flight (2,300 km): < 100 m
 EXTRAPOLATION_TOL_M_S = 0.1  # the same error turning at the orbit rate n ≈ 1.1e-3 rad/s
 PROGRAMME_TOL_RAD = 3.0 * ARCSEC  # the fitted orbit plane turns the ORF by ≲ 1.5″ (tilt above)
@@ -103,6 +105,20 @@ def test_gps_fixes_of_the_emulated_satellite_give_its_scenario_orbit(satellite) 
     }
     for key, value in expected.items():
         assert np.radians(fitted[key] - value) == pytest.approx(0.0, abs=NOISY_FIT_TOL_RAD), key
+
+
+def test_three_gps_fixes_give_the_orbit_plane_from_their_velocities(satellite) -> None:
+    """The live twin's first synchronisation (2 s after the first packets) fits three fixes: positions alone would
+    leave the plane free to turn about the 15 km chord they span; the weighted velocities pin it."""
+    traj, _, batches = satellite
+    track = actual_track(batches)
+    s = scenario_library.get("somov-ge4-scan")
+    for k in (10, 300, 600):
+        t = track.gps_t_utc_ns[k : k + 3] / NS
+        fitted = fit_circular_orbit(t, track.gps["r_ecef_m"][k : k + 3], track.gps["v_ecef_m_s"][k : k + 3], t[0])
+        inclination = float(orbit.sun_synchronous_inclination_deg(s.orbit.altitude_m))
+        assert np.radians(fitted["inclination_deg"] - inclination) == pytest.approx(0.0, abs=THREE_FIX_PLANE_TOL_RAD)
+        assert np.radians(fitted["raan_deg"] - s.orbit.raan_deg) == pytest.approx(0.0, abs=THREE_FIX_PLANE_TOL_RAD)
 
 
 def test_orbit_from_gps_fixes_follows_the_flown_orbit_inside_and_beyond_the_pass(satellite) -> None:

@@ -13,7 +13,7 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import inspect, text
 
-from telemetry.archive import Archive, PacketBatch, upgrade
+from telemetry.archive import Archive, PacketBatch, PendingUpload, upgrade
 from telemetry.archive.engine import create_archive_engine
 from telemetry.archive.migrate import alembic_config
 from telemetry.archive.models import Base
@@ -200,6 +200,30 @@ def test_a_failing_upload_leaves_nothing_behind(archive: Archive) -> None:
     assert archive.uploads(SAT) == []
     assert archive.parameters(SAT) == {}
     assert archive.packet_keys(SAT, 0, 2**62) == {}
+
+
+def test_group_commit_archives_each_satellite_as_its_own_upload(archive: Archive) -> None:
+    """Archive.ingest_many: one transaction for many uploads, each read back as if ingested alone."""
+    whole = synthetic_batch(300)
+    group = [
+        PendingUpload(f"SAT-{k}", [whole.take(np.arange(100 * k, 100 * k + 100))], "live", "tester") for k in range(3)
+    ]
+    results = archive.ingest_many([*group, PendingUpload("SAT-0", [whole.take(np.arange(50, 150))], "more", "tester")])
+    assert [(r.packets_accepted, r.packets_duplicate) for r in results] == [(100, 0), (100, 0), (100, 0), (50, 50)]
+    for k in range(3):
+        assert [u.source for u in archive.uploads(f"SAT-{k}")] == (["live", "more"] if k == 0 else ["live"])
+        t, v = archive.read_parameter(f"SAT-{k}", "index", 0, 2**62)
+        np.testing.assert_array_equal(v, np.arange(100.0 * k, 100.0 * k + (150 if k == 0 else 100)))
+
+
+def test_a_failing_upload_in_a_group_commit_leaves_nothing_of_the_group(archive: Archive) -> None:
+    good = synthetic_batch(100)
+    clash = PacketBatch.from_packets(101, good.t_utc_ns, good.seq_count, good.packets(), {"label": np.full(100, "x")})
+    with pytest.raises(ValueError, match="not numeric"):
+        archive.ingest_many(
+            [PendingUpload("SAT-A", [good], "ok", "tester"), PendingUpload("SAT-B", [clash], "bad", "t")]
+        )
+    assert archive.uploads("SAT-A") == [] and archive.packet_keys("SAT-A", 0, 2**62) == {}
 
 
 def test_latest_values_are_the_newest_samples(archive: Archive) -> None:

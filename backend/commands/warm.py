@@ -1,0 +1,63 @@
+"""``acs-twin warm``: compile the kernels ``acs-twin serve`` needs into numba's on-disk cache, once per install.
+
+numba compiles on first call; cold, the demo satellite's flight and its live twin spend minutes compiling on a
+loaded 2-core machine, on the start-up's critical path. ``scripts/run.sh`` runs this after installing (and again
+whenever a source file of ``sim_core`` or ``telemetry`` changed, since sim_core.compiled_cache then drops the
+cache): it flies what ``serve`` flies with the same types — the emulator's flight with the demo's hidden fault,
+the decoding of its packets, the live twin synchronising on them — so that ``serve`` only loads machine code.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+WARM_FLIGHT_S = 90.0  # enough telemetry for the live twin to synchronise and fly one segment
+WARM_START_UTC = "2026-03-20T00:00:00Z"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the ``warm`` subcommand."""
+    p = sub.add_parser("warm", help="compile the server's kernels into numba's cache (run.sh does it at install)")
+    p.add_argument("--scenario", default="somov-ge4-scan", help="scenario the demo satellite flies (as serve)")
+    p.set_defaults(handler=run)
+
+
+def warm_kernels(scenario: str) -> dict[str, float]:
+    """Fly the demo emulator, decode its packets and synchronise a live twin on them; seconds per step."""
+    from backend.commands.serve import HIDDEN_FAULTS
+    from backend.twin.live import LiveTwin
+    from sim_core import scenario_library
+    from sim_core.faults import parse_fault
+    from telemetry.attitude_mapping import shipped_mapping
+    from telemetry.decoding import decode_stream
+    from telemetry.dictionary import load_dictionary
+    from telemetry.emulator import REFERENCE_DICTIONARY, emulate
+
+    steps: dict[str, float] = {}
+    t = time.perf_counter()
+    stream = emulate(scenario, [parse_fault(f) for f in HIDDEN_FAULTS], WARM_FLIGHT_S, WARM_START_UTC)[2]
+    steps["emulator flight"] = time.perf_counter() - t
+    t = time.perf_counter()
+    dictionary = load_dictionary(REFERENCE_DICTIONARY)
+    batches = decode_stream(stream.data, dictionary, source="warm").batches
+    steps["decoding"] = time.perf_counter() - t
+    t = time.perf_counter()
+    mapping = shipped_mapping(REFERENCE_DICTIONARY)
+    if mapping is None:
+        raise RuntimeError(f"no attitude mapping shipped beside {REFERENCE_DICTIONARY}")
+    twin = LiveTwin("warm", mapping, scenario_library.get(scenario), epoch_from_run=True)
+    twin.observe(batches, time.time())
+    if twin.state.resyncs == 0:
+        raise RuntimeError(f"the live twin did not synchronise on {WARM_FLIGHT_S:.0f} s of telemetry: {twin.state}")
+    steps["live twin"] = time.perf_counter() - t
+    return steps
+
+
+def run(args: argparse.Namespace) -> int:
+    """Compile (or load) the kernels and say how long each step took."""
+    t = time.perf_counter()
+    for step, seconds in warm_kernels(args.scenario).items():
+        print(f"  {step}: {seconds:.1f} s")
+    print(f"acs-twin warm: kernels compiled and cached in {time.perf_counter() - t:.1f} s")
+    return 0
