@@ -15,12 +15,12 @@ from typing import Any
 
 __all__ = ["LiveHub", "Subscription", "TOPIC_PREFIXES"]
 
-TOPIC_PREFIXES = ("parameters/", "alarms", "twin")
+TOPIC_PREFIXES = ("parameters/", "alarms", "twin", "archive")
 
 
 def _check_topic(topic: str) -> str:
-    if not (topic in ("alarms", "twin") or (topic.startswith("parameters/") and len(topic) > 11)):
-        raise ValueError(f"topics: {topic!r} is not 'parameters/<name>', 'parameters/*', 'alarms' or 'twin'")
+    if not (topic in ("alarms", "twin", "archive") or (topic.startswith("parameters/") and len(topic) > 11)):
+        raise ValueError(f"topics: {topic!r} is not 'parameters/<name>', 'parameters/*', 'alarms', 'twin' or 'archive'")
     return topic
 
 

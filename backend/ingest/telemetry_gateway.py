@@ -41,7 +41,7 @@ from backend.ingest.sample_cache import SampleCache
 from backend.ingest.upload_decoder import PacketFileJob, RedecodeJob, UploadDecoder, archive_packet_file
 from telemetry import decoding, ground_files
 from telemetry.archive import Archive
-from telemetry.archive.records import PassRecord
+from telemetry.archive.records import IngestResult, PassRecord
 from telemetry.dictionary import Dictionary
 from telemetry.downsampling import minmax_indices
 from telemetry.ingest_report import DecodeResult, SampleBatch
@@ -272,6 +272,8 @@ class TelemetryGateway:
             self._publish(satellite, outcome.first_batches, outcome.result.alarm_events)
             for listener in self._committed:
                 listener(satellite, dictionary_name, outcome.first_batches)
+        if not outcome.result.duplicate_upload:
+            self._publish_commit(satellite, outcome.result, outcome.span_ns, published=outcome.chunks == 1)
         return {
             "satellite": satellite,
             "dictionary": dictionary_name_of(dictionary),
@@ -292,6 +294,8 @@ class TelemetryGateway:
         outcome = self.upload_decoder.run(RedecodeJob(satellite, dictionary_name, apids, uploaded_by))
         if outcome.span_ns is not None:
             self._samples.invalidate(satellite, *outcome.span_ns)
+        if outcome.result is not None:
+            self._publish_commit(satellite, outcome.result, outcome.span_ns, published=False)
         return {
             "satellite": satellite,
             "dictionary": dictionary_name_of(dictionary),
@@ -331,6 +335,9 @@ class TelemetryGateway:
             for listener in self._committed:
                 listener(satellite, dictionary_name, decoded.batches)
             passes = self.passes_from_data(satellite, decoded.batches)
+            spans = [(int(b.t_utc_ns.min()), int(b.t_utc_ns.max())) for b in decoded.batches if len(b.t_utc_ns)]
+            span = (min(a for a, _ in spans), max(b for _, b in spans)) if spans else None
+            self._publish_commit(satellite, result, span, published=True)
         return {
             "satellite": satellite,
             "dictionary": dictionary_name_of(dictionary),
@@ -348,6 +355,27 @@ class TelemetryGateway:
         if not spans:
             return []
         return passes.passes_from_data(self._opened(), satellite, min(s[0] for s in spans), max(s[1] for s in spans))
+
+    def _publish_commit(
+        self, satellite: str, result: IngestResult, span_ns: tuple[int, int] | None, *, published: bool
+    ) -> None:
+        """One "archive" item per commit; when its samples were not replayed on "parameters/" (a backfill: a file of
+        more than one chunk, a redecode) dashboards reload their plots and latest values from the archive, and
+        "alarms" subscribers hear of its alarm events here."""
+        if self._hub.wants_any("archive"):
+            self._hub.publish(
+                "archive",
+                {
+                    "satellite": satellite,
+                    "upload_id": result.upload_id,
+                    "packets_accepted": result.packets_accepted,
+                    "t_first_utc_ns": None if span_ns is None else span_ns[0],
+                    "t_last_utc_ns": None if span_ns is None else span_ns[1],
+                    "published": published,
+                },
+            )
+        if not published:
+            self._publish(satellite, [], result.alarm_events)
 
     def _publish(self, satellite: str, batches: list[SampleBatch], alarm_events: int) -> None:
         for batch in batches:

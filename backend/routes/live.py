@@ -1,7 +1,9 @@
-"""WebSocket /api/v1/ws: live parameters, alarms and twin state in batches of at most rate_hz/s.
+"""WebSocket /api/v1/ws: live parameters, alarms, twin state and archive commits in batches of at most rate_hz/s.
 
 Protocol: the client sends ``{"op": "subscribe" | "unsubscribe", "topics": [...]}`` with topics
-``parameters/<name>``, ``parameters/*``, ``alarms``, ``twin``; the server sends
+``parameters/<name>``, ``parameters/*``, ``alarms``, ``twin``, ``archive`` (one item per committed upload or
+redecode: satellite, upload id, packets, time span, and whether its samples went out on ``parameters/``);
+the server sends
 ``{"type": "batch", "items": [{"topic", "data"}...], "dropped": n}`` (n items thinned so far) and
 ``{"type": "error", "message", "field"}``. Token: ``?token=`` or an Authorization header (viewer).
 """

@@ -145,3 +145,27 @@ def test_one_chunk_upload_is_decoded_in_the_server(client: TestClient, tokens: d
     _upload(client, tokens["operator"], small, out)
     assert out["status"] == 200 and out["body"]["published"] is True
     assert client.app.state.services.telemetry.upload_decoder.pid is None
+
+
+def test_large_upload_tells_archive_subscribers_to_reload(client: TestClient, tokens: dict[str, str]) -> None:
+    """A file of several chunks is not replayed sample by sample: "archive" subscribers (the dashboard) hear of the
+    commit with its span and reload plots and latest values from the archive."""
+    data = mixed_stream(N_GPS // 2)
+    with client.websocket_connect("/api/v1/ws", headers=bearer(tokens["viewer"])) as ws:
+        ws.send_json({"op": "subscribe", "topics": ["archive"]})
+        hub = client.app.state.services.hub
+        deadline = time.monotonic() + 10.0
+        while not hub.wants_any("archive"):
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        out: dict = {}
+        _upload(client, tokens["operator"], data, out)
+        item = ws.receive_json()["items"][0]
+    assert out["status"] == 200 and out["body"]["published"] is False
+    assert item["topic"] == "archive"
+    commit = item["data"]
+    assert commit["satellite"] == "REFSAT" and commit["published"] is False
+    assert commit["upload_id"] == out["body"]["archive"]["upload_id"]
+    assert commit["packets_accepted"] == 5 * (N_GPS // 2)
+    decoded = decode_stream(data, reference()).batches
+    assert commit["t_last_utc_ns"] == max(int(b.t_utc_ns.max()) for b in decoded)

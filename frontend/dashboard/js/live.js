@@ -1,12 +1,13 @@
 // Live updates over the WebSocket /api/v1/ws (backend/routes/live.py): subscribe to parameters/*,
-// alarms and twin; hand each batch to the panels; reconnect with back-off; a "last packet N s ago /
-// stale" indicator per satellite, from the newest sample time seen.
+// alarms, twin and archive (commits, e.g. a large upload archived without live replay); hand each batch
+// to the panels; reconnect with back-off; a "last packet N s ago / stale" indicator per satellite, from
+// the newest sample time seen.
 import { wsUrl } from "./api.js";
 import { $, el, fill } from "./dom.js";
 import { age, isoUtc } from "./format.js";
 import { emit, state } from "./state.js";
 
-const TOPICS = ["parameters/*", "alarms", "twin"];
+const TOPICS = ["parameters/*", "alarms", "twin", "archive"];
 const RETRY_S = [1, 2, 5, 10, 20];
 const CLOSE_UNAUTHORIZED = 4401, CLOSE_FORBIDDEN = 4403;
 let socket = null;
@@ -81,6 +82,10 @@ function dispatch(items) {
       emit("alarms", data);
     } else if (topic === "twin") {
       emit("twin", data);
+    } else if (topic === "archive" && data && data.satellite) {
+      const newest = data.t_last_utc_ns === null ? null : data.t_last_utc_ns / 1e9;
+      if (newest !== null && !(state.lastPacketS[data.satellite] >= newest)) state.lastPacketS[data.satellite] = newest;
+      emit("archive-committed", data);
     }
   }
   for (const [satellite, batch] of Object.entries(bySatellite)) emit("samples", { satellite, batch });

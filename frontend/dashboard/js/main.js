@@ -10,7 +10,7 @@ import { connectLive, disconnectLive, renderAges } from "./live.js";
 import { showMonitors } from "./monitors.js";
 import { clearPasses, followLive, loadPasses, trimLiveWindow, windowFromInputs } from "./passes.js";
 import { plots, resetZoom, resizePlots } from "./plots.js";
-import { on, state } from "./state.js";
+import { emit, on, state } from "./state.js";
 import { exportSummaryPdf, exportSummaryPng, showSummary } from "./summary.js";
 import {
   appendLive, clearTelemetry, exportCsv, exportPng, fetchLatest, loadLatest, loadParameters, plotSelected,
@@ -21,6 +21,8 @@ const RETRY_S = 5;
 let config = { api_base: "/api/v1", monitors: {} };
 let retryTimer = null;
 let alarmTimer = null;
+let archiveTimer = null;
+const ARCHIVE_RELOAD_MS = 300;  // commits in a burst (several uploads) reload once
 let painted = false;
 let monitorsShown = false;
 let monitorsTimer = null;
@@ -243,6 +245,12 @@ on("twin", (data) => { if (data && data.satellite === state.satellite) showTwin(
 on("unauthorized", () => session.onUnauthorized());
 on("choose-satellite", (name) => { if (name !== state.satellite) selectSatellite(name); });
 on("archive-changed", () => selectSatellite(state.satellite));
+on("archive-committed", (data) => {
+  // a commit whose samples did not come live (a large upload, a redecode): plots and latest values reload
+  if (data.published || data.satellite !== state.satellite) return;
+  clearTimeout(archiveTimer);
+  archiveTimer = setTimeout(() => emit("archive-changed"), ARCHIVE_RELOAD_MS);
+});
 
 async function start() {
   try {
