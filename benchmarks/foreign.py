@@ -239,7 +239,7 @@ def cases(mb: float, workdir: Path) -> None:
     path = workdir / "idex.bin"
     replicate(data, max(int(mb / 10 * 1e6 / len(data)), 1), path, _coarse_shift({1424}, 48, 10_000))
     line(
-        "IDEX polymorphic variable, XTCE (spp path)",
+        "IDEX polymorphic variable, XTCE",
         path.stat().st_size,
         ours(path, idex, workdir),
         spp_parse(path, imap / "suda_combined_science_definition.xml"),

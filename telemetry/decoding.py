@@ -312,13 +312,32 @@ def _layout_groups(
     unique, inverse = np.unique(keys, axis=0, return_inverse=True)
     for g, key in enumerate(unique.tolist()):
         idx = fits[inverse.ravel() == g]
-        try:
-            params = definition.resolve(key[0], dict(zip(counts, key[1:])))
-        except ValueError as exc:
-            short.update({i: str(exc) for i in idx.tolist()})
+        layout = _resolved(definition, tuple(key), counts)
+        if isinstance(layout, str):
+            short.update(dict.fromkeys(idx.tolist(), layout))
             continue
-        groups.append((idx, replace(definition, parameters=params, packet_octets=key[0], fields=())))
+        groups.append((idx, layout))
     return groups, short
+
+
+_LAYOUTS: dict[tuple[int, tuple[int, ...]], tuple[PacketDefinition, PacketDefinition | str]] = {}
+
+
+def _resolved(definition: PacketDefinition, key: tuple[int, ...], counts: tuple[str, ...]) -> PacketDefinition | str:
+    """The fixed layout of a variable definition for (packet octets, count-field values), or why there is none;
+    made once per key, so the decoder's compiled plan of that layout is reused chunk after chunk."""
+    known = _LAYOUTS.get((id(definition), key))
+    if known is not None and known[0] is definition:
+        return known[1]
+    try:
+        params = definition.resolve(key[0], dict(zip(counts, key[1:])))
+        layout: PacketDefinition | str = replace(definition, parameters=params, packet_octets=key[0], fields=())
+    except ValueError as exc:
+        layout = str(exc)
+    if len(_LAYOUTS) >= _MAX_PLANS:
+        _LAYOUTS.clear()
+    _LAYOUTS[(id(definition), key)] = (definition, layout)
+    return layout
 
 
 def _union(parts: list[tuple[np.ndarray, dict[str, np.ndarray]]], n: int) -> dict[str, np.ndarray]:
