@@ -475,6 +475,9 @@ def _xtce_bulk(
                 pieces.setdefault(name, []).append((idx, v))
     columns = {}
     for name, have in pieces.items():
+        if len(have) == 1 and len(have[0][0]) == n and have[0][1].dtype.kind == "i":
+            columns[name] = have[0][1]  # one group of every packet, in order (groups keep ascending positions)
+            continue
         whole = sum(len(idx) for idx, _ in have) == n and all(v.dtype.kind == "i" for _, v in have)
         column = np.empty(n, np.int64) if whole else np.full(n, np.nan)
         for idx, v in have:
