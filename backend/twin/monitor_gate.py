@@ -123,9 +123,19 @@ class MonitorGate:
         return self.port
 
     def stop(self) -> None:
-        """Stop listening and the loop (open connections are dropped)."""
-        if self._server is not None:
-            self._loop.call_soon_threadsafe(self._server.close)
+        """Stop listening, drop open connections (their tasks cancelled and awaited), then stop the loop."""
+
+        async def shutdown() -> None:
+            if self._server is not None:
+                self._server.close()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+
+        if self._loop.is_running():
+            with contextlib.suppress(Exception):  # a loop that cannot finish in time is stopped all the same
+                asyncio.run_coroutine_threadsafe(shutdown(), self._loop).result(5.0)
         self._loop.call_soon_threadsafe(self._loop.stop)
 
     async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:

@@ -73,6 +73,7 @@ def console(tmp_path_factory):
         "token_ids": {k: v[0] for k, v in tokens.items()},
         "end": end,
         "viewer_port": viewer_port,
+        "auth": auth,
     }
     server.should_exit = True
     thread.join(timeout=10.0)
@@ -385,6 +386,29 @@ def test_monitors_show_progress_until_they_answer(browser, console):
             server.shutdown()
             server.server_close()
         page.close()
+
+
+def test_an_embedded_monitor_behind_the_token_gate_opens_with_the_dashboard_token(browser, console, twin_feed):
+    from backend.twin.monitor_gate import MonitorGate
+    from frontend.monitors import serve_monitors
+    from tests.frontend.test_browser import PAINT_TIMEOUT_S, _wait_for
+
+    handles = serve_monitors(twin_feed, ports={"actual": free_port()}, roles=("actual",))
+    gate = MonitorGate(console["auth"], "127.0.0.1", console["viewer_port"], handles.ports["actual"], role="actual")
+    gate.start()
+    page = _open(browser, console, VIEWPORTS[1], role="viewer")
+    try:
+        element = page.wait_for_selector("#monitors figure[data-role='actual'] iframe", timeout=LOAD_MS)
+        element.scroll_into_view_if_needed()  # chromium does not animate an off-screen cross-origin frame
+        frame = element.content_frame()
+        # the frame's viser WebSocket came through the gate (cookie from the dashboard's token): a viewer of its own
+        _wait_for(lambda: len(handles.viewers.get("actual", {})) == 1, PAINT_TIMEOUT_S, "the embedded monitor")
+        assert frame.url == f"http://127.0.0.1:{console['viewer_port']}/"  # the gate moved the token into a cookie
+        assert "Software WebGL" in frame.evaluate("document.body.innerText")  # viser's own page, not a refusal
+    finally:
+        page.close()
+        gate.stop()
+        handles.stop()
 
 
 def _pdf_is_well_formed(pdf: bytes) -> None:

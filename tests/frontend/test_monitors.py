@@ -4,6 +4,8 @@ viewer (one client's playback never moves another's view), camera presets, refus
 from __future__ import annotations
 
 import socket
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -141,5 +143,46 @@ def test_live_data_nearing_the_end_of_the_drawn_tracks_extends_them(twin_feed):
             assert handles.extend_tracks()
             assert handles.geometry.track_t[-1] > first_end and viewer.geometry is handles.geometry
             assert handles.render(wall_dt_s=0.1)[viewer.client_id].t_unix_s == feed.end
+    finally:
+        handles.stop()
+
+
+class SlowWindows:
+    """A WindowSource whose archive read takes as long as the test wants (it waits for ``release``)."""
+
+    def __init__(self, feed) -> None:
+        self.feed, self.release = feed, threading.Event()
+
+    def archive_span_unix_s(self) -> tuple[float, float]:
+        return self.feed.span_unix_s()
+
+    def window_feed(self, t0_unix_s: float, t1_unix_s: float):
+        assert self.release.wait(60.0)
+        return self.feed
+
+
+def test_a_window_loading_in_the_background_never_holds_up_the_live_viewers(twin_feed):
+    feed, windows = GrowingFeed(twin_feed), SlowWindows(twin_feed)
+    handles = serve_monitors(
+        feed, ports={"overlay": free_port()}, roles=("overlay",), start=False, live=True, windows=windows
+    )
+    try:
+        with viser_client(handles.ports["overlay"]), viser_client(handles.ports["overlay"]):
+            loader, watcher = wait_for_viewers(handles, "overlay", 2)
+            t0, _ = twin_feed.span_unix_s()
+            loader.request_window(t0 + 60.0, t0 + 360.0)
+            for _ in range(3):  # the archive read is still running: live goes on for everyone
+                feed.end += 10.0
+                shown = handles.render(wall_dt_s=0.1)
+                assert shown[watcher.client_id].t_unix_s == shown[loader.client_id].t_unix_s == feed.end
+                assert loader.loading and not loader.replaying_window
+            windows.release.set()
+            deadline = time.monotonic() + 30.0
+            while not loader.replaying_window and time.monotonic() < deadline:
+                shown = handles.render(wall_dt_s=0.1)  # swapped in by the render loop once loaded
+                time.sleep(0.05)
+            assert loader.replaying_window and not loader.clock.live
+            assert shown[loader.client_id].t_unix_s == t0 and shown[watcher.client_id].t_unix_s == feed.end
+            assert "replaying" in loader.panels.window_status.content
     finally:
         handles.stop()

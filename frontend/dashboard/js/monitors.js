@@ -1,5 +1,9 @@
 // The twin monitors (viser, one port per role) embedded as frames once they answer: until then each
-// shows that it is starting, with the time waited, instead of a broken frame.
+// shows that it is starting, with the time waited, instead of a broken frame. Behind the server's token
+// gate the frame opens with the dashboard's token (?token=…: the gate answers with a redirect that keeps it
+// in an HttpOnly cookie, out of the frame's URL), so the embedded monitor and the "open on its own
+// screen" link work without a second login; each frame is a viewer with its own playback.
+import { session } from "./api.js";
 import { $, el, fill } from "./dom.js";
 
 const PROBE_MS = 1000;
@@ -20,8 +24,15 @@ async function answers(url) {
   }
 }
 
+function withToken(url) {
+  if (!session.token) return url;
+  const u = new URL(url, window.location.href);
+  u.searchParams.set("token", session.token);
+  return u.href;
+}
+
 function embed(figure, role, url) {
-  const frame = el("iframe", { src: url, title: `${role} monitor` });
+  const frame = el("iframe", { src: withToken(url), title: `${role} monitor` });
   figure.querySelector(".starting").replaceWith(frame);
   figure.dataset.state = "ready";
 }
