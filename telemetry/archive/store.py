@@ -320,6 +320,7 @@ class Archive:
             parts: list[IngestResult] = []
             archived: dict[int, int] = {}
             pending = _PendingBatches()
+            last_written: dict[int, tuple[int, int]] = {}  # gaps between two archive chunks counted once
             for decoded in results:
                 batches = _merge_by_apid([PacketBatch.from_sample_batch(b) for b in decoded.batches])
                 if existing is not None:
@@ -329,10 +330,10 @@ class Archive:
                     continue
                 ready = pending.add(batches)
                 if ready:
-                    parts.append(self._write_batches(conn, sat_id, upload_id, ready, limits or {}))
+                    parts.append(self._write_batches(conn, sat_id, upload_id, ready, limits or {}, last_written))
                 self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
             if pending.batches:
-                parts.append(self._write_batches(conn, sat_id, upload_id, pending.flush(), limits or {}))
+                parts.append(self._write_batches(conn, sat_id, upload_id, pending.flush(), limits or {}, last_written))
             if existing is not None:
                 return IngestResult(
                     upload_id, True, packets_duplicate=sum(archived.values()), duplicates_by_apid=archived
@@ -495,8 +496,16 @@ class Archive:
         return int(conn.execute(insert(UPLOAD).values(**row).returning(UPLOAD.c.id)).scalar_one())
 
     def _write_batches(
-        self, conn: Connection, sat_id: int, upload_id: int, batches: list[PacketBatch], limits: Mapping[str, LimitSet]
+        self,
+        conn: Connection,
+        sat_id: int,
+        upload_id: int,
+        batches: list[PacketBatch],
+        limits: Mapping[str, LimitSet],
+        last_written: dict[int, tuple[int, int]] | None = None,
     ) -> IngestResult:
+        """Write the batches' new packets; ``last_written`` (APID → time and sequence count of the upload's last
+        packet written so far, updated) counts a gap between two writes of one upload once, as one write would."""
         accepted = duplicates = samples = 0
         gaps: list[Gap] = []
         changes: list[alarm_state.LevelChange] = []
@@ -505,7 +514,7 @@ class Archive:
             ordered, n_dup_inside = _order_and_dedupe(batch)
             fresh, n_dup_archived = self._drop_archived(conn, sat_id, ordered)
             duplicates += n_dup_inside + n_dup_archived
-            by_apid[batch.apid] = n_dup_inside + n_dup_archived
+            by_apid[batch.apid] = by_apid.get(batch.apid, 0) + n_dup_inside + n_dup_archived
             if fresh.n_packets == 0:
                 continue
             self._write_chunks(conn, sat_id, upload_id, fresh)
@@ -513,7 +522,11 @@ class Archive:
             samples += fresh.n_packets * len(fresh.values) - sum(
                 int(np.count_nonzero(np.isnan(v))) for v in fresh.values.values() if v.dtype.kind == "f"
             )  # NaN: no such element
-            gaps.extend(_gaps_of(fresh) if fresh.raw else [])  # ground files carry no sequence counts
+            if fresh.raw:  # ground files carry no sequence counts
+                previous = None if last_written is None else last_written.get(fresh.apid)
+                gaps.extend(_gaps_of(fresh, previous))
+                if last_written is not None:
+                    last_written[fresh.apid] = (int(fresh.t_utc_ns[-1]), int(fresh.seq_count[-1]))
             changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
         changes.sort(key=lambda c: c.t_ns)
         n_events = alarm_state.apply_level_changes(conn, sat_id, upload_id, changes) if changes else 0
@@ -1039,10 +1052,14 @@ def _order_and_dedupe(batch: PacketBatch) -> tuple[PacketBatch, int]:
     return batch.take(order[keep]), int((~keep).sum())
 
 
-def _gaps_of(batch: PacketBatch) -> list[Gap]:
-    missing = sequence_gaps(batch.seq_count)
+def _gaps_of(batch: PacketBatch, previous: tuple[int, int] | None = None) -> list[Gap]:
+    """Sequence gaps of a time-ordered batch, and before its first packet from ``previous`` (time, count) when it
+    follows that one in time."""
+    t, seq = batch.t_utc_ns, batch.seq_count
+    if previous is not None and t.size and previous[0] < t[0]:
+        t, seq = np.concatenate(([previous[0]], t)), np.concatenate(([previous[1]], seq))
+    missing = sequence_gaps(seq)
     idx = np.flatnonzero(missing)
-    t = batch.t_utc_ns
     return [Gap(batch.apid, int(t[i - 1]), int(t[i]), int(missing[i])) for i in idx.tolist()]
 
 

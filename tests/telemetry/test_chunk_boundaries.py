@@ -107,3 +107,28 @@ def test_archive_counts_gaps_and_duplicates_across_chunks_as_one_pass(tmp_path: 
             assert stored is not None
             results.append((stored.packets_accepted, stored.packets_duplicate, stored.gaps))
     assert results[1] == results[0]
+
+
+def test_archive_gaps_across_its_own_chunk_flushes_are_those_of_one_pass(
+    tmp_path: Path, shared_data: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Archive chunks of 100 packets (the archive writes an APID's pending packets every CHUNK_PACKETS): a gap
+    every 7th packet straddles many flushes and each is counted once, as in one pass."""
+    from telemetry.archive import store
+
+    packets = np.frombuffer((shared_data / NOAA20_PACKETS).read_bytes(), np.uint8).reshape(-1, NOAA20_OCTETS)
+    lost = np.arange(len(packets)) % 7 == 3
+    data = packets[~lost].tobytes()
+    path = tmp_path / "holes.bin"
+    path.write_bytes(data)
+    dictionary = load_dictionary("noaa20_apid11_ccsdspy.yaml")
+    with Archive(f"sqlite:///{tmp_path / 'one'}.sqlite") as archive:
+        _, one = ingest_packet_file(archive, path, dictionary, satellite="NOAA-20", uploaded_by="test")
+    monkeypatch.setattr(store, "CHUNK_PACKETS", 100)
+    with Archive(f"sqlite:///{tmp_path / 'cut'}.sqlite") as archive:
+        _, cut = ingest_packet_file(
+            archive, path, dictionary, satellite="NOAA-20", uploaded_by="test", chunk_octets=997
+        )
+    assert one is not None and cut is not None
+    assert len(one.gaps) == np.count_nonzero(lost[:-1])  # the last packet is lost after the last one received
+    assert cut.gaps == one.gaps
