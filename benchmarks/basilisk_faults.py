@@ -74,122 +74,24 @@ def _fault_module(kind: str, wheel: int, onset_s: float, magnitude: float, js: f
 
 def fly(kind: str, wheel: int, onset_s: float, magnitude: float, duration_s: float) -> dict[str, np.ndarray]:
     """Basilisk flight of the peer case with one hidden fault (0-based ``wheel``); 1 Hz series."""
-    from Basilisk.architecture import messaging
-    from Basilisk.fswAlgorithms import (
-        attTrackingError,
-        inertial3D,
-        mrpFeedback,
-        rwMotorTorque,
-    )
-    from Basilisk.simulation import (
-        GravityGradientEffector,
-        reactionWheelStateEffector,
-        simpleNav,
-        spacecraft,
-    )
-    from Basilisk.utilities import (
-        SimulationBaseClass,
-        macros,
-        orbitalMotion,
-        simIncludeGravBody,
-        simIncludeRW,
-    )
+    from Basilisk.utilities import macros
 
-    sim = SimulationBaseClass.SimBaseClass()
-    dyn = sim.CreateNewProcess("dyn")
-    dyn.addTask(sim.CreateNewTask("dynTask", macros.sec2nano(peer.DYNAMICS_DT_S)))
-    fsw = sim.CreateNewProcess("fsw")
-    fsw.addTask(sim.CreateNewTask("fswTask", macros.sec2nano(peer.CONTROL_DT_S)))
-    sc = spacecraft.Spacecraft()
-    sc.ModelTag = "peer"
-    inertia = np.diag(peer.HUB_INERTIA_KGM2)
-    sc.hub.mHub = peer.HUB_MASS_KG
-    sc.hub.IHubPntBc_B = inertia.tolist()
-    sim.AddModelToTask("dynTask", sc, None, 1)
-    grav = simIncludeGravBody.gravBodyFactory()
-    earth = grav.createEarth()
-    earth.isCentralBody = True
-    sc.gravField.gravBodies = spacecraft.GravBodyVector(list(grav.gravBodies.values()))
-    gg = GravityGradientEffector.GravityGradientEffector()
-    gg.ModelTag = "gravityGradient"
-    gg.addPlanetName(earth.planetName)
-    sc.addDynamicEffector(gg)
-    sim.AddModelToTask("dynTask", gg)
-    factory = simIncludeRW.rwFactory()
-    for axis, rpm in zip(peer.wheel_axes_b(), peer.WHEEL_START_RPM):
-        factory.create(
-            "Honeywell_HR12", list(axis), maxMomentum=peer.WHEEL_MAX_MOMENTUM_NMS, Omega=rpm, useMaxTorque=False
-        )
-    js = float(next(iter(factory.rwList.values())).Js)
-    rw = reactionWheelStateEffector.ReactionWheelStateEffector()
-    factory.addToSpacecraft("wheels", rw, sc)
-    sim.AddModelToTask("dynTask", rw, None, 2)
-    hidden = _fault_module(kind, wheel, onset_s, magnitude, js)
-    hidden.ModelTag = "hiddenFault"
-    sim.AddModelToTask("dynTask", hidden, None, 3)
-    nav = simpleNav.SimpleNav()
-    nav.ModelTag = "nav"
-    sim.AddModelToTask("dynTask", nav)
-    first, second = peer.reference_mrps()
-    ref = inertial3D.inertial3D()
-    ref.ModelTag = "reference"
-    ref.sigma_R0N = list(first)
-    sim.AddModelToTask("fswTask", ref)
-    err = attTrackingError.attTrackingError()
-    err.ModelTag = "attitudeError"
-    sim.AddModelToTask("fswTask", err)
-    ctrl = mrpFeedback.mrpFeedback()
-    ctrl.ModelTag = "mrpFeedback"
-    ctrl.K, ctrl.P, ctrl.Ki = peer.MRP_K, peer.MRP_P, -1.0
-    ctrl.integralLimit = 0.0
-    sim.AddModelToTask("fswTask", ctrl)
-    mapping = rwMotorTorque.rwMotorTorque()
-    mapping.ModelTag = "rwMotorTorque"
-    mapping.controlAxes_B = [1, 0, 0, 0, 1, 0, 0, 0, 1]
-    sim.AddModelToTask("fswTask", mapping)
-    veh = messaging.VehicleConfigMsgPayload()
-    veh.ISCPntB_B = inertia.flatten().tolist()
-    veh_msg = messaging.VehicleConfigMsg().write(veh)
-    rw_params = factory.getConfigMessage()
-    oe = orbitalMotion.ClassicElements()
-    oe.a = earth.radEquator + peer.ORBIT_ALTITUDE_M
-    oe.e = 0.0
-    oe.i = np.radians(peer.ORBIT_INCLINATION_DEG)
-    oe.Omega = oe.omega = oe.f = 0.0
-    r_n, v_n = orbitalMotion.elem2rv(earth.mu, oe)
-    sc.hub.r_CN_NInit = r_n
-    sc.hub.v_CN_NInit = v_n
-    sc.hub.sigma_BNInit = [[0.0], [0.0], [0.0]]
-    sc.hub.omega_BN_BInit = [[0.0], [0.0], [0.0]]
-    nav.scStateInMsg.subscribeTo(sc.scStateOutMsg)
-    err.attNavInMsg.subscribeTo(nav.attOutMsg)
-    err.attRefInMsg.subscribeTo(ref.attRefOutMsg)
-    ctrl.guidInMsg.subscribeTo(err.attGuidOutMsg)
-    ctrl.vehConfigInMsg.subscribeTo(veh_msg)
-    ctrl.rwParamsInMsg.subscribeTo(rw_params)
-    ctrl.rwSpeedsInMsg.subscribeTo(rw.rwSpeedOutMsg)
-    mapping.rwParamsInMsg.subscribeTo(rw_params)
-    mapping.vehControlInMsg.subscribeTo(ctrl.cmdTorqueOutMsg)
-    hidden.cmdInMsg.subscribeTo(mapping.rwMotorTorqueOutMsg)
-    hidden.speedInMsg.subscribeTo(rw.rwSpeedOutMsg)
-    rw.rwMotorCmdInMsg.subscribeTo(hidden.torqueOutMsg)
+    craft = peer.build(
+        failed_wheels=None,
+        wheel_torque_limit=False,
+        command_filter=lambda js: _fault_module(kind, wheel, onset_s, magnitude, js),
+    )
     every = macros.sec2nano(1.0)
     logs = {
-        "state": nav.attOutMsg.recorder(every),
-        "ref": ref.attRefOutMsg.recorder(every),
-        "speed": rw.rwSpeedOutMsg.recorder(every),
-        "cmd": mapping.rwMotorTorqueOutMsg.recorder(every),
+        "state": craft.nav.attOutMsg.recorder(every),
+        "ref": craft.ref.attRefOutMsg.recorder(every),
+        "speed": craft.wheels.rwSpeedOutMsg.recorder(every),
+        "cmd": craft.mapping.rwMotorTorqueOutMsg.recorder(every),
     }
     for log in logs.values():
-        sim.AddModelToTask("fswTask", log)
-    sim.InitializeSimulation()
-    switch = min(peer.SECOND_SLEW_TIME_S, duration_s)
-    sim.ConfigureStopTime(macros.sec2nano(switch - 0.5 * peer.DYNAMICS_DT_S))
-    sim.ExecuteSimulation()
-    if duration_s > switch:
-        ref.sigma_R0N = list(second)
-        sim.ConfigureStopTime(macros.sec2nano(duration_s))
-        sim.ExecuteSimulation()
+        craft.sim.AddModelToTask("fswTask", log)
+    craft.sim.InitializeSimulation()
+    craft.fly(duration_s)
     return {
         "t_s": logs["state"].times() * 1e-9,
         "sigma_bn": np.array(logs["state"].sigma_BN),

@@ -12,7 +12,9 @@ at 0.5 s, point-mass gravity with gravity-gradient torque; the inertial referenc
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -60,8 +62,46 @@ class PeerRun:
     omega_rw_rad_s: np.ndarray
 
 
-def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), record: bool = True) -> PeerRun:
-    """Build and run the peer scenario in Basilisk; wall time covers ExecuteSimulation only."""
+@dataclass
+class PeerSim:
+    """The peer scenario assembled in Basilisk, ready to fly: the simulation and the modules a caller records."""
+
+    sim: Any
+    nav: Any
+    ref: Any
+    err: Any
+    mapping: Any
+    wheels: Any
+    rotor_inertia_kg_m2: float
+    messages: tuple[Any, ...]  # stand-alone messages the modules read: kept alive with the simulation
+
+    def fly(self, duration_s: float) -> None:
+        """Fly the reference profile after ``sim.InitializeSimulation()``: the first reference, then the second
+        from SECOND_SLEW_TIME_S."""
+        from Basilisk.utilities import macros
+
+        switch = min(SECOND_SLEW_TIME_S, duration_s)
+        # Stop just before the switch so that the FSW tick at t = switch already sees the new reference.
+        self.sim.ConfigureStopTime(macros.sec2nano(switch - 0.5 * DYNAMICS_DT_S))
+        self.sim.ExecuteSimulation()
+        if duration_s > switch:
+            self.ref.sigma_R0N = list(reference_mrps()[1])
+            self.sim.ConfigureStopTime(macros.sec2nano(duration_s))
+            self.sim.ExecuteSimulation()
+
+
+def build(
+    failed_wheels: tuple[int, ...] | None = (),
+    wheel_torque_limit: bool = True,
+    command_filter: Callable[[float], Any] | None = None,
+) -> PeerSim:
+    """Assemble the peer case (module docstring) in Basilisk.
+
+    ``failed_wheels``: wheels the flight software is told are unavailable (None: no availability message at
+    all); ``command_filter(J_s)``: a module placed between the torque mapping and the wheel effector (inputs
+    ``cmdInMsg``, ``speedInMsg``, output ``torqueOutMsg``), e.g. a fault the flight software is never told of;
+    ``wheel_torque_limit``: the effector clips the torque at the wheel's rating (off when a filter must act).
+    """
     from Basilisk.architecture import messaging
     from Basilisk.fswAlgorithms import attTrackingError, inertial3D, mrpFeedback, rwMotorTorque
     from Basilisk.simulation import GravityGradientEffector, reactionWheelStateEffector, simpleNav, spacecraft
@@ -98,22 +138,28 @@ def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), rec
     sim.AddModelToTask("dynTask", gg)
 
     factory = simIncludeRW.rwFactory()
+    limit = {} if wheel_torque_limit else {"useMaxTorque": False}
     for axis, rpm in zip(wheel_axes_b(), WHEEL_START_RPM):
-        factory.create("Honeywell_HR12", list(axis), maxMomentum=WHEEL_MAX_MOMENTUM_NMS, Omega=rpm)
-    for index in failed_wheels:
+        factory.create("Honeywell_HR12", list(axis), maxMomentum=WHEEL_MAX_MOMENTUM_NMS, Omega=rpm, **limit)
+    for index in failed_wheels or ():
         list(factory.rwList.values())[index].u_min = 1e9
     rw_effector = reactionWheelStateEffector.ReactionWheelStateEffector()
     factory.addToSpacecraft("wheels", rw_effector, sc)
     sim.AddModelToTask("dynTask", rw_effector, None, 2)
+    js = float(next(iter(factory.rwList.values())).Js)
+    between = None
+    if command_filter is not None:
+        between = command_filter(js)
+        between.ModelTag = "commandFilter"
+        sim.AddModelToTask("dynTask", between, None, 3)
 
     nav = simpleNav.SimpleNav()
     nav.ModelTag = "nav"
     sim.AddModelToTask("dynTask", nav)
 
-    first, second = reference_mrps()
     ref = inertial3D.inertial3D()
     ref.ModelTag = "reference"
-    ref.sigma_R0N = list(first)
+    ref.sigma_R0N = list(reference_mrps()[0])
     sim.AddModelToTask("fswTask", ref)
     err = attTrackingError.attTrackingError()
     err.ModelTag = "attitudeError"
@@ -132,9 +178,6 @@ def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), rec
     veh.ISCPntB_B = inertia.flatten().tolist()
     veh_msg = messaging.VehicleConfigMsg().write(veh)
     rw_params = factory.getConfigMessage()
-    avail = messaging.RWAvailabilityMsgPayload()
-    avail.wheelAvailability = [messaging.UNAVAILABLE if i in failed_wheels else messaging.AVAILABLE for i in range(4)]
-    avail_msg = messaging.RWAvailabilityMsg().write(avail)
 
     oe = orbitalMotion.ClassicElements()
     oe.a = earth.radEquator + ORBIT_ALTITUDE_M  # radEquator is in metres
@@ -154,29 +197,40 @@ def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), rec
     ctrl.vehConfigInMsg.subscribeTo(veh_msg)
     ctrl.rwParamsInMsg.subscribeTo(rw_params)
     ctrl.rwSpeedsInMsg.subscribeTo(rw_effector.rwSpeedOutMsg)
-    ctrl.rwAvailInMsg.subscribeTo(avail_msg)
     mapping.rwParamsInMsg.subscribeTo(rw_params)
     mapping.vehControlInMsg.subscribeTo(ctrl.cmdTorqueOutMsg)
-    mapping.rwAvailInMsg.subscribeTo(avail_msg)
-    rw_effector.rwMotorCmdInMsg.subscribeTo(mapping.rwMotorTorqueOutMsg)
+    if failed_wheels is not None:
+        avail = messaging.RWAvailabilityMsgPayload()
+        avail.wheelAvailability = [
+            messaging.UNAVAILABLE if i in failed_wheels else messaging.AVAILABLE for i in range(4)
+        ]
+        avail_msg = messaging.RWAvailabilityMsg().write(avail)
+        ctrl.rwAvailInMsg.subscribeTo(avail_msg)
+        mapping.rwAvailInMsg.subscribeTo(avail_msg)
+    if between is None:
+        rw_effector.rwMotorCmdInMsg.subscribeTo(mapping.rwMotorTorqueOutMsg)
+    else:
+        between.cmdInMsg.subscribeTo(mapping.rwMotorTorqueOutMsg)
+        between.speedInMsg.subscribeTo(rw_effector.rwSpeedOutMsg)
+        rw_effector.rwMotorCmdInMsg.subscribeTo(between.torqueOutMsg)
+    messages = (veh_msg, rw_params) + ((avail_msg,) if failed_wheels is not None else ())
+    return PeerSim(sim, nav, ref, err, mapping, rw_effector, js, messages)
 
+
+def run(duration_s: float = DURATION_S, failed_wheels: tuple[int, ...] = (), record: bool = True) -> PeerRun:
+    """Build and run the peer scenario in Basilisk; wall time covers ExecuteSimulation only."""
+    from Basilisk.utilities import macros
+
+    peer = build(failed_wheels)
     err_log = speed_log = None
     if record:
-        err_log = err.attGuidOutMsg.recorder(macros.sec2nano(CONTROL_DT_S))
-        speed_log = rw_effector.rwSpeedOutMsg.recorder(macros.sec2nano(CONTROL_DT_S))
-        sim.AddModelToTask("fswTask", err_log)
-        sim.AddModelToTask("fswTask", speed_log)
-
-    sim.InitializeSimulation()
+        err_log = peer.err.attGuidOutMsg.recorder(macros.sec2nano(CONTROL_DT_S))
+        speed_log = peer.wheels.rwSpeedOutMsg.recorder(macros.sec2nano(CONTROL_DT_S))
+        peer.sim.AddModelToTask("fswTask", err_log)
+        peer.sim.AddModelToTask("fswTask", speed_log)
+    peer.sim.InitializeSimulation()
     start = time.perf_counter()
-    switch = min(SECOND_SLEW_TIME_S, duration_s)
-    # Stop just before the switch so that the FSW tick at t = switch already sees the new reference.
-    sim.ConfigureStopTime(macros.sec2nano(switch - 0.5 * DYNAMICS_DT_S))
-    sim.ExecuteSimulation()
-    if duration_s > switch:
-        ref.sigma_R0N = list(second)
-        sim.ConfigureStopTime(macros.sec2nano(duration_s))
-        sim.ExecuteSimulation()
+    peer.fly(duration_s)
     wall = time.perf_counter() - start
     if not record:
         return PeerRun(wall, np.empty(0), np.empty((0, 3)), np.empty((0, 4)))
