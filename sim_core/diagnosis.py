@@ -69,9 +69,13 @@ PAIR_PRIOR_LOG_ODDS = math.log(100.0)  # two wheel faults within one diagnosis w
 FDIR_MISS_LOG_ODDS = math.log(1e4)  # the onboard FDIR isolates a healthy wheel at most once in 10^4 isolations
 ROTOR_TOLERANCE = 0.02  # torque → speed known within 2 %: rotor inertia and motor torque constant tolerances
 COUPLING_TOLERANCE = 0.5  # an estimated body rate lags a sudden change by up to half a sample at 1 Hz
+SECOND_FAULT_S = 600.0  # alarms this soon after the first are diagnosed with it (issue 14: within 10 minutes)
 REPLAYED = 3  # wheel hypotheses flown in the twin replay
 REPLAY_ONSETS = 13  # onsets tried per replayed hypothesis
 REPLAY_LEAD_S = 60.0  # the twin starts this long before the earliest onset tried
+RESOLVED_COUNTS = 2  # a reading that moves by one count may be the rounding of an arbitrarily small change:
+# a speed bias or a friction is claimed only if it moves the tachometer by two counts or more
+SUB_SAMPLE = 4  # onsets tried per telemetry interval (a fault starts between samples)
 KINEMATIC_RATE_FLOOR_RAD_S = 2e-7  # float32 quaternion components (6e-8) differenced over 1 s, with margin
 
 
@@ -324,13 +328,21 @@ class _Fit:
     onset_s: float
     onset_sigma_s: float
     magnitude: float | None
+    credit: dict[int, float] = field(default_factory=dict)  # other channels' evidence included (seizure kick)
 
 
-def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Profiled log-likelihood over onset indices (and magnitude if ``quadratic``): (ll (G,), θ* (G,))."""
+def _profile(
+    ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool, fraction: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Profiled log-likelihood over onset indices (and magnitude if ``quadratic``): (ll (G,), θ* (G,)).
+
+    ``fraction`` of the interval before each onset sample is already faulty (the onset falls between samples:
+    a motor dead for the last 0.4 s of an interval delivers 60 % of its command over it)."""
     n = ch.y.shape[0]
     g = onsets.shape[0]
     after = (np.arange(n - 1)[None, :] >= onsets[:, None]).astype(float)  # interval k → k+1 after onset
+    if fraction > 0.0:
+        after[np.arange(n - 1)[None, :] == onsets[:, None] - 1] = fraction
     after_sample = (np.arange(n)[None, :] >= onsets[:, None]).astype(float)
     zero_off = np.zeros((g, n))
     no_reset = np.zeros((g, n), dtype=np.bool_)
@@ -364,18 +376,22 @@ def _profile(ch: _Channel, onsets: np.ndarray, kind: str, quadratic: bool) -> tu
         def at(theta: float) -> np.ndarray:
             return run(base + theta * after * ch.templates["friction"], zero_off, no_reset)
 
-        # a friction that does not move the wheel by one tachometer count after its onset is not resolved
+        # a friction that does not move the wheel by RESOLVED_COUNTS tachometer counts after its onset is not resolved
         per_nm = np.abs(after * ch.templates["friction"]).sum(axis=1)
         with np.errstate(divide="ignore"):
-            resolvable = np.where(per_nm > 0.0, ch.bound / per_nm, UNRESOLVED_FRICTION_NM)
+            resolvable = np.where(per_nm > 0.0, RESOLVED_COUNTS * ch.bound / per_nm, UNRESOLVED_FRICTION_NM)
         return _quadratic_max(at, 0.0, np.inf, scale=1e-3, min_abs=resolvable)
 
     def at_bias(theta: float) -> np.ndarray:  # speed, gyro or magnetometer bias: a step in the measurement
         return run(base, theta * after_sample, no_reset)
 
-    # a bias below the sensor's resolution is not identifiable: rounding leaves such offsets for minutes
+    # a bias below RESOLVED_COUNTS of the sensor's resolution is not identifiable: rounding does as much
     return _quadratic_max(
-        at_bias, -np.inf, np.inf, scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0, min_abs=ch.bound
+        at_bias,
+        -np.inf,
+        np.inf,
+        scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0,
+        min_abs=RESOLVED_COUNTS * ch.bound,
     )
 
 
@@ -402,23 +418,68 @@ def _quadratic_max(
 
 
 def _fit(
-    ch: _Channel, index: int, kind: str, onsets: np.ndarray, t_s: np.ndarray, nominal: float, n_params: int
+    ch: _Channel,
+    index: int,
+    kind: str,
+    onsets: np.ndarray,
+    t_s: np.ndarray,
+    nominal: float,
+    n_params: int,
+    others: dict[int, np.ndarray] | None = None,
 ) -> _Fit:
-    """Onset-marginal, magnitude-penalised log evidence of one fault in one channel."""
+    """Onset-marginal, magnitude-penalised log evidence of one fault in one channel; the onset prior is uniform in
+    time, sampled at SUB_SAMPLE fractions of the interval for faults whose effect is an integrated torque."""
     quadratic = kind not in ("failure", "stuck")
-    ll, theta = _profile(ch, onsets, kind, quadratic)
-    onset, sigma, best = _onset_stats(t_s[onsets], ll)
-    penalty = 0.5 * n_params * math.log(max(ch.y.shape[0] - int(onsets[best]), 2))
+    fractions = np.arange(SUB_SAMPLE) / SUB_SAMPLE if kind in ("failure", "gain_loss", "friction") else [0.0]
+    lead = t_s[onsets] - t_s[np.maximum(onsets - 1, 0)]
+    runs = [_profile(ch, onsets, kind, quadratic, float(phi)) for phi in fractions]
+    ll = np.concatenate([r[0] for r in runs])
+    theta = np.concatenate([r[1] for r in runs])
+    others = others or {}
+    for extra in others.values():  # the other channels' evidence under this hypothesis, per onset
+        ll = ll + np.tile(extra, len(fractions))
+    onset, sigma, best = _onset_stats(np.concatenate([t_s[onsets] - phi * lead for phi in fractions]), ll)
+    k = best % onsets.shape[0]
+    penalty = 0.5 * n_params * math.log(max(ch.y.shape[0] - int(onsets[k]), 2))
     magnitude = None if np.isnan(theta[best]) else float(theta[best])
-    return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude)
+    credit = {q: float(extra[k]) for q, extra in others.items()}
+    return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude, credit)
 
 
-def _window(alarm: fd.Alarm | None, n: int, dt: float) -> tuple[int, int, int]:
-    """Analysis window [start, stop) and the first onset index searched."""
+def _kick_evidence(ch: _Channel, onsets: np.ndarray, nominal: float) -> np.ndarray:
+    """Log evidence (G,) of a healthy wheel's balance, relative to its nominal model, when another rotor seizes
+    between samples o−1 and o (per onset o): the seizure dumps the rotor's momentum into the body in one step,
+    and the coupling term J_r aᵗΔω of that interval, taken from estimated rates that do not follow a step, is
+    then known only to its own size. A level step δ ~ N(0, s²) at that interval, s = |coupling| of the
+    interval and the next, is marginalised exactly (the log-likelihood is quadratic in δ)."""
+    n = ch.y.shape[0]
+    kick = (np.arange(n - 1)[None, :] == (onsets[:, None] - 1)).astype(float)
+    coupling = np.abs(np.concatenate([ch.templates["coupling"], [0.0]]))
+    s2 = (coupling[np.maximum(onsets - 1, 0)] + coupling[onsets]) ** 2
+    h = ch.bound if ch.bound > 0.0 else 1.0
+    zero_off = np.zeros((onsets.shape[0], n))
+    no_reset = np.zeros((onsets.shape[0], n), dtype=np.bool_)
+
+    def at(delta: float) -> np.ndarray:
+        drift = np.ascontiguousarray(ch.drift[None, :] + delta * kick)
+        return fd.level_loglik(ch.y, drift, ch.q_var, ch.r_var, zero_off, no_reset)
+
+    f0, fp, fm = at(0.0), at(h), at(-h)
+    a = np.minimum((fp + fm - 2.0 * f0) / (2.0 * h * h), 0.0)
+    b = (fp - fm) / (2.0 * h)
+    spread = 1.0 - 2.0 * a * s2
+    return f0 + b * b * s2 / (2.0 * spread) - 0.5 * np.log(spread) - nominal
+
+
+def _window(alarm: fd.Alarm | None, later: list[int], n: int, dt: float) -> tuple[int, int, int]:
+    """Analysis window [start, stop) and the first onset index searched: from before the first alarm to
+    POST_ALARM_S after the last alarm (any channel, or an FDIR isolation) within SECOND_FAULT_S of the first,
+    so that a second fault soon after the first is in the window its pair hypotheses are fitted on."""
     if alarm is None:
         return 0, n, 1
     first = max(1, alarm.index - alarm.window - int(ONSET_MARGIN_S / dt))
-    return max(0, first - int(PRE_ONSET_S / dt)), min(n, alarm.index + int(POST_ALARM_S / dt) + 1), first
+    last = max([k for k in later if k <= alarm.index + SECOND_FAULT_S / dt], default=alarm.index)
+    return max(0, first - int(PRE_ONSET_S / dt)), min(n, max(alarm.index, last) + int(POST_ALARM_S / dt) + 1), first
 
 
 def _cut(ch: _Channel, a: int, b: int) -> _Channel:
@@ -493,32 +554,41 @@ def diagnose(
 
     # detection over the whole record: continuous channels by window tests, star tracker by invalid runs
     channels = wheels + [c for group in sensors.values() for c in group]
-    alarm = _first_alarm(channels, dt)
+    alarms = _alarms(channels, dt)
+    alarm = min(alarms, key=lambda a: a.index, default=None)
     st_alarm = _star_tracker_alarm(valid)
     if st_alarm is not None and (alarm is None or st_alarm < alarm.index):
         alarm = fd.Alarm(-1, st_alarm, 1, float("inf"))
     isolated = _isolations(obs)
     if isolated and (alarm is None or min(isolated.values()) < alarm.index):
         alarm = fd.Alarm(-2, min(isolated.values()), int(ONSET_MARGIN_S / dt), float("inf"))
-    start, stop, first = _window(alarm, t.shape[0], dt)
+    later = [a.index for a in alarms] + list(isolated.values())
+    start, stop, first = _window(alarm, later, t.shape[0], dt)
     stride = 1 if alarm is not None else max(1, (stop - start) // 200)
     onsets = np.arange(first - start, stop - start - 1, stride)
     tw = t[start:stop]
 
     fits: list[_Fit] = []
     suspected = []
-    for p, ch in enumerate(wheels):
-        cut = _cut(ch, start, stop)
+    cuts = [_cut(ch, start, stop) for ch in wheels]
+    nominals = [_nominal(c) for c in cuts]
+    kicks: dict[int, np.ndarray] = {}
+    for p, cut in enumerate(cuts):
         if not (_suspected(cut) or (p in isolated and isolated[p] < stop)):
             continue
         suspected.append(p + 1)
-        nominal = _nominal(cut)
         for kind in WHEEL_FAULTS:
-            fits.append(_fit(cut, p, kind, onsets, tw, nominal, 0 if kind in ("failure", "stuck") else 1))
+            others = None
+            if kind == "stuck":
+                for q in range(len(cuts)):
+                    if q != p and q not in kicks:
+                        kicks[q] = _kick_evidence(cuts[q], onsets, nominals[q])
+                others = {q: kicks[q] for q in range(len(cuts)) if q != p}
+            fits.append(_fit(cut, p, kind, onsets, tw, nominals[p], 0 if kind in ("failure", "stuck") else 1, others))
     sensor_fits = [_sensor_fit(kind, group, start, stop, onsets, tw) for kind, group in sensors.items()]
     if valid is not None:
         sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
-    flagged = {p for p, k in isolated.items() if k < stop}
+    flagged = {p: float(t[k]) for p, k in isolated.items() if k < stop}
     hyps = _rank(fits, [f for f in sensor_fits if f is not None], flagged)
     if scenario is not None and alarm is not None:
         hyps = _replayed(hyps, obs, scenario, start, stop, alarm.index, flyer)
@@ -545,16 +615,16 @@ def _isolations(obs: Observations) -> dict[int, int]:
     return {p: int(np.argmax(flags[:, p])) for p in range(flags.shape[1]) if flags[:, p].any()}
 
 
-def _first_alarm(channels: list[_Channel], dt: float) -> fd.Alarm | None:
-    """Earliest window-test alarm over all continuous channels."""
-    best = None
+def _alarms(channels: list[_Channel], dt: float) -> list[fd.Alarm]:
+    """The first window-test alarm of every continuous channel that alarms."""
+    out = []
     for i, ch in enumerate(channels):
         r = fd.open_loop_residual(ch.y, ch.drift)[None, :]
         rel = None if ch.relative is None else ch.relative[None, :]
         a = fd.window_alarm(r, ch.q_var[None, :], ch.r_var[None, :], ch.bound, dt, relative=rel)
-        if a is not None and (best is None or a.index < best.index):
-            best = fd.Alarm(i, a.index, a.window, a.ratio)
-    return best
+        if a is not None:
+            out.append(fd.Alarm(i, a.index, a.window, a.ratio))
+    return out
 
 
 STAR_OUTAGE_RUN = 5  # consecutive invalid samples: P = (1e-4)^5 per sample for a healthy tracker
@@ -667,7 +737,7 @@ def _replay_grid(
     t = obs.t_s
     fdir = scenario.fdir or (obs.wheel_isolated is not None and bool(np.any(obs.wheel_isolated[start:stop] > 0)))
     scenario = scenario.model_copy(update={"fdir": fdir})
-    first = max(0, min(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start))
+    first = max(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start)
     reference = max(int(np.searchsorted(t, grid[0])), first + 2)
     candidates = [
         (fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau)) for h in chosen for tau in grid
@@ -705,20 +775,23 @@ def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:
     )
 
 
-def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: set[int] = frozenset()) -> list[Hypothesis]:
+def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: dict[int, float] | None = None) -> list[Hypothesis]:
     """Singles, pairs of wheel faults on different wheels (prior odds PAIR_PRIOR_LOG_ODDS), sensors and "none",
-    scored by posterior probability; each wheel the onboard FDIR isolated that a hypothesis leaves healthy costs
-    FDIR_MISS_LOG_ODDS."""
+    scored by posterior probability; each wheel the onboard FDIR isolated (``flagged``: wheel index → time) that
+    a hypothesis leaves healthy costs FDIR_MISS_LOG_ODDS, unless the hypothesis seizes a rotor before that
+    isolation: a seizure's kick (the rotor's momentum dumped into the body in one step) is outside the FDIR's
+    body-rate prediction, so the isolations after it say nothing about the other wheels."""
+    flagged = flagged or {}
 
-    def unexplained(*wheels: int) -> float:
-        return -FDIR_MISS_LOG_ODDS * len(set(flagged) - set(wheels))
+    def unexplained(*fits: _Fit) -> float:
+        kicks = [f.onset_s for f in fits if f.fault == "stuck"]
+        healthy = [t for p, t in flagged.items() if p not in {f.channel for f in fits}]
+        return -FDIR_MISS_LOG_ODDS * sum(not any(k <= t for k in kicks) for t in healthy)
 
     hyps = [Hypothesis("none", None, None, None, None, unexplained())]
     for f in wheel_fits:
         hyps.append(
-            Hypothesis(
-                f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained(f.channel)
-            )
+            Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained(f))
         )
     for f in sensor_fits:
         hyps.append(Hypothesis(f.fault, None, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained()))
@@ -735,7 +808,12 @@ def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: set[int] = f
                         min(a.onset_s, b.onset_s),
                         max(a.onset_sigma_s, b.onset_sigma_s),
                         [a.magnitude, b.magnitude],
-                        a.delta + b.delta + unexplained(p, q) - PAIR_PRIOR_LOG_ODDS,
+                        a.delta
+                        + b.delta
+                        - a.credit.get(q, 0.0)
+                        - b.credit.get(p, 0.0)  # q, p fitted, not kicked
+                        + unexplained(a, b)
+                        - PAIR_PRIOR_LOG_ODDS,
                     )
                 )
     return _scored(hyps)[:MAX_LISTED]
