@@ -211,11 +211,21 @@ def stop_trials(stops: int) -> int:
     return leaked
 
 
-def health_during_upload(upload_mb: float, diary: bytes) -> tuple[float, float, int, float, int]:
-    """(health p50 ms, p99 ms, health requests, upload seconds, peak RSS rise kB) during one big upload."""
+def status_kb(pid: int, key: str) -> int:
+    """A /proc/<pid>/status figure in kB (0 once the process is gone)."""
+    try:
+        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+    except OSError:
+        return 0
+    return next((int(line.split()[1]) for line in lines if line.startswith(key + ":")), 0)
+
+
+def health_during_upload(upload_mb: float, diary: bytes) -> tuple[float, float, int, float, int, int]:
+    """(health p50 ms, p99 ms, health requests, upload seconds, server peak RSS rise kB, upload decoder peak RSS
+    kB: the process backend.ingest.upload_decoder starts for a file of more than one chunk) during one upload."""
     data_dir = Path(tempfile.mkdtemp(prefix="acs-hardening-"))
     server = Server(data_dir, free_port(), free_port(), free_port(), "--no-emulator")
-    server.children(1)
+    before_upload = server.children(1)
     time.sleep(5.0)  # start-up work (ingest process imports) done: measure the upload alone
     body = diary * int(np.ceil(upload_mb * 1e6 / len(diary)))
     body = body[: int(upload_mb * 1e6) // PACKET_OCTETS * PACKET_OCTETS]
@@ -242,10 +252,12 @@ def health_during_upload(upload_mb: float, diary: bytes) -> tuple[float, float, 
     rise = server.rss_kb("VmHWM") - before
     assert answer.status_code == 200, answer.text[:300]
     children = server.children(1)
+    decoder_peak = max((status_kb(pid, "VmHWM") for pid in children - before_upload), default=0)
     server.process.send_signal(signal.SIGTERM)
     server.process.wait(300)
     wait_gone(children)
-    return float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99)), len(latencies), elapsed, rise
+    p50, p99 = float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99))
+    return p50, p99, len(latencies), elapsed, rise, decoder_peak
 
 
 def main() -> None:
@@ -257,10 +269,11 @@ def main() -> None:
     args = parser.parse_args()
     diary = DIARY.read_bytes()
     if args.upload_mb > 0:
-        p50, p99, n, seconds, rise = health_during_upload(args.upload_mb, diary)
+        p50, p99, n, seconds, rise, decoder = health_during_upload(args.upload_mb, diary)
         print(
             f"health during a {args.upload_mb:g} MB upload ({seconds:.1f} s): {n} requests, p50 {p50:.1f} ms, "
-            f"p99 {p99:.1f} ms (target < 100 ms); server peak RSS rise {rise / 1000:.0f} MB",
+            f"p99 {p99:.1f} ms (target < 100 ms); server peak RSS rise {rise / 1000:.0f} MB, "
+            f"upload decoder peak RSS {decoder / 1000:.0f} MB",
             flush=True,
         )
     if args.kill_trials > 0:

@@ -53,14 +53,45 @@ def start_server(data_dir: Path, port: int, deadline_s: float = 300.0) -> subpro
     raise SystemExit("server did not start")
 
 
-def poll_health(base: str, stop: threading.Event, out: list[float]) -> None:
-    """Latency (s) of GET /health every 20 ms until stop is set."""
+def poll_health(base: str, stop: threading.Event, out: list[float], at: list[float] | None = None) -> None:
+    """Latency (s) of GET /health every 20 ms until stop is set (and when each was sent, into ``at``)."""
     with httpx.Client(timeout=30) as client:
         while not stop.is_set():
             t0 = time.perf_counter()
             client.get(f"{base}/health")
             out.append(time.perf_counter() - t0)
+            if at is not None:
+                at.append(t0)
             time.sleep(0.02)
+
+
+def children_of(pid: int) -> set[int]:
+    """Process ids whose parent is ``pid`` (Linux /proc)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.add(int(stat.parent.name))
+    return found
+
+
+def watch_new_child(pid: int, stop: threading.Event, out: list[float]) -> None:
+    """When the server first starts a child after this call (the upload decoder: the body is spooled)."""
+    known = children_of(pid)
+    while not stop.is_set():
+        if children_of(pid) - known:
+            out.append(time.perf_counter())
+            return
+        time.sleep(0.05)
+
+
+def _summary(ms: np.ndarray) -> str:
+    if ms.size == 0:
+        return "no request"
+    return f"{ms.size} requests, p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms"
 
 
 def upload(base: str, path: Path, headers: dict[str, str]) -> tuple[float, dict]:
@@ -116,20 +147,28 @@ def main() -> None:
             poller.join()
             stop.clear()
             busy: list[float] = []
-            poller = threading.Thread(target=poll_health, args=(base, stop, busy))
+            sent_at: list[float] = []
+            spooled_at: list[float] = []
+            poller = threading.Thread(target=poll_health, args=(base, stop, busy, sent_at))
+            watcher = threading.Thread(target=watch_new_child, args=(server.pid, stop, spooled_at))
+            watcher.start()
             poller.start()
             with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as uploader:
                 elapsed, body = uploader.submit(upload, base, path, operator).result()
             stop.set()
             poller.join()
+            watcher.join()
             archive = body["archive"]
             ms, idle_ms = np.array(busy) * 1e3, np.array(idle) * 1e3
+            spooling = np.array(sent_at) < (spooled_at[0] if spooled_at else np.inf)
             size_mb = path.stat().st_size / 1e6
             print(
                 f"upload of {size_mb:.0f} MB: {elapsed:.1f} s, {archive['packets_accepted']:,} packets "
                 f"archived ({archive['samples_accepted']:,} samples)\n"
                 f"health during it: {len(ms)} requests, p50 {np.percentile(ms, 50):.1f} ms, "
                 f"p99 {np.percentile(ms, 99):.1f} ms, max {ms.max():.1f} ms\n"
+                f"  while the body streamed to disk: {_summary(ms[spooling])}\n"
+                f"  while the decoder process decoded and committed it: {_summary(ms[~spooling])}\n"
                 f"health idle ({IDLE_S:.0f} s before): {len(idle_ms)} requests, "
                 f"p50 {np.percentile(idle_ms, 50):.1f} ms, "
                 f"p99 {np.percentile(idle_ms, 99):.1f} ms; p99 during / idle = "

@@ -238,7 +238,7 @@ class UploadDecoder:
     def __init__(self, database_url: str, dictionaries_dir: Path) -> None:
         self._database_url, self._dictionaries_dir = database_url, dictionaries_dir
         self._ctx = mp.get_context("spawn")
-        self._progress: Synchronized[int] = self._ctx.Value("q", 0)
+        self._progress: Synchronized[int] | None = None  # made with the first decoder (a semaphore: a tracker process)
         self._busy = threading.Lock()
         self._process: BaseProcess | None = None
         self._jobs: Connection | None = None
@@ -253,7 +253,7 @@ class UploadDecoder:
     @property
     def octets_decoded(self) -> int:
         """Octets of the current (or last) file decoded so far."""
-        return int(self._progress.value)
+        return 0 if self._progress is None else int(self._progress.value)
 
     def run(self, job: DecoderJob[T]) -> T:
         """Perform ``job`` in the decoder process (blocking: call from a thread); a second death of the decoder
@@ -280,6 +280,8 @@ class UploadDecoder:
     def _started(self) -> Connection:
         if self._process is None or self._jobs is None or not self._process.is_alive():
             self._discard()
+            if self._progress is None:
+                self._progress = self._ctx.Value("q", 0)
             self._progress.value = 0
             ours, theirs = self._ctx.Pipe()
             args = (theirs, self._database_url, str(self._dictionaries_dir), self._progress)
