@@ -148,7 +148,9 @@ def _smoothed_fixes(t_fix: np.ndarray, r_fix: np.ndarray, v_fix: np.ndarray, t: 
     return coeff[:, 0], coeff[:, 1]
 
 
-def fit_circular_orbit(t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray, t0_unix_s: float) -> dict:
+def fit_circular_orbit(
+    t_unix_s: np.ndarray, r_ecef_m: np.ndarray, v_ecef_m_s: np.ndarray, t0_unix_s: float
+) -> dict[str, float]:
     """Circular-orbit elements at t0 fitted to GPS fixes: plane by least squares, radius and phase u = u0 + n (t − t0).
 
     The plane's normal n is the one that best satisfies n·r = 0 and n·v = 0 for every fix, each row weighted by
@@ -219,7 +221,8 @@ def aligned_scenario(
 
 def aligned_wheel_available(track: ActualTrack, t_align_utc_ns: int) -> np.ndarray:
     """(1, n_wheels) wheels onboard FDIR had not isolated at the telemetry instant (``simulate(wheel_available=)``)."""
-    return track.series["fault_wheel"][track.at(t_align_utc_ns)][None, :] == 0.0
+    available: np.ndarray = track.series["fault_wheel"][track.at(t_align_utc_ns)][None, :] == 0.0
+    return available
 
 
 @dataclass(frozen=True)

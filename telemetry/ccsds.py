@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 __all__ = [
@@ -168,7 +169,7 @@ def encode_primary_headers(
     return words.view(np.uint8).reshape(count.shape + (6,))
 
 
-def _leap_table() -> tuple[np.ndarray, np.ndarray]:
+def _leap_table() -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """UTC ns where TAI − UTC steps, and TAI − UTC (ns) from then on (IERS Bulletin C, skyfield's builtin table)."""
     from skyfield.api import load
 
@@ -177,10 +178,10 @@ def _leap_table() -> tuple[np.ndarray, np.ndarray]:
     return starts_ns, np.rint(np.asarray(ts.leap_offsets)).astype(np.int64) * NS_PER_S
 
 
-_LEAPS: list[tuple[np.ndarray, np.ndarray]] = []
+_LEAPS: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]] = []
 
 
-def _tai_minus_utc_ns(boundaries: str, t_ns: np.ndarray) -> np.ndarray:
+def _tai_minus_utc_ns(boundaries: str, t_ns: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
     """TAI − UTC (ns) at times given in UTC ('utc') or as TAI labels ('tai'); the 1972 value before 1972."""
     if not _LEAPS:
         _LEAPS.append(_leap_table())
@@ -189,19 +190,21 @@ def _tai_minus_utc_ns(boundaries: str, t_ns: np.ndarray) -> np.ndarray:
     return offset[np.clip(np.searchsorted(starts, t_ns, side="right") - 1, 0, None)]
 
 
-def scale_to_utc(t_scale_ns: np.ndarray, scale: str) -> np.ndarray:
+def scale_to_utc(t_scale_ns: npt.NDArray[np.int64], scale: str) -> npt.NDArray[np.int64]:
     """UTC ns of times labelled in a time scale (UTC, TAI, GPS)."""
-    if TIME_SCALE_OFFSET_S[scale] is None:
+    offset_s = TIME_SCALE_OFFSET_S[scale]
+    if offset_s is None:
         return t_scale_ns
-    t_tai = t_scale_ns - TIME_SCALE_OFFSET_S[scale] * NS_PER_S
+    t_tai = t_scale_ns - offset_s * NS_PER_S
     return t_tai - _tai_minus_utc_ns("tai", t_tai)
 
 
-def _utc_to_scale(t_utc_ns: np.ndarray, scale: str) -> np.ndarray:
+def _utc_to_scale(t_utc_ns: npt.NDArray[np.int64], scale: str) -> npt.NDArray[np.int64]:
     """Labels in a time scale (UTC, TAI, GPS) of UTC ns times."""
-    if TIME_SCALE_OFFSET_S[scale] is None:
+    offset_s = TIME_SCALE_OFFSET_S[scale]
+    if offset_s is None:
         return t_utc_ns
-    return t_utc_ns + _tai_minus_utc_ns("utc", t_utc_ns) + TIME_SCALE_OFFSET_S[scale] * NS_PER_S
+    return t_utc_ns + _tai_minus_utc_ns("utc", t_utc_ns) + offset_s * NS_PER_S
 
 
 def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
@@ -218,7 +221,8 @@ def decode_time(octets: np.ndarray, code: TimeCode) -> np.ndarray:
     day = _big_endian_uint(t[:, : code.day_octets]).astype(np.int64)
     ms = _big_endian_uint(t[:, code.day_octets : code.day_octets + 4]).astype(np.int64)
     sub = _big_endian_uint(t[:, code.day_octets + 4 :]).astype(np.int64)
-    sub_ns = {0: 0, 2: sub * 1_000, 4: sub // 1_000}[code.submillisecond_octets]
+    sub_ns_by_octets: dict[int, np.ndarray | int] = {0: 0, 2: sub * 1_000, 4: sub // 1_000}
+    sub_ns = sub_ns_by_octets[code.submillisecond_octets]
     return scale_to_utc(code.epoch_ns + day * NS_PER_DAY + ms * 1_000_000 + sub_ns, code.time_scale)
 
 
@@ -325,7 +329,8 @@ def _header_fits(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, 
     if lengths[apid] == 0 or (lengths[apid] > 0 and size != lengths[apid]) or p + size > n:
         return False
     if crc[apid]:
-        return _crc16_1(buf, p, p + size - 2, table) == ((np.int64(buf[p + size - 2]) << 8) | buf[p + size - 1])
+        crc_ok: bool = _crc16_1(buf, p, p + size - 2, table) == ((np.int64(buf[p + size - 2]) << 8) | buf[p + size - 1])
+        return crc_ok
     return True
 
 
@@ -335,7 +340,8 @@ def _well_formed(buf: np.ndarray, p: int) -> bool:
     n = buf.shape[0]
     if p + PRIMARY_HEADER_OCTETS > n or (buf[p] >> 5) != 0:
         return False
-    return p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 <= n
+    ends_within: bool = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 <= n
+    return ends_within
 
 
 @njit(cache=True, nogil=True)
@@ -364,7 +370,8 @@ def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
     """True when exactly one idle packet (APID 2047, CCSDS 133.0-B-2 §4.1.3.3.4.4) spans [p, q)."""
     if not _well_formed(buf, p) or (((np.int64(buf[p]) & 7) << 8) | buf[p + 1]) != IDLE_APID:
         return False
-    return p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 == q
+    spans: bool = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1 == q
+    return spans
 
 
 @njit(cache=True, nogil=True)
@@ -417,7 +424,9 @@ def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: 
 
 
 @njit(cache=True, nogil=True)
-def _frame_kernel(buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, keep_undefined: bool):
+def _frame_kernel(
+    buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, keep_undefined: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them.
 
     A dictionary packet that fits at p (known APID, its length, CRC where defined) is taken when its

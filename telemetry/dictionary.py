@@ -13,7 +13,7 @@ import re
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import yaml
@@ -131,7 +131,7 @@ class FieldSpec:
     bit_offset: int | None = None
     byte_order: str = "big"
     shape: tuple[int, ...] | str | None = None
-    array_order: str = "C"
+    array_order: Literal["C", "F"] = "C"
 
     @property
     def is_variable(self) -> bool:
@@ -143,7 +143,7 @@ class FieldSpec:
         if self.shape is None:
             return [self.name]
         if isinstance(self.shape, tuple) and len(self.shape) > 1:
-            index = np.unravel_index(np.arange(count), self.shape, order=self.array_order)  # type: ignore[arg-type]
+            index = np.unravel_index(np.arange(count), self.shape, order=self.array_order)
             return [self.name + "".join(f"_{int(i[k])}" for i in index) for k in range(count)]
         return [f"{self.name}_{k}" for k in range(count)]
 
@@ -208,8 +208,7 @@ class PacketDefinition:
         if any(c not in fixed_names for c in self.count_fields):
             raise ValueError(f"{self.name}: array size fields {self.count_fields} must precede every variable array")
         if self.time_fields is not None and self.xtce is None:
-            names = fixed_names
-            missing = [n for n in self.time_fields.names if n not in names]
+            missing = [n for n in self.time_fields.names if n not in fixed_names]
             if missing:
                 raise ValueError(f"{self.name}.time_fields: no fixed-position parameters {missing}")
         body_end = 8 * (self.packet_octets - (CRC_OCTETS if self.crc else 0))
@@ -273,7 +272,8 @@ class Dictionary:
     def parameter(self, name: str) -> tuple[PacketDefinition, Parameter | DerivedParameter]:
         """The packet and the (raw or derived) parameter of that name."""
         for packet in self.packets.values():
-            for p in (*packet.parameters, *packet.derived):
+            members: tuple[Parameter | DerivedParameter, ...] = (*packet.parameters, *packet.derived)
+            for p in members:
                 if p.name == name:
                     return packet, p
         raise ValueError(f"name: no parameter {name!r} in dictionary {self.name!r}")
@@ -390,19 +390,29 @@ def _beside(folder: Path, file: Any, field: str) -> Path:
     return path
 
 
+class _PacketCommon(TypedDict):
+    """The packet fields a YAML packet sets the same way whether its layout is inline or taken from a file."""
+
+    time_code: TimeCode | None
+    time_fields: TimeFields | None
+    period_s: float | None
+    description: str
+    derived: tuple[DerivedParameter, ...]
+
+
 def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
     """One packet definition from our YAML format (layout inline or taken from an XTCE/CSV file)."""
     name, apid = str(spec["name"]), int(spec["apid"])
     time_code = parse_time_code(spec.get("time_code"))
     time_fields = parse_time_fields(spec.get("time_fields"))
     crc = bool(spec.get("crc", False))
-    common = {
-        "time_code": time_code,
-        "time_fields": time_fields,
-        "period_s": float(spec["period_s"]) if spec.get("period_s") is not None else None,
-        "description": str(spec.get("description", "")),
-        "derived": _derived(spec.get("derived")),
-    }
+    common = _PacketCommon(
+        time_code=time_code,
+        time_fields=time_fields,
+        period_s=float(spec["period_s"]) if spec.get("period_s") is not None else None,
+        description=str(spec.get("description", "")),
+        derived=_derived(spec.get("derived")),
+    )
     source = spec.get("layout_from")
     if source:
         if not isinstance(source, dict) or set(source) not in ({"xtce"}, {"ccsdspy_csv"}):
@@ -457,7 +467,8 @@ def lay_out(
     An explicit bit_offset counts from the first octet of the packet; ``fill`` and ``str`` fields only
     take room. With packet_octets None the layout stops before the first variable array.
     """
-    bit, end, params = PRIMARY_HEADER_BITS, PRIMARY_HEADER_BITS, []
+    bit, end = PRIMARY_HEADER_BITS, PRIMARY_HEADER_BITS
+    params: list[Parameter] = []
     for i, f in enumerate(fields):
         bit = f.bit_offset if f.bit_offset is not None else bit
         if f.is_variable and packet_octets is None:
@@ -669,7 +680,8 @@ def _xtce_apid(definition: Any, container: Any) -> int | None:
 
 def _xtce_chain(definition: Any, container: Any) -> list[Any]:
     """A container and its bases, root first."""
-    chain, c = [], container
+    chain: list[Any] = []
+    c = container
     while c is not None:
         chain.insert(0, c)
         c = definition.containers.get(c.base_container_name) if c.base_container_name else None

@@ -37,6 +37,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from pydantic import ValidationError
 
 from sim_core import environment, frames, modes, quaternion, scenario_library, sensors
@@ -172,7 +173,8 @@ def _tilted(axis: np.ndarray, angle: float, rng: np.random.Generator) -> list[fl
     u = axis / np.linalg.norm(axis)
     perp = np.cross(u, rng.standard_normal(3))
     perp /= np.linalg.norm(perp)
-    return (np.cos(angle) * u + np.sin(angle) * perp).tolist()
+    tilted: list[float] = (np.cos(angle) * u + np.sin(angle) * perp).tolist()
+    return tilted
 
 
 def truth_scenario(s: Scenario, seed: int = 0, tolerances: TruthTolerances = TruthTolerances()) -> Scenario:
@@ -205,7 +207,7 @@ def truth_wheel_allowance_rad_s(
     dh = float(np.max(np.linalg.norm(h - h[0], axis=1)))
     spread = np.linalg.norm(np.linalg.pinv(p.wheel_axes_b), 2) / np.min(p.wheels.inertia_kg_m2)
     tilt = tolerances.wheel_axis_rad * float(np.max(np.abs(traj["wheel_speed_rad_s"][0, window])))
-    return (tolerances.inertia_rel + 3.0 * tolerances.product_rel) * dh * spread + tilt
+    return float((tolerances.inertia_rel + 3.0 * tolerances.product_rel) * dh * spread + tilt)
 
 
 def satellite_scenario(
@@ -371,9 +373,9 @@ def _magnetometer(
     b_true = quaternion.rotate(quaternion.conjugate(sr["q_ib"]), b_i)
     table, _ = fault_kernels.fault_table(s.variants[:1])
     b_b, failed = fault_kernels.sensor_fault_series(table[0], fault_kernels.T_MAG, t_s, b_b, b_b - b_true)
-    b_b = np.clip(b_b, -range_t, range_t)
-    b_b[failed] = 0.0
-    return b_b
+    clipped: npt.NDArray[np.float64] = np.clip(b_b, -range_t, range_t)
+    clipped[failed] = 0.0
+    return clipped
 
 
 def _unix_s(s: Scenario, t_s: np.ndarray) -> np.ndarray:
@@ -538,7 +540,9 @@ def demo_pass_bytes(
     return stream.window(epoch_ns + int(round(t_start_s * NS_PER_S)), stop_ns).data
 
 
-async def _connect(host: str, port: int, retry_s: float, attempts: int | None):
+async def _connect(
+    host: str, port: int, retry_s: float, attempts: int | None
+) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
     """Open a TCP connection, retrying every retry_s (attempts None = forever)."""
     tried = 0
     while True:
@@ -582,7 +586,8 @@ async def send_stream(
     due_s = (stream.t_utc_ns - stream.t_utc_ns[0]) / NS_PER_S / rate
     reader, writer = await _connect(host, port, retry_s, attempts)
     report.connections += 1
-    wall0, i, recent = time.monotonic(), 0, deque()
+    wall0, i = time.monotonic(), 0
+    recent: deque[tuple[float, int]] = deque()  # (monotonic s, packet index) written within REWIND_S
     if on_wall_clock:
         wall0 -= time.time() - int(stream.t_utc_ns[0]) / NS_PER_S
     try:
@@ -617,7 +622,7 @@ async def send_stream(
     return report
 
 
-def _rewind(recent: deque, i: int) -> int:
+def _rewind(recent: deque[tuple[float, int]], i: int) -> int:
     """First packet index written within the last REWIND_S (i if none)."""
     resume = recent[0][1] if recent else i
     recent.clear()

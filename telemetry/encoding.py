@@ -72,7 +72,7 @@ def encode_packets(
             out[:, k] |= (word & np.uint64(0xFF)).astype(np.uint8)
             word >>= np.uint64(8)
     if definition.crc:
-        crc = ccsds.crc16_ccitt(out[:, :-2])
+        crc = np.asarray(ccsds.crc16_ccitt(out[:, :-2]))  # (n,) for the (n, k) rows
         out[:, -2] = (crc >> 8).astype(np.uint8)
         out[:, -1] = (crc & 0xFF).astype(np.uint8)
     return out

@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +34,7 @@ def _line_starts(data: bytes) -> np.ndarray:
     return starts[starts < len(data)] if len(data) else starts[:0]
 
 
-def _to_float(cells: list, enumeration: dict[int, str]) -> tuple[np.ndarray, np.ndarray]:
+def _to_float(cells: list[Any], enumeration: dict[int, str]) -> tuple[np.ndarray, np.ndarray]:
     """Float values of text/number cells (None/"" = NaN) and a mask of cells that are not numbers."""
     if not enumeration:
         try:  # vectorised: numpy parses numeric text and numbers alike, None is NaN
@@ -56,7 +57,7 @@ def _to_float(cells: list, enumeration: dict[int, str]) -> tuple[np.ndarray, np.
     return out, bad
 
 
-def _to_time_ns(cells: list, column: str) -> tuple[np.ndarray, np.ndarray]:
+def _to_time_ns(cells: list[Any], column: str) -> tuple[np.ndarray, np.ndarray]:
     """UTC ns of ISO 8601 (``t_utc``) or integer-ns (``t_utc_ns``) cells, and a mask of unreadable ones."""
     try:  # vectorised first; one unreadable cell sends the column to the per-cell path
         if column == "t_utc_ns":
@@ -79,7 +80,7 @@ def _to_time_ns(cells: list, column: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _validate_rows(
-    columns: dict[str, list],
+    columns: dict[str, list[Any]],
     row_offset: np.ndarray,
     row_length: np.ndarray,
     line: np.ndarray,

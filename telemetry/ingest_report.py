@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from collections import Counter
 from dataclasses import asdict, dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -149,7 +150,7 @@ class IngestReport:
             mine = self.apids.setdefault(apid, ApidSummary(apid, summary.packet))
             mine.absorb(summary)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready mapping (what ``acs-twin ingest`` prints and the archive stores)."""
         return {
             "source": self.source,

@@ -91,7 +91,8 @@ def _elevation_function(
         r_ecef, _ = frames.eci_to_ecef(r_eci, v_eci, t_unix_s.ravel())
         rel = r_ecef - site
         sin_el = rel @ up / np.linalg.norm(rel, axis=-1)
-        return np.degrees(np.arcsin(np.clip(sin_el, -1.0, 1.0))).reshape(t_unix_s.shape)
+        elevation_deg: np.ndarray = np.degrees(np.arcsin(np.clip(sin_el, -1.0, 1.0))).reshape(t_unix_s.shape)
+        return elevation_deg
 
     return elevation
 
@@ -172,7 +173,8 @@ def _golden_maximum(f: Callable[[np.ndarray], np.ndarray], a: np.ndarray, b: np.
             np.where(left, f_new, fd),
             np.where(left, fc, f_new),
         )
-    return 0.5 * (a + b)
+    t_max: np.ndarray = 0.5 * (a + b)
+    return t_max
 
 
 def _bisect_crossing(g: Callable[[np.ndarray], np.ndarray], below: np.ndarray, above: np.ndarray) -> np.ndarray:
@@ -182,7 +184,8 @@ def _bisect_crossing(g: Callable[[np.ndarray], np.ndarray], below: np.ndarray, a
         mid = 0.5 * (below + above)
         is_above = g(mid) >= 0.0
         above, below = np.where(is_above, mid, above), np.where(is_above, below, mid)
-    return 0.5 * (below + above)
+    t_cross: np.ndarray = 0.5 * (below + above)
+    return t_cross
 
 
 def assign_to_passes(t_utc_ns: np.ndarray, aos_ns: np.ndarray, los_ns: np.ndarray) -> np.ndarray:

@@ -141,11 +141,11 @@ def export_csv(archive: Archive, satellite: str, names: list[str], t0_ns: int, t
     """Write the export table as CSV (header row, ISO 8601 UTC times); returns rows written."""
     table = export_table(archive, satellite, names, t0_ns, t1_ns)
     pa_csv.write_csv(table, str(path))
-    return table.num_rows
+    return int(table.num_rows)
 
 
 def export_parquet(archive: Archive, satellite: str, names: list[str], t0_ns: int, t1_ns: int, path: str | Path) -> int:
     """Write the export table as Parquet (zstd); returns rows written."""
     table = export_table(archive, satellite, names, t0_ns, t1_ns)
     pq.write_table(table, str(path), compression="zstd")
-    return table.num_rows
+    return int(table.num_rows)

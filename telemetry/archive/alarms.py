@@ -12,7 +12,7 @@ All functions run on a connection inside the caller's transaction.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import cast
+from typing import Any, cast
 
 import numpy as np
 from sqlalchemy import Connection, Table, insert, select, update
@@ -55,7 +55,7 @@ def apply_level_changes(conn: Connection, satellite_id: int, upload_id: int, cha
     for change in changes:
         by_parameter.setdefault(change.parameter, []).append(change)
     open_alarms = current_levels(conn, satellite_id, list(by_parameter))
-    events: list[dict] = []
+    events: list[dict[str, Any]] = []
     for name, param_changes in by_parameter.items():
         events.extend(_apply_parameter(conn, satellite_id, upload_id, name, param_changes, open_alarms.get(name)))
     if events:
@@ -70,8 +70,8 @@ def _apply_parameter(
     name: str,
     changes: list[LevelChange],
     open_alarm: tuple[int, int] | None,
-) -> list[dict]:
-    events: list[dict] = []
+) -> list[dict[str, Any]]:
+    events: list[dict[str, Any]] = []
     alarm = _load(conn, open_alarm[0]) if open_alarm else None
     for change in changes:
         severity = SEVERITY_NAMES[change.level]
@@ -104,7 +104,7 @@ def _apply_parameter(
     return events
 
 
-def _load(conn: Connection, alarm_id: int) -> dict:
+def _load(conn: Connection, alarm_id: int) -> dict[str, Any]:
     row = conn.execute(
         select(ALARM.c.id, ALARM.c.state, ALARM.c.severity, ALARM.c.level, ALARM.c.first_t_ns, ALARM.c.last_t_ns).where(
             ALARM.c.id == alarm_id
@@ -113,7 +113,7 @@ def _load(conn: Connection, alarm_id: int) -> dict:
     return dict(row._mapping)
 
 
-def _create(conn: Connection, satellite_id: int, name: str, alarm: dict) -> int:
+def _create(conn: Connection, satellite_id: int, name: str, alarm: dict[str, Any]) -> int:
     values = {k: v for k, v in alarm.items() if k != "id"}
     return int(
         conn.execute(
@@ -122,7 +122,7 @@ def _create(conn: Connection, satellite_id: int, name: str, alarm: dict) -> int:
     )
 
 
-def _save(conn: Connection, alarm: dict) -> None:
+def _save(conn: Connection, alarm: dict[str, Any]) -> None:
     values = {k: v for k, v in alarm.items() if k != "id"}
     conn.execute(update(ALARM).where(ALARM.c.id == alarm["id"]).values(**values))
 
@@ -135,7 +135,7 @@ def _event(
     severity: str | None,
     value: float | None,
     actor: str | None,
-) -> dict:
+) -> dict[str, Any]:
     value_f = None if value is None or not np.isfinite(value) else float(value)
     return {
         "alarm_id": alarm_id,
@@ -159,7 +159,7 @@ def operator_action(
         raise ValueError(f"alarm_id: no alarm {alarm_id}")
     state, level = row
     new_state, extra = _next_state(action, state, level, shelved_until_ns, t_ns)
-    values: dict = {"state": new_state}
+    values: dict[str, Any] = {"state": new_state}
     if action == "acknowledge":
         values["acknowledged_by"] = actor
     if action == "shelve":

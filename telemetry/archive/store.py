@@ -741,7 +741,7 @@ class Archive:
             query = query.where(CHUNK.c.apid == apid)
         with self.engine.connect() as conn:
             rows = conn.execute(query.order_by(CHUNK.c.apid, CHUNK.c.t_start_ns)).all()
-        per_apid: dict[int, list] = {}
+        per_apid: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
         for row_apid, t_blob, seq_blob in rows:
             per_apid.setdefault(int(row_apid), []).append((decode_int64(t_blob), decode_int64(seq_blob)))
         return {
@@ -1080,7 +1080,7 @@ def _limit_changes(
     return changes
 
 
-def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict:
+def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict[str, Any]:
     dtype, blob, v_min, v_max = encode_values_range(values)
     return {
         "parameter_id": param_id,
