@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 __all__ = [
@@ -146,7 +147,8 @@ def ge_axes(gamma_rad: float, drf_roll_rad: float = np.pi / 4) -> np.ndarray:
     a_d = np.array([[c, c, c, c], [s, -s, 0.0, 0.0], [0.0, 0.0, s, -s]])
     cr, sr = np.cos(drf_roll_rad), np.sin(drf_roll_rad)
     turn_1 = np.array([[1.0, 0.0, 0.0], [0.0, cr, sr], [0.0, -sr, cr]])  # passive [φ]_1
-    return turn_1.T @ a_d
+    axes_b: npt.NDArray[np.float64] = turn_1.T @ a_d
+    return axes_b
 
 
 @njit(cache=True)
@@ -239,7 +241,7 @@ def _solve(m: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, bool]:
 
 @njit(cache=True)
 def _dot3(u: np.ndarray, v: np.ndarray) -> float:
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+    return float(u[0] * v[0] + u[1] * v[1] + u[2] * v[2])
 
 
 @njit(cache=True)
@@ -265,9 +267,11 @@ def _solve3(m: np.ndarray, i0: int, i1: int, i2: int, rhs: np.ndarray) -> tuple[
 
 
 @njit(cache=True)
-def _triple(u: tuple, v: tuple, w: tuple) -> float:
+def _triple(u: tuple[float, float, float], v: tuple[float, float, float], w: tuple[float, float, float]) -> float:
     """Scalar triple product u · (v × w)."""
-    return u[0] * (v[1] * w[2] - v[2] * w[1]) + u[1] * (v[2] * w[0] - v[0] * w[2]) + u[2] * (v[0] * w[1] - v[1] * w[0])
+    return float(
+        u[0] * (v[1] * w[2] - v[2] * w[1]) + u[1] * (v[2] * w[0] - v[0] * w[2]) + u[2] * (v[0] * w[1] - v[1] * w[0])
+    )
 
 
 @njit(cache=True)

@@ -17,6 +17,7 @@ neighbouring chord rates (exact for a constant-rate rotation).
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from sim_core import quaternion
 
@@ -59,7 +60,8 @@ def right_jacobian(phi: np.ndarray) -> np.ndarray:
     a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
     b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
     k = _hat(phi)
-    return np.eye(3) - a * k + b * (k @ k)
+    jacobian: npt.NDArray[np.float64] = np.eye(3) - a * k + b * (k @ k)
+    return jacobian
 
 
 def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
@@ -70,7 +72,8 @@ def right_jacobian_inverse(phi: np.ndarray) -> np.ndarray:
     t = np.where(small, 1.0, theta)
     c = np.where(small, 1.0 / 12.0 + theta**2 / 720.0, 1.0 / t**2 - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t)))
     k = _hat(phi)
-    return np.eye(3) + 0.5 * k + c * (k @ k)
+    jacobian_inv: npt.NDArray[np.float64] = np.eye(3) + 0.5 * k + c * (k @ k)
+    return jacobian_inv
 
 
 class AttitudeSpline:
@@ -121,7 +124,10 @@ class AttitudeSpline:
         """Body rate ω = J_r(p) ṗ of the spline (seed 000 eq 1 kinematics), rad/s, shape (..., 3)."""
         i, tau = self._locate(t_s)
         p, dp = self._cubic(i, tau)
-        return np.einsum("...ij,...j->...i", right_jacobian(p), dp) / self._h[i][..., None]
+        omega_rad_s: npt.NDArray[np.float64] = (
+            np.einsum("...ij,...j->...i", right_jacobian(p), dp) / self._h[i][..., None]
+        )
+        return omega_rad_s
 
 
 def _continuous_signs(q: np.ndarray) -> np.ndarray:

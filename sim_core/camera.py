@@ -17,6 +17,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import frames, quaternion
@@ -78,7 +79,8 @@ def _count(n: int, name: str, minimum: int) -> int:
 
 def body_to_ecef_dcm(q_ib: np.ndarray, eci_to_ecef: np.ndarray) -> np.ndarray:
     """DCM body → ECEF, C_eb = M_ei · R(Λ) with Λ = q_ib (seed 000 §2 attitude in the IRF), (..., 3, 3)."""
-    return _dcm(eci_to_ecef, "eci_to_ecef") @ quaternion.to_dcm(quaternion.normalize(q_ib))
+    dcm: npt.NDArray[np.float64] = _dcm(eci_to_ecef, "eci_to_ecef") @ quaternion.to_dcm(quaternion.normalize(q_ib))
+    return dcm
 
 
 def intersect_ellipsoid(origin_m: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -201,7 +203,8 @@ def surface_point_from_normal(normal: np.ndarray) -> np.ndarray:
     """
     n = _vectors(normal, "normal")
     a2n = _AXES**2 * n
-    return a2n / np.sqrt(np.sum(a2n * n, axis=-1, keepdims=True))
+    point_m: npt.NDArray[np.float64] = a2n / np.sqrt(np.sum(a2n * n, axis=-1, keepdims=True))
+    return point_m
 
 
 def ground_trace_ecef_m(r_ecef_m: np.ndarray) -> np.ndarray:
@@ -331,4 +334,5 @@ def image_motion_rad_s(
     x = rho[..., 0:1]
     if np.any(x <= 0.0):
         raise ValueError("p_eci_m: the point lies behind the focal plane (ρ_x ≤ 0)")
-    return (rho_dot[..., 1:] * x - rho[..., 1:] * rho_dot[..., 0:1]) / x**2
+    rate: npt.NDArray[np.float64] = (rho_dot[..., 1:] * x - rho[..., 1:] * rho_dot[..., 0:1]) / x**2
+    return rate

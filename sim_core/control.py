@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from scipy.optimize import brentq
 
@@ -138,7 +139,8 @@ def error_quaternion(q_p: np.ndarray, q_ib: np.ndarray) -> np.ndarray:
 def mismatch_vector(e: np.ndarray) -> np.ndarray:
     """Mismatch ε = −2 e0 e of an error quaternion (seed 000 §4); ≈ −(error rotation vector)."""
     e = _as_field(e, "e", 4)
-    return -2.0 * e[..., :1] * e[..., 1:]
+    torque_nm: npt.NDArray[np.float64] = -2.0 * e[..., :1] * e[..., 1:]
+    return torque_nm
 
 
 @njit(cache=True)
@@ -299,7 +301,10 @@ def loop_response(
     k, p, b, _ = gains.as_array()
     a = lead_lag_coefficients(gains.tau1_s, gains.tau2_s, t)[0]
     z = np.exp(1j * np.asarray(omega_rad_s, dtype=float) * t)
-    return k * p * (z - a) / (z - b) * t * t * (z + 1.0) / (2.0 * (z - 1.0) ** 2) * z ** (-delay_periods)
+    response: npt.NDArray[np.complex128] = (
+        k * p * (z - a) / (z - b) * t * t * (z + 1.0) / (2.0 * (z - 1.0) ** 2) * z ** (-delay_periods)
+    )
+    return response
 
 
 def loop_margins(gains: DigitalLawGains = DigitalLawGains(), delay_periods: int = 0) -> tuple[float, float, float]:
@@ -356,7 +361,8 @@ def quaternion_pd_step(
     if e[0] < 0.0:
         e = -e
     omega_e = omega_b - _mv3(error_matrix_1(e), omega_d_d)
-    return -kp_nm * e[1:] - kd_nms * omega_e
+    torque_nm: npt.NDArray[np.float64] = -kp_nm * e[1:] - kd_nms * omega_e
+    return torque_nm
 
 
 def quaternion_pd(
@@ -382,7 +388,8 @@ def _limit_dipole(dipole: np.ndarray, l_max: float) -> np.ndarray:
     """Scale the whole dipole so that |l_i| ≤ l^m (direction kept: the law's sign properties hold)."""
     peak = np.max(np.abs(dipole))
     if peak > l_max:
-        return dipole * (l_max / peak)
+        dipole_am2: npt.NDArray[np.float64] = dipole * (l_max / peak)
+        return dipole_am2
     return dipole
 
 
@@ -476,7 +483,8 @@ def mrp_feedback_step(
                 h[r] += spin * gs_b[r, i]
     gyro = np.cross(omega_rn_b if law_type == 0 else omega, h)
     feed = _mv3(inertia, np.cross(omega, omega_rn_b) - domega_rn_b)
-    return -k_nm * sigma_br - p_nms * omega_br_b + gyro - feed
+    torque_nm: npt.NDArray[np.float64] = -k_nm * sigma_br - p_nms * omega_br_b + gyro - feed
+    return torque_nm
 
 
 def mrp_feedback(

@@ -27,8 +27,10 @@ from __future__ import annotations
 
 import datetime as dt
 import functools
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import frames, quaternion
@@ -195,7 +197,8 @@ def magnetic_field_eci_t(r_eci_m: np.ndarray, t_unix_s: np.ndarray | float, mode
     t = np.broadcast_to(_times(t_unix_s), r.shape[:1])
     m = frames.eci_to_ecef_matrix(t)
     b_ecef = magnetic_field_ecef_t(np.einsum("nij,nj->ni", m, r), t, model)
-    return np.einsum("nji,nj->ni", m, b_ecef)
+    b_body_t: npt.NDArray[np.float64] = np.einsum("nji,nj->ni", m, b_ecef)
+    return b_body_t
 
 
 def magnetic_field_body_t(
@@ -297,7 +300,7 @@ def _dipole_many(r_ecef_m: np.ndarray, g_t: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=1)
-def _ephemeris():
+def _ephemeris() -> Any:  # a skyfield SpiceKernel (skyfield is untyped)
     """DE421 from skyfield-data (offline), loaded once."""
     from skyfield.api import load_file
 
@@ -357,11 +360,11 @@ def illumination_1(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> float:
     if c <= b - a:
         return 0.0
     if c <= a - b:
-        return 1.0 - (b * b) / (a * a)
+        return float(1.0 - (b * b) / (a * a))
     x = (c * c + a * a - b * b) / (2.0 * c)
     y = np.sqrt(max(0.0, a * a - x * x))
     area = a * a * np.arccos(max(-1.0, min(1.0, x / a))) + b * b * np.arccos(max(-1.0, min(1.0, (c - x) / b))) - c * y
-    return 1.0 - area / (np.pi * a * a)
+    return float(1.0 - area / (np.pi * a * a))
 
 
 def illumination_fraction(r_sat_eci_m: np.ndarray, r_sun_eci_m: np.ndarray) -> np.ndarray:
@@ -389,7 +392,7 @@ def atmosphere_density_1(alt_m: float) -> float:
     for i in range(_ATMOSPHERE_TABLE.shape[0]):
         if alt_m >= _ATMOSPHERE_TABLE[i, 0]:
             k = i
-    return _ATMOSPHERE_TABLE[k, 1] * np.exp(-(alt_m - _ATMOSPHERE_TABLE[k, 0]) / _ATMOSPHERE_TABLE[k, 2])
+    return float(_ATMOSPHERE_TABLE[k, 1] * np.exp(-(alt_m - _ATMOSPHERE_TABLE[k, 0]) / _ATMOSPHERE_TABLE[k, 2]))
 
 
 def atmosphere_density_kg_m3(alt_m: np.ndarray | float) -> np.ndarray:
@@ -397,7 +400,8 @@ def atmosphere_density_kg_m3(alt_m: np.ndarray | float) -> np.ndarray:
     h = _times(alt_m, "alt_m")
     if np.any(h < 0.0):
         raise ValueError("alt_m: the exponential model starts at sea level (alt_m ≥ 0)")
-    return np.vectorize(atmosphere_density_1, otypes=[float])(h)
+    density_kg_m3: npt.NDArray[np.float64] = np.vectorize(atmosphere_density_1, otypes=[float])(h)
+    return density_kg_m3
 
 
 # --- disturbance torques --------------------------------------------------------------------------
@@ -502,7 +506,7 @@ def _plates(normals_b: np.ndarray, areas_m2: np.ndarray, centroids_b_m: np.ndarr
     return np.ascontiguousarray(n), np.ascontiguousarray(a), np.ascontiguousarray(c)
 
 
-def _fractions(values: np.ndarray, size: int, name: str) -> np.ndarray:
+def _fractions(values: np.ndarray | float, size: int, name: str) -> np.ndarray:
     f = np.broadcast_to(np.asarray(values, dtype=float), (size,))
     if not np.all(np.isfinite(f)) or np.any(f < 0.0) or np.any(f > 1.0):
         raise ValueError(f"{name}: reflectivity fractions must lie in [0, 1]")

@@ -14,6 +14,7 @@ Seed typos corrected here (DESIGN.md asks to decide and document):
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import quaternion as qt
@@ -31,7 +32,8 @@ def _unit(v: np.ndarray, name: str) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     if np.any(n == 0.0):
         raise ValueError(f"{name}: zero vector has no direction")
-    return v / n
+    unit: npt.NDArray[np.float64] = v / n
+    return unit
 
 
 def _triad_frame(u: np.ndarray, v: np.ndarray, names: str) -> np.ndarray:
@@ -70,7 +72,8 @@ def _dcm_to_quat_1(r: np.ndarray) -> np.ndarray:
     else:
         q[:] = (r[1, 0] - r[0, 1], r[0, 2] + r[2, 0], r[1, 2] + r[2, 1], cand[3])
     q = q / np.sqrt(np.sum(q * q))
-    return -q if q[0] < 0.0 else q
+    q_pos: npt.NDArray[np.float64] = -q if q[0] < 0.0 else q
+    return q_pos
 
 
 @njit(cache=True)

@@ -125,7 +125,7 @@ def parse_fault(text: str) -> FaultSpec:
     if len(parts) != 3 or not timing:
         raise ValueError(f"fault: expected target:index:type@onset_s[+duration_s][,key=value], got {text!r}")
     onset, _, duration = timing.partition("+")
-    fields: dict = {"target": parts[0], "index": parts[1], "type": parts[2], "onset_s": onset}
+    fields: dict[str, str] = {"target": parts[0], "index": parts[1], "type": parts[2], "onset_s": onset}
     if duration:
         fields["duration_s"] = duration
     for option in options:
@@ -185,7 +185,7 @@ def fault_active_1(row: np.ndarray, t: float) -> bool:
         return False
     if int(row[F_TYPE]) == Y_INTERMITTENT and row[F_PERIOD] > 0.0:
         phase = (t - row[F_ONSET]) % row[F_PERIOD]
-        return phase < row[F_DUTY] * row[F_PERIOD]
+        return bool(phase < row[F_DUTY] * row[F_PERIOD])
     return True
 
 

@@ -435,7 +435,7 @@ def star_innovation_1(
         for j in range(3):
             s[i, j] = p_cov[i, j]
         s[i, i] += sigma3[i] * sigma3[i]
-    return z, z @ np.linalg.solve(s, z)
+    return z, float(z @ np.linalg.solve(s, z))
 
 
 @njit(cache=True)
@@ -487,7 +487,7 @@ def star_tracker_check_1(
         state[SS_COUNT] = 0.0
         state[SS_JUMP] = 0.0
         state[SS_Z : SS_Z + 3] = z
-        return scale
+        return float(scale)
     state[SS_JUMP] = 1.0 if jumped else state[SS_JUMP]
     state[SS_COUNT] += 1.0
     arg = SENSOR_ARG + 10 * T_STAR
@@ -657,7 +657,7 @@ def gyro_drift_step_1(
             state[GS_QST0 : GS_QST0 + 4] = q_star
             state[GS_T0] = t
             state[GS_WPREV : GS_WPREV + 3] = w_meas
-        return state[GS_SIGMA_U]
+        return float(state[GS_SIGMA_U])
     q_int = state[GS_QINT : GS_QINT + 4].copy()
     w_mid = 0.5 * (w_meas + state[GS_WPREV : GS_WPREV + 3])
     _integrate_rate_1(q_int, w_mid, dt)
@@ -665,7 +665,7 @@ def gyro_drift_step_1(
     state[GS_WPREV : GS_WPREV + 3] = w_meas
     width = t - state[GS_T0]
     if width < GYRO_WINDOW_S or not star_ok:
-        return state[GS_SIGMA_U]
+        return float(state[GS_SIGMA_U])
     rel_st = np.empty(4)
     q0 = state[GS_QST0 : GS_QST0 + 4]
     rel_st[:] = _conj_mul_1(q0, q_star)
@@ -679,7 +679,7 @@ def gyro_drift_step_1(
         state[GS_BREF : GS_BREF + 3] = (state[GS_BREF : GS_BREF + 3] * n + rate_err) / (n + 1.0)
         state[GS_N] = n + 1.0
         state[GS_TREF] = t
-        return state[GS_SIGMA_U]
+        return float(state[GS_SIGMA_U])
     elapsed = t - state[GS_TREF]
     noise = np.sqrt(
         2.0 * sigma_st * sigma_st / (width * width)
@@ -694,7 +694,7 @@ def gyro_drift_step_1(
             worst, axis = abs(change[i]), i
     if worst <= n_sigma * noise:
         state[GS_COUNT] = 0.0
-        return state[GS_SIGMA_U]
+        return float(state[GS_SIGMA_U])
     state[GS_COUNT] += 1.0
     arg = SENSOR_ARG + 10 * T_GYRO + axis
     if state[GS_COUNT] == 1.0 and state[GS_ISOLATED] == 0.0:
@@ -704,7 +704,7 @@ def gyro_drift_step_1(
         state[GS_SIGMA_U] = max(state[GS_SIGMA_U], worst / np.sqrt(max(elapsed, width)))
         _emit(ev, n_ev, t, EV_ISOLATED, arg)
         _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_GYRO)
-    return state[GS_SIGMA_U]
+    return float(state[GS_SIGMA_U])
 
 
 @njit(cache=True)
@@ -794,7 +794,16 @@ def wheel_residuals(
 
 
 @njit(cache=True)
-def _residual_table(w, axial, m, j, f, q, rate_noise, t_u):
+def _residual_table(
+    w: np.ndarray,
+    axial: np.ndarray,
+    m: np.ndarray,
+    j: np.ndarray,
+    f: np.ndarray,
+    q: float,
+    rate_noise: float,
+    t_u: float,
+) -> tuple[np.ndarray, np.ndarray]:
     n, nw = m.shape
     r, b = np.empty((n, nw)), np.empty((n, nw))
     for k in range(n):

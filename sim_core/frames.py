@@ -23,9 +23,10 @@ from __future__ import annotations
 import functools
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import quaternion
@@ -83,7 +84,7 @@ def skyfield_data_path() -> Path:
 
 
 @functools.lru_cache(maxsize=1)
-def _timescale():
+def _timescale() -> Any:  # a skyfield Timescale (skyfield is untyped)
     """skyfield's built-in timescale (leap seconds, DUT1), loaded once, offline."""
     from skyfield.api import load
     from skyfield.data import iers
@@ -185,7 +186,8 @@ def eci_to_ecef_matrix(t_unix_s: np.ndarray | float) -> np.ndarray:
     flat = np.atleast_1d(t).ravel()
     c, w, _ = _slow_matrices(flat)
     era = earth_rotation_angle_rad(flat + ut1_minus_utc_s(flat))
-    return (w @ _rot3(era) @ c).reshape(t.shape + (3, 3))
+    dcm: npt.NDArray[np.float64] = (w @ _rot3(era) @ c).reshape(t.shape + (3, 3))
+    return dcm
 
 
 def eci_to_ecef(
@@ -273,7 +275,8 @@ def orf_quaternion(r_eci_m: np.ndarray, v_eci_m_s: np.ndarray) -> np.ndarray:
 def orf_rate_rad_s(r_eci_m: np.ndarray, v_eci_m_s: np.ndarray) -> np.ndarray:
     """Angular velocity of the ORF in ECI, ω_o = (r × v)/r² (exact for central-force motion)."""
     r, v = _vectors(r_eci_m, "r_eci_m"), _vectors(v_eci_m_s, "v_eci_m_s")
-    return np.cross(r, v) / np.sum(r * r, axis=-1, keepdims=True)
+    omega_rad_s: npt.NDArray[np.float64] = np.cross(r, v) / np.sum(r * r, axis=-1, keepdims=True)
+    return omega_rad_s
 
 
 def earth_orientation_frozen(t0_unix_s: float) -> tuple[np.ndarray, np.ndarray, float]:
@@ -287,7 +290,7 @@ def earth_rotation_angle_1(t_ut1_unix_s: float) -> float:
     """IAU 2000 Earth rotation angle (rad) of one UT1 instant (compiled kernel)."""
     tu = (t_ut1_unix_s - _J2000_UNIX_S) / 86400.0
     turns = 0.7790572732640 + 0.00273781191135448 * tu + (tu - np.floor(tu))
-    return 2.0 * np.pi * (turns - np.floor(turns))
+    return float(2.0 * np.pi * (turns - np.floor(turns)))
 
 
 @njit(cache=True)

@@ -348,7 +348,9 @@ def _route_array(route: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _route_many(route, t, r, v, a, c_pn, dut1):
+def _route_many(
+    route: np.ndarray, t: np.ndarray, r: np.ndarray, v: np.ndarray, a: np.ndarray, c_pn: np.ndarray, dut1: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     n = t.shape[0]
     q, w, wd, obs = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n, dtype=np.bool_)
     for i in range(n):
@@ -387,7 +389,9 @@ def route_program(
 
 
 @njit(cache=True)
-def _orf_many(q_offset, r, v, a):
+def _orf_many(
+    q_offset: np.ndarray, r: np.ndarray, v: np.ndarray, a: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = r.shape[0]
     q, w, wd = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
@@ -457,7 +461,8 @@ def target_pointing_program(
         raise ValueError("yaw_ref_eci: parallel to the line of sight, the yaw is undefined")
     q, w, wd = np.empty((n, 4)), np.empty((n, 3)), np.empty((n, 3))
     for i in range(n):
-        q[i], w[i], wd[i] = target_pointing_1(*(s[i] for s in states), u / np.linalg.norm(u))
+        r, v, a, r_target, v_target, a_target = (s[i] for s in states)
+        q[i], w[i], wd[i] = target_pointing_1(r, v, a, r_target, v_target, a_target, u / np.linalg.norm(u))
     return q, w, wd
 
 

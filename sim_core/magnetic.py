@@ -16,6 +16,7 @@ The ``*_1`` functions are numba kernels for the simulation loop.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from numpy.typing import ArrayLike
 
@@ -80,7 +81,8 @@ def saturate_moment(moment_b_am2: ArrayLike, max_moment_am2: float) -> np.ndarra
     l_max = float(max_moment_am2)
     if not np.isfinite(l_max) or l_max <= 0.0:
         raise ValueError(f"max_moment_am2: must be finite and positive, got {max_moment_am2}")
-    return np.clip(_vec3(moment_b_am2, "moment_b_am2"), -l_max, l_max)
+    moment_am2: npt.NDArray[np.float64] = np.clip(_vec3(moment_b_am2, "moment_b_am2"), -l_max, l_max)
+    return moment_am2
 
 
 def moment_for_torque(torque_b_nm: ArrayLike, field_b_t: ArrayLike) -> np.ndarray:
@@ -89,7 +91,8 @@ def moment_for_torque(torque_b_nm: ArrayLike, field_b_t: ArrayLike) -> np.ndarra
     b2 = np.sum(b * b, axis=-1, keepdims=True)
     if np.any(b2 == 0.0):
         raise ValueError("field_b_t: zero field, no magnetic torque can be commanded")
-    return np.cross(b, t) / b2
+    moment_am2: npt.NDArray[np.float64] = np.cross(b, t) / b2
+    return moment_am2
 
 
 def moment_for_driver_torque(torque_mag_nm: ArrayLike, torque_dir_b: ArrayLike, field_b_t: ArrayLike) -> np.ndarray:
@@ -104,4 +107,5 @@ def moment_for_driver_torque(torque_mag_nm: ArrayLike, torque_dir_b: ArrayLike, 
     if np.any(np.abs(np.sum(e_m * unit_b, axis=-1)) > 1e-9):
         raise ValueError("torque_dir_b: e^m must be perpendicular to the field (e^m = b × e_pq)")
     m = np.asarray(torque_mag_nm, dtype=float)[..., None]
-    return m / b_norm * np.cross(unit_b, e_m)
+    moment_am2: npt.NDArray[np.float64] = m / b_norm * np.cross(unit_b, e_m)
+    return moment_am2

@@ -19,6 +19,7 @@ rad/s^{3/2}, measurement σ in rad. The ``*_1`` kernels work in place on plain f
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import quaternion as qt
@@ -279,11 +280,23 @@ def _inverse3(s: np.ndarray) -> np.ndarray:
     inv[2, 1] = s[0, 1] * s[2, 0] - s[0, 0] * s[2, 1]
     inv[2, 2] = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
     det = s[0, 0] * inv[0, 0] + s[0, 1] * inv[1, 0] + s[0, 2] * inv[2, 0]
-    return inv / det
+    inverse: npt.NDArray[np.float64] = inv / det
+    return inverse
 
 
 @njit(cache=True)
-def _run(q0, b0, p0, omega_meas, q_meas, q_valid, dt, sigma_v, sigma_u, sigma3):
+def _run(
+    q0: np.ndarray,
+    b0: np.ndarray,
+    p0: np.ndarray,
+    omega_meas: np.ndarray,
+    q_meas: np.ndarray,
+    q_valid: np.ndarray,
+    dt: float,
+    sigma_v: float,
+    sigma_u: float,
+    sigma3: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     n = omega_meas.shape[0]
     q_hist = np.empty((n, 4))
     b_hist = np.empty((n, 3))

@@ -109,7 +109,7 @@ def _held_1(state: np.ndarray, slot: int, holds: bool, t: float, confirm: float)
         return False
     if np.isnan(state[slot]):
         state[slot] = t
-    return t - state[slot] >= confirm
+    return bool(t - state[slot] >= confirm)
 
 
 @njit(cache=True)
@@ -172,7 +172,18 @@ def mode_step_1(
 
 
 @njit(cache=True)
-def _run_1(state, p, t, rate, valid, sun, pointing, window, fault, recovered):
+def _run_1(
+    state: np.ndarray,
+    p: np.ndarray,
+    t: np.ndarray,
+    rate: np.ndarray,
+    valid: np.ndarray,
+    sun: np.ndarray,
+    pointing: np.ndarray,
+    window: np.ndarray,
+    fault: np.ndarray,
+    recovered: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     n = t.shape[0]
     modes = np.empty(n, dtype=np.int64)
     events = np.empty((n, 3))

@@ -12,7 +12,10 @@ a = −μ r/r³ − (3/2) J2 μ R²/r⁵ [x(1 − 5z²/r²), y(1 − 5z²/r²), 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from sgp4.api import Satrec
 
@@ -94,7 +97,8 @@ def j2_acceleration(r_eci_m: np.ndarray) -> np.ndarray:
     z2 = 5.0 * r[..., 2:3] ** 2 / r2
     k = -1.5 * J2_EARTH * MU_EARTH_M3_S2 * R_EARTH_M**2 / (r2 * r2 * np.sqrt(r2))
     zonal = np.concatenate([1.0 - z2, 1.0 - z2, 3.0 - z2], axis=-1)
-    return (-MU_EARTH_M3_S2 / (r2 * np.sqrt(r2)) + k * zonal) * r
+    accel_m_s2: npt.NDArray[np.float64] = (-MU_EARTH_M3_S2 / (r2 * np.sqrt(r2)) + k * zonal) * r
+    return accel_m_s2
 
 
 def propagate_j2(
@@ -162,14 +166,14 @@ _TLE_FIELDS = {
 def _check_tle_field(line_no: int, line: str, name: str, c0: int, c1: int, kind: str) -> None:
     text = line[c0 - 1 : c1]
     where = f"TLE line {line_no} columns {c0}-{c1} ({name})"
-    ok = {
+    checks: dict[str, Callable[[str], bool]] = {
         "id": lambda s: s.strip().isalnum(),
         "int": lambda s: s.strip().isdigit(),
         "digits": lambda s: s.strip().isdigit(),
         "float": lambda s: _is_float(s),
         "exp": lambda s: _is_float(s[:-2].replace(" ", "") or "0") and _is_float(s[-2:].strip() or "0"),
-    }[kind](text)
-    if not ok:
+    }
+    if not checks[kind](text):
         raise ValueError(f"{where}: {text!r} is not a valid {kind} field")
 
 
@@ -223,7 +227,7 @@ def read_tle_file(text: str) -> list[tuple[str, Satrec]]:
 
 def tle_epoch_unix_s(satrec: Satrec) -> float:
     """Epoch of a TLE as UTC seconds since the Unix epoch."""
-    return (satrec.jdsatepoch - 2440587.5) * 86400.0 + satrec.jdsatepochF * 86400.0
+    return float((satrec.jdsatepoch - 2440587.5) * 86400.0 + satrec.jdsatepochF * 86400.0)
 
 
 def sgp4_teme(satrec: Satrec, t_unix_s: np.ndarray | float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -303,7 +307,8 @@ def j2_rk4_step_1(state: np.ndarray, h_s: float) -> np.ndarray:
     k2 = _j2_derivative(state + 0.5 * h_s * k1)
     k3 = _j2_derivative(state + 0.5 * h_s * k2)
     k4 = _j2_derivative(state + h_s * k3)
-    return state + (h_s / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    state_next: npt.NDArray[np.float64] = state + (h_s / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return state_next
 
 
 @njit(cache=True)

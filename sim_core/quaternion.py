@@ -8,6 +8,7 @@ The ``*_1`` functions are numba kernels on single quaternions, for compiled inne
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 __all__ = [
@@ -57,7 +58,8 @@ def multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 def conjugate(q: np.ndarray) -> np.ndarray:
     """Conjugate Λ̃ = (λ0, −λ), the inverse of a unit quaternion."""
     q = np.asarray(q, dtype=float)
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
+    q_conj: npt.NDArray[np.float64] = q * np.array([1.0, -1.0, -1.0, -1.0])
+    return q_conj
 
 
 def normalize(q: np.ndarray) -> np.ndarray:
@@ -143,7 +145,8 @@ def from_axis_angle(axis: np.ndarray, angle_rad: np.ndarray | float) -> np.ndarr
 def angle(q: np.ndarray) -> np.ndarray:
     """Rotation angle of Λ in [0, π] (rad): 2 atan2(|λ|, |λ0|)."""
     q = np.asarray(q, dtype=float)
-    return 2.0 * np.arctan2(np.linalg.norm(q[..., 1:], axis=-1), np.abs(q[..., 0]))
+    angle_rad: npt.NDArray[np.float64] = 2.0 * np.arctan2(np.linalg.norm(q[..., 1:], axis=-1), np.abs(q[..., 0]))
+    return angle_rad
 
 
 def _turn(i: int, phi: np.ndarray) -> np.ndarray:
@@ -153,7 +156,7 @@ def _turn(i: int, phi: np.ndarray) -> np.ndarray:
     return from_axis_angle(axis, phi)
 
 
-def from_euler_132(yaw_rad, roll_rad, pitch_rad) -> np.ndarray:
+def from_euler_132(yaw_rad: npt.ArrayLike, roll_rad: npt.ArrayLike, pitch_rad: npt.ArrayLike) -> np.ndarray:
     """Quaternion of seed 000's sequence 132: yaw φ1 about x, then roll φ2 about y… as C^o = [φ2]_2 [φ3]_3 [φ1]_1.
 
     C^o maps reference-frame coordinates to body coordinates (a passive matrix), so the active
@@ -257,4 +260,5 @@ def angle_between_1(a: np.ndarray, b: np.ndarray) -> float:
 @njit(cache=True)
 def normalize_1(q: np.ndarray) -> np.ndarray:
     """Unit quaternion of a single quaternion (compiled kernel; sign kept)."""
-    return q / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q_unit: npt.NDArray[np.float64] = q / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return q_unit

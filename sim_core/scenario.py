@@ -341,7 +341,7 @@ def apply_overrides(scenario: Scenario, assignments: list[str]) -> Scenario:
     return Scenario.model_validate(data)
 
 
-def shifted_guidance(guidance: dict, elapsed_s: float) -> dict:
+def shifted_guidance(guidance: dict[str, Any], elapsed_s: float) -> dict[str, Any]:
     """The guidance programme as seen from elapsed_s after its epoch (seed 001 route segments trimmed)."""
     g = dict(guidance)
     if g["kind"] == "inertial":
@@ -352,7 +352,8 @@ def shifted_guidance(guidance: dict, elapsed_s: float) -> dict:
     if g["kind"] != "route" or g["route_start_s"] >= elapsed_s:
         g["route_start_s"] = max(g["route_start_s"] - elapsed_s, 0.0) if g["kind"] == "route" else 0.0
         return g
-    into, route = elapsed_s - g["route_start_s"], []
+    into = elapsed_s - g["route_start_s"]
+    route: list[dict[str, Any]] = []
     for seg in g["route"]:
         if route:
             route.append(seg)

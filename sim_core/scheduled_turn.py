@@ -209,7 +209,9 @@ def _scaled_t(plan: np.ndarray, slot: int, k: float) -> tuple[float, float, floa
 
 
 @njit(cache=True)
-def _multiply_t(a: tuple, b: tuple) -> tuple[float, float, float, float]:
+def _multiply_t(
+    a: tuple[float, float, float, float], b: tuple[float, float, float, float]
+) -> tuple[float, float, float, float]:
     """Hamilton product a ∘ b on tuples (same algebra as quaternion.multiply_1)."""
     return (
         a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
@@ -220,7 +222,9 @@ def _multiply_t(a: tuple, b: tuple) -> tuple[float, float, float, float]:
 
 
 @njit(cache=True)
-def _conjugate_rotate_t(q: tuple, v: tuple) -> tuple[float, float, float]:
+def _conjugate_rotate_t(
+    q: tuple[float, float, float, float], v: tuple[float, float, float]
+) -> tuple[float, float, float]:
     """Λ̃ ∘ v ∘ Λ on tuples (same algebra as quaternion.conjugate_rotate_1)."""
     tx = 2.0 * (-q[2] * v[2] + q[3] * v[1])
     ty = 2.0 * (-q[3] * v[0] + q[1] * v[2])
@@ -233,7 +237,7 @@ def _conjugate_rotate_t(q: tuple, v: tuple) -> tuple[float, float, float]:
 
 
 @njit(cache=True)
-def _cross_t(a: tuple, b: tuple) -> tuple[float, float, float]:
+def _cross_t(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
     """a × b on tuples."""
     return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
 

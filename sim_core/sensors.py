@@ -16,6 +16,7 @@ each variant start to finish on one thread (what ``sim_core.closed_loop`` does).
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import quaternion as qt
@@ -143,7 +144,8 @@ def star_tracker_blinded(
     _positive(exclusion_rad, "exclusion_rad")
     bore_i = qt.rotate(qt.normalize(q_ib), bore / np.linalg.norm(bore))
     cos_sep = np.sum(bore_i * s_i, axis=-1) / np.linalg.norm(s_i, axis=-1)
-    return (cos_sep > np.cos(exclusion_rad)) & ~in_earth_shadow(r_i_m, s_i)
+    blinded: npt.NDArray[np.bool_] = (cos_sep > np.cos(exclusion_rad)) & ~in_earth_shadow(r_i_m, s_i)
+    return blinded
 
 
 @njit(cache=True)
@@ -372,7 +374,8 @@ def in_earth_shadow(r_i_m: np.ndarray, sun_i: np.ndarray) -> np.ndarray:
     s = s / np.linalg.norm(s, axis=-1, keepdims=True)
     along = np.sum(r * s, axis=-1)
     perp = np.linalg.norm(r - along[..., None] * s, axis=-1)
-    return (along < 0.0) & (perp < EARTH_RADIUS_M)
+    shadowed: npt.NDArray[np.bool_] = (along < 0.0) & (perp < EARTH_RADIUS_M)
+    return shadowed
 
 
 def sun_sensor(

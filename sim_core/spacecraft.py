@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from numpy.typing import ArrayLike
 
@@ -129,10 +130,17 @@ class PlantParams:
                 raise ValueError(f"{name}: must be positive (log decrement: non-negative), got {arr}")
             object.__setattr__(self, name, arr)
 
+    def _flex_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Flex coupling (3, n_q), modal masses, frequencies, log decrements (n_q,): arrays once __post_init__ ran."""
+        c, m, f, d = self.flex_coupling, self.flex_modal_mass, self.flex_freq_rad_s, self.flex_log_decrement
+        if c is None or m is None or f is None or d is None:
+            raise RuntimeError("flex arrays unset: PlantParams.__post_init__ fills every one of them")
+        return c, m, f, d
+
     @property
     def n_modes(self) -> int:
         """Number of flexible modes n_q."""
-        return self.flex_coupling.shape[1]
+        return int(self._flex_arrays()[0].shape[1])
 
     @property
     def n_wheels(self) -> int:
@@ -144,28 +152,30 @@ class PlantParams:
         nq, nw = self.n_modes, self.n_wheels
         jr = self.wheels.inertia_kg_m2
         d_r = self.wheel_axes_b * jr
+        coupling, modal_mass, _, _ = self._flex_arrays()
         m = np.zeros((3 + nq + nw, 3 + nq + nw))
         m[:3, :3] = self.inertia_kg_m2
-        m[:3, 3 : 3 + nq] = self.flex_coupling
-        m[3 : 3 + nq, :3] = self.flex_coupling.T
+        m[:3, 3 : 3 + nq] = coupling
+        m[3 : 3 + nq, :3] = coupling.T
         m[:3, 3 + nq :] = d_r
         m[3 + nq :, :3] = d_r.T
-        m[3 : 3 + nq, 3 : 3 + nq] = np.diag(self.flex_modal_mass)
+        m[3 : 3 + nq, 3 : 3 + nq] = np.diag(modal_mass)
         m[3 + nq :, 3 + nq :] = np.diag(jr)
         return m
 
     def pack(self) -> PlantArrays:
         """Plain float64 arrays for the kernels, with (A^o)^-1 computed once."""
+        coupling, modal_mass, freq, decrement = self._flex_arrays()
         return PlantArrays(
             inertia=self.inertia_kg_m2.copy(),
             mass_inv=np.ascontiguousarray(np.linalg.inv(self.mass_matrix())),
             wheel_axes=self.wheel_axes_b.copy(),
             wheel_inertia=self.wheels.inertia_kg_m2.copy(),
             friction=self.wheels.friction_table(),
-            flex_coupling=self.flex_coupling.copy(),
-            flex_mass=self.flex_modal_mass.copy(),
-            flex_freq=self.flex_freq_rad_s.copy(),
-            flex_decrement=self.flex_log_decrement.copy(),
+            flex_coupling=coupling.copy(),
+            flex_mass=modal_mass.copy(),
+            flex_freq=freq.copy(),
+            flex_decrement=decrement.copy(),
         )
 
 
@@ -306,7 +316,7 @@ def kinetic_energy_1(x: np.ndarray, p: PlantArrays) -> float:
         om = x[7 + 2 * nq + w]
         axial = p.wheel_axes[0, w] * x[4] + p.wheel_axes[1, w] * x[5] + p.wheel_axes[2, w] * x[6]
         e += p.wheel_inertia[w] * om * (axial + om)
-    return 0.5 * e
+    return float(0.5 * e)
 
 
 @njit(cache=True)
@@ -368,7 +378,10 @@ def angular_momentum_i(x: ArrayLike, params: PlantParams) -> np.ndarray:
 def wheel_momentum(x: ArrayLike, params: PlantParams) -> np.ndarray:
     """Relative wheel momenta h = J_r Ω, N·m·s, shape (..., n_w) (seed 000 eq 1); the cluster's is A h."""
     rows, lead = _rows(x, params)
-    return (rows[:, 7 + 2 * params.n_modes :] * params.wheels.inertia_kg_m2).reshape(lead + (params.n_wheels,))
+    momentum_nms: npt.NDArray[np.float64] = (rows[:, 7 + 2 * params.n_modes :] * params.wheels.inertia_kg_m2).reshape(
+        lead + (params.n_wheels,)
+    )
+    return momentum_nms
 
 
 def kinetic_energy(x: ArrayLike, params: PlantParams) -> float | np.ndarray:

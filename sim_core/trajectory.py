@@ -7,6 +7,7 @@ output rate, so memory grows with output samples, not with integration steps.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -92,7 +93,7 @@ class Trajectory:
                 out[v] = self.t_s[sel][bad[-1] + 1] - after_s
         return out
 
-    def summary(self, variant: int = 0) -> dict:
+    def summary(self, variant: int = 0) -> dict[str, Any]:
         """Summary metrics of one variant (the keys ``acs-twin simulate --summary-json`` writes)."""
         err = self.pointing_error_rad()[variant]
         obs = self.series["observing"][variant] > 0

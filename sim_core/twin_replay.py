@@ -17,6 +17,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from sim_core import engine, orbit, quaternion
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
@@ -156,10 +157,12 @@ def replay_scores(
     n_eff = max((t_s[stop - 1] - t_s[reference]) / correlation_s, 1.0)
     mse_u = np.nanmean(du[:, pre:] ** 2, axis=(1, 2)) + sig_u**2
     mse_a = np.nanmean(att[:, pre:] ** 2, axis=(1, 2)) + sig_a**2
-    return -0.5 * n_eff * (np.log(mse_u) + np.log(mse_a))
+    log_likelihood: npt.NDArray[np.float64] = -0.5 * n_eff * (np.log(mse_u) + np.log(mse_a))
+    return log_likelihood
 
 
 def _small_angles(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:
     """Rotation vector (rad) of conj(q_a) ∘ q_b, per row, small-angle (2 × vector part, hemisphere fixed)."""
     e = quaternion.multiply(quaternion.conjugate(q_a), q_b)
-    return 2.0 * np.sign(e[:, :1] + 1e-300) * e[:, 1:]
+    rotvec: npt.NDArray[np.float64] = 2.0 * np.sign(e[:, :1] + 1e-300) * e[:, 1:]
+    return rotvec

@@ -14,9 +14,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from sim_core import allocation, engine, environment
 from sim_core.fdir import describe_event
@@ -58,7 +59,7 @@ class Feasibility:
     md_windows_s: list[tuple[float, float]] = field(default_factory=list)
 
 
-def _with_initial(s: Scenario, initial: dict | None) -> Scenario:
+def _with_initial(s: Scenario, initial: dict[str, Any] | None) -> Scenario:
     if not initial:
         return s
     data = s.model_dump()
@@ -81,10 +82,10 @@ def sweep(
     scenario: Scenario,
     variants: list[VariantSpec],
     wheel_available: np.ndarray | None = None,
-    initial: dict | None = None,
+    initial: dict[str, Any] | None = None,
     fdir: bool = True,
     flyer: Callable[[Scenario], Trajectory] | None = None,
-) -> list[dict]:
+) -> list[dict[str, Any]]:
     """Fly the fault variants in one batch from ``initial`` (q_ib, omega_b_rad_s, wheel_speed_rpm) and
     return :func:`variant_metrics` per variant (seed 002 §3.2 fault impact, seed 000 §3 reconfiguration).
 
@@ -100,7 +101,7 @@ def sweep(
     return [variant_metrics(traj, s, v) for v in range(traj.n_variants)]
 
 
-def variant_metrics(traj: Trajectory, s: Scenario, v: int) -> dict:
+def variant_metrics(traj: Trajectory, s: Scenario, v: int) -> dict[str, Any]:
     """Max pointing error, settled, wheel momentum margin, MD saturation and fault-mode time, events."""
     err = traj.pointing_error_rad()[v]
     h = np.abs(traj["wheel_speed_rad_s"][v] * traj.wheel_inertia_kg_m2)
@@ -141,7 +142,8 @@ def _pair_kappa(axes: np.ndarray, available: np.ndarray, b_body: np.ndarray) -> 
         return None
     s = axes[:, idx[0]] + axes[:, idx[1]]
     e_pq = s / np.linalg.norm(s)
-    return (b_body @ e_pq) / np.linalg.norm(b_body, axis=1)
+    kappa: npt.NDArray[np.float64] = (b_body @ e_pq) / np.linalg.norm(b_body, axis=1)
+    return kappa
 
 
 def feasibility(
@@ -196,7 +198,7 @@ def feasibility(
             continue
         worst_m = max(worst_m, float(np.max(np.abs(m_out) / m_max)))
         worst_h = max(worst_h, float(np.max(np.abs(h) / h_max)))
-        if np.linalg.norm(missing) > 1e-12 * max(np.linalg.norm(m_req), 1e-30):
+        if np.linalg.norm(missing) > 1e-12 * max(float(np.linalg.norm(m_req)), 1e-30):
             impulse += missing * s.control_dt_s
             drift += np.linalg.norm(impulse) * s.control_dt_s / np.min(np.linalg.eigvalsh(j))
         else:
@@ -217,7 +219,9 @@ def feasibility(
     )
 
 
-def _violation(worst_m: float, worst_h: float, drift_arcsec: float, budget: float, kappa, k: int, t: float) -> str:
+def _violation(
+    worst_m: float, worst_h: float, drift_arcsec: float, budget: float, kappa: np.ndarray | None, k: int, t: float
+) -> str:
     if worst_m > 1.0:
         return f"wheel torque {worst_m:.2f}× its limit at t = {t:.1f} s"
     if worst_h > 1.0:
@@ -308,7 +312,10 @@ def _nadir_kappa(scenario: Scenario, available: np.ndarray, samples: int = 1200)
     t = np.linspace(0.0, period, samples, endpoint=False)
     prog = engine.program_along(s, t)
     b_body = np.array([conjugate_rotate_1(q, b) for q, b in zip(prog.q_ib, prog.b_eci_t)])
-    return t, _pair_kappa(engine.plant_params(scenario).wheel_axes_b, available, b_body)
+    kappa = _pair_kappa(engine.plant_params(scenario).wheel_axes_b, available, b_body)
+    if kappa is None:
+        raise ValueError("available: κ is defined for a pair, exactly two wheels")
+    return t, kappa
 
 
 def kappa_fraction(scenario: Scenario, available: np.ndarray) -> float | None:
@@ -349,7 +356,7 @@ def pair_limit(traj: Trajectory, s: Scenario, v: int, mask: np.ndarray, kappa_fr
     return f"{' and '.join(causes) or 'loop design'}: " + "; ".join(parts)
 
 
-def configuration_table(scenario: Scenario) -> list[dict]:
+def configuration_table(scenario: Scenario) -> list[dict[str, Any]]:
     """Seed 000 §3/§5 for every wheel configuration (nominal, 4 singles, 6 pairs + MD) from one batch:
     pointing RMS/max while scanning, |κ| ≤ 1/2 orbit fraction, fastest feasible roll, route flown, and for a
     pair that misses the scanning accuracy the reason with figures (:func:`pair_limit`)."""

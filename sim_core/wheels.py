@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 from numpy.typing import ArrayLike
 
@@ -166,7 +167,8 @@ def ge_scheme_axes(gamma_rad: float) -> np.ndarray:
     """Body-frame wheel axes A = [π/4]_1^t A^d of the GE scheme (seed 000 eq 1), shape (3, 4)."""
     c, s = np.cos(0.25 * np.pi), np.sin(0.25 * np.pi)
     turn_t = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])  # [π/4]_1 is passive: transpose is R_x(+π/4)
-    return turn_t @ ge_device_axes(gamma_rad)
+    axes_b: npt.NDArray[np.float64] = turn_t @ ge_device_axes(gamma_rad)
+    return axes_b
 
 
 def orthogonal_axes() -> np.ndarray:
@@ -204,7 +206,7 @@ def friction_torque_one_wheel(speed_rad_s: float, friction: np.ndarray, p: int) 
     w = speed_rad_s
     sat_speed = friction[1, p]
     dry = min(1.0, max(-1.0, w / sat_speed)) if sat_speed > 0.0 else 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
-    return friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w))
+    return float(friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w)))
 
 
 @njit(cache=True)
@@ -299,7 +301,8 @@ def motor_current_step_1(
     """
     decay = np.exp(-resistance_ohm * dt / inductance_h)
     i_inf = (voltage_v - back_emf_v_s * speed_rad_s) / resistance_ohm
-    return i_inf + (current_a - i_inf) * decay
+    current_next_a: npt.NDArray[np.float64] = i_inf + (current_a - i_inf) * decay
+    return current_next_a
 
 
 @njit(cache=True)
@@ -315,7 +318,10 @@ def speed_loop_torque_1(
     Seed 003 writes the request with the body-reaction sign (a positive T_c is a torque on the
     body); the wheel motor torque is its opposite, hence the minus sign.
     """
-    return -loop_gain_nm_s * (speed_rad_s - speed_set_rad_s) - torque_gain * torque_request_nm
+    motor_torque_nm: npt.NDArray[np.float64] = (
+        -loop_gain_nm_s * (speed_rad_s - speed_set_rad_s) - torque_gain * torque_request_nm
+    )
+    return motor_torque_nm
 
 
 # --- friendly numpy API (tests, tools) ----------------------------------------------------------
@@ -338,7 +344,8 @@ def friction_torque(wheels: WheelParams, speed_rad_s: ArrayLike) -> np.ndarray:
 def imbalance_torque(wheels: WheelParams, speed_rad_s: ArrayLike, t_s: float) -> np.ndarray:
     """Dynamic-imbalance torque K_d Ω² sin(Ωt) per wheel, N·m (seed 002 eq 4 M_d)."""
     w = _speeds(speed_rad_s, wheels.n)
-    return wheels.imbalance_nm_s2 * w * w * np.sin(w * float(t_s))
+    torque_nm: npt.NDArray[np.float64] = wheels.imbalance_nm_s2 * w * w * np.sin(w * float(t_s))
+    return torque_nm
 
 
 def noise_torque(wheels: WheelParams, rng: np.random.Generator) -> np.ndarray:
@@ -350,7 +357,8 @@ def limited_motor_torque(wheels: WheelParams, torque_cmd_nm: ArrayLike, speed_ra
     """Commanded motor torque clipped to m^m and cut at the momentum limit h^m (seed 000 eq 2)."""
     m = _speeds(torque_cmd_nm, wheels.n, "torque_cmd_nm")
     w = _speeds(speed_rad_s, wheels.n)
-    return limited_motor_torque_1(m, w, wheels.inertia_kg_m2, wheels.max_torque_nm, wheels.max_momentum_nms)
+    limits = np.asarray(wheels.max_torque_nm), np.asarray(wheels.max_momentum_nms)  # (n,) after __post_init__
+    return limited_motor_torque_1(m, w, wheels.inertia_kg_m2, *limits)
 
 
 def _finite_arrays(**named: ArrayLike) -> list[np.ndarray]:
