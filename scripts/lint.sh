@@ -5,7 +5,7 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
-MYPY_MAX_FINDINGS=${MYPY_MAX_FINDINGS:-206}  # measured on main 2026-12-02 (strict: sim_core, telemetry)
+MYPY_MAX_FINDINGS=${MYPY_MAX_FINDINGS:-13}  # 2026-12-02: left in diagnosis, fault_detection, decoding (being edited)
 say() { echo "lint.sh: $*" >&2; }
 failed=()
 say "ruff check"; "$PY" -m ruff check . || failed+=("ruff check")

@@ -16,6 +16,7 @@ from datetime import datetime
 from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from sim_core import (
     allocation,
@@ -32,6 +33,7 @@ from sim_core import (
 from sim_core import faults as fault_kernels
 from sim_core import fdir as fdir_kernels
 from sim_core.control import DigitalLawGains
+from sim_core.guidance import OrbitState
 from sim_core.scenario import Scenario
 from sim_core.spacecraft import PlantParams, pack_state
 from sim_core.trajectory import EVENT_NAMES, Trajectory
@@ -88,7 +90,8 @@ def cluster_axes(s: Scenario) -> np.ndarray:
     if c.geometry == "skew4":
         return wheels.skew_3plus1_axes()
     axes = np.asarray(c.axes_b, dtype=float).T
-    return axes / np.linalg.norm(axes, axis=0)
+    unit_axes: npt.NDArray[np.float64] = axes / np.linalg.norm(axes, axis=0)
+    return unit_axes
 
 
 def plant_params(s: Scenario, truth: bool = False) -> PlantParams:
@@ -128,7 +131,7 @@ def plant_params(s: Scenario, truth: bool = False) -> PlantParams:
     )
 
 
-def orbit_state(s: Scenario) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+def orbit_state(s: Scenario) -> OrbitState:
     """Callable t_unix_s → ECI r, v, a of the scenario's orbit (circular, J2 or SGP4)."""
     o = s.orbit
     t0 = _epoch_unix_s(o.epoch_utc)
@@ -138,49 +141,51 @@ def orbit_state(s: Scenario) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndar
         else float(orbit.sun_synchronous_inclination_deg(o.altitude_m))
     )
     if o.kind == "tle":
+        if o.tle_line1 is None or o.tle_line2 is None:  # the Scenario validator already refuses this
+            raise ValueError("orbit.tle_line1/tle_line2: both lines are required when kind is 'tle'")
         sat = orbit.parse_tle(o.tle_line1, o.tle_line2)
 
-        def state(t):
+        def tle_state(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             r, v = orbit.propagate_tle(sat, t)
             return r, v, orbit.j2_acceleration(r)
 
-        return state
+        return tle_state
     if o.kind == "circular":
 
-        def state(t):
+        def circular_state(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             r, v = orbit.circular_orbit(np.asarray(t) - t0, o.altitude_m, inc, o.raan_deg, o.arg_latitude_deg)
             rn = np.linalg.norm(r, axis=-1, keepdims=True)
             return r, v, -orbit.MU_EARTH_M3_S2 * r / rn**3
 
-        return state
+        return circular_state
     r0, v0 = orbit.circular_orbit(np.array([0.0]), o.altitude_m, inc, o.raan_deg, o.arg_latitude_deg)
 
-    def state(t):
-        t = np.atleast_1d(np.asarray(t, dtype=float))
+    def j2_state(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = np.atleast_1d(np.asarray(t_unix_s, dtype=float))
         order = np.argsort(t)
         r, v = np.empty((t.size, 3)), np.empty((t.size, 3))
         rr, vv = orbit.propagate_j2(r0[0], v0[0], np.maximum(t[order] - t0, 0.0))
         r[order], v[order] = rr, vv
         return r, v, orbit.j2_acceleration(r)
 
-    return state
+    return j2_state
 
 
-def _orbit_table(state, t0: float, duration_s: float) -> tuple[np.ndarray, float, float]:
+def _orbit_table(state: OrbitState, t0: float, duration_s: float) -> tuple[np.ndarray, float, float]:
     t = np.arange(-ORBIT_TABLE_STEP_S, duration_s + 3 * ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S)
     r, v, a = state(t0 + t)
     return np.ascontiguousarray(np.hstack([r, v, a])), float(t[0]), ORBIT_TABLE_STEP_S
 
 
-def _field_table(state, t0: float, duration_s: float, model: str) -> tuple[np.ndarray, float, float]:
+def _field_table(state: OrbitState, t0: float, duration_s: float, model: str) -> tuple[np.ndarray, float, float]:
     t = np.arange(-FIELD_TABLE_STEP_S, duration_s + 3 * FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S)
     r, _, _ = state(t0 + t)
     return np.ascontiguousarray(environment.magnetic_field_eci_t(r, t0 + t, model)), float(t[0]), FIELD_TABLE_STEP_S
 
 
-def _route_segments(s: Scenario) -> list:
+def _route_segments(s: Scenario) -> list[guidance.Segment]:
     g = s.guidance
-    segs: list = [guidance.OrfHold(g.route_start_s)] if g.route_start_s > 0 else []
+    segs: list[guidance.Segment] = [guidance.OrfHold(g.route_start_s)] if g.route_start_s > 0 else []
     for seg in g.route:
         if seg.kind == "turn":
             segs.append(guidance.Turn(seg.duration_s))
@@ -194,7 +199,9 @@ def _route_segments(s: Scenario) -> list:
     return segs
 
 
-def _program(s: Scenario, state, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, dut1: float) -> closed_loop.Program:
+def _program(
+    s: Scenario, state: OrbitState, t0: float, c_pn: np.ndarray, w_pm: np.ndarray, dut1: float
+) -> closed_loop.Program:
     g = s.guidance
     if g.kind == "inertial":
         steps_t = np.array([t for t, _ in g.inertial_steps], dtype=float)
@@ -393,7 +400,13 @@ def simulate(
 
 
 def loop_config(
-    s: Scenario, params: PlantParams, state, t0: float, c_pn: np.ndarray, dut1: float, program: closed_loop.Program
+    s: Scenario,
+    params: PlantParams,
+    state: OrbitState,
+    t0: float,
+    c_pn: np.ndarray,
+    dut1: float,
+    program: closed_loop.Program,
 ) -> closed_loop.LoopConfig:
     """The typed configuration of :func:`sim_core.closed_loop.fly_variant` for the scenario: every block's
     parameters by name (plant as modelled and as flown, clock, ephemeris tables, sensors, estimator, law,
@@ -461,7 +474,12 @@ def loop_config(
 
 
 def _run_watched(
-    config: closed_loop.LoopConfig, batch: closed_loop.Batch, out: closed_loop.Record, n_steps: int, progress, cancel
+    config: closed_loop.LoopConfig,
+    batch: closed_loop.Batch,
+    out: closed_loop.Record,
+    n_steps: int,
+    progress: Callable[[float], None] | None,
+    cancel: Callable[[], bool] | None,
 ) -> None:
     """Run the compiled batch; if watched, in a thread while this one reports progress and polls cancel."""
     if progress is None and cancel is None:
@@ -482,7 +500,16 @@ def _run_watched(
         raise Cancelled("simulation cancelled")
 
 
-def _trajectory(s: Scenario, rec, ev, n_ev, nw: int, span: float, params: PlantParams, wall: float) -> Trajectory:
+def _trajectory(
+    s: Scenario,
+    rec: np.ndarray,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    nw: int,
+    span: float,
+    params: PlantParams,
+    wall: float,
+) -> Trajectory:
     cl = closed_loop
     w0 = cl.R_WHEELS
     series = {

@@ -76,11 +76,11 @@ class Authenticator:
         self._tokens, self.enabled = tokens, enabled
         self._cache: dict[str, Principal] = {}
         self._lock = threading.Lock()
-        self._watchers: dict[int, dict[int, Callable[[], None]]] = {}
+        self._watchers: dict[int, dict[int, Callable[[], object]]] = {}
         self._poll_stop = threading.Event()
         self._poller: threading.Thread | None = None
 
-    def watch(self, principal: Principal, on_revoke: Callable[[], None]) -> Callable[[], None]:
+    def watch(self, principal: Principal, on_revoke: Callable[[], object]) -> Callable[[], None]:
         """Call ``on_revoke`` (from any thread) when the principal's token is revoked; returns the unwatch."""
         if principal.token_id is None:
             return lambda: None

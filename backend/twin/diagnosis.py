@@ -17,6 +17,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sim_core import engine
 from sim_core.diagnosis import (
     Diagnosis,
@@ -46,9 +48,8 @@ MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a fe
 def scenario_wheels(scenario: Scenario) -> WheelModel:
     """The cluster as the momentum balance needs it, from the scenario's spacecraft (seed 000 eq 1)."""
     p = engine.plant_params(scenario)
-    return wheel_model(
-        p.wheel_axes_b, p.wheels.inertia_kg_m2, p.wheels.max_torque_nm, p.wheels.coulomb_nm, scenario.control_dt_s
-    )
+    limits = np.asarray(p.wheels.max_torque_nm), np.asarray(p.wheels.coulomb_nm)  # (n,) after WheelParams.__post_init__
+    return wheel_model(p.wheel_axes_b, p.wheels.inertia_kg_m2, *limits, scenario.control_dt_s)
 
 
 def _utc(epoch_unix_s: float, t_s: float | None) -> str | None:

@@ -20,7 +20,7 @@ import contextlib
 import html
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
@@ -233,6 +233,6 @@ class MonitorGate:
             await sink.drain()
 
 
-def _cancel(tasks: list[asyncio.Future]) -> None:
+def _cancel(tasks: Sequence[asyncio.Future[Any]]) -> None:
     for task in tasks:
         task.cancel()
