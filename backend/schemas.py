@@ -7,7 +7,7 @@ from datetime import UTC, datetime
 from typing import Annotated, Any, Literal, get_type_hints
 
 from fastapi import Path
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, create_model
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, RootModel, create_model
 
 from telemetry.archive.records import AlarmRecord, PassRecord
 
@@ -35,6 +35,19 @@ __all__ = [
     "IngestReportPublic",
     "DictionaryStored",
     "LatestValue",
+    "LatestValues",
+    "ParameterApids",
+    "DictionaryNames",
+    "KeptRawCounts",
+    "ScenarioNames",
+    "ConsoleConstants",
+    "Caller",
+    "ParameterLimits",
+    "ParameterInfo",
+    "ParametersInfo",
+    "SatellitePublic",
+    "TwinIssue",
+    "LiveTwinPublic",
 ]
 
 SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)
@@ -327,3 +340,119 @@ class DiagnosisPublic(BaseModel):
         "onset_sigma_s, magnitude, score = posterior), confidence, detection, "
         "suspected_wheels, untestable",
     )
+
+
+class LatestValues(RootModel[dict[str, LatestValue]]):
+    """The newest sample of each archived parameter, by name."""
+
+
+class ParameterApids(RootModel[dict[str, int]]):
+    """Archived parameters of a satellite, name → APID of the packet that carries it."""
+
+
+class DictionaryNames(RootModel[list[str]]):
+    """File names of the known telemetry dictionaries (shipped and uploaded)."""
+
+
+class KeptRawCounts(RootModel[dict[str, int]]):
+    """APID (as text) → packets of a satellite kept raw for want of a definition."""
+
+
+class ScenarioNames(RootModel[list[str]]):
+    """Names of the library scenarios."""
+
+
+class ConsoleConstants(BaseModel):
+    """Values the dashboard takes from the server instead of copying them."""
+
+    gps_margin_s: float = Field(description="Telemetry a twin session reads before its alignment instant (GPS fit).")
+    stale_after_s: float = Field(description="A live twin without telemetry for this long is stale.")
+    max_points: int = Field(description="Most points one time-series answer returns.")
+    ws_rate_hz: float = Field(description="Batches per second per WebSocket client.")
+    shelve_max_s: float = Field(description="Longest an alarm may be shelved.")
+    severities: dict[str, str] = Field(description="Limit colour → alarm severity.")
+    auth_enabled: bool
+
+
+class Caller(BaseModel):
+    """The token's name and role (the console greys out what the role may not do)."""
+
+    name: str
+    role: str = Field(description="viewer, operator or admin.")
+
+
+class ParameterLimits(BaseModel):
+    """Yellow (warning) and red (alarm) limits in engineering units; null = no limit."""
+
+    yellow_low: float | None = None
+    yellow_high: float | None = None
+    red_low: float | None = None
+    red_high: float | None = None
+
+
+class ParameterInfo(BaseModel):
+    """The dictionary entry of an archived parameter."""
+
+    units: str
+    description: str
+    limits: ParameterLimits
+    enumeration: dict[str, str] | None = Field(None, description="Raw value (as text) → label; null if none.")
+
+
+class ParametersInfo(RootModel[dict[str, ParameterInfo]]):
+    """Dictionary entry of each archived parameter of a satellite, by name (names no dictionary defines left out)."""
+
+
+class SatellitePublic(BaseModel):
+    """One archived satellite: its newest telemetry and its live twin's state in a word."""
+
+    name: str
+    norad_id: int | None = None
+    first_telemetry_utc: str | None = Field(None, description="Oldest archived packet, ISO 8601 UTC (null if none).")
+    latest_telemetry_utc: str | None = Field(None, description="Newest archived packet, ISO 8601 UTC (null if none).")
+    twin_state: str | None = Field(
+        None,
+        description="waiting, synchronised, propagating, stale or actual_only; "
+        "null when no attitude mapping fits the satellite's dictionary.",
+    )
+    acs_model: str | None = Field(None, description="Library scenario the twin flies; null: no ACS model.")
+
+
+class TwinIssue(BaseModel):
+    """A bad-input finding of a live twin (repeats counted, not listed)."""
+
+    kind: str = Field(description="mapping, time_backwards, gap, quaternion, sync or residual.")
+    message: str
+    utc: str | None = Field(description="ISO 8601 UTC of the telemetry it concerns.")
+    count: int
+
+
+class LiveTwinPublic(BaseModel):
+    """State of a satellite's live twin (backend.twin.live), also published on the WebSocket topic ``twin``.
+
+    Times are ISO 8601 UTC or null; residuals are twin minus telemetry."""
+
+    satellite: str
+    dictionary: str
+    acs_model: str | None = Field(description="Library scenario the twin flies; null without ACS model.")
+    model_note: str | None = Field(description="Why there is no twin, else null.")
+    state: str = Field(description="waiting, synchronised, propagating, stale or actual_only.")
+    stale: bool
+    last_packet_age_s: float | None = Field(description="Seconds since telemetry last reached the server.")
+    stale_after_s: float
+    telemetry_utc: str | None = Field(description="Newest actual sample.")
+    twin_utc: str | None = Field(description="Newest instant the twin was compared at.")
+    twin_behind_telemetry_s: float | None
+    synchronised_utc: str | None = Field(description="Last re-sync instant.")
+    route_epoch_utc: str | None = Field(description="Epoch of the flown route; null without ACS model.")
+    horizon_utc: str | None = Field(description="End of the flown segment.")
+    actual_q_ib: list[float] | None = Field(description="Scalar-first, body → inertial.")
+    twin_q_ib: list[float] | None = Field(description="Scalar-first, body → inertial.")
+    attitude_residual_arcsec: float | None = Field(description="Actual vs twin at twin_utc; null without ACS model.")
+    rate_residual_b_rad_s: list[float] | None = Field(description="[x, y, z].")
+    wheel_speed_residual_rad_s: list[float] | None = Field(description="One per wheel.")
+    resyncs: int
+    forced_resyncs: int = Field(description="Re-syncs forced by a residual beyond the sensors' noise.")
+    samples_compared: int
+    note: str | None
+    issues: list[TwinIssue] = Field(description="The newest bad-input findings.")

@@ -11,6 +11,7 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import ServicesDep, ViewerDep
 from backend.routes.alarms import ShelveRequest
+from backend.schemas import Caller, ConsoleConstants, ParametersInfo
 from backend.twin.live import STALE_S
 from backend.twin.twin_sessions import GPS_MARGIN_S
 
@@ -19,7 +20,7 @@ router = APIRouter(tags=["console"], responses=ERROR_RESPONSES)
 SEVERITIES = {"yellow": "warning", "red": "critical"}
 
 
-@router.get("/constants", summary="Constants the console shares with the server")
+@router.get("/constants", response_model=ConsoleConstants, summary="Constants the console shares with the server")
 def constants(services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     """Values the dashboard must not copy: twin orbit-fit margin, staleness, answer and shelving bounds."""
     settings = services.settings
@@ -35,13 +36,13 @@ def constants(services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     }
 
 
-@router.get("/whoami", summary="The caller's name and role")
+@router.get("/whoami", response_model=Caller, summary="The caller's name and role")
 def whoami(principal: ViewerDep) -> dict[str, Any]:
     """Name and role of the token (the console greys out what the role may not do)."""
     return {"name": principal.name, "role": principal.role.name}
 
 
-@router.get("/parameters/info", summary="Dictionary entry of each archived parameter")
+@router.get("/parameters/info", response_model=ParametersInfo, summary="Dictionary entry of each archived parameter")
 async def parameters_info(
     services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=100)
 ) -> dict[str, Any]:

@@ -14,7 +14,7 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 from backend.deps import ServicesDep, ViewerDep
-from backend.schemas import SATELLITE_NAME, LatestValue
+from backend.schemas import SATELLITE_NAME, LatestValues, ParameterApids
 
 router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
 
@@ -39,13 +39,13 @@ def _window(start: datetime | None, end: datetime | None) -> tuple[int, int]:
     return t0, t1
 
 
-@router.get("/parameters", response_model=dict[str, int], summary="Archived parameters and their APID")
+@router.get("/parameters", response_model=ParameterApids, summary="Archived parameters and their APID")
 def list_parameters(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, int]:
     """Every parameter name archived for the satellite."""
     return services.telemetry.archive.parameters(satellite)
 
 
-@router.get("/parameters/latest", response_model=dict[str, LatestValue], summary="Newest value of each parameter")
+@router.get("/parameters/latest", response_model=LatestValues, summary="Newest value of each parameter")
 def latest_values(services: ServicesDep, _: ViewerDep, satellite: str = SatelliteQuery) -> dict[str, Any]:
     """{name: {t_utc_ns, value}} for every archived parameter."""
     latest = services.telemetry.archive.latest_values(satellite)

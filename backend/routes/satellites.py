@@ -6,36 +6,21 @@ from typing import Any
 
 import numpy as np
 from fastapi import APIRouter, Path
-from pydantic import BaseModel, Field
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import ServicesDep, ViewerDep
+from backend.schemas import LiveTwinPublic, SatellitePublic
 from backend.twin.live import TWIN_APID
 
 router = APIRouter(tags=["satellites"], responses=ERROR_RESPONSES)
-
-
-class SatellitePublic(BaseModel):
-    """One archived satellite: its newest telemetry and its live twin's state in a word."""
-
-    name: str
-    norad_id: int | None = None
-    first_telemetry_utc: str | None = Field(None, description="Oldest archived packet, ISO 8601 UTC (null if none).")
-    latest_telemetry_utc: str | None = Field(None, description="Newest archived packet, ISO 8601 UTC (null if none).")
-    twin_state: str | None = Field(
-        None,
-        description="waiting, synchronised, propagating, stale or actual_only; "
-        "null when no attitude mapping fits the satellite's dictionary.",
-    )
-    acs_model: str | None = Field(None, description="Library scenario the twin flies; null: no ACS model.")
 
 
 def _iso(t_ns: int | None) -> str | None:
     return None if t_ns is None else f"{np.datetime64(int(t_ns), 'ns').astype('datetime64[ms]')}Z"
 
 
-@router.get("/satellites", summary="Every satellite the archive knows")
+@router.get("/satellites", response_model=list[SatellitePublic], summary="Every satellite the archive knows")
 async def list_satellites(services: ServicesDep, _: ViewerDep) -> list[SatellitePublic]:
     """Satellites by name with their oldest and newest archived telemetry (the twin's residuals not counted) and
     the state of their live twin; a satellite registered without telemetry has ``latest_telemetry_utc`` null."""
@@ -56,7 +41,7 @@ async def list_satellites(services: ServicesDep, _: ViewerDep) -> list[Satellite
     return out
 
 
-@router.get("/satellites/{name}/twin", summary="The live twin of one satellite")
+@router.get("/satellites/{name}/twin", response_model=LiveTwinPublic, summary="The live twin of one satellite")
 def get_twin(
     services: ServicesDep, _: ViewerDep, name: str = Path(min_length=1, max_length=100, examples=["REFSAT"])
 ) -> dict[str, Any]:

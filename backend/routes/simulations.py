@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import FilePublic, JobAccepted, JobPublic, SeriesPublic
+from backend.schemas import FilePublic, JobAccepted, JobPublic, ScenarioNames, SeriesPublic
 from telemetry.downsampling import minmax_indices
 
 router = APIRouter(tags=["simulations"], responses=ERROR_RESPONSES)
@@ -50,7 +50,7 @@ def _job(services: Any, job_id: str) -> JobPublic:
     return job
 
 
-@router.get("/scenarios", response_model=list[str], summary="Library scenarios")
+@router.get("/scenarios", response_model=ScenarioNames, summary="Library scenarios")
 def list_scenarios(_: ViewerDep) -> list[str]:
     """Names usable as ``{"library": NAME}`` in POST /simulations."""
     from backend.jobs.simulators import library_names
@@ -115,7 +115,25 @@ def list_files(job_id: str, request: Request, services: ServicesDep, _: ViewerDe
     ]
 
 
-@router.get("/simulations/{job_id}/files/{name}", summary="Download a result file", response_class=FileResponse)
+RESULT_FILE = {"schema": {"type": "string", "format": "binary"}}
+
+
+@router.get(
+    "/simulations/{job_id}/files/{name}",
+    summary="Download a result file",
+    response_class=FileResponse,
+    responses={
+        200: {
+            "description": "The file's bytes, typed by its extension: trajectory.csv, summary.json and "
+            "scenario.json as such, trajectory.npz and trajectory.parquet as application/octet-stream.",
+            "content": {
+                "text/csv": RESULT_FILE,
+                "application/json": RESULT_FILE,
+                "application/octet-stream": RESULT_FILE,
+            },
+        }
+    },
+)
 def get_file(job_id: str, name: str, services: ServicesDep, _: ViewerDep) -> FileResponse:
     """One result file as bytes."""
     folder = _result_dir(services, job_id)

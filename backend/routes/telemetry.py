@@ -13,7 +13,14 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import SATELLITE_NAME, DictionaryStored, IngestReportPublic, RedecodeReportPublic
+from backend.schemas import (
+    SATELLITE_NAME,
+    DictionaryNames,
+    DictionaryStored,
+    IngestReportPublic,
+    KeptRawCounts,
+    RedecodeReportPublic,
+)
 from telemetry.archive.records import UploadRecord
 
 router = APIRouter(tags=["telemetry"], responses=ERROR_RESPONSES)
@@ -143,7 +150,7 @@ def list_uploads(
 
 @router.get(
     "/telemetry/undefined",
-    response_model=dict[str, int],
+    response_model=KeptRawCounts,
     summary="Packets kept raw per APID for want of a definition",
 )
 def kept_raw(
@@ -192,7 +199,7 @@ async def redecode_kept(
     return report
 
 
-@router.get("/dictionaries", response_model=list[str], summary="Known telemetry dictionaries")
+@router.get("/dictionaries", response_model=DictionaryNames, summary="Known telemetry dictionaries")
 def list_dictionaries(services: ServicesDep, _: ViewerDep) -> list[str]:
     """File names usable as ``dictionary=`` in uploads (shipped and uploaded)."""
     return services.telemetry.dictionaries.names()

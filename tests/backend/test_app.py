@@ -2,10 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
+from typing import Any, get_args, get_origin
 
 import pytest
+from fastapi import FastAPI
+from fastapi.responses import FileResponse, StreamingResponse
+from fastapi.routing import APIRoute, iter_route_contexts
 from fastapi.testclient import TestClient
+from pydantic import BaseModel
 
 from backend.app import create_app
 from backend.core.settings import Settings
@@ -65,3 +71,38 @@ def test_dashboard_is_served_with_the_api_prefix_and_monitor_urls(client: TestCl
     config = client.get("/dashboard/config.json").json()
     assert config["api_base"] == "/api/v1"
     assert set(config["monitors"]) == {"actual", "simulated", "overlay"}
+
+
+def _api_routes(app: FastAPI) -> list[tuple[str, APIRoute]]:
+    """(full path, route) of every documented HTTP route, routers included with their prefix."""
+    found = [(c.path or "", c.original_route) for c in iter_route_contexts(app.routes)]
+    return [(path, r) for path, r in found if isinstance(r, APIRoute) and r.include_in_schema]
+
+
+def _named(model: Any) -> bool:
+    """A schema with a name in the OpenAPI components: a pydantic model or dataclass, or a list of one."""
+    if get_origin(model) is list:
+        (model,) = get_args(model)
+    return isinstance(model, type) and (issubclass(model, BaseModel) or dataclasses.is_dataclass(model))
+
+
+def test_every_api_route_declares_a_named_response_model_or_its_file_media_types(tmp_path: Path) -> None:
+    app = create_app(Settings(data_dir=tmp_path, telemetry_port=0, live_enabled=False))
+    routes = _api_routes(app)
+    assert {"/api/v1/satellites/{name}/twin", "/api/v1/simulations/{job_id}/files/{name}"} <= {p for p, _ in routes}
+    document = app.openapi()["paths"]
+    unnamed = []
+    for path, route in routes:
+        if route.response_model is None:  # a file download: its media types documented instead
+            media = route.responses.get(200, {}).get("content", {})
+            if not (issubclass(route.response_class, (FileResponse, StreamingResponse)) and media):
+                unnamed.append(f"{sorted(route.methods)} {path}: no response_model, no documented file media types")
+            continue
+        if not _named(route.response_model):
+            unnamed.append(f"{sorted(route.methods)} {path}: response_model {route.response_model} has no name")
+        for method in route.methods:
+            success = document[path][method.lower()]["responses"][str(route.status_code or 200)]
+            schema = success["content"]["application/json"]["schema"]
+            if "$ref" not in schema.get("items", schema):
+                unnamed.append(f"{method} {path}: OpenAPI answer schema {schema} is not a named component")
+    assert unnamed == []
