@@ -33,6 +33,10 @@ import httpx
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from tests import process_tree  # noqa: E402 - the supervision tests' view of the process tree
+from tests.process_tree import alive, descendants  # noqa: E402
+
 DIARY = REPO.parent / "shared/data/real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 PACKET_OCTETS = 71  # the diary's APID 11 packets
 SLICE_PACKETS = 600
@@ -47,44 +51,9 @@ def free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def descendants(pid: int) -> set[int]:
-    """Living processes below ``pid`` (zombies excluded), from /proc."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if fields[0] != "Z":
-            children.setdefault(int(fields[1]), []).append(int(entry.name))
-    found, frontier = set(), [pid]
-    while frontier:
-        for child in children.get(frontier.pop(), []):
-            found.add(child)
-            frontier.append(child)
-    return found
-
-
-def running(pids: set[int]) -> set[int]:
-    """The ``pids`` still running (zombies count as gone)."""
-    alive = set()
-    for pid in pids:
-        try:
-            if (Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]) != "Z":
-                alive.add(pid)
-        except OSError:
-            pass
-    return alive
-
-
 def wait_gone(pids: set[int]) -> set[int]:
     """Poll until none of ``pids`` runs; those left after GONE_TIMEOUT_S."""
-    deadline = time.monotonic() + GONE_TIMEOUT_S
-    while (left := running(pids)) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    return left
+    return process_tree.wait_gone(pids, GONE_TIMEOUT_S)
 
 
 class Server:
@@ -168,7 +137,7 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
         leaked += len(wait_gone(children))
         print(
             f"  kill -9 trial {trial + 1}/{trials}: {len(acknowledged)} uploads acknowledged so far, "
-            f"children left {len(running(children))}",
+            f"children left {len(alive(children))}",
             flush=True,
         )
     server = Server(data_dir, *ports)

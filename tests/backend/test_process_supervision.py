@@ -20,7 +20,9 @@ from pathlib import Path
 import httpx
 import pytest
 
+from tests import process_tree
 from tests.backend.conftest import free_port
+from tests.process_tree import descendants
 
 pytestmark = pytest.mark.slow
 
@@ -29,40 +31,9 @@ GONE_TIMEOUT_S = 25.0  # the ingest process archives what is pending before it e
 STOP_TIMEOUT_S = 180.0  # SIGTERM to exit: the ingest process archives what is pending (32 s seen at load 26)
 
 
-def _ppid_and_state(pid: int) -> tuple[int, str] | None:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return None
-    fields = stat.rsplit(")", 1)[1].split()
-    return int(fields[1]), fields[0]
-
-
-def descendants(pid: int) -> set[int]:
-    """Every living process below ``pid`` in the process tree (zombies excluded)."""
-    children: dict[int, list[int]] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit() and (info := _ppid_and_state(int(entry.name))) and info[1] != "Z":
-            children.setdefault(info[0], []).append(int(entry.name))
-    found, frontier = set(), [pid]
-    while frontier:
-        for child in children.get(frontier.pop(), []):
-            found.add(child)
-            frontier.append(child)
-    return found
-
-
-def alive(pids: set[int]) -> set[int]:
-    """The ``pids`` still running (not exited, not zombies)."""
-    return {pid for pid in pids if (info := _ppid_and_state(pid)) is not None and info[1] != "Z"}
-
-
 def wait_gone(pids: set[int], timeout_s: float = GONE_TIMEOUT_S) -> set[int]:
     """Poll until none of ``pids`` runs; the ones left after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while (left := alive(pids)) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    return left
+    return process_tree.wait_gone(pids, timeout_s)
 
 
 def start_server(data_dir: Path, api_port: int, telemetry_port: int, *extra: str) -> tuple[subprocess.Popen, list[str]]:
