@@ -35,9 +35,10 @@ from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
+import numpy.typing as npt
 
 from sim_core import fault_detection as fd
-from sim_core.scenario import Scenario
+from sim_core.scenario import FaultSpec, Scenario
 from sim_core.twin_replay import fault_specs, replay_scores
 
 __all__ = [
@@ -247,7 +248,8 @@ def _kinematic_rates(q: np.ndarray, t: np.ndarray) -> np.ndarray:
     qa, qb = q[:-1], q[1:]
     w0 = qa[:, 0:1] * qb[:, 1:] - qb[:, 0:1] * qa[:, 1:] - np.cross(qa[:, 1:], qb[:, 1:])
     scalar = np.sum(qa * qb, axis=1, keepdims=True)
-    return 2.0 * np.sign(scalar) * w0 / np.diff(t)[:, None]
+    rate: npt.NDArray[np.float64] = 2.0 * np.sign(scalar) * w0 / np.diff(t)[:, None]
+    return rate
 
 
 def _gyro_channels(obs: Observations) -> list[_Channel]:
@@ -297,7 +299,8 @@ def _star_tracker_valid(q: np.ndarray) -> np.ndarray:
     ok = np.isfinite(norm) & (np.abs(norm - 1.0) < 1e-3)
     frozen = np.zeros(q.shape[0], dtype=bool)
     frozen[1:] = np.all(q[1:] == q[:-1], axis=1)
-    return ok & ~frozen
+    usable: npt.NDArray[np.bool_] = ok & ~frozen
+    return usable
 
 
 def detection_rate_per_day(n_channels: int, dt_s: float) -> float:
@@ -396,7 +399,7 @@ def _profile(
 
 
 def _quadratic_max(
-    at, lo: float, hi: float, scale: float = 1.0, min_abs: float | np.ndarray = 0.0
+    at: Callable[[float], np.ndarray], lo: float, hi: float, scale: float = 1.0, min_abs: float | np.ndarray = 0.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi] and |θ| ≥ min_abs."""
     if np.isfinite(hi) and np.isfinite(lo):
@@ -468,7 +471,8 @@ def _kick_evidence(ch: _Channel, onsets: np.ndarray, nominal: float) -> np.ndarr
     a = np.minimum((fp + fm - 2.0 * f0) / (2.0 * h * h), 0.0)
     b = (fp - fm) / (2.0 * h)
     spread = 1.0 - 2.0 * a * s2
-    return f0 + b * b * s2 / (2.0 * spread) - 0.5 * np.log(spread) - nominal
+    loglik: npt.NDArray[np.float64] = f0 + b * b * s2 / (2.0 * spread) - 0.5 * np.log(spread) - nominal
+    return loglik
 
 
 def _window(alarm: fd.Alarm | None, later: list[int], n: int, dt: float) -> tuple[int, int, int]:
@@ -693,6 +697,7 @@ def _replayed(
     if not chosen:
         return hyps
     top = chosen[0]
+    assert top.onset_s is not None  # chosen keeps hypotheses with an onset
     half = float(np.clip(3.0 * (top.onset_sigma_s or 0.0) + 20.0, 30.0, 300.0))
     lo, hi = float(t[start + 1]), float(t[min(alarm, stop - 2)])  # the fault began before it was detected
     grid = np.unique(np.clip(top.onset_s + np.linspace(-half, half, REPLAY_ONSETS), lo, hi))
@@ -739,9 +744,13 @@ def _replay_grid(
     scenario = scenario.model_copy(update={"fdir": fdir})
     first = max(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start)
     reference = max(int(np.searchsorted(t, grid[0])), first + 2)
-    candidates = [
-        (fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude), float(tau)) for h in chosen for tau in grid
-    ]
+    candidates: list[tuple[list[FaultSpec], float]] = []
+    for h in chosen:
+        for tau in grid:
+            specs = fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude)
+            if specs is None:  # _replayed chooses flyable hypotheses only
+                raise ValueError(f"{h.fault}: not a flyable wheel hypothesis")
+            candidates.append((specs, float(tau)))
     ll = replay_scores(
         scenario,
         t,
@@ -758,7 +767,8 @@ def _replay_grid(
         flyer,
         q_prog_ib=obs.q_prog_ib,
     )
-    return (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
+    relative: npt.NDArray[np.float64] = (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
+    return relative
 
 
 def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:

@@ -20,9 +20,10 @@ bound the rate per sample is at most (windows × channels) × 2Φ(−n) (:func:`
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 __all__ = [
@@ -39,7 +40,8 @@ WINDOWS_S = (10.0, 30.0, 100.0, 300.0, 1000.0)  # a failed wheel commanded 1e-5 
 N_SIGMA = 6.5  # 2Φ(−6.5) = 8e-11 per test: with 5 windows × 10 channels at 1 Hz, ≤ 3.5e-4 false alarms a day
 
 
-class Alarm(NamedTuple):
+@dataclass(frozen=True)
+class Alarm:
     """First window test that failed: channel, sample index, window length (samples) and the test ratio."""
 
     channel: int
@@ -85,7 +87,8 @@ def open_loop_residual(y: np.ndarray, drift: np.ndarray) -> np.ndarray:
     """r_k = y_k − y_0 − Σ_{j<k} d_j: what the drift model leaves unexplained, from the first finite sample."""
     r = y - np.concatenate([[0.0], np.cumsum(drift)])
     finite = np.flatnonzero(np.isfinite(r))
-    return r - (r[finite[0]] if finite.size else 0.0)
+    unexplained: npt.NDArray[np.float64] = r - (r[finite[0]] if finite.size else 0.0)
+    return unexplained
 
 
 def window_alarm(

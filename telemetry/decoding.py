@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 from numba import njit
 
 from sim_core import quaternion
@@ -288,7 +289,10 @@ def _frame_records(buf: np.ndarray, frames: ccsds.Frames) -> list[QuarantineReco
 
 def _packet_lengths(buf: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """Total octets of the packets at offset, from their packet data length fields (CCSDS 133.0-B-2 §4.1.3.5)."""
-    return ((buf[offset + 4].astype(np.int64) << 8) | buf[offset + 5]) + ccsds.PRIMARY_HEADER_OCTETS + 1
+    octets: npt.NDArray[np.int64] = ((buf[offset + 4].astype(np.int64) << 8) | buf[offset + 5]) + (
+        ccsds.PRIMARY_HEADER_OCTETS + 1
+    )
+    return octets
 
 
 def _layout_groups(
@@ -641,12 +645,12 @@ def _complete_end(buf: np.ndarray, frames: ccsds.Frames) -> int:
     (a packet, or damage whose next packet may follow), keeping at most one packet's length unread."""
     n = buf.shape[0]
     if frames.offset.size == 0:
-        return max(n - MAX_PACKET_OCTETS, 0)
+        return int(max(n - MAX_PACKET_OCTETS, 0))
     last = frames.offset.size - 1
     whole = frames.code[last] in (ccsds.FrameCode.OK, ccsds.FrameCode.UNDEFINED, ccsds.FrameCode.IDLE)
     if whole and n - int(frames.offset[last]) >= ccsds.PRIMARY_HEADER_OCTETS:
-        return n
-    return max(int(frames.offset[last]), n - MAX_PACKET_OCTETS)
+        return int(n)
+    return int(max(int(frames.offset[last]), n - MAX_PACKET_OCTETS))
 
 
 def decode_stream(
