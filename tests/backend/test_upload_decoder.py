@@ -88,6 +88,11 @@ def test_large_upload_is_decoded_in_another_process_with_the_one_shot_report(
     assert {a: s["accepted"] for a, s in decoding["apids"].items()} == {"256": 4 * N_GPS, "257": N_GPS}
     assert decoding["quarantined_count"] == 0 and archive["packets_accepted"] == 5 * N_GPS
     assert _archived_packets(client) == 5 * N_GPS
+    again: dict = {}
+    _upload(client, tokens["operator"], stream, again)  # a re-upload: a reported no-op, per APID
+    assert again["body"]["archive"]["duplicate_upload"] is True and again["body"]["archive"]["packets_accepted"] == 0
+    assert again["body"]["archive"]["duplicates_by_apid"] == {"256": 4 * N_GPS, "257": N_GPS}
+    assert _archived_packets(client) == 5 * N_GPS
 
 
 def test_decoder_killed_mid_file_loses_nothing_and_writes_nothing_twice(
