@@ -17,6 +17,9 @@
   the app into SQLite); time from the request until the window is swapped into its view (archive read,
   downsampling, geometry, scene rebuild), median of 3 per window length; the peer in the same run is the
   switch back to the live feed (scene rebuild only).  No target in the issue; reported.
+  In the same run, the render loop's cost of one live frame (TwinGeometry.frame on the satellite's LiveFeed,
+  60 instants over its span), against the peer: the same frames with the orbit asked of the GPS fixes
+  directly (ActualTrack.orbit_eci, what LiveFeed did before its orbit table).
 """
 
 from __future__ import annotations
@@ -206,6 +209,32 @@ def _wait(predicate, timeout_s: float = 120.0) -> None:
         time.sleep(0.005)
 
 
+def _frame_ms(geometry, times: np.ndarray) -> float:
+    start = time.perf_counter()
+    for t in times:
+        geometry.frame(t)
+    return (time.perf_counter() - start) / times.size * 1e3
+
+
+def _bench_live_frame(feed) -> None:
+    from frontend.twin_geometry import TwinGeometry
+
+    geometry = TwinGeometry(feed)
+    t0, t1 = feed.span_unix_s()
+    times = np.linspace(t0, t1, 60)
+    geometry.frame(t1)  # the snapshot and its orbit table
+    tabled = _frame_ms(geometry, times)
+    direct = type("DirectOrbit", (), {})()  # the same feed, the orbit straight from the fixes
+    for name in ("span_unix_s", "attitude_actual", "attitude_simulated", "window", "active_alarms", "ground_stations"):
+        setattr(direct, name, getattr(feed, name))
+    direct.orbit_eci = lambda t: (feed._snapshot(), feed._track.orbit_eci(t))[1]
+    untabled = _frame_ms(TwinGeometry(direct), times)
+    print(
+        f"live frame (LiveFeed, orbit table): {tabled:.1f} ms; orbit from the fixes each frame: {untabled:.1f} ms; "
+        f"ratio {untabled / tabled:.1f}  (load average {os.getloadavg()[0]:.1f}; upper bounds)"
+    )
+
+
 def bench_window_switch() -> None:
     from fastapi.testclient import TestClient
 
@@ -232,6 +261,7 @@ def bench_window_switch() -> None:
         ).raise_for_status()
         services.twins.drain(600.0)
         windows = ArchiveWindows(services.telemetry.opened_archive, services.twins, "REFSAT")
+        _bench_live_frame(LiveFeed(services.twins, "REFSAT"))
         handles = serve_monitors(
             LiveFeed(services.twins, "REFSAT"),
             ports={"overlay": _free_port()},

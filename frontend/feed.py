@@ -25,6 +25,9 @@ __all__ = [
     "TrajectoryFeed",
     "DEFAULT_STATIONS",
     "attitude_error_rad",
+    "hermite_orbit",
+    "ORBIT_MARGIN_S",
+    "ORBIT_TABLE_STEP_S",
 ]
 
 ORBIT_TABLE_STEP_S = 10.0  # cubic interpolation error ~ (n h)⁴ r / 384 ≈ 0.2 mm at LEO
@@ -159,7 +162,7 @@ class TrajectoryFeed:
     def orbit_eci(self, t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Position and velocity by cubic Hermite interpolation of the orbit table (J2-extended past the data)."""
         t = np.clip(np.asarray(t_unix_s, dtype=float), self._orbit_t[0], self._orbit_t[-1])
-        return _hermite(self._orbit_t, self._orbit_r, self._orbit_v, t)
+        return hermite_orbit(self._orbit_t, self._orbit_r, self._orbit_v, t)
 
     def window(self, t0_unix_s: float, t1_unix_s: float) -> FeedWindow:
         """Samples of the actual variant in [t0, t1] with the error against the twin."""
@@ -232,8 +235,10 @@ def _orbit_table(t_unix_s: np.ndarray, r_eci_m: np.ndarray) -> tuple[np.ndarray,
     return t[keep], r_all[keep], v_all[keep]
 
 
-def _hermite(t_tab: np.ndarray, r_tab: np.ndarray, v_tab: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Cubic Hermite interpolation of position with velocity, and its derivative."""
+def hermite_orbit(
+    t_tab: np.ndarray, r_tab: np.ndarray, v_tab: np.ndarray, t: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Position and velocity at t by cubic Hermite interpolation of an orbit table (t, r, v), t inside it."""
     i = np.clip(np.searchsorted(t_tab, t, side="right") - 1, 0, t_tab.size - 2)
     h = (t_tab[i + 1] - t_tab[i])[..., None]
     s = ((t - t_tab[i])[..., None]) / h

@@ -21,7 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from frontend.feed import DEFAULT_STATIONS, FeedWindow, GroundStation, attitude_error_rad
+from frontend.feed import (
+    DEFAULT_STATIONS,
+    ORBIT_TABLE_STEP_S,
+    FeedWindow,
+    GroundStation,
+    attitude_error_rad,
+    hermite_orbit,
+)
 from sim_core import quaternion
 from telemetry.actual_state import ActualTrack
 from telemetry.attitude_mapping import AttitudeMapping, actual_attitude
@@ -34,12 +41,24 @@ SNAPSHOT_S = 0.5
 MIN_GPS_FIXES = 3  # ActualTrack.orbit_eci fits at least three
 MAX_WINDOW_S = 7200.0  # longest replay window: more than an orbit (the panel offers up to 120 min)
 MAX_WINDOW_SAMPLES = 20_000  # per series of a replay window (a 2 h window of 4 Hz housekeeping is 28,800)
+ORBIT_TABLE_MARGIN_S = 60.0  # the orbit table reaches this far past the fixes; renewed once the telemetry is
+# half-way there (a 30 s circular-orbit extrapolation from the fitted fixes is far below a displayed pixel)
 ARCHIVE_SPAN_CACHE_S = 2.0  # the archive's span is asked by every panel twice a second: one query per this
 
 
 def _interp_q(t: np.ndarray, t_tab: np.ndarray, q_tab: np.ndarray) -> np.ndarray:
     """q_ib at t, linear between neighbouring (hemisphere-continuous) samples and renormalised; ends held."""
     return quaternion.normalize(np.stack([np.interp(t, t_tab, q_tab[:, j]) for j in range(4)], axis=-1))
+
+
+def _orbit_table(track: ActualTrack) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, r, v) every ORBIT_TABLE_STEP_S from the first fix to ORBIT_TABLE_MARGIN_S past the last (cubic Hermite
+    between its rows is within ~0.2 mm at LEO, frontend.feed), from one vectorised ActualTrack.orbit_eci call; one
+    side beyond the fixes only (one circular-orbit fit): live telemetry runs ahead of its newest fix."""
+    t_fix = track.gps_t_utc_ns / NS_PER_S
+    t = np.arange(t_fix[0], t_fix[-1] + ORBIT_TABLE_MARGIN_S + ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S)
+    r, v = track.orbit_eci(t)
+    return t, r, v
 
 
 class LiveFeed:
@@ -59,6 +78,7 @@ class LiveFeed:
         self._taken = -np.inf
         self._snap: dict[str, Any] = {}
         self._track: ActualTrack | None = None
+        self._orbit: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         if not self.ready():
             raise ValueError(f"satellite: the live twin of {satellite!r} has no attitude and GPS samples yet")
 
@@ -83,6 +103,9 @@ class LiveFeed:
                             "v_ecef_m_s": np.stack([gps[n] for n in m.v_ecef_m_s], -1),
                         },
                     )
+                    newest_s = float(recent["t_ns"][-1]) / NS_PER_S
+                    if self._orbit is None or newest_s > self._orbit[0][-1] - ORBIT_TABLE_MARGIN_S / 2:
+                        self._orbit = _orbit_table(self._track)  # renewed every ~30 s of telemetry, not per snapshot
                     self._snap = {
                         **recent,
                         "t_s": recent["t_ns"] / NS_PER_S,
@@ -110,10 +133,15 @@ class LiveFeed:
         return _interp_q(np.asarray(t_unix_s, float), s["twin_t_s"], s["twin_q_ib"])
 
     def orbit_eci(self, t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """ECI position and velocity from the GPS fixes (telemetry.actual_state.ActualTrack.orbit_eci)."""
+        """ECI position and velocity from the GPS fixes (telemetry.actual_state.ActualTrack.orbit_eci), near the fixes
+        through the snapshot's table (_orbit_table): the render loop asks every frame, the fixes convert once."""
         self._snapshot()
-        assert self._track is not None
-        return self._track.orbit_eci(t_unix_s)
+        assert self._orbit is not None and self._track is not None
+        t_tab, r_tab, v_tab = self._orbit
+        t = np.asarray(t_unix_s, dtype=float)
+        if t.size and (t.min() < t_tab[0] or t.max() > t_tab[-1]):  # the drawn tracks, far past the fixes
+            return self._track.orbit_eci(t)
+        return hermite_orbit(t_tab, r_tab, v_tab, t)
 
     def window(self, t0_unix_s: float, t1_unix_s: float) -> FeedWindow:
         """Telemetry samples in [t0, t1] with the attitude error against the twin (NaN where no twin flew)."""

@@ -217,7 +217,11 @@ class MonitorGate:
             asyncio.ensure_future(self._pipe(upstream_reader, writer)),
         ]
         loop = asyncio.get_running_loop()
-        unwatch = self._auth.watch(principal, lambda: loop.call_soon_threadsafe(_cancel, pipes))
+
+        def revoked() -> None:  # from the revoking thread: cancel the pipes on this loop
+            loop.call_soon_threadsafe(_cancel, pipes)
+
+        unwatch = self._auth.watch(principal, revoked)
         try:
             await asyncio.wait(pipes, return_when=asyncio.FIRST_COMPLETED)
         finally:

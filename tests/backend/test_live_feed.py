@@ -59,3 +59,20 @@ def test_windows_outside_the_archive_or_too_long_are_refused_naming_the_field(wi
         windows.window_feed(t0, t0 + MAX_WINDOW_S + 1.0)
     with pytest.raises(ValueError, match="^window: need finite"):
         windows.window_feed(t1, t0)
+
+
+def test_the_feed_orbit_goes_through_the_gps_fixes_within_their_noise(windows: ArchiveWindows) -> None:
+    from sim_core import frames
+    from telemetry.emulator import GPS_SIGMA_R_M
+
+    t0, t1 = windows.archive_span_unix_s()
+    feed = windows.window_feed(t0, t1)
+    recent = feed._snapshot()  # the window's GPS fixes as read from the archive
+    m, gps, t_fix = recent["mapping"], recent["gps"], recent["gps_t_ns"] / NS_PER_S
+    r_fix, _ = frames.ecef_to_eci(
+        np.stack([gps[n] for n in m.r_ecef_m], -1), np.stack([gps[n] for n in m.v_ecef_m_s], -1), t_fix
+    )
+    r, _ = feed.orbit_eci(t_fix + 0.25)  # between the table's rows, off the fixes' instants
+    r_at_fix, _ = feed.orbit_eci(t_fix)
+    assert np.max(np.linalg.norm(r_at_fix - r_fix, axis=-1)) < 5 * GPS_SIGMA_R_M  # smoothed through the noise
+    assert np.all(np.linalg.norm(r - r_at_fix, axis=-1) < 8_000.0 * 0.25 + 5 * GPS_SIGMA_R_M)  # LEO ~7.6 km/s
