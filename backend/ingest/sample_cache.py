@@ -1,6 +1,7 @@
-"""Caches behind the samples endpoint: JSON answers per window and decoded series per parameter.
+"""Caches of what is read from the archive: JSON sample answers per window, decoded series per parameter, and
+results computed from a window (a twin session's residuals).
 
-Both are dropped when ingested data overlaps them (an upload's or a live batch's time span), and a
+All are dropped when ingested data overlaps them (an upload's or a live batch's time span), and a
 computation that started before such an ingest is not stored (per-satellite generation counter).
 Live data younger than HOT_S may not be archived yet (the live stream commits every 0.5 s), so
 answers reaching into it are never stored and the satellite's series are read per window.
@@ -14,13 +15,16 @@ from collections import OrderedDict, deque
 
 import numpy as np
 
-__all__ = ["SampleCache", "ANSWER_ENTRIES", "SERIES_BYTES", "HOT_S"]
+__all__ = ["SampleCache", "ANSWER_ENTRIES", "SERIES_BYTES", "COMPUTED_ENTRIES", "HOT_S"]
 
 ANSWER_ENTRIES = 4096  # distinct (parameter, window, max_points) answers kept between ingests
 SERIES_BYTES = 256_000_000  # decoded (t, value) arrays kept in memory, least recently used first out
+COMPUTED_ENTRIES = 32  # results computed from archive windows (a session's residuals: a few MB at most)
+INGEST_LOG = 4096  # recent ingest spans remembered: a result computed meanwhile is kept if none overlaps it
 HOT_S = 5.0  # live data younger than this may still wait for the archive flush (every 0.5 s)
 
 AnswerKey = tuple[str, str, int, int, int]
+ComputedKey = tuple[str, str, int, int]  # satellite, what was computed, t0_ns, t1_ns of the archive window read
 
 
 class SampleCache:
@@ -31,6 +35,8 @@ class SampleCache:
         self._answers: OrderedDict[AnswerKey, bytes] = OrderedDict()
         self._series: OrderedDict[tuple[str, str], tuple[np.ndarray, np.ndarray]] = OrderedDict()
         self._series_bytes = 0
+        self._computed: OrderedDict[ComputedKey, object] = OrderedDict()
+        self._ingested: deque[tuple[str, int, int, int]] = deque(maxlen=INGEST_LOG)  # satellite, generation, t0, t1
         self._generation: dict[str, int] = {}
         self._hot: deque[tuple[float, str, int]] = deque()
 
@@ -43,8 +49,11 @@ class SampleCache:
         """New data of ``satellite`` in [t0_ns, t1_ns]: drop overlapping answers and its series."""
         with self._lock:
             self._generation[satellite] = self._generation.get(satellite, 0) + 1
+            self._ingested.append((satellite, self._generation[satellite], t0_ns, t1_ns))
             for key in [k for k in self._answers if k[0] == satellite and k[2] <= t1_ns and k[3] >= t0_ns]:
                 del self._answers[key]
+            for done in [k for k in self._computed if k[0] == satellite and k[2] <= t1_ns and k[3] >= t0_ns]:
+                del self._computed[done]
             for series_key in [k for k in self._series if k[0] == satellite]:
                 self._series_bytes -= sum(a.nbytes for a in self._series.pop(series_key))
 
@@ -76,6 +85,31 @@ class SampleCache:
             self._answers[key] = body
             if len(self._answers) > ANSWER_ENTRIES:
                 self._answers.popitem(last=False)
+
+    def computed(self, key: ComputedKey) -> object | None:
+        """A stored result computed from an archive window (marks it recently used)."""
+        with self._lock:
+            hit = self._computed.get(key)
+            if hit is not None:
+                self._computed.move_to_end(key)
+            return hit
+
+    def store_computed(self, key: ComputedKey, generation: int, value: object) -> None:
+        """Keep a computed result unless an ingest since ``generation`` overlapped its window (a live stream
+        elsewhere in time does not count) or the window reaches hot live data."""
+        hot = self.hot_start_ns(key[0])
+        with self._lock:
+            if not self._untouched(key[0], generation, key[2], key[3]) or (hot is not None and key[3] >= hot):
+                return
+            self._computed[key] = value
+            if len(self._computed) > COMPUTED_ENTRIES:
+                self._computed.popitem(last=False)
+
+    def _untouched(self, satellite: str, generation: int, t0_ns: int, t1_ns: int) -> bool:
+        """No ingest of ``satellite`` since ``generation`` overlapped [t0_ns, t1_ns] (False if the log cannot tell)."""
+        since = self._generation.get(satellite, 0) - generation
+        spans = [(a, b) for s, g, a, b in self._ingested if s == satellite and g > generation]
+        return len(spans) == since and not any(a <= t1_ns and b >= t0_ns for a, b in spans)
 
     def series(self, satellite: str, name: str) -> tuple[np.ndarray, np.ndarray] | None:
         """The whole decoded series of a parameter if stored."""

@@ -26,7 +26,7 @@ from multiprocessing.process import BaseProcess
 from multiprocessing.queues import Queue
 from multiprocessing.synchronize import Event
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 import numpy as np
 import orjson
@@ -51,6 +51,8 @@ if TYPE_CHECKING:
     import pyarrow as pa
 
 __all__ = ["COMPONENTS", "TelemetryGateway"]
+
+Result = TypeVar("Result")
 
 # the parts /health lists; all are hard dependencies of the backend, so all are present
 COMPONENTS = (
@@ -474,6 +476,18 @@ class TelemetryGateway:
             whole = self.archive.read_parameter(satellite, name, -BOUND_NS, BOUND_NS)
             self._samples.store_series(satellite, name, generation, *whole)
         return _window_of(whole, t0_ns, t1_ns)
+
+    def window_result(self, satellite: str, what: str, t0_ns: int, t1_ns: int, compute: Callable[[], Result]) -> Result:
+        """``compute()``, a result read from the archive window [t0_ns, t1_ns] of ``satellite`` and named ``what``
+        (including whatever else it depends on), kept until an ingest overlaps the window; failures are not kept."""
+        key = (satellite, what, t0_ns, t1_ns)
+        hit = self._samples.computed(key)
+        if hit is not None:
+            return cast(Result, hit)  # stored under this key by this method only
+        generation = self._samples.generation(satellite)
+        value = compute()
+        self._samples.store_computed(key, generation, value)
+        return value
 
     def samples_json(self, satellite: str, name: str, t0_ns: int, t1_ns: int, max_points: int) -> bytes:
         """JSON of one parameter's samples in [t0_ns, t1_ns], min/max-downsampled to max_points (cached)."""

@@ -15,6 +15,7 @@ from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.core.auth import Role
+from backend.twin import session_service
 from backend.twin.session_service import session_feed
 from frontend.feed import TwinFeed
 from sim_core import orbit, quaternion
@@ -59,7 +60,7 @@ def _wait(client: TestClient, session_id: str, headers: dict[str, str]) -> dict:
 
 
 def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_departs(
-    tmp_path: Path, satellite_packets: tuple[bytes, int, float]
+    tmp_path: Path, satellite_packets: tuple[bytes, int, float], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     data, t0_ns, truth_rpm = satellite_packets
     settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'twin.sqlite'}")
@@ -85,8 +86,13 @@ def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_de
         )
         assert right.status_code == 202, right.json()
         assert _wait(client, right.json()["id"], operator)["status"] == "succeeded"
+        replays, read_window = [], session_service.actual_track_between
+        monkeypatch.setattr(
+            session_service, "actual_track_between", lambda *a, **k: replays.append(a[2:]) or read_window(*a, **k)
+        )
         residuals = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals", headers=operator).json()
         nominal = client.get(f"/api/v1/twin/sessions/{right.json()['id']}/residuals?variant=1", headers=operator).json()
+        assert len(replays) == 1  # the second answer comes from the residuals kept since the first
         feed = session_feed(client.app.state.services, right.json()["id"])
         wrong = client.post(
             "/api/v1/twin/sessions",
