@@ -3,7 +3,8 @@
 Publishing never waits: each subscriber owns a bounded deque; when a slow client's deque is full
 the oldest items are dropped (thinning) and counted; the WebSocket sender drains it in batches at
 most ``rate_hz`` times per second and drops a client whose send stalls. Publish is safe from any
-thread (deque.append is atomic; the subscriber list is replaced, never mutated in place).
+thread (deque.append is atomic; the subscriber list is replaced, never mutated in place). This is the
+hub's part of the one fan-out policy for live samples, stated in :mod:`backend.ingest.telemetry_gateway`.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 Ingest and the API never share a GIL, so neither slows the other; the ingest process forwards
 each decoded batch (raw packets stripped) and its tallies to the API process through a bounded
 queue, never waiting: when the API side falls behind, batches for the live hub are dropped and
-counted (they are archived regardless).
+counted (they are archived regardless): the outbox's part of the one fan-out policy for live samples,
+stated in :mod:`backend.ingest.telemetry_gateway`.
 """
 
 from __future__ import annotations
