@@ -143,11 +143,15 @@ def score(outcomes: list[dict]) -> dict:
     top1 = top3 = 0
     onset_err, gain_err, fric_err, latency = [], [], [], []
     misses = []
+    per_category: dict[str, list[int]] = {}
     for o in outcomes:
         case, res = o["case"], o["result"]
         truth = _key(case.fault, case.wheel)
         keys = [_key(h["fault"], h["wheel"]) for h in res["hypotheses"]]
         top1 += keys[0] == truth
+        tally = per_category.setdefault("double" if "+" in case.fault else case.fault, [0, 0])
+        tally[0] += keys[0] == truth
+        tally[1] += 1
         top3 += truth in keys[:3]
         if keys[0] != truth:
             misses.append((case.fault, case.wheel, keys[0], round(res["hypotheses"][0]["score"], 3)))
@@ -179,6 +183,7 @@ def score(outcomes: list[dict]) -> dict:
         "latency_median_s": pct(latency, 50),
         "latency_max_s": max(latency) if latency else float("nan"),
         "misses": misses,
+        "per_category": per_category,
     }
 
 
@@ -287,6 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         f"speed-up on {args.workers} Dask workers: {len(sub)} cases serial {wall_serial:.1f} s, "
         f"Dask {wall_sub_dask:.1f} s -> {wall_serial / wall_sub_dask:.2f}x; results identical: {same}"
     )
+    print("top-1 per category: " + ", ".join(f"{k} {a}/{n}" for k, (a, n) in s["per_category"].items()))
     print("misses (truth fault, truth wheel, top-1, its score):")
     for m in s["misses"]:
         print("  ", m)
