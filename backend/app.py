@@ -70,6 +70,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         services.jobs.start()
+        services.diagnoses.start()
         services.telemetry.start()
         services.twins.start()  # recovers every twin from the archive in its own thread
         services.auth.start_revocation_watch()  # revocations by other processes (acs-twin token revoke)

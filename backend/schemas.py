@@ -328,11 +328,17 @@ class DiagnosisPublic(BaseModel):
 
     id: str
     satellite: str
+    dictionary: str
     scenario: str
     start_utc: str
     end_utc: str
     status: Literal["running", "succeeded", "failed"]
     error: str | None = None
+    trigger: Literal["operator", "live twin"] = Field(
+        description="Who started it: an operator, or a live twin's detector."
+    )
+    alarm_id: int | None = Field(None, description="The alarm whose detection started it (GET /alarms).")
+    alarm_utc: str | None = Field(None, description="When the live twin's detector fired.")
     created_by: str
     result: dict[str, Any] | None = Field(
         None,

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import partial
 
 from sqlalchemy import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -14,9 +15,11 @@ from backend.core.settings import Settings
 from backend.core.token_repository import TokenRepository
 from backend.ingest.live_hub import LiveHub
 from backend.ingest.telemetry_gateway import TelemetryGateway
+from backend.jobs.cluster import ServerCluster
 from backend.jobs.job_repository import JobRepository
 from backend.jobs.jobs import JobManager
-from backend.twin.diagnosis import DiagnosisRuns
+from backend.twin.diagnosis import DiagnosisRuns, diagnose_detection
+from backend.twin.diagnosis_repository import DiagnosisRepository
 from backend.twin.live import LiveTwins
 from backend.twin.session_repository import TwinSessionRepository
 
@@ -33,18 +36,20 @@ class Services:
     tokens: TokenRepository
     audit: AuditRepository
     job_repo: JobRepository
+    cluster: ServerCluster
     jobs: JobManager
     auth: Authenticator
     hub: LiveHub
     telemetry: TelemetryGateway
     twin_sessions: TwinSessionRepository
     twins: LiveTwins
-    diagnoses: DiagnosisRuns = field(default_factory=DiagnosisRuns)
+    diagnoses: DiagnosisRuns
 
     def close(self) -> None:
-        """Stop jobs and the telemetry side, dispose of the engine."""
+        """Stop jobs, diagnoses and the Dask cluster, the telemetry side, dispose of the engine."""
         self.jobs.stop()
         self.diagnoses.close()
+        self.cluster.close()
         self.telemetry.close()
         self.engine.dispose()
 
@@ -66,6 +71,9 @@ def build_services(settings: Settings) -> Services:
         mapping_folders=[settings.data_dir / "dictionaries"],
     )
     telemetry.on_commit(twins.submit)
+    cluster = ServerCluster(settings.dask_scheduler, settings.job_workers)
+    diagnoses = DiagnosisRuns(DiagnosisRepository(sessions), cluster)
+    twins.on_detection = partial(diagnose_detection, diagnoses, telemetry.opened_archive, telemetry.dictionaries.load)
     return Services(
         settings=settings,
         engine=engine,
@@ -73,10 +81,12 @@ def build_services(settings: Settings) -> Services:
         tokens=tokens,
         audit=AuditRepository(sessions),
         job_repo=job_repo,
-        jobs=JobManager(settings, job_repo),
+        cluster=cluster,
+        jobs=JobManager(settings, job_repo, cluster),
         auth=Authenticator(tokens, settings.auth_enabled),
         hub=hub,
         telemetry=telemetry,
         twin_sessions=TwinSessionRepository(sessions),
         twins=twins,
+        diagnoses=diagnoses,
     )

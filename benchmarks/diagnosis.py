@@ -273,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
         cluster.map_cases(client, run_case, sub)
         wall_sub_dask = time.perf_counter() - start
     finally:
-        client.close()
+        cluster.close_client(client)
     same = all(a["result"]["hypotheses"] == b["result"]["hypotheses"] for a, b in zip(serial, outcomes))
     s = score(outcomes)
     print(f"campaign: {s['cases']} cases ({', '.join(CATEGORIES)}), {wall_dask:.0f} s on {args.workers} Dask workers")

@@ -24,7 +24,7 @@ from telemetry.dictionary import Dictionary, Parameter
 from telemetry.ground_files import read_ground_file
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["GROUND_SUFFIXES", "MIN_SPACING_S", "observations", "read_batches"]
+__all__ = ["GROUND_SUFFIXES", "MIN_SPACING_S", "calibration_step", "observations", "read_batches"]
 
 MIN_SPACING_S = 1.0
 GROUND_SUFFIXES = (".csv", ".jsonl", ".ndjson")
@@ -54,7 +54,7 @@ def _merged(batches: list[SampleBatch]) -> tuple[np.ndarray, dict[str, np.ndarra
     return t_unique, {n: np.concatenate([np.asarray(b.values[n], dtype=float) for b in batches])[first] for n in names}
 
 
-def _step(dictionary: Dictionary, name: str) -> float:
+def calibration_step(dictionary: Dictionary, name: str) -> float:
     """Calibration step (engineering units per count) of an integer parameter; 0 for floats or unknown."""
     try:
         _, p = dictionary.parameter(name)
@@ -115,7 +115,7 @@ def observations(
             f"the diagnosis needs at least {MIN_SAMPLES} at ≥ {MIN_SPACING_S:g} s spacing"
         )
     t_ns = t_ns[keep]
-    quantum = _step(dictionary, "wheel_speed_rad_s_1")
+    quantum = calibration_step(dictionary, "wheel_speed_rad_s_1")
     if quantum <= 0.0:
         raise ValueError("dictionary: wheel_speed_rad_s_1 has no integer calibration step (the tachometer quantum)")
 
@@ -131,7 +131,7 @@ def observations(
         wheel_torque_cmd_nm=cut(_stack(values, "wheel_torque_cmd_nm", suffixes)),  # type: ignore[arg-type]
         speed_quantum_rad_s=quantum,
         torque_quantum_nm=_resolution(
-            values["wheel_torque_cmd_nm_1"][keep], _step(dictionary, "wheel_torque_cmd_nm_1")
+            values["wheel_torque_cmd_nm_1"][keep], calibration_step(dictionary, "wheel_torque_cmd_nm_1")
         ),
         q_st_ib=cut(_stack(values, "q_st_ib", "0123")),
         q_prog_ib=cut(_stack(values, "q_prog_ib", "0123")),

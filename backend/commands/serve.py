@@ -25,7 +25,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--data-dir", type=Path, help="data directory (default ./data, env ACS_TWIN_DATA_DIR)")
     p.add_argument("--database-url", help="SQLAlchemy URL (default SQLite in the data directory)")
     p.add_argument("--no-auth", action="store_true", help="disable tokens (local development only)")
-    p.add_argument("--job-workers", type=int, help="simulation worker processes (default 1)")
+    p.add_argument("--job-workers", type=int, help="jobs at once, Dask LocalCluster workers (default 2)")
+    p.add_argument(
+        "--scheduler",
+        help="Dask scheduler of an existing cluster (tcp://host:port, env ACS_TWIN_DASK_SCHEDULER; "
+        "default a LocalCluster the server owns)",
+    )
     p.add_argument("--no-emulator", action="store_true", help="do not start the demo spacecraft emulator")
     p.add_argument("--emulator-scenario", default="somov-ge4-scan", help="scenario the demo satellite flies")
     p.set_defaults(handler=run)
@@ -38,6 +43,7 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
         "data_dir": args.data_dir,
         "database_url": args.database_url,
         "job_workers": args.job_workers,
+        "dask_scheduler": args.scheduler,
     }
     out = {k: v for k, v in values.items() if v is not None}
     if args.no_auth:

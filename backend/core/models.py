@@ -7,7 +7,7 @@ from datetime import datetime
 from sqlalchemy import JSON, BigInteger, DateTime, Float, Integer, String, Text
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
-__all__ = ["Base", "TokenRow", "AuditRow", "JobRow", "TwinSessionRow"]
+__all__ = ["Base", "TokenRow", "AuditRow", "JobRow", "TwinSessionRow", "DiagnosisRow"]
 
 
 class Base(DeclarativeBase):
@@ -70,3 +70,27 @@ class TwinSessionRow(Base):
     alternatives: Mapped[dict] = mapped_column(JSON, default=dict)
     created_by: Mapped[str] = mapped_column(String(100))
     created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))
+
+
+class DiagnosisRow(Base):
+    """A diagnosis of a satellite's telemetry window: who or what started it, its state and the ranked result.
+
+    ``result`` is the JSON of backend.twin.diagnosis (hypotheses best first); ``alarm_id`` is the archive alarm
+    whose detection started it (live twins), null for one an operator started."""
+
+    __tablename__ = "backend_diagnoses"
+    id: Mapped[str] = mapped_column(String(32), primary_key=True)
+    satellite: Mapped[str] = mapped_column(String(100), index=True)
+    dictionary: Mapped[str] = mapped_column(String(130))
+    scenario: Mapped[str] = mapped_column(String(100))
+    start_utc: Mapped[str] = mapped_column(String(40))
+    end_utc: Mapped[str] = mapped_column(String(40))
+    status: Mapped[str] = mapped_column(String(16), index=True)
+    error: Mapped[str | None] = mapped_column(Text, nullable=True)
+    result: Mapped[dict | None] = mapped_column(JSON, nullable=True)
+    trigger: Mapped[str] = mapped_column(String(16), default="operator")
+    alarm_id: Mapped[int | None] = mapped_column(BigInteger, nullable=True, index=True)
+    alarm_utc: Mapped[str | None] = mapped_column(String(40), nullable=True)
+    created_by: Mapped[str] = mapped_column(String(100))
+    created_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), index=True)
+    finished_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True), nullable=True)

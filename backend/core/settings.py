@@ -34,7 +34,14 @@ class Settings(BaseSettings):
     live_satellite: str = Field("REFSAT", min_length=1, description="Satellite the live stream belongs to.")
     live_dictionary: str = Field("reference_satellite.yaml", description="Dictionary of the live stream.")
     auth_enabled: bool = Field(True, description="Require API tokens (turn off only locally).")
-    job_workers: int = Field(1, ge=1, le=64, description="Simulation worker processes.")
+    job_workers: int = Field(
+        2, ge=1, le=64, description="Jobs run at once, and the worker processes of the server's Dask LocalCluster."
+    )
+    dask_scheduler: str | None = Field(
+        None,
+        description="Address of an existing Dask cluster's scheduler (tcp://host:8786) for jobs, sweeps and "
+        "diagnoses; default a LocalCluster of job_workers worker processes that the server owns.",
+    )
     job_queue_size: int = Field(4, ge=1, le=1000, description="Queued + running jobs before 429.")
     job_retry_after_s: int = Field(10, ge=1, description="Retry-After sent with 429.")
     max_sim_duration_s: float = Field(86_400.0, gt=0, description="Longest simulated time per job.")

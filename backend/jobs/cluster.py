@@ -1,10 +1,15 @@
-"""The distributed engine: a Dask client for hypothesis sweeps, what-if sweeps and campaigns.
+"""The distributed engine: a Dask client for simulation jobs, hypothesis sweeps, what-if sweeps and campaigns.
 
 :func:`dask_client` returns a client of a ``LocalCluster`` on this machine (worker processes, one
-thread each, bound to 127.0.0.1, no dashboard port) unless a scheduler address is given
-(``scheduler=`` / ``--scheduler tcp://host:port`` / ``ACS_TWIN_DASK_SCHEDULER``). Every worker loads
-the engine's compiled kernels once when it joins (:func:`warm_engine`), so the first task does not
-pay numba's start-up.
+thread each, bound to 127.0.0.1, no dashboard port; as many as the machine has cores, at most 4)
+unless a scheduler address is given (``scheduler=`` / ``--scheduler tcp://host:port`` /
+``ACS_TWIN_DASK_SCHEDULER``). Every worker loads the engine's compiled kernels when it joins, a
+restarted one too (:class:`EngineWorker`, :func:`warm_engine`), so the first task does not pay
+numba's start-up. The workers of a LocalCluster are children of this process that it owns
+(:func:`backend.core.processes.become_owned_child`: own process group, gone with this process even
+after ``kill -9``); a scheduler's workers belong to whoever started them.
+
+:class:`ServerCluster` is the server's one client, connected on first use and closed at shutdown.
 
 :func:`fly` splits a batch scenario's variants into one chunk per worker and merges the trajectories.
 Each variant keeps the random stream it has in the whole batch (the engine seeds variant i with
@@ -15,11 +20,14 @@ the result is identical to :func:`sim_core.engine.simulate` on one machine, bit 
 
 from __future__ import annotations
 
+import asyncio
 import os
+import threading
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
 import numpy as np
+from distributed import WorkerPlugin
 
 from sim_core import engine
 from sim_core.scenario import Scenario
@@ -27,7 +35,11 @@ from sim_core.trajectory import Trajectory
 
 __all__ = [
     "SCHEDULER_ENV",
+    "EngineWorker",
+    "ServerCluster",
+    "close_client",
     "dask_client",
+    "local_workers",
     "warm_engine",
     "fly",
     "flyer",
@@ -53,6 +65,29 @@ def warm_engine() -> float:
     return time.perf_counter() - start
 
 
+class EngineWorker(WorkerPlugin):
+    """Set up each worker as it joins: owned by this process (a LocalCluster's) and the engine warm."""
+
+    name = "acs-twin-engine"
+
+    def __init__(self, owned: bool, warm: bool) -> None:
+        self.owned, self.warm = owned, warm
+
+    async def setup(self, worker: Any) -> None:
+        """Own process group and death with the parent (owned workers), then compile the kernels off the loop."""
+        if self.owned:
+            from backend.core.processes import become_owned_child
+
+            become_owned_child()
+        if self.warm:
+            await asyncio.to_thread(warm_engine)
+
+
+def local_workers() -> int:
+    """Worker processes of a default LocalCluster: one per core, at most 4 (2 on this project's machines)."""
+    return max(1, min(os.cpu_count() or 1, 4))
+
+
 def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm: bool = True) -> Any:
     """A ``distributed.Client``: to ``scheduler`` (or $ACS_TWIN_DASK_SCHEDULER), else a new LocalCluster."""
     from distributed import Client, LocalCluster
@@ -63,9 +98,8 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm
             raise ValueError(f"scheduler: expected an address like tcp://host:8786, got {address!r}")
         client = Client(address, timeout="10s")
     else:
-        workers = n_workers or max(1, min(os.cpu_count() or 1, 4))
         cluster = LocalCluster(
-            n_workers=workers,
+            n_workers=n_workers or local_workers(),
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
@@ -73,9 +107,55 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm
             silence_logs=40,
         )
         client = Client(cluster)
-    if warm:
-        client.run(warm_engine)
+    client.register_plugin(EngineWorker(owned=not address, warm=warm))
     return client
+
+
+def close_client(client: Any) -> None:
+    """Close the client and, when it made its own LocalCluster, the cluster's worker processes."""
+    cluster = getattr(client, "cluster", None)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
+class ServerCluster:
+    """The server's Dask client: connected on first use (a LocalCluster it owns, or a scheduler), closed on stop."""
+
+    def __init__(self, scheduler: str | None, n_workers: int) -> None:
+        self._scheduler, self._n_workers = scheduler, n_workers
+        self._client: Any = None
+        self._error: str | None = None
+        self._closed = False
+        self._lock = threading.Lock()
+
+    def client(self) -> Any:
+        """The connected client (connects on the first call); RuntimeError naming the cause when it cannot."""
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the server is stopping: no Dask client")
+            if self._client is None and self._error is None:
+                try:
+                    self._client = dask_client(self._scheduler, self._n_workers)
+                except (OSError, ValueError, TimeoutError) as exc:
+                    where = self._scheduler or "a LocalCluster"
+                    self._error = f"Dask cluster ({where}) unavailable: {type(exc).__name__}: {exc}"
+            if self._client is None:
+                raise RuntimeError(self._error)
+            return self._client
+
+    @property
+    def connected(self) -> Any:
+        """The client if connected, else None (never connects)."""
+        return self._client
+
+    def close(self) -> None:
+        """Close the client and stop the owned LocalCluster's worker processes; later calls of ``client`` fail."""
+        with self._lock:
+            self._closed = True
+            client, self._client = self._client, None
+        if client is not None:
+            close_client(client)
 
 
 def split_variants(s: Scenario, n_chunks: int) -> list[Scenario]:

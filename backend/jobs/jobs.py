@@ -1,17 +1,23 @@
-"""Simulation jobs: a bounded queue drained by dispatcher threads, one worker process per job.
+"""Simulation jobs: a bounded queue drained by dispatcher threads, each job one task on the Dask engine.
 
-Simulations never run in the event loop nor in the server process: each job gets a fresh
-``spawn`` process (killable on cancel); dispatcher threads wait on them and persist the outcome.
+Simulations never run in the event loop nor in the server process: a dispatcher submits the job to
+the server's Dask cluster (:class:`backend.jobs.cluster.ServerCluster`: a LocalCluster of worker
+processes the server owns, or an existing cluster's scheduler) and waits on it; as many jobs run at
+once as there are dispatchers (``job_workers``). The task (:func:`backend.jobs.simulators.run_job`)
+reports progress as Dask events and stops once its job's cancel ``distributed.Event`` is set; one
+that has not stopped ``CANCEL_GRACE_S`` later has its worker restarted. The server writes the result
+files and persists the outcome.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
-import multiprocessing as mp
 import queue
 import shutil
 import threading
 import time
+import traceback
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,35 +25,41 @@ from typing import Any
 
 from backend.core.errors import ApiError
 from backend.core.settings import Settings
+from backend.jobs.cluster import ServerCluster
 from backend.jobs.job_repository import JobRepository
-from backend.jobs.simulators import run_in_worker, validate_scenario
+from backend.jobs.simulators import PROGRESS_TOPIC, JobCancelled, cancel_event_name, run_job, validate_scenario
 
 __all__ = ["JobManager"]
 
-CANCEL_GRACE_S = 1.0  # time a worker gets to stop by itself before it is terminated
+CANCEL_GRACE_S = 5.0  # time a task gets to stop by itself (it looks every 0.25 s) before its worker is restarted
 PROGRESS_PERSIST_S = 1.0  # how often running progress is written to the database
+WAIT_STEP_S = 0.1  # a dispatcher looks at its job's progress and cancellation this often
 
 
 @dataclass
 class _Handle:
     body: dict[str, Any]
-    progress: Any
-    cancel: Any
     options: dict[str, Any] = field(default_factory=dict)
-    process: Any = None
+    progress: float = 0.0
+    future: Any = None
     cancel_at: float | None = field(default=None)
+
+    @property
+    def cancelled(self) -> bool:
+        return self.cancel_at is not None
 
 
 class JobManager:
     """Admits, runs, cancels and reports simulation jobs within the configured limits."""
 
-    def __init__(self, settings: Settings, repo: JobRepository) -> None:
-        self._settings, self._repo = settings, repo
-        self._ctx = mp.get_context("spawn")
+    def __init__(self, settings: Settings, repo: JobRepository, cluster: ServerCluster) -> None:
+        self._settings, self._repo, self._cluster = settings, repo, cluster
         self._queue: queue.Queue[str | None] = queue.Queue()
         self._active: dict[str, _Handle] = {}
         self._lock = threading.Lock()
         self._threads: list[threading.Thread] = []
+        self._subscribed = False
+        self._stopping = False  # at shutdown the cluster itself stops: no worker restarts
 
     def start(self) -> int:
         """Mark jobs left active by a previous server interrupted, start dispatchers; returns count."""
@@ -62,10 +74,10 @@ class JobManager:
         """Stop every active job (recorded interrupted, as after a crash) and the dispatchers (shutdown)."""
         with self._lock:
             handles = dict(self._active)
+            self._stopping = True
         for job_id, handle in handles.items():
             self._repo.finish(job_id, "interrupted", error="server stopped while the job was active")
-            handle.cancel.set()
-            handle.cancel_at = time.monotonic()
+            self._request_cancel(job_id, handle)
         for _ in self._threads:
             self._queue.put(None)
         for thread in self._threads:
@@ -88,7 +100,7 @@ class JobManager:
                     field="job_queue_size",
                     headers={"Retry-After": str(self._settings.job_retry_after_s)},
                 )
-            self._active[job_id] = _Handle(scenario, self._ctx.Value("d", 0.0), self._ctx.Event(), options or {})
+            self._active[job_id] = _Handle(scenario, options or {})
             self._repo.add(job_id, scenario, created_by)
         self._queue.put(job_id)
         return job_id
@@ -118,29 +130,54 @@ class JobManager:
         """Live progress fraction of an active job, None when not active here."""
         with self._lock:
             handle = self._active.get(job_id)
-        return None if handle is None else float(handle.progress.value)
+        return None if handle is None else handle.progress
 
     def cancel(self, job_id: str) -> bool:
         """Request cancellation; the job is recorded cancelled at once. False if not active or already cancelled."""
         with self._lock:
             handle = self._active.get(job_id)
-            if handle is None or handle.cancel.is_set():
+            if handle is None or handle.cancelled:
                 return False
-            handle.cancel.set()
             handle.cancel_at = time.monotonic()
         self._repo.finish(job_id, "cancelled", error="cancelled on request")
+        self._request_cancel(job_id, handle)
         return True
 
     def result_dir(self, job_id: str) -> Path:
         """Directory of a job's result files."""
         return self._settings.jobs_dir() / job_id
 
+    def _request_cancel(self, job_id: str, handle: _Handle) -> None:
+        """Set the job's cancel Event on the cluster (a queued job never reaches it)."""
+        if handle.cancel_at is None:
+            handle.cancel_at = time.monotonic()
+        client = self._cluster.connected
+        if client is not None and handle.future is not None:
+            from distributed import Event
+
+            Event(cancel_event_name(job_id), client=client).set()
+
+    def _on_progress(self, event: tuple[float, Any]) -> None:
+        job_id, fraction = event[1]
+        with self._lock:
+            handle = self._active.get(job_id)
+        if handle is not None:
+            handle.progress = float(fraction)
+
+    def _client(self) -> Any:
+        client = self._cluster.client()
+        with self._lock:
+            if not self._subscribed:
+                client.subscribe_topic(PROGRESS_TOPIC, self._on_progress)
+                self._subscribed = True
+        return client
+
     def _dispatch(self) -> None:
         while (job_id := self._queue.get()) is not None:
             with self._lock:
                 handle = self._active.get(job_id)
             try:
-                if handle is not None and not handle.cancel.is_set():
+                if handle is not None and not handle.cancelled:
                     self._run(job_id, handle)
             finally:
                 with self._lock:
@@ -152,39 +189,63 @@ class JobManager:
             return
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.json").write_text(json.dumps(handle.body))
-        handle.process = self._ctx.Process(
-            target=run_in_worker,
-            name=f"sim-{job_id[:8]}",
-            args=(handle.body, str(out), handle.progress, handle.cancel, handle.options),
-        )
-        handle.process.start()
-        self._supervise(job_id, handle)
-        self._record_outcome(job_id, handle.process.exitcode, out)
+        try:
+            client = self._client()
+        except RuntimeError as exc:
+            self._repo.finish(job_id, "failed", error=str(exc))
+            return
+        handle.future = client.submit(run_job, job_id, handle.body, handle.options, key=f"job-{job_id}", pure=False)
+        if handle.cancelled:  # cancelled while the cluster was being connected
+            self._request_cancel(job_id, handle)
+        self._supervise(job_id, handle, client)
+        if self._stopping:  # recorded interrupted; the cluster is going away with the task
+            return
+        self._record_outcome(job_id, handle.future, out)
+        from distributed import Event
 
-    def _supervise(self, job_id: str, handle: _Handle) -> None:
+        with contextlib.suppress(OSError):  # the scheduler forgets a cleared Event (unless it went away meanwhile)
+            Event(cancel_event_name(job_id), client=client).clear()
+
+    def _supervise(self, job_id: str, handle: _Handle, client: Any) -> None:
+        done = threading.Event()
+        handle.future.add_done_callback(lambda _: done.set())
         last_persist = time.monotonic()
-        while handle.process.is_alive():
-            handle.process.join(0.1)
+        restarted = False
+        while not done.wait(WAIT_STEP_S) and not self._stopping:
             now = time.monotonic()
-            if handle.cancel_at is not None and now - handle.cancel_at > CANCEL_GRACE_S:
-                handle.process.terminate()
-                handle.process.join(5)
+            overdue = handle.cancel_at is not None and now - handle.cancel_at > CANCEL_GRACE_S
+            if overdue and not restarted and not self._stopping:
+                self._restart_worker_of(client, handle.future)
+                restarted = True
             if now - last_persist > PROGRESS_PERSIST_S:
-                self._repo.set_progress(job_id, float(handle.progress.value))
+                self._repo.set_progress(job_id, handle.progress)
                 last_persist = now
 
-    def _record_outcome(self, job_id: str, exitcode: int | None, out: Path) -> None:
-        summary_file = out / "summary.json"
-        if exitcode == 0 and summary_file.exists():
-            npz = out / "trajectory.npz"
-            if npz.exists() and npz.stat().st_size > self._settings.max_output_mb * 1e6:
+    @staticmethod
+    def _restart_worker_of(client: Any, future: Any) -> None:
+        """Stop a task that ignores its cancel Event: release it, then restart the worker that runs it."""
+        workers = [w for w, keys in client.processing().items() if future.key in keys]
+        future.cancel()
+        if workers:
+            with contextlib.suppress(OSError):  # the cluster went away meanwhile: nothing left to stop
+                client.restart_workers(workers, raise_for_error=False)
+
+    def _record_outcome(self, job_id: str, future: Any, out: Path) -> None:
+        if future.cancelled():
+            self._repo.finish(job_id, "cancelled", error="cancelled on request")
+            return
+        exc = future.exception()
+        if isinstance(exc, JobCancelled):
+            self._repo.finish(job_id, "cancelled", error="cancelled on request")
+        elif exc is not None:
+            text = "".join(traceback.format_exception(type(exc), exc, future.traceback()))
+            self._repo.finish(job_id, "failed", error=text[-4000:])
+        else:
+            npz, summary = future.result()
+            if len(npz) > self._settings.max_output_mb * 1e6:
                 shutil.rmtree(out, ignore_errors=True)
                 self._repo.finish(job_id, "failed", error="output over max_output_mb; files removed")
                 return
-            self._repo.finish(job_id, "succeeded", summary=json.loads(summary_file.read_text()))
-        elif (out / "error.txt").exists():
-            self._repo.finish(job_id, "failed", error=(out / "error.txt").read_text()[-4000:])
-        else:
-            self._repo.finish(
-                job_id, "cancelled" if exitcode in (3, -15) else "failed", error=f"worker exited with code {exitcode}"
-            )
+            (out / "trajectory.npz").write_bytes(npz)
+            (out / "summary.json").write_text(json.dumps(summary))
+            self._repo.finish(job_id, "succeeded", summary=summary)

@@ -2,21 +2,28 @@
 
 A body is either a full sim_core Scenario, a library scenario ``{"library": NAME, "set": [...]}``
 (``acs-twin scenarios`` lists them), or a rigid-spin scenario. It is validated in the API process
-(limits are checked before queueing) and run in a worker process by :func:`run_in_worker`, which
-writes ``trajectory.npz`` and ``summary.json`` (or ``error.txt``).
+(limits are checked before queueing) and run on a Dask worker by :func:`run_job`, which returns the
+``trajectory.npz`` bytes and the summary; the task reports progress as Dask events on
+``PROGRESS_TOPIC`` and stops at the next report once the job's cancel Event is set.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import traceback
-from collections.abc import Callable
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["JobCost", "validate_scenario", "run_in_worker", "JobCancelled", "library_names"]
+__all__ = [
+    "PROGRESS_TOPIC",
+    "JobCancelled",
+    "JobCost",
+    "cancel_event_name",
+    "library_names",
+    "run_job",
+    "validate_scenario",
+]
 
 FLOAT_BYTES = 8
 
@@ -97,13 +104,49 @@ def validate_scenario(body: dict[str, Any]) -> tuple[dict[str, Any], JobCost]:
     return scenario.model_dump(mode="json"), _engine_cost(scenario)
 
 
-def _run_engine(
-    body: dict[str, Any],
-    out: Path,
-    progress: Callable[[float], None],
-    cancelled: Callable[[], bool],
-    options: dict[str, Any],
-) -> None:
+PROGRESS_TOPIC = "acs-twin-job-progress"  # Dask event topic: [job_id, fraction] from the task to the server
+REPORT_EVERY_S = 0.25  # a task reports progress and looks at its cancel Event at most this often
+
+
+def cancel_event_name(job_id: str) -> str:
+    """Name of the ``distributed.Event`` the server sets to cancel a job."""
+    return f"acs-twin-cancel-{job_id}"
+
+
+class _JobLink:
+    """A running task's line to the server: progress as Dask events, cancellation as a Dask Event (both throttled)."""
+
+    def __init__(self, job_id: str) -> None:
+        from distributed import Event, get_worker
+
+        self._job_id, self._worker = job_id, get_worker()
+        self._cancel = Event(cancel_event_name(job_id))
+        self._reported = self._asked = -math.inf
+        self._cancelled = False
+
+    def report(self, fraction: float) -> None:
+        """Send ``fraction`` to the server (the last one always)."""
+        now = time.monotonic()
+        if now - self._reported >= REPORT_EVERY_S or fraction >= 1.0:
+            self._reported = now
+            self._worker.log_event(PROGRESS_TOPIC, [self._job_id, float(fraction)])
+
+    def is_cancelled(self) -> bool:
+        """True once the server set the cancel Event."""
+        now = time.monotonic()
+        if not self._cancelled and now - self._asked >= REPORT_EVERY_S:
+            self._asked = now
+            self._cancelled = self._cancel.is_set()
+        return self._cancelled
+
+    def progress(self, fraction: float) -> None:
+        """:meth:`report`, then raise JobCancelled once cancelled (for loops in this thread)."""
+        self.report(fraction)
+        if self.is_cancelled():
+            raise JobCancelled
+
+
+def _engine_npz(body: dict[str, Any], link: _JobLink, options: dict[str, Any], out: Path) -> dict[str, Any]:
     import numpy as np
 
     from backend.jobs.trajectory_files import write_npz
@@ -114,49 +157,37 @@ def _run_engine(
     try:
         trajectory = simulate(
             Scenario.model_validate(body),
-            progress=progress,
-            cancel=cancelled,
+            progress=link.report,  # the engine's own thread polls cancel and stops its compiled loop
+            cancel=link.is_cancelled,
             wheel_available=None if available is None else np.asarray(available, dtype=bool),
             fdir=bool(options.get("fdir", False)),
         )
     except Cancelled:
         raise JobCancelled from None
-    write_npz(trajectory, out / "trajectory.npz")
-    summary = {"variants": [trajectory.summary(v) for v in range(trajectory.n_variants)]}
-    (out / "summary.json").write_text(json.dumps(summary))
+    write_npz(trajectory, out)
+    return {"variants": [trajectory.summary(v) for v in range(trajectory.n_variants)]}
 
 
-def _run_rigid_spin(body: dict[str, Any], out: Path, progress: Callable[[float], None]) -> None:
+def _rigid_spin_npz(body: dict[str, Any], link: _JobLink, out: Path) -> dict[str, Any]:
     from sim_core import rigid_spin
 
-    trajectory = rigid_spin.simulate(rigid_spin.RigidSpinScenario.model_validate(body), progress)
-    trajectory.to_npz(out / "trajectory.npz")
-    (out / "summary.json").write_text(json.dumps(trajectory.summary()))
+    trajectory = rigid_spin.simulate(rigid_spin.RigidSpinScenario.model_validate(body), link.progress)
+    trajectory.to_npz(out)
+    return trajectory.summary()
 
 
-def run_in_worker(
-    body: dict[str, Any], out_dir: str, progress_value: Any, cancel_event: Any, options: dict[str, Any] | None = None
-) -> None:
-    """Worker-process entry: simulate, write trajectory.npz + summary.json, or error.txt."""
-    from backend.core.processes import become_owned_child
+def run_job(job_id: str, body: dict[str, Any], options: dict[str, Any] | None = None) -> tuple[bytes, dict[str, Any]]:
+    """Dask task: simulate the job; its trajectory.npz bytes and summary (JobCancelled once cancelled).
 
-    become_owned_child()  # a job never outlives the server (kill -9 included)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    The server writes the files, so a worker on another machine needs no shared disk."""
+    import tempfile
 
-    def progress(fraction: float) -> None:
-        progress_value.value = float(fraction)
-        if cancel_event.is_set():
-            raise JobCancelled
-
-    try:
+    link = _JobLink(job_id)
+    with tempfile.TemporaryDirectory(prefix="acs-twin-job-") as scratch:
+        out = Path(scratch) / "trajectory.npz"
         if _is_rigid_spin(body):
-            _run_rigid_spin(body, out, progress)
+            summary = _rigid_spin_npz(body, link, out)
         else:
-            _run_engine(body, out, progress, cancel_event.is_set, options or {})
-    except JobCancelled:
-        (out / "cancelled").touch()
-        raise SystemExit(3) from None
-    except Exception:
-        (out / "error.txt").write_text(traceback.format_exc())
-        raise SystemExit(1) from None
+            summary = _engine_npz(body, link, options or {}, out)
+        link.report(1.0)
+        return out.read_bytes(), summary

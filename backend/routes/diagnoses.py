@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Query
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
@@ -24,9 +24,14 @@ async def create_diagnosis(body: DiagnosisCreate, services: ServicesDep, princip
 
 
 @router.get("/diagnoses", response_model=list[DiagnosisPublic], summary="Diagnoses, newest first")
-def list_diagnoses(services: ServicesDep, _: ViewerDep) -> list[DiagnosisPublic]:
-    """Every diagnosis the server keeps (in memory), with its state and result."""
-    return [DiagnosisPublic(**r) for r in services.diagnoses.list()]
+def list_diagnoses(
+    services: ServicesDep,
+    _: ViewerDep,
+    alarm_id: int | None = Query(None, ge=0, description="Only the diagnosis this alarm started."),
+    satellite: str | None = Query(None, min_length=1, max_length=100),
+) -> list[DiagnosisPublic]:
+    """The stored diagnoses (the newest 200), with their state and result."""
+    return [DiagnosisPublic(**r) for r in services.diagnoses.list(alarm_id=alarm_id, satellite=satellite)]
 
 
 @router.get("/diagnoses/{diagnosis_id}", response_model=DiagnosisPublic, summary="One diagnosis")

@@ -19,6 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from backend.jobs import cluster
+from backend.jobs.cluster import ServerCluster
+from backend.twin.diagnosis_repository import DiagnosisRepository
 from sim_core import engine
 from sim_core.diagnosis import (
     Diagnosis,
@@ -35,7 +38,9 @@ from telemetry.ingest_report import SampleBatch
 __all__ = [
     "MAX_WINDOW_S",
     "DiagnosisRuns",
+    "archived_reader",
     "diagnose_batches",
+    "diagnose_detection",
     "diagnose_file",
     "result_json",
     "scenario_wheels",
@@ -119,66 +124,124 @@ def diagnose_file(
 
 
 class DiagnosisRuns:
-    """Diagnoses started over REST: one worker thread, results kept in memory (lost on restart) newest last."""
+    """Diagnoses started over REST or by a live twin's detector: one worker thread, the twin replays flown on the
+    server's Dask cluster, every run persisted (:class:`DiagnosisRepository`: it survives a restart)."""
 
-    def __init__(self, keep: int = 200) -> None:
-        import threading
+    def __init__(self, repo: DiagnosisRepository, cluster: ServerCluster) -> None:
         from concurrent.futures import ThreadPoolExecutor
 
+        self._repo, self._cluster = repo, cluster
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="diagnosis")
-        self._runs: dict[str, dict[str, Any]] = {}
-        self._lock = threading.Lock()
-        self._keep = keep
 
-    def start(
+    def start(self) -> int:
+        """Diagnoses a previous server left running are failed, saying why; their count."""
+        return self._repo.fail_running()
+
+    def submit(
         self,
         read_batches_of: Callable[[], tuple[list[SampleBatch], Dictionary]],
         scenario: Scenario,
         record: dict[str, Any],
+        before_run: Callable[[str], None] | None = None,
     ) -> dict[str, Any]:
-        """Queue a diagnosis of the batches ``read_batches_of`` returns; the run record (status running)."""
+        """Queue a diagnosis of the batches ``read_batches_of`` returns; the stored record (status running).
+
+        ``before_run(run_id)`` runs in the worker first (a live twin links its alarm there)."""
         import uuid
 
-        run = {**record, "id": uuid.uuid4().hex, "status": "running", "error": None, "result": None}
-        with self._lock:
-            self._runs[run["id"]] = run
-            for old in list(self._runs)[: max(0, len(self._runs) - self._keep)]:
-                del self._runs[old]
+        run = self._repo.add({**record, "id": uuid.uuid4().hex})
 
         def work() -> None:
             try:
+                if before_run is not None:
+                    before_run(run["id"])
                 batches, dictionary = read_batches_of()
-                result = diagnose_batches(batches, dictionary, scenario)  # the archive keys the satellite
-                run.update(status="succeeded", result=result)
-            except ValueError as exc:
-                run.update(status="failed", error=str(exc))
+                flyer = cluster.flyer(self._cluster.client())
+                result = diagnose_batches(batches, dictionary, scenario, flyer=flyer)  # the archive keys the satellite
+                self._repo.finish(run["id"], "succeeded", result=result)
+            except (ValueError, RuntimeError) as exc:  # bad input, or no cluster: the message names it
+                self._repo.finish(run["id"], "failed", error=str(exc))
             except Exception as exc:  # noqa: BLE001 (reported to the operator, the server keeps running)
-                run.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+                self._repo.finish(run["id"], "failed", error=f"{type(exc).__name__}: {exc}")
 
         self._pool.submit(work)
-        return dict(run)
+        return run
 
     def get(self, run_id: str) -> dict[str, Any] | None:
         """The run record, None if unknown."""
-        with self._lock:
-            run = self._runs.get(run_id)
-            return None if run is None else dict(run)
+        return self._repo.get(run_id)
 
-    def list(self) -> list[dict[str, Any]]:
-        """All kept runs, newest first."""
-        with self._lock:
-            return [dict(r) for r in reversed(self._runs.values())]
+    def link_alarm(self, run_id: str, alarm_id: int) -> None:
+        """Record the alarm whose detection started the run."""
+        self._repo.link_alarm(run_id, alarm_id)
+
+    def list(self, alarm_id: int | None = None, satellite: str | None = None) -> list[dict[str, Any]]:
+        """Kept runs, newest first (of one alarm or one satellite if given)."""
+        return self._repo.list(alarm_id=alarm_id, satellite=satellite)
 
     def close(self) -> None:
-        """Stop taking runs; a running one finishes in its thread."""
+        """Stop taking runs; a running one finishes in its thread (or is failed by the next start)."""
         self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+ALARM_WAIT_S = 60.0  # how long a live detection's diagnosis waits for its alarm to be archived before it runs
+
+
+def archived_reader(
+    archive: Any, satellite: str, dictionary: Dictionary, t0_ns: int, t1_ns: int
+) -> Callable[[], tuple[list[SampleBatch], Dictionary]]:
+    """A reader of the satellite's archived packets in [t0_ns, t1_ns], decoded (ValueError when there are none)."""
+    from telemetry.decoding import decode_stream
+
+    def read() -> tuple[list[SampleBatch], Dictionary]:
+        packets = archive.replay(satellite, t0_ns, t1_ns)
+        if not packets:
+            raise ValueError(f"telemetry: no archived packets of {satellite!r} in the window")
+        return decode_stream(b"".join(p for _, p in packets), dictionary, source="diagnosis").batches, dictionary
+
+    return read
+
+
+def diagnose_detection(
+    diagnoses: DiagnosisRuns, archive: Callable[[], Any], dictionaries: Callable[[str], Dictionary], live: Any
+) -> str:
+    """Start the diagnosis of a live twin's detection (``backend.twin.live.LiveDetection``); its id.
+
+    The run reads PRE_ALARM_S before the detection to the newest telemetry and, once the detection's alarm
+    (``twin_anomaly``) is archived, records the alarm's id so the alarm links to its diagnosis."""
+    from backend.twin.live import ANOMALY_PARAMETER
+
+    t0, t1 = live.window_ns
+    fired = live.detection.t_utc_ns
+
+    def link_alarm(run_id: str) -> None:
+        live.archived.wait(ALARM_WAIT_S)
+        alarms = [
+            a
+            for a in archive().alarms(live.satellite, include_cleared=True)
+            if a.parameter == ANOMALY_PARAMETER and a.first_t_ns <= fired
+        ]
+        if alarms:
+            diagnoses.link_alarm(run_id, max(alarms, key=lambda a: a.first_t_ns).id)
+
+    record = {
+        "satellite": live.satellite,
+        "dictionary": live.dictionary,
+        "scenario": live.scenario.name,
+        "created_by": "live twin",
+        "trigger": "live twin",
+        "alarm_utc": _utc(fired / 1e9, 0.0),
+        "start_utc": _utc(t0 / 1e9, 0.0),
+        "end_utc": _utc(t1 / 1e9, 0.0),
+    }
+    read = archived_reader(archive(), live.satellite, dictionaries(live.dictionary), t0, t1)
+    return str(diagnoses.submit(read, live.scenario, record, before_run=link_alarm)["id"])
 
 
 def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
     """Check a REST request (window, dictionary, scenario) and queue its diagnosis on archived packets."""
     from backend.core.errors import ApiError
     from sim_core import scenario_library
-    from telemetry.decoding import decode_stream
 
     t0, t1 = body.start_utc.timestamp(), body.end_utc.timestamp()
     if not 0.0 < t1 - t0 <= MAX_WINDOW_S:
@@ -188,19 +251,14 @@ def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
         scenario = scenario_library.get(body.scenario)
     except ValueError as exc:
         raise ApiError(422, str(exc), "scenario" if "scenario" in str(exc) else "dictionary") from None
-    archive = services.telemetry.archive
-
-    def read() -> tuple[list[SampleBatch], Dictionary]:
-        packets = archive.replay(body.satellite, int(t0 * 1e9), int(t1 * 1e9))
-        if not packets:
-            raise ValueError(f"telemetry: no archived packets of {body.satellite!r} in the window")
-        return decode_stream(b"".join(p for _, p in packets), dictionary, source="diagnosis").batches, dictionary
-
+    read = archived_reader(services.telemetry.archive, body.satellite, dictionary, int(t0 * 1e9), int(t1 * 1e9))
     record = {
         "satellite": body.satellite,
+        "dictionary": body.dictionary,
         "scenario": body.scenario,
         "created_by": actor,
+        "trigger": "operator",
         "start_utc": _utc(t0, 0.0),
         "end_utc": _utc(t1, 0.0),
     }
-    return services.diagnoses.start(read, scenario, record)
+    return services.diagnoses.submit(read, scenario, record)

@@ -15,6 +15,13 @@ on the hub (``parameters/<name>`` and the twin state on ``twin``). The twin's ow
 archived beside them (``TWIN_ATTITUDE_PARAMETERS``, scalar-first q_ib), so that the 3D monitors replay actual and
 simulated for any past window from the archive alone (backend.twin.live_feed.ArchiveWindows).
 
+Detection (the diagnosis hook): each twin's wheel-speed and body-rate residuals go through the window test of
+:mod:`backend.twin.live_detection` (stated false-alarm rate, `false_alarms_per_day` in the twin state). When it
+fires the twin archives the parameter ``twin_anomaly`` = 1 at that instant (red limit 0.5: the archive raises the
+alarm) and, once ``POST_ALARM_S`` of telemetry followed it, :class:`LiveTwins` calls ``on_detection`` (the server
+starts a diagnosis of the ``PRE_ALARM_S`` before to now, linked to the alarm). The detector then stays latched for
+``REARM_S`` of telemetry: one automatic diagnosis per anomaly, the alarm stays until acknowledged.
+
 Re-sync cadence RESYNC_S = 60 s: (1) the twin restarted from telemetry stays at the sensor-noise level over a
 segment (measured: 2–4″ RMS against σ_st = 3″, wheels within one tachometer count over 60 s), so nothing is gained
 by re-syncing more often, while a shorter segment hides slow faults (a drifting gyro, a wheel's friction) in
@@ -37,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from backend.twin.live_detection import Detection, ResidualDetector
 from sim_core import quaternion
 from sim_core.scenario import Scenario
 from telemetry.actual_state import MIN_GPS_FIXES
@@ -48,9 +56,12 @@ from telemetry.attitude_mapping import (
     mapping_for_parameters,
     shipped_mapping,
 )
+from telemetry.housekeeping import calibration_step
 from telemetry.limits import LimitSet
 
 __all__ = [
+    "ANOMALY_PARAMETER",
+    "LiveDetection",
     "RESIDUAL_PARAMETERS",
     "RESYNC_S",
     "STALE_S",
@@ -90,6 +101,10 @@ ATTITUDE_LIMIT_ARCSEC = 30.0
 RATE_LIMIT_RAD_S = 1e-4
 WHEEL_LIMIT_RAD_S = 10 * 0.25 * np.pi / 30.0
 RED_FACTOR = 10.0
+ANOMALY_PARAMETER = "twin_anomaly"  # 1 where the detector fired, else 0; red above 0.5
+POST_ALARM_S = 20.0  # telemetry after the detection that the diagnosis waits for (the fault's signature grows)
+PRE_ALARM_S = 600.0  # telemetry before the detection the diagnosis looks at (the onset lies before the alarm)
+REARM_S = 1800.0  # telemetry time after a detection before the detector may fire again
 
 WAITING, SYNCHRONISED, PROPAGATING, STALE, ACTUAL_ONLY = (
     "waiting",
@@ -122,7 +137,9 @@ def residual_limits(n_wheels: int) -> dict[str, LimitSet]:
 
     names = residual_names(n_wheels)
     limits = [ATTITUDE_LIMIT_ARCSEC] + [RATE_LIMIT_RAD_S] * 3 + [WHEEL_LIMIT_RAD_S] * n_wheels
-    return {n: band(lim, signed=i > 0) for i, (n, lim) in enumerate(zip(names, limits))}
+    out = {n: band(lim, signed=i > 0) for i, (n, lim) in enumerate(zip(names, limits))}
+    out[ANOMALY_PARAMETER] = LimitSet(yellow_low=-np.inf, yellow_high=0.5, red_low=-np.inf, red_high=0.5)
+    return out
 
 
 @dataclass
@@ -154,6 +171,24 @@ class Segment:
         return quaternion.normalize(lin(self.q_ib)), lin(self.omega_b_rad_s), lin(self.wheel_speed_rad_s)
 
 
+@dataclass(frozen=True)
+class LiveDetection:
+    """A live twin's detection handed to ``LiveTwins.on_detection``: the satellite, its dictionary and ACS model,
+    the detection, the newest telemetry time (ns) and an Event set once the alarm is archived."""
+
+    satellite: str
+    dictionary: str
+    scenario: Scenario
+    detection: Detection
+    newest_utc_ns: int
+    archived: threading.Event
+
+    @property
+    def window_ns(self) -> tuple[int, int]:
+        """The telemetry the diagnosis reads: PRE_ALARM_S before the detection to the newest sample."""
+        return self.detection.t_utc_ns - int(PRE_ALARM_S * NS_PER_S), self.newest_utc_ns
+
+
 @dataclass
 class TwinState:
     """What the API and the ``twin`` topic tell about one satellite's live twin."""
@@ -177,6 +212,8 @@ class TwinState:
     samples_compared: int = 0
     note: str | None = None
     issues: deque = field(default_factory=lambda: deque(maxlen=MAX_ISSUES))
+    detection: dict[str, Any] | None = None  # the detector's last firing (and the diagnosis it started)
+    false_alarms_per_day: float | None = None
 
 
 def _stack(columns: dict[str, np.ndarray], names: Sequence[str] | None) -> np.ndarray:
@@ -199,6 +236,7 @@ class LiveTwin:
         epoch_ns: int | None = None,
         resync_s: float = RESYNC_S,
         epoch_from_run: bool = False,
+        wheel_quantum_rad_s: float = 0.0,
     ) -> None:
         self.mapping, self.model, self._epoch_ns, self._resync_s = mapping, model, epoch_ns, resync_s
         self._epoch_from_run = epoch_from_run  # the route starts with each run of telemetry (an emulator's flight)
@@ -214,6 +252,9 @@ class LiveTwin:
         self._last_forced_ns = -(2**62)
         self._twin_t = np.empty(0, np.int64)
         self._twin_q = np.empty((0, 4))
+        n_wheels = len(mapping.wheel_speeds_rad_s or ())
+        self.detector = ResidualDetector(n_wheels, wheel_quantum_rad_s)
+        self.detections: list[Detection] = []  # fired and not yet taken by LiveTwins
 
     # --- bad input -------------------------------------------------------------------------------
     def report(self, kind: str, message: str, t_ns: int | None = None) -> None:
@@ -463,7 +504,32 @@ class LiveTwin:
             "t_utc_ns": t,
             **dict(zip(names, columns)),
             **{name: q_twin[:, k] for k, name in enumerate(TWIN_ATTITUDE_PARAMETERS)},
+            ANOMALY_PARAMETER: self._detect(seg, t, columns),
         }
+
+    def _detect(self, seg: Segment, t: np.ndarray, columns: list[np.ndarray]) -> np.ndarray:
+        """The detector on the wheel and rate residuals of these rows; 1 where it fired, else 0."""
+        flag = np.zeros(t.size)
+        rows = np.searchsorted(self._t, t)
+        isolated = _stack(self._hk, self.mapping.wheel_isolated)[rows] if self.mapping.wheel_isolated else None
+        det = self.detector.update(seg.start_ns, t, np.stack([*columns[4:], *columns[1:4]], axis=-1), isolated)
+        self.state.false_alarms_per_day = self.detector.false_alarms_per_day
+        if det is not None:
+            flag[np.searchsorted(t, det.t_utc_ns)] = 1.0
+            self.detections.append(det)
+            self.state.detection = {
+                "utc": _iso(det.t_utc_ns),
+                "channel": det.channel,
+                "window_s": det.window_s,
+                "ratio_sigma": det.ratio,
+                "diagnosis_id": None,
+            }
+            test = "" if det.ratio is None else f" ({det.ratio:.1f} σ over {det.window_s:g} s)"
+            why = f"anomaly detected: {det.channel}{test}"
+            self.report("anomaly", why, det.t_utc_ns)
+        elif self.detector.fired is not None and int(t[-1]) - self.detector.fired.t_utc_ns > REARM_S * NS_PER_S:
+            self.detector.rearm()
+        return flag
 
     def _first_exceedance(self, res: dict[str, np.ndarray], seg: Segment) -> int | None:
         """Rows to keep when EXCEED_SAMPLES consecutive samples pass a limit (None: keep going)."""
@@ -527,6 +593,8 @@ class LiveTwin:
             "samples_compared": s.samples_compared,
             "note": s.note,
             "issues": list(s.issues),
+            "detection": s.detection,
+            "false_alarms_per_day": s.false_alarms_per_day,
         }
 
 
@@ -563,6 +631,8 @@ class LiveTwins:
         self._writes: queue.Queue = queue.Queue()
         self._stop = threading.Event()
         self.latencies_s: deque = deque(maxlen=100_000)
+        self._detected: dict[str, list[Detection]] = {}  # waiting for POST_ALARM_S of telemetry after them
+        self.on_detection: Callable[[LiveDetection], str | None] | None = None  # starts a diagnosis: its id
 
     def register_model(self, satellite: str, scenario: str, epoch_ns: int | None, from_run: bool = False) -> None:
         """Tell the twin of ``satellite`` its scenario and when its route started (``from_run``: with each run of
@@ -649,7 +719,9 @@ class LiveTwins:
         mapping = next((m for f in self._folders if (m := shipped_mapping(dictionary_name, f)) is not None), None)
         if mapping is None:
             return twin
-        mapping.check(self._dictionary(dictionary_name))
+        dictionary = self._dictionary(dictionary_name)
+        mapping.check(dictionary)
+        quantum = calibration_step(dictionary, mapping.wheel_speeds_rad_s[0]) if mapping.wheel_speeds_rad_s else 0.0
         scenario, epoch_ns, from_run = self._models.get(satellite, (mapping.acs_model, None, False))
         model = None
         if scenario is not None:
@@ -659,7 +731,9 @@ class LiveTwins:
             if epoch_ns is None and not from_run:
                 epoch_ns = self._first_telemetry_ns(satellite)
         with self._lock:
-            self._twins[satellite] = twin = LiveTwin(satellite, mapping, model, epoch_ns, epoch_from_run=from_run)
+            self._twins[satellite] = twin = LiveTwin(
+                satellite, mapping, model, epoch_ns, epoch_from_run=from_run, wheel_quantum_rad_s=quantum
+            )
         return twin
 
     def _first_telemetry_ns(self, satellite: str) -> int | None:
@@ -679,14 +753,38 @@ class LiveTwins:
             return
         with self._lock:
             rows = twin.observe(batches, arrived)
+            self._detected.setdefault(satellite, []).extend(twin.detections)
+            twin.detections.clear()
         self.latencies_s.append(self._clock() - arrived)
         if rows is not None and rows["t_utc_ns"].size:
             self._pending.setdefault(satellite, []).append(rows)
             self._publish_rows(satellite, rows)
         if self._clock() - self._flushed_at.get(satellite, 0.0) >= ARCHIVE_PERIOD_S:
             self._flush(satellite)
+        self._start_diagnoses(satellite, twin)
         self._stale_published.discard(satellite)
         self._hub.publish("twin", twin.public(self._clock()))
+
+    def _start_diagnoses(self, satellite: str, twin: LiveTwin) -> None:
+        """Detections followed by POST_ALARM_S of telemetry: archive what is pending, then ``on_detection``."""
+        newest = twin.state.telemetry_utc_ns or 0
+        ready = [d for d in self._detected.get(satellite, []) if newest - d.t_utc_ns >= POST_ALARM_S * NS_PER_S]
+        if not ready:
+            return
+        self._detected[satellite] = [d for d in self._detected[satellite] if d not in ready]
+        for det in ready:
+            self._flush(satellite)
+            archived = threading.Event()  # set by the writer once twin_anomaly (the alarm) is committed
+            self._writes.put(archived)
+            run_id = None
+            if self.on_detection is not None and twin.model is not None:
+                live = LiveDetection(satellite, twin.mapping.dictionary, twin.model, det, newest, archived)
+                try:
+                    run_id = self.on_detection(live)
+                except Exception:  # the twin goes on; the alarm stays for the operator
+                    log.exception("live twin of %s: the automatic diagnosis did not start", satellite)
+            if twin.state.detection is not None and twin.state.detection["utc"] == _iso(det.t_utc_ns):
+                twin.state.detection["diagnosis_id"] = run_id
 
     def _publish_rows(self, satellite: str, rows: dict[str, np.ndarray]) -> None:
         t = rows["t_utc_ns"].tolist()

@@ -14,8 +14,7 @@ from sim_core.scenario import Scenario, VariantSpec
 def client():
     c = cluster.dask_client(n_workers=2)
     yield c
-    c.close()
-    c.cluster.close()
+    cluster.close_client(c)
 
 
 def _batch() -> Scenario:
@@ -52,3 +51,79 @@ def test_whatif_sweep_on_the_cluster_equals_the_local_sweep(client) -> None:
     variants = s.variants
     base = Scenario.model_validate({**s.model_dump(), "variants": [variants[0].model_dump()]})
     assert whatif.sweep(base, variants, flyer=cluster.flyer(client)) == whatif.sweep(base, variants)
+
+
+@pytest.fixture(scope="module")
+def scheduler_address():
+    """A cluster started apart from the tests, as an operator would: ``dask scheduler`` + ``dask worker`` processes."""
+    import subprocess
+    import sys
+
+    from backend.core.processes import stop_owned
+    from tests.backend.conftest import free_port
+
+    address = f"tcp://127.0.0.1:{free_port()}"
+    host, port = address.removeprefix("tcp://").split(":")
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", host, "--port", port, "--no-dashboard"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    worker = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nworkers", "2", "--nthreads", "1"]
+        + ["--host", host, "--no-dashboard"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        from distributed import Client
+
+        with Client(address, timeout="120s") as probe:
+            probe.wait_for_workers(2, timeout=300)
+        yield address
+    finally:
+        stop_owned(worker)
+        stop_owned(scheduler)  # each process group: SIGTERM, then SIGKILL of what is left
+
+
+def test_a_separately_started_cluster_flies_the_batch_bit_for_bit(scheduler_address) -> None:
+    s = _batch()
+    client = cluster.dask_client(scheduler_address)
+    try:
+        assert len(client.scheduler_info(n_workers=-1)["workers"]) == 2
+        there = cluster.fly(client, s)
+    finally:
+        cluster.close_client(client)
+    here = engine.simulate(s)
+    for name, series in here.series.items():
+        np.testing.assert_array_equal(there.series[name], series, err_msg=name)
+
+
+def test_a_server_job_on_a_separately_started_cluster_equals_the_engine(scheduler_address, tmp_path) -> None:
+    import time
+
+    from fastapi.testclient import TestClient
+
+    from backend.app import create_app
+    from backend.core.auth import Role
+    from sim_core.scenario import apply_overrides
+    from tests.backend.conftest import bearer, make_settings
+
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'jobs.sqlite'}", dask_scheduler=scheduler_address)
+    body = {"library": "somov-ge4-scan", "set": ["duration_s=20"]}
+    with TestClient(create_app(settings)) as api:
+        operator = bearer(api.app.state.services.auth.issue("op", Role.operator)[1])
+        job_id = api.post("/api/v1/simulations", json=body, headers=operator).json()["id"]
+        deadline = time.monotonic() + 400.0
+        while (job := api.get(f"/api/v1/simulations/{job_id}", headers=operator).json())["status"] in (
+            "queued",
+            "running",
+        ):
+            assert time.monotonic() < deadline, job
+            time.sleep(0.5)
+    assert job["status"] == "succeeded", job["error"]
+    direct = engine.simulate(apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=20"]))
+    expected = {k: v for k, v in direct.summary(0).items() if k != "wall_time_s"}
+    assert {k: v for k, v in job["summary"]["variants"][0].items() if k != "wall_time_s"} == expected

@@ -1,5 +1,6 @@
 """Diagnosis over REST: upload the emulated satellite's packets (a hidden wheel failure), start a diagnosis on
-the satellite and window, poll it, read the ranked hypotheses (the same JSON as ``acs-twin diagnose``)."""
+the satellite and window, poll it, read the ranked hypotheses (the same JSON as ``acs-twin diagnose``); the
+twin replays fly on the server's Dask LocalCluster; diagnoses are stored (SQLite, PostgreSQL) and outlive a restart."""
 
 from __future__ import annotations
 
@@ -54,10 +55,14 @@ def test_diagnosis_started_over_rest_names_the_hidden_wheel_failure(tmp_path: Pa
         onset = datetime.fromisoformat(top["onset_utc"]).timestamp() - t0 / 1e9
         assert abs(onset - FAILURE_ONSET_S) <= ONSET_TOLERANCE_S
         assert [r["id"] for r in client.get("/api/v1/diagnoses", headers=operator).json()] == [run_id]
+        assert run["trigger"] == "operator" and run["alarm_id"] is None
+    with TestClient(create_app(settings)) as client:  # a restart keeps the result
+        operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
+        assert client.get(f"/api/v1/diagnoses/{run_id}", headers=operator).json() == run
 
 
-def test_diagnosis_requests_are_checked(tmp_path: Path) -> None:
-    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'diagnosis.sqlite'}")
+def test_diagnosis_requests_are_checked_and_their_outcome_outlives_a_restart(tmp_path: Path, database_url: str) -> None:
+    settings = make_settings(tmp_path, database_url)
     start = datetime(2026, 3, 20, tzinfo=UTC)
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
@@ -79,3 +84,22 @@ def test_diagnosis_requests_are_checked(tmp_path: Path) -> None:
             assert time.monotonic() < deadline
             time.sleep(0.2)
         assert run["status"] == "failed" and "REFSAT" in run["error"]  # the archive names what it lacks
+    with TestClient(create_app(settings)) as client:
+        operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
+        assert client.get(f"/api/v1/diagnoses/{empty['id']}", headers=operator).json() == run
+
+
+def test_a_diagnosis_left_running_by_a_dead_server_is_failed_saying_so(tmp_path: Path, database_url: str) -> None:
+    from backend.services import build_services
+    from backend.twin.diagnosis_repository import RESTARTED, DiagnosisRepository
+
+    settings = make_settings(tmp_path, database_url)
+    crashed = build_services(settings)
+    record = {"id": "deadbeef", "satellite": "REFSAT", "dictionary": "reference_satellite.yaml"}
+    record |= {"scenario": "somov-ge4-scan", "start_utc": "2026-03-20T00:00:00.000Z"}
+    DiagnosisRepository(crashed.sessions).add(record | {"end_utc": "2026-03-20T00:20:00.000Z", "created_by": "op"})
+    crashed.engine.dispose()
+    with TestClient(create_app(settings)) as client:
+        operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
+        run = client.get("/api/v1/diagnoses/deadbeef", headers=operator).json()
+    assert run["status"] == "failed" and run["error"] == RESTARTED

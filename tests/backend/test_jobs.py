@@ -1,7 +1,8 @@
-"""Simulation jobs through the API: real worker processes, limits, queue bound, cancel, restart."""
+"""Simulation jobs through the API: tasks on a real Dask LocalCluster, limits, queue bound, cancel, restart."""
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -11,10 +12,12 @@ from fastapi.testclient import TestClient
 from backend.app import create_app
 from backend.core.auth import Role
 from backend.jobs.job_repository import JobRepository
+from backend.jobs.simulators import JobCancelled
 from backend.services import build_services
 from tests.backend.conftest import bearer, make_settings
+from tests.backend.test_process_supervision import wait_gone
 
-JOB_TIMEOUT_S = 60.0  # spawn start-up (~1-2 s on these 2 cores) plus the run, with margin
+JOB_TIMEOUT_S = 120.0  # LocalCluster start-up and the worker's engine warm-up (seconds here, more under load) + run
 ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level
 SHORT_SPIN = {
     "kind": "rigid-spin",
@@ -79,17 +82,32 @@ def test_full_queue_is_429_with_retry_after_and_cancel_stops_the_worker(
     refused = client.post("/api/v1/simulations", json=LONG_SPIN, headers=operator)
     assert refused.status_code == 429 and int(refused.headers["Retry-After"]) > 0
     assert refused.json()["field"] == "job_queue_size"
-    running = _wait(client, first, tokens["viewer"], ("running",))
-    handle = client.app.state.services.jobs._active[first]
+    running = _wait_progress(client, first, tokens["viewer"])
+    services = client.app.state.services
+    handle = services.jobs._active[first]
     assert client.delete(f"/api/v1/simulations/{second}", headers=operator).json()["status"] == "cancelled"
     assert client.delete(f"/api/v1/simulations/{first}", headers=operator).json()["status"] == "cancelled"
     deadline = time.monotonic() + JOB_TIMEOUT_S
-    while handle.process is not None and handle.process.is_alive() and time.monotonic() < deadline:
+    while not handle.future.done() and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert running["status"] == "running" and not handle.process.is_alive()
+    assert running["status"] == "running" and 0.0 < running["progress"] < 1.0
+    # stopped by itself at its next look at the cancel Event, or (after the grace) by a restart of its worker
+    assert handle.future.cancelled() or isinstance(handle.future.exception(), JobCancelled)
+    assert not any(services.cluster.connected.processing().values())  # nothing left running on the cluster
     again = client.delete(f"/api/v1/simulations/{first}", headers=operator)
     assert again.status_code == 409
+    while services.jobs.progress(first) is not None and time.monotonic() < deadline:  # its dispatcher lets go
+        time.sleep(0.05)
     assert client.post("/api/v1/simulations", json=SHORT_SPIN, headers=operator).status_code == 202
+
+
+def _wait_progress(client: TestClient, job_id: str, token: str) -> dict:
+    """The job once it runs on a worker and has reported progress through the cluster's events."""
+    deadline = time.monotonic() + JOB_TIMEOUT_S
+    while (job := client.get(f"/api/v1/simulations/{job_id}", headers=bearer(token)).json())["progress"] == 0.0:
+        assert time.monotonic() < deadline and job["status"] in ("queued", "running"), job
+        time.sleep(0.1)
+    return job
 
 
 def test_jobs_left_running_by_a_dead_server_are_marked_interrupted(tmp_path: Path, database_url: str) -> None:
@@ -139,8 +157,10 @@ def test_shutdown_stops_running_jobs_and_records_them_interrupted(tmp_path: Path
     with TestClient(create_app(settings)) as client:
         operator = client.app.state.services.auth.issue("op", Role.operator)[1]
         job_id = client.post("/api/v1/simulations", json=LONG_SPIN, headers=bearer(operator)).json()["id"]
-        _wait(client, job_id, operator, ("running",))
-        handle = client.app.state.services.jobs._active[job_id]
-    assert client.app.state.services.job_repo.get(job_id).status == "interrupted"
-    handle.process.join(JOB_TIMEOUT_S)
-    assert not handle.process.is_alive()
+        _wait_progress(client, job_id, operator)
+        services = client.app.state.services
+        handle = services.jobs._active[job_id]
+        worker_pids = set(services.cluster.connected.run(os.getpid).values())
+    assert services.job_repo.get(job_id).status == "interrupted"
+    assert handle.future.done() and services.cluster.connected is None
+    assert wait_gone(worker_pids) == set()

@@ -129,3 +129,39 @@ def test_a_busy_port_is_named_with_its_holder_and_spends_no_admin_token(tmp_path
     finally:
         process.send_signal(signal.SIGTERM)
         process.communicate(timeout=STOP_TIMEOUT_S)
+
+
+DASK_JOB = {"kind": "rigid-spin", "duration_s": 2000.0, "dt_s": 0.001}  # runs long enough to be stopped mid-way
+CLUSTER_START_TIMEOUT_S = 400.0  # the first job starts the LocalCluster: two workers import and warm the engine
+
+
+def _job_on_the_cluster(process: subprocess.Popen, lines: list[str], api: int, before: set[int]) -> set[int]:
+    """Start a job through the API; the server's new descendants once its Dask workers run it."""
+    token = next(m.group(1) for line in lines if (m := re.search(r"admin token .*: (acs_\S+)", line)))
+    headers = {"Authorization": f"Bearer {token}"}
+    job_id = httpx.post(f"http://127.0.0.1:{api}/api/v1/simulations", json=DASK_JOB, headers=headers).json()["id"]
+    deadline = time.monotonic() + CLUSTER_START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        job = httpx.get(f"http://127.0.0.1:{api}/api/v1/simulations/{job_id}", headers=headers).json()
+        if job["progress"] > 0.0:
+            return descendants(process.pid) - before
+        assert job["status"] in ("queued", "running"), job
+        time.sleep(0.2)
+    raise AssertionError(f"the job never ran: {job}")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_the_dask_workers_of_a_job_go_with_the_server(tmp_path: Path, sig: signal.Signals) -> None:
+    api = free_port()
+    process, lines = start_server(tmp_path, api, free_port(), "--no-emulator", "--job-workers", "2")
+    try:
+        before = wait_children(process, 1)  # the ingest process
+        workers = _job_on_the_cluster(process, lines, api, before)
+        assert len(workers) >= 2, workers  # the LocalCluster's two worker processes (and their helpers)
+        process.send_signal(sig)
+        out, _ = process.communicate(timeout=STOP_TIMEOUT_S)
+    finally:
+        process.kill()
+    assert wait_gone(workers | before) == set()
+    if sig == signal.SIGTERM:
+        assert process.returncode == 0 and "Traceback" not in out, out

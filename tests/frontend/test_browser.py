@@ -254,3 +254,42 @@ def test_what_if_where_no_hypothesis_fits_says_so_with_the_residuals(browser, ba
         assert errors == []
     finally:
         page.close()
+
+
+DIAGNOSIS_TIMEOUT_MS = 600_000  # the automatic diagnosis: LocalCluster start and the replays, on a loaded machine
+
+
+def test_the_detection_alarm_links_to_its_diagnosis_and_its_top_hypotheses_fly(
+    browser, backend_server, emulated_telemetry
+):
+    """The uploaded REFSAT telemetry (RW2 fails at 350 s, onboard FDIR isolates it) made the live twin detect the
+    anomaly: the twin_anomaly alarm's "diagnosis" button shows the automatic diagnosis (evidence, ranked
+    hypotheses with RW2 failure on top), and its top hypotheses fly as a twin session whose residuals plot."""
+    page = browser.new_page(viewport={"width": 1920, "height": 1400})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(backend_server["base"] + "/dashboard/")
+        page.fill("#satellite", EMULATED_SATELLITE)
+        page.fill("#token", backend_server["token"])
+        page.click("#login button[type=submit]")
+        alarm = page.wait_for_selector("#alarms tbody tr[data-parameter='twin_anomaly']", timeout=60_000)
+        alarm.query_selector("button.diagnosis-link").click()
+        page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
+        evidence = page.inner_text("#diagnosis-detail .diagnosis-evidence")
+        assert "false-alarm rate" in evidence and "analysis window" in evidence
+        assert "alarm" in page.inner_text("#diagnosis-detail h3")
+        top = page.eval_on_selector(
+            "#diagnosis-detail .diagnosis-hypotheses tbody tr", "r => Array.from(r.cells).map(c => c.innerText)"
+        )
+        assert top[:3] == ["1", "failure", f"RW{HIDDEN_WHEEL + 1}"], top
+        listed = page.inner_text("#diagnoses tbody")
+        assert "live twin" in listed and f"failure RW{HIDDEN_WHEEL + 1}" in listed
+        page.click("#diagnosis-fly")
+        page.wait_for_selector("#twin-summary-table", timeout=WHATIF_TIMEOUT_MS)
+        rows = page.eval_on_selector_all("#twin-summary-table tbody tr", "rs => rs.map(r => r.dataset.variant)")
+        assert rows[0] == "twin" and rows[1].startswith("h1_failure") and len(rows) >= 3, rows
+        page.wait_for_function("document.querySelectorAll('#whatif-plots .twin-chart .uplot').length === 3")
+        assert errors == []
+    finally:
+        page.close()

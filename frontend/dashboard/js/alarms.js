@@ -6,6 +6,9 @@ import { api, errorText } from "./api.js";
 import { $, el, fill, table } from "./dom.js";
 import { isoUtcNs, severityLabel, eng } from "./format.js";
 import { satParam, state } from "./state.js";
+import { showAlarmDiagnosis } from "./diagnosis.js";
+
+const DETECTION_PARAMETER = "twin_anomaly";  // a live twin's detector: its alarm starts a diagnosis
 
 const SHELVE_CHOICES_S = [[900, "15 min"], [3600, "1 h"], [8 * 3600, "8 h"]];
 let known = new Set();  // ids of unacknowledged alarms already announced (sound once per new alarm)
@@ -42,6 +45,12 @@ function actionButtons(a) {
     buttons.push(choice, el("button", { class: "small", onclick: (e) => act("shelve", { duration_s: Number(choice.value) })(e) }, "shelve"));
   }
   buttons.push(el("button", { class: "small", onclick: (e) => { e.stopPropagation(); showHistory(a); } }, "history"));
+  if (a.parameter === DETECTION_PARAMETER) {
+    buttons.push(el("button", { class: "small diagnosis-link", onclick: (e) => {
+      e.stopPropagation();
+      showAlarmDiagnosis(a.id).catch((err) => { $("alarm-status").textContent = errorText(err); });
+    } }, "diagnosis"));
+  }
   return el("td", { class: "actions" }, buttons);
 }
 

@@ -5,6 +5,7 @@ import { api, errorText, optional, session, setToken } from "./api.js";
 import { $, el, fill } from "./dom.js";
 import { isoUtc } from "./format.js";
 import { clearAlarms, loadAlarms } from "./alarms.js";
+import { clearDiagnoses, loadDiagnoses } from "./diagnosis.js";
 import { applyRole, loadArchive, wireArchive } from "./archive.js";
 import { connectLive, disconnectLive, renderAges } from "./live.js";
 import { showMonitors } from "./monitors.js";
@@ -152,6 +153,7 @@ async function selectSatellite(name) {
   clearTelemetry();
   clearPasses();
   clearAlarms();
+  clearDiagnoses();
   whatif.clearWhatif();
   fill($("twin-state"));
   notice(null);
@@ -182,6 +184,7 @@ async function selectSatellite(name) {
   }
   loadPasses().catch((err) => setStatus(errorText(err), true));
   loadAlarms().catch((err) => setStatus(errorText(err), true));
+  loadDiagnoses().catch((err) => setStatus(errorText(err), true));
   loadTwin();
   // the archive's newest sample time (GET /satellites) lets the plots start before the latest values arrive
   const listed = state.satellites.find((s) => s.name === name);
@@ -239,7 +242,10 @@ on("samples", ({ satellite, batch }) => {
 on("alarms", (data) => {
   if (data && data.satellite && data.satellite !== state.satellite) return;
   clearTimeout(alarmTimer);
-  alarmTimer = setTimeout(() => loadAlarms().catch((err) => setStatus(errorText(err), true)), 100);
+  alarmTimer = setTimeout(() => {
+    loadAlarms().catch((err) => setStatus(errorText(err), true));
+    loadDiagnoses().catch((err) => setStatus(errorText(err), true));
+  }, 100);
 });
 on("twin", (data) => { if (data && data.satellite === state.satellite) showTwin(data); });
 on("unauthorized", () => session.onUnauthorized());

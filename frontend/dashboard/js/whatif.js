@@ -97,6 +97,24 @@ async function startTwin(checked, onset, duration) {
     align_utc: isoUtc(start, 3), duration_s: duration, faults: checked.map((v) => faultText(v, onset)),
     alternatives: parseAlternatives() };
   if ($("whatif-epoch").value) body.scenario_epoch_utc = isoUtc(inputUtc($("whatif-epoch").value), 3);
+  await submitTwin(body);
+}
+
+/** Fly fault hypotheses (name -> faults) beside the nominal twin against the telemetry from `alignS` (Unix s):
+ * the diagnosis panel's top hypotheses, shown here like any what-if. */
+export async function flyHypotheses({ satellite, dictionary, scenario, alignS, durationS, alternatives }) {
+  clearWhatif();
+  $("whatif-status").classList.remove("error");
+  $("whatif-panel").scrollIntoView({ block: "start" });
+  const body = { satellite, dictionary, scenario, align_utc: isoUtc(alignS, 3), duration_s: durationS, faults: [], alternatives };
+  try {
+    await submitTwin(body);
+  } catch (err) {
+    showError("rejected", err);
+  }
+}
+
+async function submitTwin(body) {
   const session = await api("/twin/sessions", { method: "POST", json: body });
   last.alternatives = body.alternatives;  // as sent: the table names each variant's faults
   $("whatif-status").textContent = `twin ${session.id.slice(0, 8)} ${session.status}`;

@@ -1,0 +1,143 @@
+// Diagnosis: the satellite's diagnoses (an operator's, or one a live twin's detector started from its alarm),
+// one chosen: the evidence (detection, false-alarm rate, window, suspected wheels, what could not be tested),
+// the ranked hypotheses with onset, magnitude and posterior score (the server's ranking, unchanged), and the
+// residuals of the top hypotheses: flown as a twin session (what-if panel) from before the earliest onset.
+import { api, errorText } from "./api.js";
+import { $, el, fill, table } from "./dom.js";
+import { satParam, state } from "./state.js";
+import { flyHypotheses } from "./whatif.js";
+
+const SHOWN = 10;           // hypotheses listed
+const FLOWN = 3;            // top hypotheses flown for their residuals
+const LEAD_S = 120;         // the twin starts this long before the earliest onset
+const AFTER_S = 240;        // and flies this long after it
+const POLL_MS = 2000;       // a running diagnosis is polled this often
+let shown = null;           // id of the diagnosis in the detail view
+let pollTimer = null;
+
+const wheelText = (w) => (w === null || w === undefined ? "" : Array.isArray(w) ? w.map((x) => `RW${x}`).join("+") : `RW${w}`);
+const magnitudeText = (m) => (m === null || m === undefined ? "" : Array.isArray(m)
+  ? m.map(magnitudeText).join(" / ") : Math.abs(m) < 0.01 ? m.toExponential(2) : m.toFixed(3));
+const scoreText = (s) => (s >= 0.001 ? s.toFixed(3) : s.toExponential(1));
+const topText = (d) => {
+  const h = d.result && d.result.hypotheses[0];
+  return h ? `${h.fault} ${wheelText(h.wheel)} (${scoreText(h.score)})` : d.status === "failed" ? d.error || "failed" : "…";
+};
+const origin = (d) => (d.trigger === "live twin" ? `alarm ${d.alarm_id ?? "?"} (live twin)` : `operator ${d.created_by}`);
+
+export async function loadDiagnoses() {
+  const runs = await api(`/diagnoses?satellite=${satParam()}`);
+  const rows = runs.map((d) => el("tr", { class: `diag-${d.status}`, dataset: { diagnosisId: d.id }, onclick: () => showDiagnosis(d.id) },
+    el("td", {}, d.alarm_utc || d.start_utc), el("td", {}, origin(d)), el("td", {}, d.status), el("td", {}, topText(d))));
+  fill($("diagnoses").querySelector("tbody"),
+    rows.length ? rows : el("tr", {}, el("td", { colspan: 4, class: "muted" }, "no diagnosis of this satellite yet")));
+  return runs;
+}
+
+/** The diagnosis an alarm started (alarms panel): shown in the diagnosis panel. */
+export async function showAlarmDiagnosis(alarmId) {
+  const runs = await api(`/diagnoses?alarm_id=${alarmId}`);
+  if (!runs.length) {
+    fill($("diagnosis-detail"), el("p", { class: "muted" }, `alarm ${alarmId} started no diagnosis (yet)`));
+    return null;
+  }
+  $("diagnosis-panel").scrollIntoView({ block: "start" });
+  return showDiagnosis(runs[0].id);
+}
+
+export async function showDiagnosis(id) {
+  clearTimeout(pollTimer);
+  shown = id;
+  const box = $("diagnosis-detail");
+  let d;
+  try {
+    d = await api(`/diagnoses/${id}`);
+  } catch (err) {
+    fill(box, el("p", { class: "error" }, errorText(err)));
+    return null;
+  }
+  box.dataset.diagnosisId = d.id;
+  box.dataset.status = d.status;
+  const head = el("h3", {}, `diagnosis ${d.id.slice(0, 8)} of ${d.satellite}, ${d.start_utc} → ${d.end_utc} (${origin(d)})`);
+  if (d.status === "running") {
+    fill(box, head, el("p", {}, "running: detection, pruning and the twin replays of the hypotheses…"));
+    pollTimer = setTimeout(() => showDiagnosis(id), POLL_MS);
+    return d;
+  }
+  if (d.status === "failed") {
+    fill(box, head, el("p", { class: "error" }, d.error));
+    return d;
+  }
+  const r = d.result;
+  fill(box, head, evidence(r), hypothesesTable(r.hypotheses),
+    el("button", { type: "button", id: "diagnosis-fly", onclick: () => flyTop(d) }, `residuals of the top ${FLOWN} (twin session)`),
+    el("div", { id: "diagnosis-fly-status" }));
+  return d;
+}
+
+function evidence(r) {
+  const det = r.detection;
+  const items = [
+    det.detected
+      ? `anomaly detected at ${det.alarm_utc} on ${det.channel}`
+      : "no anomaly detected in the window",
+    `false-alarm rate of the detector: ${det.false_alarms_per_day.toExponential(1)} per day`,
+    `analysis window ${det.window_utc[0]} → ${det.window_utc[1]}`,
+    `confidence (posterior of the top hypothesis): ${r.confidence.toFixed(3)}`,
+  ];
+  if (r.suspected_wheels.length) items.push(`momentum balance suspects ${r.suspected_wheels.map((w) => `RW${w}`).join(", ")}`);
+  for (const [what, why] of Object.entries(r.untestable || {})) items.push(`not testable: ${what}: ${why}`);
+  return el("ul", { class: "diagnosis-evidence" }, items.map((t) => el("li", {}, t)));
+}
+
+function hypothesesTable(hypotheses) {
+  return table(["#", "fault", "wheel", "onset (UTC)", "± s", "magnitude", "score"],
+    hypotheses.slice(0, SHOWN).map((h, i) => [String(i + 1), h.fault, wheelText(h.wheel), h.onset_utc || "",
+      h.onset_sigma_s === null || h.onset_sigma_s === undefined ? "" : h.onset_sigma_s.toFixed(1),
+      magnitudeText(h.magnitude), scoreText(h.score)]),
+    { class: "diagnosis-hypotheses" });
+}
+
+/** One hypothesis in the twin sessions' fault syntax (0-based wheel index), onsets relative to `alignS`;
+ * null for a fault a twin session cannot fly (the text says which). */
+export function hypothesisFaults(h, alignS) {
+  const kinds = h.fault.split("+");
+  const wheels = Array.isArray(h.wheel) ? h.wheel : [h.wheel];
+  const magnitudes = Array.isArray(h.magnitude) ? h.magnitude : [h.magnitude];
+  const onset = h.onset_utc ? Math.max(0, Date.parse(h.onset_utc) / 1000 - alignS) : 0;
+  const out = [];
+  for (const [i, kind] of kinds.entries()) {
+    const w = wheels[i] - 1, m = magnitudes[i];
+    const at = `@${onset.toFixed(1)}`;
+    if (kind === "none") return [];
+    if (kind === "failure" || kind === "stuck") out.push(`wheel:${w}:${kind}${at}`);
+    else if (kind === "gain_loss" && m !== null && m !== undefined) out.push(`wheel:${w}:gain${at},gain=${m}`);
+    else if (kind === "friction" && m !== null && m !== undefined) out.push(`wheel:${w}:friction${at},value=${m}`);
+    else return null;
+  }
+  return out;
+}
+
+function flyTop(d) {
+  const status = $("diagnosis-fly-status");
+  const top = d.result.hypotheses.slice(0, FLOWN);
+  const onsets = top.map((h) => (h.onset_utc ? Date.parse(h.onset_utc) / 1000 : null)).filter((t) => t !== null);
+  const windowStart = Date.parse(d.start_utc) / 1000;
+  const align = onsets.length ? Math.max(windowStart, Math.min(...onsets) - LEAD_S) : windowStart;
+  const alternatives = {}, skipped = [];
+  top.forEach((h, i) => {
+    const faults = hypothesisFaults(h, align);
+    if (faults === null) skipped.push(`${h.fault} ${wheelText(h.wheel)}`);
+    else alternatives[`h${i + 1}_${h.fault.replaceAll("+", "_")}`] = faults;
+  });
+  fill(status, skipped.length ? `not flown (a twin session flies wheel faults only): ${skipped.join(", ")}` : "");
+  flyHypotheses({ satellite: d.satellite, dictionary: d.dictionary, scenario: d.scenario, alignS: align,
+    durationS: LEAD_S + AFTER_S, alternatives });
+}
+
+export function clearDiagnoses() {
+  clearTimeout(pollTimer);
+  shown = null;
+  fill($("diagnoses").querySelector("tbody"));
+  fill($("diagnosis-detail"));
+}
