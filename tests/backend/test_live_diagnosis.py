@@ -1,10 +1,11 @@
-"""Automatic diagnosis: a satellite streams live telemetry with a hidden wheel failure; its live twin's detector
-fires, the archive raises the ``twin_anomaly`` alarm, a diagnosis starts by itself (replays on the server's Dask
-LocalCluster) and the alarm links to it: GET /diagnoses?alarm_id= answers it, with the failed wheel on top."""
+"""Automatic diagnosis: telemetry with a hidden wheel failure reaches the archive (an upload: the path the live
+stream takes from the archive's commit on, LiveTwins.submit); the satellite's live twin's detector fires, the
+archive raises the ``twin_anomaly`` alarm, a diagnosis starts by itself (replays on the server's Dask
+LocalCluster) and the alarm links to it: GET /diagnoses?alarm_id= answers it, with the failed wheel on top.
+The second-by-second live delivery is tested on the twin itself (tests/backend/test_live_twin.py)."""
 
 from __future__ import annotations
 
-import asyncio
 import time
 from datetime import datetime
 from pathlib import Path
@@ -36,13 +37,18 @@ def test_a_live_wheel_failure_raises_an_alarm_that_links_to_its_automatic_diagno
     fault = emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S}")
     _, _, stream = emulator.emulate("somov-ge4-scan", [fault], FLIGHT_S, "2026-03-20T00:00:00Z", fdir=False)
     t0 = int(stream.t_utc_ns[0]) / 1e9
-    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'live.sqlite'}", live_enabled=True)
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'live.sqlite'}")
+    sat = "REFSAT"
     with TestClient(create_app(settings)) as client:
         services = client.app.state.services
         viewer = bearer(services.auth.issue("viewer", Role.viewer)[1])
-        port = client.get("/api/v1/health").json()["live"]["port"]
-        asyncio.run(emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3))
-        sat = settings.live_satellite
+        operator = bearer(services.auth.issue("op", Role.operator)[1])
+        upload = client.post(
+            f"/api/v1/telemetry/uploads?satellite={sat}&dictionary=reference_satellite.yaml",
+            content=stream.data,
+            headers=operator,
+        )
+        assert upload.status_code == 200, upload.json()
         state = _wait(
             "the diagnosis of the detection",
             lambda: (s := services.twins.state(sat)) and s["detection"] and s["detection"]["diagnosis_id"] and s,
