@@ -20,7 +20,6 @@ the result is identical to :func:`sim_core.engine.simulate` on one machine, bit 
 
 from __future__ import annotations
 
-import asyncio
 import os
 import threading
 from collections.abc import Callable, Sequence
@@ -73,14 +72,16 @@ class EngineWorker(WorkerPlugin):
     def __init__(self, owned: bool, warm: bool) -> None:
         self.owned, self.warm = owned, warm
 
-    async def setup(self, worker: Any) -> None:
-        """Own process group and death with the parent (owned workers), then compile the kernels off the loop."""
+    def setup(self, worker: Any) -> None:
+        """Own process group and death with the parent (owned workers); the kernels compiled in a thread of their
+        own, so the worker takes tasks at once (an engine task meanwhile waits on numba's compile lock; a cold
+        compile takes minutes on a loaded machine, and a rigid-spin job needs none)."""
         if self.owned:
             from backend.core.processes import become_owned_child
 
             become_owned_child()
         if self.warm:
-            await asyncio.to_thread(warm_engine)
+            threading.Thread(target=warm_engine, name="engine-warm", daemon=True).start()
 
 
 def local_workers() -> int:
