@@ -632,6 +632,7 @@ class LiveTwins:
         self._stop = threading.Event()
         self.latencies_s: deque = deque(maxlen=100_000)
         self._detected: dict[str, list[Detection]] = {}  # waiting for POST_ALARM_S of telemetry after them
+        self._recovering = False
         self.on_detection: Callable[[LiveDetection], str | None] | None = None  # starts a diagnosis: its id
 
     def register_model(self, satellite: str, scenario: str, epoch_ns: int | None, from_run: bool = False) -> None:
@@ -767,6 +768,8 @@ class LiveTwins:
 
     def _start_diagnoses(self, satellite: str, twin: LiveTwin) -> None:
         """Detections followed by POST_ALARM_S of telemetry: archive what is pending, then ``on_detection``."""
+        if self._recovering:
+            return
         newest = twin.state.telemetry_utc_ns or 0
         ready = [d for d in self._detected.get(satellite, []) if newest - d.t_utc_ns >= POST_ALARM_S * NS_PER_S]
         if not ready:
@@ -895,4 +898,9 @@ class LiveTwins:
             decoded = decode_stream(
                 b"".join(p for _, p in packets), self._dictionary(mapping.dictionary), source="twin recovery"
             )
-            self._process(row["name"], mapping.dictionary, decoded.batches, t1 / 1e9)
+            self._recovering = True  # detections in what was archived before the restart had their diagnosis
+            try:
+                self._process(row["name"], mapping.dictionary, decoded.batches, t1 / 1e9)
+            finally:
+                self._recovering = False
+                self._detected.pop(row["name"], None)
