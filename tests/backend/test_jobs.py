@@ -15,7 +15,7 @@ from backend.jobs.job_repository import JobRepository
 from backend.jobs.simulators import JobCancelled
 from backend.services import build_services
 from tests.backend.conftest import bearer, make_settings
-from tests.backend.test_process_supervision import wait_gone
+from tests.process_tree import wait_gone
 
 JOB_TIMEOUT_S = 300.0  # LocalCluster start-up + run; a worker compiling a cold numba cache shares its CPU with the job
 ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level
@@ -121,6 +121,7 @@ def test_jobs_left_running_by_a_dead_server_are_marked_interrupted(tmp_path: Pat
     assert row.status == "interrupted" and "restarted" in row.error
 
 
+WORKERS_GONE_S = 25.0  # LocalCluster.close: SIGTERM, then SIGKILL after a few seconds
 ENGINE_JOB_TIMEOUT_S = 400.0  # a fresh worker may compile the numba engine (~1 min here, more under load)
 ENGINE_BODY = {"library": "somov-ge4-scan", "set": ["duration_s=20"]}
 
@@ -163,4 +164,4 @@ def test_shutdown_stops_running_jobs_and_records_them_interrupted(tmp_path: Path
         worker_pids = set(services.cluster.connected.run(os.getpid).values())
     assert services.job_repo.get(job_id).status == "interrupted"
     assert handle.future.done() and services.cluster.connected is None
-    assert wait_gone(worker_pids) == set()
+    assert wait_gone(worker_pids, WORKERS_GONE_S) == set()
