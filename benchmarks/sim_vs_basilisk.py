@@ -6,7 +6,8 @@ Prints, for ``peer-basilisk-rw4`` (DESIGN.md's case, built in both): execution t
 (alternating acs-twin and Basilisk runs, median of the repeats), their ratio, both settling times
 after the second slew and the largest attitude difference between the two histories; then the 11
 wheel-fault variants (nominal, 4 single, 6 double failures) as one acs-twin batch against 11 Basilisk
-runs on a process pool of the same width; then 24 h of ``somov-ge4-scan``. The first acs-twin call
+runs on a process pool of the same width; the cost of each seed model (one orbit of ``somov-ge4-scan``
+with each switched on alone, then all); then 24 h of ``somov-ge4-scan``. The first acs-twin call
 (numba compile or cache load) is reported separately.
 """
 
@@ -18,6 +19,7 @@ import os
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -27,7 +29,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import peer_basilisk  # noqa: E402
 
 from sim_core import engine, scenario_library  # noqa: E402
-from sim_core.scenario import FaultSpec, VariantSpec, apply_overrides  # noqa: E402
+from sim_core.scenario import (  # noqa: E402
+    FaultSpec,
+    MotorSpec,
+    Scenario,
+    SurfaceSpec,
+    VariantSpec,
+    apply_overrides,
+)
 
 SETTLE_DEG = 0.01
 FAULT_SETS = [()] + [(i,) for i in range(4)] + list(itertools.combinations(range(4), 2))
@@ -53,7 +62,7 @@ def _basilisk_job(failed: tuple[int, ...]) -> float:
     return peer_basilisk.run(failed_wheels=failed, record=False).wall_time_s
 
 
-def one_orbit(repeats: int) -> None:
+def one_orbit(repeats: int) -> float:
     """Peer scenario, one orbit: alternate the two simulators and compare timing and histories."""
     scenario = scenario_library.get("peer-basilisk-rw4")
     first, _ = _ours(scenario)
@@ -90,6 +99,7 @@ def one_orbit(repeats: int) -> None:
         f"{np.round(traj['wheel_speed_rad_s'][0, -1] * 30 / np.pi, 2)}, Basilisk "
         f"{np.round(peer.omega_rw_rad_s[-1] * 30 / np.pi, 2)}"
     )
+    return t_bsk
 
 
 def fault_variants(repeats: int) -> None:
@@ -134,13 +144,85 @@ def day_of_scanning() -> None:
     )
 
 
+def _wheels(s: Scenario, **update: float) -> Scenario:
+    ws = [w.model_copy(update=update) for w in s.spacecraft.cluster.wheels]
+    return _cluster(s, wheels=ws)
+
+
+def _cluster(s: Scenario, **update: object) -> Scenario:
+    cluster = s.spacecraft.cluster.model_copy(update=update)
+    return s.model_copy(update={"spacecraft": s.spacecraft.model_copy(update={"cluster": cluster})})
+
+
+def _spacecraft(s: Scenario, **update: object) -> Scenario:
+    return s.model_copy(update={"spacecraft": s.spacecraft.model_copy(update=update)})
+
+
+def _sensors(s: Scenario, **update: object) -> Scenario:
+    return s.model_copy(update={"sensors": s.sensors.model_copy(update=update)})
+
+
+PLATES = [
+    SurfaceSpec(normal_b=n, area_m2=a, centroid_b_m=c)
+    for n, a, c in (
+        ([0.0, 1.0, 0.0], 2.0, [0.3, 0.4, 0.2]),
+        ([0.0, -1.0, 0.0], 1.0, [-0.2, -0.4, 0.1]),
+        ([0.0, 0.0, 1.0], 1.5, [0.1, 0.2, 0.6]),
+        ([1.0, 0.0, 0.0], 1.0, [0.5, 0.1, -0.2]),
+    )
+]
+SEED_MODELS: dict[str, Callable[[Scenario], Scenario]] = {
+    "wheel aero drag (seed 002 eq 4)": lambda s: _wheels(s, aero_drag_nm_s15=1e-8),
+    "wheel noise (seed 002 eq 4)": lambda s: _wheels(s, noise_nm=1e-4),
+    "wheel imbalance (seed 002 eq 4)": lambda s: _wheels(s, imbalance_nm_s2=1e-10),
+    "motor electrics (seed 002 eq 2-3)": lambda s: _cluster(s, motor=MotorSpec()),
+    "torque quantisation (seed 000 eq 3)": lambda s: _wheels(s, torque_quantum_nm=1e-4),
+    "flexible modes x2 (seed 000 eq 1)": lambda s: _spacecraft(
+        s, flex_modes=scenario_library.get("somov-ge4-scan-flex").spacecraft.flex_modes
+    ),
+    "gyro Markov drift (seed 002 eq 13)": lambda s: _sensors(s, gyro_markov_sigma_rad_s=1e-6),
+    "star-tracker Sun blinding (seed 003)": lambda s: _sensors(s, star_tracker_sun_exclusion_deg=30.0),
+    "star-tracker rate limit": lambda s: _sensors(s, star_tracker_max_rate_rad_s=0.01),
+    "residual dipole": lambda s: _spacecraft(s, residual_dipole_am2=[0.1, 0.1, 0.1]),
+    "aerodynamic torque": lambda s: _spacecraft(s, surfaces=PLATES).model_copy(update={"aerodynamic_torque": True}),
+    "solar-pressure torque": lambda s: _spacecraft(s, surfaces=PLATES).model_copy(
+        update={"solar_pressure_torque": True}
+    ),
+}
+
+
+def seed_model_costs(repeats: int, t_bsk: float) -> None:
+    """One orbit of somov-ge4-scan (MEKF, GE cluster, IGRF, gravity gradient) with each seed model switched on
+    alone and then all together: the extra time each costs, and the all-on run against Basilisk's orbit."""
+    base = apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=5801", "output_dt_s=1.0"])
+    every = base
+    for switch in SEED_MODELS.values():
+        every = switch(every)
+    _ours(every)  # compile/cache (switches are values: one compiled loop serves every case)
+
+    def median_time(s: Scenario) -> float:
+        return statistics.median(_ours(s)[0] for _ in range(repeats))
+
+    t_base = median_time(base)
+    print(f"seed models, one orbit of somov-ge4-scan: all off {t_base:.3f} s")
+    for name, switch in SEED_MODELS.items():
+        t = median_time(switch(base))
+        print(f"  + {name:40s} {t:.3f} s  (cost {t - t_base:+.3f} s, {100 * (t / t_base - 1):+.0f} %)")
+    t_all = median_time(every)
+    print(
+        f"  all on: {t_all:.3f} s ({100 * (t_all / t_base - 1):+.0f} %); Basilisk's rw4 orbit in this run "
+        f"{t_bsk:.3f} s -> ratio {t_bsk / t_all:.2f}x (Basilisk flies a rigid body, no sensors, no seed models)"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--skip-24h", action="store_true")
     args = parser.parse_args()
-    one_orbit(args.repeats)
+    t_bsk = one_orbit(args.repeats)
     fault_variants(args.repeats)
+    seed_model_costs(args.repeats, t_bsk)
     if not args.skip_24h:
         day_of_scanning()
 

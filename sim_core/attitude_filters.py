@@ -38,6 +38,7 @@ __all__ = [
     "mismatch_filter_step_1",
     "error_quaternion_from_mismatch_1",
     "filtered_attitude_1",
+    "mismatch_1",
 ]
 
 _SDA_TOLERANCE = 1e-14  # relative change of the Riccati iterate at which doubling stops
@@ -186,3 +187,11 @@ def filtered_attitude_1(state9: np.ndarray, q_prog_ib: np.ndarray) -> tuple[np.n
     e = error_quaternion_from_mismatch_1(state9[0:3])
     q = qt.normalize_1(qt.multiply_1(q_prog_ib, e))
     return q, state9[6:9].copy()
+
+
+@njit(cache=True)
+def mismatch_1(q_prog_ib: np.ndarray, q_meas_ib: np.ndarray) -> np.ndarray:
+    """Compiled mismatch ε = −2 e0 e of E = Λ̃^p ∘ Λ^m (seed 000 §4)."""
+    e = qt.multiply_1(np.array([q_prog_ib[0], -q_prog_ib[1], -q_prog_ib[2], -q_prog_ib[3]]), q_meas_ib)
+    out: np.ndarray = -2.0 * e[0] * e[1:]
+    return out

@@ -25,6 +25,7 @@ from numba import njit
 
 from sim_core import (
     allocation,
+    attitude_filters,
     control,
     environment,
     fdir,
@@ -47,7 +48,7 @@ PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
 # Control laws.
 LAW_SEED000, LAW_MRP_FEEDBACK, LAW_QUATERNION_PD = 0, 1, 2
 # Estimators.
-ESTIMATOR_TRUTH, ESTIMATOR_STAR_TRACKER, ESTIMATOR_MEKF = 0, 1, 2
+ESTIMATOR_TRUTH, ESTIMATOR_STAR_TRACKER, ESTIMATOR_MEKF, ESTIMATOR_SEED000, ESTIMATOR_SEED003 = 0, 1, 2, 3, 4
 
 # Fault codes live in sim_core.faults (re-exported here for the record's readers).
 TARGET_CODES, TYPE_CODES, FAULT_COLUMNS = faults_mod.TARGET_CODES, faults_mod.TYPE_CODES, faults_mod.FAULT_COLUMNS
@@ -56,7 +57,8 @@ TARGET_CODES, TYPE_CODES, FAULT_COLUMNS = faults_mod.TARGET_CODES, faults_mod.TY
 EARTH_SENSOR_SIGMA_RAD = np.radians(0.05)  # static infrared earth sensor class (seed 002 eq 14 gives none)
 STAR_RESET_SIGMA_RAD = np.radians(1.0)  # attitude uncertainty re-opened after a wheel is isolated (a seizure's kick)
 MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
-STAR_TRACKER_MAX_RATE_RAD_S = 1e9  # no rate limit on the star tracker (seed 000 §4 gives none)
+NO_RATE_LIMIT_RAD_S = 1e9  # star tracker without a rate limit (seed 000 §4 gives none)
+NEVER_BLINDED_COS = 2.0  # cosine of a Sun exclusion cone no direction falls in (blinding off)
 
 # Event codes (sim_core.trajectory.EVENT_NAMES).
 EV_MODE_CHANGE, EV_ALLOCATION, EV_MD_SATURATED = 1, 7, 8
@@ -123,14 +125,25 @@ class SensorModels(NamedTuple):
     magnetometer_noise_t: float
     tachometer_quantum_rad_s: float
     sun_sensor_sigma_rad: float
+    star_boresight_b: np.ndarray  # star-tracker boresight (unit, body axes)
+    star_cos_sun_exclusion: float  # cos of the Sun exclusion half-angle (seed 003 §3.2.3.1); NEVER_BLINDED_COS: off
+    star_max_rate_rad_s: float  # star tracker invalid above this body rate; NO_RATE_LIMIT_RAD_S: off
 
 
 class EstimatorConfig(NamedTuple):
-    """Attitude determination the law reads: ESTIMATOR_TRUTH, _STAR_TRACKER or _MEKF (sim_core.mekf)."""
+    """Attitude determination the law reads (``kind``): ESTIMATOR_TRUTH (the true state), _STAR_TRACKER (star
+    sample and gyro as they come), _MEKF (sim_core.mekf on gyro + star tracker, earth sensor and magnetometer
+    without stars), _SEED000 (seed 000 §4's filter of the mismatch ε and the gyro rate, sim_core.attitude_filters)
+    or _SEED003 (seed 003's gyro-less body-rate estimator, eqs 15–19, on the star tracker's mismatch angles)."""
 
     kind: int
     covariance0: np.ndarray  # initial MEKF covariance (6, 6)
     gyro_drift_density: float  # σ_u the MEKF assumes for the bias random walk
+    k_alpha: float  # seed 000 filter: discrete steady-state gains (attitude_filters.discrete_gains)
+    k_omega: float
+    smoothing: float  # seed 000 filter: 1 − exp(−T_q/T) of the gyro-rate smoother
+    rate_phi: np.ndarray  # seed 003 estimator: (Φ, Γ) of attitude_filters.body_rate_discretisation at T_q
+    rate_gamma: np.ndarray
 
 
 class LawConfig(NamedTuple):
@@ -146,21 +159,52 @@ class LawConfig(NamedTuple):
     mrp_law_type: int
 
 
+class MotorModel(NamedTuple):
+    """Wheel motor electrics behind a voltage-limited driver (seed 002 eq 2–3; wheels.driven_motor_torque_1)."""
+
+    on: bool
+    inductance_h: float
+    resistance_ohm: float
+    torque_constant_nm_a: float
+    back_emf_v_s: float
+    max_voltage_v: float
+
+
 class Actuators(NamedTuple):
-    """Wheel limits (seed 000 eq 2), torque quanta (eq 3) and the magnetic driver's dipole limit."""
+    """Wheel limits (seed 000 eq 2), torque quanta (eq 3), seed 002's motor electrics, noise and imbalance torques,
+    and the magnetic driver's dipole limit."""
 
     max_torque_nm: np.ndarray
     max_momentum_nms: np.ndarray
     torque_quantum_nm: np.ndarray
     md_max_am2: float
     allocation: np.ndarray  # allocation.AllocationConfig.as_array
+    motor: MotorModel
+    noise_nm: np.ndarray  # K_x per wheel (seed 002 eq 4)
+    imbalance_nm_s2: np.ndarray  # K_d per wheel (seed 002 eq 4)
+    disturbed: bool  # any K_x or K_d non-zero
+
+
+class Surfaces(NamedTuple):
+    """Outer flat plates (rows) for the aerodynamic and solar-pressure torques (sim_core.environment)."""
+
+    normals_b: np.ndarray  # (n, 3)
+    areas_m2: np.ndarray
+    centroids_b_m: np.ndarray  # (n, 3) from the centre of mass
+    specular: np.ndarray
+    diffuse: np.ndarray
+    drag_coefficient: float
 
 
 class Disturbances(NamedTuple):
-    """External torques flown by the plant: gravity gradient and the residual dipole m_res (m_res × B)."""
+    """External torques flown by the plant: gravity gradient, residual dipole m_res (m_res × B), aerodynamic and
+    solar-pressure torques on ``surfaces``."""
 
     gravity_gradient: bool
     residual_dipole_am2: np.ndarray
+    aerodynamic: bool
+    solar_pressure: bool
+    surfaces: Surfaces
 
 
 class ModeConfig(NamedTuple):
@@ -245,6 +289,7 @@ class Position(NamedTuple):
     a: np.ndarray
     b_eci: np.ndarray
     b_body: np.ndarray
+    sun_eci: np.ndarray  # Sun position (m), refreshed each T_q when a model needs it
 
 
 class Sensed(NamedTuple):
@@ -267,6 +312,7 @@ class Estimate(NamedTuple):
     omega: np.ndarray
     bias: np.ndarray
     covariance: np.ndarray
+    filter_state: np.ndarray  # seed 000: ε^f, ε̇^f, ω^f; seed 003: α̂ (3), ω̂ of the mismatch (3)
 
 
 class Commands(NamedTuple):
@@ -282,6 +328,7 @@ class Commands(NamedTuple):
     wheel_alloc: np.ndarray
     dipole_alloc: np.ndarray
     program: np.ndarray  # Λ^p (4), ω^p (3), ω̇^p (3) of the last control tick
+    motor_current: np.ndarray  # armature currents (A) when the motor electrics are flown
 
 
 class Monitors(NamedTuple):
@@ -368,9 +415,14 @@ def _sun_direction_1(
 
 
 @njit(cache=True)
-def _ephemeris_stage(c: LoopConfig, t: float, x: np.ndarray, orbit_due: bool, field_due: bool, pos: Position) -> None:
-    """Orbit and field at t from the batch's tables (field rotated into body axes by the true attitude)."""
+def _ephemeris_stage(
+    c: LoopConfig, t: float, x: np.ndarray, orbit_due: bool, field_due: bool, sun_due: bool, pos: Position
+) -> None:
+    """Orbit and field at t from the batch's tables (field rotated into body axes by the true attitude), and the
+    Sun (environment.sun_position_1) when due."""
     e = c.ephemeris
+    if sun_due:
+        pos.sun_eci[:] = environment.sun_position_1(c.clock.t0_unix_s + t)
     if orbit_due:
         orbit.hermite_state_into(e.orbit_table, e.orbit_t0_s, e.orbit_step_s, t, pos.r, pos.v, pos.a)
     if field_due:
@@ -426,7 +478,12 @@ def _sense_stage(
         faults, T_GYRO, t, sensed.omega, sensed.gyro_frozen, s.gyro_noise_rad_s, normals[0:3]
     )
     sig3 = np.full(3, s.star_sigma_rad)
-    q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, STAR_TRACKER_MAX_RATE_RAD_S, normals[3:6])
+    q_m, st_ok = sensors.star_tracker_1(x[0:4], x[4:7], sig3, s.star_max_rate_rad_s, normals[3:6])
+    if s.star_cos_sun_exclusion <= 1.0:
+        blinded = sensors.star_tracker_blinded_1(
+            x[0:4], pos.sun_eci, pos.r, s.star_boresight_b, s.star_cos_sun_exclusion
+        )
+        st_ok = st_ok and not blinded
     st_ok = (
         faults_mod.star_tracker_faults_1(faults, t, q_m, sensed.star_frozen, s.star_sigma_rad, normals[3:6]) and st_ok
     )
@@ -522,6 +579,33 @@ def _mekf_stage(
 
 
 @njit(cache=True)
+def _mismatch_filter_stage(
+    c: LoopConfig, t: float, pos: Position, sensed: Sensed, q_m: np.ndarray, st_ok: bool, gyro_ok: bool, est: Estimate
+) -> None:
+    """Seed 000 §4 (gyro + star tracker) or seed 003 eqs 15–19 (star tracker only) per-axis steady-state filters
+    of the mismatch ε = −2 e0 e of E = Λ̃^p ∘ Λ^m (sim_core.attitude_filters); the estimate is Λ^p ∘ E^f and the
+    filtered gyro rate (seed 000) or ω^p − ε̂̇ (seed 003: ε̇ = −(ω − ω^p) in body axes)."""
+    e = c.estimator
+    q_p, w_p, _, _ = program_at(c, t, pos)
+    f = est.filter_state
+    t_q = c.clock.measure_every * c.clock.dt_s
+    if e.kind == ESTIMATOR_SEED000:
+        rate = sensed.omega if gyro_ok else f[6:9].copy()
+        attitude_filters.mismatch_filter_step_1(f, q_p, q_m, rate, st_ok, e.k_alpha, e.k_omega, e.smoothing, t_q)
+        q, w = attitude_filters.filtered_attitude_1(f, q_p)
+        est.q[:] = q
+        est.omega[:] = w
+        return
+    z = f[0:3].copy()
+    if st_ok:
+        z = attitude_filters.mismatch_1(q_p, q_m)
+    attitude_filters.body_rate_step_1(f[0:3], f[3:6], z, e.rate_phi, e.rate_gamma)
+    q, _ = attitude_filters.filtered_attitude_1(f, q_p)
+    est.q[:] = q
+    est.omega[:] = control.program_in_body_1(q_p, q, w_p) - f[3:6]
+
+
+@njit(cache=True)
 def _estimate_stage(
     c: LoopConfig,
     faults: np.ndarray,
@@ -556,6 +640,9 @@ def _estimate_stage(
             t,
         )
     kind = c.estimator.kind
+    if kind in (ESTIMATOR_SEED000, ESTIMATOR_SEED003):
+        _mismatch_filter_stage(c, t, pos, sensed, q_m, st_ok, gyro_ok, est)
+        return st_ok, sigma_u
     if kind == ESTIMATOR_TRUTH:
         est.q[:] = x[0:4]
         est.omega[:] = x[4:7]
@@ -694,6 +781,24 @@ def _wheel_commands_1(act: Actuators, cmd: Commands) -> None:
 
 
 @njit(cache=True)
+def _allocate_1(c: LoopConfig, available: np.ndarray, h_wheels: np.ndarray, sensed: Sensed, cmd: Commands) -> int:
+    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1), then the quantised,
+    limited wheel commands; returns the allocation status."""
+    status: int = allocation.allocate_1(
+        cmd.body_torque,
+        c.model.wheel_axes,
+        available,
+        h_wheels,
+        sensed.mag,
+        c.actuators.allocation,
+        cmd.wheel_alloc,
+        cmd.dipole_alloc,
+    )
+    _wheel_commands_1(c.actuators, cmd)
+    return status
+
+
+@njit(cache=True)
 def _rate_damping_stage(
     c: LoopConfig,
     mode: int,
@@ -719,17 +824,7 @@ def _rate_damping_stage(
             )
         return
     cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
-    allocation.allocate_1(
-        cmd.body_torque,
-        p.wheel_axes,
-        available,
-        h_wheels,
-        sensed.mag,
-        act.allocation,
-        cmd.wheel_alloc,
-        cmd.dipole_alloc,
-    )
-    _wheel_commands_1(act, cmd)
+    _allocate_1(c, available, h_wheels, sensed, cmd)
     cmd.dipole[:] = control.unloading_dipole_step(
         sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
     )
@@ -753,17 +848,7 @@ def _allocation_stage(
     allocation status."""
     p, act = c.model, c.actuators
     faults_mod.controller_faults_1(faults, t, cmd.body_torque, cmd.frozen_torque)
-    status = allocation.allocate_1(
-        cmd.body_torque,
-        p.wheel_axes,
-        available,
-        h_wheels,
-        sensed.mag,
-        act.allocation,
-        cmd.wheel_alloc,
-        cmd.dipole_alloc,
-    )
-    _wheel_commands_1(act, cmd)
+    status = _allocate_1(c, available, h_wheels, sensed, cmd)
     cmd.dipole[:] = cmd.dipole_alloc
     faults_mod.rod_faults_1(faults, t, cmd.dipole)
     for i in range(3):
@@ -833,30 +918,51 @@ def _wheel_hold_stage(
 
 @njit(cache=True)
 def _actuator_stage(c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, cmd: Commands) -> None:
-    """Delivered wheel motor torques: the held commands under wheel faults, then seed 000 eq (2) limits."""
-    p = c.model
+    """Delivered wheel motor torques: the held commands under wheel faults, seed 000 eq (2) limits, then (when
+    flown) seed 002's motor electrics (eq 2–3) and its noise and imbalance torques (eq 1, 4)."""
+    p, act = c.model, c.actuators
     nq, nw = p.flex_mass.shape[0], p.wheel_inertia.shape[0]
+    speeds = x[7 + 2 * nq : 7 + 2 * nq + nw]
     faults_mod.wheel_commands_1(faults, t, cmd.wheel_cmd, cmd.frozen_cmd, cmd.delivered)
-    wheels.limit_motor_torque_into(
-        cmd.delivered,
-        x[7 + 2 * nq : 7 + 2 * nq + nw],
-        p.wheel_inertia,
-        c.actuators.max_torque_nm,
-        c.actuators.max_momentum_nms,
-    )
+    wheels.limit_motor_torque_into(cmd.delivered, speeds, p.wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
+    m = act.motor
+    if m.on:
+        cmd.delivered[:] = wheels.driven_motor_torque_1(
+            cmd.motor_current,
+            cmd.delivered,
+            speeds,
+            c.clock.dt_s,
+            m.inductance_h,
+            m.resistance_ohm,
+            m.torque_constant_nm_a,
+            m.back_emf_v_s,
+            m.max_voltage_v,
+        )
+    if act.disturbed:
+        white = np.asarray(np.random.uniform(-1.0, 1.0, nw))
+        cmd.delivered[:] = wheels.delivered_torque_1(cmd.delivered, speeds, t, act.noise_nm, act.imbalance_nm_s2, white)
 
 
 @njit(cache=True)
 def _disturbance_stage(
     c: LoopConfig, x: np.ndarray, pos: Position, dipole: np.ndarray, magnetic_on: bool, ext: np.ndarray
 ) -> None:
-    """External torque on the flown body: (MD dipole + residual dipole) × B (sim_core.magnetic) and the gravity
-    gradient (sim_core.environment) of the true inertia."""
+    """External torque on the flown body: (MD dipole + residual dipole) × B (sim_core.magnetic), the gravity
+    gradient of the true inertia, aerodynamic and solar-pressure torques on the plates (sim_core.environment)."""
     ext[:] = 0.0
     if magnetic_on:
         ext[:] = magnetic.magnetic_torque_1(dipole + c.disturbances.residual_dipole_am2, pos.b_body)
-    if c.disturbances.gravity_gradient:
+    d, sf = c.disturbances, c.disturbances.surfaces
+    if d.gravity_gradient:
         ext[:] += environment.gravity_gradient_torque_1(conjugate_rotate_1(x[0:4], pos.r), c.truth.inertia)
+    if d.aerodynamic:
+        ext[:] += environment.aerodynamic_torque_orbit_1(
+            x[0:4], pos.r, pos.v, sf.drag_coefficient, sf.normals_b, sf.areas_m2, sf.centroids_b_m
+        )
+    if d.solar_pressure:
+        ext[:] += environment.solar_pressure_torque_orbit_1(
+            x[0:4], pos.r, pos.sun_eci, sf.normals_b, sf.areas_m2, sf.centroids_b_m, sf.specular, sf.diffuse
+        )
 
 
 @njit(cache=True)
@@ -956,7 +1062,9 @@ def fly_variant(
     """Fly one variant and fill its output record ``rec`` (samples × R_* channels) and events ``ev``.
 
     ``c.model`` is the plant the onboard software models (law, allocation, FDIR); ``c.truth`` the one the
-    dynamics fly. The law reads the estimator of ``c.estimator`` (truth, star tracker + gyro, or MEKF).
+    dynamics fly. The law reads the estimate of ``c.estimator.kind`` (see :class:`EstimatorConfig`: the true
+    state, the raw star tracker + gyro, the MEKF, seed 000 §4's mismatch filter or seed 003's body-rate
+    estimator); every seed model in ``c`` whose switch is off costs nothing and draws no random number.
     ``shared[0]`` non-zero cancels the run (checked each T_u); ``shared[slot]`` receives the steps done.
     """
     np.random.seed(var.seed)
@@ -968,7 +1076,9 @@ def fly_variant(
     sig_m = c.sensors.gyro_markov_sigma_rad_s
     drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
     sensed = Sensed(np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), np.zeros(3))
-    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), c.estimator.covariance0.copy())
+    filt = np.zeros(9)
+    filt[6:9] = x[4:7]
+    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), c.estimator.covariance0.copy(), filt)
     cmd = Commands(
         np.zeros(3),
         np.zeros(3),
@@ -980,9 +1090,10 @@ def fly_variant(
         np.zeros(nw),
         np.zeros(3),
         np.zeros(10),
+        np.zeros(nw),
     )
     mon = _initial_monitors(c, var.available)
-    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3))
+    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.zeros(3))
     plant = _flown_plant(c)
     j_inv = np.linalg.inv(c.truth.inertia)
     work = np.zeros((6, x.shape[0] + 3 + nq + nw))
@@ -996,15 +1107,18 @@ def fly_variant(
     sigma_u = c.estimator.gyro_drift_density
     flags, status, out_i = 0, 0, 0
     md_on, have_mag_prev, valid = False, False, True
-    _ephemeris_stage(c, 0.0, x, True, True, pos)
+    d = c.disturbances
+    every_step = d.gravity_gradient or d.aerodynamic or d.solar_pressure  # models that need r, v at each step
+    sun_wanted = d.solar_pressure or c.sensors.star_cos_sun_exclusion <= 1.0
+    _ephemeris_stage(c, 0.0, x, True, True, sun_wanted, pos)
 
     for k in range(clk.n_steps):
         t = k * clk.dt_s
         measure = k % clk.measure_every == 0
         control_tick = k % clk.control_every == 0
         output = k % clk.output_every == 0
-        orbit_due = c.disturbances.gravity_gradient or md_on or control_tick or measure or output
-        _ephemeris_stage(c, t, x, orbit_due, md_on or res_on or measure, pos)
+        orbit_due = every_step or md_on or control_tick or measure or output
+        _ephemeris_stage(c, t, x, orbit_due, md_on or res_on or measure, sun_wanted and measure, pos)
         flags = _fault_stage(faults, t, fault_state, flags, ev, n_ev, cmd, sensed)
 
         if measure:

@@ -20,6 +20,7 @@ import numpy.typing as npt
 
 from sim_core import (
     allocation,
+    attitude_filters,
     closed_loop,
     environment,
     frames,
@@ -70,6 +71,8 @@ ESTIMATORS = {
     "truth": closed_loop.ESTIMATOR_TRUTH,
     "star_tracker": closed_loop.ESTIMATOR_STAR_TRACKER,
     "mekf": closed_loop.ESTIMATOR_MEKF,
+    "seed000_filter": closed_loop.ESTIMATOR_SEED000,
+    "seed003_rate": closed_loop.ESTIMATOR_SEED003,
 }
 
 
@@ -123,6 +126,9 @@ def plant_params(s: Scenario, truth: bool = False) -> PlantParams:
             coulomb_nm=np.array([w.coulomb_nm for w in ws]),
             coulomb_sat_speed_rad_s=np.array([w.coulomb_sat_speed_rad_s for w in ws]),
             viscous_nm_s=np.array([w.viscous_nm_s for w in ws]),
+            aero_drag_nm_s15=np.array([w.aero_drag_nm_s15 for w in ws]),
+            noise_nm=np.array([w.noise_nm for w in ws]),
+            imbalance_nm_s2=np.array([w.imbalance_nm_s2 for w in ws]),
         ),
         flex_coupling=np.array([m.coupling_b for m in modes]).T if modes else None,
         flex_modal_mass=np.array([m.modal_mass for m in modes]) if modes else None,
@@ -399,6 +405,66 @@ def simulate(
     return _trajectory(s, out.rec, out.ev, out.n_ev, nw, span, params, time.perf_counter() - start)
 
 
+def _unit(v: Sequence[float]) -> np.ndarray:
+    a = np.array(v, dtype=float)
+    n = float(np.linalg.norm(a))
+    if n == 0.0:
+        raise ValueError("sensors.star_tracker_boresight_b: a zero vector has no direction")
+    return a / n
+
+
+def _motor_model(s: Scenario) -> closed_loop.MotorModel:
+    """Seed 002 motor electrics of the cluster (off when ``spacecraft.cluster.motor`` is None)."""
+    m = s.spacecraft.cluster.motor
+    if m is None:
+        return closed_loop.MotorModel(False, 1.0, 1.0, 1.0, 1.0, 1.0)
+    return closed_loop.MotorModel(
+        True,
+        float(m.inductance_h),
+        float(m.resistance_ohm),
+        float(m.torque_constant_nm_a),
+        float(m.back_emf_v_s),
+        float(m.max_voltage_v),
+    )
+
+
+def _surfaces(s: Scenario) -> closed_loop.Surfaces:
+    """The spacecraft's outer plates as arrays (rows), for the aerodynamic and solar-pressure torques."""
+    sf = s.spacecraft.surfaces
+    if (s.aerodynamic_torque or s.solar_pressure_torque) and not sf:
+        raise ValueError("spacecraft.surfaces: aerodynamic_torque/solar_pressure_torque need at least one plate")
+    return closed_loop.Surfaces(
+        np.array([p.normal_b for p in sf], dtype=float).reshape(-1, 3),
+        np.array([p.area_m2 for p in sf], dtype=float),
+        np.array([p.centroid_b_m for p in sf], dtype=float).reshape(-1, 3),
+        np.array([p.specular for p in sf], dtype=float),
+        np.array([p.diffuse for p in sf], dtype=float),
+        float(s.spacecraft.drag_coefficient),
+    )
+
+
+def _estimator_config(s: Scenario) -> closed_loop.EstimatorConfig:
+    """The estimator the law reads, with the steady-state gains of the per-axis filters (sim_core.attitude_filters):
+    measurement density r = σ_st² T_q, disturbance density q = ``estimator.disturbance_density_rad2_s3``."""
+    t_q = s.measurement_dt_s
+    r = max((s.sensors.star_tracker_sigma_arcsec * ARCSEC) ** 2 * t_q, 1e-30)
+    q = s.estimator.disturbance_density_rad2_s3
+    k_alpha, k_omega = attitude_filters.discrete_gains(q, r, t_q)
+    k12, k22 = attitude_filters.continuous_gains(q, r)
+    time_constant, _ = attitude_filters.time_constant_and_damping(k12, k22)
+    phi, gamma = attitude_filters.body_rate_discretisation(k12, k22, t_q)
+    return closed_loop.EstimatorConfig(
+        ESTIMATORS[s.estimator.kind],
+        mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S),
+        float(s.sensors.gyro_drift_density_rad_s_sqrt_s),
+        k_alpha,
+        k_omega,
+        float(1.0 - np.exp(-t_q / time_constant)),
+        np.ascontiguousarray(phi),
+        np.ascontiguousarray(gamma),
+    )
+
+
 def loop_config(
     s: Scenario,
     params: PlantParams,
@@ -429,12 +495,13 @@ def loop_config(
         float(sn.magnetometer_noise_t),
         float(sn.tachometer_quantum_rad_s),
         float(sn.sun_sensor_sigma_rad),
+        _unit(sn.star_tracker_boresight_b),
+        float(np.cos(np.radians(sn.star_tracker_sun_exclusion_deg)))
+        if sn.star_tracker_sun_exclusion_deg > 0.0
+        else closed_loop.NEVER_BLINDED_COS,
+        float(sn.star_tracker_max_rate_rad_s or closed_loop.NO_RATE_LIMIT_RAD_S),
     )
-    estimator = closed_loop.EstimatorConfig(
-        ESTIMATORS[s.estimator.kind],
-        mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S),
-        float(sn.gyro_drift_density_rad_s_sqrt_s),
-    )
+    estimator = _estimator_config(s)
     law = closed_loop.LawConfig(
         LAWS[c.kind],
         DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array(),
@@ -451,9 +518,17 @@ def loop_config(
         np.array([w.torque_quantum_nm for w in ws], dtype=float),
         float(s.spacecraft.md_max_dipole_am2),
         allocation_params(s),
+        _motor_model(s),
+        np.array([w.noise_nm for w in ws], dtype=float),
+        np.array([w.imbalance_nm_s2 for w in ws], dtype=float),
+        any(w.noise_nm > 0.0 or w.imbalance_nm_s2 > 0.0 for w in ws),
     )
     disturbances = closed_loop.Disturbances(
-        bool(s.gravity_gradient), np.array(s.spacecraft.residual_dipole_am2, dtype=float)
+        bool(s.gravity_gradient),
+        np.array(s.spacecraft.residual_dipole_am2, dtype=float),
+        bool(s.aerodynamic_torque),
+        bool(s.solar_pressure_torque),
+        _surfaces(s),
     )
     packed = params.pack()
     flown = plant_params(s, truth=True).pack() if s.truth is not None else packed

@@ -61,6 +61,9 @@ __all__ = [
     "gravity_gradient_torque_1",
     "aerodynamic_torque_1",
     "solar_pressure_torque_1",
+    "EARTH_ROTATION_RAD_S",
+    "aerodynamic_torque_orbit_1",
+    "solar_pressure_torque_orbit_1",
     "field_table_into",
 ]
 
@@ -68,6 +71,7 @@ IGRF_REFERENCE_RADIUS_M = 6371.2e3
 R_SUN_M = 6.957e8  # IAU 2015 nominal solar radius
 AU_M = 1.495978707e11
 SOLAR_PRESSURE_1AU_N_M2 = 4.56e-6  # 1361 W/m² / c
+EARTH_ROTATION_RAD_S = 7.292115e-5  # IERS mean angular velocity: the atmosphere co-rotates
 _CHUNK_S = 3600.0  # one IGRF date per hour of data
 _MODELS = ("igrf", "dipole")
 _IGRF_NMAX = 13
@@ -574,3 +578,49 @@ def field_table_into(table: np.ndarray, t0: float, step: float, t: float, out: n
     s = u - i
     for j in range(out.shape[0]):
         out[j] = (1.0 - s) * table[i, j] + s * table[i + 1, j]
+
+
+@njit(cache=True)
+def aerodynamic_torque_orbit_1(
+    q_ib: np.ndarray,
+    r_eci_m: np.ndarray,
+    v_eci_m_s: np.ndarray,
+    drag_coefficient: float,
+    normals_b: np.ndarray,
+    areas_m2: np.ndarray,
+    centroids_b_m: np.ndarray,
+) -> np.ndarray:
+    """:func:`aerodynamic_torque_1` where the spacecraft is: wind v − ω_E × r of the co-rotating atmosphere in body
+    axes, density of :func:`atmosphere_density_1` at |r| − R_E (N·m, body axes)."""
+    wind = np.empty(3)
+    wind[0] = v_eci_m_s[0] + EARTH_ROTATION_RAD_S * r_eci_m[1]
+    wind[1] = v_eci_m_s[1] - EARTH_ROTATION_RAD_S * r_eci_m[0]
+    wind[2] = v_eci_m_s[2]
+    wind_b = quaternion.conjugate_rotate_1(q_ib, wind)
+    alt = np.sqrt(r_eci_m @ r_eci_m) - _R_EARTH_M
+    torque: np.ndarray = aerodynamic_torque_1(
+        wind_b, atmosphere_density_1(alt), drag_coefficient, normals_b, areas_m2, centroids_b_m
+    )
+    return torque
+
+
+@njit(cache=True)
+def solar_pressure_torque_orbit_1(
+    q_ib: np.ndarray,
+    r_eci_m: np.ndarray,
+    sun_eci_m: np.ndarray,
+    normals_b: np.ndarray,
+    areas_m2: np.ndarray,
+    centroids_b_m: np.ndarray,
+    specular: np.ndarray,
+    diffuse: np.ndarray,
+) -> np.ndarray:
+    """:func:`solar_pressure_torque_1` where the spacecraft is: Sun direction in body axes, distance and the sunlit
+    fraction of :func:`illumination_1` (N·m, body axes)."""
+    to_sun = sun_eci_m - r_eci_m
+    dist = np.sqrt(to_sun @ to_sun)
+    sun_b = quaternion.conjugate_rotate_1(q_ib, to_sun / dist)
+    torque: np.ndarray = solar_pressure_torque_1(
+        sun_b, dist, illumination_1(r_eci_m, sun_eci_m), normals_b, areas_m2, centroids_b_m, specular, diffuse
+    )
+    return torque

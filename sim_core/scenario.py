@@ -16,6 +16,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 __all__ = [
     "WheelSpec",
     "ClusterSpec",
+    "MotorSpec",
+    "SurfaceSpec",
     "FlexModeSpec",
     "SpacecraftSpec",
     "OrbitSpec",
@@ -54,7 +56,21 @@ class WheelSpec(_Spec):
     coulomb_nm: NonNegative = 0.0
     coulomb_sat_speed_rad_s: NonNegative = 0.0
     viscous_nm_s: NonNegative = 0.0
+    aero_drag_nm_s15: NonNegative = 0.0  # seed 002 eq 4 M_a = K_a Ω √|Ω|
+    noise_nm: NonNegative = 0.0  # seed 002 eq 4 M_x = K_x W/|W_max|, W uniform white
+    imbalance_nm_s2: NonNegative = 0.0  # seed 002 eq 4 M_d = K_d Ω² sin(Ω t)
     initial_speed_rpm: Finite = 0.0
+
+
+class MotorSpec(_Spec):
+    """Armature of the wheel motors (seed 002 eq 2–3) behind a voltage-limited driver: L di/dt + R i + K_e Ω = u,
+    M = K_m i, with u = R M_c/K_m + K_e Ω (current feed-forward) clipped to ±max_voltage_v."""
+
+    inductance_h: Positive = 1e-3
+    resistance_ohm: Positive = 1.0
+    torque_constant_nm_a: Positive = 0.053  # seed 002 Table 1 K_m
+    back_emf_v_s: Positive = 0.053  # = K_m in SI for an ideal DC motor
+    max_voltage_v: Positive = 28.0
 
 
 class ClusterSpec(_Spec):
@@ -64,6 +80,7 @@ class ClusterSpec(_Spec):
     gamma_deg: Annotated[float, Field(gt=0.0, lt=45.0)] = 30.0  # GE half-angle; < 45° keeps eq (6) real
     axes_b: list[Vector3] | None = None
     wheels: list[WheelSpec] = Field(default_factory=lambda: [WheelSpec() for _ in range(4)])
+    motor: MotorSpec | None = None  # None: the motors deliver the commanded torque (no electrics)
 
     @model_validator(mode="after")
     def _axes_match_wheels(self) -> ClusterSpec:
@@ -90,6 +107,25 @@ class FlexModeSpec(_Spec):
     log_decrement: NonNegative = 0.02
 
 
+class SurfaceSpec(_Spec):
+    """One flat outer plate for aerodynamic and solar-pressure torques (normal, area, centroid from the CoM,
+    specular and diffuse reflectivity)."""
+
+    normal_b: Vector3
+    area_m2: Positive
+    centroid_b_m: Vector3
+    specular: Annotated[float, Field(ge=0.0, le=1.0)] = 0.1
+    diffuse: Annotated[float, Field(ge=0.0, le=1.0)] = 0.2
+
+    @model_validator(mode="after")
+    def _unit_normal(self) -> SurfaceSpec:
+        if abs(math.sqrt(math.fsum(c * c for c in self.normal_b)) - 1.0) > 1e-6:
+            raise ValueError("spacecraft.surfaces.normal_b: must be a unit vector")
+        if self.specular + self.diffuse > 1.0:
+            raise ValueError("spacecraft.surfaces: specular + diffuse must not exceed 1")
+        return self
+
+
 class SpacecraftSpec(_Spec):
     """Mass properties, wheels, flexible modes and the magnetic driver of the spacecraft."""
 
@@ -101,6 +137,8 @@ class SpacecraftSpec(_Spec):
     flex_modes: list[FlexModeSpec] = Field(default_factory=list)
     md_max_dipole_am2: NonNegative = 25.0
     residual_dipole_am2: Vector3 = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+    surfaces: list[SurfaceSpec] = Field(default_factory=list)  # outer plates (aero and SRP torques)
+    drag_coefficient: Positive = 2.2  # free-molecular flat plate
 
 
 class OrbitSpec(_Spec):
@@ -134,12 +172,17 @@ class SensorsSpec(_Spec):
     sun_sensor_sigma_rad: NonNegative = 0.0087  # coarse Sun sensor, 0.5° (seed 003 SS)
     magnetometer_noise_t: NonNegative = 50e-9
     tachometer_quantum_rad_s: NonNegative = 0.0
+    star_tracker_boresight_b: Vector3 = Field(default_factory=lambda: [-1.0, 0.0, 0.0])  # zenith at nadir pointing
+    star_tracker_sun_exclusion_deg: Annotated[float, Field(ge=0.0, lt=90.0)] = 0.0  # 0: never blinded
+    star_tracker_max_rate_rad_s: Positive | None = None  # None: valid at any rate
 
 
 class EstimatorSpec(_Spec):
-    """Attitude determination feeding the control law."""
+    """Attitude determination feeding the control law: the true state, the raw star tracker + gyro, the MEKF,
+    seed 000 §4's mismatch filter (gyro + star tracker) or seed 003's gyro-less body-rate estimator (eqs 15–19)."""
 
-    kind: Literal["truth", "star_tracker", "mekf"] = "truth"
+    kind: Literal["truth", "star_tracker", "mekf", "seed000_filter", "seed003_rate"] = "truth"
+    disturbance_density_rad2_s3: Positive = 1e-9  # q of the per-axis filters (white angular acceleration)
 
 
 class RouteSegmentSpec(_Spec):
@@ -259,6 +302,8 @@ class Scenario(_Spec):
     controller: ControllerSpec = Field(default_factory=ControllerSpec)
     allocation: AllocationSpec = Field(default_factory=AllocationSpec)
     gravity_gradient: bool = True
+    aerodynamic_torque: bool = False  # on spacecraft.surfaces (environment.aerodynamic_torque_1)
+    solar_pressure_torque: bool = False  # on spacecraft.surfaces (environment.solar_pressure_torque_1)
     initial_mode: Literal["rate_damping", "sun_safe", "orf", "route"] | None = None  # None: no mode machine
     fdir: bool = False  # onboard wheel and sensor FDIR (sim_core.fdir); off flies the faults unmitigated
     magnetic_model: Literal["igrf", "dipole"] = "igrf"

@@ -11,7 +11,9 @@ from sim_core.scenario import (
     ClusterSpec,
     ControllerSpec,
     EstimatorSpec,
+    FlexModeSpec,
     GuidanceSpec,
+    MotorSpec,
     OrbitSpec,
     RouteSegmentSpec,
     Scenario,
@@ -141,10 +143,20 @@ def aist_scheduled_turn() -> Scenario:
     )
 
 
+SONG_WHEEL_TERMS = {  # seed 002 eq 4 (its Table 1 values are garbled: K_d = 0.001 would be 10 N·m at 100 rad/s)
+    "viscous_nm_s": 1e-6,  # K_l
+    "coulomb_nm": 1e-4,  # K_nl sign(Ω), saturated below 0.1 rad/s
+    "coulomb_sat_speed_rad_s": 0.1,
+    "aero_drag_nm_s15": 1e-8,  # K_a: 1.7e-5 N·m at 3,000 rpm
+    "noise_nm": 1e-4,  # K_x
+    "imbalance_nm_s2": 1e-10,  # K_d: 1e-5 N·m at 3,000 rpm
+}
+
+
 def song_table1() -> Scenario:
     """Seed 002 §3.2 base case: three orthogonal wheels, quaternion PD (eq 18), 1,000 s of Earth pointing
     from a small initial error; its Table 1 (garbled in the seed) is reproduced qualitatively by the
-    fault variants of issue 4."""
+    fault variants of issue 4 (ideal wheels and gyro: :func:`song_components` flies the component models)."""
     wheels = [WheelSpec(inertia_kg_m2=0.01, max_torque_nm=0.1, max_momentum_nms=4.0) for _ in range(3)]
     q0 = quaternion.from_axis_angle(np.array([1.0, 1.0, 0.0]), np.radians(5.0))
     return Scenario(
@@ -166,6 +178,32 @@ def song_table1() -> Scenario:
         measurement_dt_s=0.1,
         control_dt_s=0.1,
         output_dt_s=0.1,
+    )
+
+
+def song_components() -> Scenario:
+    """The song-table1 bus with seed 002's component models flown: the wheel torque balance (eq 1, 4: friction,
+    noise, aerodynamic drag, imbalance; :data:`SONG_WHEEL_TERMS`), the motor electrics behind a 28 V driver
+    (eq 2–3, K_m = 0.053 N·m/A from Table 1), the gyro's Markov drift (eq 13, σ = 1e-6 rad/s, τ = 300 s, its
+    random-walk density told to the MEKF) and the MEKF on gyro + star tracker."""
+    s = song_table1()
+    wheels = [w.model_copy(update=SONG_WHEEL_TERMS) for w in s.spacecraft.cluster.wheels]
+    cluster = s.spacecraft.cluster.model_copy(update={"wheels": wheels, "motor": MotorSpec()})
+    sensors = s.sensors.model_copy(
+        update={
+            "gyro_markov_sigma_rad_s": 1e-6,
+            "gyro_markov_tau_s": 300.0,
+            "gyro_drift_density_rad_s_sqrt_s": 8.2e-8,  # σ √(2/τ): the drift's random-walk density
+        }
+    )
+    return s.model_copy(
+        update={
+            "name": "song-components",
+            "description": "Seed 002 bus with its wheel, motor and gyro component models",
+            "spacecraft": s.spacecraft.model_copy(update={"cluster": cluster}),
+            "sensors": sensors,
+            "estimator": s.estimator.model_copy(update={"kind": "mekf"}),
+        }
     )
 
 
@@ -192,12 +230,35 @@ def somov_detumble_to_scan() -> Scenario:
     )
 
 
+def somov_ge4_scan_flex() -> Scenario:
+    """Seed 000 eq (1) and (3) on the scanning route: two solar-array bending modes (0.5 Hz across the roll axis
+    and 1.3 Hz across yaw, log decrement 0.02, modal coupling 2 and 1 kg^½·m) and digital wheel torques quantised to
+    1e-4 N·m (12 bits over ±0.2 N·m). The seed gives neither figure: these are typical of a 300 kg bus with
+    two 2 m² arrays, and the modes sit above the law's 0.24 rad/s crossover."""
+    s = somov_ge4_scan()
+    wheels = [w.model_copy(update={"torque_quantum_nm": 1e-4}) for w in s.spacecraft.cluster.wheels]
+    modes = [
+        FlexModeSpec(coupling_b=[0.0, 2.0, 0.0], modal_mass=1.0, freq_hz=0.5, log_decrement=0.02),
+        FlexModeSpec(coupling_b=[0.0, 0.0, 1.0], modal_mass=1.0, freq_hz=1.3, log_decrement=0.02),
+    ]
+    cluster = s.spacecraft.cluster.model_copy(update={"wheels": wheels})
+    return s.model_copy(
+        update={
+            "name": "somov-ge4-scan-flex",
+            "description": "Seed 000 §5 route with flexible modes (eq 1) and quantised wheel torques (eq 3)",
+            "spacecraft": s.spacecraft.model_copy(update={"cluster": cluster, "flex_modes": modes}),
+        }
+    )
+
+
 SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "peer-basilisk-rw4": peer_basilisk_rw4,
     "somov-ge4-scan": somov_ge4_scan,
     "aist-scheduled-turn": aist_scheduled_turn,
     "song-table1": song_table1,
     "somov-detumble-to-scan": somov_detumble_to_scan,
+    "somov-ge4-scan-flex": somov_ge4_scan_flex,
+    "song-components": song_components,
 }
 
 

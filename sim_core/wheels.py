@@ -58,6 +58,7 @@ __all__ = [
     "motor_current_derivative_1",
     "motor_current_step",
     "motor_current_step_1",
+    "driven_motor_torque_1",
     "motor_torque",
     "speed_loop_torque",
     "speed_loop_torque_1",
@@ -303,6 +304,33 @@ def motor_current_step_1(
     i_inf = (voltage_v - back_emf_v_s * speed_rad_s) / resistance_ohm
     current_next_a: npt.NDArray[np.float64] = i_inf + (current_a - i_inf) * decay
     return current_next_a
+
+
+@njit(cache=True)
+def driven_motor_torque_1(
+    current_a: np.ndarray,
+    torque_cmd_nm: np.ndarray,
+    speed_rad_s: np.ndarray,
+    dt: float,
+    inductance_h: float,
+    resistance_ohm: float,
+    torque_constant_nm_a: float,
+    back_emf_v_s: float,
+    max_voltage_v: float,
+) -> np.ndarray:
+    """Motor torque K_m i after dt of a voltage-limited driver (seed 002 eq 2–3); advances ``current_a`` in place.
+
+    The driver feeds forward the current the command needs and the back-EMF, u = R M_c/K_m + K_e Ω, clipped to
+    ±max_voltage_v; so the motor delivers M_c while |u| fits, and at most K_m (V_max − K_e Ω)/R (for Ω > 0) when
+    the back-EMF eats the supply."""
+    n = torque_cmd_nm.shape[0]
+    voltage = np.empty(n)
+    for p in range(n):
+        u = resistance_ohm * torque_cmd_nm[p] / torque_constant_nm_a + back_emf_v_s * speed_rad_s[p]
+        voltage[p] = min(max(u, -max_voltage_v), max_voltage_v)
+    current_a[:] = motor_current_step_1(current_a, voltage, speed_rad_s, dt, inductance_h, resistance_ohm, back_emf_v_s)
+    out: np.ndarray = torque_constant_nm_a * current_a
+    return out
 
 
 @njit(cache=True)
