@@ -128,7 +128,7 @@ RESULT_FILE = {"schema": {"type": "string", "format": "binary"}}
             "scenario.json as such, trajectory.npz and trajectory.parquet as application/octet-stream.",
             "content": {
                 "text/csv": RESULT_FILE,
-                "application/json": RESULT_FILE,
+                "application/json": {"schema": {"type": "object"}},  # summary.json, scenario.json
                 "application/octet-stream": RESULT_FILE,
             },
         }
