@@ -301,6 +301,7 @@ def test_exported_members_are_the_documented_surface() -> None:
             "upgrade",
             "IngestResult",
             "Gap",
+            "PendingUpload",
             "UploadRecord",
             "AlarmRecord",
             "AlarmEventRecord",
