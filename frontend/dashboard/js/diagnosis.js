@@ -64,6 +64,7 @@ export async function showDiagnosis(id) {
     pollTimer = setTimeout(() => showDiagnosis(id), POLL_MS);
     return d;
   }
+  loadDiagnoses().catch((err) => fill(box, el("p", { class: "error" }, errorText(err))));  // the list shows it done
   if (d.status === "failed") {
     fill(box, head, el("p", { class: "error" }, d.error));
     return d;
