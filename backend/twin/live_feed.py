@@ -264,7 +264,10 @@ class ArchiveWindows:
             raise ValueError(f"from: {self._satellite} has no attitude mapping (no live twin)")
         window = self._read(recent["mapping"], int(t0_unix_s * NS_PER_S), int(t1_unix_s * NS_PER_S))
         state = self._twins.state(self._satellite) or {}
-        frozen = _ArchivedTwin(self._satellite, window, {"model_note": state.get("model_note")})
+        note = state.get("model_note")
+        if note is None and window["twin_t_ns"].size < 2:  # archived before the twin's attitude was, or no twin flew
+            note = "no twin attitude archived in this window: the simulated side shows the actual attitude"
+        frozen = _ArchivedTwin(self._satellite, window, {"model_note": note})
         try:
             return LiveFeed(frozen, self._satellite, self._alarms)
         except ValueError:

@@ -41,6 +41,18 @@ def test_a_past_window_replays_the_archived_telemetry_and_the_archived_twin(
     assert _same_attitude(feed.attitude_simulated(recent["twin_t_ns"][flown] / NS_PER_S), recent["twin_q_ib"][flown])
     window = feed.window(start, end)
     assert np.nanmax(window.error_angle_rad) > 0.0 and window.wheel_speed_rad_s.shape[1] == 4
+    assert not any("no twin attitude" in a for a in feed.active_alarms(end))
+
+
+def test_a_window_without_an_archived_twin_says_so(windows: ArchiveWindows, monkeypatch) -> None:
+    from backend.twin import live
+
+    monkeypatch.setattr(live, "TWIN_ATTITUDE_PARAMETERS", ("not_archived_0", "a", "b", "c"))  # an older archive
+    t0, t1 = windows.archive_span_unix_s()
+    feed = windows.window_feed(t0, t1)
+    assert "no twin attitude archived in this window" in feed.active_alarms(t1)[0]
+    t = np.linspace(t0, t1, 7)
+    assert _same_attitude(feed.attitude_simulated(t), feed.attitude_actual(t))
 
 
 def test_loading_is_bounded_by_the_one_downsampler(windows: ArchiveWindows, monkeypatch) -> None:
