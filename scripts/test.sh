@@ -92,5 +92,10 @@ say "installing the project and its test extra into .venv"
 .venv/bin/python -m pip install -q -e '.[test]'
 
 [ -n "${ACS_TWIN_TEST_SETUP_ONLY:-}" ] && exit 0
+# Compile the numba kernels once, before the two test workers start: cold, each worker would compile the
+# closed loop itself (minutes of CPU each, past pytest's per-test timeout on a loaded machine) and two
+# processes writing one cache entry at once can fail to load it.
+say "compiling the kernels into numba's cache (acs-twin warm)"
+.venv/bin/acs-twin warm >&2
 say "running pytest (PostgreSQL: $ACS_TWIN_TEST_POSTGRES_URL)"
 .venv/bin/python -m pytest -n 2 --dist loadfile "$@"
