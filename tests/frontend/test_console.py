@@ -400,10 +400,12 @@ def test_an_embedded_monitor_behind_the_token_gate_opens_with_the_dashboard_toke
     try:
         element = page.wait_for_selector("#monitors figure[data-role='actual'] iframe", timeout=LOAD_MS)
         element.scroll_into_view_if_needed()  # chromium does not animate an off-screen cross-origin frame
-        frame = element.content_frame()
         # the frame's viser WebSocket came through the gate (cookie from the dashboard's token): a viewer of its own
         _wait_for(lambda: len(handles.viewers.get("actual", {})) == 1, PAINT_TIMEOUT_S, "the embedded monitor")
-        assert frame.url == f"http://127.0.0.1:{console['viewer_port']}/"  # the gate moved the token into a cookie
+        gate_url = f"http://127.0.0.1:{console['viewer_port']}/"  # the gate moved the token into a cookie
+        # looked up now, not before the wait: the gate's redirect replaces the frame the element first held
+        frame = next((f for f in page.frames if f.url == gate_url), None)
+        assert frame is not None, [f.url for f in page.frames]
         assert "Software WebGL" in frame.evaluate("document.body.innerText")  # viser's own page, not a refusal
     finally:
         page.close()

@@ -127,6 +127,8 @@ def test_a_viewer_replays_a_past_window_of_the_archive_while_another_stays_live(
             2.0, abs=1e-3
         )
         assert _displayed_utc(watcher) == live_end
+        # the click toggles the box the browser shows: wait until it shows replay (off), or the click turns it off
+        _wait_for(lambda: not replayer.get_by_label("Live follow").is_checked(), 10.0, "live follow shown off")
         replayer.get_by_text("Live follow").click()  # back to live
         _wait_for(lambda: _displayed_utc(replayer) == live_end, 30.0, "the viewer back on the live feed")
         assert not any(v.replaying_window for v in handles.all_viewers())
