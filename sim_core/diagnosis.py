@@ -39,7 +39,6 @@ import numpy.typing as npt
 
 from sim_core import fault_detection as fd
 from sim_core.scenario import FaultSpec, Scenario
-from sim_core.twin_replay import fault_specs, replay_scores
 
 __all__ = [
     "MIN_SAMPLES",
@@ -692,6 +691,8 @@ def _replayed(
 ) -> list[Hypothesis]:
     """Add the twin replay's evidence (commands and attitude, onset re-estimated on a common coarse-then-fine
     grid) to the top wheel hypotheses and re-rank (:mod:`sim_core.twin_replay`)."""
+    from sim_core.twin_replay import fault_specs  # the engine's kernels: loaded by a replay, not by an import
+
     t = obs.t_s
     chosen = [h for h in hyps if h.onset_s is not None and fault_specs(h.fault, h.wheel, 0.0, h.magnitude)][:REPLAYED]
     if not chosen:
@@ -739,6 +740,8 @@ def _replay_grid(
     flyer: Callable[[Scenario], object] | None,
 ) -> np.ndarray:
     """Replay log-likelihood (hypotheses × onsets) relative to the no-fault variant."""
+    from sim_core.twin_replay import fault_specs, replay_scores
+
     t = obs.t_s
     fdir = scenario.fdir or (obs.wheel_isolated is not None and bool(np.any(obs.wheel_isolated[start:stop] > 0)))
     scenario = scenario.model_copy(update={"fdir": fdir})

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim_core import frames, orbit, quaternion, sensors
-from sim_core.engine import simulate
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
 from telemetry.ccsds import NS_PER_S
 from telemetry.dictionary import parse_utc_ns
@@ -247,6 +246,8 @@ def rank_hypotheses(
     The mismatch unit of wheel speeds is the tachometer count of the dictionary (0.25 rpm); of the attitude,
     the star tracker's σ: the twin's true attitude against the telemetered estimate.
     """
+    from sim_core.engine import simulate  # the engine's kernels: loaded by a fit, not by an import
+
     if not hypotheses:
         raise ValueError("hypotheses: give at least one (name -> fault list), e.g. {'nominal': []}")
     twin = aligned_scenario(base, track, t_align_utc_ns, duration_s)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -68,3 +70,11 @@ def test_backend_top_level_stays_small():
 def test_every_room_is_a_package():
     rooms = [d for d in BACKEND.iterdir() if d.is_dir() and any(d.glob("*.py"))]
     assert all((room / "__init__.py").exists() for room in rooms), rooms
+
+
+def test_the_server_starts_without_loading_the_flight_engine():
+    """Importing the app loads no sim_core.engine (its numba kernels are ~60 % of the import): a simulation,
+    a diagnosis or a live twin loads it when it first flies."""
+    probe = "import sys, backend.app; print('sim_core.engine' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stderr

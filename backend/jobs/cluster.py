@@ -28,7 +28,6 @@ from typing import Any, TypeVar
 import numpy as np
 from distributed import WorkerPlugin
 
-from sim_core import engine
 from sim_core.scenario import Scenario
 from sim_core.trajectory import Trajectory
 
@@ -60,7 +59,7 @@ def warm_engine() -> float:
 
     start = time.perf_counter()
     s = scenario_library.get("peer-basilisk-rw4").model_copy(update={"duration_s": 2.0})
-    engine.simulate(Scenario.model_validate(s.model_dump()))
+    _simulate(Scenario.model_validate(s.model_dump()))
     return time.perf_counter() - start
 
 
@@ -190,7 +189,9 @@ def merge_trajectories(parts: Sequence[Trajectory]) -> Trajectory:
 
 
 def _simulate(s: Scenario) -> Trajectory:
-    return engine.simulate(s)
+    from sim_core.engine import simulate  # numba kernels: imported where a case is flown, not with the server
+
+    return simulate(s)
 
 
 def fly(client: Any, s: Scenario) -> Trajectory:

@@ -22,7 +22,6 @@ import numpy as np
 from backend.jobs import cluster
 from backend.jobs.cluster import ServerCluster
 from backend.twin.diagnosis_repository import DiagnosisRepository
-from sim_core import engine
 from sim_core.diagnosis import (
     Diagnosis,
     Observations,
@@ -52,7 +51,9 @@ MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a fe
 
 def scenario_wheels(scenario: Scenario) -> WheelModel:
     """The cluster as the momentum balance needs it, from the scenario's spacecraft (seed 000 eq 1)."""
-    p = engine.plant_params(scenario)
+    from sim_core.engine import plant_params  # the engine's kernels: loaded by a diagnosis, not with the server
+
+    p = plant_params(scenario)
     limits = np.asarray(p.wheels.max_torque_nm), np.asarray(p.wheels.coulomb_nm)  # (n,) after WheelParams.__post_init__
     return wheel_model(p.wheel_axes_b, p.wheels.inertia_kg_m2, *limits, scenario.control_dt_s)
 
