@@ -13,8 +13,15 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # imported where used: `serve` binds its ports before the server's heavy imports
+    import uvicorn
+
+    from backend.core.settings import Settings
+    from backend.services import Services
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +58,7 @@ def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def first_admin_token(services: Any) -> str | None:
+def first_admin_token(services: Services) -> str | None:
     """Issue an admin token when none is active (first start); the plain token, else None."""
     from backend.core.auth import Role
 
@@ -66,7 +73,7 @@ HIDDEN_FAULTS = ["wheel:2:failure@1500"]  # the demo satellite's secret: found f
 DEMO_FLIGHT_S = 5801.0  # one orbit of the demo satellite, so that the hidden fault does happen
 
 
-def start_emulator(settings: Any, scenario: str, telemetry_port: int | None) -> subprocess.Popen | None:
+def start_emulator(settings: Settings, scenario: str, telemetry_port: int | None) -> subprocess.Popen[bytes] | None:
     """The demo satellite (``acs-twin emulate``) streaming into the live listener, logging to data_dir."""
     from backend.core.processes import spawn_owned
 
@@ -131,7 +138,7 @@ def _port_message(what: str, host: str, port: int, knob: str, exc: OSError) -> s
     )
 
 
-def _owned_server(config: Any, on_started: Callable[[], None]) -> Any:
+def _owned_server(config: uvicorn.Config, on_started: Callable[[], None]) -> uvicorn.Server:
     """uvicorn's server minus its re-raise of SIGTERM/SIGINT after shutdown (which killed the process before
     ``serve`` could stop its children); ``on_started`` runs once the server listens."""
     import uvicorn
@@ -157,6 +164,14 @@ def _owned_server(config: Any, on_started: Callable[[], None]) -> Any:
     return OwnedServer(config)
 
 
+@dataclass
+class _Children:
+    """What ``serve`` started beside the server and stops when it stops."""
+
+    emulator: subprocess.Popen[bytes] | None = None  # the demo satellite
+    twin: threading.Thread | None = None  # the demo's 3D monitors (backend.twin.demo_twin)
+
+
 def run(args: argparse.Namespace) -> int:
     """Build the app from Settings, serve until SIGTERM/SIGINT; children stop on exit.
 
@@ -170,20 +185,20 @@ def run(args: argparse.Namespace) -> int:
     api_socket = _bind_api_socket(settings.host, settings.port)
     if settings.live_enabled:
         _check_port_free(settings.host, settings.telemetry_port)
-    children: dict[str, Any] = {}
-    if not args.no_emulator and (emulator := start_emulator(settings, args.emulator_scenario, settings.telemetry_port)):
-        children["emulator"] = emulator
+    children = _Children()
+    if not args.no_emulator:
+        children.emulator = start_emulator(settings, args.emulator_scenario, settings.telemetry_port)
     stop = threading.Event()
     try:
-        config = _app_for(settings, args, "emulator" in children)
-        server = _owned_server(config, lambda: _on_started(config, settings, args, children, stop))
+        config, services = _app_for(settings, args, children.emulator is not None)
+        server = _owned_server(config, lambda: _on_started(services, settings, args, children, stop))
         server.run(sockets=[api_socket])
     finally:
         stop.set()
-        if "emulator" in children:
-            stop_owned(children["emulator"])
-        if "twin" in children:
-            children["twin"].join(5)
+        if children.emulator is not None:
+            stop_owned(children.emulator)
+        if children.twin is not None:
+            children.twin.join(5)
         api_socket.close()
     if not server.started:
         print("acs-twin serve: start-up failed (see above); no admin token was issued", file=sys.stderr)
@@ -192,34 +207,35 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _app_for(settings: Any, args: argparse.Namespace, demo: bool) -> Any:
-    """The app (heavy imports here); the demo satellite's route starts with the emulator's flight."""
+def _app_for(settings: Settings, args: argparse.Namespace, demo: bool) -> tuple[uvicorn.Config, Services]:
+    """The server's configuration and the app's services (heavy imports here); the demo satellite's route starts
+    with the emulator's flight."""
     import uvicorn
 
     from backend.app import create_app
 
     app = create_app(settings)
+    services: Services = app.state.services
     if demo:
-        app.state.services.twins.register_model(settings.live_satellite, args.emulator_scenario, None, from_run=True)
-    return uvicorn.Config(app, log_level="warning")
+        services.twins.register_model(settings.live_satellite, args.emulator_scenario, None, from_run=True)
+    return uvicorn.Config(app, log_level="warning"), services
 
 
 def _on_started(
-    app_config: Any, settings: Any, args: argparse.Namespace, children: dict, stop: threading.Event
+    services: Services, settings: Settings, args: argparse.Namespace, children: _Children, stop: threading.Event
 ) -> None:
     """Once the server listens: URLs and the one-time admin token (issued only now), the demo's monitors."""
-    services = app_config.app.state.services
     _announce(settings, services)
-    if "emulator" in children:
+    if children.emulator is not None:
         print(
             f"  emulator  demo satellite {settings.live_satellite} ({args.emulator_scenario}) -> "
             f"tcp://{settings.host}:{services.telemetry.live_port}, log {settings.data_dir / 'emulator.log'}"
         )
-        children["twin"] = start_demo_twin(services, settings, args.emulator_scenario, stop)
+        children.twin = start_demo_twin(services, settings, args.emulator_scenario, stop)
     print(flush=True)
 
 
-def _announce(settings: Any, services: Any) -> None:
+def _announce(settings: Settings, services: Services) -> None:
     """Print the URLs and, on first start, the admin token."""
     token = first_admin_token(services)
     base = f"http://{settings.host}:{settings.port}"
@@ -233,7 +249,7 @@ def _announce(settings: Any, services: Any) -> None:
         print("  auth DISABLED: every caller is admin")
 
 
-def start_demo_twin(services: Any, settings: Any, scenario: str, stop: threading.Event) -> threading.Thread:
+def start_demo_twin(services: Services, settings: Settings, scenario: str, stop: threading.Event) -> threading.Thread:
     """Thread: the 3D monitors on the demo satellite's live twin once its first samples arrived (demo_twin)."""
     from backend.app import monitor_urls
     from backend.twin.demo_twin import run_demo_twin

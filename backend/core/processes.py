@@ -17,8 +17,9 @@ import subprocess
 import sys
 import threading
 import time
+from multiprocessing.process import BaseProcess
 from pathlib import Path
-from typing import IO, Any
+from typing import IO
 
 __all__ = ["PARENT_ENV", "become_owned_child", "die_with_parent", "port_holder", "spawn_owned", "stop_owned"]
 
@@ -56,7 +57,7 @@ def become_owned_child() -> None:
         die_with_parent(parent.pid)
 
 
-def spawn_owned(command: list[str], log: IO[bytes]) -> subprocess.Popen:
+def spawn_owned(command: list[str], log: IO[bytes]) -> subprocess.Popen[bytes]:
     """Start ``command`` in its own session, output to ``log``, told to die with this process."""
     env = {**os.environ, PARENT_ENV: str(os.getpid())}
     return subprocess.Popen(
@@ -64,7 +65,7 @@ def spawn_owned(command: list[str], log: IO[bytes]) -> subprocess.Popen:
     )
 
 
-def stop_owned(process: subprocess.Popen | Any, grace_s: float = STOP_GRACE_S) -> None:
+def stop_owned(process: subprocess.Popen[bytes] | BaseProcess, grace_s: float = STOP_GRACE_S) -> None:
     """SIGTERM the child's process group, wait ``grace_s``, then SIGKILL what is left of the group."""
     pid = process.pid
     if pid is None:
@@ -77,7 +78,7 @@ def stop_owned(process: subprocess.Popen | Any, grace_s: float = STOP_GRACE_S) -
         _wait(process, grace_s)
 
 
-def _wait(process: Any, timeout_s: float) -> bool:
+def _wait(process: subprocess.Popen[bytes] | BaseProcess, timeout_s: float) -> bool:
     """True once the child has exited (and is reaped), False after ``timeout_s``."""
     if isinstance(process, subprocess.Popen):
         with contextlib.suppress(subprocess.TimeoutExpired):

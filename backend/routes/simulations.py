@@ -13,6 +13,7 @@ from fastapi.responses import FileResponse
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.schemas import FilePublic, JobAccepted, JobPublic, ScenarioNames, SeriesPublic
+from backend.services import Services
 from telemetry.downsampling import minmax_indices
 
 router = APIRouter(tags=["simulations"], responses=ERROR_RESPONSES)
@@ -39,7 +40,7 @@ SCENARIO_EXAMPLES: dict[str, Example] = {
 }
 
 
-def _job(services: Any, job_id: str) -> JobPublic:
+def _job(services: Services, job_id: str) -> JobPublic:
     row = services.job_repo.get(job_id)
     if row is None:
         raise ApiError(404, f"no simulation job {job_id!r}", "id")
@@ -95,7 +96,7 @@ def cancel_simulation(job_id: str, services: ServicesDep, principal: OperatorDep
     return _job(services, job_id)
 
 
-def _result_dir(services: Any, job_id: str) -> Path:
+def _result_dir(services: Services, job_id: str) -> Path:
     job = _job(services, job_id)
     if job.status != "succeeded":
         raise ApiError(409, f"job {job_id} is {job.status}: results exist once it succeeded", "id")
