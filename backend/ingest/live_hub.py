@@ -12,9 +12,9 @@ from __future__ import annotations
 import threading
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
-__all__ = ["LiveHub", "Subscription", "TOPIC_PREFIXES"]
+__all__ = ["LiveHub", "Publisher", "Subscription", "TOPIC_PREFIXES"]
 
 TOPIC_PREFIXES = ("parameters/", "alarms", "twin", "archive")
 
@@ -53,6 +53,14 @@ class Subscription:
         for _ in range(len(self.pending)):
             items.append(self.pending.popleft())
         return items
+
+
+class Publisher(Protocol):
+    """What a producer of live items needs of the hub (:class:`LiveHub` is one)."""
+
+    def publish(self, topic: str, data: Any) -> None: ...
+
+    def wants_any(self, topic: str) -> bool: ...
 
 
 class LiveHub:

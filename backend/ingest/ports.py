@@ -18,6 +18,7 @@ from telemetry.archive.records import (
     AlarmRecord,
     IngestResult,
     PassRecord,
+    PendingUpload,
     StationRecord,
     UploadRecord,
 )
@@ -69,6 +70,8 @@ class TelemetryArchive(Protocol):
         sha256: str | None = None,
         limits: Mapping[str, LimitSet] | None = None,
     ) -> IngestResult: ...
+
+    def ingest_many(self, uploads: Sequence[PendingUpload]) -> list[IngestResult]: ...
 
     def parameters(self, satellite: str) -> dict[str, int]: ...
 

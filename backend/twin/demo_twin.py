@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import threading
 from datetime import UTC, datetime
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from backend.services import Services
     from frontend.monitors import MonitorHandles
+    from telemetry.archive.records import AlarmRecord
 
 __all__ = ["run_demo_twin", "POLL_S"]
 
@@ -39,7 +40,7 @@ def run_demo_twin(
     satellite = services.settings.live_satellite
     twins = services.twins
 
-    def alarms() -> list[Any]:
+    def alarms() -> list[AlarmRecord]:
         archive = services.telemetry.opened_archive()
         try:
             return [] if archive is None else list(archive.alarms(satellite))

@@ -40,7 +40,7 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -57,7 +57,14 @@ from telemetry.attitude_mapping import (
     shipped_mapping,
 )
 from telemetry.housekeeping import calibration_step
+from telemetry.ingest_report import SampleBatch
 from telemetry.limits import LimitSet
+
+if TYPE_CHECKING:
+    from backend.ingest.live_hub import Publisher
+    from backend.ingest.ports import TelemetryArchive
+    from telemetry.archive import PendingUpload
+    from telemetry.dictionary import Dictionary
 
 __all__ = [
     "ANOMALY_PARAMETER",
@@ -267,7 +274,7 @@ class LiveTwin:
         log.info("twin %s: %s", self.state.satellite, message)
 
     # --- input -----------------------------------------------------------------------------------
-    def _columns(self, batch: Any, names: Sequence[str]) -> dict[str, np.ndarray] | None:
+    def _columns(self, batch: SampleBatch, names: Sequence[str]) -> dict[str, np.ndarray] | None:
         missing = [n for n in names if n not in batch.values]
         if missing:
             self.report(
@@ -286,7 +293,7 @@ class LiveTwin:
         if self._epoch_from_run:
             self._epoch_ns = None
 
-    def _add_gps(self, batch: Any) -> None:
+    def _add_gps(self, batch: SampleBatch) -> None:
         cols = self._columns(batch, self.mapping.orbit_parameters())
         if cols is None or not len(batch.t_utc_ns):
             return
@@ -304,7 +311,7 @@ class LiveTwin:
             self._gps_t = self._gps_t[first:]
             self._gps = {n: c[first:] for n, c in self._gps.items()}
 
-    def _add_hk(self, batch: Any) -> bool:
+    def _add_hk(self, batch: SampleBatch) -> bool:
         """Append the batch's new samples (checked); True if the twin had to restart (all buffered samples new)."""
         cols = self._columns(batch, self.mapping.hk_parameters())
         t = np.asarray(batch.t_utc_ns, np.int64)
@@ -342,7 +349,7 @@ class LiveTwin:
         self._hk = {n: c[first:] for n, c in self._hk.items()}
         return restarted
 
-    def observe(self, batches: Sequence[Any], arrived_unix_s: float) -> dict[str, np.ndarray] | None:
+    def observe(self, batches: Sequence[SampleBatch], arrived_unix_s: float) -> dict[str, np.ndarray] | None:
         """Take one committed set of decoded batches; the residual columns computed (with ``t_utc_ns``), or None."""
         for batch in batches:
             if self.mapping.orbit_packet and batch.packet == self.mapping.orbit_packet:
@@ -608,9 +615,9 @@ class LiveTwins:
 
     def __init__(
         self,
-        archive: Callable[[], Any],
-        hub: Any,
-        dictionary: Callable[[str], Any],
+        archive: Callable[[], TelemetryArchive | None],
+        hub: Publisher,
+        dictionary: Callable[[str], Dictionary],
         on_archived: Callable[[str, int, int], None] | None = None,
         mapping_folders: Sequence[Path] = (),
         clock: Callable[[], float] = time.time,
@@ -642,7 +649,7 @@ class LiveTwins:
             self._models[satellite] = (scenario, epoch_ns, from_run)
             self._twins.pop(satellite, None)
 
-    def submit(self, satellite: str, dictionary_name: str, batches: Sequence[Any]) -> None:
+    def submit(self, satellite: str, dictionary_name: str, batches: Sequence[SampleBatch]) -> None:
         """Queue committed batches of ``satellite`` for its twin (never waits)."""
         self._inbox.put((satellite, dictionary_name, list(batches), self._clock()))
 
@@ -744,7 +751,7 @@ class LiveTwins:
                 return row["first_t_ns"]
         return None
 
-    def _process(self, satellite: str, dictionary_name: str, batches: list[Any], arrived: float) -> None:
+    def _process(self, satellite: str, dictionary_name: str, batches: list[SampleBatch], arrived: float) -> None:
         try:
             twin = self._twin(satellite, dictionary_name)
         except ValueError as exc:
@@ -871,7 +878,7 @@ class LiveTwins:
                 self._on_archived(satellite, t0, t1)
 
     @staticmethod
-    def _write_one(archive: Any, upload: Any) -> bool:
+    def _write_one(archive: TelemetryArchive, upload: PendingUpload) -> bool:
         try:
             archive.ingest_many([upload])
         except Exception:

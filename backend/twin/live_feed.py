@@ -17,7 +17,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -34,7 +34,11 @@ from telemetry.actual_state import ActualTrack
 from telemetry.attitude_mapping import AttitudeMapping, actual_attitude
 from telemetry.downsampling import minmax_indices
 
-__all__ = ["ArchiveWindows", "LiveFeed", "MAX_WINDOW_S", "MAX_WINDOW_SAMPLES"]
+if TYPE_CHECKING:
+    from backend.ingest.ports import TelemetryArchive
+    from telemetry.archive.records import AlarmRecord
+
+__all__ = ["ArchiveWindows", "LiveFeed", "MAX_WINDOW_S", "MAX_WINDOW_SAMPLES", "TwinSamples"]
 
 NS_PER_S = 1e9
 SNAPSHOT_S = 0.5
@@ -61,14 +65,23 @@ def _orbit_table(track: ActualTrack) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return t, r, v
 
 
+class TwinSamples(Protocol):
+    """What the feed asks of the twins: a satellite's recent samples and public state (backend.twin.live.LiveTwins,
+    or a window of the archive frozen)."""
+
+    def recent(self, satellite: str) -> dict[str, Any] | None: ...
+
+    def state(self, satellite: str) -> dict[str, Any] | None: ...
+
+
 class LiveFeed:
     """TwinFeed of a satellite's live twin (thread-safe: the render loop and the twin worker run apart)."""
 
     def __init__(
         self,
-        twins: Any,
+        twins: TwinSamples,
         satellite: str,
-        alarms: Callable[[], Sequence[Any]] = tuple,
+        alarms: Callable[[], Sequence[AlarmRecord]] = tuple,
         stations: Sequence[GroundStation] = DEFAULT_STATIONS,
         clock: Callable[[], float] = time.time,
     ) -> None:
@@ -220,10 +233,10 @@ class ArchiveWindows:
 
     def __init__(
         self,
-        archive: Callable[[], Any],
-        twins: Any,
+        archive: Callable[[], TelemetryArchive | None],
+        twins: TwinSamples,
         satellite: str,
-        alarms: Callable[[], Sequence[Any]] = tuple,
+        alarms: Callable[[], Sequence[AlarmRecord]] = tuple,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._archive, self._twins, self._satellite, self._alarms, self._clock = (
