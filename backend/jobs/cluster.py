@@ -23,13 +23,16 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable, Sequence
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 from distributed import WorkerPlugin
 
 from sim_core.scenario import Scenario
 from sim_core.trajectory import Trajectory
+
+if TYPE_CHECKING:  # distributed ships its types (py.typed): the seam is typed by the library itself
+    from distributed import Client, Worker
 
 __all__ = [
     "SCHEDULER_ENV",
@@ -49,6 +52,7 @@ __all__ = [
 SCHEDULER_ENV = "ACS_TWIN_DASK_SCHEDULER"
 SEED_STRIDE = 7919  # sim_core.engine.simulate: variant i draws from seed·1000 + 7919 i + seed_offset
 T = TypeVar("T")
+Case = TypeVar("Case")
 
 
 def warm_engine() -> float:
@@ -71,7 +75,7 @@ class EngineWorker(WorkerPlugin):
     def __init__(self, owned: bool, warm: bool) -> None:
         self.owned, self.warm = owned, warm
 
-    def setup(self, worker: Any) -> None:
+    def setup(self, worker: Worker) -> None:
         """Own process group and death with the parent (owned workers); the kernels compiled in a thread of their
         own, so the worker takes tasks at once (an engine task meanwhile waits on numba's compile lock; a cold
         compile takes minutes on a loaded machine, and a rigid-spin job needs none)."""
@@ -88,7 +92,7 @@ def local_workers() -> int:
     return max(1, min(os.cpu_count() or 1, 4))
 
 
-def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm: bool = True) -> Any:
+def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm: bool = True) -> Client:
     """A ``distributed.Client``: to ``scheduler`` (or $ACS_TWIN_DASK_SCHEDULER), else a new LocalCluster."""
     from distributed import Client, LocalCluster
 
@@ -111,7 +115,7 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm
     return client
 
 
-def close_client(client: Any) -> None:
+def close_client(client: Client) -> None:
     """Close the client and, when it made its own LocalCluster, the cluster's worker processes."""
     cluster = getattr(client, "cluster", None)
     client.close()
@@ -124,12 +128,12 @@ class ServerCluster:
 
     def __init__(self, scheduler: str | None, n_workers: int) -> None:
         self._scheduler, self._n_workers = scheduler, n_workers
-        self._client: Any = None
+        self._client: Client | None = None
         self._error: str | None = None
         self._closed = False
         self._lock = threading.Lock()
 
-    def client(self) -> Any:
+    def client(self) -> Client:
         """The connected client (connects on the first call); RuntimeError naming the cause when it cannot."""
         with self._lock:
             if self._closed:
@@ -145,7 +149,7 @@ class ServerCluster:
             return self._client
 
     @property
-    def connected(self) -> Any:
+    def connected(self) -> Client | None:
         """The client if connected, else None (never connects)."""
         return self._client
 
@@ -194,7 +198,7 @@ def _simulate(s: Scenario) -> Trajectory:
     return simulate(s)
 
 
-def fly(client: Any, s: Scenario) -> Trajectory:
+def fly(client: Client, s: Scenario) -> Trajectory:
     """:func:`sim_core.engine.simulate` of the batch with its variants spread over the cluster's workers."""
     n_workers = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
     chunks = split_variants(s, n_workers)
@@ -203,11 +207,11 @@ def fly(client: Any, s: Scenario) -> Trajectory:
     return merge_trajectories(client.gather(client.map(_simulate, chunks, pure=False)))
 
 
-def flyer(client: Any) -> Callable[[Scenario], Trajectory]:
+def flyer(client: Client) -> Callable[[Scenario], Trajectory]:
     """``fly`` bound to a client, for hooks that take how a batch is flown (diagnosis replay, what-if)."""
     return lambda s: fly(client, s)
 
 
-def map_cases(client: Any, fn: Callable[[Any], T], cases: Sequence[Any]) -> list[T]:
+def map_cases(client: Client, fn: Callable[[Case], T], cases: Sequence[Case]) -> list[T]:
     """``[fn(c) for c in cases]`` computed on the cluster, results in the order of ``cases``."""
     return list(client.gather(client.map(fn, list(cases), pure=False)))

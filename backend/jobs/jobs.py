@@ -21,13 +21,24 @@ import traceback
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from backend.core.errors import ApiError
 from backend.core.settings import Settings
 from backend.jobs.cluster import ServerCluster
 from backend.jobs.job_repository import JobRepository
-from backend.jobs.simulators import PROGRESS_TOPIC, JobCancelled, cancel_event_name, run_job, validate_scenario
+from backend.jobs.simulators import (
+    PROGRESS_TOPIC,
+    JobCancelled,
+    JobCost,
+    JobOutput,
+    cancel_event_name,
+    run_job,
+    validate_scenario,
+)
+
+if TYPE_CHECKING:
+    from distributed import Client, Future
 
 __all__ = ["JobManager"]
 
@@ -41,7 +52,7 @@ class _Handle:
     body: dict[str, Any]
     options: dict[str, Any] = field(default_factory=dict)
     progress: float = 0.0
-    future: Any = None
+    future: Future[JobOutput] | None = None
     cancel_at: float | None = field(default=None)
 
     @property
@@ -105,7 +116,7 @@ class JobManager:
         self._queue.put(job_id)
         return job_id
 
-    def _check_limits(self, cost: Any) -> None:
+    def _check_limits(self, cost: JobCost) -> None:
         s = self._settings
         if cost.duration_s > s.max_sim_duration_s:
             raise ApiError(
@@ -157,14 +168,14 @@ class JobManager:
 
             Event(cancel_event_name(job_id), client=client).set()
 
-    def _on_progress(self, event: tuple[float, Any]) -> None:
+    def _on_progress(self, event: tuple[float, tuple[str, float]]) -> None:
         job_id, fraction = event[1]
         with self._lock:
             handle = self._active.get(job_id)
         if handle is not None:
             handle.progress = float(fraction)
 
-    def _client(self) -> Any:
+    def _client(self) -> Client:
         client = self._cluster.client()
         with self._lock:
             if not self._subscribed:
@@ -194,35 +205,36 @@ class JobManager:
         except RuntimeError as exc:
             self._repo.finish(job_id, "failed", error=str(exc))
             return
-        handle.future = client.submit(run_job, job_id, handle.body, handle.options, key=f"job-{job_id}", pure=False)
+        future = client.submit(run_job, job_id, handle.body, handle.options, key=f"job-{job_id}", pure=False)
+        handle.future = future
         if handle.cancelled:  # cancelled while the cluster was being connected
             self._request_cancel(job_id, handle)
-        self._supervise(job_id, handle, client)
+        self._supervise(job_id, handle, client, future)
         if self._stopping:  # recorded interrupted; the cluster is going away with the task
             return
-        self._record_outcome(job_id, handle.future, out)
+        self._record_outcome(job_id, future, out)
         from distributed import Event
 
         with contextlib.suppress(OSError):  # the scheduler forgets a cleared Event (unless it went away meanwhile)
             Event(cancel_event_name(job_id), client=client).clear()
 
-    def _supervise(self, job_id: str, handle: _Handle, client: Any) -> None:
+    def _supervise(self, job_id: str, handle: _Handle, client: Client, future: Future[JobOutput]) -> None:
         done = threading.Event()
-        handle.future.add_done_callback(lambda _: done.set())
+        future.add_done_callback(lambda _: done.set())
         last_persist = time.monotonic()
         restarted = False
         while not done.wait(WAIT_STEP_S) and not self._stopping:
             now = time.monotonic()
             overdue = handle.cancel_at is not None and now - handle.cancel_at > CANCEL_GRACE_S
             if overdue and not restarted and not self._stopping:
-                self._restart_worker_of(client, handle.future)
+                self._restart_worker_of(client, future)
                 restarted = True
             if now - last_persist > PROGRESS_PERSIST_S:
                 self._repo.set_progress(job_id, handle.progress)
                 last_persist = now
 
     @staticmethod
-    def _restart_worker_of(client: Any, future: Any) -> None:
+    def _restart_worker_of(client: Client, future: Future[JobOutput]) -> None:
         """Stop a task that ignores its cancel Event: release it, then restart the worker that runs it."""
         workers = [w for w, keys in client.processing().items() if future.key in keys]
         future.cancel()
@@ -230,7 +242,7 @@ class JobManager:
             with contextlib.suppress(OSError):  # the cluster went away meanwhile: nothing left to stop
                 client.restart_workers(workers, raise_for_error=False)
 
-    def _record_outcome(self, job_id: str, future: Any, out: Path) -> None:
+    def _record_outcome(self, job_id: str, future: Future[JobOutput], out: Path) -> None:
         if future.cancelled():
             self._repo.finish(job_id, "cancelled", error="cancelled on request")
             return

@@ -13,12 +13,16 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sim_core.scenario import Scenario
 
 __all__ = [
     "PROGRESS_TOPIC",
     "JobCancelled",
     "JobCost",
+    "JobOutput",
     "cancel_event_name",
     "library_names",
     "run_job",
@@ -26,6 +30,7 @@ __all__ = [
 ]
 
 FLOAT_BYTES = 8
+JobOutput = tuple[bytes, dict[str, Any]]  # what a job's task returns: trajectory.npz bytes, the summary (JSON)
 
 
 class JobCancelled(Exception):
@@ -52,7 +57,7 @@ def library_names() -> list[str]:
     return scenario_library.names()
 
 
-def _engine_scenario(body: dict[str, Any]) -> Any:
+def _engine_scenario(body: dict[str, Any]) -> Scenario:
     from sim_core import scenario_library
     from sim_core.scenario import Scenario, apply_overrides
 
@@ -72,7 +77,7 @@ def _engine_scenario(body: dict[str, Any]) -> Any:
 MAX_STEPS = 10**9  # dynamics steps of one job: far above any real scenario (one orbit at 0.01 s: 580,100)
 
 
-def _steps(scenario: Any, field: str) -> int:
+def _steps(scenario: Scenario, field: str) -> int:
     """``getattr(scenario, field) / dynamics_dt_s`` as a count (ValueError naming the field when not finite/too big)."""
     for name in ("duration_s", "dynamics_dt_s", "output_dt_s"):
         value = float(getattr(scenario, name))
@@ -84,7 +89,7 @@ def _steps(scenario: Any, field: str) -> int:
     return max(round(steps), 1)
 
 
-def _engine_cost(scenario: Any) -> JobCost:
+def _engine_cost(scenario: Scenario) -> JobCost:
     from sim_core.closed_loop import record_width
 
     n_out = -(-_steps(scenario, "duration_s") // _steps(scenario, "output_dt_s"))
@@ -176,7 +181,7 @@ def _rigid_spin_npz(body: dict[str, Any], link: _JobLink, out: Path) -> dict[str
     return trajectory.summary()
 
 
-def run_job(job_id: str, body: dict[str, Any], options: dict[str, Any] | None = None) -> tuple[bytes, dict[str, Any]]:
+def run_job(job_id: str, body: dict[str, Any], options: dict[str, Any] | None = None) -> JobOutput:
     """Dask task: simulate the job; its trajectory.npz bytes and summary (JobCancelled once cancelled).
 
     The server writes the files, so a worker on another machine needs no shared disk."""
