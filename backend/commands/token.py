@@ -15,7 +15,10 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from sqlalchemy.orm import Session, sessionmaker
 
 ROLES = ("viewer", "operator", "admin")
 
@@ -45,7 +48,7 @@ class _NoDatabase(Exception):
 
 
 @contextmanager
-def _sessions(args: argparse.Namespace) -> Iterator[Any]:
+def _sessions(args: argparse.Namespace) -> Iterator[sessionmaker[Session]]:
     """A session factory on the server's database; _NoDatabase (with the message) if there is none."""
     from pydantic import ValidationError
 

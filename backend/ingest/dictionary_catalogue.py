@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from backend.core.errors import ApiError
-from telemetry.dictionary import Dictionary
+from telemetry.dictionary import Dictionary, Limits
 
 __all__ = ["DICTIONARY_SUFFIXES", "DictionaryCatalogue"]
 
@@ -159,11 +159,11 @@ class DictionaryCatalogue:
         return described
 
 
-def _limits(limits: Any) -> dict[str, float | None]:
+def _limits(limits: Limits) -> dict[str, float | None]:
     return {k: getattr(limits, k) for k in ("yellow_low", "yellow_high", "red_low", "red_high")}
 
 
-def _entries(dictionary: Any) -> dict[tuple[str, int], dict[str, Any]]:
+def _entries(dictionary: Dictionary) -> dict[tuple[str, int], dict[str, Any]]:
     """(name, APID) -> JSON-ready entry of every raw and derived parameter of a dictionary."""
     entries = {}
     for apid, packet in dictionary.packets.items():

@@ -12,12 +12,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
 from backend.core.auth import Role
-from backend.ingest.live_hub import Subscription
+from backend.ingest.live_hub import LiveHub, Subscription
 
 router = APIRouter(tags=["live"])
 
@@ -47,7 +46,7 @@ async def _send_batches(websocket: WebSocket, sub: Subscription, period_s: float
             return
 
 
-async def _receive_commands(websocket: WebSocket, hub: Any, sub: Subscription) -> None:
+async def _receive_commands(websocket: WebSocket, hub: LiveHub, sub: Subscription) -> None:
     while True:
         message = await websocket.receive_json()
         try:

@@ -25,7 +25,7 @@ from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
-from backend.core.auth import Authenticator, Role
+from backend.core.auth import Authenticator, Principal, Role
 
 __all__ = ["COOKIE", "MonitorGate"]
 
@@ -203,7 +203,7 @@ class MonitorGate:
         head: bytes,
         reader: asyncio.StreamReader,
         writer: asyncio.StreamWriter,
-        principal: Any,
+        principal: Principal,
         private_port: int,
     ) -> None:
         try:
