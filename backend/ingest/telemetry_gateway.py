@@ -477,9 +477,20 @@ class TelemetryGateway:
             self._samples.store_series(satellite, name, generation, *whole)
         return _window_of(whole, t0_ns, t1_ns)
 
-    def window_result(self, satellite: str, what: str, t0_ns: int, t1_ns: int, compute: Callable[[], Result]) -> Result:
+    def window_result(
+        self,
+        satellite: str,
+        what: str,
+        t0_ns: int,
+        t1_ns: int,
+        compute: Callable[[], Result],
+        dictionary: str | None = None,
+    ) -> Result:
         """``compute()``, a result read from the archive window [t0_ns, t1_ns] of ``satellite`` and named ``what``
-        (including whatever else it depends on), kept until an ingest overlaps the window; failures are not kept."""
+        (including whatever else it depends on), kept until an ingest overlaps the window; failures are not kept.
+        A result decoded with ``dictionary`` is kept per version of it: an upload under the same name recomputes."""
+        if dictionary is not None:
+            what = f"{what} decoded with {dictionary} v{self.dictionaries.version(dictionary)}"
         key = (satellite, what, t0_ns, t1_ns)
         hit = self._samples.computed(key)
         if hit is not None:

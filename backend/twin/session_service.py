@@ -147,7 +147,8 @@ def session_feed(services: Services, session_id: str) -> SessionFeed:
 
 def _all_residuals(services: Services, row: TwinSessionRow) -> tuple[list[str], list[Residuals]]:
     """Every variant's residuals, computed once (archive window read and decoded) and kept until telemetry
-    ingested into the session's window changes them (the twin's trajectory never changes once it succeeded)."""
+    ingested into the session's window or a new version of its dictionary changes them (the twin's trajectory
+    never changes once it succeeded)."""
 
     def compute() -> tuple[list[str], list[Residuals]]:
         track, npz = _finished_track(services, row, ": residuals once it succeeded")
@@ -155,8 +156,8 @@ def _all_residuals(services: Services, row: TwinSessionRow) -> tuple[list[str], 
         return names, [residuals(track, npz, row.align_utc_ns, v) for v in range(len(names))]
 
     t1 = row.align_utc_ns + int(row.duration_s * NS_PER_S)
-    what = f"twin-session residuals {row.id} {row.dictionary}"
-    return services.telemetry.window_result(row.satellite, what, row.align_utc_ns, t1, compute)
+    what = f"twin-session residuals {row.id}"
+    return services.telemetry.window_result(row.satellite, what, row.align_utc_ns, t1, compute, row.dictionary)
 
 
 def session_residuals(services: Services, session_id: str, variant: int, max_points: int) -> ResidualsPublic:

@@ -10,6 +10,7 @@ from backend.core.settings import Settings
 from backend.ingest.live_hub import LiveHub
 from backend.ingest.sample_cache import SampleCache
 from backend.ingest.telemetry_gateway import TelemetryGateway
+from telemetry.dictionary import SHIPPED
 
 KEY = ("SAT", "q", 100, 200, 1000)
 
@@ -73,3 +74,22 @@ def test_a_result_computed_across_an_overlapping_ingest_is_not_kept_one_elsewher
     cache.invalidate("SAT", 150, 160)  # an upload into the window lands meanwhile
     cache.store_computed(other, generation, "stale")
     assert cache.computed(other) is None and cache.computed(key) is None
+
+
+def test_a_result_decoded_with_a_dictionary_is_recomputed_once_the_dictionary_is_uploaded_again(
+    tmp_path: Path,
+) -> None:
+    gateway = TelemetryGateway(Settings(data_dir=tmp_path), LiveHub(16))
+    definition = (SHIPPED / "reference_satellite.yaml").read_bytes()
+    gateway.dictionaries.add("ops.yaml", definition, apid=None, time_code=None)
+    computed: list[int] = []
+
+    def compute() -> list[int]:
+        computed.append(len(computed))
+        return computed.copy()
+
+    first = gateway.window_result("SAT", "residuals of session s1", 100, 200, compute, dictionary="ops.yaml")
+    assert gateway.window_result("SAT", "residuals of session s1", 100, 200, compute, dictionary="ops.yaml") is first
+    gateway.dictionaries.add("ops.yaml", definition.replace(b"\n", b"\n\n", 1), apid=None, time_code=None)  # v2
+    assert gateway.window_result("SAT", "residuals of session s1", 100, 200, compute, dictionary="ops.yaml") == [0, 1]
+    assert computed == [0, 1]
