@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import cache
 from importlib.metadata import PackageNotFoundError, version
 
 from fastapi import APIRouter
@@ -13,7 +14,9 @@ from backend.schemas import Health
 router = APIRouter(tags=["health"])
 
 
+@cache
 def _version() -> str:
+    """The installed package's version, looked up once (a scan of every path entry's metadata: milliseconds)."""
     try:
         return version("acs-twin")
     except PackageNotFoundError:

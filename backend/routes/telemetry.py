@@ -6,13 +6,14 @@ import os
 import tempfile
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, BinaryIO, Literal
 
 from fastapi import APIRouter, Query, Request
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.ingest.telemetry_gateway import TelemetryGateway
 from backend.schemas import (
     SATELLITE_NAME,
     DictionaryNames,
@@ -35,6 +36,7 @@ BINARY_BODY = {
         },
     }
 }
+SPOOL_BLOCK_OCTETS = 4 * 2**20  # an uploaded body goes to disk in blocks of about this size, from a worker thread
 DEFINITION_BODY = {
     "requestBody": {
         "required": True,
@@ -59,26 +61,60 @@ async def read_limited(request: Request, max_bytes: int) -> bytes:
 
 
 async def spool_limited(request: Request, max_bytes: int, folder: Path) -> Path:
-    """The request body streamed to a new file in folder (413 naming max_upload_mb past max_bytes, 422 if empty)."""
+    """The request body streamed to a new file in folder (413 naming max_upload_mb past max_bytes, 422 if empty).
+
+    The event loop only gathers the body's chunks: every SPOOL_BLOCK_OCTETS of them go to disk in a worker
+    thread (the loop never waits on the disk), as the file is created and deleted there too.
+    """
     declared = request.headers.get("content-length")
     if declared and declared.isdigit() and int(declared) > max_bytes:
         raise ApiError(413, f"body of {int(declared)} bytes over max_upload_mb", "max_upload_mb")
-    folder.mkdir(parents=True, exist_ok=True)
-    handle, name = tempfile.mkstemp(prefix="upload-", suffix=".ccsds", dir=folder)
-    path, size = Path(name), 0
+    path = await run_in_threadpool(_new_spool_file, folder)
     try:
-        with os.fdopen(handle, "wb") as f:
-            async for chunk in request.stream():
-                size += len(chunk)
-                if size > max_bytes:
-                    raise ApiError(413, f"body over max_upload_mb ({max_bytes} bytes)", "max_upload_mb")
-                f.write(chunk)
+        with path.open("wb") as f:
+            size = await _spool_chunks(request, max_bytes, f)
         if size == 0:
             raise ApiError(422, "body: empty upload", "body")
     except BaseException:
         path.unlink(missing_ok=True)
         raise
     return path
+
+
+async def _spool_chunks(request: Request, max_bytes: int, f: BinaryIO) -> int:
+    """Octets of the body written to f, block by block from a worker thread; 413 past max_bytes."""
+    block: list[bytes] = []
+    size = in_block = 0
+    async for chunk in request.stream():
+        size += len(chunk)
+        if size > max_bytes:
+            raise ApiError(413, f"body over max_upload_mb ({max_bytes} bytes)", "max_upload_mb")
+        block.append(chunk)
+        in_block += len(chunk)
+        if in_block >= SPOOL_BLOCK_OCTETS:
+            await run_in_threadpool(f.writelines, block)
+            block, in_block = [], 0
+    await run_in_threadpool(f.writelines, block)
+    return size
+
+
+def _new_spool_file(folder: Path) -> Path:
+    """A new empty file in folder (made if missing) for a body being received."""
+    folder.mkdir(parents=True, exist_ok=True)
+    handle, name = tempfile.mkstemp(prefix="upload-", suffix=".ccsds", dir=folder)
+    os.close(handle)
+    return Path(name)
+
+
+def _ingest_spooled(
+    gateway: TelemetryGateway, satellite: str, path: Path, dictionary: str, source: str, uploaded_by: str
+) -> tuple[int, dict[str, Any]]:
+    """(octets, ingest report) of a spooled packet file decoded and archived, the file deleted after
+    (blocking: the decoder's work and the disk; call from a thread)."""
+    try:
+        return path.stat().st_size, gateway.ingest_packet_file(satellite, path, dictionary, source, uploaded_by)
+    finally:
+        path.unlink(missing_ok=True)
 
 
 def _parse_failure(exc: Exception, field: str) -> ApiError:
@@ -102,27 +138,25 @@ async def upload_telemetry(
 ) -> dict[str, Any]:
     """Decode, validate, archive (limits checked, duplicates dropped) and return the ingest report.
 
-    CCSDS packets stream to a file on disk as they arrive and decode chunk by chunk in a worker thread,
-    so neither memory nor the event loop follows the upload's size.
+    CCSDS packets stream to a file on disk as they arrive (written from a worker thread) and decode chunk by
+    chunk in the upload decoder process (or a worker thread for a small file), so neither memory nor the event
+    loop follows the upload's size.
     """
     gateway = services.telemetry
     max_bytes = int(services.settings.max_upload_mb * 1e6)
     if format == "ccsds":
         path = await spool_limited(request, max_bytes, services.settings.data_dir / "uploads")
-        try:
-            size = path.stat().st_size
-            report = await run_in_threadpool(
-                gateway.ingest_packet_file, satellite, path, dictionary, source, principal.name
-            )
-        finally:
-            path.unlink(missing_ok=True)
+        size, report = await run_in_threadpool(
+            _ingest_spooled, gateway, satellite, path, dictionary, source, principal.name
+        )
     else:
         data = await read_limited(request, max_bytes)
         size = len(data)
         report = await run_in_threadpool(
             gateway.ingest_ground_file, satellite, data, format, dictionary, source, principal.name
         )
-    services.audit.record(
+    await run_in_threadpool(
+        services.audit.record,
         principal.name,
         "telemetry.upload",
         f"satellite/{satellite}",
@@ -185,7 +219,8 @@ async def redecode_kept(
     report = await run_in_threadpool(
         services.telemetry.redecode, satellite, dictionary, tuple(sorted(set(apid))), principal.name
     )
-    services.audit.record(
+    await run_in_threadpool(
+        services.audit.record,
         principal.name,
         "telemetry.redecode",
         f"satellite/{satellite}",
@@ -236,7 +271,11 @@ async def upload_dictionary(
         raise
     except Exception as exc:  # a malformed XML/YAML file raises its parser's own errors
         raise _parse_failure(exc, "body") from exc
-    services.audit.record(
-        principal.name, "dictionary.upload", f"dictionary/{name}", {"bytes": len(data), "version": version}
+    await run_in_threadpool(
+        services.audit.record,
+        principal.name,
+        "dictionary.upload",
+        f"dictionary/{name}",
+        {"bytes": len(data), "version": version},
     )
     return {"name": name, "packets": {str(a): p.name for a, p in loaded.packets.items()}}
