@@ -48,8 +48,21 @@ __all__ = [
     "SatellitePublic",
     "TwinIssue",
     "LiveTwinPublic",
+    "PARQUET_MEDIA_TYPE",
+    "RESULT_FILE_MEDIA_TYPES",
+    "SamplesPublic",
+    "SatelliteCreate",
+    "ShelveRequest",
+    "StationCreate",
 ]
 
+PARQUET_MEDIA_TYPE = "application/vnd.apache.parquet"  # the media type registered for Apache Parquet
+RESULT_FILE_MEDIA_TYPES = {  # a job's result files by suffix; anything else as starlette guesses from the name
+    ".parquet": PARQUET_MEDIA_TYPE,
+    ".npz": "application/octet-stream",  # numpy's zip of arrays: no registered type of its own
+    ".csv": "text/csv",
+    ".json": "application/json",
+}
 SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)
 
 
@@ -462,3 +475,36 @@ class LiveTwinPublic(BaseModel):
     samples_compared: int
     note: str | None
     issues: list[TwinIssue] = Field(description="The newest bad-input findings.")
+
+
+class SamplesPublic(BaseModel):
+    """Samples of one parameter: UTC ns times and values, downsampled keeping bucket min/max."""
+
+    satellite: str
+    name: str
+    total_points: int
+    t_utc_ns: list[int]
+    values: list[float]
+
+
+class ShelveRequest(BaseModel):
+    """Shelve an alarm for a while (it comes back by itself when the time is over)."""
+
+    duration_s: float = Field(gt=0, le=30 * 86_400, examples=[3600.0])
+
+
+class SatelliteCreate(BaseModel):
+    """Register a satellite by name (and NORAD id)."""
+
+    name: str = Field(min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
+    norad_id: int | None = Field(None, ge=1, le=999_999, examples=[43013])
+
+
+class StationCreate(BaseModel):
+    """A ground station (WGS84 geodetic) and its elevation mask."""
+
+    name: str = Field(min_length=1, max_length=100, examples=["Svalbard"])
+    lat_deg: float = Field(ge=-90, le=90, examples=[78.23])
+    lon_deg: float = Field(ge=-180, le=360, examples=[15.39])
+    alt_m: float = Field(0.0, ge=-500, le=10_000, examples=[500.0])
+    min_elevation_deg: float = Field(5.0, ge=-90, lt=90, examples=[5.0])

@@ -7,22 +7,15 @@ from dataclasses import asdict
 from typing import Any
 
 from fastapi import APIRouter, Query
-from pydantic import BaseModel, Field
 
 from backend.core.auth import Principal
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import AlarmActed, DbId
+from backend.schemas import AlarmActed, DbId, ShelveRequest
 from backend.services import Services
 from telemetry.archive.records import AlarmEventRecord, AlarmRecord
 
 router = APIRouter(tags=["alarms"], responses=ERROR_RESPONSES)
-
-
-class ShelveRequest(BaseModel):
-    """Shelve an alarm for a while (it comes back by itself when the time is over)."""
-
-    duration_s: float = Field(gt=0, le=30 * 86_400, examples=[3600.0])
 
 
 @router.get("/alarms", response_model=list[AlarmRecord], summary="Alarms of a satellite")

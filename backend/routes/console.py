@@ -10,8 +10,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import ServicesDep, ViewerDep
-from backend.routes.alarms import ShelveRequest
-from backend.schemas import Caller, ConsoleConstants, ParametersInfo
+from backend.schemas import Caller, ConsoleConstants, ParametersInfo, ShelveRequest
 from backend.twin.live import STALE_S
 from backend.twin.twin_sessions import GPS_MARGIN_S
 

@@ -8,28 +8,17 @@ from typing import Any, Literal
 
 from fastapi import APIRouter, Query
 from fastapi.responses import Response, StreamingResponse
-from pydantic import BaseModel
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 from backend.deps import ServicesDep, ViewerDep
-from backend.schemas import SATELLITE_NAME, LatestValues, ParameterApids
+from backend.schemas import PARQUET_MEDIA_TYPE, SATELLITE_NAME, LatestValues, ParameterApids, SamplesPublic
 
 router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
 
 SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 MAX_EXPORT_PARAMETERS = 200
-
-
-class SamplesPublic(BaseModel):
-    """Samples of one parameter: UTC ns times and values, downsampled keeping bucket min/max."""
-
-    satellite: str
-    name: str
-    total_points: int
-    t_utc_ns: list[int]
-    values: list[float]
 
 
 def _window(start: datetime | None, end: datetime | None) -> tuple[int, int]:
@@ -78,7 +67,7 @@ async def samples(
     "/exports/samples",
     summary="Export every sample as CSV or Parquet (t_utc + one column per parameter)",
     response_class=StreamingResponse,
-    responses={200: {"content": {"text/csv": {}, "application/vnd.apache.parquet": {}}}},
+    responses={200: {"content": {"text/csv": {}, PARQUET_MEDIA_TYPE: {}}}},
 )
 def export_samples(
     services: ServicesDep,
@@ -109,6 +98,4 @@ def export_samples(
     headers = {"Content-Disposition": f'attachment; filename="{filename}-samples.{format}"'}
     if format == "csv":
         return StreamingResponse(csv_chunks(schema, batches), media_type="text/csv", headers=headers)
-    return StreamingResponse(
-        parquet_chunks(schema, batches), media_type="application/vnd.apache.parquet", headers=headers
-    )
+    return StreamingResponse(parquet_chunks(schema, batches), media_type=PARQUET_MEDIA_TYPE, headers=headers)

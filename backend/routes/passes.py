@@ -7,7 +7,6 @@ from datetime import datetime
 from typing import Any
 
 from fastapi import APIRouter, Query, Request
-from pydantic import BaseModel, Field
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
@@ -18,7 +17,9 @@ from backend.schemas import (
     DbId,
     PassPublic,
     PassSummaryPublic,
+    SatelliteCreate,
     SatelliteCreated,
+    StationCreate,
     TlePublic,
     TleStored,
 )
@@ -40,23 +41,6 @@ TLE_BODY = {
         },
     }
 }
-
-
-class SatelliteCreate(BaseModel):
-    """Register a satellite by name (and NORAD id)."""
-
-    name: str = Field(min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
-    norad_id: int | None = Field(None, ge=1, le=999_999, examples=[43013])
-
-
-class StationCreate(BaseModel):
-    """A ground station (WGS84 geodetic) and its elevation mask."""
-
-    name: str = Field(min_length=1, max_length=100, examples=["Svalbard"])
-    lat_deg: float = Field(ge=-90, le=90, examples=[78.23])
-    lon_deg: float = Field(ge=-180, le=360, examples=[15.39])
-    alt_m: float = Field(0.0, ge=-500, le=10_000, examples=[500.0])
-    min_elevation_deg: float = Field(5.0, ge=-90, lt=90, examples=[5.0])
 
 
 def _pass_public(record: PassRecord) -> dict[str, Any]:

@@ -12,7 +12,15 @@ from fastapi.responses import FileResponse
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import FilePublic, JobAccepted, JobPublic, ScenarioNames, SeriesPublic
+from backend.schemas import (
+    PARQUET_MEDIA_TYPE,
+    RESULT_FILE_MEDIA_TYPES,
+    FilePublic,
+    JobAccepted,
+    JobPublic,
+    ScenarioNames,
+    SeriesPublic,
+)
 from backend.services import Services
 from telemetry.downsampling import minmax_indices
 
@@ -126,10 +134,12 @@ RESULT_FILE = {"schema": {"type": "string", "format": "binary"}}
     responses={
         200: {
             "description": "The file's bytes, typed by its extension: trajectory.csv, summary.json and "
-            "scenario.json as such, trajectory.npz and trajectory.parquet as application/octet-stream.",
+            f"scenario.json as such, trajectory.parquet as {PARQUET_MEDIA_TYPE} (as the samples export), "
+            "trajectory.npz as application/octet-stream.",
             "content": {
                 "text/csv": RESULT_FILE,
                 "application/json": {"schema": {"type": "object"}},  # summary.json, scenario.json
+                PARQUET_MEDIA_TYPE: RESULT_FILE,
                 "application/octet-stream": RESULT_FILE,
             },
         }
@@ -141,7 +151,7 @@ def get_file(job_id: str, name: str, services: ServicesDep, _: ViewerDep) -> Fil
     path = folder / name
     if "/" in name or "\\" in name or name.startswith(".") or not path.is_file():
         raise ApiError(404, f"no file {name!r} in job {job_id}", "name")
-    return FileResponse(path, filename=name)
+    return FileResponse(path, filename=name, media_type=RESULT_FILE_MEDIA_TYPES.get(path.suffix))
 
 
 def _series_columns(array: np.ndarray, n: int, member: int, name: str) -> np.ndarray:

@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
+import io
 import os
 import time
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.core.auth import Role
 from backend.jobs.job_repository import JobRepository
 from backend.jobs.simulators import JobCancelled
+from backend.schemas import PARQUET_MEDIA_TYPE
 from backend.services import build_services
 from tests.backend.conftest import bearer, make_settings
 from tests.process_tree import wait_gone
@@ -50,6 +54,7 @@ def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
     assert max(job["summary"]["energy_rel_drift"]) < ENERGY_DRIFT_TOLERANCE
     files = client.get(f"/api/v1/simulations/{job['id']}/files", headers=bearer(tokens["viewer"])).json()
     assert {f["name"] for f in files} == {"scenario.json", "summary.json", "trajectory.npz"}
+    _check_result_media_types(client, job["id"], tokens["viewer"])
     series = client.get(
         f"/api/v1/simulations/{job['id']}/series/omega_b_rad_s?member=1&max_points=12", headers=bearer(tokens["viewer"])
     ).json()
@@ -57,6 +62,20 @@ def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
     assert np.allclose(series["values"][0], SHORT_SPIN["omega0_rad_s"][1])
     audit = client.get("/api/v1/audit?action=simulation.create", headers=bearer(tokens["admin"])).json()
     assert audit[0]["target"] == f"simulation/{job['id']}"
+
+
+def _check_result_media_types(client: TestClient, job_id: str, token: str) -> None:
+    """npz as generic bytes that numpy reads back; a Parquet result file typed as the samples export types it."""
+    url = f"/api/v1/simulations/{job_id}/files"
+    npz = client.get(f"{url}/trajectory.npz", headers=bearer(token))
+    assert npz.headers["content-type"] == "application/octet-stream"
+    with np.load(io.BytesIO(npz.content)) as arrays:
+        assert "omega_b_rad_s" in arrays.files
+    table = pa.table({"t_s": [0.0, 0.01]})
+    pq.write_table(table, client.app.state.services.jobs.result_dir(job_id) / "trajectory.parquet")
+    parquet = client.get(f"{url}/trajectory.parquet", headers=bearer(token))
+    assert parquet.headers["content-type"] == PARQUET_MEDIA_TYPE
+    assert pq.read_table(io.BytesIO(parquet.content)).equals(table)
 
 
 def test_over_a_limit_is_422_naming_the_limit(tmp_path: Path, database_url: str) -> None:
