@@ -10,8 +10,9 @@ emulator on, free loopback ports) as its own process:
     in the archive with all its accepted samples. Lost = acknowledged samples not found afterwards.
     The server's children (live-ingest process, emulator, job workers) must all be gone after each kill.
   * stops: SIGTERM and SIGINT alternately; the children still running afterwards are counted.
-  * health during an upload: GET /api/v1/health every 10 ms while --upload-mb of CCSDS packets
-    (the diary repeated) are POSTed; p50/p99 of the health answers and the server's peak RSS rise.
+  * health during an upload: benchmarks/upload_health.py's measurement (--upload-mb of new CYGNSS packets
+    from a process of their own, health polled from another thread; p50/p99 by phase beside the same server's
+    idle p99, the server's peak RSS rise and the upload decoder's peak RSS).
 Targets: 0 samples lost, 0 processes leaked, health p99 < 100 ms.
 """
 
@@ -30,12 +31,14 @@ import time
 from pathlib import Path
 
 import httpx
-import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 from tests import process_tree  # noqa: E402 - the supervision tests' view of the process tree
 from tests.process_tree import alive, descendants  # noqa: E402
+
+sys.path.insert(0, str(REPO / "benchmarks"))
+import upload_health  # noqa: E402 - the health-during-upload measurement lives there
 
 DIARY = REPO.parent / "shared/data/real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 PACKET_OCTETS = 71  # the diary's APID 11 packets
@@ -69,19 +72,20 @@ class Server:
         }
         env.pop("ACS_TWIN_DATABASE_URL", None)
         command = [sys.executable, "-m", "backend", "serve", "--port", str(api), "--no-auth", *extra]
-        self.process = subprocess.Popen(
-            command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=REPO
-        )
+        self.log = data_dir / "serve.log"
+        with self.log.open("ab") as log:
+            self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
         self.http = httpx.Client(base_url=f"http://127.0.0.1:{api}/api/v1", timeout=60.0)
         deadline = time.monotonic() + START_TIMEOUT_S
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and self.process.poll() is None:
             try:
                 if self.http.get("/health", timeout=2.0).status_code == 200:
-                    break
+                    return
             except httpx.TransportError:
                 time.sleep(0.2)
-        else:
-            raise RuntimeError("server did not answer")
+        self.process.kill()
+        tail = self.log.read_text(errors="replace")[-2000:]
+        raise RuntimeError(f"server did not answer (exit code {self.process.wait()}); its output ends:\n{tail}")
 
     def children(self, count: int = 2) -> set[int]:
         """Its descendants once there are ``count`` (ingest process + emulator)."""
@@ -89,12 +93,6 @@ class Server:
         while len(found := descendants(self.process.pid)) < count and time.monotonic() < deadline:
             time.sleep(0.2)
         return found
-
-    def rss_kb(self, key: str = "VmRSS") -> int:
-        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
-            if line.startswith(key + ":"):
-                return int(line.split()[1])
-        return 0
 
 
 def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
@@ -106,6 +104,7 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
     rng = random.Random(16)
     n_slices = len(diary) // (PACKET_OCTETS * SLICE_PACKETS)
     for trial in range(trials):
+        started = time.monotonic()
         server = Server(data_dir, *ports)
         children = server.children()
         stop = threading.Event()
@@ -137,7 +136,7 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
         leaked += len(wait_gone(children))
         print(
             f"  kill -9 trial {trial + 1}/{trials}: {len(acknowledged)} uploads acknowledged so far, "
-            f"children left {len(alive(children))}",
+            f"children left {len(alive(children))} ({time.monotonic() - started:.0f} s)",
             flush=True,
         )
     server = Server(data_dir, *ports)
@@ -180,55 +179,6 @@ def stop_trials(stops: int) -> int:
     return leaked
 
 
-def status_kb(pid: int, key: str) -> int:
-    """A /proc/<pid>/status figure in kB (0 once the process is gone)."""
-    try:
-        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
-    except OSError:
-        return 0
-    return next((int(line.split()[1]) for line in lines if line.startswith(key + ":")), 0)
-
-
-def health_during_upload(upload_mb: float, diary: bytes) -> tuple[float, float, int, float, int, int]:
-    """(health p50 ms, p99 ms, health requests, upload seconds, server peak RSS rise kB, upload decoder peak RSS
-    kB: the process backend.ingest.upload_decoder starts for a file of more than one chunk) during one upload."""
-    data_dir = Path(tempfile.mkdtemp(prefix="acs-hardening-"))
-    server = Server(data_dir, free_port(), free_port(), free_port(), "--no-emulator")
-    before_upload = server.children(1)
-    time.sleep(5.0)  # start-up work (ingest process imports) done: measure the upload alone
-    body = diary * int(np.ceil(upload_mb * 1e6 / len(diary)))
-    body = body[: int(upload_mb * 1e6) // PACKET_OCTETS * PACKET_OCTETS]
-    Path(f"/proc/{server.process.pid}/clear_refs").write_text("5")
-    before = server.rss_kb()
-    latencies: list[float] = []
-    done = threading.Event()
-
-    def probe() -> None:
-        with httpx.Client(base_url=server.http.base_url, timeout=10.0) as client:
-            while not done.is_set():
-                start = time.perf_counter()
-                client.get("/health")
-                latencies.append((time.perf_counter() - start) * 1e3)
-                time.sleep(0.01)
-
-    prober = threading.Thread(target=probe)
-    prober.start()
-    start = time.perf_counter()
-    answer = server.http.post("/telemetry/uploads", params={"satellite": "BIG"}, content=body, timeout=600.0)
-    elapsed = time.perf_counter() - start
-    done.set()
-    prober.join()
-    rise = server.rss_kb("VmHWM") - before
-    assert answer.status_code == 200, answer.text[:300]
-    children = server.children(1)
-    decoder_peak = max((status_kb(pid, "VmHWM") for pid in children - before_upload), default=0)
-    server.process.send_signal(signal.SIGTERM)
-    server.process.wait(300)
-    wait_gone(children)
-    p50, p99 = float(np.percentile(latencies, 50)), float(np.percentile(latencies, 99))
-    return p50, p99, len(latencies), elapsed, rise, decoder_peak
-
-
 def main() -> None:
     """Run the three measurements and print the figures against their targets."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -238,13 +188,7 @@ def main() -> None:
     args = parser.parse_args()
     diary = DIARY.read_bytes()
     if args.upload_mb > 0:
-        p50, p99, n, seconds, rise, decoder = health_during_upload(args.upload_mb, diary)
-        print(
-            f"health during a {args.upload_mb:g} MB upload ({seconds:.1f} s): {n} requests, p50 {p50:.1f} ms, "
-            f"p99 {p99:.1f} ms (target < 100 ms); server peak RSS rise {rise / 1000:.0f} MB, "
-            f"upload decoder peak RSS {decoder / 1000:.0f} MB",
-            flush=True,
-        )
+        print(upload_health.measure(args.upload_mb).report(), flush=True)
     if args.kill_trials > 0:
         uploads, samples, lost, leaked = kill_trials(args.kill_trials, diary)
         print(

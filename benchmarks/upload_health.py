@@ -6,8 +6,10 @@ Starts ``acs-twin serve`` (its own process, SQLite, auth on; benchmarks/api_load
 CYGNSS FM07 L0 stream (tests/data) replicated to --mb MB with every copy shifted in time (all packets
 new) from a process of its own against a ccsdspy CSV dictionary uploaded with its time fields, and
 meanwhile asks GET /api/v1/health every 20 ms from another thread. Prints the health p50/p99/max during
-the upload and, as the peer, over IDLE_S on the idle server just before (the machine's own load shows
-there), the upload time, the archive's tally and the load average. Target: p99 < 100 ms during the upload.
+the upload (split at the uploader's last byte: body streaming vs the decoder's work) and, as the peer, over
+IDLE_S on the idle server just before (the machine's own load shows there), the upload time, the archive's
+tally, the server's peak RSS rise and the upload decoder's peak RSS, and the load average. Target: p99 <
+100 ms during the upload. benchmarks/hardening.py reports the same measurement (``measure``).
 """
 
 from __future__ import annotations
@@ -22,14 +24,18 @@ import threading
 import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from api_load import free_port, make_tokens  # noqa: E402
 from foreign import CYGNSS_STREAM, CYGNSS_TIME, DATA, _calendar_shift, replicate  # noqa: E402
+
+from tests.process_tree import descendants  # noqa: E402 - the supervision tests' view of the process tree
 
 IDLE_S = 10.0  # health polled this long on the idle server first: the same run's baseline
 BLOCK_OCTETS = 2**20  # the uploader hands the body to httpx in blocks of this size
@@ -96,10 +102,49 @@ def upload(base: str, path: Path, headers: dict[str, str]) -> tuple[float, float
     return time.perf_counter() - t0, sent[0], answer.json()
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--mb", type=float, default=200.0)
-    args = parser.parse_args()
+@dataclass
+class UploadHealth:
+    """Health latencies (ms) idle and during one upload, with the upload's tallies and the memory it took."""
+
+    size_mb: float
+    seconds: float
+    archive: dict
+    idle_ms: np.ndarray
+    busy_ms: np.ndarray
+    body_phase: np.ndarray  # per busy request: sent before the upload's last byte went out
+    server_rss_rise_kb: int  # the server's peak RSS (VmHWM after its reset) over its RSS before the upload
+    decoder_peak_kb: int  # peak RSS of the server's children started by the upload (the upload decoder)
+    load: tuple[float, float]  # load average (1 min) at start and end
+
+    def report(self) -> str:
+        """The figures, the during/idle ratio and the load, for printing."""
+        ms, idle = self.busy_ms, self.idle_ms
+        return (
+            f"upload of {self.size_mb:.0f} MB: {self.seconds:.1f} s, {self.archive['packets_accepted']:,} packets "
+            f"archived ({self.archive['samples_accepted']:,} samples); server peak RSS rise "
+            f"{self.server_rss_rise_kb / 1000:.0f} MB, upload decoder peak RSS {self.decoder_peak_kb / 1000:.0f} MB\n"
+            f"health during it: {len(ms)} requests, p50 {np.percentile(ms, 50):.1f} ms, "
+            f"p99 {np.percentile(ms, 99):.1f} ms, max {ms.max():.1f} ms (target p99 < 100 ms)\n"
+            f"  while the body was sent (streamed to disk): {_summary(ms[self.body_phase])}\n"
+            f"  after (the decoder process decoded and committed it): {_summary(ms[~self.body_phase])}\n"
+            f"health idle ({IDLE_S:.0f} s before, same server): {len(idle)} requests, "
+            f"p50 {np.percentile(idle, 50):.1f} ms, p99 {np.percentile(idle, 99):.1f} ms; p99 during / idle = "
+            f"{np.percentile(ms, 99) / np.percentile(idle, 99):.2f}\n"
+            f"load average (1 min) at start {self.load[0]:.1f}, at end {self.load[1]:.1f} (2 cores shared)"
+        )
+
+
+def status_kb(pid: int, key: str) -> int:
+    """A /proc/<pid>/status figure in kB (0 once the process is gone)."""
+    try:
+        lines = Path(f"/proc/{pid}/status").read_text().splitlines()
+    except OSError:
+        return 0
+    return next((int(line.split()[1]) for line in lines if line.startswith(key + ":")), 0)
+
+
+def measure(mb: float) -> UploadHealth:
+    """Health idle for IDLE_S, then during an upload of ``mb`` MB of new CYGNSS packets, on a server of its own."""
     from telemetry.dictionary import load_dictionary
 
     load_start = os.getloadavg()[0]
@@ -108,7 +153,7 @@ def main() -> None:
         cygnss = load_dictionary(DATA / "cygnss_f7" / "ccsdspy", time_fields=CYGNSS_TIME)
         path = work / "upload.tlm"
         data = CYGNSS_STREAM.read_bytes()
-        replicate(data, int(args.mb * 1e6 / len(data)), path, _calendar_shift(cygnss), block=2000)
+        replicate(data, int(mb * 1e6 / len(data)), path, _calendar_shift(cygnss), block=2000)
         data_dir = work / "data"
         tokens = make_tokens(data_dir)
         port = free_port()
@@ -116,15 +161,7 @@ def main() -> None:
         base = f"http://127.0.0.1:{port}/api/v1"
         operator = {"Authorization": f"Bearer {tokens['operator']}"}
         try:
-            layout = (DATA / "cygnss_f7" / "ccsdspy" / "apid00393.csv").read_bytes()
-            made = httpx.post(
-                f"{base}/dictionaries/cygnss_adcsio.csv",
-                params={"apid": 393, "time_fields": CYGNSS_TIME},
-                content=layout,
-                headers=operator,
-                timeout=60,
-            )
-            made.raise_for_status()
+            _upload_dictionary(base, operator)
             idle: list[float] = []
             stop = threading.Event()
             poller = threading.Thread(target=poll_health, args=(base, stop, idle))
@@ -135,32 +172,50 @@ def main() -> None:
             stop.clear()
             busy: list[float] = []
             sent_at: list[float] = []
+            before_upload = descendants(server.pid)
+            Path(f"/proc/{server.pid}/clear_refs").write_text("5")  # VmHWM from here on
+            rss_before = status_kb(server.pid, "VmRSS")
             poller = threading.Thread(target=poll_health, args=(base, stop, busy, sent_at))
             poller.start()
             with ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as uploader:
                 elapsed, body_sent_at, body = uploader.submit(upload, base, path, operator).result()
             stop.set()
             poller.join()
-            archive = body["archive"]
-            ms, idle_ms = np.array(busy) * 1e3, np.array(idle) * 1e3
-            spooling = np.array(sent_at) < body_sent_at
-            size_mb = path.stat().st_size / 1e6
-            print(
-                f"upload of {size_mb:.0f} MB: {elapsed:.1f} s, {archive['packets_accepted']:,} packets "
-                f"archived ({archive['samples_accepted']:,} samples)\n"
-                f"health during it: {len(ms)} requests, p50 {np.percentile(ms, 50):.1f} ms, "
-                f"p99 {np.percentile(ms, 99):.1f} ms, max {ms.max():.1f} ms\n"
-                f"  while the body was sent (streamed to disk): {_summary(ms[spooling])}\n"
-                f"  after (the decoder process decoded and committed it): {_summary(ms[~spooling])}\n"
-                f"health idle ({IDLE_S:.0f} s before): {len(idle_ms)} requests, "
-                f"p50 {np.percentile(idle_ms, 50):.1f} ms, "
-                f"p99 {np.percentile(idle_ms, 99):.1f} ms; p99 during / idle = "
-                f"{np.percentile(ms, 99) / np.percentile(idle_ms, 99):.2f}\n"
-                f"load average (1 min) at start {load_start:.1f}, at end {os.getloadavg()[0]:.1f} (2 cores shared)"
+            started = descendants(server.pid) - before_upload
+            return UploadHealth(
+                size_mb=path.stat().st_size / 1e6,
+                seconds=elapsed,
+                archive=body["archive"],
+                idle_ms=np.array(idle) * 1e3,
+                busy_ms=np.array(busy) * 1e3,
+                body_phase=np.array(sent_at) < body_sent_at,
+                server_rss_rise_kb=status_kb(server.pid, "VmHWM") - rss_before,
+                decoder_peak_kb=max((status_kb(pid, "VmHWM") for pid in started), default=0),
+                load=(load_start, os.getloadavg()[0]),
             )
         finally:
             server.terminate()
-            server.wait(30)
+            server.wait(60)
+
+
+def _upload_dictionary(base: str, operator: dict[str, str]) -> None:
+    """The CYGNSS ADCS packet layout as the operator's dictionary cygnss_adcsio.csv, with its time fields."""
+    layout = (DATA / "cygnss_f7" / "ccsdspy" / "apid00393.csv").read_bytes()
+    made = httpx.post(
+        f"{base}/dictionaries/cygnss_adcsio.csv",
+        params={"apid": 393, "time_fields": CYGNSS_TIME},
+        content=layout,
+        headers=operator,
+        timeout=60,
+    )
+    made.raise_for_status()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--mb", type=float, default=200.0)
+    args = parser.parse_args()
+    print(measure(args.mb).report())
 
 
 if __name__ == "__main__":
