@@ -19,7 +19,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--scheduler",
         help="fly the twin replays on this Dask scheduler (tcp://host:port; default "
-        "$ACS_TWIN_DASK_SCHEDULER, else on this machine without a cluster)",
+        "$ACS_TWIN_DASK_SCHEDULER, else a LocalCluster of worker processes on this machine)",
+    )
+    p.add_argument(
+        "--workers", type=int, help="worker processes of the LocalCluster (default: one per core, at most 4)"
     )
     p.set_defaults(handler=run)
 
@@ -36,25 +39,23 @@ def _scenario(name: str):
 
 def run(args: argparse.Namespace) -> int:
     """Diagnose and print the ranking; exit 2 on bad input."""
-    import os
-
     from backend.jobs import cluster
     from backend.twin.diagnosis import diagnose_file
     from telemetry.dictionary import load_dictionary
 
-    client = None
+    # the cluster starts when the first twin replay is flown: bad input and nominal telemetry never wait for it
+    dask = cluster.ServerCluster(args.scheduler, args.workers or cluster.local_workers())
     try:
         dictionary = load_dictionary(args.dictionary)
-        address = args.scheduler or os.environ.get(cluster.SCHEDULER_ENV)
-        client = cluster.dask_client(address) if address else None
-        flyer = cluster.flyer(client) if client is not None else None
-        result = diagnose_file(args.telemetry, dictionary, _scenario(args.scenario), args.satellite, flyer)
-    except (ValueError, OSError) as exc:
+        scenario = _scenario(args.scenario)
+        result = diagnose_file(
+            args.telemetry, dictionary, scenario, args.satellite, lambda s: cluster.fly(dask.client(), s)
+        )
+    except (ValueError, OSError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     finally:
-        if client is not None:
-            client.close()
+        dask.close()
     det = result["detection"]
     if det["detected"]:
         print(

@@ -9,7 +9,8 @@ numba's start-up. The workers of a LocalCluster are children of this process tha
 (:func:`backend.core.processes.become_owned_child`: own process group, gone with this process even
 after ``kill -9``); a scheduler's workers belong to whoever started them.
 
-:class:`ServerCluster` is the server's one client, connected on first use and closed at shutdown.
+:class:`ServerCluster` is the server's one client (and ``acs-twin diagnose``'s), connected on first use and
+closed at shutdown.
 
 :func:`fly` splits a batch scenario's variants into one chunk per worker and merges the trajectories.
 Each variant keeps the random stream it has in the whole batch (the engine seeds variant i with

@@ -1,5 +1,9 @@
 """``acs-twin diagnose`` on telemetry of an independent simulator: Basilisk flew ``peer-basilisk-rw4`` with a
-hidden wheel fault (benchmarks/basilisk_faults.py, files in tests/data/basilisk_faults, see its README)."""
+hidden wheel fault (benchmarks/basilisk_faults.py, files in tests/data/basilisk_faults, see its README).
+
+The command flies its twin replays on Dask: the fault cases share one LocalCluster through
+``ACS_TWIN_DASK_SCHEDULER`` (a cluster per case would start two worker processes each); one test lets the
+command start its own LocalCluster and checks the result equals the engine's on this process."""
 
 from __future__ import annotations
 
@@ -10,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from backend.cli import main
+from backend.jobs import cluster
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "basilisk_faults"
 DICTIONARY = Path(__file__).resolve().parents[2] / "telemetry" / "dictionaries" / "reference_satellite.yaml"
@@ -22,6 +27,18 @@ CASES = {
     "friction_w1.csv": ("friction", 1, 300.0, 0.002, 2e-4),  # added dry friction, N·m
     "stuck_w4.csv": ("stuck", 4, 300.0, None, None),
 }
+
+
+@pytest.fixture(scope="module")
+def shared_scheduler():
+    client = cluster.dask_client(n_workers=2)
+    yield client.scheduler.address
+    cluster.close_client(client)
+
+
+@pytest.fixture
+def on_cluster(shared_scheduler, monkeypatch) -> None:
+    monkeypatch.setenv(cluster.SCHEDULER_ENV, shared_scheduler)
 
 
 def _diagnose(tmp_path: Path, telemetry: Path, *extra: str, dictionary: Path = DICTIONARY) -> tuple[int, dict]:
@@ -47,7 +64,7 @@ def _utc(text: str) -> float:
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
-def test_basilisk_wheel_fault_named_with_wheel_and_onset(tmp_path: Path, name: str) -> None:
+def test_basilisk_wheel_fault_named_with_wheel_and_onset(tmp_path: Path, name: str, on_cluster) -> None:
     fault, wheel, onset_s, magnitude, tolerance = CASES[name]
     code, result = _diagnose(tmp_path, DATA / name)
     assert code == 0
@@ -59,6 +76,34 @@ def test_basilisk_wheel_fault_named_with_wheel_and_onset(tmp_path: Path, name: s
         assert top["magnitude"] == pytest.approx(magnitude, abs=tolerance)
     assert top["score"] == max(h["score"] for h in result["hypotheses"])
     assert result["detection"]["detected"]
+
+
+def test_the_command_starts_a_local_cluster_for_its_replays_with_the_engine_s_result(
+    tmp_path: Path, monkeypatch
+) -> None:
+    from backend.twin.diagnosis import diagnose_file
+    from sim_core import scenario_library
+    from telemetry.dictionary import load_dictionary
+
+    monkeypatch.delenv(cluster.SCHEDULER_ENV, raising=False)
+    started = []
+    real = cluster.dask_client
+
+    def spy(scheduler=None, n_workers=None, warm=True):
+        client = real(scheduler, n_workers, warm)
+        started.append((scheduler, len(client.scheduler_info(n_workers=-1)["workers"]), client))
+        return client
+
+    monkeypatch.setattr(cluster, "dask_client", spy)
+    code, result = _diagnose(tmp_path, DATA / "failure_w2.csv", "--workers", "1")
+    assert code == 0
+    [(scheduler, workers, client)] = started
+    assert (scheduler, workers) == (None, 1)
+    assert client.status == "closed"  # stopped with its worker before the command returned
+    here = diagnose_file(
+        DATA / "failure_w2.csv", load_dictionary(DICTIONARY), scenario_library.get("peer-basilisk-rw4")
+    )
+    assert result["hypotheses"] == here["hypotheses"]
 
 
 def test_basilisk_nominal_flight_is_none_without_alarm(tmp_path: Path) -> None:
