@@ -550,7 +550,9 @@ def diagnose(
     if obs.b_mag_b_t is not None and obs.b_model_b_t is not None:
         sensors["magnetometer_bias"] = _magnetometer_channels(obs)
     else:
-        untestable["magnetometer_bias"] = "no magnetometer field (b_mag_b_t_*) or field model in the telemetry"
+        untestable["magnetometer_bias"] = (
+            "no magnetometer field (b_mag_b_t_*) or GPS position (r_ecef_m_*) for the field model in the telemetry"
+        )
     valid = _star_tracker_valid(obs.q_st_ib) if obs.q_st_ib is not None else None
     if valid is None:
         untestable["star_tracker_outage"] = "no star-tracker quaternion (q_st_ib_*) in the telemetry"
@@ -709,7 +711,10 @@ def _replayed(
     step = float(np.diff(grid).min(initial=2.0 * half))
     best = grid[int(np.argmax(ll.max(axis=0)))]
     fine = np.unique(np.clip(best + np.linspace(-step, step, REPLAY_ONSETS), lo, hi))
-    ll_fine = _replay_grid(chosen, fine, obs, scenario, start, stop, flyer)
+    try:
+        ll_fine = _replay_grid(chosen, fine, obs, scenario, start, stop, flyer)
+    except ValueError:  # the twin cannot restart before the fine grid (a scheduled turn): the coarse grid alone
+        fine, ll_fine = grid[:0], ll[:, :0]
     taus = np.concatenate([grid, fine])
     all_ll = np.concatenate([ll, ll_fine], axis=1)
     # the replay ranks the hypotheses it flies among themselves: the twin's own mismatch (inertia, alignments)

@@ -57,13 +57,14 @@ def level_loglik(
     """Log-likelihood (B,) of y (n,) under B local-level models x_{k+1} = x_k + drift[b, k] (+ N(0, q_var[k])),
     y_k = x_k + offset[b, k] + N(0, r_var[k]); reset[b, k] forces x_k = 0 exactly (seized rotor). NaN y: no update.
 
-    Diffuse start: x_0 = y_0 − offset_0 and the first sample carries no likelihood.
+    Diffuse start: x = y − offset at the first finite sample, which carries no likelihood.
     """
     n_b, n = drift.shape[0], y.shape[0]
     out = np.zeros(n_b)
     for b in range(n_b):
         x = y[0] - offset[b, 0]
         p = r_var[0]
+        started = not np.isnan(x)
         ll = 0.0
         for k in range(1, n):
             x += drift[b, k - 1]
@@ -72,6 +73,9 @@ def level_loglik(
                 x = 0.0
                 p = 0.0
             if np.isnan(y[k]):
+                continue
+            if not started:
+                x, p, started = y[k] - offset[b, k], r_var[k], True
                 continue
             nu = y[k] - x - offset[b, k]
             s = p + r_var[k]

@@ -5,7 +5,10 @@ satellite's dictionary, finds the packet that carries the wheel speeds, and stac
 diagnosis needs under sim_core's names: estimated attitude (``q_est_ib_0..3``, else the star tracker's
 ``q_st_ib_0..3``), rates (``omega_est_b_rad_s_*``, else ``omega_gyro_b_rad_s_*``), wheel speeds
 ``wheel_speed_rad_s_1..n`` and commands ``wheel_torque_cmd_nm_1..n``; optional star-tracker quaternion,
-gyro rates and magnetometer field. The tachometer quantum is the dictionary's calibration step of
+gyro rates and magnetometer field ``b_mag_b_t_*``. With the magnetometer and a GPS position (``r_ecef_m_*``,
+any packet, interpolated to the housekeeping times) the field model (IGRF-14, or the scenario's model) at
+that position is rotated into the body frame by the estimated attitude, the field the magnetometer should
+read (:func:`model_field_body_t`). The tachometer quantum is the dictionary's calibration step of
 ``wheel_speed_rad_s_1`` (0.25 rpm on the reference satellite). Samples are thinned to at most one per
 ``MIN_SPACING_S`` (the diagnosis works at the housekeeping's 1 Hz ground rate). The epoch is the first sample.
 """
@@ -24,9 +27,10 @@ from telemetry.dictionary import Dictionary, Parameter
 from telemetry.ground_files import read_ground_file
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["GROUND_SUFFIXES", "MIN_SPACING_S", "calibration_step", "observations", "read_batches"]
+__all__ = ["GROUND_SUFFIXES", "MIN_SPACING_S", "calibration_step", "model_field_body_t", "observations", "read_batches"]
 
 MIN_SPACING_S = 1.0
+MAX_POSITION_GAP_S = 30.0  # GPS fixes further apart than this are not interpolated (no field model there)
 GROUND_SUFFIXES = (".csv", ".jsonl", ".ndjson")
 ALTERNATIVES = {  # what the diagnosis reads → dictionary prefixes in order of preference
     "q_est_ib": ("q_est_ib", "q_st_ib"),
@@ -72,10 +76,49 @@ def _stack(values: dict[str, np.ndarray], prefix: str, suffixes: Iterable[str]) 
     return np.stack([values[n] for n in names], axis=-1)
 
 
+def _positions_ecef(batches: list[SampleBatch], t_ns: np.ndarray) -> np.ndarray | None:
+    """GPS positions (ECEF, m) interpolated to ``t_ns`` (NaN rows away from fixes); None without any fix."""
+    fixes = [b for b in batches if len(b.t_utc_ns) and "r_ecef_m_x" in b.values]
+    if not fixes:
+        return None
+    t_fix, values = _merged(fixes)
+    r = _stack(values, "r_ecef_m", "xyz")
+    if r is None:
+        return None
+    ok = np.all(np.isfinite(r), axis=1)
+    t_fix, r = t_fix[ok], r[ok]
+    if t_fix.shape[0] < 2:
+        return None
+    out = np.stack([np.interp(t_ns, t_fix, r[:, i]) for i in range(3)], axis=1)
+    k = np.clip(np.searchsorted(t_fix, t_ns), 1, t_fix.shape[0] - 1)
+    bracket = t_fix[k] - t_fix[k - 1]
+    outside = (t_ns < t_fix[0]) | (t_ns > t_fix[-1]) | (bracket > MAX_POSITION_GAP_S * NS_PER_S)
+    out[outside] = np.nan
+    return out
+
+
+def model_field_body_t(r_ecef_m: np.ndarray, t_unix_s: np.ndarray, q_ib: np.ndarray, model: str = "igrf") -> np.ndarray:
+    """The field model (T) at ECEF positions in the body frame of attitude ``q_ib``; NaN rows where either is NaN."""
+    from sim_core import environment, frames
+
+    out = np.full(r_ecef_m.shape, np.nan)
+    ok = np.all(np.isfinite(r_ecef_m), axis=1) & np.all(np.isfinite(q_ib), axis=1)
+    if ok.any():
+        r_eci, _ = frames.ecef_to_eci(r_ecef_m[ok], np.zeros((int(ok.sum()), 3)), t_unix_s[ok])
+        out[ok] = environment.magnetic_field_body_t(r_eci, t_unix_s[ok], q_ib[ok], model)
+    return out
+
+
 def observations(
-    batches: list[SampleBatch], dictionary: Dictionary, satellite: str | None = None, n_wheels: int | None = None
+    batches: list[SampleBatch],
+    dictionary: Dictionary,
+    satellite: str | None = None,
+    n_wheels: int | None = None,
+    field_model: str = "igrf",
 ) -> Observations:
-    """The diagnosis's :class:`Observations` from decoded batches; ValueError naming what is missing."""
+    """The diagnosis's :class:`Observations` from decoded batches; ValueError naming what is missing.
+
+    ``field_model``: the geomagnetic model the magnetometer is compared with (the scenario's)."""
     if satellite is not None and satellite != dictionary.satellite_name:
         raise ValueError(
             f"--satellite {satellite!r}: the dictionary describes {dictionary.satellite_name!r} "
@@ -122,6 +165,11 @@ def observations(
     def cut(a: np.ndarray | None) -> np.ndarray | None:
         return None if a is None else np.ascontiguousarray(a[keep])
 
+    b_mag = cut(_stack(values, "b_mag_b_t", "xyz"))
+    r_ecef = _positions_ecef(batches, t_ns) if b_mag is not None else None
+    b_model = None
+    if r_ecef is not None:
+        b_model = model_field_body_t(r_ecef, t_ns / NS_PER_S, picked["q_est_ib"][keep], field_model)
     return Observations(
         t_s=(t_ns - t_ns[0]) / NS_PER_S,
         epoch_unix_s=float(t_ns[0]) / NS_PER_S,
@@ -137,6 +185,8 @@ def observations(
         q_prog_ib=cut(_stack(values, "q_prog_ib", "0123")),
         wheel_isolated=cut(_stack(values, "fault_wheel", suffixes)),
         omega_gyro_b_rad_s=cut(_stack(values, "omega_gyro_b_rad_s", "xyz")),
+        b_mag_b_t=b_mag if b_model is not None else None,
+        b_model_b_t=b_model,
     )
 
 

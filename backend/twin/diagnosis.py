@@ -108,7 +108,7 @@ def diagnose_batches(
 
     ``flyer`` flies the replay batches (:func:`backend.jobs.cluster.flyer` for a Dask cluster)."""
     wm = scenario_wheels(scenario)
-    obs = observations(batches, dictionary, satellite, n_wheels=wm.axes_b.shape[1])
+    obs = observations(batches, dictionary, satellite, n_wheels=wm.axes_b.shape[1], field_model=scenario.magnetic_model)
     result = diagnose(obs, wm, scenario, flyer=flyer)
     return result_json(result, obs, dictionary.satellite_name, scenario.name)
 

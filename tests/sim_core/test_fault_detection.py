@@ -34,6 +34,21 @@ def test_level_loglik_matches_the_dense_gaussian_density() -> None:
     assert math.isclose(got, _dense_loglik(y, drift, q_var, r_var, offset), rel_tol=1e-9)
 
 
+def test_leading_missing_samples_start_the_level_at_the_first_sample_there_is() -> None:
+    rng = np.random.default_rng(5)
+    n, lead = 40, 3
+    drift = rng.normal(0.0, 0.3, n - 1)
+    q_var = rng.uniform(0.01, 0.2, n - 1)
+    r_var = rng.uniform(0.05, 0.3, n)
+    offset = np.where(np.arange(n) >= 25, 0.7, 0.0)
+    y = rng.normal(0.0, 1.0, n).cumsum()
+    y[:lead] = np.nan  # e.g. a field model before the first GPS fix
+    got = fd.level_loglik(y, drift[None], q_var, r_var, offset[None], np.zeros((1, n), dtype=np.bool_))[0]
+    tail = slice(lead, None)
+    want = _dense_loglik(y[tail], drift[lead:], q_var[lead:], r_var[tail], offset[tail])
+    assert math.isclose(got, want, rel_tol=1e-9)
+
+
 def test_reset_forces_the_state_to_zero() -> None:
     n = 20
     y = np.r_[np.full(10, 5.0), np.zeros(10)]
