@@ -4,9 +4,10 @@ The stream is a sequence of CCSDS space packets framed by their packet data leng
 (CCSDS 133.0-B-2 §4.1.3.5: total length = field + 7 octets).  Complete packets are decoded in
 bulk by :func:`telemetry.decoding.decode_stream` at most every ``DECODE_INTERVAL_S`` (a decode
 call costs ~2 ms whatever its size, so coalescing is what sustains thousands of packets per
-second), published to every subscriber without ever waiting (a full queue drops the message and
-the subscriber's next message says how many packets it lost), and committed to the archive in
-batches from a worker thread so a slow database never stalls the socket.
+second), published to every subscriber without ever waiting (newest wins: a full queue drops its
+oldest message, and the next message the subscriber takes says how many packets it lost), and
+committed to the archive in batches from a worker thread so a slow database never stalls the socket
+(the archive path never drops a packet the stream accepted).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import asyncio
 import ipaddress
 import time
 from collections.abc import Callable, Coroutine, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -146,23 +147,31 @@ class Subscriber:
         self.dropped_packets_total = 0
 
     def offer(self, batch: SampleBatch, received_ns: int) -> bool:
-        """Queue a batch if there is room; otherwise count its packets as dropped."""
-        try:
-            self._queue.put_nowait(LiveMessage(batch, received_ns, self._dropped_since_delivery))
-        except asyncio.QueueFull:
-            self._dropped_since_delivery += len(batch.t_utc_ns)
-            self.dropped_packets_total += len(batch.t_utc_ns)
-            return False
-        self._dropped_since_delivery = 0
-        return True
+        """Queue a batch without waiting; newest wins: when full, the oldest queued message is dropped and its
+        packets counted (the next message taken says how many). False if a message was dropped."""
+        dropped = 0
+        if self._queue.full():
+            dropped = len(self._queue.get_nowait().batch.t_utc_ns)
+            self._dropped_since_delivery += dropped
+            self.dropped_packets_total += dropped
+        self._queue.put_nowait(LiveMessage(batch, received_ns, 0))
+        return dropped == 0
 
     async def get(self) -> LiveMessage:
         """The next message (waits until one arrives)."""
-        return await self._queue.get()
+        return self._delivered(await self._queue.get())
 
     def get_nowait(self) -> LiveMessage:
         """The next message; raises asyncio.QueueEmpty if none is waiting."""
-        return self._queue.get_nowait()
+        return self._delivered(self._queue.get_nowait())
+
+    def _delivered(self, message: LiveMessage) -> LiveMessage:
+        """``message`` with the packets dropped since the last delivery (all older than it: drops take the oldest)."""
+        if not self._dropped_since_delivery:
+            return message
+        message = replace(message, dropped_packets=self._dropped_since_delivery)
+        self._dropped_since_delivery = 0
+        return message
 
     @property
     def pending(self) -> int:

@@ -2,14 +2,15 @@
 
 Ingest and the API never share a GIL, so neither slows the other; the ingest process forwards
 each decoded batch (raw packets stripped) and its tallies to the API process through a bounded
-queue, never waiting: when the API side falls behind, batches for the live hub are dropped and
-counted (they are archived regardless): the outbox's part of the one fan-out policy for live samples,
-stated in :mod:`backend.ingest.telemetry_gateway`.
+queue, never waiting: when the API side falls behind, the oldest waiting messages are dropped and
+counted (their batches are archived regardless), so the server resumes at the present: the outbox's
+part of the one fan-out policy for live samples, stated in :mod:`backend.ingest.telemetry_gateway`.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import dataclasses
 import os
 import queue
@@ -29,6 +30,9 @@ __all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 STATS_PERIOD_S = 0.5
 OUTBOX_MESSAGES = 1_000  # ≈ 20 s of batches at the 50 decodes/s of telemetry.live
 STOP_POLL_S = 0.1
+EVICT_WAIT_S = 0.5  # a full outbox's oldest message may still be in this process's feeder thread, not yet in the
+# pipe: an eviction waits this long at most for it (it is there within milliseconds; the full wait happens only if
+# the server emptied the outbox in between, and then the put that follows succeeds)
 ORPHAN_EXIT_S = 20.0  # after SIGTERM the pending batches are archived within this, else the process exits anyway
 
 
@@ -60,9 +64,19 @@ def _stop_orphan(outbox: Outbox, stop: Event) -> None:
 
 
 def _offer(outbox: Outbox, message: tuple[str, Any], tally: dict[str, int]) -> None:
+    """Put ``message`` without waiting on the server; newest wins: a full outbox loses its oldest message (counted
+    in ``forward_dropped``). Only this process puts, so once one message is taken out there is room."""
     try:
         outbox.put_nowait(message)
+        return
     except queue.Full:
+        pass
+    with contextlib.suppress(queue.Empty):  # empty: the server took everything meanwhile, room all the same
+        outbox.get(timeout=EVICT_WAIT_S)
+        tally["forward_dropped"] += 1
+    try:
+        outbox.put_nowait(message)
+    except queue.Full:  # the server holds the read lock on a queue it has not emptied yet: the newcomer goes
         tally["forward_dropped"] += 1
 
 

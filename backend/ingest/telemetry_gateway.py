@@ -5,12 +5,14 @@ handed out typed as the :class:`~backend.ingest.ports.TelemetryArchive` Protocol
 pipeline decode → validate → archive (with limits) → publish to the live hub; downsampled sample
 queries are cached per satellite until its next ingest.
 
-Fan-out of live samples, one policy: a producer never waits on a consumer; a full bounded queue
-loses items, counts them and tells its consumer the count; the archive, not the fan-out, is the
-lossless record. Every ingested batch (upload or live link) is published once to the hub. Where
-the loss falls: telemetry.live's subscriber queue and the ingest process's outbox refuse the
-newcomer (what is delivered stays in order, the next message carries the gap); the WebSocket hub
-evicts the oldest so a stalled display resumes at the present.
+Fan-out of live samples, one policy: a producer never waits on a consumer; newest wins: a full
+bounded queue drops its oldest items, counts them and tells its consumer the count, so a consumer
+that fell behind resumes at the present (an operator watches what the satellite does now); the
+archive, not the fan-out, is the lossless record: telemetry the link accepted is archived whatever a
+queue dropped. Every ingested batch (upload or live link) is published once to the hub. The three
+queues: telemetry.live's subscriber queue (the next message taken carries the count of packets lost
+before it), the ingest process's outbox (``forward_dropped`` in the live stats) and each WebSocket
+client's deque in the hub (``dropped`` so far, in every batch sent).
 """
 
 from __future__ import annotations

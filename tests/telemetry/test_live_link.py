@@ -54,7 +54,7 @@ def test_packets_cut_anywhere_arrive_as_decoded_offline() -> None:
     assert all(m.dropped_packets == 0 for m in messages)
 
 
-def test_a_full_subscriber_refuses_new_batches_and_its_next_message_counts_them() -> None:
+def test_a_full_subscriber_keeps_the_newest_batch_and_its_next_message_counts_the_lost() -> None:
     dictionary = reference()
     raw = packets(dictionary.packets[HK_APID], 40, seed=2)
     parts = [raw[i : i + 10].tobytes() for i in range(0, 40, 10)]  # four connections of 10 packets each
@@ -64,16 +64,16 @@ def test_a_full_subscriber_refuses_new_batches_and_its_next_message_counts_them(
         slow = stream.subscribe(max_messages=1)
         await stream.start(link=link)
         await send(link, parts[0])
-        await send(link, parts[1])  # queue full: refused, counted
-        await send(link, parts[2])  # refused, counted
+        await send(link, parts[1])  # queue full: parts[0] dropped, counted
+        await send(link, parts[2])  # parts[1] dropped, counted
         first = slow.get_nowait()
         await send(link, parts[3])
         await stream.stop()
         return first, slow.get_nowait(), slow
 
     first, late, slow = asyncio.run(scenario())
-    assert first.dropped_packets == 0 and int(first.batch.sequence_count[0]) == 0
-    assert slow.dropped_packets_total == 20 and late.dropped_packets == 20
+    assert first.dropped_packets == 20 and int(first.batch.sequence_count[0]) == 20  # the newest, after the gap
+    assert slow.dropped_packets_total == 20 and late.dropped_packets == 0
     assert int(late.batch.sequence_count[0]) == 30
 
 
