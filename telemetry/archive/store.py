@@ -254,17 +254,7 @@ class Archive:
         upload_id = self._insert_upload(conn, sat_id, source, uploaded_by, checksum)
         result = self._write_batches(conn, sat_id, upload_id, batches, limits)
         self._write_undefined(conn, sat_id, upload_id, undefined)
-        report = {**result.as_report(), "decode": dict(decode_report)}
-        conn.execute(
-            update(UPLOAD)
-            .where(UPLOAD.c.id == upload_id)
-            .values(
-                packets_accepted=result.packets_accepted,
-                samples_accepted=result.samples_accepted,
-                report_json=json.dumps(report),
-            )
-        )
-        return result
+        return self._store_result(conn, upload_id, result, decode_report)
 
     def ingest_decoded(
         self,
@@ -358,7 +348,14 @@ class Archive:
             [g for p in parts for g in p.gaps],
             by_apid,
         )
-        stored = {**result.as_report(), "decode": report.to_dict() if report else {}}
+        return self._store_result(conn, upload_id, result, report.to_dict() if report else {})
+
+    @staticmethod
+    def _store_result(
+        conn: Connection, upload_id: int, result: IngestResult, decode_report: Mapping[str, object]
+    ) -> IngestResult:
+        """``result``: its counts and report (with the decoder's) stored on the upload's row."""
+        stored = {**result.as_report(), "decode": dict(decode_report)}
         conn.execute(
             update(UPLOAD)
             .where(UPLOAD.c.id == upload_id)
