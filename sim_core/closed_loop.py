@@ -282,7 +282,7 @@ def record_width(n_wheels: int) -> int:
 
 
 class Position(NamedTuple):
-    """Where the spacecraft is: ECI r, v, a and the field in ECI and body axes."""
+    """Where the spacecraft is: ECI r, v, a, the field in ECI and body axes, r in body axes, the Sun."""
 
     r: np.ndarray
     v: np.ndarray
@@ -290,6 +290,7 @@ class Position(NamedTuple):
     b_eci: np.ndarray
     b_body: np.ndarray
     sun_eci: np.ndarray  # Sun position (m), refreshed each T_q when a model needs it
+    r_body: np.ndarray  # r in body axes, refreshed each step when the gravity gradient is flown
 
 
 class Sensed(NamedTuple):
@@ -303,6 +304,15 @@ class Sensed(NamedTuple):
     mag: np.ndarray
     mag_prev: np.ndarray
     sun_frozen: np.ndarray
+
+
+class StarSample(NamedTuple):
+    """One T_q's star-tracker sample Λ^m with its σ per axis, and whether the star tracker and the gyro gave one."""
+
+    q: np.ndarray
+    sigma: np.ndarray
+    star_ok: bool
+    gyro_ok: bool
 
 
 class Estimate(NamedTuple):
@@ -329,6 +339,7 @@ class Commands(NamedTuple):
     dipole_alloc: np.ndarray
     program: np.ndarray  # Λ^p (4), ω^p (3), ω̇^p (3) of the last control tick
     motor_current: np.ndarray  # armature currents (A) when the motor electrics are flown
+    moment: np.ndarray  # dipole flown: MD dipole + residual dipole (A·m²)
 
 
 class Monitors(NamedTuple):
@@ -363,10 +374,12 @@ def program_1(
 
 
 @njit(cache=True)
-def program_at(c: LoopConfig, t: float, pos: Position) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    """:func:`program_1` of the configured program where the spacecraft is at t."""
+def program_at(
+    g: Program, clk: Clock, c_pn: np.ndarray, t: float, pos: Position
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """:func:`program_1` of program ``g`` where the spacecraft is at t (``c_pn``: Ephemeris.c_pn)."""
     sample: tuple[np.ndarray, np.ndarray, np.ndarray, bool] = program_1(
-        c.program, t, c.clock.t0_unix_s, pos.r, pos.v, pos.a, c.ephemeris.c_pn, c.clock.dut1_s
+        g, t, clk.t0_unix_s, pos.r, pos.v, pos.a, c_pn, clk.dut1_s
     )
     return sample
 
@@ -393,12 +406,18 @@ def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.nda
 
 @njit(cache=True)
 def _sun_direction_1(
-    c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, q_est: np.ndarray, r: np.ndarray, frozen: np.ndarray
+    sigma: float,
+    t0_unix_s: float,
+    faults: np.ndarray,
+    t: float,
+    x: np.ndarray,
+    q_est: np.ndarray,
+    r: np.ndarray,
+    frozen: np.ndarray,
 ) -> np.ndarray:
-    """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1) under its faults; in eclipse or
-    when failed, the ephemeris Sun seen through the attitude estimate."""
-    sigma = c.sensors.sun_sensor_sigma_rad
-    sun_eci = environment.sun_position_1(c.clock.t0_unix_s + t)
+    """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1, noise σ) under its faults; in
+    eclipse or when failed, the ephemeris Sun seen through the attitude estimate."""
+    sun_eci = environment.sun_position_1(t0_unix_s + t)
     normals = np.random.standard_normal(3)
     s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
     ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
@@ -411,18 +430,24 @@ def _sun_direction_1(
     return unit
 
 
-# --- stages --------------------------------------------------------------------------------------------
+# --- stages: each takes the blocks of the configuration it reads, never the whole LoopConfig -------------------
 
 
 @njit(cache=True)
 def _ephemeris_stage(
-    c: LoopConfig, t: float, x: np.ndarray, orbit_due: bool, field_due: bool, sun_due: bool, pos: Position
+    e: Ephemeris,
+    t0_unix_s: float,
+    t: float,
+    x: np.ndarray,
+    orbit_due: bool,
+    field_due: bool,
+    sun_due: bool,
+    pos: Position,
 ) -> None:
     """Orbit and field at t from the batch's tables (field rotated into body axes by the true attitude), and the
     Sun (environment.sun_position_1) when due."""
-    e = c.ephemeris
     if sun_due:
-        pos.sun_eci[:] = environment.sun_position_1(c.clock.t0_unix_s + t)
+        pos.sun_eci[:] = environment.sun_position_1(t0_unix_s + t)
     if orbit_due:
         orbit.hermite_state_into(e.orbit_table, e.orbit_t0_s, e.orbit_step_s, t, pos.r, pos.v, pos.a)
     if field_due:
@@ -435,15 +460,13 @@ def _fault_stage(
     faults: np.ndarray,
     t: float,
     fault_state: np.ndarray,
-    flags: int,
     ev: np.ndarray,
     n_ev: np.ndarray,
     cmd: Commands,
     sensed: Sensed,
 ) -> int:
-    """Fault onsets and ends at t (sim_core.faults); at a 'frozen' onset the outputs in hand are held."""
-    if faults.shape[0] == 0:
-        return flags
+    """Fault onsets and ends at t of a variant with faults (sim_core.faults); at a 'frozen' onset the outputs in
+    hand are held. Returns the active-fault flags."""
     new = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
     if new < 0:
         new = -new - 1
@@ -455,12 +478,10 @@ def _fault_stage(
 
 @njit(cache=True)
 def _sense_stage(
-    c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, markov: np.ndarray, pos: Position, sensed: Sensed
-) -> tuple[np.ndarray, np.ndarray, bool, bool]:
+    s: SensorModels, faults: np.ndarray, t: float, x: np.ndarray, markov: np.ndarray, pos: Position, sensed: Sensed
+) -> StarSample:
     """Gyro (seed 002 eq 13), star tracker (seed 000 §4) and magnetometer (seed 003 MAG) samples under the
-    variant's faults. ``markov``: decay and step σ of the gyro drift. Returns (star sample, its σ per axis,
-    star valid, gyro valid)."""
-    s = c.sensors
+    variant's faults. ``markov``: decay and step σ of the gyro drift."""
     normals = np.random.standard_normal(6)
     drift_normals = np.random.standard_normal(3) if s.gyro_markov_sigma_rad_s > 0.0 else np.zeros(3)
     w_meas, _ = sensors.gyro_1(
@@ -492,23 +513,41 @@ def _sense_stage(
     )
     sensed.mag[:] = mag
     faults_mod.sensor_faults_1(faults, T_MAG, t, sensed.mag, sensed.mag, s.magnetometer_noise_t, normals[0:3])
-    return q_m, sig3, st_ok, gyro_ok
+    return StarSample(q_m, sig3, st_ok, gyro_ok)
+
+
+@njit(cache=True)
+def _magnetometer_monitor_stage(
+    s: SensorModels,
+    fd: FdirConfig,
+    t: float,
+    pos: Position,
+    sensed: Sensed,
+    est: Estimate,
+    mon: Monitors,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> None:
+    """Magnetometer FDIR at T_q (sim_core.fdir.magnetometer_check_1) against the field model seen through the
+    estimate, before the estimator reads the sample."""
+    fdir.magnetometer_check_1(
+        mon.mag, sensed.mag, conjugate_rotate_1(est.q, pos.b_eci), s.magnetometer_noise_t, fd.n_sigma, ev, n_ev, t
+    )
 
 
 @njit(cache=True)
 def _mekf_stage(
-    c: LoopConfig,
-    faults: np.ndarray,
-    fdir_on: bool,
+    e: EstimatorConfig,
+    s: SensorModels,
+    fd: FdirConfig,
+    t_q: float,
+    var: Variant,
     k: int,
     t: float,
     x: np.ndarray,
     pos: Position,
     sensed: Sensed,
-    q_m: np.ndarray,
-    sig3: np.ndarray,
-    st_ok: bool,
-    gyro_ok: bool,
+    sample: StarSample,
     sigma_u: float,
     est: Estimate,
     mon: Monitors,
@@ -516,11 +555,10 @@ def _mekf_stage(
     n_ev: np.ndarray,
 ) -> tuple[bool, float]:
     """MEKF (sim_core.mekf) on gyro + star tracker; without a star sample, on the earth sensor's nadir and the
-    magnetometer's field direction; each sensor screened by FDIR when on. Returns (attitude valid, σ_u)."""
-    s = c.sensors
-    t_q = c.clock.measure_every * c.clock.dt_s
-    fd = c.fdir
-    if k > 0 and gyro_ok:
+    magnetometer's field direction; each sensor screened by FDIR when the variant flies it. Returns (attitude
+    valid, σ_u)."""
+    fdir_on, q_m, sig3, st_ok = var.fdir_on, sample.q, sample.sigma, sample.star_ok
+    if k > 0 and sample.gyro_ok:
         # mean of the samples bracketing the step: the held sample's ½ ω̇ T_q² error would
         # make the filter overconfident in manoeuvres (and the FDIR innovation test with it)
         mekf.mekf_propagate_1(
@@ -533,14 +571,13 @@ def _mekf_stage(
             sigma_u,
         )
     sensed.omega_prev[:] = sensed.omega
-    st_raw_ok = st_ok
     if fdir_on and st_ok:
         st_scale = fdir.star_tracker_check_1(
             mon.star, est.q, est.covariance, q_m, sig3, fd.star_nis_max, mon.gyro[fdir.GS_ISOLATED] != 0.0, ev, n_ev, t
         )
         st_ok = st_scale > 0.0
         sig3 *= max(st_scale, 1.0)
-    if fdir_on and gyro_ok:
+    if fdir_on and sample.gyro_ok:
         sigma_u = fdir.gyro_drift_step_1(
             mon.gyro,
             t,
@@ -550,18 +587,18 @@ def _mekf_stage(
             st_ok,
             s.star_sigma_rad,
             s.gyro_noise_rad_s,
-            c.estimator.gyro_drift_density,
+            e.gyro_drift_density,
             fd.n_sigma,
             ev,
             n_ev,
         )
     if not st_ok:
-        nadir, earth_ok = _earth_sensor_nadir_1(faults, t, x, pos.r)
+        nadir, earth_ok = _earth_sensor_nadir_1(var.faults, t, x, pos.r)
         if fdir_on and earth_ok:
             earth_ok = fdir.earth_sensor_check_1(
                 mon.earth, est.q, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD, ev, n_ev, t
             )
-        if fdir_on and earth_ok and st_raw_ok:
+        if fdir_on and earth_ok and sample.star_ok:
             st_ok = fdir.star_readmit_1(
                 mon.star, est.q, q_m, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD, fd.n_sigma, ev, n_ev, t
             )
@@ -580,25 +617,25 @@ def _mekf_stage(
 
 @njit(cache=True)
 def _mismatch_filter_stage(
-    c: LoopConfig, t: float, pos: Position, sensed: Sensed, q_m: np.ndarray, st_ok: bool, gyro_ok: bool, est: Estimate
+    e: EstimatorConfig, t_q: float, q_p: np.ndarray, w_p: np.ndarray, sensed: Sensed, sample: StarSample, est: Estimate
 ) -> None:
     """Seed 000 §4 (gyro + star tracker) or seed 003 eqs 15–19 (star tracker only) per-axis steady-state filters
-    of the mismatch ε = −2 e0 e of E = Λ̃^p ∘ Λ^m (sim_core.attitude_filters); the estimate is Λ^p ∘ E^f and the
-    filtered gyro rate (seed 000) or ω^p − ε̂̇ (seed 003: ε̇ = −(ω − ω^p) in body axes)."""
-    e = c.estimator
-    q_p, w_p, _, _ = program_at(c, t, pos)
+    of the mismatch ε = −2 e0 e of E = Λ̃^p ∘ Λ^m (sim_core.attitude_filters) against the program Λ^p, ω^p at
+    t; the estimate is Λ^p ∘ E^f and the filtered gyro rate (seed 000) or ω^p − ε̂̇ (seed 003: ε̇ = −(ω − ω^p)
+    in body axes)."""
     f = est.filter_state
-    t_q = c.clock.measure_every * c.clock.dt_s
     if e.kind == ESTIMATOR_SEED000:
-        rate = sensed.omega if gyro_ok else f[6:9].copy()
-        attitude_filters.mismatch_filter_step_1(f, q_p, q_m, rate, st_ok, e.k_alpha, e.k_omega, e.smoothing, t_q)
+        rate = sensed.omega if sample.gyro_ok else f[6:9].copy()
+        attitude_filters.mismatch_filter_step_1(
+            f, q_p, sample.q, rate, sample.star_ok, e.k_alpha, e.k_omega, e.smoothing, t_q
+        )
         q, w = attitude_filters.filtered_attitude_1(f, q_p)
         est.q[:] = q
         est.omega[:] = w
         return
     z = f[0:3].copy()
-    if st_ok:
-        z = attitude_filters.mismatch_1(q_p, q_m)
+    if sample.star_ok:
+        z = attitude_filters.mismatch_1(q_p, sample.q)
     attitude_filters.body_rate_step_1(f[0:3], f[3:6], z, e.rate_phi, e.rate_gamma)
     q, _ = attitude_filters.filtered_attitude_1(f, q_p)
     est.q[:] = q
@@ -606,62 +643,24 @@ def _mismatch_filter_stage(
 
 
 @njit(cache=True)
-def _estimate_stage(
-    c: LoopConfig,
-    faults: np.ndarray,
-    fdir_on: bool,
-    k: int,
-    t: float,
-    x: np.ndarray,
-    pos: Position,
-    sensed: Sensed,
-    q_m: np.ndarray,
-    sig3: np.ndarray,
-    st_ok: bool,
-    gyro_ok: bool,
-    sigma_u: float,
-    valid: bool,
-    est: Estimate,
-    mon: Monitors,
-    ev: np.ndarray,
-    n_ev: np.ndarray,
-) -> tuple[bool, float]:
-    """The estimator the law reads (EstimatorConfig.kind): truth, star tracker + gyro as sampled, or the MEKF.
-    The magnetometer is screened first when FDIR is on. Returns (attitude valid, σ_u)."""
-    if fdir_on:
-        fdir.magnetometer_check_1(
-            mon.mag,
-            sensed.mag,
-            conjugate_rotate_1(est.q, pos.b_eci),
-            c.sensors.magnetometer_noise_t,
-            c.fdir.n_sigma,
-            ev,
-            n_ev,
-            t,
-        )
-    kind = c.estimator.kind
-    if kind in (ESTIMATOR_SEED000, ESTIMATOR_SEED003):
-        _mismatch_filter_stage(c, t, pos, sensed, q_m, st_ok, gyro_ok, est)
-        return st_ok, sigma_u
+def _sample_estimate_stage(kind: int, x: np.ndarray, sensed: Sensed, sample: StarSample, est: Estimate) -> None:
+    """The estimates that need no filter: the true state (ESTIMATOR_TRUTH) or the star tracker and gyro as
+    sampled (ESTIMATOR_STAR_TRACKER; a missing sample keeps the last one)."""
     if kind == ESTIMATOR_TRUTH:
         est.q[:] = x[0:4]
         est.omega[:] = x[4:7]
-        return valid, sigma_u
-    if kind == ESTIMATOR_STAR_TRACKER:
-        if st_ok:
-            est.q[:] = q_m
-        if gyro_ok:
-            est.omega[:] = sensed.omega
-        return valid, sigma_u
-    result: tuple[bool, float] = _mekf_stage(
-        c, faults, fdir_on, k, t, x, pos, sensed, q_m, sig3, st_ok, gyro_ok, sigma_u, est, mon, ev, n_ev
-    )
-    return result
+        return
+    if sample.star_ok:
+        est.q[:] = sample.q
+    if sample.gyro_ok:
+        est.omega[:] = sensed.omega
 
 
 @njit(cache=True)
-def _guidance_stage(
-    c: LoopConfig,
+def _mode_stage(
+    mc: ModeConfig,
+    sun_sigma_rad: float,
+    t0_unix_s: float,
     faults: np.ndarray,
     t: float,
     x: np.ndarray,
@@ -676,54 +675,51 @@ def _guidance_stage(
     ev: np.ndarray,
     n_ev: np.ndarray,
 ) -> int:
-    """Program Λ^p, ω^p, ω̇^p into ``cmd.program``; with the mode machine on, the mode step (seed 001/003) and
-    the Sun/safe (Sun sensor) or ORF program in those modes. Returns the mode."""
-    q_p, w_p, wd_p, _ = program_at(c, t, pos)
-    if c.modes.on:
-        q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
-        sun_b = _sun_direction_1(c, faults, t, x, est.q, pos.r, sensed.sun_frozen)
-        new_mode = modes.mode_step_1(
-            mode_state,
-            c.modes.thresholds,
-            t,
-            np.sqrt(est.omega @ est.omega),
-            valid,
-            angle_between_1(SUN_AXIS_B, sun_b),
-            attitude_difference_1(est.q, q_orf),
-            True,
-            np.sum(mon.available) < 2,
-            False,
-        )
-        if new_mode != mode:
-            _event(ev, n_ev, t, EV_MODE_CHANGE, new_mode)
-            cmd.lead_lag[:] = 0.0
-            mode = new_mode
-        if mode == modes.MODE_SUN_SAFE:
-            q_p = guidance.sun_pointing_1(est.q, sun_b, SUN_AXIS_B)
-            w_p[:] = 0.0
-            wd_p[:] = 0.0
-        elif mode == modes.MODE_ORF:
-            q_p, w_p, wd_p = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
-    cmd.program[0:4] = q_p
-    cmd.program[4:7] = w_p
-    cmd.program[7:10] = wd_p
+    """Mode machine step (sim_core.modes, seed 001/003) on the Sun sensor and the ORF; in the Sun/safe and ORF
+    modes their program replaces the scenario's in ``cmd.program``. Returns the mode."""
+    q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
+    sun_b = _sun_direction_1(sun_sigma_rad, t0_unix_s, faults, t, x, est.q, pos.r, sensed.sun_frozen)
+    new_mode = modes.mode_step_1(
+        mode_state,
+        mc.thresholds,
+        t,
+        np.sqrt(est.omega @ est.omega),
+        valid,
+        angle_between_1(SUN_AXIS_B, sun_b),
+        attitude_difference_1(est.q, q_orf),
+        True,
+        np.sum(mon.available) < 2,
+        False,
+    )
+    if new_mode != mode:
+        _event(ev, n_ev, t, EV_MODE_CHANGE, new_mode)
+        cmd.lead_lag[:] = 0.0
+        mode = new_mode
+    if mode == modes.MODE_SUN_SAFE:
+        cmd.program[0:4] = guidance.sun_pointing_1(est.q, sun_b, SUN_AXIS_B)
+        cmd.program[4:10] = 0.0
+    elif mode == modes.MODE_ORF:
+        q_p, w_p, wd_p = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
+        cmd.program[0:4] = q_p
+        cmd.program[4:7] = w_p
+        cmd.program[7:10] = wd_p
     return mode
 
 
 @njit(cache=True)
-def _tachometer_stage(c: LoopConfig, x: np.ndarray) -> np.ndarray:
+def _tachometer_stage(quantum_rad_s: float, wheel_speeds: np.ndarray) -> np.ndarray:
     """Wheel speeds as the tachometers read them (sensors.wheel_tachometer_1; exact when the quantum is 0)."""
-    nq, nw = c.model.flex_mass.shape[0], c.model.wheel_inertia.shape[0]
-    speeds = x[7 + 2 * nq : 7 + 2 * nq + nw].copy()
-    quantum = c.sensors.tachometer_quantum_rad_s
-    if quantum > 0.0:
-        speeds, _ = sensors.wheel_tachometer_1(speeds, quantum, np.inf)
+    speeds = wheel_speeds.copy()
+    if quantum_rad_s > 0.0:
+        speeds, _ = sensors.wheel_tachometer_1(speeds, quantum_rad_s, np.inf)
     return speeds
 
 
 @njit(cache=True)
 def _law_stage(
-    c: LoopConfig,
+    p: PlantArrays,
+    law: LawConfig,
+    modes_on: bool,
     mode: int,
     est: Estimate,
     speeds: np.ndarray,
@@ -733,12 +729,11 @@ def _law_stage(
 ) -> None:
     """Body torque of the configured law (LawConfig.kind) on the estimate; in the Sun/safe mode and the ORF
     acquisition the seed 002 eq (18) PD with gyroscopic compensation (acquisition bandwidth)."""
-    p, law = c.model, c.law
     q_p, w_p, wd_p = cmd.program[0:4], cmd.program[4:7], cmd.program[7:10]
     coarse = mode == modes.MODE_SUN_SAFE or (
         mode == modes.MODE_ORF and attitude_difference_1(est.q, q_p) > FINE_POINTING_RAD
     )
-    if c.modes.on and coarse:
+    if modes_on and coarse:
         j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
         kp = j_max * ACQUISITION_OMEGA_RAD_S**2  # steady slew rate ≤ kp/kd = ω_n/2 per unit error
         kd = 2.0 * j_max * ACQUISITION_OMEGA_RAD_S
@@ -759,48 +754,35 @@ def _law_stage(
             w_p,
             wd_p,
             p.inertia,
-            p.wheel_axes,
-            p.wheel_inertia,
-            speeds,
-            available,
-            law.mrp_k_nm,
-            law.mrp_p_nms,
-            law.mrp_law_type,
+            control.MrpWheels(p.wheel_axes, p.wheel_inertia, speeds, available),
+            control.MrpGains(law.mrp_k_nm, law.mrp_p_nms, law.mrp_law_type),
         )
     else:
         cmd.body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, law.pd_kp_nm, law.pd_kd_nms)
 
 
 @njit(cache=True)
-def _wheel_commands_1(act: Actuators, cmd: Commands) -> None:
-    """Quantised, limited wheel torque commands (seed 000 eq 3) from the allocation's wheel torques."""
+def _allocate_1(
+    wheel_axes: np.ndarray, act: Actuators, available: np.ndarray, h_wheels: np.ndarray, sensed: Sensed, cmd: Commands
+) -> int:
+    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1), then the quantised,
+    limited wheel commands (seed 000 eq 3); returns the allocation status."""
+    status: int = allocation.allocate_1(
+        cmd.body_torque, wheel_axes, available, h_wheels, sensed.mag, act.allocation, cmd.wheel_alloc, cmd.dipole_alloc
+    )
     for w in range(cmd.wheel_cmd.shape[0]):
         cmd.wheel_cmd[w] = control.wheel_torque_command_1(
             cmd.wheel_alloc[w], act.torque_quantum_nm[w], act.max_torque_nm[w]
         )
-
-
-@njit(cache=True)
-def _allocate_1(c: LoopConfig, available: np.ndarray, h_wheels: np.ndarray, sensed: Sensed, cmd: Commands) -> int:
-    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1), then the quantised,
-    limited wheel commands; returns the allocation status."""
-    status: int = allocation.allocate_1(
-        cmd.body_torque,
-        c.model.wheel_axes,
-        available,
-        h_wheels,
-        sensed.mag,
-        c.actuators.allocation,
-        cmd.wheel_alloc,
-        cmd.dipole_alloc,
-    )
-    _wheel_commands_1(c.actuators, cmd)
     return status
 
 
 @njit(cache=True)
 def _rate_damping_stage(
-    c: LoopConfig,
+    p: PlantArrays,
+    act: Actuators,
+    bdot_gain: float,
+    t_u: float,
     mode: int,
     est: Estimate,
     sensed: Sensed,
@@ -811,20 +793,16 @@ def _rate_damping_stage(
 ) -> None:
     """Rate damping (seed 001 initial mode, seed 003 eq 29–30): B-dot above 1 °/s or in the fault mode;
     below it the wheels brake the body (control.rate_brake_torque_1) while the rods unload the cluster."""
-    p, act = c.model, c.actuators
-    t_u = c.clock.control_every * c.clock.dt_s
     cmd.body_torque[:] = 0.0
     cmd.wheel_cmd[:] = 0.0
     cmd.dipole[:] = 0.0
     rate = np.sqrt(est.omega @ est.omega)
     if mode == modes.MODE_FAULT or rate > WHEEL_CAPTURE_RAD_S or np.sum(available) < 2:
         if have_mag_prev:
-            cmd.dipole[:] = control.bdot_dipole_step(
-                sensed.mag, sensed.mag_prev, t_u, c.modes.bdot_gain, act.md_max_am2
-            )
+            cmd.dipole[:] = control.bdot_dipole_step(sensed.mag, sensed.mag_prev, t_u, bdot_gain, act.md_max_am2)
         return
     cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
-    _allocate_1(c, available, h_wheels, sensed, cmd)
+    _allocate_1(p.wheel_axes, act, available, h_wheels, sensed, cmd)
     cmd.dipole[:] = control.unloading_dipole_step(
         sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
     )
@@ -832,7 +810,10 @@ def _rate_damping_stage(
 
 @njit(cache=True)
 def _allocation_stage(
-    c: LoopConfig,
+    p: PlantArrays,
+    act: Actuators,
+    mc: ModeConfig,
+    t_u: float,
     faults: np.ndarray,
     t: float,
     mode: int,
@@ -846,57 +827,72 @@ def _allocation_stage(
     """Controller faults on the body torque, then wheel torques and MD dipole (seed 000 eq 6, §3; sim_core.
     allocation) with rod faults and the dipole limit; the modes' unloading and rate damping. Returns the
     allocation status."""
-    p, act = c.model, c.actuators
     faults_mod.controller_faults_1(faults, t, cmd.body_torque, cmd.frozen_torque)
-    status = _allocate_1(c, available, h_wheels, sensed, cmd)
+    status = _allocate_1(p.wheel_axes, act, available, h_wheels, sensed, cmd)
     cmd.dipole[:] = cmd.dipole_alloc
     faults_mod.rod_faults_1(faults, t, cmd.dipole)
     for i in range(3):
         cmd.dipole[i] = min(max(cmd.dipole[i], -act.md_max_am2), act.md_max_am2)
-    if c.modes.on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
+    if mc.on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
         # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
         cmd.dipole[:] = control.unloading_dipole_step(
             sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
         )
-    if c.modes.on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
-        _rate_damping_stage(c, mode, est, sensed, have_mag_prev, h_wheels, available, cmd)
+    if mc.on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
+        _rate_damping_stage(p, act, mc.bdot_gain, t_u, mode, est, sensed, have_mag_prev, h_wheels, available, cmd)
     return status
 
 
 @njit(cache=True)
 def _wheel_monitor_stage(
-    c: LoopConfig, t: float, speeds: np.ndarray, est: Estimate, mon: Monitors, ev: np.ndarray, n_ev: np.ndarray
+    p: PlantArrays,
+    act: Actuators,
+    tachometer_quantum_rad_s: float,
+    t_u: float,
+    star_reset: bool,
+    t: float,
+    speeds: np.ndarray,
+    est: Estimate,
+    mon: Monitors,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
 ) -> None:
     """Wheel FDIR at T_u (sim_core.fdir.wheel_check_1); it may drop wheels from ``mon.available``. After an
-    isolation the MEKF trusts the star tracker again (a seizing wheel kicks the body)."""
-    p = c.model
+    isolation a MEKF (``star_reset``) trusts the star tracker again (a seizing wheel kicks the body)."""
     n_before = np.sum(mon.available)
     fdir.wheel_check_1(
         mon.wheel,
         speeds,
         est.omega,
         p.wheel_inertia,
-        c.actuators.max_momentum_nms,
+        act.max_momentum_nms,
         p.friction,
-        c.sensors.tachometer_quantum_rad_s,
-        c.clock.control_every * c.clock.dt_s,
+        tachometer_quantum_rad_s,
+        t_u,
         mon.decouple,
         mon.available,
         ev,
         n_ev,
         t,
     )
-    if c.estimator.kind == ESTIMATOR_MEKF and np.sum(mon.available) < n_before:
+    if star_reset and np.sum(mon.available) < n_before:
         fdir.star_reset_1(mon.star, est.covariance, STAR_RESET_SIGMA_RAD)
 
 
 @njit(cache=True)
 def _wheel_hold_stage(
-    c: LoopConfig, speeds: np.ndarray, est: Estimate, sensed: Sensed, cmd: Commands, mon: Monitors
+    p: PlantArrays,
+    act: Actuators,
+    fd: FdirConfig,
+    t_u: float,
+    speeds: np.ndarray,
+    est: Estimate,
+    sensed: Sensed,
+    cmd: Commands,
+    mon: Monitors,
 ) -> None:
     """Wheel FDIR's prediction for the next T_u (sim_core.fdir.wheel_hold_1) from the commands just sent and
     the MD torque L × B (sim_core.magnetic)."""
-    p, act, fd = c.model, c.actuators, c.fdir
     fdir.wheel_hold_1(
         mon.wheel,
         speeds,
@@ -912,26 +908,31 @@ def _wheel_hold_stage(
         magnetic.magnetic_torque_1(cmd.dipole, sensed.mag),
         fd.disturbance_bound_nm,
         fd.rate_noise_rad_s,
-        c.clock.control_every * c.clock.dt_s,
+        t_u,
     )
 
 
 @njit(cache=True)
-def _actuator_stage(c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, cmd: Commands) -> None:
-    """Delivered wheel motor torques: the held commands under wheel faults, seed 000 eq (2) limits, then (when
-    flown) seed 002's motor electrics (eq 2–3) and its noise and imbalance torques (eq 1, 4)."""
-    p, act = c.model, c.actuators
-    nq, nw = p.flex_mass.shape[0], p.wheel_inertia.shape[0]
-    speeds = x[7 + 2 * nq : 7 + 2 * nq + nw]
+def _actuator_stage(
+    act: Actuators,
+    wheel_inertia: np.ndarray,
+    dt_s: float,
+    faults: np.ndarray,
+    t: float,
+    speeds: np.ndarray,
+    cmd: Commands,
+) -> None:
+    """Delivered wheel motor torques at the wheel ``speeds``: the held commands under wheel faults, seed 000 eq (2)
+    limits, then (when flown) seed 002's motor electrics (eq 2–3) and its noise and imbalance torques (eq 1, 4)."""
     faults_mod.wheel_commands_1(faults, t, cmd.wheel_cmd, cmd.frozen_cmd, cmd.delivered)
-    wheels.limit_motor_torque_into(cmd.delivered, speeds, p.wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
+    wheels.limit_motor_torque_into(cmd.delivered, speeds, wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
     m = act.motor
     if m.on:
         cmd.delivered[:] = wheels.driven_motor_torque_1(
             cmd.motor_current,
             cmd.delivered,
             speeds,
-            c.clock.dt_s,
+            dt_s,
             m.inductance_h,
             m.resistance_ohm,
             m.torque_constant_nm_a,
@@ -939,22 +940,31 @@ def _actuator_stage(c: LoopConfig, faults: np.ndarray, t: float, x: np.ndarray, 
             m.max_voltage_v,
         )
     if act.disturbed:
-        white = np.asarray(np.random.uniform(-1.0, 1.0, nw))
+        white = np.asarray(np.random.uniform(-1.0, 1.0, speeds.shape[0]))
         cmd.delivered[:] = wheels.delivered_torque_1(cmd.delivered, speeds, t, act.noise_nm, act.imbalance_nm_s2, white)
 
 
 @njit(cache=True)
 def _disturbance_stage(
-    c: LoopConfig, x: np.ndarray, pos: Position, dipole: np.ndarray, magnetic_on: bool, ext: np.ndarray
+    d: Disturbances,
+    inertia: np.ndarray,
+    x: np.ndarray,
+    pos: Position,
+    cmd: Commands,
+    magnetic_on: bool,
+    ext: np.ndarray,
 ) -> None:
-    """External torque on the flown body: (MD dipole + residual dipole) × B (sim_core.magnetic), the gravity
-    gradient of the true inertia, aerodynamic and solar-pressure torques on the plates (sim_core.environment)."""
+    """External torque on the flown body (true ``inertia``): (MD dipole + residual dipole) × B (sim_core.magnetic),
+    the gravity gradient, aerodynamic and solar-pressure torques on the plates (sim_core.environment)."""
     ext[:] = 0.0
     if magnetic_on:
-        ext[:] = magnetic.magnetic_torque_1(dipole + c.disturbances.residual_dipole_am2, pos.b_body)
-    d, sf = c.disturbances, c.disturbances.surfaces
+        for i in range(3):
+            cmd.moment[i] = cmd.dipole[i] + d.residual_dipole_am2[i]
+        magnetic.magnetic_torque_into(cmd.moment, pos.b_body, ext)
+    sf = d.surfaces
     if d.gravity_gradient:
-        ext[:] += environment.gravity_gradient_torque_1(conjugate_rotate_1(x[0:4], pos.r), c.truth.inertia)
+        conjugate_rotate_into(x, pos.r, pos.r_body)
+        environment.add_gravity_gradient_torque_into(pos.r_body, inertia, ext)
     if d.aerodynamic:
         ext[:] += environment.aerodynamic_torque_orbit_1(
             x[0:4], pos.r, pos.v, sf.drag_coefficient, sf.normals_b, sf.areas_m2, sf.centroids_b_m
@@ -967,7 +977,10 @@ def _disturbance_stage(
 
 @njit(cache=True)
 def _record_stage(
-    c: LoopConfig,
+    g: Program,
+    clk: Clock,
+    c_pn: np.ndarray,
+    n_modes: int,
     t: float,
     x: np.ndarray,
     pos: Position,
@@ -980,12 +993,12 @@ def _record_stage(
     row: np.ndarray,
 ) -> None:
     """One output sample (R_* channels): truth, estimate, program, actuators, wheels."""
-    nq, nw = c.model.flex_mass.shape[0], c.model.wheel_inertia.shape[0]
+    nw = cmd.wheel_cmd.shape[0]
     row[R_Q : R_Q + 4] = x[0:4]
     row[R_W : R_W + 3] = x[4:7]
     row[R_QE : R_QE + 4] = est.q
     row[R_WE : R_WE + 3] = est.omega
-    q_now, w_now, _, obs_now = program_at(c, t, pos)
+    q_now, w_now, _, obs_now = program_at(g, clk, c_pn, t, pos)
     row[R_QP : R_QP + 4] = q_now
     row[R_WP : R_WP + 3] = control.program_in_body_1(q_now, x[0:4], w_now)
     row[R_MD : R_MD + 3] = cmd.dipole
@@ -995,7 +1008,7 @@ def _record_stage(
     row[R_STATUS] = status
     row[R_FAULTS] = flags
     row[R_MODE] = mode
-    row[R_WHEELS : R_WHEELS + nw] = x[7 + 2 * nq : 7 + 2 * nq + nw]
+    row[R_WHEELS : R_WHEELS + nw] = x[7 + 2 * n_modes : 7 + 2 * n_modes + nw]
     row[R_WHEELS + nw : R_WHEELS + 2 * nw] = cmd.wheel_cmd
     row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = cmd.delivered
     for w in range(nw):
@@ -1015,13 +1028,13 @@ def _markov_1(s: SensorModels, t_q: float) -> np.ndarray:
 
 
 @njit(cache=True)
-def _initial_monitors(c: LoopConfig, available: np.ndarray) -> Monitors:
-    p, nw = c.model, c.model.wheel_inertia.shape[0]
+def _initial_monitors(p: PlantArrays, gyro_drift_density: float, available: np.ndarray) -> Monitors:
+    nw = p.wheel_inertia.shape[0]
     star = np.zeros(fdir.STAR_STATE_SIZE)
     star[0:4] = np.nan
     gyro = np.zeros(fdir.GYRO_STATE_SIZE)
     gyro[fdir.GS_T0] = np.nan
-    gyro[fdir.GS_SIGMA_U] = c.estimator.gyro_drift_density
+    gyro[fdir.GS_SIGMA_U] = gyro_drift_density
     j_eff_inv = np.linalg.inv(free_wheel_inertia_1(p))
     return Monitors(
         fdir.wheel_state_1(nw),
@@ -1036,9 +1049,8 @@ def _initial_monitors(c: LoopConfig, available: np.ndarray) -> Monitors:
 
 
 @njit(cache=True)
-def _flown_plant(c: LoopConfig) -> PlantArrays:
+def _flown_plant(t: PlantArrays) -> PlantArrays:
     """The truth plant with its own friction array (wheel friction faults change it during the flight)."""
-    t = c.truth
     return PlantArrays(
         t.inertia,
         t.mass_inv,
@@ -1049,6 +1061,24 @@ def _flown_plant(c: LoopConfig) -> PlantArrays:
         t.flex_mass,
         t.flex_freq,
         t.flex_decrement,
+    )
+
+
+@njit(cache=True)
+def _initial_commands(nw: int) -> Commands:
+    return Commands(
+        np.zeros(3),
+        np.zeros(3),
+        np.zeros(3),
+        np.zeros(nw),
+        np.zeros(nw),
+        np.zeros(nw),
+        np.zeros(3),
+        np.zeros(nw),
+        np.zeros(3),
+        np.zeros(10),
+        np.zeros(nw),
+        np.zeros(3),
     )
 
 
@@ -1065,52 +1095,54 @@ def fly_variant(
     dynamics fly. The law reads the estimate of ``c.estimator.kind`` (see :class:`EstimatorConfig`: the true
     state, the raw star tracker + gyro, the MEKF, seed 000 §4's mismatch filter or seed 003's body-rate
     estimator); every seed model in ``c`` whose switch is off costs nothing and draws no random number.
+    Each stage receives only the blocks of ``c`` it reads (a call that carried all of ``c`` would pass and
+    reference-count each of its arrays, at every dynamics step).
     ``shared[0]`` non-zero cancels the run (checked each T_u); ``shared[slot]`` receives the steps done.
     """
     np.random.seed(var.seed)
-    clk, p = c.clock, c.model
+    clk, eph, prog, sens, estc, act, dist, mc = (
+        c.clock,
+        c.ephemeris,
+        c.program,
+        c.sensors,
+        c.estimator,
+        c.actuators,
+        c.disturbances,
+        c.modes,
+    )
+    p = c.model
     nq, nw = p.flex_mass.shape[0], p.wheel_inertia.shape[0]
+    t_q, t_u = clk.measure_every * clk.dt_s, clk.control_every * clk.dt_s
     faults, fdir_on = var.faults, var.fdir_on
+    has_faults = faults.shape[0] > 0
     x = var.x0.copy()
-    markov = _markov_1(c.sensors, clk.measure_every * clk.dt_s)
-    sig_m = c.sensors.gyro_markov_sigma_rad_s
+    wheel_speeds = x[7 + 2 * nq : 7 + 2 * nq + nw]  # view: the integrator updates x in place
+    markov = _markov_1(sens, t_q)
+    sig_m = sens.gyro_markov_sigma_rad_s
     drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
     sensed = Sensed(np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), np.zeros(3))
     filt = np.zeros(9)
     filt[6:9] = x[4:7]
-    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), c.estimator.covariance0.copy(), filt)
-    cmd = Commands(
-        np.zeros(3),
-        np.zeros(3),
-        np.zeros(3),
-        np.zeros(nw),
-        np.zeros(nw),
-        np.zeros(nw),
-        np.zeros(3),
-        np.zeros(nw),
-        np.zeros(3),
-        np.zeros(10),
-        np.zeros(nw),
-    )
-    mon = _initial_monitors(c, var.available)
-    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.zeros(3))
-    plant = _flown_plant(c)
-    j_inv = np.linalg.inv(c.truth.inertia)
+    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), estc.covariance0.copy(), filt)
+    cmd = _initial_commands(nw)
+    mon = _initial_monitors(p, estc.gyro_drift_density, var.available)
+    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.zeros(3), np.zeros(3))
+    plant = _flown_plant(c.truth)
+    j_inv = np.linalg.inv(plant.inertia)
     work = np.zeros((6, x.shape[0] + 3 + nq + nw))
     ext = np.zeros(3)
     fault_state = np.zeros(faults.shape[0], dtype=np.bool_)
-    res = c.disturbances.residual_dipole_am2
+    res = dist.residual_dipole_am2
     res_on = res[0] != 0.0 or res[1] != 0.0 or res[2] != 0.0
-    mode = c.modes.initial if c.modes.on else -1
+    mode = mc.initial if mc.on else -1
     mode_state = np.full(modes.STATE_SIZE, np.nan)
     mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
-    sigma_u = c.estimator.gyro_drift_density
+    sigma_u = estc.gyro_drift_density
     flags, status, out_i = 0, 0, 0
     md_on, have_mag_prev, valid = False, False, True
-    d = c.disturbances
-    every_step = d.gravity_gradient or d.aerodynamic or d.solar_pressure  # models that need r, v at each step
-    sun_wanted = d.solar_pressure or c.sensors.star_cos_sun_exclusion <= 1.0
-    _ephemeris_stage(c, 0.0, x, True, True, sun_wanted, pos)
+    every_step = dist.gravity_gradient or dist.aerodynamic or dist.solar_pressure  # models that need r, v each step
+    sun_wanted = dist.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
+    _ephemeris_stage(eph, clk.t0_unix_s, 0.0, x, True, True, sun_wanted, pos)
 
     for k in range(clk.n_steps):
         t = k * clk.dt_s
@@ -1118,42 +1150,65 @@ def fly_variant(
         control_tick = k % clk.control_every == 0
         output = k % clk.output_every == 0
         orbit_due = every_step or md_on or control_tick or measure or output
-        _ephemeris_stage(c, t, x, orbit_due, md_on or res_on or measure, sun_wanted and measure, pos)
-        flags = _fault_stage(faults, t, fault_state, flags, ev, n_ev, cmd, sensed)
+        _ephemeris_stage(eph, clk.t0_unix_s, t, x, orbit_due, md_on or res_on or measure, sun_wanted and measure, pos)
+        if has_faults:
+            flags = _fault_stage(faults, t, fault_state, ev, n_ev, cmd, sensed)
 
         if measure:
-            q_m, sig3, st_ok, gyro_ok = _sense_stage(c, faults, t, x, markov, pos, sensed)
-            valid, sigma_u = _estimate_stage(
-                c, faults, fdir_on, k, t, x, pos, sensed, q_m, sig3, st_ok, gyro_ok, sigma_u, valid, est, mon, ev, n_ev
-            )
+            sample = _sense_stage(sens, faults, t, x, markov, pos, sensed)
+            if fdir_on:
+                _magnetometer_monitor_stage(sens, c.fdir, t, pos, sensed, est, mon, ev, n_ev)
+            if estc.kind == ESTIMATOR_MEKF:
+                valid, sigma_u = _mekf_stage(
+                    estc, sens, c.fdir, t_q, var, k, t, x, pos, sensed, sample, sigma_u, est, mon, ev, n_ev
+                )
+            elif estc.kind == ESTIMATOR_SEED000 or estc.kind == ESTIMATOR_SEED003:
+                q_p, w_p, _, _ = program_at(prog, clk, eph.c_pn, t, pos)
+                _mismatch_filter_stage(estc, t_q, q_p, w_p, sensed, sample, est)
+                valid = sample.star_ok
+            else:
+                _sample_estimate_stage(estc.kind, x, sensed, sample, est)
 
         if control_tick:
             shared[slot] = k
             if shared[0] != 0:
                 break
-            mode = _guidance_stage(c, faults, t, x, pos, mode_state, mode, valid, est, sensed, mon, cmd, ev, n_ev)
-            speeds = _tachometer_stage(c, x)
+            q_p, w_p, wd_p, _ = program_at(prog, clk, eph.c_pn, t, pos)
+            cmd.program[0:4] = q_p
+            cmd.program[4:7] = w_p
+            cmd.program[7:10] = wd_p
+            if mc.on:
+                mode = _mode_stage(
+                    mc, sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, pos, mode_state, mode, valid, est,
+                    sensed, mon, cmd, ev, n_ev,
+                )  # fmt: skip
+            speeds = _tachometer_stage(sens.tachometer_quantum_rad_s, wheel_speeds)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
-                _wheel_monitor_stage(c, t, speeds, est, mon, ev, n_ev)
-            _law_stage(c, mode, est, speeds, h_wheels, mon.available, cmd)
-            status = _allocation_stage(c, faults, t, mode, est, sensed, have_mag_prev, h_wheels, mon.available, cmd)
+                star_reset = estc.kind == ESTIMATOR_MEKF
+                _wheel_monitor_stage(
+                    p, act, sens.tachometer_quantum_rad_s, t_u, star_reset, t, speeds, est, mon, ev, n_ev
+                )
+            _law_stage(p, c.law, mc.on, mode, est, speeds, h_wheels, mon.available, cmd)
+            status = _allocation_stage(
+                p, act, mc, t_u, faults, t, mode, est, sensed, have_mag_prev, h_wheels, mon.available, cmd
+            )
             sensed.mag_prev[:] = sensed.mag
             have_mag_prev = True
             md_on = cmd.dipole[0] != 0.0 or cmd.dipole[1] != 0.0 or cmd.dipole[2] != 0.0
             if fdir_on:
-                _wheel_hold_stage(c, speeds, est, sensed, cmd, mon)
+                _wheel_hold_stage(p, act, c.fdir, t_u, speeds, est, sensed, cmd, mon)
 
         if output and out_i < rec.shape[0]:
-            _record_stage(c, t, x, pos, est, cmd, mon, status, flags, mode, rec[out_i])
+            _record_stage(prog, clk, eph.c_pn, nq, t, x, pos, est, cmd, mon, status, flags, mode, rec[out_i])
             out_i += 1
 
-        _actuator_stage(c, faults, t, x, cmd)
-        if faults.shape[0] > 0:
+        _actuator_stage(act, p.wheel_inertia, clk.dt_s, faults, t, wheel_speeds, cmd)
+        if has_faults:
             faults_mod.extra_friction_1(faults, t, plant.friction, p.friction)
-        _disturbance_stage(c, x, pos, cmd.dipole, md_on or res_on, ext)
+        _disturbance_stage(dist, plant.inertia, x, pos, cmd, md_on or res_on, ext)
         rk4_step_into(x, clk.dt_s, cmd.delivered, ext, plant, work, x)
-        if faults.shape[0] > 0:
+        if has_faults:
             faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)
     else:
         shared[slot] = clk.n_steps

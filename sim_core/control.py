@@ -12,6 +12,7 @@ test also covers a one-period delay, should an engine apply the torque one perio
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -48,6 +49,8 @@ __all__ = [
     "quaternion_pd_step",
     "bdot_dipole_step",
     "unloading_dipole_step",
+    "MrpWheels",
+    "MrpGains",
     "mrp_feedback_step",
     "program_in_body_1",
     "mrp_tracking_step",
@@ -452,6 +455,24 @@ def unloading_dipole(
     return out.reshape(shape)
 
 
+class MrpWheels(NamedTuple):
+    """The wheels whose momentum Basilisk's mrpFeedback sums: spin axes g (3, n_w) in body axes, J_s (kg·m²),
+    speeds Ω (rad/s) and which of them are available (RWAvailabilityMsg)."""
+
+    gs_b: np.ndarray
+    js_kg_m2: np.ndarray
+    wheel_speed_rad_s: np.ndarray
+    available: np.ndarray
+
+
+class MrpGains(NamedTuple):
+    """Basilisk mrpFeedback gains K (N·m), P (N·m·s) and its law type (0: v = ω_RN, 1: v = ω_BN)."""
+
+    k_nm: float
+    p_nms: float
+    law_type: int
+
+
 @njit(cache=True)
 def mrp_feedback_step(
     sigma_br: np.ndarray,
@@ -459,19 +480,15 @@ def mrp_feedback_step(
     omega_rn_b: np.ndarray,
     domega_rn_b: np.ndarray,
     inertia: np.ndarray,
-    gs_b: np.ndarray,
-    js_kg_m2: np.ndarray,
-    wheel_speed_rad_s: np.ndarray,
-    available: np.ndarray,
-    k_nm: float,
-    p_nms: float,
-    law_type: int,
+    wheels: MrpWheels,
+    gains: MrpGains,
 ) -> np.ndarray:
     """Basilisk mrpFeedback with Ki < 0 (no integral): L_r = −Kσ − Pδω + v × (Iω + Σ J_s(ωᵀg + Ω)g) − I(ω × ω_r − ω̇_r).
 
     v = ω_RN (law_type 0, Basilisk's default) or ω_BN (law_type 1); wheels outside ``available``
     are left out of the momentum sum, as Basilisk's RWAvailabilityMsg does; no known torque.
     """
+    gs_b, js_kg_m2, wheel_speed_rad_s, available = wheels
     omega = omega_br_b + omega_rn_b
     h = _mv3(inertia, omega)
     for i in range(gs_b.shape[1]):
@@ -481,9 +498,9 @@ def mrp_feedback_step(
             )
             for r in range(3):
                 h[r] += spin * gs_b[r, i]
-    gyro = np.cross(omega_rn_b if law_type == 0 else omega, h)
+    gyro = np.cross(omega_rn_b if gains.law_type == 0 else omega, h)
     feed = _mv3(inertia, np.cross(omega, omega_rn_b) - domega_rn_b)
-    torque_nm: npt.NDArray[np.float64] = -k_nm * sigma_br - p_nms * omega_br_b + gyro - feed
+    torque_nm: npt.NDArray[np.float64] = -gains.k_nm * sigma_br - gains.p_nms * omega_br_b + gyro - feed
     return torque_nm
 
 
@@ -525,9 +542,10 @@ def mrp_feedback(
     batch = int(np.prod(shape))
     flat = [np.broadcast_to(f, shape + f.shape[-1:]).reshape(batch, f.shape[-1]).copy() for f in fields]
     j = _as_inertia(inertia_kg_m2)
+    gains = MrpGains(float(k_nm), float(p_nms), int(law_type))
     out = np.array(
         [
-            mrp_feedback_step(s, wbr, wrn, dwrn, j, gs, js, ws, av, k_nm, p_nms, law_type)
+            mrp_feedback_step(s, wbr, wrn, dwrn, j, MrpWheels(gs, js, ws, av), gains)
             for s, wbr, wrn, dwrn, ws, av in zip(*flat)
         ]
     )
@@ -549,13 +567,8 @@ def mrp_tracking_step(
     omega_p: np.ndarray,
     omega_dot_p: np.ndarray,
     inertia: np.ndarray,
-    gs_b: np.ndarray,
-    js_kg_m2: np.ndarray,
-    wheel_speed_rad_s: np.ndarray,
-    available: np.ndarray,
-    k_nm: float,
-    p_nms: float,
-    law_type: int,
+    wheels: MrpWheels,
+    gains: MrpGains,
 ) -> np.ndarray:
     """:func:`mrp_feedback_step` on a quaternion program: σ_BR = ε/(1 + e0) of E = Λ̃^p ∘ Λ (short way),
     ω_RN and ω̇_RN carried into body axes by E, δω = ω − ω_RN."""
@@ -567,20 +580,7 @@ def mrp_tracking_step(
     sigma = e[1:] / (1.0 + e[0])
     w_rn_b = conjugate_rotate_1(e, omega_p)
     wd_rn_b = conjugate_rotate_1(e, omega_dot_p)
-    return mrp_feedback_step(
-        sigma,
-        omega_b - w_rn_b,
-        w_rn_b,
-        wd_rn_b,
-        inertia,
-        gs_b,
-        js_kg_m2,
-        wheel_speed_rad_s,
-        available,
-        k_nm,
-        p_nms,
-        law_type,
-    )
+    return mrp_feedback_step(sigma, omega_b - w_rn_b, w_rn_b, wd_rn_b, inertia, wheels, gains)
 
 
 @njit(cache=True)

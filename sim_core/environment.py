@@ -59,6 +59,7 @@ __all__ = [
     "illumination_1",
     "atmosphere_density_1",
     "gravity_gradient_torque_1",
+    "add_gravity_gradient_torque_into",
     "aerodynamic_torque_1",
     "solar_pressure_torque_1",
     "EARTH_ROTATION_RAD_S",
@@ -412,19 +413,32 @@ def atmosphere_density_kg_m3(alt_m: np.ndarray | float) -> np.ndarray:
 
 
 @njit(cache=True)
-def gravity_gradient_torque_1(r_b_m: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:
-    """Gravity-gradient torque 3μ/r³ r̂ × (J r̂) (N·m), r = position in body axes (Wertz eq 17-38)."""
+def _gravity_gradient_components(r_b_m: np.ndarray, inertia_kg_m2: np.ndarray) -> tuple[float, float, float]:
+    """Gravity-gradient torque 3μ/r³ r̂ × (J r̂) (N·m) as three floats, r = position in body axes (Wertz eq 17-38)."""
     r2 = r_b_m[0] ** 2 + r_b_m[1] ** 2 + r_b_m[2] ** 2
     k = 3.0 * MU_EARTH_M3_S2 / (r2 * r2 * np.sqrt(r2))  # 3μ/r⁵ with r (not r̂) in the products
     j = inertia_kg_m2
     j0 = j[0, 0] * r_b_m[0] + j[0, 1] * r_b_m[1] + j[0, 2] * r_b_m[2]
     j1 = j[1, 0] * r_b_m[0] + j[1, 1] * r_b_m[1] + j[1, 2] * r_b_m[2]
     j2 = j[2, 0] * r_b_m[0] + j[2, 1] * r_b_m[1] + j[2, 2] * r_b_m[2]
+    return k * (r_b_m[1] * j2 - r_b_m[2] * j1), k * (r_b_m[2] * j0 - r_b_m[0] * j2), k * (r_b_m[0] * j1 - r_b_m[1] * j0)
+
+
+@njit(cache=True)
+def gravity_gradient_torque_1(r_b_m: np.ndarray, inertia_kg_m2: np.ndarray) -> np.ndarray:
+    """Gravity-gradient torque 3μ/r³ r̂ × (J r̂) (N·m), r = position in body axes (Wertz eq 17-38)."""
     out = np.empty(3)
-    out[0] = k * (r_b_m[1] * j2 - r_b_m[2] * j1)
-    out[1] = k * (r_b_m[2] * j0 - r_b_m[0] * j2)
-    out[2] = k * (r_b_m[0] * j1 - r_b_m[1] * j0)
+    out[0], out[1], out[2] = _gravity_gradient_components(r_b_m, inertia_kg_m2)
     return out
+
+
+@njit(cache=True)
+def add_gravity_gradient_torque_into(r_b_m: np.ndarray, inertia_kg_m2: np.ndarray, torque_nm: np.ndarray) -> None:
+    """``torque_nm`` += :func:`gravity_gradient_torque_1` without allocating (the flight loop, every step)."""
+    t0, t1, t2 = _gravity_gradient_components(r_b_m, inertia_kg_m2)
+    torque_nm[0] += t0
+    torque_nm[1] += t1
+    torque_nm[2] += t2
 
 
 @njit(cache=True)

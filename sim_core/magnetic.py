@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 __all__ = [
     "magnetic_torque",
     "magnetic_torque_1",
+    "magnetic_torque_into",
     "saturate_moment",
     "saturate_moment_1",
     "moment_for_torque",
@@ -35,10 +36,16 @@ __all__ = [
 def magnetic_torque_1(moment_b: np.ndarray, field_b: np.ndarray) -> np.ndarray:
     """Torque L × B on the body, N·m, from dipole L (A·m²) and field B (T) in body axes (seed 003 eq 26)."""
     out = np.empty(3)
-    out[0] = moment_b[1] * field_b[2] - moment_b[2] * field_b[1]
-    out[1] = moment_b[2] * field_b[0] - moment_b[0] * field_b[2]
-    out[2] = moment_b[0] * field_b[1] - moment_b[1] * field_b[0]
+    magnetic_torque_into(moment_b, field_b, out)
     return out
+
+
+@njit(cache=True)
+def magnetic_torque_into(moment_b: np.ndarray, field_b: np.ndarray, torque_b_nm: np.ndarray) -> None:
+    """:func:`magnetic_torque_1` written into ``torque_b_nm`` without allocating (the flight loop, every step)."""
+    torque_b_nm[0] = moment_b[1] * field_b[2] - moment_b[2] * field_b[1]
+    torque_b_nm[1] = moment_b[2] * field_b[0] - moment_b[0] * field_b[2]
+    torque_b_nm[2] = moment_b[0] * field_b[1] - moment_b[1] * field_b[0]
 
 
 @njit(cache=True)
