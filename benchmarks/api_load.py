@@ -19,18 +19,18 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import os
 import re
 import shutil
 import socket
 import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import httpx
 import numpy as np
+
+from benchmarks.serve_process import start_serve
 
 REPO = Path(__file__).resolve().parents[1]
 DIARY = REPO.parent / "shared/data/real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
@@ -71,28 +71,12 @@ def make_tokens(data_dir: Path) -> dict[str, str]:
 
 def start_server(data_dir: Path, port: int, live_port: int) -> subprocess.Popen:
     """``acs-twin serve`` in its own process, live stream of the reference satellite on live_port."""
-    env = {
-        **os.environ,
-        "ACS_TWIN_DATA_DIR": str(data_dir),
+    live = {
         "ACS_TWIN_TELEMETRY_PORT": str(live_port),
         "ACS_TWIN_LIVE_DICTIONARY": "reference_satellite.yaml",
         "ACS_TWIN_LIVE_SATELLITE": "REFSAT",
     }
-    server = subprocess.Popen(
-        [sys.executable, "-m", "backend", "serve", "--port", str(port)],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.STDOUT,
-    )
-    deadline = time.monotonic() + 60
-    while time.monotonic() < deadline:
-        try:
-            httpx.get(f"http://127.0.0.1:{port}/api/v1/health", timeout=1.0)
-            return server
-        except httpx.TransportError:
-            time.sleep(0.2)
-    server.kill()
-    raise SystemExit("server did not start")
+    return start_serve(data_dir, port, env=live)
 
 
 def live_sender(port: int, seconds: float, rate_hz: float) -> None:

@@ -32,6 +32,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from benchmarks.serve_process import start_serve  # noqa: E402
 from tests.frontend.conftest import CHROMIUM, CHROMIUM_FLAGS, free_port  # noqa: E402 - the browser tests' set-up
 
 TARGET_P99_S = 1.0
@@ -48,27 +49,9 @@ OBSERVE_JS = """([name]) => {
 
 def _server(tmp: Path) -> tuple[subprocess.Popen, int, int]:
     """acs-twin serve --no-auth --no-emulator on free ports; (process, API port, telemetry port)."""
-    import httpx
-
     api, telemetry = free_port(), free_port()
-    env = {**os.environ, "ACS_TWIN_TELEMETRY_PORT": str(telemetry), "ACS_TWIN_VIEWER_PORT": str(free_port())}
-    command = [sys.executable, "-m", "backend", "serve", "--no-auth", "--no-emulator", "--port", str(api)]
-    proc = subprocess.Popen(
-        [*command, "--data-dir", str(tmp / "data")],
-        cwd=REPO,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.STDOUT,
-    )
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{api}/api/v1/health", timeout=2).status_code == 200:
-                return proc, api, telemetry
-        except httpx.HTTPError:
-            time.sleep(0.3)
-    proc.kill()
-    raise RuntimeError("acs-twin serve did not answer within 300 s")
+    env = {"ACS_TWIN_TELEMETRY_PORT": str(telemetry), "ACS_TWIN_VIEWER_PORT": str(free_port())}
+    return start_serve(tmp / "data", api, "--no-auth", "--no-emulator", env=env), api, telemetry
 
 
 def _stream(seconds: float):

@@ -67,6 +67,20 @@ def _kill_when_decoding(decoder: object, after_pid: int | None, deadline: float)
     raise AssertionError("the decoder never started decoding")
 
 
+def _upload_killing_the_decoder(client: TestClient, token: str, data: bytes, kills: int) -> tuple[dict, list[int]]:
+    """Upload ``data`` while the decoder is SIGKILLed ``kills`` times mid-file (each time a fresh process); the
+    answer and the killed pids."""
+    decoder = client.app.state.services.telemetry.upload_decoder
+    out: dict = {}
+    uploader = threading.Thread(target=_upload, args=(client, token, data, out))
+    uploader.start()
+    deadline, killed = time.monotonic() + KILL_WAIT_S, []
+    for _ in range(kills):
+        killed.append(_kill_when_decoding(decoder, killed[-1] if killed else None, deadline))
+    uploader.join()
+    return out, killed
+
+
 def _archived_packets(client: TestClient) -> int:
     archive = client.app.state.services.telemetry.archive
     keys = archive.packet_keys("REFSAT", -(2**62), 2**62)
@@ -98,14 +112,9 @@ def test_large_upload_is_decoded_in_another_process_with_the_one_shot_report(
 def test_decoder_killed_mid_file_loses_nothing_and_writes_nothing_twice(
     client: TestClient, tokens: dict[str, str], stream: bytes
 ) -> None:
-    decoder = client.app.state.services.telemetry.upload_decoder
-    out: dict = {}
-    uploader = threading.Thread(target=_upload, args=(client, tokens["operator"], stream, out))
-    uploader.start()
-    killed = _kill_when_decoding(decoder, None, time.monotonic() + KILL_WAIT_S)
-    uploader.join()
+    out, killed = _upload_killing_the_decoder(client, tokens["operator"], stream, kills=1)
     assert out["status"] == 200, out["body"]
-    assert decoder.pid not in (None, killed)  # a fresh decoder took the file again
+    assert client.app.state.services.telemetry.upload_decoder.pid not in (None, *killed)  # a fresh one took it again
     assert out["body"]["archive"]["packets_accepted"] == 5 * N_GPS
     uploads = client.get("/api/v1/telemetry/uploads?satellite=REFSAT", headers=bearer(tokens["viewer"])).json()
     assert [u["packets_accepted"] for u in uploads] == [5 * N_GPS]
@@ -115,14 +124,7 @@ def test_decoder_killed_mid_file_loses_nothing_and_writes_nothing_twice(
 def test_decoder_dying_twice_refuses_the_upload_with_nothing_archived(
     client: TestClient, tokens: dict[str, str], stream: bytes
 ) -> None:
-    decoder = client.app.state.services.telemetry.upload_decoder
-    out: dict = {}
-    uploader = threading.Thread(target=_upload, args=(client, tokens["operator"], stream, out))
-    uploader.start()
-    deadline = time.monotonic() + KILL_WAIT_S
-    first = _kill_when_decoding(decoder, None, deadline)
-    _kill_when_decoding(decoder, first, deadline)
-    uploader.join()
+    out, _ = _upload_killing_the_decoder(client, tokens["operator"], stream, kills=2)
     assert out["status"] == 503 and out["body"]["field"] == "body", out["body"]
     assert "nothing of it was archived" in out["body"]["message"]
     assert client.get("/api/v1/telemetry/uploads?satellite=REFSAT", headers=bearer(tokens["viewer"])).json() == []
