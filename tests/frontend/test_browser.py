@@ -9,13 +9,19 @@ from __future__ import annotations
 
 import re
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
 from PIL import Image
 
 from tests.frontend.conftest import ALARM_SATELLITE
+
+if TYPE_CHECKING:  # playwright is optional: the browser tests skip without it (conftest.browser)
+    from playwright.sync_api import Page
 
 pytestmark = pytest.mark.browser
 
@@ -166,6 +172,22 @@ def emulated_telemetry(backend_server) -> int:
     return int(stream.t_utc_ns[0])
 
 
+@contextmanager
+def _dashboard(browser, backend_server, satellite: str) -> Iterator[tuple[Page, list[str]]]:
+    """The dashboard in a new page, logged in to ``satellite`` with the server's token; the page's script errors."""
+    page = browser.new_page(viewport={"width": 1920, "height": 1400})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        page.goto(backend_server["base"] + "/dashboard/")
+        page.fill("#satellite", satellite)
+        page.fill("#token", backend_server["token"])
+        page.click("#login button[type=submit]")
+        yield page, errors
+    finally:
+        page.close()
+
+
 def _series_per_chart(page) -> list[int]:
     """Plotted series of each residual chart (legend rows minus the time axis)."""
     return page.eval_on_selector_all(
@@ -176,14 +198,7 @@ def _series_per_chart(page) -> list[int]:
 def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(
     browser, backend_server, emulated_telemetry, tmp_path
 ):
-    page = browser.new_page(viewport={"width": 1920, "height": 1400})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    try:
-        page.goto(backend_server["base"] + "/dashboard/")
-        page.fill("#satellite", EMULATED_SATELLITE)
-        page.fill("#token", backend_server["token"])
-        page.click("#login button[type=submit]")
+    with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
         # no predicted pass for the emulated satellite: its archived telemetry is the window
         page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=20_000)
         page.fill("#duration", str(TWIN_S))  # the default start moves so that the run fits in the window
@@ -217,21 +232,12 @@ def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(
         assert abs(x0 - emulated_telemetry / 1e9 - TWIN_ALIGN_S) < 1.0
         page.locator("#whatif-panel").screenshot(path=tmp_path / "whatif.png")
         assert errors == []
-    finally:
-        page.close()
 
 
 def test_what_if_where_no_hypothesis_fits_says_so_with_the_residuals(browser, backend_server, emulated_telemetry):
     """RW2 failed in the telemetry; the twin flies nominal and the alternative sticks RW3: nothing fits, and the
     dashboard says so (the server's verdict) instead of naming the least bad variant, with each one's residuals."""
-    page = browser.new_page(viewport={"width": 1920, "height": 1400})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    try:
-        page.goto(backend_server["base"] + "/dashboard/")
-        page.fill("#satellite", EMULATED_SATELLITE)
-        page.fill("#token", backend_server["token"])
-        page.click("#login button[type=submit]")
+    with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
         page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=20_000)
         page.fill("#duration", str(TWIN_S))
         page.fill("#onset", str(HIDDEN_ONSET_S - TWIN_ALIGN_S))
@@ -252,8 +258,6 @@ def test_what_if_where_no_hypothesis_fits_says_so_with_the_residuals(browser, ba
         assert headers[3] == "wheel RMS rpm" and [name for name, _ in rms] == VARIANTS
         assert all(value > NO_FIT_WHEEL_RMS_RPM for _, value in rms), rms  # RW2 stopped: far beyond the 2.5 rpm noise
         assert errors == []
-    finally:
-        page.close()
 
 
 DIAGNOSIS_TIMEOUT_MS = 600_000  # the automatic diagnosis: LocalCluster start and the replays, on a loaded machine
@@ -265,14 +269,7 @@ def test_the_detection_alarm_links_to_its_diagnosis_and_its_top_hypotheses_fly(
     """The uploaded REFSAT telemetry (RW2 fails at 350 s, onboard FDIR isolates it) made the live twin detect the
     anomaly: the twin_anomaly alarm's "diagnosis" button shows the automatic diagnosis (evidence, ranked
     hypotheses with RW2 failure on top), and its top hypotheses fly as a twin session whose residuals plot."""
-    page = browser.new_page(viewport={"width": 1920, "height": 1400})
-    errors: list[str] = []
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    try:
-        page.goto(backend_server["base"] + "/dashboard/")
-        page.fill("#satellite", EMULATED_SATELLITE)
-        page.fill("#token", backend_server["token"])
-        page.click("#login button[type=submit]")
+    with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
         alarm = page.wait_for_selector("#alarms tbody tr[data-parameter='twin_anomaly']", timeout=60_000)
         alarm.query_selector("button.diagnosis-link").click()
         page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
@@ -291,5 +288,3 @@ def test_the_detection_alarm_links_to_its_diagnosis_and_its_top_hypotheses_fly(
         assert rows[0] == "twin" and rows[1].startswith("h1_failure") and len(rows) >= 3, rows
         page.wait_for_function("document.querySelectorAll('#whatif-plots .twin-chart .uplot').length === 3")
         assert errors == []
-    finally:
-        page.close()
