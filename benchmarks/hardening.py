@@ -5,7 +5,8 @@
 Each run starts the real ``acs-twin serve`` (SQLite in a fresh data directory, auth off, demo
 emulator on, free loopback ports) as its own process:
   * kill -9 trials: while a thread uploads slices of the real NOAA-20 diary (600 packets each, one
-    satellite name per upload) the server is killed with SIGKILL at a random instant; it is started
+    satellite name per upload) the server is killed with SIGKILL at a random instant (0-3 s after the
+    trial's first upload was answered: before it, a loaded machine may still be warming up); it is started
     again on the same ports and data, and every upload that was answered 200 (acknowledged) must be
     in the archive with all its accepted samples. Lost = acknowledged samples not found afterwards.
     The server's children (live-ingest process, emulator, job workers) must all be gone after each kill.
@@ -107,9 +108,11 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
         started = time.monotonic()
         server = Server(data_dir, *ports)
         children = server.children()
-        stop = threading.Event()
+        stop, first_answered = threading.Event(), threading.Event()
 
-        def upload(trial: int = trial, server: Server = server, stop: threading.Event = stop) -> None:
+        def upload(
+            trial: int = trial, server: Server = server, stop: threading.Event = stop, first=first_answered
+        ) -> None:
             k = 0
             while not stop.is_set():
                 at = (k % n_slices) * PACKET_OCTETS * SLICE_PACKETS
@@ -124,11 +127,13 @@ def kill_trials(trials: int, diary: bytes) -> tuple[int, int, int, int]:
                     return  # killed mid-request: not acknowledged
                 if answer.status_code == 200:
                     acknowledged[satellite] = answer.json()["archive"]["packets_accepted"]
+                first.set()
                 k += 1
 
         sender = threading.Thread(target=upload)
         sender.start()
-        time.sleep(rng.uniform(1.0, 4.0))
+        first_answered.wait(START_TIMEOUT_S)  # the first upload warms the decode path: minutes under load
+        time.sleep(rng.uniform(0.0, 3.0))
         server.process.kill()
         server.process.wait(30)
         stop.set()
