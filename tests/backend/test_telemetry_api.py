@@ -159,6 +159,16 @@ def test_unknown_parameter_and_oversized_upload_name_the_field(tmp_path: Path, d
         assert unknown.status_code == 422 and unknown.json()["field"] == "name"
 
 
+def test_a_streamed_upload_past_the_limit_is_413_and_leaves_no_spooled_file(tmp_path: Path, database_url: str) -> None:
+    """Without a content-length the limit is found while spooling: the partial file is deleted."""
+    with TestClient(create_app(make_settings(tmp_path, database_url, max_upload_mb=0.001))) as client:
+        operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
+        chunks = (b"\0" * 600 for _ in range(4))  # a generator: sent chunked, no content-length
+        too_big = client.post("/api/v1/telemetry/uploads", content=chunks, headers=operator)
+        assert too_big.status_code == 413 and too_big.json()["field"] == "max_upload_mb"
+        assert list((tmp_path / "data" / "uploads").iterdir()) == []
+
+
 LIMITED_DICTIONARY = """
 name: NOAA-20 with a limit on the attitude scalar
 packets:
