@@ -84,6 +84,10 @@ class Health(BaseModel):
     auth_enabled: bool
     components: dict[str, bool] = Field(description="Optional parts present in this build.")
     live: dict[str, Any] = Field(description="Live TCP stream: port and tallies (empty when off).")
+    twins: dict[str, Any] = Field(
+        default_factory=dict,
+        description="Live twins: satellites, batches waiting for their twin, residual uploads waiting for the archive.",
+    )
 
 
 class TokenCreate(BaseModel):

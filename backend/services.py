@@ -69,8 +69,10 @@ def build_services(settings: Settings) -> Services:
         telemetry.dictionaries.load,
         telemetry.invalidate,
         mapping_folders=[settings.data_dir / "dictionaries"],
+        stale_after_s=settings.stale_after_s,
     )
     telemetry.on_commit(twins.submit)
+    telemetry.on_backfill(twins.submit_archived)
     cluster = ServerCluster(settings.dask_scheduler, settings.job_workers)
     diagnoses = DiagnosisRuns(DiagnosisRepository(sessions), cluster)
     twins.on_detection = partial(diagnose_detection, diagnoses, telemetry.opened_archive, telemetry.dictionaries.load)

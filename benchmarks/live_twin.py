@@ -1,19 +1,21 @@
 """Live twin benchmark (issue 11): a fleet of emulated satellites at 1 Hz, each with its live twin, in real time.
 
-    .venv/bin/python benchmarks/live_twin.py [--satellites 100] [--seconds 150] [--no-archive-telemetry] [--exact-model]
+    .venv/bin/python benchmarks/live_twin.py [--satellites 100] [--seconds 150] [--exact-model]
     .venv/bin/python benchmarks/live_twin.py --startup [--cold]  # acs-twin serve --no-auth: API, demo twin, monitors
 
-Fleet: one nominal flight of the reference satellite (somov-ge4-scan, emulated, ACS_HK thinned to 1 Hz + GPS at
-1 Hz) is streamed as N satellites joining one after the other over the first minute (so their 60 s re-syncs do
-not all fall in the same second), one batch per satellite per wall second, through the server's live-twin
-service (backend.twin.live.LiveTwins over a real SQLite archive, synchronous=FULL; with telemetry archiving on,
-every satellite's second is also archived as its own upload by a writer thread committing whatever is queued in one
-transaction, Archive.ingest_many, as the twins' residual writer does). Prints:
-  * twin lag: wall time from a batch reaching the service to its residuals computed (p50/p99/max), and the
-    newest telemetry instant minus the newest twin instant over all satellites (p99) — target p99 < 2 s;
-  * server CPU: process CPU time / wall time over the run (1.0 = one core of this 2-core machine);
-  * telemetry archiving: handed -> committed p50/p99 (durable once committed) and whether the writer kept up;
-  * nominal attitude residual RMS over all satellites after 30 s (the star tracker's σ is 3″), wheels in rpm;
+Fleet, through the product end to end: ``acs-twin serve --no-auth --no-emulator`` on free ports; one nominal flight
+of the reference satellite (somov-ge4-scan, emulated, ACS_HK thinned to 1 Hz + GPS_NAV at 1 Hz) is flown by N
+satellites joining one after the other over the first minute (so their 60 s re-syncs do not all fall in the same
+second), each on its own TCP connection to the one live listener (named by telemetry.live.hello), writing second
+m of its flight at its join time + m, from a sender process. The server decodes, archives (group commit,
+SQLite synchronous=FULL), relays to the live twins and publishes their states. Prints:
+  * twin lag: wall time from a packet's write to the twin state holding its residuals arriving at a WebSocket
+    client subscribed to ``twin`` (p50/p99/max; target p99 < 2 s), and telemetry_utc - twin_utc in those states;
+  * commits queued: satellites whose telemetry waits for its commit and the age of the oldest uncommitted sample
+    (/health every second), the twins' inbox and residual-upload queues;
+  * server CPU: CPU time / wall time of the server's process tree by process (1.0 = one of the machine's 2 cores),
+    and per satellite;
+  * nominal attitude residual RMS over all satellites after 30 s (the star tracker's σ is 3″), wheels in rpm.
 Start-up (--startup): after ``acs-twin warm`` (what scripts/run.sh runs once per install), wall time from launching
 ``acs-twin serve --no-auth`` (fresh data directory, free ports) to the API answering, to the demo satellite's first
 telemetry at its live twin, to the twin propagating with residuals, to the three monitors answering HTTP; ``--cold``
@@ -24,10 +26,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import multiprocessing as mp
 import os
-import queue
 import socket
 import subprocess
 import sys
@@ -40,217 +40,320 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 EPOCH = "2026-03-20T00:00:00Z"
-SETTLE_S = 30.0  # the emulated satellite's own MEKF converges first
+SETTLE_S = 30.0  # the emulated satellite's own MEKF converges first: residual RMS taken after it
 STAGGER_S = 60  # satellites start spread over one re-sync period
-TELEMETRY_COMMIT_S = 10  # each satellite's telemetry handed to the archive writer every 10 s (an upload costs
-# ~10-30 ms of CPU whatever its length: 100 satellites x 1/s would need 1-3 cores); committed in groups
-GROUP_MAX_UPLOADS = 100  # as backend.twin.live: one transaction stays far below SQLite's 30 s busy timeout
 TARGET_LAG_P99_S = 2.0
 
 
-def _flight(seconds: float, exact_model: bool = False) -> list:
-    """Decoded nominal flight: ACS_HK thinned to 1 Hz, GPS_NAV at 1 Hz; the satellite flies its own truth
+def _fleet_stream(seconds: float, exact_model: bool):
+    """One nominal flight of the reference satellite from its epoch, ACS_HK thinned to 1 Hz, GPS_NAV at 1 Hz, as
+    packets (telemetry.emulator.encode_stream: consecutive sequence counts); it flies its own truth
     (telemetry.emulator.TruthTolerances) unless ``exact_model``."""
-    from telemetry.decoding import decode_stream
-    from telemetry.dictionary import load_dictionary
-    from telemetry.emulator import emulate
+    from telemetry.emulator import PacketSeries, emulate, encode_stream
 
-    data = emulate("somov-ge4-scan", [], seconds, EPOCH, truth_seed=None if exact_model else 0)[2].data
-    batches = decode_stream(data, load_dictionary("reference_satellite.yaml"), source="bench").batches
-    out = []
-    for b in batches:
-        keep = (b.t_utc_ns % 1_000_000_000) == 0  # whole seconds: 1 Hz
-        out.append(
-            dataclasses.replace(
-                b,
-                t_utc_ns=b.t_utc_ns[keep],
-                sequence_count=b.sequence_count[keep],
-                values={n: np.asarray(v)[keep] for n, v in b.values.items()},
-                packets=None,
-            )
-        )
+    series = emulate("somov-ge4-scan", [], seconds, EPOCH, truth_seed=None if exact_model else 0)[1]
+    thinned = {}
+    for name, item in series.items():
+        keep = (item.t_utc_ns % 1_000_000_000) == 0  # whole seconds: 1 Hz
+        values = {n: np.asarray(v)[keep] for n, v in item.values.items()}
+        thinned[name] = PacketSeries(item.definition, item.t_utc_ns[keep], values)
+    return encode_stream(thinned)
+
+
+def _send_fleet(port: int, names: list[str], joins: list[int], wall0: float, seconds: int, stream, out) -> None:
+    """Process: each satellite on its own TCP connection (telemetry.live.hello first) sends second m of the flight
+    at wall0 + its join second + m, like a satellite sending as it flies; puts {satellite: [write time of second
+    m, ...]} and the worst lateness on ``out`` at the end."""
+    import asyncio
+
+    from telemetry.live import hello
+
+    t0 = int(stream.t_utc_ns[0])
+    starts = np.concatenate([[0], stream.ends[:-1]])
+    cuts = np.searchsorted(stream.t_utc_ns, t0 + np.arange(seconds + 1) * 1_000_000_000)
+    seconds_data = [stream.data[int(starts[a]) : int(starts[b])] for a, b in zip(cuts[:-1], cuts[1:])]
+    written: dict[str, list[float]] = {name: [] for name in names}
+    late = [0.0]
+
+    async def satellite(name: str, join: int) -> None:
+        _, writer = await asyncio.open_connection("127.0.0.1", port)
+        writer.write(hello(name))
+        for m in range(seconds - join):
+            due = wall0 + join + m
+            await asyncio.sleep(max(due - time.time(), 0.0))
+            late[0] = max(late[0], time.time() - due)
+            writer.write(seconds_data[m])
+            written[name].append(time.time())
+            await writer.drain()
+        writer.close()
+
+    async def fleet() -> None:
+        await asyncio.gather(*(satellite(name, join) for name, join in zip(names, joins)))
+
+    asyncio.run(fleet())
+    out.put((written, late[0]))
+
+
+def _proc_cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) of one process so far (/proc/<pid>/stat)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _tree(pid: int) -> dict[int, str]:
+    """pid -> command name of the process and its descendants."""
+    parents: dict[int, list[int]] = {}
+    names: dict[int, str] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            text = (entry / "stat").read_text()
+            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        ppid = int(text.rsplit(")", 1)[1].split()[1])
+        parents.setdefault(ppid, []).append(int(entry.name))
+        names[int(entry.name)] = cmdline
+    out, todo = {}, [pid]
+    while todo:
+        p = todo.pop()
+        out[p] = names.get(p, "?")
+        todo.extend(parents.get(p, []))
     return out
 
 
-def _second(batches: list, t0_ns: int, k: int) -> list:
-    lo, hi = t0_ns + k * 10**9, t0_ns + (k + 1) * 10**9
-    out = []
-    for b in batches:
-        s = (b.t_utc_ns >= lo) & (b.t_utc_ns < hi)
-        out.append(
-            dataclasses.replace(
-                b,
-                t_utc_ns=b.t_utc_ns[s],
-                sequence_count=b.sequence_count[s],
-                values={n: v[s] for n, v in b.values.items()},
-            )
-        )
-    return out
+def _role(cmdline: str, pid: int, server: int) -> str:
+    if pid == server:
+        return "API process (relay, live twins, WebSocket)"
+    if "multiprocessing" in cmdline and "spawn" in cmdline:
+        return "spawned children (live ingest: listener, decode, archive; idle Dask workers)"
+    return "other children"
 
 
-class _Hub:
-    """Counts what the service publishes (the WebSocket fan-out is measured in benchmarks/api_load.py)."""
+class _TwinWatch:
+    """WebSocket client on the ``twin`` topic: for each satellite, when each newest twin instant became visible."""
 
-    def __init__(self) -> None:
-        self.published = 0
+    def __init__(self, api: int) -> None:
+        self.seen: dict[str, list[tuple[int, float]]] = {}  # satellite -> (twin_utc ns, wall s received)
+        self.behind: list[float] = []  # telemetry_utc - twin_utc of every state received
+        self.states: dict[str, dict] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(api,), daemon=True)
 
-    def publish(self, topic: str, data: object) -> None:
-        self.published += 1
+    def start(self) -> None:
+        self._thread.start()
 
-    def wants_any(self, topic: str) -> bool:
-        return topic == "twin"
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(10)
+
+    def _run(self, api: int) -> None:
+        import asyncio
+        import json
+
+        import websockets
+
+        async def listen() -> None:
+            async with websockets.connect(f"ws://127.0.0.1:{api}/api/v1/ws", max_size=None) as ws:
+                await ws.send(json.dumps({"op": "subscribe", "topics": ["twin"]}))
+                while not self._stop.is_set():
+                    try:
+                        message = json.loads(await asyncio.wait_for(ws.recv(), timeout=0.5))
+                    except TimeoutError:
+                        continue
+                    now = time.time()
+                    for item in message.get("items", []):
+                        self._take(item.get("data") or {}, now)
+
+        asyncio.run(listen())
+
+    def _take(self, state: dict, now: float) -> None:
+        name = state.get("satellite")
+        if not name or not state.get("twin_utc"):
+            return
+        self.states[name] = state
+        t_ns = int(np.datetime64(state["twin_utc"][:-1], "ns").astype(np.int64))
+        seen = self.seen.setdefault(name, [])
+        if not seen or t_ns > seen[-1][0]:
+            seen.append((t_ns, now))
+        if state.get("twin_behind_telemetry_s") is not None:
+            self.behind.append(state["twin_behind_telemetry_s"])
 
 
-def fleet(n_satellites: int, seconds: int, archive_telemetry: bool, exact_model: bool = False) -> None:
-    """Stream the fleet in real time through LiveTwins and print lag, CPU and residual figures."""
-    from backend.twin.live import LiveTwins
-    from telemetry.archive import Archive
-    from telemetry.dictionary import load_dictionary
+def fleet(n_satellites: int, seconds: int, exact_model: bool = False) -> None:
+    """Stream the fleet in real time into ``acs-twin serve`` and print lag, backlog and CPU figures."""
+    from benchmarks.dashboard_live import _server
 
-    flight_s = SETTLE_S + seconds + 5
+    flight_s = seconds + 5
     t_build = time.perf_counter()
-    batches = _flight(flight_s, exact_model)
-    print(f"emulated flight of {flight_s:.0f} s in {time.perf_counter() - t_build:.1f} s")
-    t0_ns = int(min(b.t_utc_ns[0] for b in batches))
+    stream = _fleet_stream(flight_s, exact_model)
+    print(f"emulated flight of {flight_s} s in {time.perf_counter() - t_build:.1f} s; load average {os.getloadavg()}")
+    t0_ns = int(stream.t_utc_ns[0])
+    names = [f"SAT-{k:03d}" for k in range(n_satellites)]
+    joins = [(k * STAGGER_S) // n_satellites for k in range(n_satellites)]  # wall second each satellite joins
     with tempfile.TemporaryDirectory() as tmp:
-        archive = Archive(f"sqlite:///{tmp}/bench.sqlite")
-        dictionary = load_dictionary("reference_satellite.yaml")
-        twins = LiveTwins(lambda: archive, _Hub(), lambda name: dictionary)
-        names = [f"SAT-{k:03d}" for k in range(n_satellites)]
-        joins = [(k * STAGGER_S) // n_satellites for k in range(n_satellites)]  # wall second each satellite joins
-        for name in names:
-            twins.register_model(name, "somov-ge4-scan", t0_ns)
-        twins.start(recover=False)
-        ctx = mp.get_context("spawn")  # the telemetry is archived in its own process, as by the live-ingest process
-        writes, results = ctx.Queue(), ctx.Queue()
-        writer = ctx.Process(target=_archive_telemetry, args=(f"sqlite:///{tmp}/bench.sqlite", writes, results))
-        writer.start()
-        held: dict[str, list] = {name: [] for name in names}
-        cpu0, wall0 = time.process_time(), time.perf_counter()
-        behind: list[float] = []
-        worst_late = 0.0
-        for s in range(seconds):
-            tick = wall0 + s
-            for name, join in zip(names, joins):
-                if s < join:
-                    continue
-                part = _second(batches, t0_ns, int(SETTLE_S) + s - join)
-                if archive_telemetry:
-                    held[name].extend(part)
-                    if (s - join) % TELEMETRY_COMMIT_S == TELEMETRY_COMMIT_S - 1:
-                        writes.put((name, held[name], time.time()))
-                        held[name] = []
-                twins.submit(name, "reference_satellite.yaml", part)
-            if s >= 10:
-                for name in names:
-                    state = twins.state(name)
-                    if state and state["twin_behind_telemetry_s"] is not None:
-                        behind.append(state["twin_behind_telemetry_s"])
-            late = time.perf_counter() - (tick + 1.0)
-            worst_late = max(worst_late, late)
-            if late < 0:
-                time.sleep(-late)
-        writes.put(None)
-        archived_after, writer_cpu_s, backlog = results.get(timeout=600)
-        writer.join(60)
-        twins.drain(120.0)
-        cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
-        lag = np.array(twins.latencies_s)
-        twins.stop()
-        rms, wheel_rpm = _residuals(archive, names, t0_ns)
-        archive.close()
-    print(
-        f"fleet: {n_satellites} satellites x 1 Hz ACS_HK + GPS for {seconds} s, telemetry archived: {archive_telemetry}"
-    )
-    print(
-        f"  twin lag (batch arrival -> residuals computed): p50 {np.percentile(lag, 50) * 1e3:.1f} ms, "
-        f"p99 {np.percentile(lag, 99) * 1e3:.1f} ms, max {lag.max() * 1e3:.1f} ms "
-        f"(target p99 < {TARGET_LAG_P99_S:.0f} s: ratio {np.percentile(lag, 99) / TARGET_LAG_P99_S:.3f})"
-    )
-    print(
-        f"  telemetry_utc - twin_utc over all satellites: p99 {np.percentile(behind, 99):.3f} s, "
-        f"max {max(behind):.3f} s"
-    )
-    print(
-        f"  server CPU: {cpu / wall:.2f} cores ({cpu:.1f} s CPU in {wall:.1f} s wall; machine has 2), i.e. "
-        f"{cpu / seconds:.2f} cores to hold real time (CPU per streamed second, twins + feeder); feeder "
-        f"{'kept' if worst_late < 1.0 else 'did not keep'} real time (worst {max(worst_late, 0.0):.2f} s late)"
-    )
-    if archive_telemetry:
-        held_s = np.array(archived_after)
-        print(
-            f"  telemetry archived in its own process (group commit, synchronous=FULL): {held_s.size} uploads of "
-            f"{TELEMETRY_COMMIT_S} s, handed -> committed p50 {np.percentile(held_s, 50):.2f} s, p99 "
-            f"{np.percentile(held_s, 99):.2f} s, max {held_s.max():.2f} s; most waiting {backlog}; "
-            f"{'kept up' if np.percentile(held_s, 99) < TELEMETRY_COMMIT_S else 'fell behind'}; "
-            f"its CPU {writer_cpu_s / seconds:.2f} cores per streamed second"
-        )
+        proc, api, port = _server(Path(tmp))
+        base = f"http://127.0.0.1:{api}/api/v1"
+        try:
+            watch = _TwinWatch(api)
+            watch.start()
+            ctx = mp.get_context("spawn")
+            out = ctx.Queue()
+            wall0 = time.time() + 3.0
+            sender = ctx.Process(target=_send_fleet, args=(port, names, joins, wall0, seconds, stream, out))
+            sender.start()
+            tree = _tree(proc.pid)
+            cpu0 = {pid: _proc_cpu_s(pid) for pid in tree}
+            health = _poll_health(base, wall0 + seconds)
+            tree = {**tree, **_tree(proc.pid)}
+            cpu1 = {pid: _proc_cpu_s(pid) for pid in tree}
+            wall = time.time() - wall0
+            compared = sum(state.get("samples_compared", 0) for state in list(watch.states.values()))
+            written, late = out.get(timeout=60)
+            sender.join(30)
+            time.sleep(2.0)
+            watch.stop()
+            time.sleep(ARCHIVE_SETTLE_S)  # the residuals of the last seconds reach the archive
+            rms, wheel_rpm = _residuals(base, names, t0_ns)
+        finally:
+            proc.terminate()
+            proc.wait(120)
+    _print_fleet(n_satellites, seconds, watch, written, joins, names, t0_ns, late, health)
+    _print_cpu(tree, cpu0, cpu1, wall, proc.pid, n_satellites)
+    _print_capacity(tree, cpu0, cpu1, proc.pid, compared, health[-1].get("packets_received", 0) if health else 0)
     print(
         f"  nominal attitude residual RMS after {SETTLE_S:.0f} s: {rms:.2f} arcsec (star tracker sigma 3 arcsec); "
-        f"wheel speed residual RMS {wheel_rpm:.3f} rpm (tachometer count 0.25 rpm)"
+        f"wheel speed residual RMS {wheel_rpm:.3f} rpm (tachometer count 0.25 rpm); load average {os.getloadavg()}"
     )
 
 
-def _archive_telemetry(url: str, writes: mp.Queue[object], results: mp.Queue[object]) -> None:
-    """Process: the fleet's telemetry archived with group commit, what is queued (each satellite's last
-    TELEMETRY_COMMIT_S) in one Archive.ingest_many transaction, one upload per satellite; at the end it answers
-    (handed -> committed seconds, its CPU seconds, most uploads it ever had waiting)."""
-    from telemetry.archive import Archive
-
-    archive, archived_after, backlog, stop = Archive(url, migrate=False), [], 0, False
-    cpu0 = time.process_time()
-    while not stop:
-        group, item = [], writes.get()
-        while item is not None:
-            group.append(item)
-            if len(group) >= GROUP_MAX_UPLOADS:
-                break
-            try:
-                item = writes.get_nowait()
-            except queue.Empty:
-                break
-        stop = item is None
-        backlog = max(backlog, writes.qsize() + len(group))
-        _commit_group(archive, group, archived_after)
-    archive.close()
-    results.put((archived_after, time.process_time() - cpu0, backlog))
+ARCHIVE_SETTLE_S = 12.0  # residuals reach the archive <= backend.twin.live.ARCHIVE_PERIOD_S after they are computed
 
 
-def _commit_group(archive: object, group: list, archived_after: list[float]) -> None:
-    from telemetry.archive import PacketBatch, PendingUpload
+def _poll_health(base: str, until: float) -> list[dict]:
+    """/health every second until ``until``: the live stream's archive backlog and the twins' queues."""
+    import httpx
 
-    uploads = []
-    for name, parts, _ in group:
-        merged: dict[int, list] = {}
-        for b in parts:
-            merged.setdefault(b.apid, []).append(b)
-        batches = [
-            PacketBatch(
-                apid,
-                np.concatenate([b.t_utc_ns for b in bs]),
-                np.concatenate([b.sequence_count for b in bs]),
-                b"",
-                np.zeros(sum(len(b.t_utc_ns) for b in bs), np.int64),
-                {n: np.concatenate([b.values[n] for b in bs]) for n in bs[0].values},
-            )
-            for apid, bs in merged.items()
-        ]
-        uploads.append(PendingUpload(name, batches, "bench", "bench"))
-    if uploads:
-        archive.ingest_many(uploads)
-        now = time.time()
-        archived_after.extend(now - handed for _, _, handed in group)
+    polls = []
+    with httpx.Client(timeout=5.0) as http:
+        while time.time() < until:
+            with contextlib.suppress(httpx.HTTPError):
+                body = http.get(f"{base}/health").json()
+                polls.append({**body.get("live", {}), **body.get("twins", {})})
+            time.sleep(1.0)
+    return polls
 
 
-def _residuals(archive: object, names: list[str], t0_ns: int) -> tuple[float, float]:
-    att, wheels = [], []
+def _print_fleet(
+    n: int,
+    seconds: int,
+    watch: _TwinWatch,
+    written: dict,
+    joins: list[int],
+    names: list[str],
+    t0_ns: int,
+    late: float,
+    health: list[dict],
+) -> None:
+    lags = []
     for name in names:
-        if "twin_attitude_residual_arcsec" not in archive.parameters(name):
-            continue  # its twin was still collecting GPS fixes for the orbit fit
-        t, v = archive.read_parameter(name, "twin_attitude_residual_arcsec", t0_ns + int(SETTLE_S * 1e9), 2**62)
-        att.append(v)
-        for k in range(1, 5):
-            wheels.append(archive.read_parameter(name, f"twin_wheel_speed_residual_rad_s_{k}", t0_ns, 2**62)[1])
+        sent = written.get(name, [])
+        for t_ns, at in watch.seen.get(name, []):
+            m = (t_ns - t0_ns) // 1_000_000_000
+            if 0 <= m < len(sent):
+                lags.append(at - sent[m])
+    lag = np.array(lags) if lags else np.array([np.nan])
+    following = sum(1 for name in names if watch.seen.get(name))
+    p99 = np.percentile(lag, 99)
+    print(f"fleet: {n} satellites x 1 Hz ACS_HK + GPS_NAV for {seconds} s into acs-twin serve (TCP, one listener)")
+    print(
+        f"  twin lag (packet written -> its residuals in the twin state at a WebSocket client): {lag.size} samples, "
+        f"p50 {np.percentile(lag, 50):.3f} s, p99 {p99:.3f} s, max {np.max(lag):.3f} s "
+        f"(target p99 < {TARGET_LAG_P99_S:.0f} s: ratio {p99 / TARGET_LAG_P99_S:.2f}); "
+        f"{following}/{n} satellites' twins propagating"
+    )
+    behind = np.array(watch.behind) if watch.behind else np.array([np.nan])
+    print(f"  telemetry_utc - twin_utc in the twin states: p99 {np.percentile(behind, 99):.3f} s")
+    print(f"  sender: worst {late:.3f} s late against its 1 Hz schedule")
+
+    def series(key: str) -> np.ndarray:
+        return np.array([h.get(key, 0) for h in health], dtype=float) if health else np.zeros(1)
+
+    from telemetry.live import ARCHIVE_INTERVAL_S
+
+    pend, oldest = series("archive_pending_uploads"), series("archive_oldest_pending_s")
+    print(
+        f"  commits queued (telemetry, one group commit per {ARCHIVE_INTERVAL_S:g} s): satellites waiting p50 "
+        f"{np.percentile(pend, 50):.0f}, max {pend.max():.0f}; oldest uncommitted sample p99 "
+        f"{np.percentile(oldest, 99):.1f} s, max {oldest.max():.1f} s; last commit "
+        f"{series('archive_commit_s')[-1]:.2f} s; archive errors {series('archive_errors').max():.0f}"
+    )
+    inbox, residual = series("batches_waiting"), series("residual_uploads_waiting")
+    print(
+        f"  twins' queues: batches waiting p99 {np.percentile(inbox, 99):.0f}, max {inbox.max():.0f}; residual "
+        f"uploads waiting for the archive max {residual.max():.0f}; detections "
+        f"{sum(1 for s in watch.states.values() if s.get('detection'))}"
+    )
+
+
+def _print_cpu(tree: dict[int, str], cpu0: dict, cpu1: dict, wall: float, server: int, n: int) -> None:
+    by_role: dict[str, float] = {}
+    for pid, cmd in tree.items():
+        role = _role(cmd, pid, server)
+        by_role[role] = by_role.get(role, 0.0) + cpu1.get(pid, 0.0) - cpu0.get(pid, 0.0)
+    total = sum(by_role.values())
+    parts = "; ".join(f"{role} {cpu / wall:.2f}" for role, cpu in sorted(by_role.items()))
+    print(
+        f"  server CPU: {total / wall:.2f} cores over {wall:.0f} s ({parts}); {total / wall / n * 1e3:.1f} "
+        f"millicores per satellite (the fleet ramps up over the first {STAGGER_S} s); machine has 2 cores"
+    )
+
+
+def _print_capacity(tree: dict[int, str], cpu0: dict, cpu1: dict, server: int, compared: int, packets: int) -> None:
+    """CPU per satellite-second of work done, and the fleet an idle machine would hold in real time from it: the
+    twins are one thread of the API process (≤ 1 core), the listener and archive the ingest process (≤ 1 core)."""
+    api = cpu1.get(server, 0.0) - cpu0.get(server, 0.0)
+    children = sum(cpu1.get(p, 0.0) - cpu0.get(p, 0.0) for p in tree if p != server)
+    received_s = packets / PACKETS_PER_SATELLITE_S
+    if not compared or not received_s:
+        print("  CPU per satellite-second: no work measured")
+        return
+    per_twin, per_ingest = api / compared * 1e3, children / received_s * 1e3
+    holds = min(1e3 / per_twin, 1e3 / per_ingest, 2e3 / (per_twin + per_ingest))
+    print(
+        f"  CPU per satellite-second of work done: API process {per_twin:.2f} ms ({compared} satellite-seconds "
+        f"compared by the twins), ingest process {per_ingest:.2f} ms ({received_s:.0f} satellite-seconds received); "
+        f"an idle 2-core machine holds about {holds:.0f} satellites in real time at this cost per satellite "
+        f"(upper bound of the cost: measured under this load)"
+    )
+
+
+PACKETS_PER_SATELLITE_S = 2  # ACS_HK + GPS_NAV at 1 Hz
+
+
+def _residuals(base: str, names: list[str], t0_ns: int) -> tuple[float, float]:
+    """RMS of the archived attitude residuals after SETTLE_S and of the wheel residuals over every satellite."""
+    import httpx
+
+    att, wheels = [], []
+    start = f"{np.datetime64(t0_ns + int(SETTLE_S * 1e9), 'ns')}Z"
+    with httpx.Client(timeout=30.0) as http:
+        for name in names:
+            q = f"satellite={name}&start={start}&max_points=100000"  # every sample
+            body = http.get(f"{base}/parameters/twin_attitude_residual_arcsec/samples?{q}")
+            if body.status_code != 200:
+                continue
+            att.append(np.asarray(body.json()["values"], float))
+            for k in range(1, 5):
+                w = http.get(f"{base}/parameters/twin_wheel_speed_residual_rad_s_{k}/samples?{q}")
+                if w.status_code == 200:
+                    wheels.append(np.asarray(w.json()["values"], float))
+    if not att:
+        return float("nan"), float("nan")
     a, w = np.concatenate(att), np.concatenate(wheels) * 30 / np.pi
     return float(np.sqrt(np.mean(a**2))), float(np.sqrt(np.mean(w**2)))
 
@@ -356,7 +459,6 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--satellites", type=int, default=100)
     parser.add_argument("--seconds", type=int, default=150)
-    parser.add_argument("--no-archive-telemetry", action="store_true")
     parser.add_argument("--startup", action="store_true")
     parser.add_argument("--cold", action="store_true", help="--startup with an empty numba cache (compiling)")
     parser.add_argument("--exact-model", action="store_true", help="the satellite flies the twin's model exactly")
@@ -364,7 +466,7 @@ def main() -> None:
     if args.startup:
         startup(args.cold)
     else:
-        fleet(args.satellites, args.seconds, not args.no_archive_telemetry, args.exact_model)
+        fleet(args.satellites, args.seconds, args.exact_model)
 
 
 if __name__ == "__main__":

@@ -541,13 +541,16 @@ def demo_pass_bytes(
 
 
 async def _connect(
-    host: str, port: int, retry_s: float, attempts: int | None
+    host: str, port: int, retry_s: float, attempts: int | None, greeting: bytes = b""
 ) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
-    """Open a TCP connection, retrying every retry_s (attempts None = forever)."""
+    """Open a TCP connection that starts with ``greeting``, retrying every retry_s (attempts None = forever)."""
     tried = 0
     while True:
         try:
-            return await asyncio.open_connection(host, port)
+            reader, writer = await asyncio.open_connection(host, port)
+            writer.write(greeting)
+            await writer.drain()
+            return reader, writer
         except OSError:
             tried += 1
             if attempts is not None and tried >= attempts:
@@ -563,8 +566,12 @@ async def send_stream(
     retry_s: float = RETRY_S,
     attempts: int | None = None,
     on_wall_clock: bool = False,
+    satellite: str | None = None,
 ) -> SendReport:
     """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting.
+
+    ``satellite``: each connection opens with telemetry.live.hello(satellite), so that a listener serving a fleet
+    files the packets under that name (without it, under the listener's own satellite).
 
     ``on_wall_clock`` (real time only): each packet leaves when the UTC clock reaches its time stamp
     (those already due leave at once). TCP gives no application acknowledgement, so after a lost link
@@ -579,12 +586,15 @@ async def send_stream(
         raise ValueError(f"port: expected 1..65535, got {port}")
     if attempts is not None and attempts < 1:
         raise ValueError(f"attempts: expected at least 1 (None = keep trying), got {attempts}")
+    from telemetry.live import hello
+
+    greeting = b"" if satellite is None else hello(satellite)
     report, n = SendReport(), len(stream)
     if n == 0:
         return report
     starts = np.concatenate([[0], stream.ends[:-1]])
     due_s = (stream.t_utc_ns - stream.t_utc_ns[0]) / NS_PER_S / rate
-    reader, writer = await _connect(host, port, retry_s, attempts)
+    reader, writer = await _connect(host, port, retry_s, attempts, greeting)
     report.connections += 1
     wall0, i = time.monotonic(), 0
     recent: deque[tuple[float, int]] = deque()  # (monotonic s, packet index) written within REWIND_S
@@ -606,7 +616,7 @@ async def send_stream(
                 resume = _rewind(recent, i)
                 report.packets_resent += i - resume
                 i = resume
-                reader, writer = await _connect(host, port, retry_s, attempts)
+                reader, writer = await _connect(host, port, retry_s, attempts, greeting)
                 report.connections += 1
                 continue
             recent.append((time.monotonic(), i))

@@ -8,12 +8,28 @@ second), published to every subscriber without ever waiting (newest wins: a full
 oldest message, and the next message the subscriber takes says how many packets it lost), and
 committed to the archive in batches from a worker thread so a slow database never stalls the socket
 (the archive path never drops a packet the stream accepted).
+
+One listener serves a fleet. Space packets carry no spacecraft identifier (it lives in the transfer frames a
+ground station strips), so a connection says whose packets it carries the way an SLE service binds to one
+spacecraft before data flows: it may open with the line ``SATELLITE <name>\n`` (:func:`hello`); a connection
+without it carries the stream's default satellite. The line cannot be mistaken for a packet: a CCSDS version-1
+primary header starts with an octet below 0x20 (version bits 000), ``S`` is 0x53.
+
+Archiving is a group commit over the fleet: every ``archive_interval_s`` one transaction
+(:meth:`~telemetry.archive.Archive.ingest_many`, one fsync) commits the pending samples of the satellites that
+waited longest, at most ``archive_uploads_per_s`` × the interval of them. An upload costs ~10–30 ms of CPU whatever
+its length (a row per parameter, duplicate and limit checks), so the budget caps the archive's CPU (≈ 0.1–0.3 core
+at 10 uploads/s) and the time a sample waits to become durable grows with the fleet instead: one interval for a
+handful of satellites, satellites ÷ budget seconds beyond (10 s for 100 at 10/s). Subscribers get every batch at
+once regardless.
 """
 
 from __future__ import annotations
 
 import asyncio
 import ipaddress
+import logging
+import re
 import time
 from collections.abc import Callable, Coroutine, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -21,7 +37,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from telemetry.archive import Archive, PacketBatch
+from telemetry.archive import Archive, IngestResult, PacketBatch, PendingUpload
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import Dictionary
 from telemetry.encoding import encode_packets
@@ -42,7 +58,11 @@ __all__ = [
     "source_networks",
     "warm_decoder",
     "DECODE_INTERVAL_S",
+    "HELLO_PREFIX",
+    "hello",
 ]
+
+log = logging.getLogger(__name__)
 
 PRIMARY_HEADER_OCTETS = 6
 IDLE_APID = 0x7FF  # idle packets, CCSDS 133.0-B-2 §4.1.3.3.4.4
@@ -51,6 +71,32 @@ READ_BYTES = 1 << 16
 DECODE_INTERVAL_S = 0.02  # coalescing window: adds <= 20 ms of latency, bounds decode calls to 50/s
 ARCHIVE_INTERVAL_S = 0.5
 ARCHIVE_MAX_PACKETS = 8_192
+ARCHIVE_UPLOADS_PER_S = 10.0  # satellites committed per second at most (see the module docstring)
+ARCHIVE_MAX_GROUP = 100  # uploads in one transaction when everything is committed (stop): far below SQLite's
+# 30 s busy timeout
+HELLO_PREFIX = b"SATELLITE "
+HELLO_MAX_OCTETS = 80  # a connection's first line longer than this is not a hello: its octets are decoded as packets
+SATELLITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.:+-]{0,63}")
+
+
+def hello(satellite: str) -> bytes:
+    """The line a connection opens with to say that its packets are ``satellite``'s (ValueError for a bad name)."""
+    if not SATELLITE_NAME.fullmatch(satellite):
+        raise ValueError(f"satellite: {satellite!r} is not 1-64 letters, digits or _.:+- (starting alphanumeric)")
+    return HELLO_PREFIX + satellite.encode() + b"\n"
+
+
+def _read_hello(buffer: bytearray) -> tuple[str | None, int] | None:
+    """(satellite or None, octets to drop) once the connection's first octets tell; None while they may still
+    become a hello line. A line that starts like a hello but names no valid satellite is left as noise."""
+    head = bytes(buffer[: len(HELLO_PREFIX)])
+    if not HELLO_PREFIX.startswith(head):
+        return None, 0  # packets (or noise): no hello
+    end = buffer.find(b"\n", 0, HELLO_MAX_OCTETS)
+    if end < 0:
+        return (None, 0) if len(buffer) >= HELLO_MAX_OCTETS else None
+    name = bytes(buffer[len(HELLO_PREFIX) : end]).decode("ascii", "replace").strip()
+    return (name, end + 1) if SATELLITE_NAME.fullmatch(name) else (None, 0)
 
 
 def complete_prefix(buffer: bytes | bytearray, packet_octets: Mapping[int, int] | None = None) -> int:
@@ -115,11 +161,12 @@ def warm_decoder(dictionary: Dictionary) -> None:
 
 @dataclass(frozen=True)
 class LiveMessage:
-    """Decoded samples of one packet type, when they were read, and packets lost just before."""
+    """Decoded samples of one packet type, when they were read, packets lost just before, and whose they are."""
 
     batch: SampleBatch
     received_ns: int
     dropped_packets: int
+    satellite: str = ""
 
 
 @dataclass
@@ -134,6 +181,11 @@ class LiveStats:
     last_archive_error: str = ""
     connections_refused: int = 0
     last_refused_peer: str = ""
+    satellites: int = 0  # satellites heard since the start
+    archive_pending_packets: int = 0  # decoded, not yet committed (refreshed every archive interval)
+    archive_pending_uploads: int = 0  # satellites with samples waiting for their commit
+    archive_oldest_pending_s: float = 0.0  # how long the oldest uncommitted sample has waited
+    archive_commit_s: float = 0.0  # wall time of the last group commit
 
 
 class Subscriber:
@@ -146,7 +198,7 @@ class Subscriber:
         self._dropped_since_delivery = 0
         self.dropped_packets_total = 0
 
-    def offer(self, batch: SampleBatch, received_ns: int) -> bool:
+    def offer(self, batch: SampleBatch, received_ns: int, satellite: str = "") -> bool:
         """Queue a batch without waiting; newest wins: when full, the oldest queued message is dropped and its
         packets counted (the next message taken says how many). False if a message was dropped."""
         dropped = 0
@@ -154,7 +206,7 @@ class Subscriber:
             dropped = len(self._queue.get_nowait().batch.t_utc_ns)
             self._dropped_since_delivery += dropped
             self.dropped_packets_total += dropped
-        self._queue.put_nowait(LiveMessage(batch, received_ns, 0))
+        self._queue.put_nowait(LiveMessage(batch, received_ns, 0, satellite))
         return dropped == 0
 
     async def get(self) -> LiveMessage:
@@ -305,7 +357,13 @@ class MemoryLink:
 
 
 class LiveStream:
-    """Listener for a CCSDS packet stream of one satellite (optionally archived), over a :class:`Link`."""
+    """Listener for the CCSDS packet streams of a fleet (optionally archived), over a :class:`Link`: each
+    connection carries one satellite's packets, ``satellite`` unless it opens with a :func:`hello` line.
+
+    ``on_committed(archive, spans, final)`` runs in the commit's worker thread after each group commit, with the
+    (satellite, first, last sample ns) of every upload it committed, and once more at stop (no spans, ``final``
+    True): bookkeeping over committed data (passes from data) serialised with the commits instead of contending
+    for the write lock."""
 
     def __init__(
         self,
@@ -316,25 +374,33 @@ class LiveStream:
         limits: Mapping[str, LimitSet] | None = None,
         archive_interval_s: float = ARCHIVE_INTERVAL_S,
         archive_max_packets: int = ARCHIVE_MAX_PACKETS,
+        archive_uploads_per_s: float = ARCHIVE_UPLOADS_PER_S,
         uploaded_by: str = "live",
         allowed_sources: Sequence[str] = LOOPBACK_SOURCES,
+        on_committed: Callable[[Archive, list[tuple[str, int, int]], bool], None] | None = None,
     ) -> None:
         if archive is not None and not satellite:
             raise ValueError("satellite: required when the stream is archived")
+        if not archive_uploads_per_s > 0:
+            raise ValueError(f"archive_uploads_per_s: must be > 0, got {archive_uploads_per_s}")
         self._allowed = source_networks(allowed_sources)
         self._dictionary, self._archive, self._satellite = dictionary, archive, satellite
         self._packet_octets = dictionary.packet_octets_by_apid()
         self._limits = dict(limits or {})
         self._interval_s, self._max_packets, self._uploaded_by = archive_interval_s, archive_max_packets, uploaded_by
+        self._uploads_per_flush = max(1, round(archive_uploads_per_s * archive_interval_s))
         self._subscribers: list[Subscriber] = []
-        self._pending: list[SampleBatch] = []
-        self._pending_packets = 0
+        self._pending: dict[str, list[SampleBatch]] = {}  # per satellite, in arrival order
+        self._pending_since: dict[str, float] = {}  # monotonic time its oldest pending batch arrived
+        self._pending_packets: dict[str, int] = {}
+        self._heard: set[str] = set()
         self._flush_lock = asyncio.Lock()
         self._link: Link | None = None
         self._connections: set[asyncio.Task[None]] = set()
-        self._flushes: set[asyncio.Task[None]] = set()
+        self._flushes: set[asyncio.Task[bool]] = set()
         self._flusher: asyncio.Task[None] | None = None
         self._flush_count = 0
+        self._on_committed = on_committed
         self.stats = LiveStats()
 
     def subscribe(self, max_messages: int = 256) -> Subscriber:
@@ -358,7 +424,7 @@ class LiveStream:
         return bound
 
     async def stop(self) -> None:
-        """Close the listener and its connections, then archive what is pending."""
+        """Close the listener and its connections, then archive everything pending."""
         if self._link is not None:
             self._link.close()
         for task in list(self._connections):
@@ -369,7 +435,10 @@ class LiveStream:
             await asyncio.gather(self._flusher, return_exceptions=True)
         if self._link is not None:
             await self._link.wait_closed()
-        await self.flush()
+        while self._pending and await self.flush(everything=True):
+            pass
+        if self._archive is not None:
+            await asyncio.to_thread(self._after_commit, self._archive, [], True)
 
     async def _handle(self, reader: asyncio.StreamReader, writer: Peer) -> None:
         host = str(writer.get_extra_info("peername")[0])
@@ -384,6 +453,7 @@ class LiveStream:
         self.stats.connections += 1
         peer = "{}:{}".format(*writer.get_extra_info("peername")[:2])
         buffer, arrived, closed = bytearray(), asyncio.Event(), asyncio.Event()
+        satellite: str | None = None  # until the first octets tell (hello line or packets)
 
         async def receive() -> None:
             while data := await reader.read(READ_BYTES):
@@ -397,19 +467,32 @@ class LiveStream:
             while not closed.is_set():
                 await arrived.wait()
                 arrived.clear()
-                self._process_complete(buffer, peer)
+                if satellite is None:
+                    satellite = self._satellite_of(buffer)
+                if satellite is not None:
+                    self._process_complete(buffer, peer, satellite)
                 await asyncio.sleep(DECODE_INTERVAL_S)
         except asyncio.CancelledError:
             pass  # stop(): end quietly (a cancelled connection task makes asyncio's stream callback log a traceback)
         finally:
             receiving.cancel()
-            self._process_complete(buffer, peer)
+            self._process_complete(buffer, peer, satellite or self._satellite_of(buffer, final=True) or "")
             self.stats.stretches_quarantined += 1 if buffer else 0  # a packet cut off by the disconnect
             writer.close()
             if task is not None:
                 self._connections.discard(task)
 
-    def _process_complete(self, buffer: bytearray, peer: str) -> None:
+    def _satellite_of(self, buffer: bytearray, final: bool = False) -> str | None:
+        """Whose this connection's packets are, once its first octets tell (its hello line dropped); None while
+        they may still become a hello line (unless ``final``: the connection ended)."""
+        read = _read_hello(buffer)
+        if read is None:
+            return self._satellite if final else None
+        name, octets = read
+        del buffer[:octets]
+        return name or self._satellite
+
+    def _process_complete(self, buffer: bytearray, peer: str, satellite: str) -> None:
         end = complete_prefix(buffer, self._packet_octets)
         if end == 0:
             return
@@ -422,16 +505,23 @@ class LiveStream:
             if len(batch.t_utc_ns) == 0:
                 continue
             self.stats.packets_received += len(batch.t_utc_ns)
+            if satellite not in self._heard:
+                self._heard.add(satellite)
+                self.stats.satellites = len(self._heard)
             for subscriber in self._subscribers:
-                subscriber.offer(batch, received_ns)
-            self._queue_for_archive(batch)
+                subscriber.offer(batch, received_ns, satellite)
+            self._queue_for_archive(satellite, batch)
 
-    def _queue_for_archive(self, batch: SampleBatch) -> None:
+    def _queue_for_archive(self, satellite: str, batch: SampleBatch) -> None:
         if self._archive is None:
             return
-        self._pending.append(batch)
-        self._pending_packets += len(batch.t_utc_ns)
-        if self._pending_packets >= self._max_packets and not self._flush_lock.locked():
+        if satellite not in self._pending:
+            self._pending[satellite] = []
+            self._pending_since[satellite] = time.monotonic()
+            self._pending_packets[satellite] = 0
+        self._pending[satellite].append(batch)
+        self._pending_packets[satellite] += len(batch.t_utc_ns)
+        if self._pending_packets[satellite] >= self._max_packets and not self._flush_lock.locked():
             flush = asyncio.create_task(self.flush())
             self._flushes.add(flush)
             flush.add_done_callback(self._flushes.discard)
@@ -441,30 +531,77 @@ class LiveStream:
             await asyncio.sleep(self._interval_s)
             await self.flush()
 
-    async def flush(self) -> None:
-        """Commit the pending batches to the archive as one upload (kept for retry on failure)."""
-        if self._archive is None:
+    def _due(self, everything: bool) -> list[str]:
+        """Satellites whose pending samples the next commit takes: those past ``archive_max_packets``, then the
+        longest waiting, ``archive_uploads_per_s`` × the interval of them (everything: all)."""
+        waiting = sorted(self._pending, key=self._pending_since.__getitem__)
+        if everything:
+            return waiting[:ARCHIVE_MAX_GROUP]
+        full = [s for s in waiting if self._pending_packets[s] >= self._max_packets]
+        rest = [s for s in waiting if s not in full]
+        return full + rest[: max(self._uploads_per_flush - len(full), 0)]
+
+    def _commit(self, archive: Archive, uploads: list[PendingUpload]) -> list[IngestResult]:
+        """One group commit, then ``on_committed`` with what it committed."""
+        results = archive.ingest_many(uploads)
+        spans = []
+        for u in uploads:
+            times = [b.t_utc_ns for b in u.batches if len(b.t_utc_ns)]
+            if times:
+                spans.append((u.satellite, min(int(t.min()) for t in times), max(int(t.max()) for t in times)))
+        self._after_commit(archive, spans, False)
+        return results
+
+    def _after_commit(self, archive: Archive, spans: list[tuple[str, int, int]], final: bool) -> None:
+        if self._on_committed is None:
             return
+        try:
+            self._on_committed(archive, spans, final)
+        except Exception:  # the samples are archived whatever the bookkeeping does
+            log.exception("live stream: bookkeeping after a commit failed")
+
+    def _note_backlog(self) -> None:
+        now = time.monotonic()
+        self.stats.archive_pending_packets = sum(self._pending_packets.values())
+        self.stats.archive_pending_uploads = len(self._pending)
+        self.stats.archive_oldest_pending_s = now - min(self._pending_since.values(), default=now)
+
+    async def flush(self, everything: bool = False) -> bool:
+        """Commit pending batches, one upload per satellite, in one transaction (failed ones kept for a retry):
+        the satellites :meth:`_due` picks, or ``everything`` (up to ARCHIVE_MAX_GROUP of them); False if the
+        commit failed."""
+        if self._archive is None:
+            return True
         async with self._flush_lock:
-            batches, self._pending, self._pending_packets = self._pending, [], 0
-            if not batches:
-                return
+            self._note_backlog()
+            due = self._due(everything)
+            if not due:
+                return True
+            taken = {s: (self._pending.pop(s), self._pending_since.pop(s), self._pending_packets.pop(s)) for s in due}
             self._flush_count += 1
-            packet_batches = [PacketBatch.from_sample_batch(b) for b in batches]
-            source = f"live:{self._satellite}:{time.time_ns()}:{self._flush_count}"
-            try:
-                result = await asyncio.to_thread(
-                    self._archive.ingest,
-                    self._satellite,
-                    packet_batches,
-                    source=source,
-                    uploaded_by=self._uploaded_by,
-                    limits=self._limits,
+            uploads = [
+                PendingUpload(
+                    satellite,
+                    [PacketBatch.from_sample_batch(b) for b in batches],
+                    f"live:{satellite}:{time.time_ns()}:{self._flush_count}",
+                    self._uploaded_by,
+                    self._limits,
                 )
+                for satellite, (batches, _, _) in taken.items()
+            ]
+            started = time.perf_counter()
+            try:
+                results = await asyncio.to_thread(self._commit, self._archive, uploads)
             except Exception as error:  # the database may be away: keep the data, retry next time
                 self.stats.archive_errors += 1
                 self.stats.last_archive_error = repr(error)
-                self._pending = batches + self._pending
-                self._pending_packets += sum(len(b.t_utc_ns) for b in batches)
-                return
-            self.stats.packets_archived += result.packets_accepted
+                for satellite, (batches, since, packets) in taken.items():
+                    self._pending[satellite] = batches + self._pending.get(satellite, [])
+                    self._pending_since[satellite] = since
+                    self._pending_packets[satellite] = packets + self._pending_packets.get(satellite, 0)
+                return False
+            finally:
+                self.stats.archive_commit_s = time.perf_counter() - started
+                self._note_backlog()
+            self.stats.packets_archived += sum(r.packets_accepted for r in results)
+            return True

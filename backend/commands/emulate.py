@@ -30,6 +30,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--attempts", type=int, help="connection attempts before giving up (default: keep trying)")
     p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
+    p.add_argument(
+        "--satellite",
+        help="name the packets' satellite on each connection (a listener serving a fleet files them under it; "
+        "default: the listener's own satellite)",
+    )
     p.add_argument("--out", type=Path, help="write the packets to this file (for upload) instead of only sending")
     p.set_defaults(handler=run)
 
@@ -94,7 +99,15 @@ def run(args: argparse.Namespace) -> int:
     try:
         on_clock = args.start_utc == "now" and args.rate == 1.0
         report = asyncio.run(
-            emulator.send_stream(stream, args.host, port, args.rate, attempts=args.attempts, on_wall_clock=on_clock)
+            emulator.send_stream(
+                stream,
+                args.host,
+                port,
+                args.rate,
+                attempts=args.attempts,
+                on_wall_clock=on_clock,
+                satellite=args.satellite,
+            )
         )
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

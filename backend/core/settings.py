@@ -33,6 +33,13 @@ class Settings(BaseSettings):
     )
     live_satellite: str = Field("REFSAT", min_length=1, description="Satellite the live stream belongs to.")
     live_dictionary: str = Field("reference_satellite.yaml", description="Dictionary of the live stream.")
+    stale_after_s: float = Field(
+        10.0,
+        gt=0,
+        le=3600,
+        description="A satellite without telemetry for this long (wall time) is shown stale: twin state, dashboard "
+        "indicator, 3D monitors' banner (default 10 s: ten 1 Hz packets missed).",
+    )
     auth_enabled: bool = Field(True, description="Require API tokens (turn off only locally).")
     job_workers: int = Field(
         2, ge=1, le=64, description="Jobs run at once, and the worker processes of the server's Dask LocalCluster."

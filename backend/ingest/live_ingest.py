@@ -1,10 +1,11 @@
 """The live stream in its own process: TCP listener → decode → archive (telemetry.live).
 
 Ingest and the API never share a GIL, so neither slows the other; the ingest process forwards
-each decoded batch (raw packets stripped) and its tallies to the API process through a bounded
-queue, never waiting: when the API side falls behind, the oldest waiting messages are dropped and
-counted (their batches are archived regardless), so the server resumes at the present: the outbox's
-part of the one fan-out policy for live samples, stated in :mod:`backend.ingest.telemetry_gateway`.
+each decoded batch (raw packets stripped) with its satellite (one listener serves the fleet: a connection
+names its satellite with telemetry.live.hello, else it is the server's live satellite) and its tallies to the
+API process through a bounded queue, never waiting: when the API side falls behind, the oldest waiting messages
+are dropped and counted (their batches are archived regardless), so the server resumes at the present: the
+outbox's part of the one fan-out policy for live samples, stated in :mod:`backend.ingest.telemetry_gateway`.
 """
 
 from __future__ import annotations
@@ -23,11 +24,14 @@ if TYPE_CHECKING:
     from multiprocessing.queues import Queue
     from multiprocessing.synchronize import Event
 
-    Outbox = Queue[tuple[str, Any]]  # ("port" | "error" | "batch" | "stats", payload) to the server
+    Outbox = Queue[tuple[str, Any]]  # ("port" | "error" | "batch" | "stats", payload) to the server; a batch's
+    # payload is (satellite, SampleBatch)
 
 __all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 
 STATS_PERIOD_S = 0.5
+PASS_PERIOD_S = 30.0  # a satellite's pass from data is widened over what was committed at most this often (in
+# telemetry time; a few queries each, serialised with the commits in this process, never on the API's relay)
 OUTBOX_MESSAGES = 1_000  # ≈ 20 s of batches at the 50 decodes/s of telemetry.live
 STOP_POLL_S = 0.1
 EVICT_WAIT_S = 0.5  # a full outbox's oldest message may still be in this process's feeder thread, not yet in the
@@ -61,6 +65,37 @@ def _stop_orphan(outbox: Outbox, stop: Event) -> None:
     outbox.cancel_join_thread()
     stop.set()
     threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,)).start()
+
+
+class LivePasses:
+    """After each group commit of the live stream: every satellite's pass from data over what it committed since its
+    last update (telemetry.passes.passes_from_data; predicted passes covering the data are recounted instead), at
+    most every PASS_PERIOD_S of telemetry per satellite, and at stop for all: the pass list is never empty after data
+    arrived."""
+
+    def __init__(self) -> None:
+        self._from: dict[str, int] = {}  # satellite -> first sample not yet counted in a pass
+        self._newest: dict[str, int] = {}  # satellite -> newest committed sample
+
+    def __call__(self, archive: Any, spans: list[tuple[str, int, int]], final: bool) -> None:
+        due = set()
+        for satellite, t0_ns, t1_ns in spans:
+            if satellite not in self._from:
+                due.add(satellite)  # its first commit: the pass shows at once
+            start = self._from.setdefault(satellite, t0_ns)
+            self._newest[satellite] = max(self._newest.get(satellite, t1_ns), t1_ns)
+            if t1_ns - start >= PASS_PERIOD_S * 1e9:
+                due.add(satellite)
+        if final:  # stopping: every satellite's pass reaches its newest committed sample
+            due |= {s for s, t in self._newest.items() if t > self._from[s]}
+        for satellite in sorted(due):
+            self._update(archive, satellite)
+
+    def _update(self, archive: Any, satellite: str) -> None:
+        from telemetry import passes
+
+        passes.passes_from_data(archive, satellite, self._from[satellite], self._newest[satellite])
+        self._from[satellite] = self._newest[satellite]
 
 
 def _offer(outbox: Outbox, message: tuple[str, Any], tally: dict[str, int]) -> None:
@@ -99,7 +134,12 @@ async def _serve(
     archive = Archive(database_url, migrate=False)
     dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
     stream = LiveStream(
-        dictionary, archive=archive, satellite=satellite, limits=dictionary_limits(dictionary), allowed_sources=sources
+        dictionary,
+        archive=archive,
+        satellite=satellite,
+        limits=dictionary_limits(dictionary),
+        allowed_sources=sources,
+        on_committed=LivePasses(),
     )
     try:
         outbox.put(("port", await stream.start(host, port)))
@@ -116,7 +156,8 @@ async def _serve(
     async def forward() -> None:
         while True:
             message = await subscriber.get()
-            _offer(outbox, ("batch", dataclasses.replace(message.batch, packets=None)), tally)
+            batch = dataclasses.replace(message.batch, packets=None)
+            _offer(outbox, ("batch", (message.satellite, batch)), tally)
 
     async def report() -> None:
         while True:

@@ -70,7 +70,6 @@ COMPONENTS = (
     "engine",
 )
 LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
-LIVE_PASS_PERIOD_S = 10.0  # the live stream's pass from data is widened this often (a few queries each time)
 LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
 
 
@@ -109,13 +108,18 @@ class TelemetryGateway:
         self.live_port: int | None = None
         self._samples = SampleCache()
         self._committed: list[Callable[[str, str, list[SampleBatch]], None]] = []
-        self._live_pass_at_ns = 0
+        self._backfilled: list[Callable[[str, str, int, int], None]] = []
 
     def on_commit(self, listener: Callable[[str, str, list[SampleBatch]], None]) -> None:
         """Call ``listener(satellite, dictionary_name, batches)`` for every upload the archive committed and every
         live batch (the ingest process commits those within telemetry.live.ARCHIVE_INTERVAL_S); the live twins'
         one input path."""
         self._committed.append(listener)
+
+    def on_backfill(self, listener: Callable[[str, str, int, int], None]) -> None:
+        """Call ``listener(satellite, dictionary_name, t0_ns, t1_ns)`` for every upload committed without handing its
+        samples over (a file of more than one decode chunk): the live twins read that span back from the archive."""
+        self._backfilled.append(listener)
 
     def opened_archive(self) -> TelemetryArchive | None:
         """The archive once started, else None (no 503: for background workers)."""
@@ -181,7 +185,6 @@ class TelemetryGateway:
         self._relay.start()
 
     def _relay_loop(self, live: _LiveChild) -> None:
-        satellite = self._settings.live_satellite
         while True:
             try:
                 kind, payload = live.outbox.get(timeout=0.2)
@@ -192,30 +195,13 @@ class TelemetryGateway:
             if kind == "stats":
                 self._live_stats = payload
                 continue
+            satellite, payload = payload
             if len(payload.t_utc_ns):
                 self._samples.mark_live(satellite, int(payload.t_utc_ns.min()))
             self._invalidate_batches(satellite, [payload])
             self._publish(satellite, [payload], 0)
             for listener in self._committed:
                 listener(satellite, self._settings.live_dictionary, [payload])
-            self._live_passes(satellite, payload)
-
-    def _live_passes(self, satellite: str, batch: SampleBatch) -> None:
-        """Every LIVE_PASS_PERIOD_S, the live stream's pass (from data when none was predicted) over what the
-        ingest process has committed so far (it commits every telemetry.live.ARCHIVE_INTERVAL_S)."""
-        if not len(batch.t_utc_ns):
-            return
-        newest = int(batch.t_utc_ns.max())
-        if newest - self._live_pass_at_ns < LIVE_PASS_PERIOD_S * 1e9:
-            return
-        start = newest - int(2 * LIVE_PASS_PERIOD_S * 1e9) if self._live_pass_at_ns else int(batch.t_utc_ns.min())
-        self._live_pass_at_ns = newest
-        try:
-            from telemetry import passes
-
-            passes.passes_from_data(self._opened(), satellite, start, newest)
-        except ValueError:  # nothing committed yet for a new satellite: the next period will see it
-            self._live_pass_at_ns = 0
 
     async def stop_live(self) -> None:
         """Stop the ingest process (it archives what is pending first) and the relay thread."""
@@ -260,7 +246,8 @@ class TelemetryGateway:
 
         Subscribers and commit listeners get the batches of a file of one chunk (telemetry.packet_files
         .CHUNK_OCTETS); a longer file is an archive backfill: archived, caches invalidated, passes made from
-        its data, but not replayed to live subscribers ("published": false in the report).
+        its data, not replayed to live subscribers ("published": false in the report), and its span handed to the
+        backfill listeners (the live twins read it back from the archive).
         """
         from telemetry.packet_files import CHUNK_OCTETS
 
@@ -276,6 +263,9 @@ class TelemetryGateway:
             self._publish(satellite, outcome.first_batches, outcome.result.alarm_events)
             for listener in self._committed:
                 listener(satellite, dictionary_name, outcome.first_batches)
+        if not outcome.result.duplicate_upload and outcome.chunks > 1 and outcome.span_ns is not None:
+            for backfill in self._backfilled:
+                backfill(satellite, dictionary_name, *outcome.span_ns)
         if not outcome.result.duplicate_upload:
             self._publish_commit(satellite, outcome.result, outcome.span_ns, published=outcome.chunks == 1)
         return {

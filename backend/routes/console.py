@@ -11,7 +11,6 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import ServicesDep, ViewerDep
 from backend.schemas import Caller, ConsoleConstants, ParametersInfo, ShelveRequest
-from backend.twin.live import STALE_S
 from backend.twin.twin_sessions import GPS_MARGIN_S
 
 router = APIRouter(tags=["console"], responses=ERROR_RESPONSES)
@@ -26,7 +25,7 @@ def constants(services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     shelve = ShelveRequest.model_fields["duration_s"].metadata
     return {
         "gps_margin_s": GPS_MARGIN_S,
-        "stale_after_s": STALE_S,  # the live twin's own threshold: one home for "stale"
+        "stale_after_s": services.twins.stale_after_s,  # the live twins' own threshold: one home for "stale"
         "max_points": settings.max_points,
         "ws_rate_hz": settings.ws_rate_hz,
         "shelve_max_s": next(m.le for m in shelve if getattr(m, "le", None) is not None),

@@ -34,4 +34,5 @@ def health(services: ServicesDep) -> Health:
         auth_enabled=services.settings.auth_enabled,
         components=services.telemetry.components(),
         live=services.telemetry.live_stats(),
+        twins=services.twins.backlog(),
     )

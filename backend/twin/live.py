@@ -1,11 +1,15 @@
 """Live twins: one per satellite that sends telemetry, always on, beside it (seed 000 §6–7 in-flight support).
 
-Fed by what the archive commits (uploads, replays and the live stream take one path: :meth:`LiveTwins.submit`).
+Fed by what the archive commits (uploads, replays and the live stream take one path: :meth:`LiveTwins.submit`);
+an upload too large to hand over decoded (a file of several decode chunks, decoded in the upload decoder process)
+is read back from the archive by the twins' worker one ``BACKFILL_WINDOW_S`` at a time, between live batches
+(:meth:`LiveTwins.submit_archived`).
 Per satellite a :class:`LiveTwin` goes *waiting* → *synchronised* (state taken from telemetry: q_ib, ω, wheel
 speeds, isolated wheels, time, the GPS orbit) → *propagating* (the onboard-equivalent ACS of the satellite's
 library scenario flown by :func:`sim_core.engine.simulate` over a segment of ``RESYNC_S``, compared with every
 sample as it arrives) → re-synchronised when the segment ends, or at once when a residual stays beyond what the
-sensors' noise explains → *stale* once no telemetry arrived for ``STALE_S``. A satellite whose attitude mapping
+sensors' noise explains → *stale* once no telemetry arrived for ``stale_after_s`` (Settings.stale_after_s,
+default ``STALE_S``). A satellite whose attitude mapping
 declares no ACS model is *actual_only*: its attitude is followed, no twin is flown.
 
 Residuals, twin minus telemetry at each telemetry instant: attitude angle |Λ̃_tm ∘ Λ_twin| (arcsec), body rates
@@ -86,7 +90,8 @@ NS_PER_S = 1_000_000_000
 ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 TWIN_APID = DERIVED_APID  # the residuals are parameters derived on the ground: no raw packets
 RESYNC_S = 60.0  # segment length: see the module docstring
-STALE_S = 10.0  # no telemetry for this long (ten 1 Hz packets missed) = stale; a gap this long forces a re-sync
+STALE_S = 10.0  # default: no telemetry for this long (ten 1 Hz packets missed) = stale (Settings.stale_after_s)
+GAP_RESYNC_S = 10.0  # a gap this long in telemetry time forces a re-sync (whatever the staleness threshold shown)
 RECENT_S = 600.0  # telemetry kept per satellite: the sync sample may lie before a 100 s scheduled turn
 GPS_FULL_SPAN_S = 30.0  # a fit over 30 s of fixes is at the receiver noise; the first one, over the first three fixes
 # (positions and velocities: actual_state.fit_circular_orbit, a few arcseconds), is refined by a re-sync once the
@@ -100,6 +105,9 @@ ARCHIVE_PERIOD_S = 10.0  # residuals handed to the archive writer per satellite 
 # satellites make 10 uploads/s; residuals are published at once, the archive holds them ≤ 10 s later
 GROUP_MAX_UPLOADS = 100  # one transaction holds the SQLite write lock: bounded well below its 30 s busy timeout
 TICK_S = 0.5  # staleness checked this often
+MAX_TAKEN = 2_000  # queued items the worker takes at once (grouped by satellite: LiveTwins._take)
+BACKFILL_WINDOW_S = 300.0  # an archived span is read back, decoded and flown this much at a time: bounded memory
+# (≈ 1,500 packets of the reference satellite), and live batches queued meanwhile wait for one window only
 MAX_ISSUES = 20  # bad-input reports kept per satellite
 SAME_INSTANT_NS = 1_000_000
 # Forced re-sync / yellow limits from the reference sensors: σ_st = 3″ star tracker (the estimate's error is a few σ),
@@ -196,6 +204,16 @@ class LiveDetection:
         return self.detection.t_utc_ns - int(PRE_ALARM_S * NS_PER_S), self.newest_utc_ns
 
 
+@dataclass(frozen=True)
+class _Backfill:
+    """What is left of an archived span of one satellite for its twin."""
+
+    satellite: str
+    dictionary: str
+    t0_ns: int
+    t1_ns: int
+
+
 @dataclass
 class TwinState:
     """What the API and the ``twin`` topic tell about one satellite's live twin."""
@@ -244,8 +262,10 @@ class LiveTwin:
         resync_s: float = RESYNC_S,
         epoch_from_run: bool = False,
         wheel_quantum_rad_s: float = 0.0,
+        stale_after_s: float = STALE_S,
     ) -> None:
         self.mapping, self.model, self._epoch_ns, self._resync_s = mapping, model, epoch_ns, resync_s
+        self.stale_after_s = stale_after_s
         self._epoch_from_run = epoch_from_run  # the route starts with each run of telemetry (an emulator's flight)
         self.state = TwinState(
             satellite, mapping.dictionary, mapping.acs_model if model is not None else None, state=WAITING
@@ -329,7 +349,7 @@ class LiveTwin:
                 int(t[0]),
             )
             restarted = True
-        elif newest is not None and int(t[0]) - newest > STALE_S * NS_PER_S:
+        elif newest is not None and int(t[0]) - newest > GAP_RESYNC_S * NS_PER_S:
             self._restart(
                 f"gap of {(int(t[0]) - newest) / 1e9:.1f} s in telemetry (from {_iso(newest)})", "gap", int(t[0])
             )
@@ -570,7 +590,7 @@ class LiveTwin:
         """The twin state as JSON (see routes/satellites.py for the shape)."""
         s = self.state
         age = None if s.last_arrival_unix_s is None else max(now_unix_s - s.last_arrival_unix_s, 0.0)
-        stale = age is None or age > STALE_S
+        stale = age is None or age > self.stale_after_s
         return {
             "satellite": s.satellite,
             "dictionary": s.dictionary,
@@ -581,7 +601,7 @@ class LiveTwin:
             "state": STALE if stale and s.telemetry_utc_ns is not None else s.state,
             "stale": stale,
             "last_packet_age_s": age,
-            "stale_after_s": STALE_S,
+            "stale_after_s": self.stale_after_s,
             "telemetry_utc": _iso(s.telemetry_utc_ns),
             "twin_utc": _iso(s.twin_utc_ns),
             "twin_behind_telemetry_s": None
@@ -610,7 +630,8 @@ class LiveTwins:
 
     ``archive`` is a callable giving the telemetry.archive.Archive (None while not open), ``hub`` the live hub
     (``publish``, ``wants_any``), ``dictionary(name)`` the catalogue's loader, ``on_archived(satellite, t0_ns,
-    t1_ns)`` the sample cache's invalidation; mappings are looked up in ``mapping_folders`` before the shipped ones.
+    t1_ns)`` the sample cache's invalidation; mappings are looked up in ``mapping_folders`` before the shipped ones;
+    a twin without telemetry for ``stale_after_s`` of wall time is stale.
     """
 
     def __init__(
@@ -621,8 +642,10 @@ class LiveTwins:
         on_archived: Callable[[str, int, int], None] | None = None,
         mapping_folders: Sequence[Path] = (),
         clock: Callable[[], float] = time.time,
+        stale_after_s: float = STALE_S,
     ) -> None:
         self._archive, self._hub, self._dictionary = archive, hub, dictionary
+        self.stale_after_s = stale_after_s
         self._on_archived, self._clock = on_archived, clock
         self._folders = [*mapping_folders, SHIPPED_MAPPINGS]
         self._twins: dict[str, LiveTwin] = {}
@@ -640,6 +663,7 @@ class LiveTwins:
         self.latencies_s: deque = deque(maxlen=100_000)
         self._detected: dict[str, list[Detection]] = {}  # waiting for POST_ALARM_S of telemetry after them
         self._recovering = False
+        self._backfills = 0  # archived spans not yet read to their end
         self.on_detection: Callable[[LiveDetection], str | None] | None = None  # starts a diagnosis: its id
 
     def register_model(self, satellite: str, scenario: str, epoch_ns: int | None, from_run: bool = False) -> None:
@@ -652,6 +676,13 @@ class LiveTwins:
     def submit(self, satellite: str, dictionary_name: str, batches: Sequence[SampleBatch]) -> None:
         """Queue committed batches of ``satellite`` for its twin (never waits)."""
         self._inbox.put((satellite, dictionary_name, list(batches), self._clock()))
+
+    def submit_archived(self, satellite: str, dictionary_name: str, t0_ns: int, t1_ns: int) -> None:
+        """Queue the archived telemetry of ``satellite`` in [t0_ns, t1_ns] for its twin (never waits): a backfill
+        the worker reads back from the archive BACKFILL_WINDOW_S at a time."""
+        with self._lock:
+            self._backfills += 1
+        self._inbox.put(_Backfill(satellite, dictionary_name, t0_ns, t1_ns))
 
     def start(self, recover: bool = True) -> None:
         """Start the worker thread (after recovering the twins from the archive)."""
@@ -673,12 +704,27 @@ class LiveTwins:
             self._writer = None
 
     def drain(self, timeout_s: float = 30.0) -> None:
-        """Wait until everything submitted so far has been processed and archived (tests, benchmarks)."""
-        done = threading.Event()
-        self._inbox.put(done)
-        done.wait(timeout_s)
+        """Wait until everything submitted so far, backfills to their end, has been processed and archived (tests,
+        benchmarks)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            done = threading.Event()
+            self._inbox.put(done)
+            done.wait(max(deadline - time.monotonic(), 0.0))
+            with self._lock:
+                if not self._backfills or time.monotonic() >= deadline:
+                    return
 
     # --- queries ---------------------------------------------------------------------------------
+    def backlog(self) -> dict[str, int]:
+        """Satellites with a twin, committed batches waiting for their twin, residual uploads waiting for the
+        archive writer (a growing figure means the twins or the writer do not keep up)."""
+        return {
+            "satellites": len(self._twins),
+            "batches_waiting": self._inbox.qsize(),
+            "residual_uploads_waiting": self._writes.qsize(),
+        }
+
     def satellites(self) -> list[str]:
         """Satellites that have a twin."""
         with self._lock:
@@ -705,20 +751,48 @@ class LiveTwins:
                 log.exception("live twins: recovery from the archive failed")
         while not (self._stop.is_set() and self._inbox.empty()):
             try:
-                item = self._inbox.get(timeout=0.5)
+                items = [self._inbox.get(timeout=0.5)]
             except queue.Empty:
                 self._tick()
                 continue
+            while len(items) < MAX_TAKEN:  # everything queued meanwhile: see _take
+                try:
+                    items.append(self._inbox.get_nowait())
+                except queue.Empty:
+                    break
+            self._take(items)
+            self._tick()
+        self._flush_all()
+
+    def _take(self, items: list[Any]) -> None:
+        """Process queued items in order, the batches of one satellite queued one after another in one call (a twin
+        costs ~1 ms of numpy overhead per call whatever the samples: a worker that fell behind catches up instead
+        of falling further behind, and each satellite's new samples are compared at once)."""
+        group: dict[tuple[str, str], tuple[list[Any], float]] = {}
+        for item in items:
+            if isinstance(item, tuple):
+                satellite, dictionary_name, batches, arrived = item
+                taken, first = group.get((satellite, dictionary_name), ([], arrived))
+                group[(satellite, dictionary_name)] = (taken + batches, first)
+                continue
+            self._process_all(group)
+            group = {}
             if isinstance(item, threading.Event):
                 self._flush_all()
                 self._writes.put(item)  # set by the writer once the flushed residuals are committed
-                continue
+            else:
+                try:
+                    self._backfill(item)
+                except Exception:
+                    log.exception("live twin of %s failed on an archived span", item.satellite)
+        self._process_all(group)
+
+    def _process_all(self, group: dict[tuple[str, str], tuple[list[Any], float]]) -> None:
+        for (satellite, dictionary_name), (batches, arrived) in group.items():
             try:
-                self._process(*item)
+                self._process(satellite, dictionary_name, batches, arrived)
             except Exception:
-                log.exception("live twin of %s failed on a batch", item[0])
-            self._tick()
-        self._flush_all()
+                log.exception("live twin of %s failed on a batch", satellite)
 
     def _twin(self, satellite: str, dictionary_name: str) -> LiveTwin | None:
         twin = self._twins.get(satellite)
@@ -740,7 +814,13 @@ class LiveTwins:
                 epoch_ns = self._first_telemetry_ns(satellite)
         with self._lock:
             self._twins[satellite] = twin = LiveTwin(
-                satellite, mapping, model, epoch_ns, epoch_from_run=from_run, wheel_quantum_rad_s=quantum
+                satellite,
+                mapping,
+                model,
+                epoch_ns,
+                epoch_from_run=from_run,
+                wheel_quantum_rad_s=quantum,
+                stale_after_s=self.stale_after_s,
             )
         return twin
 
@@ -772,6 +852,26 @@ class LiveTwins:
         self._start_diagnoses(satellite, twin)
         self._stale_published.discard(satellite)
         self._hub.publish("twin", twin.public(self._clock()))
+
+    def _backfill(self, item: _Backfill) -> None:
+        """Read, decode and fly the first BACKFILL_WINDOW_S of an archived span; queue the rest behind what waits."""
+        from telemetry.decoding import decode_stream
+
+        archive = self._archive()
+        end = min(item.t1_ns, item.t0_ns + int(BACKFILL_WINDOW_S * NS_PER_S))
+        rest = _Backfill(item.satellite, item.dictionary, end + 1, item.t1_ns) if end < item.t1_ns else None
+        try:
+            if archive is not None:
+                packets = archive.replay(item.satellite, item.t0_ns, end)
+                data = b"".join(p for _, p in packets)
+                decoded = decode_stream(data, self._dictionary(item.dictionary), source="twin backfill")
+                self._process(item.satellite, item.dictionary, decoded.batches, self._clock())
+        finally:
+            if rest is not None and not self._stop.is_set():  # a stopping server drops the rest (it is archived)
+                self._inbox.put(rest)
+            else:
+                with self._lock:
+                    self._backfills -= 1
 
     def _start_diagnoses(self, satellite: str, twin: LiveTwin) -> None:
         """Detections followed by POST_ALARM_S of telemetry: archive what is pending, then ``on_detection``."""

@@ -4,7 +4,8 @@ Actual side: the mapped attitude (telemetry.attitude_mapping) and the GPS orbit 
 side: the twin's attitude at the telemetry instants it was compared at (the actual one for a satellite without
 ACS model, which the alarm panel says). The span grows as telemetry arrives, so the monitors' live follow stays a
 few seconds behind real time; the panel's alarm list starts with a STALE warning once no telemetry came for
-STALE_S. A snapshot of the twin's buffers is taken at most every SNAPSHOT_S (the render loop asks 30 times a s).
+the twins' ``stale_after_s`` (Settings.stale_after_s). A snapshot of the twin's buffers is taken at most every
+SNAPSHOT_S (the render loop asks 30 times a s).
 
 Any past window (frontend.feed.WindowSource): :class:`ArchiveWindows` reads the window's archived telemetry (the
 mapped attitude, rates, wheels, mode and GPS) and the twin's archived attitude (backend.twin.live

@@ -5,12 +5,16 @@ a wheel isolated by FDIR raises a critical (red) alarm from the reference dictio
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 from fastapi.testclient import TestClient
 
+from backend.app import create_app
+from backend.core.auth import Role
 from backend.twin.live import STALE_S
 from backend.twin.twin_sessions import GPS_MARGIN_S
-from tests.backend.conftest import bearer
+from telemetry.emulator import emulate
+from tests.backend.conftest import bearer, make_settings
 
 REFSAT = "REFSAT-CONSOLE"
 
@@ -33,6 +37,33 @@ def test_constants_are_the_servers_own(client: TestClient, tokens: dict[str, str
     assert body["gps_margin_s"] == GPS_MARGIN_S and body["stale_after_s"] == STALE_S
     assert body["severities"] == {"yellow": "warning", "red": "critical"} and body["shelve_max_s"] == 30 * 86_400
     assert client.get("/api/v1/constants").status_code == 401
+
+
+def test_the_stale_threshold_is_configured_once_for_the_console_and_the_twins(
+    tmp_path: Path, database_url: str
+) -> None:
+    """ACS_TWIN_STALE_AFTER_S: the dashboard's constant and every twin state say the configured threshold, and a
+    twin whose telemetry stopped longer ago than it is stale (a shorter gap is not)."""
+    settings = make_settings(tmp_path, database_url, stale_after_s=2.5)
+    with TestClient(create_app(settings)) as client:
+        viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
+        assert client.get("/api/v1/constants", headers=bearer(viewer)).json()["stale_after_s"] == 2.5
+        operator = client.app.state.services.auth.issue("operator", Role.operator)[1]
+        data = emulate("somov-ge4-scan", [], 20.0, "2026-03-20T00:00:00Z", truth_seed=None)[2].data
+        answer = client.post(
+            "/api/v1/telemetry/uploads?satellite=REFSAT-STALE&dictionary=reference_satellite.yaml",
+            content=data,
+            headers=bearer(operator),
+        )
+        assert answer.status_code == 200
+        twins = client.app.state.services.twins
+        twins.drain()
+        fresh = twins.state("REFSAT-STALE")
+        assert fresh is not None and fresh["stale_after_s"] == 2.5
+        while (state := twins.state("REFSAT-STALE")) is not None and state["last_packet_age_s"] < 2.5:
+            assert not state["stale"]
+            time.sleep(0.1)
+        assert state is not None and state["stale"]
 
 
 def test_whoami_names_the_role(client: TestClient, tokens: dict[str, str]) -> None:

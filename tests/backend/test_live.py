@@ -16,6 +16,7 @@ from backend.app import create_app
 from backend.core.auth import Role
 from backend.ingest.live_hub import LiveHub
 from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
+from backend.twin.live import ATTITUDE_LIMIT_ARCSEC, RED_FACTOR
 from tests.backend.conftest import bearer, make_settings
 
 QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
@@ -189,3 +190,59 @@ def test_revoking_a_token_closes_its_open_websocket_within_a_second(client: Test
         elapsed = time.monotonic() - start
     assert closed["type"] == "websocket.close" and closed["code"] == 4401
     assert elapsed < 1.0
+
+
+FLEET_S = 40.0  # seconds of flight each satellite of the fleet sends
+
+
+def test_one_listener_takes_a_fleet_each_satellite_archived_with_its_live_twin(
+    tmp_path: Path, database_url: str
+) -> None:
+    """End to end for a fleet: two emulated satellites, each on its own TCP connection naming it (emulator
+    satellite=...), and the server's own satellite without a name → one ingest process → each satellite's
+    samples in the archive under its name, its own live twin (state, residuals), the twin topic on the WebSocket."""
+    from telemetry import emulator
+
+    settings = make_settings(tmp_path, database_url, live_enabled=True)
+    _, series, stream = emulator.emulate("somov-ge4-scan", [], FLEET_S, "2026-03-20T00:00:00Z")
+    n_hk = series["ACS_HK"].t_utc_ns.size
+    fleet = ("SAT-A", "SAT-B", None)
+    with TestClient(create_app(settings)) as client:
+        viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
+        port = client.get("/api/v1/health").json()["live"]["port"]
+        with client.websocket_connect(f"/api/v1/ws?token={viewer}") as ws:
+            ws.send_json({"op": "subscribe", "topics": ["twin"]})
+
+            async def send_all() -> None:
+                await asyncio.gather(
+                    *(
+                        emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3, satellite=s)
+                        for s in fleet
+                    )
+                )
+
+            asyncio.run(send_all())
+            names = {s or settings.live_satellite for s in fleet}
+            propagating: set[str] = set()
+            while propagating != names:
+                for item in ws.receive_json()["items"]:
+                    if item["data"]["state"] == "propagating":
+                        propagating.add(item["data"]["satellite"])
+        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
+        while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < 3 * len(stream):
+            assert time.monotonic() < deadline, "the fleet's packets never all reached the archive"
+            time.sleep(0.1)
+        listed = {s["name"] for s in client.get("/api/v1/satellites", headers=bearer(viewer)).json()}
+        for name in names:
+            samples = client.get(
+                f"/api/v1/parameters/q_est_ib_0/samples?satellite={name}&max_points={n_hk}", headers=bearer(viewer)
+            ).json()
+            twin = client.get(f"/api/v1/satellites/{name}/twin", headers=bearer(viewer)).json()
+            passes = client.get(f"/api/v1/passes?satellite={name}", headers=bearer(viewer)).json()
+            assert samples["total_points"] == n_hk
+            assert [p["origin"] for p in passes] == ["data"]  # made from its data by the ingest process
+            assert (
+                twin["samples_compared"] > 0 and twin["attitude_residual_arcsec"] < ATTITUDE_LIMIT_ARCSEC * RED_FACTOR
+            )
+        assert client.get("/api/v1/health").json()["live"]["satellites"] == 3
+    assert names <= listed

@@ -13,6 +13,7 @@ from fastapi.testclient import TestClient
 from backend.app import create_app
 from backend.core.auth import Role
 from telemetry.emulator import emulate
+from telemetry.packet_files import CHUNK_OCTETS
 from tests.backend.conftest import bearer, make_settings
 
 NOAA20 = Path("real/noaa20_jpss1_apid11")
@@ -76,6 +77,33 @@ def test_reference_satellite_twin_compares_every_sample_and_archives_its_residua
     assert np.sqrt(np.mean(settled**2)) < 2 * STAR_TRACKER_SIGMA_ARCSEC  # the sensors' noise, not a model mismatch
     listed = client.get("/api/v1/satellites", headers=bearer(tokens["viewer"])).json()
     assert [s["latest_telemetry_utc"] for s in listed if s["name"] == "REFSAT"] == ["2026-03-20T00:03:59.750Z"]
+
+
+LONG_PASS_S = 2000.0  # 2,000 s × (4 × 126 + 62) octets/s ≈ 1.13 MB: two decode chunks
+BACKFILL_DRAIN_S = 600.0  # the twin flies 33 minutes of telemetry on a loaded 2-core machine
+
+
+def test_an_upload_of_several_decode_chunks_reaches_the_twin_over_all_of_it(
+    client: TestClient, tokens: dict[str, str]
+) -> None:
+    """Decoded by the upload decoder process, not handed over: the twin reads it back from the archive, syncs,
+    and archives residuals over the whole pass, at the sensors' noise."""
+    data = emulate("somov-ge4-scan", [], LONG_PASS_S, EPOCH, truth_seed=None)[2].data
+    assert len(data) > CHUNK_OCTETS
+    report = _upload(client, tokens["operator"], "REFSAT-LONG", "reference_satellite.yaml", data)
+    client.app.state.services.twins.drain(BACKFILL_DRAIN_S)
+    assert report["published"] is False
+    twin = client.get("/api/v1/satellites/REFSAT-LONG/twin", headers=bearer(tokens["viewer"])).json()
+    assert twin["twin_utc"] == twin["telemetry_utc"] == "2026-03-20T00:33:19.750Z"  # the last HK sample
+    samples = client.get(
+        "/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT-LONG&max_points=100000",
+        headers=bearer(tokens["viewer"]),
+    ).json()
+    t = np.array(samples["t_utc_ns"])
+    assert samples["total_points"] == twin["samples_compared"] > 0.95 * 4 * LONG_PASS_S
+    assert (t[0] - np.datetime64(EPOCH[:-1], "ns").astype(np.int64)) / 1e9 < 10.0  # from the pass's first seconds
+    settled = np.array(samples["values"])[t > t[0] + 30 * 10**9]
+    assert np.sqrt(np.mean(settled**2)) < 2 * STAR_TRACKER_SIGMA_ARCSEC
 
 
 def test_restart_recovers_the_twins_from_the_archive_without_altering_it(

@@ -26,7 +26,7 @@ from sim_core.closed_loop import TARGET_CODES
 from telemetry import emulator
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
-from telemetry.live import LiveStream
+from telemetry.live import LiveStream, hello
 
 FAILED_WHEEL = 1  # sim_core index: the dictionary's wheel_*_2
 FAILURE_ONSET_S = 350.0  # during the observing hold, before the 20° turn (420–520 s)
@@ -288,7 +288,10 @@ def test_live_emulator_to_listener_delivers_decoded_samples_paced(nominal, decod
         np.testing.assert_array_equal(np.concatenate([b.values[name] for b in hk]), offline.values[name][sel])
 
 
-def test_sender_reconnects_and_resends_after_the_link_drops(nominal, dictionary) -> None:
+def test_sender_reconnects_and_resends_after_the_link_drops_each_connection_naming_its_satellite(
+    nominal, dictionary
+) -> None:
+
     _, _, stream = nominal
     t0 = int(stream.t_utc_ns[0])
     piece = stream.window(t0, t0 + 20 * 10**9)
@@ -307,7 +310,7 @@ def test_sender_reconnects_and_resends_after_the_link_drops(nominal, dictionary)
 
         server = await asyncio.start_server(handle, "127.0.0.1", 0)
         port = server.sockets[0].getsockname()[1]
-        report = await emulator.send_stream(piece, "127.0.0.1", port, rate=40.0, retry_s=0.05)
+        report = await emulator.send_stream(piece, "127.0.0.1", port, rate=40.0, retry_s=0.05, satellite="SAT-7")
         await asyncio.sleep(SETTLE_S)
         server.close()
         await server.wait_closed()
@@ -317,7 +320,8 @@ def test_sender_reconnects_and_resends_after_the_link_drops(nominal, dictionary)
     assert report.connections == 2 == len(received)
     seen = set()
     for buffer in received:
-        for batch in decode_stream(bytes(buffer), dictionary).batches:
+        assert buffer.startswith(hello("SAT-7"))
+        for batch in decode_stream(bytes(buffer[len(hello("SAT-7")) :]), dictionary).batches:
             seen.update(zip([batch.apid] * len(batch.t_utc_ns), batch.t_utc_ns.tolist()))
     assert seen == set(zip(piece.apid.tolist(), piece.t_utc_ns.tolist()))  # nothing lost across the drop
 
@@ -381,7 +385,20 @@ def test_cli_streams_to_a_live_listener(dictionary) -> None:
         subscriber = live.subscribe(max_messages=1_000)
         port = await live.start()
         code = await asyncio.to_thread(
-            main, ["emulate", "--duration", "10", "--rate", "inf", "--port", str(port), "--attempts", "3"]
+            main,
+            [
+                "emulate",
+                "--duration",
+                "10",
+                "--rate",
+                "inf",
+                "--port",
+                str(port),
+                "--attempts",
+                "3",
+                "--satellite",
+                "S9",
+            ],
         )
         await asyncio.sleep(SETTLE_S)
         await live.stop()
@@ -392,7 +409,7 @@ def test_cli_streams_to_a_live_listener(dictionary) -> None:
         packet: sum(len(m.batch.t_utc_ns) for m in messages if m.batch.packet == packet)
         for packet in ("ACS_HK", "GPS_NAV")
     }
-    assert code == 0 and received == {"ACS_HK": 40, "GPS_NAV": 10}
+    assert code == 0 and received == {"ACS_HK": 40, "GPS_NAV": 10} and {m.satellite for m in messages} == {"S9"}
 
 
 def test_demo_pass_file_holds_the_window_with_mission_sequence_counts(dictionary) -> None:

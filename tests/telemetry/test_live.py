@@ -12,7 +12,7 @@ import pytest
 
 from telemetry.archive import Archive
 from telemetry.decoding import decode_stream
-from telemetry.live import LiveMessage, LiveStream, Subscriber, complete_prefix
+from telemetry.live import LiveMessage, LiveStream, MemoryLink, Subscriber, complete_prefix, hello
 from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
 from tests.telemetry.packet_streams import T0_UTC_NS, engineering_values, packets, reference
 
@@ -212,3 +212,77 @@ def test_archived_stream_needs_a_satellite_and_subscribers_a_positive_queue() ->
         LiveStream(reference(), archive=object())  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="max_messages"):
         Subscriber(0)
+
+
+def test_one_listener_serves_a_fleet_each_connection_filed_under_the_satellite_its_hello_names(
+    archive: Archive,
+) -> None:
+    """Three satellites, each on its own connection (hello line cut anywhere, even mid-name) plus one connection
+    without a hello (the stream's own satellite): every packet reaches subscribers tagged with its satellite and
+    the archive under that satellite, byte-exact; a budget of one upload per interval commits the longest waiting
+    satellite first and ``stop`` commits the rest."""
+
+    dictionary = reference()
+    fleet = {name: packets(dictionary.packets[HK_APID], 40 + 10 * k, seed=k) for k, name in enumerate("ABC")}
+    own = packets(dictionary.packets[HK_APID], 25, seed=9)
+
+    async def scenario() -> tuple[dict[str, int], int]:
+        link = MemoryLink()
+        stream = LiveStream(
+            dictionary, archive=archive, satellite="OWN", archive_interval_s=3600.0, archive_uploads_per_s=1 / 3600
+        )
+        subscriber = stream.subscribe(max_messages=1000)
+        await stream.start(link=link)
+        for k, (name, raw) in enumerate(fleet.items()):
+            data = hello(name) + raw.tobytes()
+            connection = link.connect()
+            for cut in (0, 4 + k, 12, len(data)):  # "SATE" | "LLITE A" ... : the hello arrives in pieces
+                connection.write(data[:cut])
+                data = data[cut:]
+                await asyncio.sleep(0)
+            await connection.aclose()
+        connection = link.connect()
+        connection.write(own.tobytes())
+        await connection.aclose()
+        tagged: dict[str, int] = {}
+        for message in drain(subscriber):
+            tagged[message.satellite] = tagged.get(message.satellite, 0) + len(message.batch.t_utc_ns)
+        assert await stream.flush()  # the budget: one satellite, the one waiting longest (A)
+        assert [_archived(name, archive) for name in ("A", "B", "C", "OWN")] == [True, False, False, False]
+        await stream.stop()
+        return tagged, stream.stats.satellites
+
+    tagged, heard = asyncio.run(scenario())
+    assert tagged == {**{name: raw.shape[0] for name, raw in fleet.items()}, "OWN": own.shape[0]} and heard == 4
+    for name, raw in {**fleet, "OWN": own}.items():
+        assert b"".join(p for _, p in archive.replay(name, T0_UTC_NS, T0_UTC_NS + 10**12)) == raw.tobytes()
+
+
+def _archived(satellite: str, archive: Archive) -> bool:
+    try:
+        return bool(archive.uploads(satellite))
+    except ValueError:  # nothing archived under that name
+        return False
+
+
+def test_a_first_line_that_names_no_valid_satellite_is_noise_and_a_bad_name_is_refused() -> None:
+
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 20, seed=2)
+    with pytest.raises(ValueError, match="satellite"):
+        hello("bad name\n")
+
+    async def scenario() -> list[LiveMessage]:
+        link = MemoryLink()
+        stream = LiveStream(dictionary, satellite="OWN")
+        subscriber = stream.subscribe(max_messages=100)
+        await stream.start(link=link)
+        connection = link.connect()
+        connection.write(b"SATELLITE a b\n" + raw.tobytes())
+        await connection.aclose()
+        await stream.stop()
+        return drain(subscriber)
+
+    messages = asyncio.run(scenario())
+    assert {m.satellite for m in messages} == {"OWN"}
+    assert sum(len(m.batch.t_utc_ns) for m in messages) == raw.shape[0]  # the line was quarantined, no packet lost
