@@ -23,7 +23,7 @@ from frontend.feed import TwinFeed, WindowSource
 from frontend.twin_geometry import TwinFrame, TwinGeometry
 from frontend.twin_panels import PLOT_WINDOW_S
 from frontend.twin_scene import ROLES, Role
-from frontend.viewer import Viewer
+from frontend.viewer import Viewer, ViewerLink
 from sim_core import quaternion
 
 if TYPE_CHECKING:
@@ -73,6 +73,7 @@ class MonitorHandles:
     live: bool = False
     windows: WindowSource | None = None
     viewers: dict[str, dict[int, Viewer]] = field(default_factory=dict)
+    link: ViewerLink = field(default_factory=ViewerLink)  # viewers that chose to move together (any monitor)
     frames_sent: int = 0
     frames_computed: int = 0
     _lock: threading.RLock = field(default_factory=threading.RLock)
@@ -101,14 +102,16 @@ class MonitorHandles:
         """A browser connected: give it a viewer of its own (clock, scene, panel)."""
         with self._lock:
             geometry = self.geometry
-        viewer = Viewer(client, role, geometry, self.n_wheels, self.live, self.windows, self._loader)
+        viewer = Viewer(client, role, geometry, self.n_wheels, self.live, self.windows, self._loader, self.link)
         with self._lock:
             self.viewers.setdefault(role, {})[viewer.client_id] = viewer
             self._render_one(viewer, {})
 
     def _disconnect(self, role: Role, client: viser.ClientHandle) -> None:
         with self._lock:
-            self.viewers.get(role, {}).pop(int(client.client_id), None)
+            viewer = self.viewers.get(role, {}).pop(int(client.client_id), None)
+        if viewer is not None:
+            self.link.leave(viewer)
 
     def _frame(self, geometry: TwinGeometry, t: float, cache: dict) -> TwinFrame:
         key = (id(geometry), t)
@@ -119,7 +122,10 @@ class MonitorHandles:
 
     def _render_one(self, viewer: Viewer, cache: dict, wall_dt_s: float = 0.0) -> TwinFrame:
         viewer.apply_pending()
-        t = viewer.clock.advance(wall_dt_s)
+        clocks = cache.setdefault("clocks", {})  # a clock shared by linked viewers advances once per render
+        if id(viewer.clock) not in clocks:
+            clocks[id(viewer.clock)] = viewer.clock.advance(wall_dt_s)
+        t = clocks[id(viewer.clock)]
         f = self._frame(viewer.geometry, t, cache)
         viewer.scene.show(f)
         viewer.panels.show_time(f)

@@ -1,4 +1,4 @@
-"""The one playback clock that keeps every monitor at the same displayed instant.
+"""A viewer's playback clock (shared by the viewers linked together: frontend.viewer.ViewerLink).
 
 Modes: *live follow* (the displayed time is the newest data), *replay* (play/pause at ×1 … ×1000 of
 real time through a stored pass), and seeking with the timeline. Thread-safe: the GUI callbacks of
@@ -98,6 +98,13 @@ class PlaybackClock:
     def pause(self) -> None:
         """Stop replay."""
         self._playing = False
+
+    def copy(self) -> PlaybackClock:
+        """A clock of its own in the same span, at the same instant, speed and mode."""
+        twin = PlaybackClock(self._span, self._speed)
+        with self._lock:
+            twin._t, twin._playing, twin._live = self._t, self._playing, self._live
+        return twin
 
     def follow_live(self, on: bool = True) -> None:
         """Follow the newest data (on) or stay where we are (off)."""

@@ -73,10 +73,11 @@ class TwinPanels:
         archive_span: Callable[[], tuple[float, float] | None] | None = None,
         on_live: Callable[[bool], None] | None = None,
         on_window: Callable[[float, float], None] | None = None,
+        on_link: Callable[[bool], None] | None = None,
     ) -> None:
         self.target, self.role, self.clock = target, role, clock
         self.camera_preset: str | None = None
-        self._archive_span, self._on_live, self._on_window = archive_span, on_live, on_window
+        self._archive_span, self._on_live, self._on_window, self._on_link = archive_span, on_live, on_window, on_link
         self._lock = threading.Lock()
         gui = target.gui
         gui.configure_theme(
@@ -93,6 +94,15 @@ class TwinPanels:
             self.play = gui.add_button_group("Replay", ("play", "pause"))
             self.speed = gui.add_dropdown("Speed", tuple(f"x{s:g}" for s in SPEEDS), initial_value=f"x{clock.speed:g}")
             self.live = gui.add_checkbox("Live follow", initial_value=clock.live)
+            self.link = (
+                gui.add_checkbox(
+                    "Link viewers",
+                    initial_value=False,
+                    hint="move together with the other viewers that tick it (e.g. actual and simulated monitors)",
+                )
+                if on_link is not None
+                else None
+            )
             self.camera = gui.add_button_group("Camera", CAMERA_PRESETS)
         self.window_from = self.window_length = self.window_load = None
         with gui.add_folder("Replay a past window"):
@@ -145,25 +155,23 @@ class TwinPanels:
             return "no archive to replay from" if self._on_window is None else "archive: no telemetry yet"
         return f"archive holds {format_utc(span[0])} … {format_utc(span[1])}"
 
-    def _wire(self) -> None:
-        clock = self.clock
-
+    def _wire(self) -> None:  # self.clock, not a copy: linking viewers swaps it
         @self.slider.on_update
         def _(event) -> None:
             if event.client is not None:
-                clock.seek(clock.span_unix_s()[0] + float(self.slider.value))
+                self.clock.seek(self.clock.span_unix_s()[0] + float(self.slider.value))
 
         @self.play.on_click
         def _(event) -> None:
             if self.play.value == "play":
-                clock.play()
+                self.clock.play()
             else:
-                clock.pause()
+                self.clock.pause()
 
         @self.speed.on_update
         def _(event) -> None:
             if event.client is not None:
-                clock.set_speed(float(self.speed.value[1:]))
+                self.clock.set_speed(float(self.speed.value[1:]))
 
         @self.live.on_update
         def _(event) -> None:
@@ -171,7 +179,14 @@ class TwinPanels:
                 if self._on_live is not None:
                     self._on_live(bool(self.live.value))
                 else:
-                    clock.follow_live(bool(self.live.value))
+                    self.clock.follow_live(bool(self.live.value))
+
+        if self.link is not None:
+
+            @self.link.on_update
+            def _(event) -> None:
+                if event.client is not None and self._on_link is not None:
+                    self._on_link(bool(self.link.value))
 
         @self.camera.on_click
         def _(event) -> None:

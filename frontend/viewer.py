@@ -7,6 +7,12 @@ loop computes one frame per distinct (geometry, instant), so a hundred viewers i
 
 A replay window is loaded off the render loop (a worker thread reads the archive and builds the geometry), and
 swapped in by the render loop at its next tick, so live viewers never wait for it.
+
+Linked viewers (the panel's "Link viewers" box; seed 000 §7's two screens, actual on one and simulated on the
+other, kept at one instant): every viewer that ticks it shares one clock and one view (live, or the same
+replayed window) through the monitors' :class:`ViewerLink`: a seek, play, speed, live follow or window load by
+one moves them all; unticking gives the viewer a clock of its own again, where it was. Viewers that never tick it
+stay independent.
 """
 
 from __future__ import annotations
@@ -25,7 +31,38 @@ from frontend.twin_scene import Role, TwinScene
 if TYPE_CHECKING:
     import viser
 
-__all__ = ["Viewer"]
+__all__ = ["Viewer", "ViewerLink"]
+
+
+class ViewerLink:
+    """The viewers that chose to move together, and their one clock (the first member's)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._members: list[Viewer] = []
+
+    def members(self) -> list[Viewer]:
+        """The linked viewers, first joined first."""
+        with self._lock:
+            return list(self._members)
+
+    def join(self, viewer: Viewer) -> None:
+        """Link a viewer: it takes the link's clock and view (the first member's, at its instant)."""
+        with self._lock:
+            if viewer in self._members:
+                return
+            leader = self._members[0] if self._members else None
+            self._members.append(viewer)
+        if leader is not None:
+            viewer.follow(leader)
+
+    def leave(self, viewer: Viewer) -> None:
+        """Unlink a viewer: it keeps its view with a clock of its own, where the link was."""
+        with self._lock:
+            if viewer not in self._members:
+                return
+            self._members.remove(viewer)
+        viewer.clock = viewer.panels.clock = viewer.clock.copy()
 
 
 class Viewer:
@@ -41,8 +78,9 @@ class Viewer:
         live: bool,
         windows: WindowSource | None = None,
         loader: Executor | None = None,
+        link: ViewerLink | None = None,
     ) -> None:
-        self.client, self.role, self.live_geometry = client, role, live_geometry
+        self.client, self.role, self.live_geometry, self._link = client, role, live_geometry, link
         self.geometry = live_geometry
         self.clock = PlaybackClock(live_geometry.feed.span_unix_s)
         if live:
@@ -51,6 +89,7 @@ class Viewer:
         self._lock = threading.Lock()
         self._pending: TwinGeometry | None = None
         self._want_live = False
+        self._keep_clock = False  # the pending swap keeps the (link's) clock where it is
         self.loading = False
         self.window_load_s: float | None = None  # wall time of the last window load (request → swapped in)
         self._requested_at = 0.0
@@ -63,6 +102,7 @@ class Viewer:
             archive_span=windows.archive_span_unix_s if windows is not None else None,
             on_live=self.request_live,
             on_window=self.request_window if windows is not None else None,
+            on_link=self.set_linked if link is not None else None,
         )
 
     @property
@@ -74,34 +114,68 @@ class Viewer:
         """True while the viewer shows an archived window instead of the live feed."""
         return self.geometry is not self.live_geometry
 
+    @property
+    def linked(self) -> bool:
+        """True while the viewer moves with the other linked viewers."""
+        return self._link is not None and self in self._link.members()
+
+    def set_linked(self, on: bool) -> None:
+        """Join (on) or leave the monitors' link (the panel's "Link viewers" box)."""
+        if self._link is None:
+            raise ValueError("link: these monitors have no viewer link")
+        if on:
+            self._link.join(self)
+        else:
+            self._link.leave(self)
+
+    def _together(self) -> list[Viewer]:
+        """The viewers an action of this one moves: the linked ones, or itself alone."""
+        return self._link.members() if self.linked and self._link is not None else [self]
+
+    def follow(self, leader: Viewer) -> None:
+        """Take ``leader``'s clock and view (on joining a link; applied by the render thread)."""
+        self.clock = self.panels.clock = leader.clock
+        with self._lock:
+            if leader.replaying_window:
+                self._pending, self._want_live, self._keep_clock = leader.geometry, False, True
+            elif self.replaying_window:
+                self._want_live, self._pending, self._keep_clock = True, None, True
+
     def request_live(self, on: bool) -> None:
-        """Live follow on: back to the live feed (at its newest instant); off: stay where we are."""
+        """Live follow on: back to the live feed (at its newest instant); off: stay where we are (every linked
+        viewer with it)."""
         if not on:
             self.clock.follow_live(False)
             return
-        with self._lock:
-            self._want_live, self._pending = True, None
+        for viewer in self._together():
+            with viewer._lock:
+                viewer._want_live, viewer._pending = True, None
         if not self.replaying_window:
             self.clock.follow_live(True)
 
     def request_window(self, t0_unix_s: float, t1_unix_s: float) -> None:
-        """Load the archived window [t0, t1] in the background; it replaces the view once loaded."""
+        """Load the archived window [t0, t1] in the background; it replaces the view once loaded (of every linked
+        viewer with it)."""
         if self._windows is None or self._loader is None:
             raise ValueError("window: this monitor has no archive to replay from")
-        self.loading, self._requested_at = True, time.perf_counter()
-        self.panels.show_window_status(f"loading {format_utc(t0_unix_s)} + {t1_unix_s - t0_unix_s:.0f} s …")
-        self._loader.submit(self._load, t0_unix_s, t1_unix_s)
+        viewers = self._together()
+        for viewer in viewers:
+            viewer.loading, viewer._requested_at = True, time.perf_counter()
+            viewer.panels.show_window_status(f"loading {format_utc(t0_unix_s)} + {t1_unix_s - t0_unix_s:.0f} s …")
+        self._loader.submit(self._load, t0_unix_s, t1_unix_s, viewers)
 
-    def _load(self, t0_unix_s: float, t1_unix_s: float) -> None:
+    def _load(self, t0_unix_s: float, t1_unix_s: float, viewers: list[Viewer]) -> None:
         assert self._windows is not None
         try:
             geometry = TwinGeometry(self._windows.window_feed(t0_unix_s, t1_unix_s))
         except ValueError as exc:
-            self.loading = False
-            self.panels.show_window_status(f"not loaded: {exc}")
+            for viewer in viewers:
+                viewer.loading = False
+                viewer.panels.show_window_status(f"not loaded: {exc}")
             return
-        with self._lock:
-            self._pending, self._want_live = geometry, False
+        for viewer in viewers:
+            with viewer._lock:
+                viewer._pending, viewer._want_live = geometry, False
 
     def set_live_geometry(self, geometry: TwinGeometry) -> None:
         """The live feed's geometry changed (tracks extended, another feed): follow it if showing live (render
@@ -115,12 +189,13 @@ class Viewer:
     def apply_pending(self) -> None:
         """Swap in a loaded window or go back to live (render thread)."""
         with self._lock:
-            pending, want_live = self._pending, self._want_live
-            self._pending, self._want_live = None, False
+            pending, want_live, keep_clock = self._pending, self._want_live, self._keep_clock
+            self._pending, self._want_live, self._keep_clock = None, False, False
         if pending is not None:
             self.geometry = pending
             self.scene.rebuild(pending)
-            self.clock.set_span(pending.feed.span_unix_s)
+            if not keep_clock:  # linked viewers swap their one clock each, in one tick: paused at the start
+                self.clock.set_span(pending.feed.span_unix_s)
             t0, t1 = pending.feed.span_unix_s()
             self.loading = False
             self.window_load_s = time.perf_counter() - self._requested_at
@@ -131,6 +206,8 @@ class Viewer:
             if self.replaying_window:
                 self.geometry = self.live_geometry
                 self.scene.rebuild(self.live_geometry)
-                self.clock.set_span(self.live_geometry.feed.span_unix_s)
+                if not keep_clock:
+                    self.clock.set_span(self.live_geometry.feed.span_unix_s)
                 self.panels.show_window_status("live")
-            self.clock.follow_live(True)
+            if not keep_clock:
+                self.clock.follow_live(True)

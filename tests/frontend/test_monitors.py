@@ -186,3 +186,59 @@ def test_a_window_loading_in_the_background_never_holds_up_the_live_viewers(twin
             assert "replaying" in loader.panels.window_status.content
     finally:
         handles.stop()
+
+
+def test_linked_viewers_of_two_monitors_move_together_and_unlinking_frees_one(twin_feed):
+    """The actual monitor on one screen and the simulated on another, both ticking "Link viewers": a seek, a replay
+    at ×50 (their one clock advances once per render, not once per viewer), a window load by either moves both; a
+    third viewer that did not tick it stays live; unticking frees a viewer where the link was."""  # live span: 100 s
+    feed, windows = GrowingFeed(twin_feed), SlowWindows(twin_feed)
+    windows.release.set()
+    handles = serve_monitors(
+        feed,
+        ports={"actual": free_port(), "simulated": free_port()},
+        roles=("actual", "simulated"),
+        start=False,
+        live=True,
+        windows=windows,
+    )
+    try:
+        with (
+            viser_client(handles.ports["actual"]),
+            viser_client(handles.ports["actual"]),
+            viser_client(handles.ports["simulated"]),
+        ):
+            actual, alone = wait_for_viewers(handles, "actual", 2)
+
+            def at(viewer) -> str:  # what its panel shows (client ids repeat across the two monitors' servers)
+                return viewer.panels.time_text.value
+
+            (simulated,) = wait_for_viewers(handles, "simulated", 1)
+            actual.set_linked(True)
+            simulated.set_linked(True)
+            assert actual.linked and simulated.linked and not alone.linked
+            t0, _ = twin_feed.span_unix_s()
+            simulated.clock.seek(t0 + 42.5)
+            handles.render(wall_dt_s=0.5)
+            assert at(actual) == at(simulated) == format_utc(t0 + 42.5)
+            assert at(alone) == format_utc(feed.end) and alone.clock.live
+            actual.clock.set_speed(50.0)
+            actual.clock.play()
+            handles.render(wall_dt_s=1.0)
+            assert at(actual) == at(simulated) == format_utc(t0 + 92.5)
+            actual.request_window(t0 + 60.0, t0 + 360.0)
+            deadline = time.monotonic() + 30.0
+            while not (actual.replaying_window and simulated.replaying_window) and time.monotonic() < deadline:
+                handles.render(wall_dt_s=0.1)
+                time.sleep(0.05)
+            assert actual.replaying_window and simulated.replaying_window and not alone.replaying_window
+            assert at(actual) == at(simulated) == format_utc(t0)
+            simulated.set_linked(False)
+            simulated.clock.seek(t0 + 7.0)
+            handles.render(wall_dt_s=0.5)
+            assert at(simulated) == format_utc(t0 + 7.0) and at(actual) == format_utc(t0)
+            simulated.set_linked(True)  # rejoining takes the link's view and instant
+            handles.render(wall_dt_s=0.5)
+            assert at(simulated) == at(actual) == format_utc(t0)
+    finally:
+        handles.stop()
