@@ -72,9 +72,10 @@ def test_every_room_is_a_package():
     assert all((room / "__init__.py").exists() for room in rooms), rooms
 
 
-def test_the_server_starts_without_loading_the_flight_engine():
-    """Importing the app loads no sim_core.engine (its numba kernels are ~60 % of the import): a simulation,
-    a diagnosis or a live twin loads it when it first flies."""
-    probe = "import sys, backend.app; print('sim_core.engine' in sys.modules)"
+def test_the_server_starts_without_loading_the_flight_engine_or_dask():
+    """Importing the app loads neither sim_core.engine (its numba kernels were ~60 % of the import) nor
+    distributed: a simulation, a diagnosis or a live twin loads the engine when it first flies, the cluster's
+    first use loads Dask."""
+    probe = "import sys, backend.app; print(sorted({'sim_core.engine', 'distributed'} & set(sys.modules)))"
     out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False", out.stderr
+    assert out.stdout.strip() == "[]", out.stderr

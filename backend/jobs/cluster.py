@@ -4,7 +4,7 @@
 thread each, bound to 127.0.0.1, no dashboard port; as many as the machine has cores, at most 4)
 unless a scheduler address is given (``scheduler=`` / ``--scheduler tcp://host:port`` /
 ``ACS_TWIN_DASK_SCHEDULER``). Every worker loads the engine's compiled kernels when it joins, a
-restarted one too (:class:`EngineWorker`, :func:`warm_engine`), so the first task does not pay
+restarted one too (:mod:`backend.jobs.engine_worker`), so the first task does not pay
 numba's start-up. The workers of a LocalCluster are children of this process that it owns
 (:func:`backend.core.processes.become_owned_child`: own process group, gone with this process even
 after ``kill -9``); a scheduler's workers belong to whoever started them.
@@ -27,22 +27,19 @@ from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
-from distributed import WorkerPlugin
 
 from sim_core.scenario import Scenario
 from sim_core.trajectory import Trajectory
 
 if TYPE_CHECKING:  # distributed ships its types (py.typed): the seam is typed by the library itself
-    from distributed import Client, Worker
+    from distributed import Client
 
 __all__ = [
     "SCHEDULER_ENV",
-    "EngineWorker",
     "ServerCluster",
     "close_client",
     "dask_client",
     "local_workers",
-    "warm_engine",
     "fly",
     "flyer",
     "map_cases",
@@ -56,38 +53,6 @@ T = TypeVar("T")
 Case = TypeVar("Case")
 
 
-def warm_engine() -> float:
-    """Fly a 2-second nominal case so the engine's kernels are compiled or loaded from the cache; wall time (s)."""
-    import time
-
-    from sim_core import scenario_library
-
-    start = time.perf_counter()
-    s = scenario_library.get("peer-basilisk-rw4").model_copy(update={"duration_s": 2.0})
-    _simulate(Scenario.model_validate(s.model_dump()))
-    return time.perf_counter() - start
-
-
-class EngineWorker(WorkerPlugin):
-    """Set up each worker as it joins: owned by this process (a LocalCluster's) and the engine warm."""
-
-    name = "acs-twin-engine"
-
-    def __init__(self, owned: bool, warm: bool) -> None:
-        self.owned, self.warm = owned, warm
-
-    def setup(self, worker: Worker) -> None:
-        """Own process group and death with the parent (owned workers); the kernels compiled in a thread of their
-        own, so the worker takes tasks at once (an engine task meanwhile waits on numba's compile lock; a cold
-        compile takes minutes on a loaded machine, and a rigid-spin job needs none)."""
-        if self.owned:
-            from backend.core.processes import become_owned_child
-
-            become_owned_child()
-        if self.warm:
-            threading.Thread(target=warm_engine, name="engine-warm", daemon=True).start()
-
-
 def local_workers() -> int:
     """Worker processes of a default LocalCluster: one per core, at most 4 (2 on this project's machines)."""
     return max(1, min(os.cpu_count() or 1, 4))
@@ -96,6 +61,8 @@ def local_workers() -> int:
 def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm: bool = True) -> Client:
     """A ``distributed.Client``: to ``scheduler`` (or $ACS_TWIN_DASK_SCHEDULER), else a new LocalCluster."""
     from distributed import Client, LocalCluster
+
+    from backend.jobs.engine_worker import EngineWorker
 
     address = scheduler or os.environ.get(SCHEDULER_ENV) or None
     if address:
