@@ -17,7 +17,8 @@ primary header starts with an octet below 0x20 (version bits 000), ``S`` is 0x53
 
 Archiving is a group commit over the fleet: every ``archive_interval_s`` one transaction
 (:meth:`~telemetry.archive.Archive.ingest_many`, one fsync) commits the pending samples of the satellites that
-waited longest, at most ``archive_uploads_per_s`` × the interval of them. An upload costs ~10–30 ms of CPU whatever
+waited longest, at most ``archive_uploads_per_s`` × the interval of them (more when samples waited
+``ARCHIVE_MAX_WAIT_S``: commits that fell behind catch up in bigger groups). An upload costs ~10–30 ms of CPU whatever
 its length (a row per parameter, duplicate and limit checks), so the budget caps the archive's CPU (≈ 0.1–0.3 core
 at 10 uploads/s) and the time a sample waits to become durable grows with the fleet instead: one interval for a
 handful of satellites, satellites ÷ budget seconds beyond (10 s for 100 at 10/s). Subscribers get every batch at
@@ -72,8 +73,10 @@ DECODE_INTERVAL_S = 0.02  # coalescing window: adds <= 20 ms of latency, bounds 
 ARCHIVE_INTERVAL_S = 0.5
 ARCHIVE_MAX_PACKETS = 8_192
 ARCHIVE_UPLOADS_PER_S = 10.0  # satellites committed per second at most (see the module docstring)
-ARCHIVE_MAX_GROUP = 100  # uploads in one transaction when everything is committed (stop): far below SQLite's
-# 30 s busy timeout
+ARCHIVE_MAX_GROUP = 100  # uploads in one transaction when everything is committed (stop), or when commits fall
+# behind: far below SQLite's 30 s busy timeout
+ARCHIVE_MAX_WAIT_S = 20.0  # samples waiting this long go in the next commit whatever the budget: commits that fall
+# behind (a slow disk, a starved process) take bigger groups, one fsync for more satellites, and catch up
 HELLO_PREFIX = b"SATELLITE "
 HELLO_MAX_OCTETS = 80  # a connection's first line longer than this is not a hello: its octets are decoded as packets
 SATELLITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.:+-]{0,63}")
@@ -532,14 +535,20 @@ class LiveStream:
             await self.flush()
 
     def _due(self, everything: bool) -> list[str]:
-        """Satellites whose pending samples the next commit takes: those past ``archive_max_packets``, then the
-        longest waiting, ``archive_uploads_per_s`` × the interval of them (everything: all)."""
+        """Satellites whose pending samples the next commit takes: those past ``archive_max_packets`` or waiting for
+        ARCHIVE_MAX_WAIT_S, then the longest waiting, ``archive_uploads_per_s`` × the interval of them (everything:
+        all); ARCHIVE_MAX_GROUP at most."""
         waiting = sorted(self._pending, key=self._pending_since.__getitem__)
         if everything:
             return waiting[:ARCHIVE_MAX_GROUP]
-        full = [s for s in waiting if self._pending_packets[s] >= self._max_packets]
-        rest = [s for s in waiting if s not in full]
-        return full + rest[: max(self._uploads_per_flush - len(full), 0)]
+        now = time.monotonic()
+        urgent = [
+            s
+            for s in waiting
+            if self._pending_packets[s] >= self._max_packets or now - self._pending_since[s] >= ARCHIVE_MAX_WAIT_S
+        ]
+        rest = [s for s in waiting if s not in urgent]
+        return (urgent + rest[: max(self._uploads_per_flush - len(urgent), 0)])[:ARCHIVE_MAX_GROUP]
 
     def _commit(self, archive: Archive, uploads: list[PendingUpload]) -> list[IngestResult]:
         """One group commit, then ``on_committed`` with what it committed."""

@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 
+from telemetry import live
 from telemetry.archive import Archive
 from telemetry.decoding import decode_stream
 from telemetry.live import LiveMessage, LiveStream, MemoryLink, Subscriber, complete_prefix, hello
@@ -215,12 +216,12 @@ def test_archived_stream_needs_a_satellite_and_subscribers_a_positive_queue() ->
 
 
 def test_one_listener_serves_a_fleet_each_connection_filed_under_the_satellite_its_hello_names(
-    archive: Archive,
+    archive: Archive, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Three satellites, each on its own connection (hello line cut anywhere, even mid-name) plus one connection
     without a hello (the stream's own satellite): every packet reaches subscribers tagged with its satellite and
     the archive under that satellite, byte-exact; a budget of one upload per interval commits the longest waiting
-    satellite first and ``stop`` commits the rest."""
+    satellite first, samples that waited ARCHIVE_MAX_WAIT_S go whatever the budget, and ``stop`` commits the rest."""
 
     dictionary = reference()
     fleet = {name: packets(dictionary.packets[HK_APID], 40 + 10 * k, seed=k) for k, name in enumerate("ABC")}
@@ -249,6 +250,9 @@ def test_one_listener_serves_a_fleet_each_connection_filed_under_the_satellite_i
             tagged[message.satellite] = tagged.get(message.satellite, 0) + len(message.batch.t_utc_ns)
         assert await stream.flush()  # the budget: one satellite, the one waiting longest (A)
         assert [_archived(name, archive) for name in ("A", "B", "C", "OWN")] == [True, False, False, False]
+        monkeypatch.setattr(live, "ARCHIVE_MAX_WAIT_S", 0.0)  # B and C have waited that long: past the budget
+        assert await stream.flush()
+        assert [_archived(name, archive) for name in ("A", "B", "C", "OWN")] == [True, True, True, True]
         await stream.stop()
         return tagged, stream.stats.satellites
 
