@@ -36,6 +36,7 @@ __all__ = [
     "scale_to_utc",
     "encode_time",
     "crc16_ccitt",
+    "MAX_PACKET_OCTETS",
     "frame_stream",
     "Frames",
     "unwrap_packets",
@@ -55,6 +56,7 @@ TIME_SCALE_OFFSET_S = {"UTC": None, "TAI": 0, "GPS": -19}  # scale − TAI where
 
 _OK, _BAD_HEADER, _UNKNOWN_APID, _BAD_LENGTH, _TRUNCATED, _CRC_FAILURE, _IDLE, _UNDEFINED = range(8)
 UNDEFINED_CHAIN = 4  # well-formed packets of undefined APIDs followed to confirm one's length field
+MAX_PACKET_OCTETS = PRIMARY_HEADER_OCTETS + 65_536  # CCSDS 133.0-B-2 §4.1.3.5
 
 
 class FrameCode:
@@ -415,6 +417,24 @@ def _other_length_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: n
 
 
 @njit(cache=True, nogil=True)
+def _walk_links(buf: np.ndarray, q: int, links: int, stopped: bool) -> tuple[int, int, bool, bool]:
+    """Walk on from q along length fields until UNDEFINED_CHAIN + 1 packets (``links`` walked already) end within
+    buf or a header that is not version 0 stops the walk (``stopped``): (where the walk is, links, stopped, and
+    False when buf ends first -- what follows buf could then change the segment the walk started at)."""
+    n = buf.shape[0]
+    while not stopped and links < UNDEFINED_CHAIN + 1:
+        if q + PRIMARY_HEADER_OCTETS > n:
+            return q, links, stopped, False
+        if (buf[q] >> 5) != 0:
+            return q, links, True, True
+        q += ((np.int64(buf[q + 4]) << 8) | buf[q + 5]) + PRIMARY_HEADER_OCTETS + 1
+        if q > n:
+            return q, links, stopped, False
+        links += 1
+    return q, links, stopped, True
+
+
+@njit(cache=True, nogil=True)
 def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> int:
     """First q in [start, stop) where a dictionary packet fits, else stop."""
     q = start
@@ -425,9 +445,10 @@ def _next_fit(buf: np.ndarray, start: int, stop: int, lengths: np.ndarray, crc: 
 
 @njit(cache=True, nogil=True)
 def _frame_kernel(
-    buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, keep_undefined: bool
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Segments (offset, length, FrameCode) covering buf: packets, and quarantined stretches between them.
+    buf: np.ndarray, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, keep_undefined: bool, final: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Segments (offset, length, FrameCode) covering buf up to the octet returned: packets, and quarantined
+    stretches between them.
 
     A dictionary packet that fits at p (known APID, its length, CRC where defined) is taken when its
     CRC confirms it or another dictionary packet fits right after it (or the data ends); an
@@ -437,6 +458,9 @@ def _frame_kernel(
     exactly that stretch is counted as idle. With keep_undefined, a well-formed packet of an APID
     without definition whose length field is confirmed (see _undefined_confirmed) is its own segment.
     lengths[apid]: 0 = no definition, > 0 = exact length, < 0 = any length (taken from the header).
+    Unless final (buf is a chunk of longer data), framing stops at the first segment the octets after buf could
+    change (see _walk_links), so the segments are those of the whole data; only a quarantined stretch longer
+    than that walk is cut, one packet's length before the end, to bound what the next chunk takes over.
     """
     n = buf.shape[0]
     offsets = np.empty(n // PRIMARY_HEADER_OCTETS + 2, dtype=np.int64)
@@ -444,7 +468,17 @@ def _frame_kernel(
     codes = np.empty(offsets.shape[0], dtype=np.uint8)
     k = 0
     p = 0
+    walk_next, walk_q, links, stopped = -1, 0, 0, False  # the length-field walk from the previous segment
     while p < n:
+        if not final:  # decided here when the packets that could confirm it end within buf (see _walk_links)
+            if p == walk_next and links > 0:  # one packet on from the last walk: reuse it
+                links -= 1
+            else:
+                walk_q, links, stopped = p, 0, False
+            walk_q, links, stopped, decided = _walk_links(buf, walk_q, links, stopped)
+            if not decided:
+                break
+            walk_next = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
         if _header_fits(buf, p, lengths, crc, table):
             apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
             size = ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
@@ -452,6 +486,8 @@ def _frame_kernel(
             confirmed = crc[apid] or q == n or _header_fits(buf, q, lengths, crc, table)
             if not confirmed and keep_undefined:
                 confirmed = _links_confirm(buf, q, lengths, crc, table)
+            if not confirmed and not final and q + MAX_PACKET_OCTETS > n:
+                break  # a packet found inside it might end after buf
             if not confirmed:
                 q = _next_fit(buf, p + 1, p + size, lengths, crc, table)
             offsets[k], sizes[k] = p, q - p
@@ -472,11 +508,15 @@ def _frame_kernel(
             k += 1
             continue
         q = _next_fit(buf, p + 1, n, lengths, crc, table)
+        if not final and q + MAX_PACKET_OCTETS > n:  # a packet ending after buf might fit before q
+            if p + (UNDEFINED_CHAIN + 1) * MAX_PACKET_OCTETS >= n:
+                break
+            q = n - MAX_PACKET_OCTETS  # a long stretch: none fits before, the rest is left to the next chunk
         offsets[k], sizes[k] = p, q - p
         codes[k] = _IDLE if _idle_until(buf, p, q) else _classify(buf, p, lengths, crc, table)
         k += 1
         p = q
-    return offsets[:k], sizes[:k], codes[:k]
+    return offsets[:k].copy(), sizes[:k].copy(), codes[:k].copy(), min(p, n)  # copies free the n/6-long buffers
 
 
 @njit(cache=True, nogil=True)
@@ -512,6 +552,7 @@ class Frames:
     offset: np.ndarray
     length: np.ndarray
     code: np.ndarray
+    end: int  # octets framed: all of the data, or (final=False) up to the first segment its continuation could change
 
 
 def frame_stream(
@@ -519,6 +560,7 @@ def frame_stream(
     packet_octets_by_apid: dict[int, int],
     crc_apids: frozenset[int] = frozenset(),
     keep_undefined: bool = False,
+    final: bool = True,
 ) -> Frames:
     """Split a mixed-APID packet stream by its length fields (CCSDS 133.0-B-2 §4.1.3.5), resynchronising on damage.
 
@@ -527,6 +569,8 @@ def frame_stream(
     stretches become quarantined segments and the scan resumes where a dictionary packet fits.
     A length of 0 means any length (variable-length packets, or layouts checked after framing);
     keep_undefined frames confirmed packets of APIDs without definition (FrameCode.UNDEFINED).
+    final=False: the data is a chunk of a longer stream; framing stops where the rest could change a segment
+    (``Frames.end``), so the segments are those of the whole stream and the next chunk starts at ``end``.
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
     if buf.dtype != np.uint8 or buf.ndim != 1:
@@ -540,5 +584,5 @@ def frame_stream(
             raise ValueError(f"packet_octets_by_apid: APID {apid} length {size} < 7 octets")
         lengths[apid] = size if size else -1
         crc[apid] = apid in crc_apids
-    offset, length, code = _frame_kernel(buf, lengths, crc, _CRC_TABLES, keep_undefined)
-    return Frames(offset=offset, length=length, code=code)
+    offset, length, code, end = _frame_kernel(buf, lengths, crc, _CRC_TABLES, keep_undefined, final)
+    return Frames(offset=offset, length=length, code=code, end=int(end))

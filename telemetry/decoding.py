@@ -31,8 +31,6 @@ from telemetry.ingest_report import (
 from telemetry.packet_time import TIME_PROBLEMS, field_times
 from telemetry.validation import HEADER_PROBLEMS, INVALID_TIME, SequenceState, header_mismatch, validate_packets
 
-MAX_PACKET_OCTETS = ccsds.PRIMARY_HEADER_OCTETS + 65_536  # CCSDS 133.0-B-2 §4.1.3.5
-
 __all__ = [
     "packet_matrix",
     "decode_raw",
@@ -640,19 +638,6 @@ def _undefined_packets(buf: np.ndarray, frames: ccsds.Frames, report: IngestRepo
     return out
 
 
-def _complete_end(buf: np.ndarray, frames: ccsds.Frames) -> int:
-    """Where the whole segments of a chunk end: before a trailing segment the chunk's end may have cut
-    (a packet, or damage whose next packet may follow), keeping at most one packet's length unread."""
-    n = buf.shape[0]
-    if frames.offset.size == 0:
-        return int(max(n - MAX_PACKET_OCTETS, 0))
-    last = frames.offset.size - 1
-    whole = frames.code[last] in (ccsds.FrameCode.OK, ccsds.FrameCode.UNDEFINED, ccsds.FrameCode.IDLE)
-    if whole and n - int(frames.offset[last]) >= ccsds.PRIMARY_HEADER_OCTETS:
-        return int(n)
-    return int(max(int(frames.offset[last]), n - MAX_PACKET_OCTETS))
-
-
 def decode_stream(
     data: bytes | np.ndarray,
     dictionary: Dictionary,
@@ -667,9 +652,10 @@ def decode_stream(
     when what follows confirms its length field (a layout shorter than its packets decodes their
     prefix, a longer one quarantines them as bad_length); variable layouts take any length;
     confirmed packets of undefined APIDs are counted and kept raw. With final=False (a chunk of a
-    longer stream) a trailing segment the chunk may have cut is left out: ``consumed`` says where
-    the next chunk starts. A dictionary with packet_prefix_octets / packet_suffix_octets has each packet
-    unwrapped first (report offsets then count packet octets only).
+    longer stream) framing stops where the rest of the stream could change a segment
+    (telemetry.ccsds.frame_stream): ``consumed`` says where the next chunk starts. A dictionary with
+    packet_prefix_octets / packet_suffix_octets has each packet unwrapped first (report offsets then count
+    packet octets only).
     ``carry`` (APID → telemetry.validation.SequenceState of its accepted packets) links consecutive chunks:
     each APID's first packet is judged from the previous chunk's last (gap, step back) and repeats of recent
     packets are duplicates, as one pass over the whole stream judges them; the entries are updated.
@@ -679,11 +665,9 @@ def decode_stream(
     if wrapped:
         buf, taken = ccsds.unwrap_packets(buf, dictionary.packet_prefix_octets, dictionary.packet_suffix_octets)
     lengths = {a: 0 if p.variable else p.packet_octets for a, p in dictionary.packets.items()}
-    frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True)
-    consumed = int(buf.shape[0]) if final or wrapped else _complete_end(buf, frames)
-    if consumed < buf.shape[0]:
-        buf = buf[:consumed]
-        frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True)
+    frames = ccsds.frame_stream(buf, lengths, dictionary.crc_apids(), keep_undefined=True, final=final or bool(wrapped))
+    consumed = frames.end
+    buf = buf[:consumed]
     if wrapped:  # offsets below count unwrapped packet octets; the chunk consumed whole wrapped packets
         consumed = taken
     report = IngestReport(source=source, octets=int(buf.shape[0]))

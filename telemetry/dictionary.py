@@ -155,6 +155,7 @@ class XtceSource:
     definition: Any = field(compare=False, repr=False)
     containers: tuple[str, ...] = ()
     numeric: tuple[str, ...] = ()
+    values_per_octet: float = 8.0  # most numeric values one octet of these packets yields (see load_xtce)
 
 
 @dataclass(frozen=True)
@@ -188,6 +189,17 @@ class PacketDefinition:
     def count_fields(self) -> tuple[str, ...]:
         """Fields whose values size arrays of this packet."""
         return tuple(str(f.shape) for f in self.fields if f.is_variable and f.shape != "expand")
+
+    @property
+    def values_per_octet(self) -> float:
+        """Most values (parameters and derived ones) that one octet of these packets can decode to: exact for a
+        fixed layout (a longer packet decodes its prefix); for a variable one, one per bit of its narrowest field."""
+        derived = len(self.derived) / self.packet_octets
+        if self.xtce is not None:
+            return self.xtce.values_per_octet + derived
+        if self.fields:
+            return 8 / min(f.bit_length for f in self.fields) + derived
+        return len(self.parameters) / self.packet_octets + derived
 
     def resolve(self, packet_octets: int, counts: dict[str, int]) -> tuple[Parameter, ...]:
         """Parameters of a variable layout in a packet of packet_octets whose count fields hold counts.
@@ -264,6 +276,10 @@ class Dictionary:
     def packet_octets_by_apid(self) -> dict[int, int]:
         """Total packet length (octets) of every known APID, for stream framing."""
         return {apid: p.packet_octets for apid, p in self.packets.items()}
+
+    def values_per_octet(self) -> float:
+        """Most values one octet of a stream of these packets can decode to (the densest packet type's)."""
+        return max((p.values_per_octet for p in self.packets.values()), default=0.0)
 
     def crc_apids(self) -> frozenset[int]:
         """APIDs whose packets end with a CRC-16 packet error control field."""
@@ -726,6 +742,26 @@ def _xtce_numeric_names(definition: Any, containers: list[Any]) -> tuple[str, ..
     return tuple(names)
 
 
+def _xtce_values_per_octet(definition: Any, containers: list[Any]) -> float:
+    """Most numeric values per octet of a packet these containers parse: over each non-abstract container of their
+    chains (where a packet may end), its chain's numeric entries over the octets its fixed-size entries
+    need (a dynamically sized entry counted as empty; a packet is at least a primary header and one octet)."""
+    from space_packet_parser.xtce import encodings
+
+    densest = 0.0
+    for container in containers:
+        values = bits = 0
+        for c in _xtce_chain(definition, container):
+            for entry in _xtce_entries(c):
+                encoding = getattr(entry.parameter_type, "encoding", None)
+                values += isinstance(encoding, (encodings.IntegerDataEncoding, encodings.FloatDataEncoding))
+                size = getattr(encoding, "size_in_bits", None) or getattr(encoding, "fixed_size_in_bits", None)
+                bits += size if isinstance(size, int) else 0
+            if not c.abstract:
+                densest = max(densest, values / max(-(-bits // 8), PRIMARY_HEADER_OCTETS + 1))
+    return densest
+
+
 def _restricts_beyond_apid(definition: Any, container: Any) -> bool:
     """True when a container (or a base) is selected by more than the APID (XTCE polymorphism)."""
     return any(
@@ -777,7 +813,9 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: 
             time_code=time_code,
             time_fields=time_fields.bound_to(numeric) if time_fields else None,
             description=base.short_description or base.long_description or "",
-            xtce=XtceSource(definition, tuple(c.name for c in containers), numeric),
+            xtce=XtceSource(
+                definition, tuple(c.name for c in containers), numeric, _xtce_values_per_octet(definition, containers)
+            ),
         )
     if not packets:
         raise ValueError(f"{path}: no concrete container selects an APID")

@@ -2,8 +2,8 @@
 
 A chunk ends on a packet boundary (:func:`telemetry.decoding.decode_stream` with ``final=False``
 leaves a trailing, possibly cut segment for the next chunk), so chunked and whole-file decoding
-frame the same packets. Peak memory is a few times CHUNK_OCTETS whatever the file size
-(benchmarks/ingest_memory.py measures it).
+frame the same packets. A chunk is as long as its decoded values allow (:func:`chunk_octets_for`):
+peak memory is bounded whatever the file size (benchmarks/foreign.py --memory-gb measures it).
 """
 
 from __future__ import annotations
@@ -20,9 +20,19 @@ from telemetry.ingest_report import DecodeResult, IngestReport
 from telemetry.limits import LimitSet
 from telemetry.validation import SequenceState
 
-__all__ = ["CHUNK_OCTETS", "decode_chunks", "file_sha256", "ingest_packet_file"]
+__all__ = ["CHUNK_OCTETS", "chunk_octets_for", "decode_chunks", "file_sha256", "ingest_packet_file"]
 
-CHUNK_OCTETS = 1 << 20  # 1 MiB: decode CPU +12 % vs 2 MiB, +68 % at 512 KiB; decoded values take ~35x the octets
+CHUNK_OCTETS = 1 << 20  # smallest chunk, 1 MiB: decode CPU +12 % vs 2 MiB, +68 % at 512 KiB
+MAX_CHUNK_OCTETS = 8 << 20  # largest: the chunk's octets are copied a few times (framing, raw packets kept)
+CHUNK_VALUES = 1 << 20  # decoded values a chunk may hold at its dictionary's densest (8 octets each, and copies)
+
+
+def chunk_octets_for(dictionary: Dictionary) -> int:
+    """Decode chunk length for streams of a dictionary: CHUNK_VALUES at its densest packets (values per octet,
+    Dictionary.values_per_octet), within CHUNK_OCTETS..MAX_CHUNK_OCTETS (long chunks cost less per octet)."""
+    densest = dictionary.values_per_octet()
+    fits = int(CHUNK_VALUES / densest) if densest > 0 else MAX_CHUNK_OCTETS
+    return min(max(fits, CHUNK_OCTETS), MAX_CHUNK_OCTETS)
 
 
 def decode_chunks(
@@ -30,21 +40,23 @@ def decode_chunks(
     dictionary: Dictionary,
     source: str = "",
     now_utc_ns: int | None = None,
-    chunk_octets: int = CHUNK_OCTETS,
+    chunk_octets: int | None = None,
 ) -> Iterator[tuple[int, DecodeResult]]:
-    """(byte offset of the chunk, its decode result) for consecutive chunks of a packet stream."""
-    pending, offset, eof = b"", 0, False
+    """(byte offset of the chunk, its decode result) for consecutive chunks of a packet stream (chunk_octets:
+    by default chunk_octets_for the dictionary); a stream of at most chunk_octets is one chunk."""
+    chunk_octets = chunk_octets or chunk_octets_for(dictionary)
+    pending, offset = b"", 0
     carry: dict[int, SequenceState] = {}  # each APID's accepted packets: gaps and repeats across chunks
-    while not eof:
-        more = stream.read(chunk_octets)
-        eof = not more
+    more = stream.read(chunk_octets)
+    while more:
+        ahead = stream.read(1)  # one octet more tells whether this chunk ends the stream
         pending += more
-        if not pending:
-            return
-        result = decode_stream(pending, dictionary, source=source, now_utc_ns=now_utc_ns, final=eof, carry=carry)
+        final = not ahead
+        result = decode_stream(pending, dictionary, source=source, now_utc_ns=now_utc_ns, final=final, carry=carry)
         yield offset, result
         offset += result.consumed
         pending = pending[result.consumed :]
+        more = ahead + stream.read(chunk_octets - 1) if ahead else b""
 
 
 def file_sha256(path: Path, block: int = 1 << 20) -> str:
@@ -65,7 +77,7 @@ def ingest_packet_file(
     uploaded_by: str,
     limits: Mapping[str, LimitSet] | None = None,
     now_utc_ns: int | None = None,
-    chunk_octets: int = CHUNK_OCTETS,
+    chunk_octets: int | None = None,
     source: str | None = None,
     on_chunk: Callable[[DecodeResult], None] | None = None,
 ) -> tuple[IngestReport, IngestResult | None]:

@@ -188,6 +188,31 @@ def test_frame_stream_rejects_bad_dictionary_naming_field() -> None:
         ccsds.frame_stream(b"", {2047: 10})
 
 
+def test_framing_a_chunk_gives_the_segments_of_the_whole_stream() -> None:
+    """Real Europa Clipper ECM stream (1227 fixed, 1223 any length, four APIDs undefined) four times over with
+    damage (flipped octets, a garbage stretch, a cut packet), cut at many points: framing the chunk with
+    final=False gives exactly the whole stream's segments up to where it stops, and stops less than a chain of
+    maximal packets before the cut."""
+    ecm = (Path(__file__).parents[1] / "data" / "europa_clipper_ecm" / "ecm_raw2.bin").read_bytes()
+    rng = np.random.default_rng(12)
+    stream = bytearray(ecm * 2 + rng.integers(0, 256, 3_000, dtype=np.uint8).tobytes() + ecm[:-700] + ecm)
+    for at in rng.integers(0, len(stream), 40).tolist():
+        stream[at] ^= 0x5A
+    lengths = {1227: 1508, 1223: 0}
+    whole = ccsds.frame_stream(bytes(stream), lengths, keep_undefined=True)
+    assert {FrameCode.NAMES[c] for c in whole.code} >= {"ok", "undefined_apid", "bad_header"}
+    assert whole.end == len(stream)
+    buf = np.frombuffer(bytes(stream), np.uint8)
+    cuts = rng.integers(0, len(stream), 60).tolist() + (whole.offset[-40:] + 1).tolist()
+    for cut in cuts:
+        chunk = ccsds.frame_stream(buf[:cut], lengths, keep_undefined=True, final=False)
+        k = int(np.searchsorted(whole.offset, chunk.end))
+        assert chunk.end == (whole.offset[k] if k < whole.offset.size else len(stream)), f"cut {cut}"
+        for name in ("offset", "length", "code"):
+            np.testing.assert_array_equal(getattr(chunk, name), getattr(whole, name)[:k], err_msg=f"cut {cut}: {name}")
+        assert chunk.end >= cut - (ccsds.UNDEFINED_CHAIN + 1) * ccsds.MAX_PACKET_OCTETS
+
+
 @pytest.mark.parametrize("scale", ["TAI", "GPS"])
 def test_tai_and_gps_time_codes_follow_skyfield_leap_seconds(scale: str) -> None:
     """CUC counted in TAI (level-1 epoch 1958) or GPS (epoch 1980-01-06) decodes to the UTC skyfield gives."""

@@ -3,7 +3,8 @@ duplicates and quarantine across every chunk boundary, and the archive stores an
 
 Truth: decode_stream over the whole file (one pass, no boundary). Streams: the real NOAA-20 APID 11 diary
 (7,200 packets of 71 octets) edited where a ground segment damages a stream (packets lost, packets received
-twice, a counter glitch) and the real mixed CYGNSS FM07 stream (7 APIDs, lengths 76-272 octets).
+twice, a counter glitch), the real mixed CYGNSS FM07 stream (7 APIDs, lengths 76-272 octets) and the real IMAP
+IDEX SUDA science stream (polymorphic XTCE, any length: 304-4,080 octets of mostly waveform octets).
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ NOAA20_OCTETS = 71
 CYGNSS = Path(__file__).parents[1] / "data" / "cygnss_f7"
 CYGNSS_STREAM = CYGNSS / "CYGNSS_F7_L0_2022_086_10_15_V01_F__first101pkts.tlm"
 CYGNSS_TIME = "year=*_HDR_YEAR,doy=*_HDR_DAY,hour=*_HDR_HOUR,minute=*_HDR_MIN,second=*_HDR_SEC,microsecond=*_HDR_USEC"
+IDEX = Path(__file__).parents[1] / "data" / "imap_idex_suda"
+IDEX_TIME = "coarse=SHCOARSE,fine=SHFINE,fine_bits=16,epoch=2010-01-01T00:00:00Z"
 # chunk sizes: primes (no packet length divides them), one under a packet, one of a packet and a few
 AWKWARD_OCTETS = (53, 71, 100, 997, 4_099, 65_537)
 
@@ -90,6 +93,18 @@ def test_mixed_stream_cut_anywhere_reports_what_one_pass_reports(tmp_path: Path,
     data = CYGNSS_STREAM.read_bytes()
     truth = one_pass(data, dictionary)
     assert sum(len(s.gaps) for s in truth.apids.values()) > 0  # its counters skip: gaps to find across cuts
+    assert tallies(chunked(tmp_path, data, dictionary, chunk_octets)) == tallies(truth)
+
+
+@pytest.mark.parametrize("chunk_octets", (997, 65_537, 1 << 20))
+def test_variable_length_stream_cut_anywhere_reports_what_one_pass_reports(tmp_path: Path, chunk_octets: int) -> None:
+    """Any-length packets full of waveform octets, the file six times over: a packet cut by a chunk's end is not
+    taken for damage (nor a false header inside its neighbour for a packet): every packet is accepted or a
+    duplicate, as in one pass."""
+    dictionary = load_dictionary(IDEX / "suda_combined_science_definition.xml", time_fields=IDEX_TIME)
+    data = (IDEX / "sciData_2023_052_14_45_05").read_bytes() * 6
+    truth = one_pass(data, dictionary)
+    assert (truth.packets_accepted, truth.duplicates, truth.quarantined) == (78, 5 * 78, [])
     assert tallies(chunked(tmp_path, data, dictionary, chunk_octets)) == tallies(truth)
 
 
