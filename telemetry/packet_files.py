@@ -9,9 +9,11 @@ peak memory is bounded whatever the file size (benchmarks/foreign.py --memory-gb
 from __future__ import annotations
 
 import hashlib
+import io
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import BinaryIO
+
+import numpy as np
 
 from telemetry.archive import Archive, IngestResult
 from telemetry.decoding import decode_stream
@@ -36,27 +38,45 @@ def chunk_octets_for(dictionary: Dictionary) -> int:
 
 
 def decode_chunks(
-    stream: BinaryIO,
+    stream: io.BufferedIOBase,
     dictionary: Dictionary,
     source: str = "",
     now_utc_ns: int | None = None,
     chunk_octets: int | None = None,
 ) -> Iterator[tuple[int, DecodeResult]]:
     """(byte offset of the chunk, its decode result) for consecutive chunks of a packet stream (chunk_octets:
-    by default chunk_octets_for the dictionary); a stream of at most chunk_octets is one chunk."""
+    by default chunk_octets_for the dictionary); a stream of at most chunk_octets is one chunk.
+
+    Each chunk is read into a buffer of its own behind the octets the previous one left (no other copy)."""
     chunk_octets = chunk_octets or chunk_octets_for(dictionary)
-    pending, offset = b"", 0
     carry: dict[int, SequenceState] = {}  # each APID's accepted packets: gaps and repeats across chunks
-    more = stream.read(chunk_octets)
-    while more:
-        ahead = stream.read(1)  # one octet more tells whether this chunk ends the stream
-        pending += more
-        final = not ahead
-        result = decode_stream(pending, dictionary, source=source, now_utc_ns=now_utc_ns, final=final, carry=carry)
+    tail, offset = np.empty(0, np.uint8), 0
+    while True:
+        buffer = np.empty(tail.size + chunk_octets + 1, np.uint8)  # one octet more tells whether the stream ends
+        buffer[: tail.size] = tail
+        got = _fill(stream, buffer.data[tail.size :])
+        held, final = tail.size + got, got <= chunk_octets
+        if held == 0:
+            return
+        result = decode_stream(
+            buffer[:held], dictionary, source=source, now_utc_ns=now_utc_ns, final=final, carry=carry
+        )
         yield offset, result
+        if final:
+            return
         offset += result.consumed
-        pending = pending[result.consumed :]
-        more = ahead + stream.read(chunk_octets - 1) if ahead else b""
+        tail = buffer[result.consumed : held]
+
+
+def _fill(stream: io.BufferedIOBase, view: memoryview) -> int:
+    """Octets read into view: until it is full or the stream ends."""
+    got = 0
+    while got < len(view):
+        n = stream.readinto(view[got:])
+        if not n:
+            break
+        got += n
+    return got
 
 
 def file_sha256(path: Path, block: int = 1 << 20) -> str:

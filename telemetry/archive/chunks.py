@@ -117,9 +117,9 @@ def decode_values(dtype_spec: str, blob: bytes) -> np.ndarray:
     return array.astype(np.dtype(presented or stored), copy=False)
 
 
-def encode_raw(raw: bytes) -> bytes:
-    """Compressed concatenation of raw packets (byte-exact on decode)."""
-    return _compress(bytes(raw))
+def encode_raw(raw: bytes | memoryview | np.ndarray) -> bytes:
+    """Compressed concatenation of raw packets (byte-exact on decode); octets of any contiguous buffer, not copied."""
+    return _compress(np.ascontiguousarray(raw, dtype=np.uint8).data if isinstance(raw, np.ndarray) else raw)
 
 
 def decode_raw(blob: bytes) -> bytes:

@@ -439,7 +439,7 @@ class Archive:
                 "n_packets": len(u.packet_lengths),
                 "seq_blob": encode_int64(np.asarray(u.sequence_count, dtype=np.int64)),
                 "length_blob": encode_int64(np.asarray(u.packet_lengths, dtype=np.int64)),
-                "raw_blob": encode_raw(np.ascontiguousarray(u.packets, dtype=np.uint8).tobytes()),
+                "raw_blob": encode_raw(u.packets),
             }
             for u in undefined
             if len(u.packet_lengths)
@@ -576,7 +576,7 @@ class Archive:
                     "t_blob": encode_int64(batch.t_utc_ns[lo:hi]),
                     "seq_blob": encode_int64(batch.seq_count[lo:hi]),
                     "length_blob": encode_int64(batch.raw_lengths[lo:hi]),
-                    "raw_blob": encode_raw(raw[byte_ends[lo] : byte_ends[hi]].tobytes()),
+                    "raw_blob": encode_raw(raw[byte_ends[lo] : byte_ends[hi]]),
                 }
             )
         chunk_ids = (
