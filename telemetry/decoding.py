@@ -419,15 +419,18 @@ def _xtce_values(
     assert source is not None
     n = offset.shape[0]
     try:
-        calibrated, short = _xtce_bulk(buf, offset, length, source)
+        calibrated, short, partial = _xtce_bulk(buf, offset, length, source)
         raw = calibrated  # the bulk walk takes no calibrated parameters: engineering value = raw number
+        values = {
+            name: _narrow(v) if v.dtype.kind == "f" and name not in partial else v for name, v in calibrated.items()
+        }
     except xtce_bulk.Unsupported:
         calibrated, raw, short = _xtce_one_by_one(buf, offset, length, source)
-    values = {
-        name: _narrow(v) if v.dtype.kind == "f" else v
-        for name, v in calibrated.items()
-        if v.dtype.kind != "f" or not np.isnan(v).all()
-    }
+        values = {
+            name: _narrow(v) if v.dtype.kind == "f" else v
+            for name, v in calibrated.items()
+            if v.dtype.kind != "f" or not np.isnan(v).all()
+        }
     timed = definition.time_fields.names if definition.time_fields is not None else ()
     raw = {name: raw.get(name, np.full(n, np.nan)) for name in timed}
     codes = {name: _narrow(raw[name]) if raw[name].dtype.kind == "f" else raw[name] for name in timed}
@@ -454,11 +457,11 @@ _WALKS: dict[int, tuple[object, xtce_bulk.XtceWalk]] = {}  # by id() of a space_
 
 def _xtce_bulk(
     buf: np.ndarray, offset: np.ndarray, length: np.ndarray, source: XtceSource
-) -> tuple[dict[str, np.ndarray], dict[int, str]]:
+) -> tuple[dict[str, np.ndarray], dict[int, str], set[str]]:
     """Numeric values of XTCE packets decoded in bulk by container (telemetry.xtce_bulk): a parameter every
-    packet has keeps its decoded integer dtype, others are float64 with NaN where a packet's container lacks
-    them (parameters no packet has are left out); and why packets could not be parsed. Unsupported when the
-    walk meets a construct it does not reproduce exactly."""
+    packet has keeps its decoded integer dtype, others (named in the set returned) are float64 with NaN where a
+    packet's container lacks them (parameters no packet has are left out); and why packets could not be parsed.
+    Unsupported when the walk meets a construct it does not reproduce exactly."""
     known = _WALKS.get(id(source.definition))
     if known is None or known[0] is not source.definition:
         known = (source.definition, xtce_bulk.XtceWalk(source.definition, xtce_parameter))
@@ -475,17 +478,19 @@ def _xtce_bulk(
         for name, v in values.items():
             if name in numeric:
                 pieces.setdefault(name, []).append((idx, v))
-    columns = {}
+    columns, partial = {}, set()
     for name, have in pieces.items():
         if len(have) == 1 and len(have[0][0]) == n and have[0][1].dtype.kind == "i":
             columns[name] = have[0][1]  # one group of every packet, in order (groups keep ascending positions)
             continue
-        whole = sum(len(idx) for idx, _ in have) == n and all(v.dtype.kind == "i" for _, v in have)
-        column = np.empty(n, np.int64) if whole else np.full(n, np.nan)
+        every = sum(len(idx) for idx, _ in have) == n
+        column = np.empty(n, np.int64) if every and all(v.dtype.kind == "i" for _, v in have) else np.full(n, np.nan)
         for idx, v in have:
             column[idx] = v
         columns[name] = column
-    return columns, {i: f"space_packet_parser would fail: {why}" for i, why in failed.items()}
+        if not every:
+            partial.add(name)
+    return columns, {i: f"space_packet_parser would fail: {why}" for i, why in failed.items()}, partial
 
 
 def _xtce_one_by_one(
