@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import os
+import threading
 import time
 from pathlib import Path
 
@@ -184,3 +185,35 @@ def test_shutdown_stops_running_jobs_and_records_them_interrupted(tmp_path: Path
     assert services.job_repo.get(job_id).status == "interrupted"
     assert handle.future.done() and services.cluster.connected is None
     assert wait_gone(worker_pids, WORKERS_GONE_S) == set()
+
+
+def test_a_task_ignoring_its_cancel_has_its_worker_restarted_after_the_grace(tmp_path: Path, database_url: str) -> None:
+    """The supervision of a cancelled job whose task never looks at its cancel Event (here a sleep) restarts the
+    worker process that runs it once CANCEL_GRACE_S has passed: the task is released, the process replaced."""
+    from backend.jobs import cluster
+    from backend.jobs.jobs import CANCEL_GRACE_S, _Handle
+
+    services = build_services(make_settings(tmp_path, database_url))
+    client = cluster.dask_client(n_workers=1, warm=False)
+    try:
+        before = set(client.run(os.getpid).values())
+        future = client.submit(time.sleep, 3600.0, pure=False)
+        deadline = time.monotonic() + JOB_TIMEOUT_S
+        while not any(future.key in keys for keys in client.processing().values()):
+            assert time.monotonic() < deadline, "the task never started"
+            time.sleep(0.1)
+        handle = _Handle(body={}, future=future, cancel_at=time.monotonic())  # cancelled now, ignores it
+        start = time.monotonic()
+        supervision = threading.Thread(target=services.jobs._supervise, args=("ignores-cancel", handle, client, future))
+        supervision.start()
+        supervision.join(JOB_TIMEOUT_S)
+        assert not supervision.is_alive(), "the task was never stopped"
+        assert time.monotonic() - start >= CANCEL_GRACE_S  # the grace was given before the restart
+        assert future.cancelled()
+        assert not wait_gone(before, JOB_TIMEOUT_S)  # the worker process that ran the sleep is gone
+        client.wait_for_workers(1, timeout=JOB_TIMEOUT_S)
+        assert before.isdisjoint(client.run(os.getpid).values())  # a new worker process serves the cluster
+        assert client.submit(sum, [1, 2], pure=False).result(timeout=JOB_TIMEOUT_S) == 3
+    finally:
+        cluster.close_client(client)
+        services.engine.dispose()
