@@ -920,17 +920,22 @@ def _actuator_stage(
     faults: np.ndarray,
     t: float,
     speeds: np.ndarray,
-    cmd: Commands,
+    held: np.ndarray,
+    frozen: np.ndarray,
+    motor_current: np.ndarray,
+    delivered: np.ndarray,
 ) -> None:
-    """Delivered wheel motor torques at the wheel ``speeds``: the held commands under wheel faults, seed 000 eq (2)
-    limits, then (when flown) seed 002's motor electrics (eq 2–3) and its noise and imbalance torques (eq 1, 4)."""
-    faults_mod.wheel_commands_1(faults, t, cmd.wheel_cmd, cmd.frozen_cmd, cmd.delivered)
-    wheels.limit_motor_torque_into(cmd.delivered, speeds, wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
+    """Delivered wheel motor torques at the wheel ``speeds``: the ``held`` commands (``frozen`` ones for a frozen
+    controller) under wheel faults, seed 000 eq (2) limits, then (when flown) seed 002's motor electrics
+    (eq 2–3) and its noise and imbalance torques (eq 1, 4). Runs every dynamics step: it takes the arrays of
+    :class:`Commands` it reads, not the whole tuple (each array passed costs a reference count)."""
+    faults_mod.wheel_commands_1(faults, t, held, frozen, delivered)
+    wheels.limit_motor_torque_into(delivered, speeds, wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
     m = act.motor
     if m.on:
-        cmd.delivered[:] = wheels.driven_motor_torque_1(
-            cmd.motor_current,
-            cmd.delivered,
+        delivered[:] = wheels.driven_motor_torque_1(
+            motor_current,
+            delivered,
             speeds,
             dt_s,
             m.inductance_h,
@@ -941,30 +946,41 @@ def _actuator_stage(
         )
     if act.disturbed:
         white = np.asarray(np.random.uniform(-1.0, 1.0, speeds.shape[0]))
-        cmd.delivered[:] = wheels.delivered_torque_1(cmd.delivered, speeds, t, act.noise_nm, act.imbalance_nm_s2, white)
+        delivered[:] = wheels.delivered_torque_1(delivered, speeds, t, act.noise_nm, act.imbalance_nm_s2, white)
 
 
 @njit(cache=True)
 def _disturbance_stage(
-    d: Disturbances,
+    gravity_gradient: bool,
+    magnetic_on: bool,
+    residual_dipole_am2: np.ndarray,
     inertia: np.ndarray,
     x: np.ndarray,
-    pos: Position,
-    cmd: Commands,
-    magnetic_on: bool,
+    r_eci: np.ndarray,
+    b_body: np.ndarray,
+    r_body: np.ndarray,
+    dipole: np.ndarray,
+    moment: np.ndarray,
     ext: np.ndarray,
 ) -> None:
-    """External torque on the flown body (true ``inertia``): (MD dipole + residual dipole) × B (sim_core.magnetic),
-    the gravity gradient, aerodynamic and solar-pressure torques on the plates (sim_core.environment)."""
+    """External torque on the flown body (true ``inertia``) every dynamics step: (MD ``dipole`` + residual dipole)
+    × B (sim_core.magnetic; the sum kept in ``moment``) and the gravity gradient (sim_core.environment; r in body
+    axes kept in ``r_body``). Takes the arrays of :class:`Position` and :class:`Commands` it reads, not the tuples
+    (each array passed costs a reference count)."""
     ext[:] = 0.0
     if magnetic_on:
         for i in range(3):
-            cmd.moment[i] = cmd.dipole[i] + d.residual_dipole_am2[i]
-        magnetic.magnetic_torque_into(cmd.moment, pos.b_body, ext)
+            moment[i] = dipole[i] + residual_dipole_am2[i]
+        magnetic.magnetic_torque_into(moment, b_body, ext)
+    if gravity_gradient:
+        conjugate_rotate_into(x, r_eci, r_body)
+        environment.add_gravity_gradient_torque_into(r_body, inertia, ext)
+
+
+@njit(cache=True)
+def _surface_torque_stage(d: Disturbances, x: np.ndarray, pos: Position, ext: np.ndarray) -> None:
+    """Aerodynamic and solar-pressure torques on the plates (sim_core.environment) added to ``ext``, when flown."""
     sf = d.surfaces
-    if d.gravity_gradient:
-        conjugate_rotate_into(x, pos.r, pos.r_body)
-        environment.add_gravity_gradient_torque_into(pos.r_body, inertia, ext)
     if d.aerodynamic:
         ext[:] += environment.aerodynamic_torque_orbit_1(
             x[0:4], pos.r, pos.v, sf.drag_coefficient, sf.normals_b, sf.areas_m2, sf.centroids_b_m
@@ -1142,6 +1158,7 @@ def fly_variant(
     md_on, have_mag_prev, valid = False, False, True
     every_step = dist.gravity_gradient or dist.aerodynamic or dist.solar_pressure  # models that need r, v each step
     sun_wanted = dist.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
+    surface_torques = dist.aerodynamic or dist.solar_pressure
     _ephemeris_stage(eph, clk.t0_unix_s, 0.0, x, True, True, sun_wanted, pos)
 
     for k in range(clk.n_steps):
@@ -1203,10 +1220,18 @@ def fly_variant(
             _record_stage(prog, clk, eph.c_pn, nq, t, x, pos, est, cmd, mon, status, flags, mode, rec[out_i])
             out_i += 1
 
-        _actuator_stage(act, p.wheel_inertia, clk.dt_s, faults, t, wheel_speeds, cmd)
+        _actuator_stage(
+            act, p.wheel_inertia, clk.dt_s, faults, t, wheel_speeds, cmd.wheel_cmd, cmd.frozen_cmd, cmd.motor_current,
+            cmd.delivered,
+        )  # fmt: skip
         if has_faults:
             faults_mod.extra_friction_1(faults, t, plant.friction, p.friction)
-        _disturbance_stage(dist, plant.inertia, x, pos, cmd, md_on or res_on, ext)
+        _disturbance_stage(
+            dist.gravity_gradient, md_on or res_on, res, plant.inertia, x, pos.r, pos.b_body, pos.r_body, cmd.dipole,
+            cmd.moment, ext,
+        )  # fmt: skip
+        if surface_torques:
+            _surface_torque_stage(dist, x, pos, ext)
         rk4_step_into(x, clk.dt_s, cmd.delivered, ext, plant, work, x)
         if has_faults:
             faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)

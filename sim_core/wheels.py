@@ -207,7 +207,10 @@ def friction_torque_one_wheel(speed_rad_s: float, friction: np.ndarray, p: int) 
     w = speed_rad_s
     sat_speed = friction[1, p]
     dry = min(1.0, max(-1.0, w / sat_speed)) if sat_speed > 0.0 else 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
-    return float(friction[0, p] * dry + friction[2, p] * w + friction[3, p] * w * np.sqrt(abs(w)))
+    torque = friction[0, p] * dry + friction[2, p] * w
+    if friction[3, p] != 0.0:  # aerodynamic drag off costs no square root (adding its ±0 changes no bit)
+        torque += friction[3, p] * w * np.sqrt(abs(w))
+    return float(torque)
 
 
 @njit(cache=True)
