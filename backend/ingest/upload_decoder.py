@@ -2,8 +2,9 @@
 
 A file of more than one decode chunk (telemetry.packet_files.CHUNK_OCTETS) is decoded and committed by
 the upload decoder, a spawned process the server owns (backend.core.processes.become_owned_child: own
-process group, SIGTERM when the server dies) and stops with it; the event loop only waits on a pipe,
-so /health keeps answering during a 200 MB upload (benchmarks/upload_health.py). A smaller file costs
+process group, SIGTERM when the server dies) and stops with it, at a lower CPU priority (NICENESS); the
+event loop only waits on a pipe, so /health keeps answering during a 200 MB upload
+(benchmarks/upload_health.py). A smaller file costs
 less to decode than a round trip to the process and is decoded in a thread of the server.
 
 Bad input loses nothing: a file is committed in one transaction (telemetry.archive), so a decoder that
@@ -15,6 +16,7 @@ again.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -36,6 +38,7 @@ __all__ = [
     "PacketFileOutcome",
     "RedecodeJob",
     "RedecodeOutcome",
+    "NICENESS",
     "UploadDecoder",
     "archive_packet_file",
     "redecode_kept",
@@ -46,6 +49,7 @@ T_co = TypeVar("T_co", covariant=True)
 
 REPLY_POLL_S = 0.2  # how often a waiting request checks that the decoder is still alive
 STOP_GRACE_S = 5.0  # a decoder mid-file rolls back at once on SIGTERM
+NICENESS = 10  # bulk work: on a busy CPU the server's requests go first (/health during a 200 MB upload)
 
 
 class DecoderJob(Protocol[T_co]):
@@ -203,6 +207,7 @@ def _serve(jobs: Connection, database_url: str, dictionaries_dir: str, progress:
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
 
     become_owned_child()
+    os.nice(NICENESS)
     archive = Archive(database_url, migrate=False)  # the server migrated it
 
     def advance(octets: int) -> None:
