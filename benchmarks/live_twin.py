@@ -295,7 +295,8 @@ def _print_fleet(
     inbox, residual = series("batches_waiting"), series("residual_uploads_waiting")
     print(
         f"  twins' queues: batches waiting p99 {np.percentile(inbox, 99):.0f}, max {inbox.max():.0f}; residual "
-        f"uploads waiting for the archive max {residual.max():.0f}; detections "
+        f"uploads waiting for the archive max {residual.max():.0f}; batches the ingest process's outbox dropped "
+        f"(API side behind) {series('forward_dropped').max():.0f}; detections "
         f"{sum(1 for s in watch.states.values() if s.get('detection'))}"
     )
 
