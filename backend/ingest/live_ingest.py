@@ -56,15 +56,28 @@ def run_ingest_process(
     from backend.core.processes import become_owned_child
 
     become_owned_child()  # SIGTERM when the server dies, even by kill -9: stop as if told to
-    signal.signal(signal.SIGTERM, lambda *_: _stop_orphan(outbox, stop))
+    signal.signal(signal.SIGTERM, _OrphanStop(outbox, stop))
     asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop, sources))
 
 
-def _stop_orphan(outbox: Outbox, stop: Event) -> None:
-    """SIGTERM: archive what is pending, never wait for the server to read the outbox, exit within a bound."""
-    outbox.cancel_join_thread()
-    stop.set()
-    threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,)).start()
+class _OrphanStop:
+    """SIGTERM handler: archive what is pending, never wait for the server to read the outbox, exit within a bound.
+
+    A dead server sends SIGTERM twice (PR_SET_PDEATHSIG and the parent watch): the second may interrupt the first
+    handler while it holds the stop event's lock, so only the first one acts (a re-entered ``stop.set()`` waited
+    on that lock for ever, the exit timer not yet started: the port stayed held after a kill -9 of the server).
+    """
+
+    def __init__(self, outbox: Outbox, stop: Event) -> None:
+        self._outbox, self._stop, self._called = outbox, stop, False
+
+    def __call__(self, *_: object) -> None:
+        if self._called:
+            return
+        self._called = True
+        threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,)).start()
+        self._outbox.cancel_join_thread()
+        self._stop.set()
 
 
 class LivePasses:
