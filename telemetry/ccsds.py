@@ -377,34 +377,59 @@ def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
 
 
 @njit(cache=True, nogil=True)
-def _links_confirm(buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+def _bad_link(buf: np.ndarray, x: int) -> bool:
+    """No link of a confirmation chain at x: not a whole version-0 packet, a telecommand, segmented, or idle."""
+    if not _well_formed(buf, x) or (buf[x] >> 4) & 1 or buf[x + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
+        return True
+    idle: bool = (((np.int64(buf[x]) & 7) << 8) | buf[x + 1]) == IDLE_APID
+    return idle
+
+
+@njit(cache=True, nogil=True)
+def _links_confirm(
+    buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
+) -> bool:
     """True when the data ends at q, a dictionary packet fits at q, or UNDEFINED_CHAIN well-formed, unsegmented
     telemetry packets follow one another from q (each where the previous one's length field ends) before either.
 
     This confirms a length field that no dictionary definition checks: garbage rarely forms even two links.
+    ``chain`` [start, links, end, verdict] remembers the last walk (``links`` good links from start end at
+    ``end``, where the walk met the data's end or a fitting packet: verdict 1, a bad link: 0, or stopped: -1),
+    so the walk from the next packet of a confirmed run reads one more link, not UNDEFINED_CHAIN.
     """
     n = buf.shape[0]
-    for _ in range(UNDEFINED_CHAIN):
-        if q == n or _header_fits(buf, q, lengths, crc, table):
-            return True
-        if not _well_formed(buf, q) or (buf[q] >> 4) & 1 or buf[q + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
-            return False
-        if (((np.int64(buf[q]) & 7) << 8) | buf[q + 1]) == IDLE_APID:
-            return False
-        q += ((np.int64(buf[q + 4]) << 8) | buf[q + 5]) + PRIMARY_HEADER_OCTETS + 1
-    return True
+    start = chain[0]
+    if chain[1] > 0 and q == start + ((np.int64(buf[start + 4]) << 8) | buf[start + 5]) + PRIMARY_HEADER_OCTETS + 1:
+        chain[0], chain[1] = q, chain[1] - 1  # one link on: the rest of the walk holds
+    elif start != q:
+        chain[0], chain[1], chain[2], chain[3] = q, 0, q, -1
+    while chain[3] == -1 and chain[1] < UNDEFINED_CHAIN:
+        x = chain[2]
+        if x == n or _header_fits(buf, x, lengths, crc, table):
+            chain[3] = 1
+        elif _bad_link(buf, x):
+            chain[3] = 0
+        else:
+            chain[1] += 1
+            chain[2] = x + ((np.int64(buf[x + 4]) << 8) | buf[x + 5]) + PRIMARY_HEADER_OCTETS + 1
+    confirmed: bool = chain[1] >= UNDEFINED_CHAIN or chain[3] == 1
+    return confirmed
 
 
 @njit(cache=True, nogil=True)
-def _undefined_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+def _undefined_confirmed(
+    buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
+) -> bool:
     """A well-formed packet of an APID without definition at p, its length field confirmed by the links from p."""
     if not _well_formed(buf, p) or lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]] != 0:
         return False
-    return _links_confirm(buf, p, lengths, crc, table)
+    return _links_confirm(buf, p, lengths, crc, table, chain)
 
 
 @njit(cache=True, nogil=True)
-def _other_length_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+def _other_length_confirmed(
+    buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
+) -> bool:
     """A well-formed packet of a defined APID whose length differs from its definition, its length field confirmed
     by the links from its end; the decoder reports the length mismatch."""
     if not _well_formed(buf, p):
@@ -413,7 +438,7 @@ def _other_length_confirmed(buf: np.ndarray, p: int, lengths: np.ndarray, crc: n
     if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1 or buf[p + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
         return False
     q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
-    return _links_confirm(buf, q, lengths, crc, table)
+    return _links_confirm(buf, q, lengths, crc, table, chain)
 
 
 @njit(cache=True, nogil=True)
@@ -469,6 +494,7 @@ def _frame_kernel(
     k = 0
     p = 0
     walk_next, walk_q, links, stopped = -1, 0, 0, False  # the length-field walk from the previous segment
+    chain = np.array([-1, 0, 0, -1], dtype=np.int64)  # the last confirmation walk (see _links_confirm)
     while p < n:
         if not final:  # decided here when the packets that could confirm it end within buf (see _walk_links)
             if p == walk_next and links > 0:  # one packet on from the last walk: reuse it
@@ -485,7 +511,7 @@ def _frame_kernel(
             q = p + size
             confirmed = crc[apid] or q == n or _header_fits(buf, q, lengths, crc, table)
             if not confirmed and keep_undefined:
-                confirmed = _links_confirm(buf, q, lengths, crc, table)
+                confirmed = _links_confirm(buf, q, lengths, crc, table, chain)
             if not confirmed and not final and q + MAX_PACKET_OCTETS > n:
                 break  # a packet found inside it might end after buf
             if not confirmed:
@@ -495,13 +521,13 @@ def _frame_kernel(
             k += 1
             p = q
             continue
-        if keep_undefined and _other_length_confirmed(buf, p, lengths, crc, table):
+        if keep_undefined and _other_length_confirmed(buf, p, lengths, crc, table, chain):
             offsets[k], sizes[k] = p, ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
             codes[k] = _OK
             p += sizes[k]
             k += 1
             continue
-        if keep_undefined and _undefined_confirmed(buf, p, lengths, crc, table):
+        if keep_undefined and _undefined_confirmed(buf, p, lengths, crc, table, chain):
             offsets[k], sizes[k] = p, ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
             codes[k] = _UNDEFINED
             p += sizes[k]

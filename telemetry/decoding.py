@@ -630,16 +630,22 @@ def _decode_apid(
 
 
 def _undefined_packets(buf: np.ndarray, frames: ccsds.Frames, report: IngestReport) -> list[UndefinedPackets]:
-    """Raw packets of APIDs without definition, by APID, counted in the report."""
+    """Raw packets of APIDs without definition, by APID (gathered in one pass, APID after APID), counted in the
+    report."""
     undefined = frames.code == ccsds.FrameCode.UNDEFINED
-    offset, length = frames.offset[undefined], frames.length[undefined]
-    apid = ((buf[offset].astype(np.int64) & 7) << 8) | buf[offset + 1]
+    apid = ((buf[frames.offset[undefined]].astype(np.int64) & 7) << 8) | buf[frames.offset[undefined] + 1]
+    order = np.argsort(apid, kind="stable")
+    offset, length, apid = frames.offset[undefined][order], frames.length[undefined][order], apid[order]
+    count = ((buf[offset + 2].astype(np.int64) & 0x3F) << 8) | buf[offset + 3]
+    octets = _gather_octets(buf, offset, length)
+    starts = np.flatnonzero(np.diff(apid, prepend=-1))
+    ends = np.append(starts[1:], apid.size)
+    first_octet = np.concatenate(([0], np.cumsum(length)))
     out = []
-    for a in np.unique(apid).tolist():
-        mine = apid == a
-        count = ((buf[offset[mine] + 2].astype(np.int64) & 0x3F) << 8) | buf[offset[mine] + 3]
-        out.append(UndefinedPackets(a, _gather_octets(buf, offset[mine], length[mine]), length[mine], count))
-        report.undefined_apids[a] = int(mine.sum())
+    for a, lo, hi in zip(apid[starts].tolist(), starts.tolist(), ends.tolist()):
+        packets = octets[first_octet[lo] : first_octet[hi]]
+        out.append(UndefinedPackets(a, packets, length[lo:hi], count[lo:hi]))
+        report.undefined_apids[a] = hi - lo
     return out
 
 

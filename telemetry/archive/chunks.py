@@ -48,7 +48,10 @@ def _decompress(blob: bytes) -> bytes:
 def encode_int64(values: np.ndarray) -> bytes:
     """Delta-encoded, compressed int64 column (times in UTC ns, sequence counts, packet lengths)."""
     a = np.ascontiguousarray(values, dtype=np.int64)
-    return _compress(np.diff(a, prepend=np.int64(0)).tobytes())
+    delta = np.empty_like(a)
+    delta[:1] = a[:1]
+    np.subtract(a[1:], a[:-1], out=delta[1:])
+    return _compress(delta.data)
 
 
 def decode_int64(blob: bytes) -> np.ndarray:
