@@ -24,6 +24,8 @@ if TYPE_CHECKING:
     from multiprocessing.queues import Queue
     from multiprocessing.synchronize import Event
 
+    from telemetry.archive import Archive
+
     Outbox = Queue[tuple[str, Any]]  # ("port" | "error" | "batch" | "stats", payload) to the server; a batch's
     # payload is (satellite, SampleBatch)
 
@@ -90,7 +92,7 @@ class LivePasses:
         self._from: dict[str, int] = {}  # satellite -> first sample not yet counted in a pass
         self._newest: dict[str, int] = {}  # satellite -> newest committed sample
 
-    def __call__(self, archive: Any, spans: list[tuple[str, int, int]], final: bool) -> None:
+    def __call__(self, archive: Archive, spans: list[tuple[str, int, int]], final: bool) -> None:
         due = set()
         for satellite, t0_ns, t1_ns in spans:
             if satellite not in self._from:
@@ -104,7 +106,7 @@ class LivePasses:
         for satellite in sorted(due):
             self._update(archive, satellite)
 
-    def _update(self, archive: Any, satellite: str) -> None:
+    def _update(self, archive: Archive, satellite: str) -> None:
         from telemetry import passes
 
         passes.passes_from_data(archive, satellite, self._from[satellite], self._newest[satellite])

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -33,6 +33,10 @@ from sim_core.scenario import Scenario
 from telemetry.dictionary import Dictionary
 from telemetry.housekeeping import observations, read_batches
 from telemetry.ingest_report import SampleBatch
+
+if TYPE_CHECKING:
+    from backend.ingest.ports import TelemetryArchive
+    from backend.twin.live import LiveDetection
 
 __all__ = [
     "MAX_WINDOW_S",
@@ -102,7 +106,7 @@ def diagnose_batches(
     dictionary: Dictionary,
     scenario: Scenario,
     satellite: str | None = None,
-    flyer: Callable[[Scenario], Any] | None = None,
+    flyer: Callable[[Scenario], object] | None = None,
 ) -> dict[str, Any]:
     """Diagnose decoded batches of one satellite against its scenario; ValueError naming what is missing.
 
@@ -118,7 +122,7 @@ def diagnose_file(
     dictionary: Dictionary,
     scenario: Scenario,
     satellite: str | None = None,
-    flyer: Callable[[Scenario], Any] | None = None,
+    flyer: Callable[[Scenario], object] | None = None,
 ) -> dict[str, Any]:
     """Diagnose a packet file or a ground CSV/JSONL file (``acs-twin diagnose``)."""
     return diagnose_batches(read_batches(path, dictionary), dictionary, scenario, satellite, flyer)
@@ -189,7 +193,7 @@ ALARM_WAIT_S = 60.0  # how long a live detection's diagnosis waits for its alarm
 
 
 def archived_reader(
-    archive: Any, satellite: str, dictionary: Dictionary, t0_ns: int, t1_ns: int
+    archive: TelemetryArchive, satellite: str, dictionary: Dictionary, t0_ns: int, t1_ns: int
 ) -> Callable[[], tuple[list[SampleBatch], Dictionary]]:
     """A reader of the satellite's archived packets in [t0_ns, t1_ns], decoded (ValueError when there are none)."""
     from telemetry.decoding import decode_stream
@@ -204,7 +208,7 @@ def archived_reader(
 
 
 def diagnose_detection(
-    diagnoses: DiagnosisRuns, archive: Callable[[], Any], dictionaries: Callable[[str], Dictionary], live: Any
+    diagnoses: DiagnosisRuns, archive: Callable[[], Any], dictionaries: Callable[[str], Dictionary], live: LiveDetection
 ) -> str:
     """Start the diagnosis of a live twin's detection (``backend.twin.live.LiveDetection``); its id.
 
