@@ -290,7 +290,8 @@ def _print_fleet(
         f"  commits queued (telemetry, one group commit per {ARCHIVE_INTERVAL_S:g} s): satellites waiting p50 "
         f"{np.percentile(pend, 50):.0f}, max {pend.max():.0f}; oldest uncommitted sample p99 "
         f"{np.percentile(oldest, 99):.1f} s, max {oldest.max():.1f} s; last commit "
-        f"{series('archive_commit_s')[-1]:.2f} s; archive errors {series('archive_errors').max():.0f}"
+        f"{series('archive_commit_s')[-1]:.2f} s (max {series('archive_commit_s').max():.2f} s), passes after it "
+        f"max {series('after_commit_s').max():.2f} s; archive errors {series('archive_errors').max():.0f}"
     )
     inbox, residual = series("batches_waiting"), series("residual_uploads_waiting")
     print(

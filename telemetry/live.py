@@ -188,7 +188,8 @@ class LiveStats:
     archive_pending_packets: int = 0  # decoded, not yet committed (refreshed every archive interval)
     archive_pending_uploads: int = 0  # satellites with samples waiting for their commit
     archive_oldest_pending_s: float = 0.0  # how long the oldest uncommitted sample has waited
-    archive_commit_s: float = 0.0  # wall time of the last group commit
+    archive_commit_s: float = 0.0  # wall time of the last group commit (the transaction)
+    after_commit_s: float = 0.0  # wall time of the bookkeeping after it (on_committed: passes from data)
 
 
 class Subscriber:
@@ -552,13 +553,17 @@ class LiveStream:
 
     def _commit(self, archive: Archive, uploads: list[PendingUpload]) -> list[IngestResult]:
         """One group commit, then ``on_committed`` with what it committed."""
+        started = time.perf_counter()
         results = archive.ingest_many(uploads)
+        self.stats.archive_commit_s = time.perf_counter() - started
         spans = []
         for u in uploads:
             times = [b.t_utc_ns for b in u.batches if len(b.t_utc_ns)]
             if times:
                 spans.append((u.satellite, min(int(t.min()) for t in times), max(int(t.max()) for t in times)))
+        started = time.perf_counter()
         self._after_commit(archive, spans, False)
+        self.stats.after_commit_s = time.perf_counter() - started
         return results
 
     def _after_commit(self, archive: Archive, spans: list[tuple[str, int, int]], final: bool) -> None:
@@ -598,7 +603,6 @@ class LiveStream:
                 )
                 for satellite, (batches, _, _) in taken.items()
             ]
-            started = time.perf_counter()
             try:
                 results = await asyncio.to_thread(self._commit, self._archive, uploads)
             except Exception as error:  # the database may be away: keep the data, retry next time
@@ -610,7 +614,6 @@ class LiveStream:
                     self._pending_packets[satellite] = packets + self._pending_packets.get(satellite, 0)
                 return False
             finally:
-                self.stats.archive_commit_s = time.perf_counter() - started
                 self._note_backlog()
             self.stats.packets_archived += sum(r.packets_accepted for r in results)
             return True

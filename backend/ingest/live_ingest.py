@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 __all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 
 STATS_PERIOD_S = 0.5
-PASS_PERIOD_S = 30.0  # a satellite's pass from data is widened over what was committed at most this often (in
+PASS_PERIOD_S = 60.0  # a satellite's pass from data is widened over what was committed at most this often (in
 # telemetry time; a few queries each, serialised with the commits in this process, never on the API's relay)
 OUTBOX_MESSAGES = 1_000  # ≈ 20 s of batches at the 50 decodes/s of telemetry.live
 STOP_POLL_S = 0.1
