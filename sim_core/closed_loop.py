@@ -28,6 +28,7 @@ from sim_core import (
     attitude_filters,
     control,
     environment,
+    estimation,
     fdir,
     guidance,
     magnetic,
@@ -49,6 +50,7 @@ PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
 LAW_SEED000, LAW_MRP_FEEDBACK, LAW_QUATERNION_PD = 0, 1, 2
 # Estimators.
 ESTIMATOR_TRUTH, ESTIMATOR_STAR_TRACKER, ESTIMATOR_MEKF, ESTIMATOR_SEED000, ESTIMATOR_SEED003 = 0, 1, 2, 3, 4
+ESTIMATOR_TRIAD = 5
 
 # Fault codes live in sim_core.faults (re-exported here for the record's readers).
 TARGET_CODES, TYPE_CODES, FAULT_COLUMNS = faults_mod.TARGET_CODES, faults_mod.TYPE_CODES, faults_mod.FAULT_COLUMNS
@@ -134,7 +136,8 @@ class EstimatorConfig(NamedTuple):
     """Attitude determination the law reads (``kind``): ESTIMATOR_TRUTH (the true state), _STAR_TRACKER (star
     sample and gyro as they come), _MEKF (sim_core.mekf on gyro + star tracker, earth sensor and magnetometer
     without stars), _SEED000 (seed 000 §4's filter of the mismatch ε and the gyro rate, sim_core.attitude_filters)
-    or _SEED003 (seed 003's gyro-less body-rate estimator, eqs 15–19, on the star tracker's mismatch angles)."""
+    or _SEED003 (seed 003's gyro-less body-rate estimator, eqs 15–19, on the star tracker's mismatch angles) or
+    _TRIAD (seed 003 §3.2.1.2.1: TRIAD of the Sun sensor, earth sensor and magnetometer each T_q, gyro rates)."""
 
     kind: int
     covariance0: np.ndarray  # initial MEKF covariance (6, 6)
@@ -340,6 +343,7 @@ class Commands(NamedTuple):
     program: np.ndarray  # Λ^p (4), ω^p (3), ω̇^p (3) of the last control tick
     motor_current: np.ndarray  # armature currents (A) when the motor electrics are flown
     moment: np.ndarray  # dipole flown: MD dipole + residual dipole (A·m²)
+    rotor_phase: np.ndarray  # rotor angles φ = ∫Ω dt (rad) when the imbalance is flown (seed 002 eq 4)
 
 
 class Monitors(NamedTuple):
@@ -418,16 +422,51 @@ def _sun_direction_1(
     """Sun direction in body axes from the Sun sensor (sensors.sun_sensor_1, noise σ) under its faults; in
     eclipse or when failed, the ephemeris Sun seen through the attitude estimate."""
     sun_eci = environment.sun_position_1(t0_unix_s + t)
-    normals = np.random.standard_normal(3)
-    s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
-    ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
-    frozen[:] = s_b
+    s_b, ok = _sun_sensor_sample_1(sigma, faults, t, x, sun_eci, r, frozen)
     n = np.sqrt(s_b @ s_b)
     if not ok or n == 0.0:
         s_b = conjugate_rotate_1(q_est, sun_eci)
         n = np.sqrt(s_b @ s_b)
     unit: np.ndarray = s_b / n
     return unit
+
+
+@njit(cache=True)
+def _sun_sensor_sample_1(
+    sigma: float, faults: np.ndarray, t: float, x: np.ndarray, sun_eci: np.ndarray, r: np.ndarray, frozen: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """A Sun-sensor sample in body axes (sensors.sun_sensor_1, noise σ) under its faults, and whether it is valid."""
+    normals = np.random.standard_normal(3)
+    s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
+    ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
+    frozen[:] = s_b
+    return s_b, ok and s_b @ s_b > 0.0
+
+
+@njit(cache=True)
+def _triad_stage(
+    sun_sigma_rad: float,
+    t0_unix_s: float,
+    faults: np.ndarray,
+    t: float,
+    x: np.ndarray,
+    pos: Position,
+    sensed: Sensed,
+    gyro_ok: bool,
+    est: Estimate,
+) -> bool:
+    """Seed 003's vector-sensor determination (estimation.triad_sensors_1): Sun sensor, earth sensor (local
+    vertical) and magnetometer against the ephemeris Sun, −r and the field model; rates from the gyro. Returns
+    whether a sensor pair gave the attitude (else the estimate holds)."""
+    sun_eci = environment.sun_position_1(t0_unix_s + t)
+    sun_b, sun_ok = _sun_sensor_sample_1(sun_sigma_rad, faults, t, x, sun_eci, pos.r, sensed.sun_frozen)
+    nadir_b, nadir_ok = _earth_sensor_nadir_1(faults, t, x, pos.r)
+    q, ok = estimation.triad_sensors_1(sun_b, sun_ok, nadir_b, nadir_ok, sensed.mag, sun_eci, -pos.r, pos.b_eci)
+    if ok:
+        est.q[:] = q if q @ est.q >= 0.0 else -q
+    if gyro_ok:
+        est.omega[:] = sensed.omega
+    return ok
 
 
 # --- stages: each takes the blocks of the configuration it reads, never the whole LoopConfig -------------------
@@ -923,12 +962,14 @@ def _actuator_stage(
     held: np.ndarray,
     frozen: np.ndarray,
     motor_current: np.ndarray,
+    rotor_phase: np.ndarray,
     delivered: np.ndarray,
 ) -> None:
     """Delivered wheel motor torques at the wheel ``speeds``: the ``held`` commands (``frozen`` ones for a frozen
     controller) under wheel faults, seed 000 eq (2) limits, then (when flown) seed 002's motor electrics
-    (eq 2–3) and its noise and imbalance torques (eq 1, 4). Runs every dynamics step: it takes the arrays of
-    :class:`Commands` it reads, not the whole tuple (each array passed costs a reference count)."""
+    (eq 2–3) and its noise and imbalance torques (eq 1, 4; the imbalance at the rotor angles ``rotor_phase``).
+    Runs every dynamics step: it takes the arrays of :class:`Commands` it reads, not the whole tuple (each array
+    passed costs a reference count)."""
     faults_mod.wheel_commands_1(faults, t, held, frozen, delivered)
     wheels.limit_motor_torque_into(delivered, speeds, wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
     m = act.motor
@@ -946,7 +987,10 @@ def _actuator_stage(
         )
     if act.disturbed:
         white = np.asarray(np.random.uniform(-1.0, 1.0, speeds.shape[0]))
-        delivered[:] = wheels.delivered_torque_1(delivered, speeds, t, act.noise_nm, act.imbalance_nm_s2, white)
+        delivered[:] = wheels.delivered_torque_1(
+            delivered, speeds, rotor_phase, act.noise_nm, act.imbalance_nm_s2, white
+        )
+        wheels.advance_rotor_phase_1(rotor_phase, speeds, dt_s)
 
 
 @njit(cache=True)
@@ -1095,6 +1139,7 @@ def _initial_commands(nw: int) -> Commands:
         np.zeros(10),
         np.zeros(nw),
         np.zeros(3),
+        np.zeros(nw),
     )
 
 
@@ -1179,6 +1224,10 @@ def fly_variant(
                 valid, sigma_u = _mekf_stage(
                     estc, sens, c.fdir, t_q, var, k, t, x, pos, sensed, sample, sigma_u, est, mon, ev, n_ev
                 )
+            elif estc.kind == ESTIMATOR_TRIAD:
+                valid = _triad_stage(
+                    sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, est
+                )
             elif estc.kind == ESTIMATOR_SEED000 or estc.kind == ESTIMATOR_SEED003:
                 q_p, w_p, _, _ = program_at(prog, clk, eph.c_pn, t, pos)
                 _mismatch_filter_stage(estc, t_q, q_p, w_p, sensed, sample, est)
@@ -1222,7 +1271,7 @@ def fly_variant(
 
         _actuator_stage(
             act, p.wheel_inertia, clk.dt_s, faults, t, wheel_speeds, cmd.wheel_cmd, cmd.frozen_cmd, cmd.motor_current,
-            cmd.delivered,
+            cmd.rotor_phase, cmd.delivered,
         )  # fmt: skip
         if has_faults:
             faults_mod.extra_friction_1(faults, t, plant.friction, p.friction)

@@ -73,6 +73,7 @@ ESTIMATORS = {
     "mekf": closed_loop.ESTIMATOR_MEKF,
     "seed000_filter": closed_loop.ESTIMATOR_SEED000,
     "seed003_rate": closed_loop.ESTIMATOR_SEED003,
+    "triad": closed_loop.ESTIMATOR_TRIAD,
 }
 
 

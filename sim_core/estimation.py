@@ -19,7 +19,7 @@ from numba import njit
 
 from sim_core import quaternion as qt
 
-__all__ = ["triad", "triad_1", "star_tracker_lsm", "LSM_MAX_ITERATIONS"]
+__all__ = ["triad", "triad_1", "triad_sensors_1", "TRIAD_MIN_SINE", "star_tracker_lsm", "LSM_MAX_ITERATIONS"]
 
 LSM_MAX_ITERATIONS = 8  # Gauss–Newton relinearisations; each squares the residual angle
 _COLLINEAR = 1e-9  # |U × V| below which two unit directions carry no attitude about their common axis
@@ -89,6 +89,38 @@ def triad_1(u_b: np.ndarray, v_b: np.ndarray, u_i: np.ndarray, v_i: np.ndarray) 
         c[:, 1] = r
         c[:, 2] = np.cross(q, r)
     return _dcm_to_quat_1(c_r @ c_m.T)
+
+
+TRIAD_MIN_SINE = np.sin(np.radians(10.0))  # a vector pair closer than 10° gives its cross product poorly
+
+
+@njit(cache=True)
+def _distinct_1(u: np.ndarray, v: np.ndarray) -> bool:
+    c = np.cross(u, v)
+    return bool(np.sum(c * c) >= TRIAD_MIN_SINE**2 * np.sum(u * u) * np.sum(v * v))
+
+
+@njit(cache=True)
+def triad_sensors_1(
+    sun_b: np.ndarray,
+    sun_ok: bool,
+    nadir_b: np.ndarray,
+    nadir_ok: bool,
+    mag_b: np.ndarray,
+    sun_i: np.ndarray,
+    nadir_i: np.ndarray,
+    mag_i: np.ndarray,
+) -> tuple[np.ndarray, bool]:
+    """q_ib by TRIAD from the vector sensors that see (seed 003 §3.2.1.2.1): the Sun S (SS) as the main vector with
+    the local vertical r (HS) as the auxiliary, else S with the field B (MAG), else r with B (eclipse); pairs
+    closer than 10° are skipped. Returns (q_ib, False) when no pair is usable."""
+    if sun_ok and nadir_ok and _distinct_1(sun_b, nadir_b):
+        return triad_1(sun_b, nadir_b, sun_i, nadir_i), True
+    if sun_ok and _distinct_1(sun_b, mag_b):
+        return triad_1(sun_b, mag_b, sun_i, mag_i), True
+    if nadir_ok and _distinct_1(nadir_b, mag_b):
+        return triad_1(nadir_b, mag_b, nadir_i, mag_i), True
+    return np.array([1.0, 0.0, 0.0, 0.0]), False
 
 
 def star_tracker_lsm(

@@ -179,9 +179,10 @@ class SensorsSpec(_Spec):
 
 class EstimatorSpec(_Spec):
     """Attitude determination feeding the control law: the true state, the raw star tracker + gyro, the MEKF,
-    seed 000 §4's mismatch filter (gyro + star tracker) or seed 003's gyro-less body-rate estimator (eqs 15–19)."""
+    seed 000 §4's mismatch filter (gyro + star tracker), seed 003's gyro-less body-rate estimator (eqs 15–19) or
+    seed 003's TRIAD of the Sun sensor, earth sensor and magnetometer with gyro rates (§3.2.1.2.1)."""
 
-    kind: Literal["truth", "star_tracker", "mekf", "seed000_filter", "seed003_rate"] = "truth"
+    kind: Literal["truth", "star_tracker", "mekf", "seed000_filter", "seed003_rate", "triad"] = "truth"
     disturbance_density_rad2_s3: Positive = 1e-9  # q of the per-axis filters (white angular acceleration)
 
 

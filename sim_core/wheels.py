@@ -11,7 +11,8 @@ terms with a plus sign although they oppose the spin; we keep the physical sign 
 resisting torque as a positive multiple of the spin direction that is *subtracted*:
 M^f = m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω √|Ω| (seed 000's saturated dry friction, seed 002's viscous
 and aerodynamic terms, seed 003 eq 34's k_e Ω and M_df sgn Ω). Seed 000 eq (1) then reads
-J_r (aᵗω̇ + Ω̇) = m − m^f. Noise M_x and imbalance M_d are added to the delivered motor torque.
+J_r (aᵗω̇ + Ω̇) = m − m^f. Noise M_x and imbalance M_d are added to the delivered motor torque; the
+imbalance turns with the rotor angle φ = ∫Ω dt (seed 002's sin(Ωt) holds only at a constant speed).
 
 Motor electrics (seed 002 eq 2–3): L di/dt + R i + K_e Ω = u, M = K_m i.
 Speed integration (seed 002 eq 5, Ω = J_c⁻¹∫M dt) is row 3 of seed 000 eq (1) in ``spacecraft``.
@@ -54,6 +55,7 @@ __all__ = [
     "imbalance_torque",
     "noise_torque",
     "delivered_torque_1",
+    "advance_rotor_phase_1",
     "motor_current_derivative",
     "motor_current_derivative_1",
     "motor_current_step",
@@ -258,21 +260,33 @@ def limit_motor_torque_into(
 def delivered_torque_1(
     motor_torque_nm: np.ndarray,
     speed_rad_s: np.ndarray,
-    t_s: float,
+    phase_rad: np.ndarray,
     noise_nm: np.ndarray,
     imbalance_nm_s2: np.ndarray,
     white_noise: np.ndarray,
 ) -> np.ndarray:
-    """Motor torque plus noise K_x W/|W_max| and imbalance K_d Ω² sin(Ωt) (seed 002 eq 1, 4).
+    """Motor torque plus noise K_x W/|W_max| and imbalance K_d Ω² sin φ, φ = ∫Ω dt (seed 002 eq 1, 4).
 
-    ``white_noise`` holds samples W/|W_max| in [−1, 1] drawn by the caller (one per wheel).
+    ``white_noise`` holds samples W/|W_max| in [−1, 1] drawn by the caller (one per wheel); ``phase_rad`` the
+    rotor angles φ_p carried by :func:`advance_rotor_phase_1`.
     """
     n = motor_torque_nm.shape[0]
     out = np.empty(n)
     for p in range(n):
         w = speed_rad_s[p]
-        out[p] = motor_torque_nm[p] + noise_nm[p] * white_noise[p] + imbalance_nm_s2[p] * w * w * np.sin(w * t_s)
+        out[p] = motor_torque_nm[p] + noise_nm[p] * white_noise[p] + imbalance_nm_s2[p] * w * w * np.sin(phase_rad[p])
     return out
+
+
+@njit(cache=True)
+def advance_rotor_phase_1(phase_rad: np.ndarray, speed_rad_s: np.ndarray, dt_s: float) -> None:
+    """Rotor angle φ_p += Ω_p dt in place, wrapped to [0, 2π): the phase of seed 002 eq 4's imbalance.
+
+    Seed 002 writes sin(Ωt), whose frequency d(Ωt)/dt = Ω + Ω̇ t chirps when the speed changes; the rotor
+    angle φ = ∫Ω dt turns at Ω at every instant (and equals Ωt at a constant speed from φ(0) = 0).
+    """
+    for p in range(phase_rad.shape[0]):
+        phase_rad[p] = (phase_rad[p] + speed_rad_s[p] * dt_s) % (2.0 * np.pi)
 
 
 @njit(cache=True)
@@ -372,10 +386,11 @@ def friction_torque(wheels: WheelParams, speed_rad_s: ArrayLike) -> np.ndarray:
     return friction_torque_1(_speeds(speed_rad_s, wheels.n), wheels.friction_table())
 
 
-def imbalance_torque(wheels: WheelParams, speed_rad_s: ArrayLike, t_s: float) -> np.ndarray:
-    """Dynamic-imbalance torque K_d Ω² sin(Ωt) per wheel, N·m (seed 002 eq 4 M_d)."""
+def imbalance_torque(wheels: WheelParams, speed_rad_s: ArrayLike, phase_rad: ArrayLike) -> np.ndarray:
+    """Dynamic-imbalance torque K_d Ω² sin φ per wheel at rotor angles φ = ∫Ω dt, N·m (seed 002 eq 4 M_d)."""
     w = _speeds(speed_rad_s, wheels.n)
-    torque_nm: npt.NDArray[np.float64] = wheels.imbalance_nm_s2 * w * w * np.sin(w * float(t_s))
+    phase = _speeds(phase_rad, wheels.n, "phase_rad")
+    torque_nm: npt.NDArray[np.float64] = wheels.imbalance_nm_s2 * w * w * np.sin(phase)
     return torque_nm
 
 

@@ -75,9 +75,8 @@ def test_wheel_noise_torque_has_the_uniform_white_noise_spread():
 
 
 def test_wheel_imbalance_torque_swings_with_amplitude_k_d_omega_squared():
-    """Seed 002 eq 4 M_d = K_d Ω² sin(Ωt): the extra torque reaches ±K_d Ω² and averages out. Speeds incommensurate
-    with the 0.05 s step (so the samples see every phase) and K_d small enough that the speed, hence the frequency
-    of the seed's sin(Ωt), stays put (a wheel the imbalance itself speeds up would chirp in that formula)."""
+    """Seed 002 eq 4 M_d = K_d Ω² sin φ: the extra torque reaches ±K_d Ω² and averages out. Speeds incommensurate
+    with the 0.05 s step, so the samples see every phase."""
     k_d = 1e-9
     s = _song(speeds_rpm=(1234.0, -2345.0, 2876.0), imbalance_nm_s2=k_d).model_copy(update={"output_dt_s": 0.05})
     on = engine.simulate(s)
@@ -86,6 +85,27 @@ def test_wheel_imbalance_torque_swings_with_amplitude_k_d_omega_squared():
     peak = np.max(np.abs(extra) / amplitude, axis=0)
     assert np.all(peak > 0.98) and np.all(peak <= 1.0 + 1e-9)
     assert np.all(np.abs(np.mean(extra / amplitude, axis=0)) < 0.1)
+
+
+def test_wheel_imbalance_turns_with_the_rotor_angle_through_a_speed_ramp():
+    """Seed 002 eq 4's imbalance at the rotor angle φ = ∫Ω dt: while the 5° slew of song-table1 ramps the wheels
+    by tens of rad/s, the torque added on each step is K_d Ω² sin φ with φ summed here from the recorded speeds
+    (its frequency is Ω at each instant); the seed's sin(Ωt) would be off by (Ω(t) − Ω(0)) t ≫ 1 rad."""
+    k_d = 1e-9
+    s = _song(speeds_rpm=(1234.0, -2345.0, 2876.0), imbalance_nm_s2=k_d)
+    s = s.model_copy(update={"initial_q_ib": scenario_library.get("song-table1").initial_q_ib, "output_dt_s": 0.05})
+    on = engine.simulate(s)
+    dt = s.dynamics_dt_s
+    speed = on.series["wheel_speed_rad_s"][0, :-1]
+    ramp = np.ptp(speed, axis=0)
+    assert np.all(ramp > 5.0), f"the slew must ramp every wheel (got {ramp} rad/s)"
+    phase = np.concatenate([np.zeros((1, 3)), np.cumsum(speed * dt, axis=0)[:-1]])
+    # a sample holds the torque delivered over the step before it, from that step's command and speed
+    extra = on.series["wheel_torque_nm"][0, 1:] - on.series["wheel_torque_cmd_nm"][0, :-1]
+    np.testing.assert_allclose(extra, k_d * speed**2 * np.sin(phase), atol=1e-6 * k_d * np.max(speed**2))
+    t = on.t_s[:-1, None]
+    seed_formula = k_d * speed**2 * np.sin(speed * t)
+    assert np.max(np.abs(extra - seed_formula)) > 0.5 * k_d * np.min(speed**2)
 
 
 def test_motor_back_emf_caps_the_torque_at_k_m_v_minus_k_e_omega_over_r():
@@ -352,3 +372,55 @@ def test_each_estimator_flies_the_scanning_route(kind):
         quaternion.multiply(quaternion.conjugate(traj.series["q_est_ib"][0]), traj.series["q_ib"][0])
     )
     assert np.degrees(np.sqrt(np.mean(est_err[observing] ** 2))) * 3600.0 < SCAN_ARCSEC_RMS[kind]
+
+
+def _triad_scan(**sun_sensor_fault: float) -> Scenario:
+    """somov-ge4-scan determined by seed 003's TRIAD (Sun sensor main, earth sensor auxiliary), optionally with a
+    Sun-sensor bias fault on one body axis from t = 0."""
+    s = scenario_library.get("somov-ge4-scan")
+    data = {**s.model_dump(), "estimator": {"kind": "triad"}}
+    if sun_sensor_fault:
+        fault = {"target": "sun_sensor", "type": "bias", "onset_s": 0.0, **sun_sensor_fault}
+        data["variants"] = [{"name": "sun sensor bias", "faults": [fault]}]
+    return Scenario.model_validate(data)
+
+
+def _estimate_error_b(traj) -> np.ndarray:
+    """Rotation vector (body axes) taking the true attitude to the estimate, per sample."""
+    dq = quaternion.multiply(quaternion.conjugate(traj.series["q_ib"][0]), traj.series["q_est_ib"][0])
+    dq = dq * np.sign(dq[:, :1])
+    return 2.0 * dq[:, 1:]
+
+
+def _sun_b(traj) -> tuple[np.ndarray, np.ndarray]:
+    """Unit Sun direction in true body axes (DE421) and whether it is lit, per sample."""
+    sun = environment.sun_position_eci_m(traj.extra["epoch_unix_s"] + traj.t_s)
+    lit = ~sensors.in_earth_shadow(traj.series["r_eci_m"][0], sun)
+    sun_b = quaternion.rotate(quaternion.conjugate(traj.series["q_ib"][0]), sun)
+    return sun_b / np.linalg.norm(sun_b, axis=1, keepdims=True), lit
+
+
+def test_triad_estimator_flies_the_sun_sensor_with_its_noise_across_the_sun_line():
+    """Seed 003 §3.2.1.2.1 TRIAD with the Sun S as main vector: the estimate matches the Sun sensor's sample exactly,
+    so across the Sun line its error is the sensor's noise rotation, σ per axis (√2 σ over the two axes), and
+    a 2° bias on one sensor axis tilts the estimate by the bias' part across the Sun line."""
+    s = _triad_scan()
+    sigma = s.sensors.sun_sensor_sigma_rad
+    traj = engine.simulate(s)
+    sun_b, lit = _sun_b(traj)
+    assert lit.mean() > 0.9, "the case must fly in sunlight"
+    err = _estimate_error_b(traj)[lit]
+    across = err - np.sum(err * sun_b[lit], axis=1, keepdims=True) * sun_b[lit]
+    rms_across = np.sqrt(np.mean(np.sum(across**2, axis=1)))
+    assert rms_across == pytest.approx(np.sqrt(2.0) * sigma, rel=0.1)
+    pointing = traj.pointing_error_rad()[0][lit]
+    assert np.max(pointing) < 20.0 * sigma  # the loop holds the route on the noisy estimate: bounded
+
+    bias = np.radians(2.0)
+    faulty = engine.simulate(_triad_scan(index=1, value=bias))
+    sun_f, lit_f = _sun_b(faulty)
+    turn = np.cross(sun_f[lit_f], [0.0, 1.0, 0.0])  # S → S + β e_y turns about S × e_y by β |S × e_y|
+    tilt_expected = bias * np.linalg.norm(turn, axis=1)
+    err_f = _estimate_error_b(faulty)[lit_f]
+    tilt = np.abs(np.mean(np.sum(err_f * turn, axis=1) / np.linalg.norm(turn, axis=1)))
+    assert tilt == pytest.approx(np.mean(tilt_expected), rel=0.1)

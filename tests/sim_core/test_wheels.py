@@ -109,18 +109,41 @@ def test_torque_and_momentum_limits_of_seed_000_eq_2():
 
 
 def test_imbalance_noise_and_delivered_torque_of_seed_002_eq_1_and_4():
-    """K_d Ω² sin(Ωt) = 1e-7 · 100² · sin(π/2) = 1e-3 N·m at Ω = 100 rad/s, t = π/200 s."""
+    """K_d Ω² sin φ = 1e-7 · 100² · sin(π/2) = 1e-3 N·m at Ω = 100 rad/s, rotor angle φ = π/2."""
     wheels = wh.WheelParams([0.02], noise_nm=1e-4, imbalance_nm_s2=1e-7)
-    t = np.pi / 200.0
-    assert wh.imbalance_torque(wheels, [100.0], t) == pytest.approx([1e-3], rel=1e-12)
+    phase = np.array([np.pi / 2.0])
+    assert wh.imbalance_torque(wheels, [100.0], phase) == pytest.approx([1e-3], rel=1e-12)
     total = wh.delivered_torque_1(
-        np.array([0.05]), np.array([100.0]), t, wheels.noise_nm, wheels.imbalance_nm_s2, np.array([-0.5])
+        np.array([0.05]), np.array([100.0]), phase, wheels.noise_nm, wheels.imbalance_nm_s2, np.array([-0.5])
     )
     assert total == pytest.approx([0.05 - 0.5e-4 + 1e-3], rel=1e-12)
     samples = np.concatenate([wh.noise_torque(wheels, np.random.default_rng(s)) for s in range(20_000)])
     assert np.max(np.abs(samples)) <= 1e-4
     five_sigma = 5.0 * 1e-4 / np.sqrt(3.0) / np.sqrt(samples.size)  # uniform W/|W_max| on [−1, 1]
     assert abs(np.mean(samples)) < five_sigma
+
+
+def test_imbalance_turns_at_the_wheel_speed_during_a_speed_ramp():
+    """Ω(t) = Ω_0 + α t: the imbalance torque's zero crossings are half a turn apart at the instantaneous speed,
+    π/Ω(t_mid) (rotor angle ∫Ω dt = Ω_0 t + α t²/2 in closed form), not at the chirp Ω_0 + 2αt of sin(Ω(t) t)."""
+    wheels = wh.WheelParams([0.02], imbalance_nm_s2=1e-7)
+    omega0, alpha, dt = 50.0, 20.0, 1e-4
+    t = np.arange(0.0, 10.0, dt)
+    speed = omega0 + alpha * t
+    phase, torque = np.zeros(1), np.empty(t.size)
+    for k, w in enumerate(speed):
+        torque[k] = wh.imbalance_torque(wheels, [w], phase)[0]
+        wh.advance_rotor_phase_1(phase, np.array([w]), dt)
+    np.testing.assert_allclose(
+        phase[0], (omega0 * t[-1] + 0.5 * alpha * t[-1] ** 2 + omega0 * dt) % (2 * np.pi), atol=alpha * t[-1] * dt
+    )
+    crossing = np.nonzero(np.sign(torque[1:]) != np.sign(torque[:-1]))[0]
+    t_cross = t[crossing] - torque[crossing] * dt / (torque[crossing + 1] - torque[crossing])
+    half_period = np.diff(t_cross)
+    speed_mid = omega0 + alpha * 0.5 * (t_cross[1:] + t_cross[:-1])
+    np.testing.assert_allclose(half_period * speed_mid, np.pi, rtol=1e-3)
+    chirp_mid = omega0 + 2.0 * alpha * 0.5 * (t_cross[1:] + t_cross[:-1])
+    assert abs(half_period[-1] * chirp_mid[-1] - np.pi) > 1.0  # sin(Ω(t) t) would run 1.8× fast by t = 10 s
 
 
 # --- motor electrics (seed 002 eq 2–3) and speed loop (seed 003 eq 35–37) --------------------------
