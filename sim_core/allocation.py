@@ -21,11 +21,13 @@ Seed defects corrected here (DESIGN.md, and found while deriving):
   a_f2, and the sign of a_f3,4, which makes {A, a_f} singular at h = 0). We use the exact gradient, so
   that df_ρ/dt = −Sat(μ_ρ f_ρ, φ_ρ) holds; ``Sat(φ_ρ, μ_ρ f_ρ)`` is read as μ_ρ f_ρ clipped at ±φ_ρ.
 
-Opt-in beyond the seed (``md_law=MD_LAW_PAIR_NORMAL``, for what-if studies): the MD only has to
-supply the torque across the pair plane, and any direction ⟂ b will do; taking e^m as the part of
-the pair normal n_pq across b makes A^m_pq singular only when b ∥ n_pq, where the seed's choice
-e^m = b × e_pq with |κ| ≤ 1/2 leaves the MD usable within about ±16° of the magnetic equator for
-the pair whose e_pq is the nadir axis (wheels 1–2 of GE).
+Beyond the seed (``md_law=MD_LAW_PAIR_NORMAL``, scenario ``allocation.md_law="least_dipole"``): the MD only
+has to supply the torque τ_n across the pair plane (about n_pq = a_p × a_q), and the least dipole doing so is
+L = τ_n (B × n_pq)/|B × n_pq|², whose torque lies along the part of n_pq across b; the wheels take the rest.
+It is usable wherever b is not along n_pq (the rods' limit, not a fixed κ window, bounds it), where the
+seed's e^m = b × e_pq with |κ| ≤ 1/2 leaves the MD usable within about ±16° of the magnetic equator for the
+pair whose e_pq is the nadir axis (wheels 1–2 of GE). With saturated rods the torque across the plane falls
+short and the wheels still give the in-plane torque in full.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ __all__ = [
     "MD_LAW_SEED",
     "MD_LAW_PAIR_NORMAL",
     "KAPPA_MAX",
-    "NORMAL_COS_MAX",
+    "MIN_NORMAL_SINE",
     "MIN_MD_PLANE_COVER",
     "P_LAW4",
     "P_GAMMA",
@@ -78,10 +80,10 @@ STATUS_TOO_FEW_WHEELS = 4  # fewer than two wheels: no torque
 LAW_GE_DISTRIBUTION = 0
 LAW_PSEUDO_INVERSE = 1
 MD_LAW_SEED = 0  # e^m = b × e_pq, used where |κ| = |⟨e_pq, b⟩| ≤ 1/2 (seed 000 §3 as corrected)
-MD_LAW_PAIR_NORMAL = 1  # e^m = the unit part of the pair normal n_pq across b, used where |⟨n_pq, b⟩| ≤ √3/2
+MD_LAW_PAIR_NORMAL = 1  # least dipole: e^m = the unit part of the pair normal n_pq across b, saturating at l^m
 
 KAPPA_MAX = 0.5  # seed 000 §3: cos(π/3)
-NORMAL_COS_MAX = np.sqrt(3.0) / 2.0  # cos(π/6): e^m keeps ≥ 1/2 of the MD torque across the pair plane
+MIN_NORMAL_SINE = 1e-3  # sin∠(b, n_pq) below which the least dipole would exceed any rod by ~1000×
 MIN_MD_PLANE_COVER = 0.05  # |⟨e^m, n_pq⟩| below this needs an MD torque > 20× the out-of-plane demand
 _SINGULAR_PIVOT = 1e-9  # relative pivot below which a small system is treated as singular
 
@@ -323,16 +325,10 @@ def _pair_least_squares(ap: np.ndarray, aq: np.ndarray, torque: np.ndarray) -> t
 
 
 @njit(cache=True)
-def _md_direction(ap: np.ndarray, aq: np.ndarray, b: np.ndarray, md_law: int) -> tuple[np.ndarray, int]:
-    """Unit MD torque direction e^m (⟂ b) for a wheel pair, or a refusal status (seed 000 §3)."""
+def _md_direction(ap: np.ndarray, aq: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, int]:
+    """Unit MD torque direction e^m = b × e_pq (⟂ b) for a wheel pair, or a refusal status (seed 000 §3)."""
     normal = np.cross(ap, aq)
     normal /= np.sqrt(_dot3(normal, normal))
-    if md_law == MD_LAW_PAIR_NORMAL:
-        nb = _dot3(normal, b)
-        if abs(nb) > NORMAL_COS_MAX:
-            return normal, STATUS_KAPPA_REFUSED
-        e_m = normal - nb * b
-        return e_m / np.sqrt(_dot3(e_m, e_m)), STATUS_OK
     s = ap + aq
     e_pq = s / np.sqrt(_dot3(s, s))
     if abs(_dot3(e_pq, b)) > KAPPA_MAX:
@@ -345,17 +341,46 @@ def _md_direction(ap: np.ndarray, aq: np.ndarray, b: np.ndarray, md_law: int) ->
 
 
 @njit(cache=True)
+def _two_wheels_min_dipole(
+    ap: np.ndarray, aq: np.ndarray, torque: np.ndarray, b_field: np.ndarray, b_norm: float, l_max: float
+) -> tuple[float, float, np.ndarray, int]:
+    """Two wheels + MD by the least dipole: the MD gives the torque τ_n = ⟨n_pq, M^r⟩ across the pair plane with
+    L = τ_n (B × n_pq)/|B × n_pq|² (the shortest L with ⟨L × B, n_pq⟩ = τ_n; its torque is along the part of n_pq
+    across b), clipped to the rods' |l_i| ≤ l^m; the wheels give the rest, M^r − L × B, which then lies in
+    their plane (exactly unless the rods saturate: least squares). Refused only where b is within
+    ``MIN_NORMAL_SINE`` of n_pq, when no dipole turns the body across the plane."""
+    normal = np.cross(ap, aq)
+    normal /= np.sqrt(_dot3(normal, normal))
+    b_cross_n = np.cross(b_field, normal)
+    sin2 = _dot3(b_cross_n, b_cross_n) / (b_norm * b_norm)
+    if sin2 < MIN_NORMAL_SINE * MIN_NORMAL_SINE:
+        mp, mq = _pair_least_squares(ap, aq, torque)
+        return mp, mq, np.zeros(3), STATUS_KAPPA_REFUSED
+    dipole = (_dot3(normal, torque) / (sin2 * b_norm * b_norm)) * b_cross_n
+    status = STATUS_OK
+    peak = max(abs(dipole[0]), abs(dipole[1]), abs(dipole[2]))
+    if peak > l_max:
+        dipole *= l_max / peak
+        status = STATUS_MD_SATURATED
+    mp, mq = _pair_least_squares(ap, aq, torque - np.cross(dipole, b_field))
+    return mp, mq, dipole, status
+
+
+@njit(cache=True)
 def _two_wheels_md(
     ap: np.ndarray, aq: np.ndarray, torque: np.ndarray, b_field: np.ndarray, l_max: float, md_law: int
 ) -> tuple[float, float, np.ndarray, int]:
-    """Two wheels + MD: A^m_pq {m_p, m_q, m^m} = −M^r, L = (m^m/B)(b × e^m) (seed 000 §3)."""
+    """Two wheels + MD: A^m_pq {m_p, m_q, m^m} = −M^r, L = (m^m/B)(b × e^m) (seed 000 §3), or the least dipole
+    (``MD_LAW_PAIR_NORMAL``, :func:`_two_wheels_min_dipole`)."""
     b_norm = np.sqrt(_dot3(b_field, b_field))
     dipole = np.zeros(3)
     if b_norm == 0.0:
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_SINGULAR
+    if md_law == MD_LAW_PAIR_NORMAL:
+        return _two_wheels_min_dipole(ap, aq, torque, b_field, b_norm, l_max)
     b = b_field / b_norm
-    e_m, status = _md_direction(ap, aq, b, md_law)
+    e_m, status = _md_direction(ap, aq, b)
     if status != STATUS_OK:
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, status

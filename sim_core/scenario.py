@@ -236,9 +236,12 @@ class ControllerSpec(_Spec):
 
 
 class AllocationSpec(_Spec):
-    """Wheel torque distribution: seed 000 eq (6) explicit law, or the minimum-norm pseudo-inverse."""
+    """Wheel torque distribution: seed 000 eq (6) explicit law, or the minimum-norm pseudo-inverse; with two
+    wheels left, the magnetic driver by seed 000 §3's e^m = b × e_pq where |κ| ≤ 1/2 (``md_law="seed"``) or by
+    the least dipole across the pair plane (``"least_dipole"``, sim_core.allocation.MD_LAW_PAIR_NORMAL)."""
 
     kind: Literal["ge_explicit", "pseudo_inverse"] = "ge_explicit"
+    md_law: Literal["seed", "least_dipole"] = "seed"
     rho: Annotated[float, Field(gt=0.0, lt=1.0)] = 0.5
     mu_rho_per_s: Positive = 0.05
     phi_rho_per_s: Positive = 0.002

@@ -256,9 +256,10 @@ def max_feasible_turn_rate(
 ) -> TurnRate:
     """Fastest feasible first turn of the route by bisection on its duration (seed 001 turn, seed 000 §5).
 
-    With two wheels and ``schedule_in_md_window`` the route is shifted so that the turn starts at the
-    longest MD efficiency window of the orbit (|κ| ≤ 1/2, nadir attitude), where seed 000 says the
-    pair can fly it. NaN figures when even the slowest turn of ``duration_range_s`` is infeasible.
+    With two wheels, seed 000's MD law and ``schedule_in_md_window`` the route is shifted so that the turn
+    starts at the longest MD efficiency window of the orbit (|κ| ≤ 1/2, nadir attitude), where seed 000 says
+    the pair can fly it (the least-dipole law has no such window: the route stays where it is). NaN figures
+    when even the slowest turn of ``duration_range_s`` is infeasible.
     """
     i = _turn_index(scenario)
     route = scenario.guidance.route
@@ -266,7 +267,8 @@ def max_feasible_turn_rate(
     route_start = scenario.guidance.route_start_s
     lo, hi = duration_range_s
     mask = None if wheel_available is None else np.asarray(wheel_available, dtype=bool)
-    if schedule_in_md_window and mask is not None and int(mask.sum()) == 2:
+    seed_law = scenario.allocation.md_law == "seed"
+    if schedule_in_md_window and seed_law and mask is not None and int(mask.sum()) == 2:
         t, kappa = _nadir_kappa(scenario, mask)
         windows = md_windows(t, kappa)
         if not windows:
@@ -327,57 +329,90 @@ def kappa_fraction(scenario: Scenario, available: np.ndarray) -> float | None:
     return float(np.mean(np.abs(kappa) <= allocation.KAPPA_MAX))
 
 
-def pair_limit(traj: Trajectory, s: Scenario, v: int, mask: np.ndarray, kappa_fraction_: float) -> str:
-    """Why a wheel pair + MD misses the scanning accuracy, with figures (seed 000 §3): the pair has no torque
-    about e_pq = a_p × a_q, which only the MD gives, L × B ⊥ B, so a torque τ about e_pq needs
-    |L| ≥ |τ| / (|B| √(1 − κ²)) with κ = ⟨e_pq, b̂⟩, and the allocation uses the MD only where |κ| ≤ 1/2."""
+SCAN_GEOMETRY_SINE = 0.5  # B within 30° of a pair's normal: the MD's torque across the plane needs ≥ 2× the dipole
+
+
+def pair_limit(s: Scenario, mask: np.ndarray) -> str:
+    """Why a wheel pair + MD (least-dipole law) misses the scanning accuracy, with figures from the programme and
+    the field model: the wheels give no torque about n_pq = a_p × a_q; the programme asks τ_n = ⟨J ω̇^p +
+    ω^p × J ω^p, n_pq⟩ there, and the rods (|l_i| ≤ l^m) give at most l^m |B| sin∠(B, n_pq) / max_i |u_i| with
+    u = b̂ × n_pq / |b̂ × n_pq| (L ∥ B × n_pq). "geometry" when the demand exceeds it with B within 30° of n_pq,
+    "dipole limit" when it does so in a better geometry; "loop design" when it never does."""
     axes = engine.plant_params(s).wheel_axes_b[:, np.asarray(mask, dtype=bool)]
-    e = np.cross(axes[:, 0], axes[:, 1])
-    e /= np.linalg.norm(e)
-    obs = traj["observing"][v] > 0
-    t0 = traj.extra["epoch_unix_s"]
-    b_eci = environment.magnetic_field_eci_t(traj["r_eci_m"][v, obs], t0 + traj.t_s[obs], s.magnetic_model)
-    b_body = np.array([conjugate_rotate_1(q, b) for q, b in zip(traj["q_ib"][v, obs], b_eci)])
+    n = np.cross(axes[:, 0], axes[:, 1])
+    n /= np.linalg.norm(n)
+    t = np.arange(s.guidance.route_start_s, s.duration_s, s.control_dt_s)
+    prog = engine.program_along(s, t)
+    j = engine.plant_params(s).inertia_kg_m2
+    demand = np.abs((prog.omega_dot_b @ j.T + np.cross(prog.omega_b, prog.omega_b @ j.T)) @ n)
+    b_body = np.array([conjugate_rotate_1(q, b) for q, b in zip(prog.q_ib, prog.b_eci_t)])
     b_norm = np.linalg.norm(b_body, axis=1)
-    kappa = b_body @ e / b_norm
-    tau = np.abs(traj["control_torque_b_nm"][v, obs] @ e)
-    need = tau / (b_norm * np.sqrt(np.maximum(1.0 - kappa**2, 1e-12)))
+    b_cross_n = np.cross(b_body / b_norm[:, None], n)
+    sine = np.linalg.norm(b_cross_n, axis=1)
+    box = np.max(np.abs(b_cross_n), axis=1) / np.maximum(sine, 1e-12)  # largest rod share of the least dipole
     limit = s.spacecraft.md_max_dipole_am2
-    window = np.abs(kappa) <= allocation.KAPPA_MAX
-    parts = [f"MD allowed (|κ| ≤ 1/2) {window.mean():.0%} of the scan, {kappa_fraction_:.0%} of a nadir orbit"]
-    parts.append(
-        f"torque about e_pq asked up to {tau.max():.2e} N·m, needing {need.max():.1f} A·m² (limit {limit:.0f} A·m²)"
-    )
+    capacity = limit * b_norm * sine / box
+    over = demand > capacity
+    k = int(np.argmax(demand - capacity))
+    parts = [
+        f"the route asks up to {demand.max():.1e} N·m across the pair plane; at its worst ({t[k]:.0f} s) "
+        f"{demand[k]:.1e} N·m where {limit:.0f} A·m² rods give {capacity[k]:.1e} N·m "
+        f"(|B| {b_norm[k] * 1e6:.0f} µT, {np.degrees(np.arcsin(min(sine[k], 1.0))):.0f}° from the pair normal)",
+        f"over the rods' limit {over.mean():.0%} of the route",
+    ]
     causes = []
-    if window.mean() < 1.0:
+    if np.any(over & (sine < SCAN_GEOMETRY_SINE)):
         causes.append("geometry")
-    if need.max() > limit:
+    if np.any(over & (sine >= SCAN_GEOMETRY_SINE)):
         causes.append("dipole limit")
     return f"{' and '.join(causes) or 'loop design'}: " + "; ".join(parts)
 
 
+def _courses_rms(err: np.ndarray, observing: np.ndarray) -> list[float]:
+    """RMS pointing error of each observing course (runs of ``observing``), arcsec."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], observing.astype(int), [0]))))
+    return [float(np.sqrt(np.mean(err[a:b] ** 2))) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def _with_md_law(s: Scenario, md_law: str, variants: list[VariantSpec]) -> Scenario:
+    data = s.model_dump()
+    data["allocation"]["md_law"] = md_law
+    data["variants"] = [v.model_dump() for v in variants]
+    return Scenario.model_validate(data)
+
+
 def configuration_table(scenario: Scenario) -> list[dict[str, Any]]:
     """Seed 000 §3/§5 for every wheel configuration (nominal, 4 singles, 6 pairs + MD) from one batch:
-    pointing RMS/max while scanning, |κ| ≤ 1/2 orbit fraction, fastest feasible roll, route flown, and for a
-    pair that misses the scanning accuracy the reason with figures (:func:`pair_limit`)."""
+    pointing RMS/max while scanning (and per course), |κ| ≤ 1/2 orbit fraction, fastest feasible roll, route
+    flown, and for a pair that misses the scanning accuracy the reason with figures (:func:`pair_limit`). Pairs
+    fly the least-dipole MD law; their RMS under seed 000's e^m = b × e_pq law (|κ| ≤ 1/2) is flown beside it."""
     from sim_core.faults import configuration_variants
 
     variants, masks = configuration_variants(len(scenario.spacecraft.cluster.wheels))
-    s = Scenario.model_validate({**scenario.model_dump(), "variants": [v.model_dump() for v in variants]})
+    s = _with_md_law(scenario, "least_dipole", variants)
     traj = engine.simulate(s, wheel_available=masks, fdir=True)
     err = traj.pointing_error_rad() * ARCSEC_PER_RAD
+    pairs = [v for v, mask in enumerate(masks) if mask.sum() == 2]
+    seed_law = _with_md_law(scenario, "seed", [variants[v] for v in pairs])
+    traj_seed = engine.simulate(seed_law, wheel_available=masks[pairs], fdir=True)
+    err_seed = traj_seed.pointing_error_rad() * ARCSEC_PER_RAD
     rows = []
     for v, mask in enumerate(masks):
         obs = traj["observing"][v] > 0
         scan = err[v, obs] if obs.any() else err[v]
         turn = max_feasible_turn_rate(s, mask)
         metrics = variant_metrics(traj, s, v)
+        seed_rms = None
+        if v in pairs:
+            e_seed = err_seed[pairs.index(v)]
+            seed_rms = float(np.sqrt(np.mean((e_seed[obs] if obs.any() else e_seed) ** 2)))
         rows.append(
             {
                 "configuration": traj.variant_names[v],
                 "wheels": [int(p) + 1 for p in np.nonzero(mask)[0]],
                 "pointing_rms_arcsec": float(np.sqrt(np.mean(scan**2))),
                 "pointing_max_arcsec": float(np.max(scan)),
+                "pointing_rms_seed_law_arcsec": seed_rms,
                 "kappa_fraction": kappa_fraction(s, mask),
                 "max_roll_rate_deg_s": None if np.isnan(turn.rate_rad_s) else float(np.degrees(turn.rate_rad_s)),
                 "fastest_turn_s": None if np.isnan(turn.duration_s) else float(turn.duration_s),
@@ -386,9 +421,6 @@ def configuration_table(scenario: Scenario) -> list[dict[str, Any]]:
                 "md_saturation_time_s": metrics["md_saturation_time_s"],
             }
         )
-        rows[-1]["why_not_flown"] = (
-            None
-            if rows[-1]["route_flown"] or mask.sum() != 2
-            else pair_limit(traj, s, v, mask, rows[-1]["kappa_fraction"])
-        )
+        rows[-1]["pointing_rms_per_course_arcsec"] = _courses_rms(err[v], obs)
+        rows[-1]["why_not_flown"] = None if rows[-1]["route_flown"] or mask.sum() != 2 else pair_limit(s, mask)
     return rows

@@ -11,6 +11,8 @@ COLUMNS = (
     ("configuration", "configuration", "{}"),
     ("pointing_rms_arcsec", "RMS while scanning (″)", "{:.2f}"),
     ("pointing_max_arcsec", "max while scanning (″)", "{:.2f}"),
+    ("pointing_rms_per_course_arcsec", "RMS per course (″)", "{:.1f}"),
+    ("pointing_rms_seed_law_arcsec", "RMS, seed 000's MD law (″)", "{:.2f}"),
     ("kappa_fraction", "orbit with \\|κ\\| ≤ 1/2", "{:.0%}"),
     ("max_roll_rate_deg_s", "fastest feasible roll (°/s)", "{:.3f}"),
     ("route_flown", "route flown", "{}"),
@@ -41,6 +43,8 @@ def _cell(value, fmt: str) -> str:
         return "—"
     if isinstance(value, bool):
         return "yes" if value else "no"
+    if isinstance(value, list):
+        return " / ".join(fmt.format(v) for v in value)
     return fmt.format(value)
 
 

@@ -179,9 +179,10 @@ def test_faults_table_lists_the_eleven_configurations(tmp_path):
     assert rows["wheels 2+4 + MD"]["route_flown"]
     assert all(0.0 < rows[n]["kappa_fraction"] < 1.0 for n in rows if "+ MD" in n)
     for name, row in rows.items():  # a pair that misses the scanning accuracy says why, with figures
+        assert (row["pointing_rms_seed_law_arcsec"] is not None) == ("+ MD" in name)
         if "+ MD" in name and not row["route_flown"]:
             why = row["why_not_flown"]
-            assert ("geometry" in why or "dipole limit" in why) and "A·m²" in why and "|κ| ≤ 1/2" in why
+            assert ("geometry" in why or "dipole limit" in why) and "A·m²" in why and "from the pair normal" in why
         else:
             assert row["why_not_flown"] is None
 
