@@ -1,13 +1,14 @@
 """FDIR campaign under real sensors: randomised wheel faults along the scanning route (issue 13).
 
-One command: ``python benchmarks/fdir_campaign.py [--cases 200] [--seed 0]``. The somov-ge4-scan spacecraft
-flies with a 0.25 rpm tachometer quantum (our telemetry's resolution), its 2e-6 rad/s gyro noise and the MEKF;
-each case fails one uniformly drawn wheel (dead motor, or a 50 % gain loss) at a uniform onset in the route.
-A fault is *observable* from the first instant the momentum it withheld, |∫ (m_cmd − m_delivered) dt| from
-the onset, reaches one tachometer quantum of momentum J_r q (before that no reading can tell it from
-quantisation; a wheel isolated earlier, by favourable rounding, counts with delay 0). Printed: isolation
-delays from observability (distribution), isolated in ≤ 60 s, late, never, never observable, wrong wheel;
-then 24 h of nominal scanning with the same sensors (false alarms).
+One command: ``python benchmarks/fdir_campaign.py [--cases 200] [--seed 0] [--seed-models]``. The somov-ge4-scan
+spacecraft flies with a 0.25 rpm tachometer quantum (our telemetry's resolution), its 2e-6 rad/s gyro noise and the
+MEKF; each case fails one uniformly drawn wheel (dead motor, or a 50 % gain loss) at a uniform onset in the route. A
+fault is *observable* from the first instant the momentum it withheld, |∫ (m_cmd − m_delivered) dt| from the onset,
+reaches one tachometer quantum of momentum J_r q (before that no reading can tell it from quantisation; a wheel
+isolated earlier, by favourable rounding, counts with delay 0). Printed: isolation delays from observability
+(distribution), isolated in ≤ 60 s, late, never, never observable, wrong wheel; then 24 h of nominal scanning with
+the same sensors (false alarms). ``--seed-models`` adds seed 002's wheel noise torque K_x and gyro Markov drift with
+song-components' values (its drift density told to the MEKF).
 """
 
 from __future__ import annotations
@@ -31,11 +32,21 @@ TAIL_S = 360.0  # flight after the last possible onset (the route holds its last
 KINDS = {"dead wheel": ("failure", {}), "50% gain loss": ("gain", {"gain": 0.5})}
 
 
+SEED_MODELS = False  # --seed-models: seed 002 wheel noise and gyro Markov drift on
+
+
 def campaign_scenario(variants: list[VariantSpec], duration_s: float, output_dt_s: float = 1.0) -> Scenario:
-    """somov-ge4-scan with the quantised tachometer, FDIR on, the given variants."""
+    """somov-ge4-scan with the quantised tachometer, FDIR on, the given variants (and, with SEED_MODELS, seed
+    002's wheel noise and the gyro's Markov drift of song-components)."""
     s = scenario_library.get("somov-ge4-scan")
     d = s.model_dump()
     d["sensors"]["tachometer_quantum_rad_s"] = TACH_QUANTUM_RAD_S
+    if SEED_MODELS:
+        song = scenario_library.get("song-components").sensors
+        for key in ("gyro_markov_sigma_rad_s", "gyro_markov_tau_s", "gyro_drift_density_rad_s_sqrt_s"):
+            d["sensors"][key] = getattr(song, key)
+        for w in d["spacecraft"]["cluster"]["wheels"]:
+            w["noise_nm"] = scenario_library.SONG_WHEEL_TERMS["noise_nm"]
     d.update(duration_s=duration_s, output_dt_s=output_dt_s, fdir=True, variants=[v.model_dump() for v in variants])
     return Scenario.model_validate(d)
 
@@ -91,10 +102,20 @@ def main() -> None:
     ap.add_argument("--cases", type=int, default=200, help="cases per fault kind (default 200)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-24h", action="store_true", help="skip the 24 h nominal false-alarm run")
+    ap.add_argument("--seed-models", action="store_true", help="wheel noise K_x and gyro Markov drift on")
     args = ap.parse_args()
+    global SEED_MODELS
+    SEED_MODELS = args.seed_models
+    extra = ""
+    if SEED_MODELS:
+        song = scenario_library.get("song-components").sensors
+        extra = (
+            f", wheel noise K_x {scenario_library.SONG_WHEEL_TERMS['noise_nm']:g} N·m, gyro Markov drift "
+            f"σ {song.gyro_markov_sigma_rad_s:g} rad/s τ {song.gyro_markov_tau_s:g} s"
+        )
     print(
         f"somov-ge4-scan, tachometer quantum 0.25 rpm, gyro noise "
-        f"{scenario_library.get('somov-ge4-scan').sensors.gyro_noise_rad_s:g} rad/s, MEKF, onsets U{ONSETS_S} s"
+        f"{scenario_library.get('somov-ge4-scan').sensors.gyro_noise_rad_s:g} rad/s{extra}, MEKF, onsets U{ONSETS_S} s"
     )
     for k, name in enumerate(KINDS):
         r = run_kind(name, args.cases, args.seed + k)
