@@ -472,7 +472,7 @@ def _triad_stage(
 # --- stages: each takes the blocks of the configuration it reads, never the whole LoopConfig -------------------
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # every dynamics step: compiled into fly_variant, no call
 def _ephemeris_stage(
     e: Ephemeris,
     t0_unix_s: float,
@@ -951,7 +951,7 @@ def _wheel_hold_stage(
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # every dynamics step: compiled into fly_variant, no call
 def _actuator_stage(
     act: Actuators,
     wheel_inertia: np.ndarray,
@@ -993,7 +993,7 @@ def _actuator_stage(
         wheels.advance_rotor_phase_1(rotor_phase, speeds, dt_s)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # every dynamics step: compiled into fly_variant, no call
 def _disturbance_stage(
     gravity_gradient: bool,
     magnetic_on: bool,
