@@ -17,16 +17,8 @@ client's deque in the hub (``dropped`` so far, in every batch sent).
 
 from __future__ import annotations
 
-import asyncio
-import multiprocessing as mp
-import queue
-import threading
-import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass
-from multiprocessing.process import BaseProcess
-from multiprocessing.queues import Queue
-from multiprocessing.synchronize import Event
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar, cast
 
@@ -52,6 +44,8 @@ from telemetry.limits import dictionary_limits
 if TYPE_CHECKING:
     import pyarrow as pa
 
+    from backend.ingest.live_link import LiveLink
+
 __all__ = ["COMPONENTS", "TelemetryGateway"]
 
 Result = TypeVar("Result")
@@ -69,29 +63,6 @@ COMPONENTS = (
     "emulator",
     "engine",
 )
-LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
-LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
-
-
-@dataclass(frozen=True)
-class _LiveChild:
-    """The live-ingest process, its outbox to this server and its stop event."""
-
-    process: BaseProcess
-    outbox: Queue[tuple[str, Any]]
-    stop: Event
-
-
-def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
-    """("port", n) from the ingest process, or ("error", why) if it failed, died or stayed silent."""
-    deadline = time.monotonic() + LIVE_START_TIMEOUT_S
-    while time.monotonic() < deadline:
-        try:
-            return live.outbox.get(timeout=0.2)
-        except queue.Empty:
-            if not live.process.is_alive():
-                return "error", f"the ingest process exited with code {live.process.exitcode} (see its output above)"
-    return "error", f"no answer from the ingest process within {LIVE_START_TIMEOUT_S:.0f} s"
 
 
 class TelemetryGateway:
@@ -102,10 +73,7 @@ class TelemetryGateway:
         self.dictionaries = DictionaryCatalogue(settings.data_dir / "dictionaries")
         self._archive: Archive | None = None
         self._upload_decoder: UploadDecoder | None = None
-        self._live: _LiveChild | None = None
-        self._relay: threading.Thread | None = None
-        self._live_stats: dict[str, Any] = {}
-        self.live_port: int | None = None
+        self._live: LiveLink | None = None
         self._samples = SampleCache()
         self._committed: list[Callable[[str, str, list[SampleBatch]], None]] = []
         self._backfilled: list[Callable[[str, str, int, int], None]] = []
@@ -149,76 +117,43 @@ class TelemetryGateway:
         self._upload_decoder = UploadDecoder(self._archive.url, self._settings.data_dir / "dictionaries")
 
     async def start_live(self) -> None:
-        """Start the live-ingest process (telemetry.live) and the thread relaying it to the hub."""
+        """Start the live link (backend.ingest.live_link: the ingest process and the relay of its batches)."""
         if not (self._settings.live_enabled and self._archive is not None):
             return
-        from backend.ingest.live_ingest import OUTBOX_MESSAGES, run_ingest_process
+        from backend.ingest.live_link import LiveLink
 
         self.dictionaries.load(self._settings.live_dictionary)  # fail here, naming the dictionary
-        ctx = mp.get_context("spawn")
-        outbox: Queue[tuple[str, Any]] = ctx.Queue(OUTBOX_MESSAGES)
-        stop = ctx.Event()
-        args = (
-            self._settings.resolved_database_url(),
-            str(self._settings.data_dir / "dictionaries"),
-            self._settings.live_dictionary,
-            self._settings.live_satellite,
-            self._settings.host,
-            self._settings.telemetry_port,
-            outbox,
-            stop,
-            tuple(self._settings.telemetry_sources),
-        )
-        live = _LiveChild(
-            ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True), outbox, stop
-        )
-        self._live = live
-        live.process.start()
-        kind, detail = await asyncio.to_thread(_first_live_message, live)
-        if kind != "port":
-            stop.set()
-            await asyncio.to_thread(live.process.join, LIVE_STOP_TIMEOUT_S)
+        self._live = LiveLink(self._settings, self._on_live_batch)
+        try:
+            await self._live.start()
+        except RuntimeError:
             self._live = None
-            raise RuntimeError(f"live ingest did not start: {detail}")
-        self.live_port = int(detail)
-        self._relay = threading.Thread(target=self._relay_loop, args=(live,), name="live-relay", daemon=True)
-        self._relay.start()
+            raise
 
-    def _relay_loop(self, live: _LiveChild) -> None:
-        while True:
-            try:
-                kind, payload = live.outbox.get(timeout=0.2)
-            except queue.Empty:
-                if live.stop.is_set() and not live.process.is_alive():
-                    return
-                continue
-            if kind == "stats":
-                self._live_stats = payload
-                continue
-            satellite, payload = payload
-            if len(payload.t_utc_ns):
-                self._samples.mark_live(satellite, int(payload.t_utc_ns.min()))
-            self._invalidate_batches(satellite, [payload])
-            self._publish(satellite, [payload], 0)
-            for listener in self._committed:
-                listener(satellite, self._settings.live_dictionary, [payload])
+    @property
+    def live_port(self) -> int | None:
+        """The port the live link listens on (None while it does not)."""
+        return None if self._live is None else self._live.port
+
+    def _on_live_batch(self, satellite: str, batch: SampleBatch) -> None:
+        """A batch of ``satellite`` the ingest process decoded and archives (within telemetry.live.ARCHIVE_INTERVAL_S):
+        caches, hub, commit listeners (called from the link's relay thread, in arrival order)."""
+        if len(batch.t_utc_ns):
+            self._samples.mark_live(satellite, int(batch.t_utc_ns.min()))
+        self._invalidate_batches(satellite, [batch])
+        self._publish(satellite, [batch], 0)
+        for listener in self._committed:
+            listener(satellite, self._settings.live_dictionary, [batch])
 
     async def stop_live(self) -> None:
-        """Stop the ingest process (it archives what is pending first) and the relay thread."""
-        if self._live is None:
-            return
-        process = self._live.process
-        self._live.stop.set()
-        await asyncio.to_thread(process.join, LIVE_STOP_TIMEOUT_S)
-        if process.is_alive():
-            process.terminate()
-        if self._relay is not None:
-            await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
-        self._live = None
+        """Stop the live link (the ingest process archives what is pending first)."""
+        if self._live is not None:
+            await self._live.stop()
+            self._live = None
 
     def live_stats(self) -> dict[str, Any]:
         """Tallies of the live stream (packets received/archived, errors), empty when off."""
-        return {} if self._live is None else {"port": self.live_port, **self._live_stats}
+        return {} if self._live is None else self._live.stats()
 
     def close(self) -> None:
         """Stop the upload decoder (a file mid-decode is not archived) and release the archive's connections."""

@@ -1,0 +1,129 @@
+"""The live link as the server sees it: the live-ingest child process (backend.ingest.live_ingest), its outbox
+and the thread relaying what it forwards.
+
+The child listens for packets, decodes and archives them (telemetry.live) and forwards each decoded batch (raw
+packets stripped) with its satellite, and its tallies; :class:`LiveLink` starts it, waits for its port, hands
+every (satellite, batch) to ``on_batch`` in arrival order from its relay thread, keeps the newest tallies, and
+stops it (the child archives what is pending first). The outbox's drop rule is the one fan-out policy stated in
+:mod:`backend.ingest.telemetry_gateway`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import multiprocessing as mp
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from multiprocessing.process import BaseProcess
+from multiprocessing.queues import Queue
+from multiprocessing.synchronize import Event
+from typing import Any
+
+from backend.core.settings import Settings
+from telemetry.ingest_report import SampleBatch
+
+__all__ = ["LIVE_START_TIMEOUT_S", "LIVE_STOP_TIMEOUT_S", "LiveLink"]
+
+LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
+LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
+RELAY_POLL_S = 0.2
+
+
+@dataclass(frozen=True)
+class _LiveChild:
+    """The live-ingest process, its outbox to this server and its stop event."""
+
+    process: BaseProcess
+    outbox: Queue[tuple[str, Any]]
+    stop: Event
+
+
+def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
+    """("port", n) from the ingest process, or ("error", why) if it failed, died or stayed silent."""
+    deadline = time.monotonic() + LIVE_START_TIMEOUT_S
+    while time.monotonic() < deadline:
+        try:
+            return live.outbox.get(timeout=RELAY_POLL_S)
+        except queue.Empty:
+            if not live.process.is_alive():
+                return "error", f"the ingest process exited with code {live.process.exitcode} (see its output above)"
+    return "error", f"no answer from the ingest process within {LIVE_START_TIMEOUT_S:.0f} s"
+
+
+class LiveLink:
+    """The live-ingest process of ``settings`` (its satellite, dictionary, host, port, allowed sources) and the relay
+    of its batches to ``on_batch``."""
+
+    def __init__(self, settings: Settings, on_batch: Callable[[str, SampleBatch], None]) -> None:
+        self._settings, self._on_batch = settings, on_batch
+        self._child: _LiveChild | None = None
+        self._relay: threading.Thread | None = None
+        self._stats: dict[str, Any] = {}
+        self.port: int | None = None
+
+    async def start(self) -> int:
+        """Spawn the ingest process, wait for its port and start the relay; RuntimeError naming why it did not."""
+        from backend.ingest.live_ingest import OUTBOX_MESSAGES, run_ingest_process
+
+        s = self._settings
+        ctx = mp.get_context("spawn")
+        outbox: Queue[tuple[str, Any]] = ctx.Queue(OUTBOX_MESSAGES)
+        stop = ctx.Event()
+        args = (
+            s.resolved_database_url(),
+            str(s.data_dir / "dictionaries"),
+            s.live_dictionary,
+            s.live_satellite,
+            s.host,
+            s.telemetry_port,
+            outbox,
+            stop,
+            tuple(s.telemetry_sources),
+        )
+        process = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
+        child = self._child = _LiveChild(process, outbox, stop)
+        process.start()
+        kind, detail = await asyncio.to_thread(_first_live_message, child)
+        if kind != "port":
+            stop.set()
+            await asyncio.to_thread(process.join, LIVE_STOP_TIMEOUT_S)
+            self._child = None
+            raise RuntimeError(f"live ingest did not start: {detail}")
+        self.port = int(detail)
+        self._relay = threading.Thread(target=self._relay_loop, args=(child,), name="live-relay", daemon=True)
+        self._relay.start()
+        return self.port
+
+    def _relay_loop(self, child: _LiveChild) -> None:
+        while True:
+            try:
+                kind, payload = child.outbox.get(timeout=RELAY_POLL_S)
+            except queue.Empty:
+                if child.stop.is_set() and not child.process.is_alive():
+                    return
+                continue
+            if kind == "stats":
+                self._stats = payload
+            else:
+                satellite, batch = payload
+                self._on_batch(satellite, batch)
+
+    async def stop(self) -> None:
+        """Stop the ingest process (it archives what is pending first) and the relay thread."""
+        if self._child is None:
+            return
+        process = self._child.process
+        self._child.stop.set()
+        await asyncio.to_thread(process.join, LIVE_STOP_TIMEOUT_S)
+        if process.is_alive():
+            process.terminate()
+        if self._relay is not None:
+            await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
+        self._child = None
+
+    def stats(self) -> dict[str, Any]:
+        """Tallies of the live stream (packets received/archived, errors, forward_dropped), empty once stopped."""
+        return {} if self._child is None else {"port": self.port, **self._stats}
