@@ -103,9 +103,9 @@ class MonitorHandles:
         with self._lock:
             geometry = self.geometry
         viewer = Viewer(client, role, geometry, self.n_wheels, self.live, self.windows, self._loader, self.link)
-        with self._lock:
-            self.viewers.setdefault(role, {})[viewer.client_id] = viewer
+        with self._lock:  # its first frame sent before it is listed: a listed viewer has been shown
             self._render_one(viewer, {})
+            self.viewers.setdefault(role, {})[viewer.client_id] = viewer
 
     def _disconnect(self, role: Role, client: viser.ClientHandle) -> None:
         with self._lock:

@@ -10,10 +10,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+import telemetry
 from backend.app import create_app
 from backend.core.auth import Role
+from telemetry.dictionary import load_yaml
 from telemetry.emulator import emulate
-from telemetry.packet_files import CHUNK_OCTETS
+from telemetry.packet_files import chunk_octets_for
 from tests.backend.conftest import bearer, make_settings
 
 NOAA20 = Path("real/noaa20_jpss1_apid11")
@@ -79,8 +81,8 @@ def test_reference_satellite_twin_compares_every_sample_and_archives_its_residua
     assert [s["latest_telemetry_utc"] for s in listed if s["name"] == "REFSAT"] == ["2026-03-20T00:03:59.750Z"]
 
 
-LONG_PASS_S = 2000.0  # 2,000 s × (4 × 126 + 62) octets/s ≈ 1.13 MB: two decode chunks
-BACKFILL_DRAIN_S = 600.0  # the twin flies 33 minutes of telemetry on a loaded 2-core machine
+LONG_PASS_S = 5200.0  # 5,200 s × (4 × 126 + 62) octets/s ≈ 2.94 MB: two of the dictionary's decode chunks (2.75 MB)
+BACKFILL_DRAIN_S = 600.0  # the twin flies 87 minutes of telemetry on a loaded 2-core machine
 
 
 def test_an_upload_of_several_decode_chunks_reaches_the_twin_over_all_of_it(
@@ -89,12 +91,14 @@ def test_an_upload_of_several_decode_chunks_reaches_the_twin_over_all_of_it(
     """Decoded by the upload decoder process, not handed over: the twin reads it back from the archive, syncs,
     and archives residuals over the whole pass, at the sensors' noise."""
     data = emulate("somov-ge4-scan", [], LONG_PASS_S, EPOCH, truth_seed=None)[2].data
-    assert len(data) > CHUNK_OCTETS
+    assert len(data) > chunk_octets_for(
+        load_yaml(Path(telemetry.__file__).parent / "dictionaries" / "reference_satellite.yaml")
+    )
     report = _upload(client, tokens["operator"], "REFSAT-LONG", "reference_satellite.yaml", data)
     client.app.state.services.twins.drain(BACKFILL_DRAIN_S)
     assert report["published"] is False
     twin = client.get("/api/v1/satellites/REFSAT-LONG/twin", headers=bearer(tokens["viewer"])).json()
-    assert twin["twin_utc"] == twin["telemetry_utc"] == "2026-03-20T00:33:19.750Z"  # the last HK sample
+    assert twin["twin_utc"] == twin["telemetry_utc"] == "2026-03-20T01:26:39.750Z"  # the last HK sample
     samples = client.get(
         "/api/v1/parameters/twin_attitude_residual_arcsec/samples?satellite=REFSAT-LONG&max_points=100000",
         headers=bearer(tokens["viewer"]),
