@@ -104,26 +104,17 @@ def _proc_cpu_s(pid: int) -> float:
 
 
 def _tree(pid: int) -> dict[int, str]:
-    """pid -> command name of the process and its descendants."""
-    parents: dict[int, list[int]] = {}
-    names: dict[int, str] = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            text = (entry / "stat").read_text()
-            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        ppid = int(text.rsplit(")", 1)[1].split()[1])
-        parents.setdefault(ppid, []).append(int(entry.name))
-        names[int(entry.name)] = cmdline
-    out, todo = {}, [pid]
-    while todo:
-        p = todo.pop()
-        out[p] = names.get(p, "?")
-        todo.extend(parents.get(p, []))
-    return out
+    """pid -> command line of the process and its living descendants (tests.process_tree's walk)."""
+    from tests.process_tree import descendants
+
+    return {p: _cmdline(p) for p in {pid} | descendants(pid)}
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+    except OSError:
+        return "?"
 
 
 def _role(cmdline: str, pid: int, server: int) -> str:
