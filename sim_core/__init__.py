@@ -7,4 +7,4 @@ from pathlib import Path as _Path
 
 from sim_core.compiled_cache import guard as _guard_compiled_cache
 
-_guard_compiled_cache(_Path(__file__).parent)  # numba caches never outlive a change of any sim_core source
+_guard_compiled_cache(_Path(__file__).parent)  # a module's numba cache never outlives a change of its sources

@@ -59,5 +59,30 @@ def test_the_stamp_follows_the_sources(tmp_path):
     pkg = tmp_path / "pkg"
     assert compiled_cache.guard(pkg) and not compiled_cache.guard(pkg)  # first call stamps, second finds it current
     (pkg / "callee.py").write_text(CALLEE.format(3))
-    assert compiled_cache.source_hash(pkg) != compiled_cache.stamp_path(pkg).read_text().strip()
-    assert compiled_cache.guard(pkg)
+    assert compiled_cache.guard(pkg) == ["callee", "caller"]  # the callee changed, the caller imports it
+
+
+def test_a_change_clears_only_the_modules_that_see_it(tmp_path):
+    _package(tmp_path, 1)
+    pkg = tmp_path / "pkg"
+    (pkg / "other.py").write_text("from numba import njit\n\n\n@njit(cache=True)\ndef three():\n    return 3\n")
+    assert _run(tmp_path, True) == 2
+    compiled = {f.name for f in (pkg / "__pycache__").iterdir() if f.suffix in compiled_cache.CACHE_SUFFIXES}
+    assert any(n.startswith("caller.") for n in compiled) and any(n.startswith("callee.") for n in compiled)
+    (pkg / "other.py").write_text("from numba import njit\n\n\n@njit(cache=True)\ndef three():\n    return 4\n")
+    assert compiled_cache.guard(pkg) == ["other"]
+    kept = {f.name for f in (pkg / "__pycache__").iterdir() if f.suffix in compiled_cache.CACHE_SUFFIXES}
+    assert kept == compiled  # other.py was never compiled; caller and callee keep their machine code
+    (pkg / "callee.py").write_text(CALLEE.format(5))
+    assert compiled_cache.guard(pkg) == ["callee", "caller"]
+    assert not any(f.suffix in compiled_cache.CACHE_SUFFIXES for f in (pkg / "__pycache__").iterdir())
+    assert _run(tmp_path, True) == 10
+
+
+def test_imports_are_found_in_every_spelling():
+    modules = {"a", "b", "c", "d", "e"}
+    source = (
+        "import pkg.a\nfrom pkg import b as bb\nfrom pkg.c import f\nfrom . import d\ndef g():\n    from .e import h\n"
+    )
+    assert compiled_cache._imported_modules(source, "pkg", modules) == modules
+    assert compiled_cache._imported_modules("import numpy\nfrom pkgx import a\n", "pkg", modules) == set()
