@@ -3,8 +3,9 @@
 numba compiles on first call; cold, the demo satellite's flight and its live twin spend minutes compiling on a
 loaded 2-core machine, on the start-up's critical path. ``scripts/run.sh`` runs this after installing (and again
 whenever a source file of ``sim_core`` or ``telemetry`` changed, since sim_core.compiled_cache then drops the
-cache of the modules that see the change): it flies what ``serve`` flies with the same types — the emulator's flight with the demo's hidden fault,
-the decoding of its packets, the live twin synchronising on them — so that ``serve`` only loads machine code.
+cache of the modules that see the change): it flies what ``serve`` flies with the same types — the emulator's
+flight with the demo's hidden fault, the decoding of its packets, the live twin synchronising on them —
+so that ``serve`` only loads machine code.
 """
 
 from __future__ import annotations
