@@ -1,13 +1,19 @@
-"""The ingest process's outbox to the server: newest wins when the server falls behind, losses counted."""
+"""The ingest process's outbox to the server (newest wins when the server falls behind, losses counted) and its
+SIGTERM handler."""
 
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
+import signal
+import threading
 
+from backend.ingest import live_ingest
 from backend.ingest.live_ingest import _offer
 
 OUTBOX_MESSAGES = 3
 GET_TIMEOUT_S = 10.0  # the queue's feeder thread writes to its pipe within milliseconds; margin for a loaded machine
+REENTRY_WAIT_S = 2.0  # a re-entered stop.set() waits this long on its own lock before the test calls it a deadlock
 
 
 def test_a_full_outbox_loses_its_oldest_messages_and_counts_them() -> None:
@@ -18,4 +24,47 @@ def test_a_full_outbox_loses_its_oldest_messages_and_counts_them() -> None:
     received = [outbox.get(timeout=GET_TIMEOUT_S)[1] for _ in range(OUTBOX_MESSAGES)]
     assert received == [7, 8, 9]  # the server resumes at the present, in order
     assert tally["forward_dropped"] == 10 - OUTBOX_MESSAGES
+    outbox.close()
+
+
+class _SecondSigtermInsideSet:
+    """A stop event like multiprocessing's (set() holds a non-reentrant lock) during whose first set() a second
+    SIGTERM arrives, as when the server was killed -9 (parent-death signal and parent watch both fire). A set()
+    re-entered from the handler finds the lock held: with the real event it waits for ever; here it fails."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.sets = 0
+
+    def set(self) -> None:
+        if not self._lock.acquire(timeout=REENTRY_WAIT_S):
+            raise AssertionError("stop.set() re-entered from the second SIGTERM waited on its own lock (deadlock)")
+        try:
+            self.sets += 1
+            if self.sets == 1:
+                signal.raise_signal(signal.SIGTERM)  # its handler runs here, the lock held
+        finally:
+            self._lock.release()
+
+
+def test_a_second_sigterm_during_the_first_neither_deadlocks_nor_acts_twice(monkeypatch) -> None:
+    timers: list[tuple[float, object]] = []
+
+    class RecordedTimer:  # the real one would os._exit the test process ORPHAN_EXIT_S later
+        def __init__(self, interval: float, function: object, args: tuple[int]) -> None:
+            timers.append((interval, function))
+
+        def start(self) -> None:
+            pass
+
+    monkeypatch.setattr(live_ingest.threading, "Timer", RecordedTimer)
+    outbox = mp.get_context("spawn").Queue(OUTBOX_MESSAGES)
+    stop = _SecondSigtermInsideSet()
+    previous = signal.signal(signal.SIGTERM, live_ingest._OrphanStop(outbox, stop))  # type: ignore[arg-type]
+    try:
+        signal.raise_signal(signal.SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert stop.sets == 1  # the second signal did nothing: the first one's set() completed
+    assert timers == [(live_ingest.ORPHAN_EXIT_S, os._exit)]  # one bounded exit, armed
     outbox.close()
