@@ -45,5 +45,5 @@ async def parameters_info(
     services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=100)
 ) -> dict[str, Any]:
     """{name: {units, description, enumeration, limits}} from the dictionaries that define the satellite's names."""
-    archived = services.telemetry.archive.parameters(satellite)
+    archived = await run_in_threadpool(services.telemetry.archive.parameters, satellite)
     return await run_in_threadpool(services.telemetry.dictionaries.describe, archived)

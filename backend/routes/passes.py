@@ -7,6 +7,7 @@ from datetime import datetime
 from typing import Any
 
 from fastapi import APIRouter, Query, Request
+from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
@@ -23,6 +24,7 @@ from backend.schemas import (
     TlePublic,
     TleStored,
 )
+from backend.services import Services
 from telemetry.archive.records import PassRecord, StationRecord
 
 router = APIRouter(tags=["passes"], responses=ERROR_RESPONSES)
@@ -76,9 +78,15 @@ async def upload_tle(name: str, request: Request, services: ServicesDep, princip
     """Store a two-line element set (epoch read by SGP4)."""
     text = (await read_limited(request, MAX_TLE_BYTES)).decode("ascii", errors="replace")
     line1, line2, epoch_ns = _tle_lines(text)
-    tle_id = services.telemetry.archive.add_tle(name, line1, line2, epoch_ns)
-    services.audit.record(principal.name, "tle.upload", f"satellite/{name}", {"tle_id": tle_id})
+    tle_id = await run_in_threadpool(_store_tle, services, principal.name, name, line1, line2, epoch_ns)
     return {"id": tle_id, "satellite": name, "epoch_utc_ns": epoch_ns}
+
+
+def _store_tle(services: Services, caller: str, name: str, line1: str, line2: str, epoch_ns: int) -> int:
+    """Id of the TLE archived for ``name``, with its audit row (blocking: the database; call from a thread)."""
+    tle_id = services.telemetry.archive.add_tle(name, line1, line2, epoch_ns)
+    services.audit.record(caller, "tle.upload", f"satellite/{name}", {"tle_id": tle_id})
+    return tle_id
 
 
 @router.get("/satellites/{name}/tle", response_model=TlePublic, summary="Newest TLE of a satellite")

@@ -22,7 +22,9 @@ router = APIRouter(tags=["twin"], responses=ERROR_RESPONSES)
 async def create_session(body: TwinSessionCreate, services: ServicesDep, principal: OperatorDep) -> TwinSessionPublic:
     """Align the twin to telemetry at align_utc, fly it with the hypothesis (a simulation job)."""
     session = await run_in_threadpool(start_session, services, body, principal.name)
-    services.audit.record(principal.name, "twin.create", f"twin/{session.id}", {"faults": body.faults})
+    await run_in_threadpool(
+        services.audit.record, principal.name, "twin.create", f"twin/{session.id}", {"faults": body.faults}
+    )
     return session
 
 

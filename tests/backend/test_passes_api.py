@@ -40,6 +40,8 @@ def test_predicted_passes_match_skyfield_and_reception_uses_the_diary(
     assert client.post("/api/v1/ground-stations", json=STATION, headers=operator).status_code == 201
     tle = client.post("/api/v1/satellites/NOAA-20/tles", content=f"{line1}\n{line2}\n", headers=operator)
     assert tle.status_code == 201
+    audit = client.get("/api/v1/audit?action=tle.upload", headers=bearer(tokens["admin"])).json()
+    assert [(e["target"], e["detail"]["tle_id"]) for e in audit] == [("satellite/NOAA-20", tle.json()["id"])]
     predicted = client.post(
         f"/api/v1/satellites/NOAA-20/passes/predict?station=Fairbanks&start={DAY[0]}&end={DAY[1]}", headers=operator
     )
