@@ -21,7 +21,15 @@ from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import IO
 
-__all__ = ["PARENT_ENV", "become_owned_child", "die_with_parent", "port_holder", "spawn_owned", "stop_owned"]
+__all__ = [
+    "PARENT_ENV",
+    "become_owned_child",
+    "cpu_seconds",
+    "die_with_parent",
+    "port_holder",
+    "spawn_owned",
+    "stop_owned",
+]
 
 PARENT_ENV = "ACS_TWIN_PARENT_PID"  # set by spawn_owned; the child's CLI calls die_with_parent()
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
@@ -86,6 +94,15 @@ def _wait(process: subprocess.Popen[bytes] | BaseProcess, timeout_s: float) -> b
         return process.poll() is not None
     process.join(timeout_s)  # multiprocessing.Process
     return not process.is_alive()
+
+
+def cpu_seconds(pid: int) -> float | None:
+    """CPU time (user + system, s) process ``pid`` has used so far (Linux /proc), None where unknown."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime: fields 14, 15 of stat
 
 
 def port_holder(port: int) -> str | None:

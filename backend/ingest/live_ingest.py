@@ -26,8 +26,8 @@ if TYPE_CHECKING:
 
     from telemetry.archive import Archive
 
-    Outbox = Queue[tuple[str, Any]]  # ("port" | "error" | "batch" | "stats", payload) to the server; a batch's
-    # payload is (satellite, SampleBatch)
+    Outbox = Queue[tuple[str, Any]]  # ("starting" | "port" | "error" | "batch" | "stats", payload) to the server;
+    # "starting" names each start-up step as it begins, a batch's payload is (satellite, SampleBatch)
 
 __all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 
@@ -54,9 +54,10 @@ def run_ingest_process(
     sources: tuple[str, ...],
 ) -> None:
     """Process entry: serve the live stream (packets only from ``sources``, CIDR) until ``stop`` is set or the
-    server dies; ("port", n) or ("error", why) first."""
+    server dies; ("starting", step) as each start-up step begins, then ("port", n) or ("error", why)."""
     from backend.core.processes import become_owned_child
 
+    outbox.put(("starting", "process entry"))
     become_owned_child()  # SIGTERM when the server dies, even by kill -9: stop as if told to
     signal.signal(signal.SIGTERM, _OrphanStop(outbox, stop))
     asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop, sources))
@@ -141,13 +142,17 @@ async def _serve(
     stop: Event,
     sources: tuple[str, ...],
 ) -> None:
+    outbox.put(("starting", "imports of the live stream"))
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
     from telemetry.archive import Archive
     from telemetry.limits import dictionary_limits
     from telemetry.live import LiveStream
 
+    outbox.put(("starting", "opening the archive"))
     archive = Archive(database_url, migrate=False)
+    outbox.put(("starting", f"loading the dictionary {dictionary_name}"))
     dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
+    outbox.put(("starting", f"listening on {host}:{port}"))
     stream = LiveStream(
         dictionary,
         archive=archive,

@@ -25,9 +25,10 @@ from typing import Any
 from backend.core.settings import Settings
 from telemetry.ingest_report import SampleBatch
 
-__all__ = ["LIVE_START_TIMEOUT_S", "LIVE_STOP_TIMEOUT_S", "LiveLink"]
+__all__ = ["LIVE_START_STALL_S", "LIVE_STOP_TIMEOUT_S", "LiveLink"]
 
-LIVE_START_TIMEOUT_S = 120.0  # spawn + imports of the ingest process on a loaded 2-core machine
+LIVE_START_STALL_S = 60.0  # the ingest process's start-up fails only after this long without progress (neither a
+# step reported nor CPU time used): on a loaded machine its spawn and imports may take minutes, never silently
 LIVE_STOP_TIMEOUT_S = 30.0  # the ingest process archives its pending batches before it exits
 RELAY_POLL_S = 0.2
 
@@ -42,15 +43,29 @@ class _LiveChild:
 
 
 def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
-    """("port", n) from the ingest process, or ("error", why) if it failed, died or stayed silent."""
-    deadline = time.monotonic() + LIVE_START_TIMEOUT_S
-    while time.monotonic() < deadline:
+    """("port", n) from the ingest process, or ("error", why) if it failed, died or made no progress (neither a
+    start-up step reported nor CPU time used) for LIVE_START_STALL_S; the error names the step it was in."""
+    from backend.core.processes import cpu_seconds
+
+    started = progressed = time.monotonic()
+    step, cpu = "spawn and imports", cpu_seconds(live.process.pid or 0)
+    while time.monotonic() - progressed < LIVE_START_STALL_S:
         try:
-            return live.outbox.get(timeout=RELAY_POLL_S)
+            kind, detail = live.outbox.get(timeout=RELAY_POLL_S)
         except queue.Empty:
             if not live.process.is_alive():
                 return "error", f"the ingest process exited with code {live.process.exitcode} (see its output above)"
-    return "error", f"no answer from the ingest process within {LIVE_START_TIMEOUT_S:.0f} s"
+            now_cpu = cpu_seconds(live.process.pid or 0)
+            if now_cpu is not None and now_cpu != cpu:
+                cpu, progressed = now_cpu, time.monotonic()
+            continue
+        if kind != "starting":
+            return kind, detail
+        step, progressed = detail, time.monotonic()
+    return "error", (
+        f"the ingest process made no progress for {LIVE_START_STALL_S:.0f} s at its step '{step}' "
+        f"({time.monotonic() - started:.0f} s after it was started)"
+    )
 
 
 class LiveLink:
