@@ -17,6 +17,7 @@ own random stream seeded at its start, so results do not depend on the thread co
 
 from __future__ import annotations
 
+import ctypes
 import os
 from typing import NamedTuple
 
@@ -357,6 +358,29 @@ class Monitors(NamedTuple):
     available: np.ndarray
     decouple: np.ndarray
     j_eff_inv: np.ndarray
+
+
+# Slots of Carry.scalars: the next step to fly, mode, σ_u, fault flags, allocation status, MD on, field held, valid.
+C_STEP, C_MODE, C_SIGMA_U, C_FLAGS, C_STATUS, C_MD_ON, C_MAG_PREV, C_VALID = 0, 1, 2, 3, 4, 5, 6, 7
+N_SCALARS = 8
+
+
+class Carry(NamedTuple):
+    """The loop's whole state between two calls of :func:`fly_variant` (a flight flown in segments), updated in
+    place: state vector, sensors, estimate, commands, monitors, position, flown friction, fault and mode state,
+    the scalars (C_* slots) and ``rng``, the bytes of the thread's numba random state (run_batch keeps it)."""
+
+    x: np.ndarray
+    sensed: Sensed
+    est: Estimate
+    cmd: Commands
+    mon: Monitors
+    pos: Position
+    friction: np.ndarray
+    fault_state: np.ndarray
+    mode_state: np.ndarray
+    scalars: np.ndarray
+    rng: np.ndarray
 
 
 # --- small pieces of the diagram ----------------------------------------------------------------------------
@@ -1109,14 +1133,14 @@ def _initial_monitors(p: PlantArrays, gyro_drift_density: float, available: np.n
 
 
 @njit(cache=True)
-def _flown_plant(t: PlantArrays) -> PlantArrays:
-    """The truth plant with its own friction array (wheel friction faults change it during the flight)."""
+def _flown_plant(t: PlantArrays, friction: np.ndarray) -> PlantArrays:
+    """The truth plant with the flight's own ``friction`` array (wheel friction faults change it during the flight)."""
     return PlantArrays(
         t.inertia,
         t.mass_inv,
         t.wheel_axes,
         t.wheel_inertia,
-        t.friction.copy(),
+        friction,
         t.flex_coupling,
         t.flex_mass,
         t.flex_freq,
@@ -1143,14 +1167,59 @@ def _initial_commands(nw: int) -> Commands:
     )
 
 
+@njit(cache=True)
+def initial_carry(c: LoopConfig, var: Variant) -> Carry:
+    """The loop's state at t = 0 for variant ``var`` (initial state, estimate at it, t = 0 ephemeris); seeds the
+    thread's random stream with ``var.seed`` and takes its first draw (the gyro's Markov drift)."""
+    np.random.seed(var.seed)
+    sens, estc, p, mc = c.sensors, c.estimator, c.model, c.modes
+    x = var.x0.copy()
+    sig_m = sens.gyro_markov_sigma_rad_s
+    drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
+    sensed = Sensed(np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), np.zeros(3))
+    filt = np.zeros(9)
+    filt[6:9] = x[4:7]
+    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), estc.covariance0.copy(), filt)
+    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.zeros(3), np.zeros(3))
+    sun_wanted = c.disturbances.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
+    _ephemeris_stage(c.ephemeris, c.clock.t0_unix_s, 0.0, x, True, True, sun_wanted, pos)
+    mode = mc.initial if mc.on else -1
+    mode_state = np.full(modes.STATE_SIZE, np.nan)
+    mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
+    scalars = np.zeros(N_SCALARS)
+    scalars[C_MODE], scalars[C_SIGMA_U], scalars[C_VALID] = mode, estc.gyro_drift_density, 1.0
+    return Carry(
+        x,
+        sensed,
+        est,
+        _initial_commands(p.wheel_inertia.shape[0]),
+        _initial_monitors(p, estc.gyro_drift_density, var.available),
+        pos,
+        c.truth.friction.copy(),
+        np.zeros(var.faults.shape[0], dtype=np.bool_),
+        mode_state,
+        scalars,
+        np.zeros(0, dtype=np.uint8),
+    )
+
+
 # --- the block diagram ---------------------------------------------------------------------------------------
 
 
 @njit(cache=True, nogil=True)
 def fly_variant(
-    c: LoopConfig, var: Variant, rec: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, shared: np.ndarray, slot: int
+    c: LoopConfig,
+    var: Variant,
+    carry: Carry,
+    rec: np.ndarray,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    shared: np.ndarray,
+    slot: int,
 ) -> None:
-    """Fly one variant and fill its output record ``rec`` (samples × R_* channels) and events ``ev``.
+    """Fly one variant from the state ``carry`` (its step ``C_STEP`` on, :func:`initial_carry` at t = 0) to the
+    clock's last step, updating ``carry`` in place, and fill its output record ``rec`` (samples × R_* channels)
+    and events ``ev``. The thread's random stream continues (initial_carry seeds it; run_batch restores it).
 
     ``c.model`` is the plant the onboard software models (law, allocation, FDIR); ``c.truth`` the one the
     dynamics fly. The law reads the estimate of ``c.estimator.kind`` (see :class:`EstimatorConfig`: the true
@@ -1160,7 +1229,6 @@ def fly_variant(
     reference-count each of its arrays, at every dynamics step).
     ``shared[0]`` non-zero cancels the run (checked each T_u); ``shared[slot]`` receives the steps done.
     """
-    np.random.seed(var.seed)
     clk, eph, prog, sens, estc, act, dist, mc = (
         c.clock,
         c.ephemeris,
@@ -1176,37 +1244,25 @@ def fly_variant(
     t_q, t_u = clk.measure_every * clk.dt_s, clk.control_every * clk.dt_s
     faults, fdir_on = var.faults, var.fdir_on
     has_faults = faults.shape[0] > 0
-    x = var.x0.copy()
+    x, sensed, est, cmd, mon, pos = carry.x, carry.sensed, carry.est, carry.cmd, carry.mon, carry.pos
+    fault_state, mode_state, scalars = carry.fault_state, carry.mode_state, carry.scalars
     wheel_speeds = x[7 + 2 * nq : 7 + 2 * nq + nw]  # view: the integrator updates x in place
     markov = _markov_1(sens, t_q)
-    sig_m = sens.gyro_markov_sigma_rad_s
-    drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
-    sensed = Sensed(np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), np.zeros(3))
-    filt = np.zeros(9)
-    filt[6:9] = x[4:7]
-    est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), estc.covariance0.copy(), filt)
-    cmd = _initial_commands(nw)
-    mon = _initial_monitors(p, estc.gyro_drift_density, var.available)
-    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.zeros(3), np.zeros(3))
-    plant = _flown_plant(c.truth)
+    plant = _flown_plant(c.truth, carry.friction)
     j_inv = np.linalg.inv(plant.inertia)
     work = np.zeros((6, x.shape[0] + 3 + nq + nw))
     ext = np.zeros(3)
-    fault_state = np.zeros(faults.shape[0], dtype=np.bool_)
     res = dist.residual_dipole_am2
     res_on = res[0] != 0.0 or res[1] != 0.0 or res[2] != 0.0
-    mode = mc.initial if mc.on else -1
-    mode_state = np.full(modes.STATE_SIZE, np.nan)
-    mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
-    sigma_u = estc.gyro_drift_density
-    flags, status, out_i = 0, 0, 0
-    md_on, have_mag_prev, valid = False, False, True
+    mode, sigma_u = int(scalars[C_MODE]), scalars[C_SIGMA_U]
+    flags, status, out_i = int(scalars[C_FLAGS]), int(scalars[C_STATUS]), 0
+    md_on, have_mag_prev, valid = scalars[C_MD_ON] != 0.0, scalars[C_MAG_PREV] != 0.0, scalars[C_VALID] != 0.0
     every_step = dist.gravity_gradient or dist.aerodynamic or dist.solar_pressure  # models that need r, v each step
     sun_wanted = dist.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
     surface_torques = dist.aerodynamic or dist.solar_pressure
-    _ephemeris_stage(eph, clk.t0_unix_s, 0.0, x, True, True, sun_wanted, pos)
+    k_next = clk.n_steps
 
-    for k in range(clk.n_steps):
+    for k in range(int(scalars[C_STEP]), clk.n_steps):
         t = k * clk.dt_s
         measure = k % clk.measure_every == 0
         control_tick = k % clk.control_every == 0
@@ -1238,6 +1294,7 @@ def fly_variant(
         if control_tick:
             shared[slot] = k
             if shared[0] != 0:
+                k_next = k
                 break
             q_p, w_p, wd_p, _ = program_at(prog, clk, eph.c_pn, t, pos)
             cmd.program[0:4] = q_p
@@ -1284,19 +1341,29 @@ def fly_variant(
         rk4_step_into(x, clk.dt_s, cmd.delivered, ext, plant, work, x)
         if has_faults:
             faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)
-    else:
-        shared[slot] = clk.n_steps
+    shared[slot] = k_next
+    scalars[C_STEP], scalars[C_MODE], scalars[C_SIGMA_U], scalars[C_FLAGS], scalars[C_STATUS] = (
+        k_next,
+        mode,
+        sigma_u,
+        flags,
+        status,
+    )
+    scalars[C_MD_ON], scalars[C_MAG_PREV], scalars[C_VALID] = md_on, have_mag_prev, valid
 
 
-def run_batch(config: LoopConfig, batch: Batch, out: Record) -> None:
-    """Fly every variant of ``batch`` with ``config``, one thread per core, into ``out``.
+def run_batch(config: LoopConfig, batch: Batch, out: Record, carries: list[Carry] | None = None) -> list[Carry]:
+    """Fly every variant of ``batch`` with ``config``, one thread per core, into ``out``; returns each variant's
+    :class:`Carry` at the end.
 
     ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
-    random stream, so results do not depend on the thread count or order.
+    random stream, so results do not depend on the thread count or order. ``carries`` (one per variant, from
+    the previous call, whose clock ended where this one's flight begins): each variant resumes where it
+    stopped, its random stream included, so that the segments joined are one flight.
     """
     from concurrent.futures import ThreadPoolExecutor
 
-    def one(v: int) -> None:
+    def one(v: int) -> Carry:
         var = Variant(
             batch.x0[v],
             batch.available[v],
@@ -1304,11 +1371,47 @@ def run_batch(config: LoopConfig, batch: Batch, out: Record) -> None:
             bool(batch.fdir_on[v]),
             int(batch.seeds[v]),
         )
-        fly_variant(config, var, out.rec[v], out.ev[v], out.n_ev[v], out.shared, 1 + v)
+        if carries is None:
+            carry = initial_carry(config, var)
+        else:
+            carry = carries[v]
+            _set_random_state(carry.rng)
+        fly_variant(config, var, carry, out.rec[v], out.ev[v], out.n_ev[v], out.shared, 1 + v)
+        return carry._replace(rng=_random_state())
 
     n = batch.x0.shape[0]
     if n == 1:
-        one(0)
-        return
+        return [one(0)]
     with ThreadPoolExecutor(max_workers=min(n, os.cpu_count() or 1)) as pool:
-        list(pool.map(one, range(n)))
+        return list(pool.map(one, range(n)))
+
+
+class _NumbaRandomState(ctypes.Structure):
+    """numba's per-thread NumPy random state (``rnd_state_t`` of numba/_random.c): the Mersenne Twister and the
+    second Gaussian of the last Box–Muller pair, which numba keeps for the next draw."""
+
+    _fields_ = [
+        ("index", ctypes.c_int),
+        ("mt", ctypes.c_uint * 624),
+        ("has_gauss", ctypes.c_int),
+        ("gauss", ctypes.c_double),
+        ("is_initialized", ctypes.c_int),
+    ]
+
+
+def _random_state() -> np.ndarray:
+    """This thread's numba random state as bytes (numba's own get_state leaves out the kept Gaussian)."""
+    from numba import _helperlib
+
+    raw = ctypes.string_at(_helperlib.rnd_get_np_state_ptr(), ctypes.sizeof(_NumbaRandomState))  # type: ignore[attr-defined]
+    return np.frombuffer(raw, dtype=np.uint8).copy()
+
+
+def _set_random_state(state: np.ndarray) -> None:
+    """Restore this thread's numba random state from :func:`_random_state`'s bytes."""
+    from numba import _helperlib
+
+    if state.dtype != np.uint8 or state.size != ctypes.sizeof(_NumbaRandomState):
+        raise ValueError(f"carry.rng: expected {ctypes.sizeof(_NumbaRandomState)} bytes of random state")
+    pointer = _helperlib.rnd_get_np_state_ptr()  # type: ignore[attr-defined]
+    ctypes.memmove(pointer, np.ascontiguousarray(state).ctypes.data, state.size)

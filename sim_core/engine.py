@@ -50,10 +50,13 @@ __all__ = [
     "turn_peak_rate",
     "MAX_EVENTS",
     "loop_config",
+    "Flight",
 ]
 
 ORBIT_TABLE_STEP_S = 10.0  # Hermite error ~ (ωh)⁴ r / 384 ≈ 0.2 mm at LEO
 FIELD_TABLE_STEP_S = 30.0  # linear error ~ (2ω h)² B / 8 ≈ 1e-4 B (a few nT)
+# rows of one IGRF date: magnetic_field_ecef_t dates its coefficients per hour of data from the first time
+FIELD_CHUNK_ROWS = int(environment._CHUNK_S / FIELD_TABLE_STEP_S)
 MAX_EVENTS = 256
 ARCSEC = np.pi / 180.0 / 3600.0
 PROGRESS_POLL_S = 0.2
@@ -367,28 +370,99 @@ def simulate(
     """
     s = scenario
     start = time.perf_counter()
-    params = plant_params(s)
+    flight = Flight(s, wheel_available, fdir)
+    params = flight.params
+    config = loop_config(s, params, flight.orbit, flight.t0_unix_s, flight.c_pn, flight.dut1_s, flight.start_program)
+    out = _record(config.clock, 0, len(s.variants), params.n_wheels)
+    _run_watched(config, flight.batch, out, config.clock.n_steps, progress, cancel, None)
+    span = out.rec.shape[1] * config.clock.output_every * config.clock.dt_s
+    return _trajectory(s, out, params, 0, min(span, s.duration_s), time.perf_counter() - start)
+
+
+class Flight:
+    """A flight flown in segments, without end (the emulator's stream): each :meth:`fly` goes on where the last
+    stopped, handing over the loop's whole state (closed_loop.Carry: attitude, rates, wheel speeds, estimator,
+    controller and monitors, fault and mode state, random streams), so that the segments joined are one
+    flight, bit for bit the same as one ``fly`` of their summed duration. The scenario's ``duration_s`` is not
+    used: the route's last hold lasts to the end of each segment; the ephemeris tables keep the epoch as origin
+    (orbit and field of the flown span, the field in whole IGRF dates) and the Earth orientation stays frozen at
+    the epoch; the B-dot gain of the mode machine is the first orbit's. :func:`simulate` flies one such segment,
+    its tables only as long as its own duration (the field of its last IGRF hour dated at that hour's data)."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        wheel_available: np.ndarray | None = None,
+        fdir: bool | Sequence[bool] | None = None,
+    ) -> None:
+        s = scenario
+        self.scenario, self.params = s, plant_params(s)
+        self.t0_unix_s = _epoch_unix_s(s.orbit.epoch_utc)
+        self.orbit = orbit_state(s)
+        self.c_pn, self.w_pm, self.dut1_s = frames.earth_orientation_frozen(self.t0_unix_s)
+        self.start_program = self.program(s)  # the route to the scenario's own duration
+        self.batch = _initial_batch(s, self, wheel_available, fdir)
+        self.steps_flown = 0
+        self._carries: list[closed_loop.Carry] | None = None
+        self._modes: closed_loop.ModeConfig | None = None
+
+    @property
+    def flown_s(self) -> float:
+        """Seconds flown since the epoch."""
+        return self.steps_flown * self.scenario.dynamics_dt_s
+
+    def program(self, s: Scenario) -> closed_loop.Program:
+        """The programmed motion of ``s`` (this flight's scenario, or a copy flown to another end)."""
+        return _program(s, self.orbit, self.t0_unix_s, self.c_pn, self.w_pm, self.dut1_s)
+
+    def fly(self, duration_s: float) -> Trajectory:
+        """Fly ``duration_s`` more (a whole number of dynamics steps) and return that segment's trajectory (times
+        since the epoch)."""
+        s, start = self.scenario, time.perf_counter()
+        steps = round(duration_s / s.dynamics_dt_s) if np.isfinite(duration_s) else 0
+        if steps < 1 or abs(steps * s.dynamics_dt_s - duration_s) > 1e-9 * max(duration_s, 1.0):
+            raise ValueError(
+                f"duration_s: expected a whole number (≥ 1) of {s.dynamics_dt_s} s steps, got {duration_s}"
+            )
+        end = self.steps_flown + steps
+        seg = s.model_copy(update={"duration_s": end * s.dynamics_dt_s})
+        rows = -(-(seg.duration_s + 4 * FIELD_TABLE_STEP_S) // FIELD_TABLE_STEP_S)
+        until = (-(-rows // FIELD_CHUNK_ROWS) * FIELD_CHUNK_ROWS - 4) * FIELD_TABLE_STEP_S
+        config = loop_config(
+            seg, self.params, self.orbit, self.t0_unix_s, self.c_pn, self.dut1_s, self.program(seg), until
+        )
+        if self._modes is None:
+            orbit_rows = int(orbit_period_s(s) // FIELD_TABLE_STEP_S) + 1
+            self._modes = _mode_config(s, config.ephemeris.field_table[:orbit_rows])
+        config = config._replace(modes=self._modes)
+        out = _record(config.clock, self.steps_flown, len(s.variants), self.params.n_wheels)
+        carries = _run_watched(config, self.batch, out, end, None, None, self._carries)
+        first = -(-self.steps_flown // config.clock.output_every)
+        self._carries, self.steps_flown = carries, end
+        return _trajectory(s, out, self.params, first, duration_s, time.perf_counter() - start)
+
+
+def _initial_batch(
+    s: Scenario, flight: Flight, wheel_available: np.ndarray | None, fdir: bool | Sequence[bool] | None
+) -> closed_loop.Batch:
+    """Every variant's start: the programmed (or the scenario's) attitude and rate at t = 0, wheel speeds, the
+    wheels the allocation may use, fault rows, FDIR flag and random seed."""
+    params, t0 = flight.params, flight.t0_unix_s
     nw, nv = params.n_wheels, len(s.variants)
-    t0 = _epoch_unix_s(s.orbit.epoch_utc)
-    state = orbit_state(s)
-    c_pn, w_pm, dut1 = frames.earth_orientation_frozen(t0)
-    program = _program(s, state, t0, c_pn, w_pm, dut1)
-    r0, v0, a0 = state(np.array([t0]))
-    q_p0, w_p0, _, _ = closed_loop.program_1(program, 0.0, t0, r0[0], v0[0], a0[0], c_pn, dut1)
+    r0, v0, a0 = flight.orbit(np.array([t0]))
+    q_p0, w_p0, _, _ = closed_loop.program_1(
+        flight.start_program, 0.0, t0, r0[0], v0[0], a0[0], flight.c_pn, flight.dut1_s
+    )
     q_init = q_p0 if s.initial_q_ib is None else quaternion.normalize(np.array(s.initial_q_ib))
     w_init = w_p0 if s.initial_omega_b_rad_s is None else np.array(s.initial_omega_b_rad_s)
     speeds = np.array([w.initial_speed_rpm for w in s.spacecraft.cluster.wheels]) * np.pi / 30.0
     x0 = pack_state(params, q_init, w_init, speeds)
-
-    config = loop_config(s, params, state, t0, c_pn, dut1, program)
-    clock = config.clock
-    n_out = -(-clock.n_steps // clock.output_every)
     avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)
     if avail.shape != (nv, nw):
         raise ValueError(f"wheel_available: expected shape ({nv}, {nw}), got {avail.shape}")
     faults, n_faults = fault_kernels.fault_table(s.variants)
     seeds = np.array([s.seed * 1000 + i * 7919 + v.seed_offset for i, v in enumerate(s.variants)], dtype=np.int64)
-    batch = closed_loop.Batch(
+    return closed_loop.Batch(
         np.repeat(x0[None], nv, axis=0),
         np.ascontiguousarray(avail),
         faults,
@@ -396,15 +470,17 @@ def simulate(
         _fdir_flags(s, s.fdir if fdir is None else fdir),
         seeds,
     )
-    out = closed_loop.Record(
+
+
+def _record(clock: closed_loop.Clock, first_step: int, nv: int, nw: int) -> closed_loop.Record:
+    """Empty outputs for the steps first_step … clock.n_steps − 1 of nv variants."""
+    n_out = -(-clock.n_steps // clock.output_every) - (-(-first_step // clock.output_every))
+    return closed_loop.Record(
         np.zeros((nv, n_out, closed_loop.record_width(nw))),
         np.zeros((nv, MAX_EVENTS, 3)),
         np.zeros((nv, 1), dtype=np.int64),
         np.zeros(nv + 1, dtype=np.int64),
     )
-    _run_watched(config, batch, out, clock.n_steps, progress, cancel)
-    span = n_out * clock.output_every * clock.dt_s
-    return _trajectory(s, out.rec, out.ev, out.n_ev, nw, span, params, time.perf_counter() - start)
 
 
 def _unit(v: Sequence[float]) -> np.ndarray:
@@ -475,17 +551,20 @@ def loop_config(
     c_pn: np.ndarray,
     dut1: float,
     program: closed_loop.Program,
+    tables_until_s: float | None = None,
 ) -> closed_loop.LoopConfig:
     """The typed configuration of :func:`sim_core.closed_loop.fly_variant` for the scenario: every block's
     parameters by name (plant as modelled and as flown, clock, ephemeris tables, sensors, estimator, law,
-    actuators, disturbances, modes, FDIR)."""
+    actuators, disturbances, modes, FDIR). ``tables_until_s``: tabulate the orbit and field that far (default:
+    the scenario's duration)."""
     dt = s.dynamics_dt_s
     every = [int(round(getattr(s, name) / dt)) for name in ("measurement_dt_s", "control_dt_s", "output_dt_s")]
     clock = closed_loop.Clock(
         int(round(s.duration_s / dt)), float(dt), every[0], every[1], every[2], float(t0), float(dut1)
     )
-    field_tab = _field_table(state, t0, s.duration_s, s.magnetic_model)
-    orbit_tab = _orbit_table(state, t0, s.duration_s)
+    until = s.duration_s if tables_until_s is None else max(tables_until_s, s.duration_s)
+    field_tab = _field_table(state, t0, until, s.magnetic_model)
+    orbit_tab = _orbit_table(state, t0, until)
     ephemeris = closed_loop.Ephemeris(*orbit_tab, *field_tab, np.ascontiguousarray(c_pn))
     sn, c, ws = s.sensors, s.controller, s.spacecraft.cluster.wheels
     sensor_models = closed_loop.SensorModels(
@@ -557,15 +636,18 @@ def _run_watched(
     n_steps: int,
     progress: Callable[[float], None] | None,
     cancel: Callable[[], bool] | None,
-) -> None:
-    """Run the compiled batch; if watched, in a thread while this one reports progress and polls cancel."""
+    carries: list[closed_loop.Carry] | None,
+) -> list[closed_loop.Carry]:
+    """Run the compiled batch (from ``carries`` if given); if watched, in a thread while this one reports
+    progress and polls cancel. Returns the variants' carries."""
     if progress is None and cancel is None:
-        closed_loop.run_batch(config, batch, out)
-        return
+        return closed_loop.run_batch(config, batch, out, carries)
     import threading
 
-    shared = out.shared
-    worker = threading.Thread(target=closed_loop.run_batch, args=(config, batch, out), daemon=True)
+    shared, done = out.shared, []
+    worker = threading.Thread(
+        target=lambda: done.extend(closed_loop.run_batch(config, batch, out, carries)), daemon=True
+    )
     worker.start()
     while worker.is_alive():
         worker.join(PROGRESS_POLL_S)
@@ -575,19 +657,14 @@ def _run_watched(
             progress(float(shared[1:].min()) / max(n_steps, 1))
     if shared[0]:
         raise Cancelled("simulation cancelled")
+    return done
 
 
 def _trajectory(
-    s: Scenario,
-    rec: np.ndarray,
-    ev: np.ndarray,
-    n_ev: np.ndarray,
-    nw: int,
-    span: float,
-    params: PlantParams,
-    wall: float,
+    s: Scenario, out: closed_loop.Record, params: PlantParams, first: int, span: float, wall: float
 ) -> Trajectory:
-    cl = closed_loop
+    """The trajectory of a record whose first sample is output number ``first`` since the epoch."""
+    cl, rec, ev, n_ev, nw = closed_loop, out.rec, out.ev, out.n_ev, params.n_wheels
     w0 = cl.R_WHEELS
     series = {
         "q_ib": rec[..., cl.R_Q : cl.R_Q + 4],
@@ -615,7 +692,7 @@ def _trajectory(
         ]
         for v in range(len(s.variants))
     ]
-    t = np.arange(rec.shape[1]) * s.output_dt_s
+    t = (first + np.arange(rec.shape[1])) * s.output_dt_s
     return Trajectory(
         scenario_name=s.name,
         variant_names=[v.name for v in s.variants],
@@ -624,6 +701,6 @@ def _trajectory(
         events=events,
         wheel_inertia_kg_m2=params.wheels.inertia_kg_m2.copy(),
         wall_time_s=wall,
-        simulated_time_s=float(min(span, s.duration_s)),
+        simulated_time_s=float(span),
         extra={"epoch_unix_s": _epoch_unix_s(s.orbit.epoch_utc)},
     )
