@@ -33,8 +33,8 @@ import contextlib
 import math
 import time
 from collections import deque
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import AsyncGenerator, AsyncIterator, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
@@ -43,7 +43,7 @@ from pydantic import ValidationError
 from sim_core import environment, frames, modes, quaternion, scenario_library, sensors
 from sim_core import faults as fault_kernels
 from sim_core import fdir as onboard_fdir
-from sim_core.engine import cluster_axes, orbit_state, plant_params, simulate
+from sim_core.engine import Flight, cluster_axes, orbit_state, plant_params
 from sim_core.faults import (  # parse_fault: the grammar's home is sim_core.faults
     TARGET_CODES,
     parse_fault,
@@ -65,6 +65,10 @@ __all__ = [
     "PacketSeries",
     "PacketStream",
     "SendReport",
+    "Satellite",
+    "TelemetryCarry",
+    "flight_streams",
+    "send_streams",
     "parse_fault",
     "satellite_scenario",
     "TruthTolerances",
@@ -75,6 +79,7 @@ __all__ = [
     "emulate",
     "demo_pass_bytes",
     "gps_week_seconds",
+    "hk_period_s",
     "send_stream",
 ]
 
@@ -94,6 +99,7 @@ SECONDS_PER_WEEK = 604_800
 GYRO_RANGE_RAD_S = math.radians(20.0)  # measuring range of the emulated rate sensor (well above any turn)
 WHEEL_TORQUE_CONSTANT_NM_A = 0.1  # K_m: the HR12-class 0.2 N·m maximum draws 2 A, inside the 2.5 A yellow limit
 STAR_TRACKER_TRACKING_RATE_RAD_S = math.radians(2.0)  # validity is not telemetered; a typical tracking limit
+SEGMENT_S = 600.0  # an endless flight is flown and packetised this much at a time (well under a second of CPU)
 REWIND_S = 1.0  # on reconnect, re-send what went out in the last second (socket buffers lost with the link)
 RETRY_S = 0.5
 MODE_LABELS = {
@@ -103,6 +109,7 @@ MODE_LABELS = {
     modes.MODE_ROUTE: "THREE_AXIS",
     modes.MODE_FAULT: "FAULT",
 }  # sim_core.modes → dictionary labels
+HIDDEN_EVENTS = {EVENT_NAMES[2], EVENT_NAMES[3]}  # fault onset/cleared: ground truth of the injection
 SENSOR_FLAGS = {
     "star_tracker": "fault_star_tracker",
     "gyro": "fault_gyro",
@@ -143,6 +150,19 @@ class PacketStream:
         return PacketStream(
             self.data[base : int(self.ends[hi - 1])], self.ends[lo:hi] - base, self.t_utc_ns[lo:hi], self.apid[lo:hi]
         )
+
+
+@dataclass
+class TelemetryCarry:
+    """What the emulated telemetry carries from one segment of a flight to the next: the sensors' noise stream,
+    the gyro's Markov drift at the next sample (None: drawn from its stationary distribution), the onboard
+    events the telemetry still shows (the last one, the last mode change, every isolation) and the next
+    sequence count per packet."""
+
+    rng: np.random.Generator
+    gyro_drift: np.ndarray | None = None
+    events: list[tuple[float, str, int]] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -270,7 +290,9 @@ def _turn_windows(s: Scenario) -> list[tuple[float, float]]:
     return windows
 
 
-def _mode(traj: Trajectory, s: Scenario, definition: PacketDefinition, t_s: np.ndarray) -> np.ndarray:
+def _mode(
+    events: list[tuple[float, str, int]], s: Scenario, definition: PacketDefinition, t_s: np.ndarray
+) -> np.ndarray:
     """Onboard mode code per sample: PROGRAM_TURN inside a scheduled turn, THREE_AXIS otherwise, and the mode
     the onboard logic announces by ``mode_change`` events from then on (seed 001 modes)."""
     codes = _codes(definition, "mode")
@@ -278,19 +300,21 @@ def _mode(traj: Trajectory, s: Scenario, definition: PacketDefinition, t_s: np.n
     for start, end in _turn_windows(s):
         programme[(t_s >= start) & (t_s < end)] = codes["PROGRAM_TURN"]
     mode = programme.copy()
-    for t, name, arg in traj.events[0]:
+    for t, name, arg in events:
         if name == "mode_change":
             label = MODE_LABELS.get(arg, "THREE_AXIS")
             mode[t_s >= t] = programme[t_s >= t] if label == "THREE_AXIS" else codes[label]
     return mode
 
 
-def _fdir_flags(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray) -> dict[str, np.ndarray]:
+def _fdir_flags(
+    events: list[tuple[float, str, int]], definition: PacketDefinition, t_s: np.ndarray
+) -> dict[str, np.ndarray]:
     """FDIR isolation flags per sample from the onboard FDIR's ``fault_isolated`` events (sim_core.fdir arguments)."""
     names = [p.name for p in definition.parameters if p.name.startswith("fault_")]
     flags = {name: np.zeros(t_s.shape, dtype=np.int64) for name in names}
     target_names = {code: name for name, code in TARGET_CODES.items()}
-    for t, event, arg in traj.events[0]:
+    for t, event, arg in events:
         if event != "fault_isolated":
             continue
         if arg < onboard_fdir.SENSOR_ARG:
@@ -302,15 +326,16 @@ def _fdir_flags(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray)
     return flags
 
 
-def _last_events(traj: Trajectory, definition: PacketDefinition, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _last_events(
+    events: list[tuple[float, str, int]], definition: PacketDefinition, t_s: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Code and argument of the last onboard-known engine event at or before each sample (truth-only events left out;
     a mode change carries the dictionary's mode code)."""
     codes, mode_codes = _codes(definition, "fdir_event"), _codes(definition, "mode")
-    hidden = {EVENT_NAMES[2], EVENT_NAMES[3]}  # fault onset/cleared: ground truth of the injection
     known = [
         (t, codes[name.upper()], mode_codes[MODE_LABELS.get(arg, "THREE_AXIS")] if name == "mode_change" else arg)
-        for t, name, arg in traj.events[0]
-        if name not in hidden
+        for t, name, arg in events
+        if name not in HIDDEN_EVENTS
     ]
     event = np.full(t_s.shape, codes["NONE"], dtype=np.int64)
     argument = np.zeros(t_s.shape, dtype=np.int64)
@@ -349,13 +374,17 @@ def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: 
     return q_m
 
 
-def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Gyro rates ω + b + d + n_g (seed 002 eq 13) under the hidden gyro faults; zeros if failed."""
-    sn = s.sensors
+def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, carry: TelemetryCarry) -> np.ndarray:
+    """Gyro rates ω + b + d + n_g (seed 002 eq 13) under the hidden gyro faults; zeros if failed. The Markov
+    drift goes on from ``carry.gyro_drift`` and leaves there its value at the next sample."""
+    sn, rng = s.sensors, carry.rng
     bias = np.array(sn.gyro_bias_rad_s)
     density = sn.gyro_markov_sigma_rad_s * math.sqrt(2.0 / sn.gyro_markov_tau_s)  # stationary σ as in the loop
     drift = sensors.GaussMarkovDrift(sn.gyro_markov_tau_s, density, s.measurement_dt_s)
-    w_g, d, _ = sensors.gyro(sr["omega_b_rad_s"], bias, drift, sn.gyro_noise_rad_s, GYRO_RANGE_RAD_S, rng)
+    w_g, d, _ = sensors.gyro(
+        sr["omega_b_rad_s"], bias, drift, sn.gyro_noise_rad_s, GYRO_RANGE_RAD_S, rng, carry.gyro_drift
+    )
+    carry.gyro_drift = drift.decay * d[-1] + drift.step_std * rng.standard_normal(3)
     table, _ = fault_kernels.fault_table(s.variants[:1])
     w_g, failed = fault_kernels.sensor_fault_series(
         table[0], fault_kernels.T_GYRO, t_s, w_g, w_g - sr["omega_b_rad_s"] - bias - d
@@ -384,16 +413,22 @@ def _unix_s(s: Scenario, t_s: np.ndarray) -> np.ndarray:
 
 
 def _hk_values(
-    traj: Trajectory, s: Scenario, definition: PacketDefinition, rows: np.ndarray, rng: np.random.Generator
+    traj: Trajectory,
+    s: Scenario,
+    definition: PacketDefinition,
+    rows: np.ndarray,
+    carry: TelemetryCarry,
+    events: list[tuple[float, str, int]],
 ) -> dict[str, np.ndarray]:
-    """ACS_HK engineering values at the trajectory rows (estimates, programme, actuators, sensor samples)."""
+    """ACS_HK engineering values at the trajectory rows (estimates, programme, actuators, sensor samples), the
+    onboard ``events`` so far."""
     sr = {name: series[0, rows] for name, series in traj.series.items()}
-    t_s = traj.t_s[rows]
+    t_s, rng = traj.t_s[rows], carry.rng
     wheels = [str(k + 1) for k in range(sr["wheel_speed_rad_s"].shape[-1])]
-    event, argument = _last_events(traj, definition, t_s)
+    event, argument = _last_events(events, definition, t_s)
     values = {
         **_split("q_st_ib", _star_tracker(sr, s, t_s, rng), "0123"),
-        **_split("omega_gyro_b_rad_s", _gyro(sr, s, t_s, rng), "xyz"),
+        **_split("omega_gyro_b_rad_s", _gyro(sr, s, t_s, carry), "xyz"),
         **_split("b_mag_b_t", _magnetometer(sr, s, t_s, _representable(definition, "b_mag_b_t_x"), rng), "xyz"),
         **_split("q_est_ib", sr["q_est_ib"], "0123"),
         **_split("q_prog_ib", sr["q_prog_ib"], "0123"),
@@ -402,10 +437,10 @@ def _hk_values(
         **_split("wheel_torque_cmd_nm", sr["wheel_torque_cmd_nm"], wheels),
         **_split("wheel_current_a", sr["wheel_torque_nm"] / WHEEL_TORQUE_CONSTANT_NM_A, wheels),
         **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"),
-        "mode": _mode(traj, s, definition, t_s),
+        "mode": _mode(events, s, definition, t_s),
         "fdir_event": event,
         "fdir_event_argument": argument,
-        **_fdir_flags(traj, definition, t_s),
+        **_fdir_flags(events, definition, t_s),
     }
     return values
 
@@ -437,14 +472,14 @@ def _gps_values(
     definition: PacketDefinition,
     rows: np.ndarray,
     t_utc_ns: np.ndarray,
-    rng: np.random.Generator,
+    carry: TelemetryCarry,
 ) -> dict[str, np.ndarray]:
     """GPS_NAV engineering values: ECEF fix of the flown orbit with seed 003's receiver noise, GPS time."""
     t_unix = traj.extra["epoch_unix_s"] + traj.t_s[rows]
     r_eci = traj.series["r_eci_m"][0, rows]
     _, v_eci, _ = orbit_state(s)(t_unix)
     r_ecef, v_ecef = frames.eci_to_ecef(r_eci, v_eci, t_unix)
-    r_fix, v_fix, _ = sensors.gps_receiver(r_ecef, v_ecef, GPS_SIGMA_R_M, GPS_SIGMA_V_M_S, 0.0, rng)
+    r_fix, v_fix, _ = sensors.gps_receiver(r_ecef, v_ecef, GPS_SIGMA_R_M, GPS_SIGMA_V_M_S, 0.0, carry.rng)
     week, seconds = gps_week_seconds(t_utc_ns)
     n = rows.shape[0]
     return {
@@ -457,37 +492,64 @@ def _gps_values(
     }
 
 
-def packet_series(traj: Trajectory, s: Scenario, dictionary: Dictionary, seed: int = 0) -> dict[str, PacketSeries]:
-    """Engineering values of ACS_HK (every T_q) and GPS_NAV (every 1 s) from a flown trajectory (variant 0)."""
+def packet_series(
+    traj: Trajectory, s: Scenario, dictionary: Dictionary, seed: int = 0, carry: TelemetryCarry | None = None
+) -> dict[str, PacketSeries]:
+    """Engineering values of ACS_HK (every T_q) and GPS_NAV (every 1 s) from a flown trajectory (variant 0).
+
+    ``carry``: a segment of a longer flight (its sample times since the epoch), the sensors going on from the
+    previous segment's carry and leaving theirs in it; without it, sensors start afresh from ``seed``."""
+    packets = _check_packets(dictionary, traj.series["wheel_speed_rad_s"].shape[-1])
+    output_dt = float(traj.t_s[1] - traj.t_s[0]) if traj.t_s.shape[0] > 1 else s.output_dt_s
+    epoch_ns = int(round(traj.extra["epoch_unix_s"] * NS_PER_S))
+    carry = carry or TelemetryCarry(np.random.default_rng(np.random.SeedSequence([s.seed, seed, EMULATOR_STREAM])))
+    events = carry.events + traj.events[0]
+    out = {}
+    for name in (HK_PACKET, GPS_PACKET):
+        definition = packets[name]
+        rows = np.flatnonzero(np.rint(traj.t_s / output_dt).astype(np.int64) % _stride(definition, output_dt) == 0)
+        t_ns = epoch_ns + np.rint(traj.t_s[rows] * NS_PER_S).astype(np.int64)
+        if name == HK_PACKET:
+            values = _hk_values(traj, s, definition, rows, carry, events)
+        else:
+            values = _gps_values(traj, s, definition, rows, t_ns, carry)
+        out[name] = PacketSeries(definition, t_ns, values)
+    carry.events = _kept_events(events)
+    return out
+
+
+def _check_packets(dictionary: Dictionary, n_wheels: int) -> dict[str, PacketDefinition]:
+    """The dictionary's packets by name; ValueError unless it has the reference satellite's ACS_HK (with a period
+    and ``n_wheels`` wheels) and GPS_NAV."""
     packets = {p.name: p for p in dictionary.packets.values()}
     missing = {HK_PACKET, GPS_PACKET} - set(packets)
     if missing:
         raise ValueError(f"dictionary: the emulator needs packets {sorted(missing)} of the reference satellite")
-    output_dt = float(traj.t_s[1] - traj.t_s[0]) if traj.t_s.shape[0] > 1 else s.output_dt_s
-    epoch_ns = int(round(traj.extra["epoch_unix_s"] * NS_PER_S))
-    n_wheels = sum(1 for p in packets[HK_PACKET].parameters if p.name.startswith("wheel_speed_rad_s_"))
-    if n_wheels != traj.series["wheel_speed_rad_s"].shape[-1]:
+    carried = sum(1 for p in packets[HK_PACKET].parameters if p.name.startswith("wheel_speed_rad_s_"))
+    if carried != n_wheels:
         raise ValueError(
-            f"scenario.spacecraft.cluster.wheels: the dictionary carries {n_wheels} wheels, the scenario "
-            f"flies {traj.series['wheel_speed_rad_s'].shape[-1]}"
+            f"scenario.spacecraft.cluster.wheels: the dictionary carries {carried} wheels, "
+            f"the scenario flies {n_wheels}"
         )
-    rng = np.random.default_rng(np.random.SeedSequence([s.seed, seed, EMULATOR_STREAM]))
-    out = {}
-    for name, build in ((HK_PACKET, _hk_values), (GPS_PACKET, _gps_values)):
-        definition = packets[name]
-        rows = np.arange(0, traj.t_s.shape[0], _stride(definition, output_dt))
-        t_ns = epoch_ns + np.rint(traj.t_s[rows] * NS_PER_S).astype(np.int64)
-        args = (t_ns, rng) if name == GPS_PACKET else (rng,)
-        out[name] = PacketSeries(definition, t_ns, build(traj, s, definition, rows, *args))
-    return out
+    return packets
 
 
-def encode_stream(series: dict[str, PacketSeries], first_count: int = 0) -> PacketStream:
-    """Packets of every series merged in time order, per-APID sequence counts mod 2^14 (CCSDS 133.0-B-2 §4.1.3.4)."""
+def _kept_events(events: list[tuple[float, str, int]]) -> list[tuple[float, str, int]]:
+    """The events later telemetry still shows: the last onboard-known one, the last mode change, every isolation."""
+    known = [i for i, e in enumerate(events) if e[1] not in HIDDEN_EVENTS]
+    changes = [i for i, e in enumerate(events) if e[1] == "mode_change"]
+    kept = {i for i, e in enumerate(events) if e[1] == "fault_isolated"} | set(known[-1:]) | set(changes[-1:])
+    return [events[i] for i in sorted(kept)]  # in their order: the last of equal times is the one shown
+
+
+def encode_stream(series: dict[str, PacketSeries], first_count: int | Mapping[str, int] = 0) -> PacketStream:
+    """Packets of every series merged in time order, per-APID sequence counts mod 2^14 (CCSDS 133.0-B-2 §4.1.3.4)
+    from ``first_count`` (one for all, or per packet name: a segment going on from the previous one's counts)."""
     blocks, times, apids, lengths = [], [], [], []
-    for item in series.values():
+    for name, item in series.items():
         n = item.t_utc_ns.shape[0]
-        counts = (first_count + np.arange(n)) % SEQUENCE_COUNT_MODULUS
+        first = first_count if isinstance(first_count, int) else first_count.get(name, 0)
+        counts = (first + np.arange(n)) % SEQUENCE_COUNT_MODULUS
         blocks.append(encode_packets(item.definition, item.t_utc_ns, counts, item.values))
         times.append(item.t_utc_ns)
         apids.append(np.full(n, item.definition.apid, dtype=np.int64))
@@ -501,6 +563,38 @@ def encode_stream(series: dict[str, PacketSeries], first_count: int = 0) -> Pack
     return PacketStream(data, np.cumsum(size[order]), t[order], apid[order])
 
 
+class Satellite:
+    """The emulated satellite flying without end: :meth:`fly` flies and packetises the next segment, the flight's
+    whole state handed over (sim_core.engine.Flight) and the sensors' noise, drift, onboard events and sequence
+    counts going on (:class:`TelemetryCarry`), so that the segments' packets are one continuous stream."""
+
+    def __init__(self, s: Scenario, dictionary: Dictionary | None = None, seed: int = 0, fdir: bool = True) -> None:
+        """``s``: the scenario as flown (:func:`satellite_scenario`); ``seed``: of the sensor noise."""
+        self.scenario, self.dictionary = s, dictionary or load_dictionary(REFERENCE_DICTIONARY)
+        _check_packets(self.dictionary, len(s.spacecraft.cluster.wheels))
+        self.flight = Flight(s, fdir=fdir)
+        self.telemetry = TelemetryCarry(np.random.default_rng(np.random.SeedSequence([s.seed, seed, EMULATOR_STREAM])))
+
+    def fly(self, duration_s: float) -> tuple[Trajectory, dict[str, PacketSeries], PacketStream]:
+        """The next ``duration_s`` of the flight: trajectory, values, packets."""
+        traj = self.flight.fly(duration_s)
+        series = packet_series(traj, self.scenario, self.dictionary, carry=self.telemetry)
+        stream = encode_stream(series, self.telemetry.counts)
+        for name, item in series.items():
+            self.telemetry.counts[name] = (
+                self.telemetry.counts.get(name, 0) + len(item.t_utc_ns)
+            ) % SEQUENCE_COUNT_MODULUS
+        return traj, series, stream
+
+
+def hk_period_s(dictionary: Dictionary) -> float:
+    """Period of the dictionary's ACS_HK packet (the emulator's output step); ValueError if it has none."""
+    hk = next((p for p in dictionary.packets.values() if p.name == HK_PACKET), None)
+    if hk is None or hk.period_s is None:
+        raise ValueError(f"dictionary: needs packet {HK_PACKET} with a period_s")
+    return float(hk.period_s)
+
+
 def emulate(
     scenario: str | Scenario = DEFAULT_SCENARIO,
     faults: Sequence[FaultSpec] = (),
@@ -512,15 +606,34 @@ def emulate(
     truth_seed: int | None = 0,
 ) -> tuple[Trajectory, dict[str, PacketSeries], PacketStream]:
     """Fly the satellite (hidden faults, onboard FDIR on, its own truth parameters unless ``truth_seed`` is
-    None) and packetise its telemetry: trajectory, values, packets."""
+    None) for ``duration_s`` (default: the scenario's) and packetise its telemetry: trajectory, values, packets."""
     dictionary = dictionary or load_dictionary(REFERENCE_DICTIONARY)
-    hk = next((p for p in dictionary.packets.values() if p.name == HK_PACKET), None)
-    if hk is None or hk.period_s is None:
-        raise ValueError(f"dictionary: needs packet {HK_PACKET} with a period_s")
-    s = satellite_scenario(scenario, faults, duration_s, start_utc, hk.period_s, truth_seed)
-    traj = simulate(s, fdir=fdir)
-    series = packet_series(traj, s, dictionary, seed)
-    return traj, series, encode_stream(series)
+    s = satellite_scenario(scenario, faults, duration_s, start_utc, hk_period_s(dictionary), truth_seed)
+    return Satellite(s, dictionary, seed, fdir).fly(s.duration_s)
+
+
+async def flight_streams(
+    satellite: Satellite, segment_s: float = SEGMENT_S, duration_s: float | None = None
+) -> AsyncGenerator[PacketStream, None]:
+    """The satellite's packets segment after segment (``segment_s`` each) for ``duration_s`` (None: without end);
+    the next segment is flown in a worker thread while the caller sends this one, so the stream never waits."""
+    if not segment_s > 0.0:
+        raise ValueError(f"segment_s: must be > 0, got {segment_s}")
+    loop, flown = asyncio.get_running_loop(), 0.0
+
+    def next_length() -> float:
+        return segment_s if duration_s is None else min(segment_s, duration_s - flown)
+
+    pending = loop.run_in_executor(None, satellite.fly, next_length())
+    while True:
+        flown += next_length()
+        _, _, stream = await pending
+        more = duration_s is None or flown < duration_s - 1e-9
+        if more:
+            pending = loop.run_in_executor(None, satellite.fly, next_length())
+        yield stream
+        if not more:
+            return
 
 
 def demo_pass_bytes(
@@ -568,15 +681,46 @@ async def send_stream(
     on_wall_clock: bool = False,
     satellite: str | None = None,
 ) -> SendReport:
-    """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting.
+    """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting
+    (:func:`send_streams` of this one stream)."""
+
+    async def once() -> AsyncIterator[PacketStream]:
+        yield stream
+
+    return await send_streams(once(), host, port, rate, retry_s, attempts, on_wall_clock, satellite)
+
+
+@dataclass
+class _Link:
+    """An open connection with its greeting, and the pace: wall clock (monotonic s) of the first packet's time."""
+
+    reader: asyncio.StreamReader
+    writer: asyncio.StreamWriter
+    greeting: bytes
+    wall0: float
+    t0_ns: int
+
+
+async def send_streams(
+    streams: AsyncIterator[PacketStream],
+    host: str = "127.0.0.1",
+    port: int = 10025,
+    rate: float = 1.0,
+    retry_s: float = RETRY_S,
+    attempts: int | None = None,
+    on_wall_clock: bool = False,
+    satellite: str | None = None,
+) -> SendReport:
+    """Send the packets of each stream in turn over one TCP link, paced at ``rate`` × their time stamps from the
+    first packet's (inf: as fast as possible), reconnecting.
 
     ``satellite``: each connection opens with telemetry.live.hello(satellite), so that a listener serving a fleet
     files the packets under that name (without it, under the listener's own satellite).
 
     ``on_wall_clock`` (real time only): each packet leaves when the UTC clock reaches its time stamp
     (those already due leave at once). TCP gives no application acknowledgement, so after a lost link
-    the packets written in the last ``REWIND_S`` are sent again; the archive drops duplicates (same
-    APID, count and time).
+    the packets of the current stream written in the last ``REWIND_S`` are sent again; the archive drops
+    duplicates (same APID, count and time).
     """
     if not rate > 0.0:
         raise ValueError(f"rate: must be > 0 (inf = unpaced), got {rate}")
@@ -589,47 +733,60 @@ async def send_stream(
     from telemetry.live import hello
 
     greeting = b"" if satellite is None else hello(satellite)
-    report, n = SendReport(), len(stream)
-    if n == 0:
-        return report
-    starts = np.concatenate([[0], stream.ends[:-1]])
-    due_s = (stream.t_utc_ns - stream.t_utc_ns[0]) / NS_PER_S / rate
-    reader, writer = await _connect(host, port, retry_s, attempts, greeting)
-    report.connections += 1
-    wall0, i = time.monotonic(), 0
-    recent: deque[tuple[float, int]] = deque()  # (monotonic s, packet index) written within REWIND_S
-    if on_wall_clock:
-        wall0 -= time.time() - int(stream.t_utc_ns[0]) / NS_PER_S
+    report, link = SendReport(), None
     try:
-        while i < n:
-            j = int(np.searchsorted(due_s, time.monotonic() - wall0, side="right"))
-            if j <= i:
-                await asyncio.sleep(due_s[i] - (time.monotonic() - wall0))
+        async for stream in streams:
+            if len(stream) == 0:
                 continue
-            try:
-                if reader.at_eof():
-                    raise ConnectionResetError("listener closed the connection")
-                writer.write(stream.data[int(starts[i]) : int(stream.ends[j - 1])])
-                await writer.drain()
-            except (ConnectionError, OSError):
-                writer.close()
-                resume = _rewind(recent, i)
-                report.packets_resent += i - resume
-                i = resume
+            if link is None:
                 reader, writer = await _connect(host, port, retry_s, attempts, greeting)
                 report.connections += 1
-                continue
-            recent.append((time.monotonic(), i))
-            while recent and recent[0][0] < time.monotonic() - REWIND_S:
-                recent.popleft()
-            report.packets_sent += j - i
-            report.octets_sent += int(stream.ends[j - 1] - starts[i])
-            i = j
+                wall0 = time.monotonic()
+                if on_wall_clock:
+                    wall0 -= time.time() - int(stream.t_utc_ns[0]) / NS_PER_S
+                link = _Link(reader, writer, greeting, wall0, int(stream.t_utc_ns[0]))
+            await _send_one(stream, link, rate, (host, port, retry_s, attempts), report)
     finally:
-        writer.close()
-        with contextlib.suppress(ConnectionError, OSError):
-            await writer.wait_closed()
+        if link is not None:
+            link.writer.close()
+            with contextlib.suppress(ConnectionError, OSError):
+                await link.writer.wait_closed()
     return report
+
+
+async def _send_one(
+    stream: PacketStream, link: _Link, rate: float, target: tuple[str, int, float, int | None], report: SendReport
+) -> None:
+    """Write one stream's packets on ``link`` at their pace, reconnecting it (and re-sending) when it drops."""
+    n = len(stream)
+    starts = np.concatenate([[0], stream.ends[:-1]])
+    due_s = (stream.t_utc_ns - link.t0_ns) / NS_PER_S / rate
+    i = 0
+    recent: deque[tuple[float, int]] = deque()  # (monotonic s, packet index) written within REWIND_S
+    while i < n:
+        j = int(np.searchsorted(due_s, time.monotonic() - link.wall0, side="right"))
+        if j <= i:
+            await asyncio.sleep(due_s[i] - (time.monotonic() - link.wall0))
+            continue
+        try:
+            if link.reader.at_eof():
+                raise ConnectionResetError("listener closed the connection")
+            link.writer.write(stream.data[int(starts[i]) : int(stream.ends[j - 1])])
+            await link.writer.drain()
+        except (ConnectionError, OSError):
+            link.writer.close()
+            resume = _rewind(recent, i)
+            report.packets_resent += i - resume
+            i = resume
+            link.reader, link.writer = await _connect(*target, link.greeting)
+            report.connections += 1
+            continue
+        recent.append((time.monotonic(), i))
+        while recent and recent[0][0] < time.monotonic() - REWIND_S:
+            recent.popleft()
+        report.packets_sent += j - i
+        report.octets_sent += int(stream.ends[j - 1] - starts[i])
+        i = j
 
 
 def _rewind(recent: deque[tuple[float, int]], i: int) -> int:

@@ -19,6 +19,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=float, default=1.0, help="time acceleration (1 = real time, inf = unpaced)")
     p.add_argument("--duration", type=float, help="simulated seconds (default: the scenario's)")
     p.add_argument(
+        "--forever", action="store_true", help="fly and send without end (the live demo; not with --out or --duration)"
+    )
+    p.add_argument(
+        "--segment",
+        type=float,
+        default=600.0,
+        help="when sending, fly this many seconds at a time, the next while the last is sent (default 600)",
+    )
+    p.add_argument(
         "--fault",
         action="append",
         default=[],
@@ -70,45 +79,58 @@ def _warn_late_faults(faults: list, duration_s: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Fly, packetise, then write and/or send; exit 2 on bad input, 1 if the listener cannot be reached."""
+    """Fly, packetise, then write and/or send; exit 2 on bad input, 1 if the listener cannot be reached.
+
+    Sending without ``--out`` flies in segments of ``--segment`` s, each next one while the last is sent (the first
+    packets leave after one segment's flight); ``--forever`` never ends."""
     import asyncio
 
     from sim_core.faults import parse_fault
     from telemetry import emulator
+    from telemetry.dictionary import load_dictionary
 
     try:
         faults = [parse_fault(text) for text in args.fault]
         if not args.rate > 0.0:
             raise ValueError(f"rate: must be > 0 (inf = unpaced), got {args.rate}")
-        traj, _, stream = emulator.emulate(
-            _scenario(args.scenario), faults, args.duration, _start_utc(args.start_utc), seed=args.seed
-        )
+        if args.forever and (args.out or args.duration is not None):
+            raise ValueError("forever: a flight without end has no --duration and cannot be written to --out")
+        if not args.segment > 0.0:
+            raise ValueError(f"segment: must be > 0 s, got {args.segment}")
+        start_utc = _start_utc(args.start_utc)
+        if args.out:
+            traj, _, stream = emulator.emulate(
+                _scenario(args.scenario), faults, args.duration, start_utc, seed=args.seed
+            )
+            duration = traj.simulated_time_s
+        else:
+            hk_period = emulator.hk_period_s(load_dictionary(emulator.REFERENCE_DICTIONARY))
+            s = emulator.satellite_scenario(_scenario(args.scenario), faults, args.duration, start_utc, hk_period)
+            satellite = emulator.Satellite(s, seed=args.seed)
+            duration = math.inf if args.forever else s.duration_s
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    _warn_late_faults(faults, traj.simulated_time_s)
-    print(f"emulated {len(stream)} packets ({len(stream.data)} octets) of {args.scenario}")
+    _warn_late_faults(faults, duration)
     if args.out:
+        print(f"emulated {len(stream)} packets ({len(stream.data)} octets) of {args.scenario}")
         args.out.write_bytes(stream.data)
         print(f"wrote {args.out}")
         if args.port is None:
             return 0
     port = DEFAULT_PORT if args.port is None else args.port
     pace = "unpaced" if math.isinf(args.rate) else f"x{args.rate:g}"
-    print(f"sending to {args.host}:{port} ({pace})", flush=True)
+    length = "without end" if math.isinf(duration) else f"{duration:g} s"
+    print(f"sending {length} of {args.scenario} to {args.host}:{port} ({pace})", flush=True)
     try:
         on_clock = args.start_utc == "now" and args.rate == 1.0
-        report = asyncio.run(
-            emulator.send_stream(
-                stream,
-                args.host,
-                port,
-                args.rate,
-                attempts=args.attempts,
-                on_wall_clock=on_clock,
-                satellite=args.satellite,
-            )
-        )
+        pacing = {"attempts": args.attempts, "on_wall_clock": on_clock, "satellite": args.satellite}
+        if args.out:
+            sending = emulator.send_stream(stream, args.host, port, args.rate, **pacing)
+        else:
+            streams = emulator.flight_streams(satellite, args.segment, None if math.isinf(duration) else duration)
+            sending = emulator.send_streams(streams, args.host, port, args.rate, **pacing)
+        report = asyncio.run(sending)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -70,11 +70,11 @@ def first_admin_token(services: Services) -> str | None:
 
 
 HIDDEN_FAULTS = ["wheel:2:failure@1500"]  # the demo satellite's secret: found from telemetry, not printed
-DEMO_FLIGHT_S = 5801.0  # one orbit of the demo satellite, so that the hidden fault does happen
 
 
 def start_emulator(settings: Settings, scenario: str, telemetry_port: int | None) -> subprocess.Popen[bytes] | None:
-    """The demo satellite (``acs-twin emulate``) streaming into the live listener, logging to data_dir."""
+    """The demo satellite (``acs-twin emulate --forever``) streaming into the live listener without end, logging to
+    data_dir."""
     from backend.core.processes import spawn_owned
 
     if not settings.live_enabled or not settings.telemetry_port or not telemetry_port:
@@ -96,8 +96,7 @@ def start_emulator(settings: Settings, scenario: str, telemetry_port: int | None
         "1",
         "--start-utc",
         "now",
-        "--duration",
-        str(DEMO_FLIGHT_S),
+        "--forever",
     ]
     for fault in HIDDEN_FAULTS:
         command += ["--fault", fault]

@@ -26,7 +26,7 @@ from sim_core.closed_loop import TARGET_CODES
 from telemetry import emulator
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
-from telemetry.live import LiveStream, hello
+from telemetry.live import LiveStream, MemoryLink, hello
 
 FAILED_WHEEL = 1  # sim_core index: the dictionary's wheel_*_2
 FAILURE_ONSET_S = 350.0  # during the observing hold, before the 20° turn (420–520 s)
@@ -390,6 +390,8 @@ def test_cli_streams_to_a_live_listener(dictionary) -> None:
                 "emulate",
                 "--duration",
                 "10",
+                "--segment",
+                "4",
                 "--rate",
                 "inf",
                 "--port",
@@ -410,6 +412,50 @@ def test_cli_streams_to_a_live_listener(dictionary) -> None:
         for packet in ("ACS_HK", "GPS_NAV")
     }
     assert code == 0 and received == {"ACS_HK": 40, "GPS_NAV": 10} and {m.satellite for m in messages} == {"S9"}
+
+
+SEGMENT_S = 20.0  # short segments: several seams in a fast test (the demo flies 600 s at a time)
+NOISE_CORRELATION_MAX = 0.3  # two independent runs of 80 × 3 star-tracker errors: |r| ~ 0.065 (1σ); 0.3 is 4.6σ
+
+
+def test_an_endless_satellite_keeps_streaming_segment_after_segment_as_one_flight(dictionary) -> None:
+    s = emulator.satellite_scenario(faults=[emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@30")])
+    n_segments = 4
+    whole_traj, _, whole_stream = emulator.Satellite(s, dictionary).fly(n_segments * SEGMENT_S)
+    whole = {b.packet: b for b in decode_stream(whole_stream.data, dictionary).batches}
+
+    async def listen() -> list:
+        live, link = LiveStream(dictionary), MemoryLink()
+        subscriber = live.subscribe(max_messages=10_000)
+        await live.start(link=link)
+        connection, sent = link.connect(), 0
+        streams = emulator.flight_streams(emulator.Satellite(s, dictionary), SEGMENT_S)  # without end
+        async for stream in streams:
+            connection.write(stream.data)
+            sent += 1
+            if sent == n_segments:
+                break
+        await streams.aclose()
+        await connection.aclose()
+        await live.stop()
+        return drain(subscriber)
+
+    batches: dict[str, list] = {}
+    for m in asyncio.run(listen()):
+        batches.setdefault(m.batch.packet, []).append(m.batch)
+    for name, offline in whole.items():
+        np.testing.assert_array_equal(np.concatenate([b.t_utc_ns for b in batches[name]]), offline.t_utc_ns)
+        counts = np.concatenate([b.sequence_count for b in batches[name]])
+        np.testing.assert_array_equal(counts, np.arange(len(offline.t_utc_ns)) % 16384)  # on across the seams
+    hk = {k: np.concatenate([b.values[k] for b in batches["ACS_HK"]]) for k in whole["ACS_HK"].values}
+    for k in ("q_est_ib_0", "q_est_ib_3", "omega_est_b_rad_s_x", "wheel_speed_rad_s_2", "wheel_speed_rad_s_4"):
+        np.testing.assert_array_equal(hk[k], whole["ACS_HK"].values[k], err_msg=k)  # the flight is one flight
+    assert hk["fault_wheel_2"][-1] == 1  # the wheel failed at 30 s, isolated by the onboard FDIR, still shown
+    q_st = np.stack([hk[f"q_st_ib_{i}"] for i in range(4)], axis=-1)
+    e = quaternion.multiply(quaternion.conjugate(whole_traj["q_ib"][0]), q_st)[:, 1:]  # the noise rotation / 2
+    per_segment = int(SEGMENT_S / s.output_dt_s)
+    r = np.corrcoef(e[:per_segment].ravel(), e[per_segment : 2 * per_segment].ravel())[0, 1]
+    assert abs(r) < NOISE_CORRELATION_MAX  # the sensor noise goes on, it does not start again each segment
 
 
 def test_demo_pass_file_holds_the_window_with_mission_sequence_counts(dictionary) -> None:
