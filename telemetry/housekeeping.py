@@ -38,15 +38,21 @@ ALTERNATIVES = {  # what the diagnosis reads → dictionary prefixes in order of
 }
 
 
-def read_batches(path: str | Path, dictionary: Dictionary) -> list[SampleBatch]:
-    """Decoded, validated batches of a packet file or a ground CSV/JSONL file (chosen by the suffix)."""
+def read_batches(path: str | Path, dictionary: Dictionary, now_utc_ns: int | None = None) -> list[SampleBatch]:
+    """Decoded, validated batches of a packet file or a ground CSV/JSONL file (chosen by the suffix); ValueError
+    naming the quarantine reasons when every sample in it was rejected. ``now_utc_ns``: the validation's clock (samples
+    later than a day after it are corrupt stamps)."""
     path = Path(path)
     if not path.exists():
         raise ValueError(f"telemetry: no such file {path}")
     if path.suffix.lower() in GROUND_SUFFIXES:
-        result = read_ground_file(path, dictionary)
+        result = read_ground_file(path, dictionary, now_utc_ns)
     else:
-        result = decode_stream(path.read_bytes(), dictionary, source=str(path))
+        result = decode_stream(path.read_bytes(), dictionary, source=str(path), now_utc_ns=now_utc_ns)
+    rejected = {r: n for r, n in result.report.reason_counts().items() if r != "unknown_parameter"}
+    if result.report.samples_accepted == 0 and rejected:  # unknown columns alone: the caller names what is missing
+        reasons = ", ".join(f"{n} {r}" for r, n in sorted(rejected.items()))
+        raise ValueError(f"telemetry: no sample of {path.name} accepted (quarantined: {reasons})")
     return result.batches
 
 

@@ -51,6 +51,9 @@ __all__ = [
 ]
 
 MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a few seconds of diagnosis
+# A file diagnosed offline may be a simulated flight dated after today (each file has its own epoch): the
+# ingest's bound against a runaway onboard clock protects the archive, which diagnosing a file never writes.
+OFFLINE_CLOCK_UTC_NS = 4_102_444_800 * 10**9  # 2100-01-01T00:00:00Z
 
 
 def scenario_wheels(scenario: Scenario) -> WheelModel:
@@ -124,8 +127,9 @@ def diagnose_file(
     satellite: str | None = None,
     flyer: Callable[[Scenario], object] | None = None,
 ) -> dict[str, Any]:
-    """Diagnose a packet file or a ground CSV/JSONL file (``acs-twin diagnose``)."""
-    return diagnose_batches(read_batches(path, dictionary), dictionary, scenario, satellite, flyer)
+    """Diagnose a packet file or a ground CSV/JSONL file (``acs-twin diagnose``), dated anywhere up to 2100."""
+    batches = read_batches(path, dictionary, now_utc_ns=OFFLINE_CLOCK_UTC_NS)
+    return diagnose_batches(batches, dictionary, scenario, satellite, flyer)
 
 
 class DiagnosisRuns:

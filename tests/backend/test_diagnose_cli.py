@@ -140,3 +140,21 @@ def test_another_spacecraft_is_refused(tmp_path: Path, capsys) -> None:
     code, _ = _diagnose(tmp_path, DATA / "nominal.csv", dictionary=NOAA)
     assert code == 2
     assert "wheel" in capsys.readouterr().err
+
+
+def test_a_file_dated_after_today_is_diagnosed(tmp_path: Path) -> None:
+    later = tmp_path / "nominal_2036.csv"
+    later.write_text((DATA / "nominal.csv").read_text().replace("2026-10-05T", "2036-10-05T"))
+    code, result = _diagnose(tmp_path, later)
+    assert code == 0
+    assert result["telemetry_start_utc"].startswith("2036-10-05T06:07:08")
+    assert result["hypotheses"][0]["fault"] == "none"
+
+
+def test_a_file_with_no_accepted_sample_names_the_quarantine_reason(tmp_path: Path, capsys) -> None:
+    unset_clock = tmp_path / "nominal_1970.csv"
+    unset_clock.write_text((DATA / "nominal.csv").read_text().replace("2026-10-05T", "1970-01-01T"))
+    code, _ = _diagnose(tmp_path, unset_clock)
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "no sample of nominal_1970.csv accepted" in err and "time_out_of_range" in err
