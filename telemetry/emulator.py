@@ -680,6 +680,7 @@ async def send_stream(
     attempts: int | None = None,
     on_wall_clock: bool = False,
     satellite: str | None = None,
+    dictionary: str | None = None,
 ) -> SendReport:
     """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting
     (:func:`send_streams` of this one stream)."""
@@ -687,7 +688,7 @@ async def send_stream(
     async def once() -> AsyncIterator[PacketStream]:
         yield stream
 
-    return await send_streams(once(), host, port, rate, retry_s, attempts, on_wall_clock, satellite)
+    return await send_streams(once(), host, port, rate, retry_s, attempts, on_wall_clock, satellite, dictionary)
 
 
 @dataclass
@@ -710,12 +711,14 @@ async def send_streams(
     attempts: int | None = None,
     on_wall_clock: bool = False,
     satellite: str | None = None,
+    dictionary: str | None = None,
 ) -> SendReport:
     """Send the packets of each stream in turn over one TCP link, paced at ``rate`` × their time stamps from the
     first packet's (inf: as fast as possible), reconnecting.
 
-    ``satellite``: each connection opens with telemetry.live.hello(satellite), so that a listener serving a fleet
-    files the packets under that name (without it, under the listener's own satellite).
+    ``satellite``: each connection opens with telemetry.live.hello(satellite, dictionary), so that a listener
+    serving a fleet files the packets under that name (without it, under the listener's own satellite) and, for a
+    mixed fleet, decodes them with the ``dictionary`` it knows by that id (without it, with its own).
 
     ``on_wall_clock`` (real time only): each packet leaves when the UTC clock reaches its time stamp
     (those already due leave at once). TCP gives no application acknowledgement, so after a lost link
@@ -732,7 +735,9 @@ async def send_streams(
         raise ValueError(f"attempts: expected at least 1 (None = keep trying), got {attempts}")
     from telemetry.live import hello
 
-    greeting = b"" if satellite is None else hello(satellite)
+    if dictionary is not None and satellite is None:
+        raise ValueError("dictionary: a hello line names the dictionary of a named satellite (give satellite)")
+    greeting = b"" if satellite is None else hello(satellite, dictionary)
     report, link = SendReport(), None
     try:
         async for stream in streams:

@@ -12,8 +12,10 @@ committed to the archive in batches from a worker thread so a slow database neve
 One listener serves a fleet. Space packets carry no spacecraft identifier (it lives in the transfer frames a
 ground station strips), so a connection says whose packets it carries the way an SLE service binds to one
 spacecraft before data flows: it may open with the line ``SATELLITE <name>\n`` (:func:`hello`); a connection
-without it carries the stream's default satellite. The line cannot be mistaken for a packet: a CCSDS version-1
-primary header starts with an octet below 0x20 (version bits 000), ``S`` is 0x53.
+without it carries the stream's default satellite. A mixed fleet names the dictionary too,
+``SATELLITE <name> DICTIONARY <id>\n``, an id the stream's ``dictionaries`` knows (else the connection is refused,
+said in the stats and the log); without it, the stream's own dictionary decodes. The line cannot be mistaken for a
+packet: a CCSDS version-1 primary header starts with an octet below 0x20 (version bits 000), ``S`` is 0x53.
 
 Archiving is a group commit over the fleet: every ``archive_interval_s`` one transaction
 (:meth:`~telemetry.archive.Archive.ingest_many`, one fsync) commits the pending samples of the satellites that
@@ -43,7 +45,7 @@ from telemetry.decoding import decode_stream
 from telemetry.dictionary import Dictionary
 from telemetry.encoding import encode_packets
 from telemetry.ingest_report import SampleBatch
-from telemetry.limits import LimitSet
+from telemetry.limits import LimitSet, dictionary_limits
 
 __all__ = [
     "LiveMessage",
@@ -78,28 +80,39 @@ ARCHIVE_MAX_GROUP = 100  # uploads in one transaction when everything is committ
 ARCHIVE_MAX_WAIT_S = 20.0  # samples waiting this long go in the next commit whatever the budget: commits that fall
 # behind (a slow disk, a starved process) take bigger groups, one fsync for more satellites, and catch up
 HELLO_PREFIX = b"SATELLITE "
-HELLO_MAX_OCTETS = 80  # a connection's first line longer than this is not a hello: its octets are decoded as packets
+HELLO_MAX_OCTETS = 160  # a connection's first line longer than this is not a hello: its octets are decoded as packets
+HELLO_DICTIONARY = "DICTIONARY"  # SATELLITE <name> DICTIONARY <id>
 SATELLITE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.:+-]{0,63}")
 
 
-def hello(satellite: str) -> bytes:
-    """The line a connection opens with to say that its packets are ``satellite``'s (ValueError for a bad name)."""
-    if not SATELLITE_NAME.fullmatch(satellite):
-        raise ValueError(f"satellite: {satellite!r} is not 1-64 letters, digits or _.:+- (starting alphanumeric)")
-    return HELLO_PREFIX + satellite.encode() + b"\n"
+def hello(satellite: str, dictionary: str | None = None) -> bytes:
+    """The line a connection opens with to say that its packets are ``satellite``'s, decoded with ``dictionary``
+    (an id the listener knows, such as a dictionary's file name; None: the listener's own); ValueError for a bad
+    name or id."""
+    for what, text in (("satellite", satellite), ("dictionary", dictionary)):
+        if text is not None and not SATELLITE_NAME.fullmatch(text):
+            raise ValueError(f"{what}: {text!r} is not 1-64 letters, digits or _.:+- (starting alphanumeric)")
+    tail = b"" if dictionary is None else f" {HELLO_DICTIONARY} {dictionary}".encode()
+    return HELLO_PREFIX + satellite.encode() + tail + b"\n"
 
 
-def _read_hello(buffer: bytearray) -> tuple[str | None, int] | None:
-    """(satellite or None, octets to drop) once the connection's first octets tell; None while they may still
-    become a hello line. A line that starts like a hello but names no valid satellite is left as noise."""
+def _read_hello(buffer: bytearray) -> tuple[str | None, str | None, int] | None:
+    """(satellite or None, dictionary id or None, octets to drop) once the connection's first octets tell; None
+    while they may still become a hello line. A line that starts like a hello but is not one is left as noise."""
     head = bytes(buffer[: len(HELLO_PREFIX)])
     if not HELLO_PREFIX.startswith(head):
-        return None, 0  # packets (or noise): no hello
+        return None, None, 0  # packets (or noise): no hello
     end = buffer.find(b"\n", 0, HELLO_MAX_OCTETS)
     if end < 0:
-        return (None, 0) if len(buffer) >= HELLO_MAX_OCTETS else None
-    name = bytes(buffer[len(HELLO_PREFIX) : end]).decode("ascii", "replace").strip()
-    return (name, end + 1) if SATELLITE_NAME.fullmatch(name) else (None, 0)
+        return (None, None, 0) if len(buffer) >= HELLO_MAX_OCTETS else None
+    words = bytes(buffer[len(HELLO_PREFIX) : end]).decode("ascii", "replace").split()
+    if not words or not all(SATELLITE_NAME.fullmatch(w) for w in words[:1] + words[2:]):
+        return None, None, 0
+    if len(words) == 1:
+        return words[0], None, end + 1
+    if len(words) == 3 and words[1] == HELLO_DICTIONARY:
+        return words[0], words[2], end + 1
+    return None, None, 0
 
 
 def complete_prefix(buffer: bytes | bytearray, packet_octets: Mapping[int, int] | None = None) -> int:
@@ -184,6 +197,8 @@ class LiveStats:
     last_archive_error: str = ""
     connections_refused: int = 0
     last_refused_peer: str = ""
+    hellos_refused: int = 0  # connections whose hello line named a dictionary the stream does not know
+    last_hello_error: str = ""
     satellites: int = 0  # satellites heard since the start
     archive_pending_packets: int = 0  # decoded, not yet committed (refreshed every archive interval)
     archive_pending_uploads: int = 0  # satellites with samples waiting for their commit
@@ -360,6 +375,19 @@ class MemoryLink:
         """Nothing held."""
 
 
+@dataclass(frozen=True)
+class _Decoding:
+    """How a connection's packets are decoded and checked: dictionary, its packet sizes by APID, limits."""
+
+    dictionary: Dictionary
+    packet_octets: dict[int, int]
+    limits: dict[str, LimitSet]
+
+
+class _Refused(Exception):
+    """A connection the stream will not decode (its hello named an unknown dictionary)."""
+
+
 class LiveStream:
     """Listener for the CCSDS packet streams of a fleet (optionally archived), over a :class:`Link`: each
     connection carries one satellite's packets, ``satellite`` unless it opens with a :func:`hello` line.
@@ -367,7 +395,8 @@ class LiveStream:
     ``on_committed(archive, spans, final)`` runs in the commit's worker thread after each group commit, with the
     (satellite, first, last sample ns) of every upload it committed, and once more at stop (no spans, ``final``
     True): bookkeeping over committed data (passes from data) serialised with the commits instead of contending
-    for the write lock."""
+    for the write lock. ``dictionaries(id)``: the dictionary a hello line names (ValueError saying why for an
+    unknown id; None: a hello naming a dictionary is refused), decoded and limit-checked with its own limits."""
 
     def __init__(
         self,
@@ -382,6 +411,7 @@ class LiveStream:
         uploaded_by: str = "live",
         allowed_sources: Sequence[str] = LOOPBACK_SOURCES,
         on_committed: Callable[[Archive, list[tuple[str, int, int]], bool], None] | None = None,
+        dictionaries: Callable[[str], Dictionary] | None = None,
     ) -> None:
         if archive is not None and not satellite:
             raise ValueError("satellite: required when the stream is archived")
@@ -389,8 +419,10 @@ class LiveStream:
             raise ValueError(f"archive_uploads_per_s: must be > 0, got {archive_uploads_per_s}")
         self._allowed = source_networks(allowed_sources)
         self._dictionary, self._archive, self._satellite = dictionary, archive, satellite
-        self._packet_octets = dictionary.packet_octets_by_apid()
-        self._limits = dict(limits or {})
+        self._own = _Decoding(dictionary, dictionary.packet_octets_by_apid(), dict(limits or {}))
+        self._dictionaries = dictionaries
+        self._named: dict[str, _Decoding] = {}  # the dictionaries hello lines named, by id
+        self._limits_of: dict[str, dict[str, LimitSet]] = {}  # per satellite: those of the dictionary it came with
         self._interval_s, self._max_packets, self._uploaded_by = archive_interval_s, archive_max_packets, uploaded_by
         self._uploads_per_flush = max(1, round(archive_uploads_per_s * archive_interval_s))
         self._subscribers: list[Subscriber] = []
@@ -458,6 +490,7 @@ class LiveStream:
         peer = "{}:{}".format(*writer.get_extra_info("peername")[:2])
         buffer, arrived, closed = bytearray(), asyncio.Event(), asyncio.Event()
         satellite: str | None = None  # until the first octets tell (hello line or packets)
+        decoding = self._own
 
         async def receive() -> None:
             while data := await reader.read(READ_BYTES):
@@ -472,38 +505,66 @@ class LiveStream:
                 await arrived.wait()
                 arrived.clear()
                 if satellite is None:
-                    satellite = self._satellite_of(buffer)
+                    satellite, decoding = await self._identify(buffer, peer)
                 if satellite is not None:
-                    self._process_complete(buffer, peer, satellite)
+                    self._process_complete(buffer, peer, satellite, decoding)
                 await asyncio.sleep(DECODE_INTERVAL_S)
+            if satellite is None:  # the connection ended before its first octets told
+                satellite, decoding = await self._identify(buffer, peer, final=True)
+        except _Refused:
+            buffer.clear()  # nothing of a refused connection is decoded or archived
         except asyncio.CancelledError:
             pass  # stop(): end quietly (a cancelled connection task makes asyncio's stream callback log a traceback)
         finally:
             receiving.cancel()
-            self._process_complete(buffer, peer, satellite or self._satellite_of(buffer, final=True) or "")
+            if satellite is None:  # stopped before the first octets told: a dictionary not yet loaded is refused
+                satellite, named = self._satellite_of(buffer, final=True)
+                decoding = self._own if named is None else self._named.get(named, decoding)
+                if named is not None and named not in self._named:
+                    buffer.clear()
+            self._process_complete(buffer, peer, satellite or "", decoding)
             self.stats.stretches_quarantined += 1 if buffer else 0  # a packet cut off by the disconnect
             writer.close()
             if task is not None:
                 self._connections.discard(task)
 
-    def _satellite_of(self, buffer: bytearray, final: bool = False) -> str | None:
-        """Whose this connection's packets are, once its first octets tell (its hello line dropped); None while
-        they may still become a hello line (unless ``final``: the connection ended)."""
+    def _satellite_of(self, buffer: bytearray, final: bool = False) -> tuple[str | None, str | None]:
+        """(whose this connection's packets are, the dictionary id its hello named) once its first octets tell (the
+        hello line dropped); (None, None) while they may still become a hello line (unless ``final``: it ended)."""
         read = _read_hello(buffer)
         if read is None:
-            return self._satellite if final else None
-        name, octets = read
+            return (self._satellite if final else None), None
+        name, dictionary, octets = read
         del buffer[:octets]
-        return name or self._satellite
+        return name or self._satellite, dictionary
 
-    def _process_complete(self, buffer: bytearray, peer: str, satellite: str) -> None:
-        end = complete_prefix(buffer, self._packet_octets)
+    async def _identify(self, buffer: bytearray, peer: str, final: bool = False) -> tuple[str | None, _Decoding]:
+        """(satellite or None while unknown, how its packets decode); :class:`_Refused` for a hello naming a
+        dictionary the stream does not know (counted and said in the stats and the log)."""
+        satellite, dictionary_id = self._satellite_of(buffer, final)
+        if satellite is None or dictionary_id is None:
+            return satellite, self._own
+        if dictionary_id not in self._named:
+            try:
+                if self._dictionaries is None:
+                    raise ValueError("this listener decodes with its own dictionary only")
+                named = await asyncio.to_thread(self._dictionaries, dictionary_id)
+            except ValueError as exc:
+                self.stats.hellos_refused += 1
+                self.stats.last_hello_error = f"{peer}: satellite {satellite}: dictionary {dictionary_id!r}: {exc}"
+                log.warning("live stream: connection refused: %s", self.stats.last_hello_error)
+                raise _Refused(self.stats.last_hello_error) from None
+            self._named[dictionary_id] = _Decoding(named, named.packet_octets_by_apid(), dictionary_limits(named))
+        return satellite, self._named[dictionary_id]
+
+    def _process_complete(self, buffer: bytearray, peer: str, satellite: str, decoding: _Decoding) -> None:
+        end = complete_prefix(buffer, decoding.packet_octets)
         if end == 0:
             return
         received_ns = time.perf_counter_ns()
         chunk = bytes(buffer[:end])
         del buffer[:end]
-        decoded = decode_stream(chunk, self._dictionary, source=f"live:{peer}")
+        decoded = decode_stream(chunk, decoding.dictionary, source=f"live:{peer}")
         self.stats.stretches_quarantined += len(decoded.report.quarantined)
         for batch in decoded.batches:
             if len(batch.t_utc_ns) == 0:
@@ -514,11 +575,12 @@ class LiveStream:
                 self.stats.satellites = len(self._heard)
             for subscriber in self._subscribers:
                 subscriber.offer(batch, received_ns, satellite)
-            self._queue_for_archive(satellite, batch)
+            self._queue_for_archive(satellite, batch, decoding.limits)
 
-    def _queue_for_archive(self, satellite: str, batch: SampleBatch) -> None:
+    def _queue_for_archive(self, satellite: str, batch: SampleBatch, limits: dict[str, LimitSet]) -> None:
         if self._archive is None:
             return
+        self._limits_of[satellite] = limits
         if satellite not in self._pending:
             self._pending[satellite] = []
             self._pending_since[satellite] = time.monotonic()
@@ -599,7 +661,7 @@ class LiveStream:
                     [PacketBatch.from_sample_batch(b) for b in batches],
                     f"live:{satellite}:{time.time_ns()}:{self._flush_count}",
                     self._uploaded_by,
-                    self._limits,
+                    self._limits_of.get(satellite, self._own.limits),
                 )
                 for satellite, (batches, _, _) in taken.items()
             ]

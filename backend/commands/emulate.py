@@ -44,6 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="name the packets' satellite on each connection (a listener serving a fleet files them under it; "
         "default: the listener's own satellite)",
     )
+    p.add_argument(
+        "--dictionary",
+        help="name the packets' dictionary in the hello line too, as the listener knows it (a mixed fleet: "
+        "e.g. reference_satellite.yaml; needs --satellite)",
+    )
     p.add_argument("--out", type=Path, help="write the packets to this file (for upload) instead of only sending")
     p.set_defaults(handler=run)
 
@@ -124,7 +129,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"sending {length} of {args.scenario} to {args.host}:{port} ({pace})", flush=True)
     try:
         on_clock = args.start_utc == "now" and args.rate == 1.0
-        pacing = {"attempts": args.attempts, "on_wall_clock": on_clock, "satellite": args.satellite}
+        pacing = {
+            "attempts": args.attempts,
+            "on_wall_clock": on_clock,
+            "satellite": args.satellite,
+            "dictionary": args.dictionary,
+        }
         if args.out:
             sending = emulator.send_stream(stream, args.host, port, args.rate, **pacing)
         else:

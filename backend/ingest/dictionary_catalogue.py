@@ -97,6 +97,13 @@ class DictionaryCatalogue:
             self._cache[name] = dictionary
         return dictionary
 
+    def load_known(self, name: str) -> Dictionary:
+        """:meth:`load` of a dictionary this catalogue lists (ValueError naming the known ones otherwise)."""
+        known = self.names()
+        if name not in known:
+            raise ValueError(f"not a known dictionary (known: {', '.join(known)})")
+        return self.load(name)
+
     def version(self, name: str) -> int:
         """Version of the uploaded dictionary ``name`` (0: none uploaded)."""
         return int(self._meta(name).get("version", 1)) if (self._folder / name).is_file() else 0

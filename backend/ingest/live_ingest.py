@@ -2,7 +2,8 @@
 
 Ingest and the API never share a GIL, so neither slows the other; the ingest process forwards
 each decoded batch (raw packets stripped) with its satellite (one listener serves the fleet: a connection
-names its satellite with telemetry.live.hello, else it is the server's live satellite) and its tallies to the
+names its satellite, and for a mixed fleet the dictionary its packets decode with, by telemetry.live.hello; else
+it is the server's live satellite and dictionary) and its tallies to the
 API process through a bounded queue, never waiting: when the API side falls behind, the oldest waiting messages
 are dropped and counted (their batches are archived regardless), so the server resumes at the present: the
 outbox's part of the one fan-out policy for live samples, stated in :mod:`backend.ingest.telemetry_gateway`.
@@ -151,7 +152,8 @@ async def _serve(
     outbox.put(("starting", "opening the archive"))
     archive = Archive(database_url, migrate=False)
     outbox.put(("starting", f"loading the dictionary {dictionary_name}"))
-    dictionary = DictionaryCatalogue(dictionaries_dir).load(dictionary_name)
+    catalogue = DictionaryCatalogue(dictionaries_dir)
+    dictionary = catalogue.load(dictionary_name)
     outbox.put(("starting", f"listening on {host}:{port}"))
     stream = LiveStream(
         dictionary,
@@ -160,6 +162,7 @@ async def _serve(
         limits=dictionary_limits(dictionary),
         allowed_sources=sources,
         on_committed=LivePasses(),
+        dictionaries=catalogue.load_known,
     )
     try:
         outbox.put(("port", await stream.start(host, port)))

@@ -17,6 +17,7 @@ from backend.core.auth import Role
 from backend.ingest.live_hub import LiveHub
 from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
 from backend.twin.live import ATTITUDE_LIMIT_ARCSEC, RED_FACTOR
+from telemetry.live import hello
 from tests.backend.conftest import bearer, make_settings
 
 QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
@@ -175,6 +176,51 @@ def test_emulated_satellite_over_tcp_reaches_archive_and_websocket(tmp_path: Pat
         ).json()
     assert np.allclose(live, sent_q0, atol=QUATERNION_RESOLUTION)
     assert np.allclose(archived["values"], sent_q0, atol=QUATERNION_RESOLUTION)
+
+
+def test_a_mixed_fleet_on_one_listener_each_satellite_decoded_with_the_dictionary_its_hello_names(
+    tmp_path: Path, database_url: str, shared_data: Path
+) -> None:
+    """End to end: a listener whose own dictionary is NOAA-20's takes real NOAA-20 packets, the emulated reference
+    satellite naming its dictionary in its hello line, and a connection naming an unknown one (refused, said)."""
+    from telemetry import emulator
+
+    noaa = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
+    n_noaa, noaa_octets = 300, 71
+    settings = make_settings(
+        tmp_path,
+        database_url,
+        live_enabled=True,
+        live_satellite="NOAA-20",
+        live_dictionary="noaa20_apid11_ccsdspy.yaml",
+    )
+    _, series, stream = emulator.emulate("somov-ge4-scan", [], 20.0, "2026-03-20T00:00:00Z")
+    sent_q0 = np.asarray(series["ACS_HK"].values["q_est_ib_0"], dtype=float)
+    with TestClient(create_app(settings)) as client:
+        viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
+        port = client.get("/api/v1/health").json()["live"]["port"]
+        with socket.create_connection(("127.0.0.1", port)) as link:
+            link.sendall(noaa[: n_noaa * noaa_octets])  # no hello: the listener's own satellite and dictionary
+        reference = {"satellite": "REF-9", "dictionary": emulator.REFERENCE_DICTIONARY}
+        asyncio.run(emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3, **reference))
+        with socket.create_connection(("127.0.0.1", port)) as link:
+            link.sendall(hello("BAD-1", "nope.yaml") + stream.data)  # a dictionary the listener does not know
+        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
+        while (live := client.get("/api/v1/health").json()["live"]).get("packets_archived", 0) < n_noaa + len(
+            stream
+        ) or not live.get("hellos_refused"):
+            assert time.monotonic() < deadline, "the fleet's packets never reached the archive"
+            time.sleep(0.1)
+        archived = client.get(
+            f"/api/v1/parameters/q_est_ib_0/samples?satellite=REF-9&max_points={sent_q0.size}", headers=bearer(viewer)
+        ).json()
+        noaa_samples = client.get("/api/v1/parameters/q_ib_0/samples?satellite=NOAA-20", headers=bearer(viewer)).json()
+        names = {s["name"] for s in client.get("/api/v1/satellites", headers=bearer(viewer)).json()}
+    assert np.allclose(archived["values"], sent_q0, atol=QUATERNION_RESOLUTION)
+    assert noaa_samples["total_points"] == n_noaa and "BAD-1" not in names
+    assert live["hellos_refused"] == 1 and "'nope.yaml'" in live["last_hello_error"]
+    assert emulator.REFERENCE_DICTIONARY in live["last_hello_error"]  # the error lists the known dictionaries
+    assert "BAD-1" in live["last_hello_error"]
 
 
 def test_revoking_a_token_closes_its_open_websocket_within_a_second(client: TestClient, tokens: dict[str, str]) -> None:

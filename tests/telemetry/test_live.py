@@ -13,6 +13,7 @@ import pytest
 from telemetry import live
 from telemetry.archive import Archive
 from telemetry.decoding import decode_stream
+from telemetry.dictionary import load_dictionary
 from telemetry.live import LiveMessage, LiveStream, MemoryLink, Subscriber, complete_prefix, hello
 from tests.telemetry.archive_databases import archive, archive_url  # noqa: F401  (fixtures)
 from tests.telemetry.packet_streams import T0_UTC_NS, engineering_values, packets, reference
@@ -290,3 +291,55 @@ def test_a_first_line_that_names_no_valid_satellite_is_noise_and_a_bad_name_is_r
     messages = asyncio.run(scenario())
     assert {m.satellite for m in messages} == {"OWN"}
     assert sum(len(m.batch.t_utc_ns) for m in messages) == raw.shape[0]  # the line was quarantined, no packet lost
+
+
+NOAA20_PACKETS = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
+NOAA20_DICTIONARY = "noaa20_apid11_ccsdspy.yaml"
+
+
+def test_a_mixed_fleet_on_one_listener_each_connection_decoded_with_the_dictionary_its_hello_names(
+    archive: Archive, shared_data, tmp_path
+) -> None:
+    from backend.ingest.dictionary_catalogue import DictionaryCatalogue
+
+    own = reference()
+    noaa = load_dictionary(NOAA20_DICTIONARY)
+    real = (shared_data / NOAA20_PACKETS).read_bytes()
+    real = real[: complete_prefix(real[:200_000], noaa.packet_octets_by_apid())]  # whole packets of a real pass
+    ref = packets(own.packets[HK_APID], 40, seed=7)
+    assert hello("N20", NOAA20_DICTIONARY) == b"SATELLITE N20 DICTIONARY noaa20_apid11_ccsdspy.yaml\n"
+    with pytest.raises(ValueError, match="dictionary"):
+        hello("N20", "no such.yaml")
+
+    async def scenario() -> tuple[list[LiveMessage], live.LiveStats]:
+        link = MemoryLink()
+        catalogue = DictionaryCatalogue(tmp_path)
+        stream = LiveStream(own, archive=archive, satellite="OWN", dictionaries=catalogue.load_known)
+        subscriber = stream.subscribe(max_messages=10_000)
+        await stream.start(link=link)
+        for data in (
+            hello("N20", NOAA20_DICTIONARY) + real,  # another mission's packets, its dictionary named
+            hello("REF-2") + ref.tobytes(),  # the listener's own dictionary, as before
+            hello("X-1", "nope.yaml") + ref.tobytes(),  # a dictionary nobody knows: refused
+        ):
+            connection = link.connect()
+            connection.write(data)
+            await connection.aclose()
+        await stream.stop()
+        return drain(subscriber), stream.stats
+
+    messages, stats = asyncio.run(scenario())
+    assert {m.satellite for m in messages} == {"N20", "REF-2"}  # nothing of the refused connection
+    assert stats.hellos_refused == 1 and "'nope.yaml'" in stats.last_hello_error
+    assert NOAA20_DICTIONARY in stats.last_hello_error  # the error names the known dictionaries
+    for satellite, data, dictionary in (("N20", real, noaa), ("REF-2", ref.tobytes(), own)):
+        offline = {b.packet: b for b in decode_stream(data, dictionary).batches}
+        got = [m.batch for m in messages if m.satellite == satellite]
+        assert {b.packet for b in got} == set(offline) and sum(len(b.t_utc_ns) for b in got) > 0
+        for name, batch in offline.items():
+            mine = [b for b in got if b.packet == name]
+            for parameter, column in batch.values.items():
+                np.testing.assert_array_equal(np.concatenate([b.values[parameter] for b in mine]), column)
+        t0, t1 = int(min(b.t_utc_ns.min() for b in got)), int(max(b.t_utc_ns.max() for b in got))
+        assert b"".join(p for _, p in archive.replay(satellite, t0, t1 + 1)) == data  # archived as sent
+    assert not _archived("X-1", archive)
