@@ -181,16 +181,35 @@ def orbit_state(s: Scenario) -> OrbitState:
     return j2_state
 
 
-def _orbit_table(state: OrbitState, t0: float, duration_s: float) -> tuple[np.ndarray, float, float]:
-    t = np.arange(-ORBIT_TABLE_STEP_S, duration_s + 3 * ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S)
+Table = tuple[np.ndarray, float, float]  # rows, time of the first row (s from the epoch), step
+
+
+def _orbit_rows(state: OrbitState, t0: float, duration_s: float, first: int = 0) -> np.ndarray:
+    """Rows ``first``… of the orbit table to ``duration_s``: r, v, a every ORBIT_TABLE_STEP_S from −1 step."""
+    t = np.arange(-ORBIT_TABLE_STEP_S, duration_s + 3 * ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S)[first:]
+    if t.size == 0:
+        return np.zeros((0, 9))
     r, v, a = state(t0 + t)
-    return np.ascontiguousarray(np.hstack([r, v, a])), float(t[0]), ORBIT_TABLE_STEP_S
+    return np.hstack([r, v, a])
 
 
-def _field_table(state: OrbitState, t0: float, duration_s: float, model: str) -> tuple[np.ndarray, float, float]:
-    t = np.arange(-FIELD_TABLE_STEP_S, duration_s + 3 * FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S)
+def _field_rows(state: OrbitState, t0: float, duration_s: float, model: str, first: int = 0) -> np.ndarray:
+    """Rows ``first``… of the field table to ``duration_s``: B (ECI, T) every FIELD_TABLE_STEP_S from −1 step
+    (whole IGRF dates from row ``first`` on when it is a multiple of FIELD_CHUNK_ROWS)."""
+    t = np.arange(-FIELD_TABLE_STEP_S, duration_s + 3 * FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S)[first:]
+    if t.size == 0:
+        return np.zeros((0, 3))
     r, _, _ = state(t0 + t)
-    return np.ascontiguousarray(environment.magnetic_field_eci_t(r, t0 + t, model)), float(t[0]), FIELD_TABLE_STEP_S
+    return environment.magnetic_field_eci_t(r, t0 + t, model)
+
+
+def _orbit_table(state: OrbitState, t0: float, duration_s: float) -> Table:
+    return np.ascontiguousarray(_orbit_rows(state, t0, duration_s)), -ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S
+
+
+def _field_table(state: OrbitState, t0: float, duration_s: float, model: str) -> Table:
+    rows = _field_rows(state, t0, duration_s, model)
+    return np.ascontiguousarray(rows), -FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S
 
 
 def _route_segments(s: Scenario) -> list[guidance.Segment]:
@@ -385,8 +404,9 @@ class Flight:
     controller and monitors, fault and mode state, random streams), so that the segments joined are one
     flight, bit for bit the same as one ``fly`` of their summed duration. The scenario's ``duration_s`` is not
     used: the route's last hold lasts to the end of each segment; the ephemeris tables keep the epoch as origin
-    (orbit and field of the flown span, the field in whole IGRF dates) and the Earth orientation stays frozen at
-    the epoch; the B-dot gain of the mode machine is the first orbit's. :func:`simulate` flies one such segment,
+    (orbit and field of the flown span, the field in whole IGRF dates; each segment computes only its own rows,
+    but for a J2 orbit, propagated from the epoch) and the Earth orientation stays frozen at the epoch; the B-dot
+    gain of the mode machine is the first orbit's. :func:`simulate` flies one such segment,
     its tables only as long as its own duration (the field of its last IGRF hour dated at that hour's data)."""
 
     def __init__(
@@ -405,6 +425,7 @@ class Flight:
         self.steps_flown = 0
         self._carries: list[closed_loop.Carry] | None = None
         self._modes: closed_loop.ModeConfig | None = None
+        self._orbit_rows, self._field_rows = np.zeros((0, 9)), np.zeros((0, 3))
 
     @property
     def flown_s(self) -> float:
@@ -426,10 +447,9 @@ class Flight:
             )
         end = self.steps_flown + steps
         seg = s.model_copy(update={"duration_s": end * s.dynamics_dt_s})
-        rows = -(-(seg.duration_s + 4 * FIELD_TABLE_STEP_S) // FIELD_TABLE_STEP_S)
-        until = (-(-rows // FIELD_CHUNK_ROWS) * FIELD_CHUNK_ROWS - 4) * FIELD_TABLE_STEP_S
+        tables = self._tables(seg.duration_s)
         config = loop_config(
-            seg, self.params, self.orbit, self.t0_unix_s, self.c_pn, self.dut1_s, self.program(seg), until
+            seg, self.params, self.orbit, self.t0_unix_s, self.c_pn, self.dut1_s, self.program(seg), tables
         )
         if self._modes is None:
             orbit_rows = int(orbit_period_s(s) // FIELD_TABLE_STEP_S) + 1
@@ -440,6 +460,22 @@ class Flight:
         first = -(-self.steps_flown // config.clock.output_every)
         self._carries, self.steps_flown = carries, end
         return _trajectory(s, out, self.params, first, duration_s, time.perf_counter() - start)
+
+    def _tables(self, end_s: float) -> tuple[Table, Table]:
+        """Orbit and field tables from the epoch to ``end_s`` (the field to a whole IGRF date): the last segment's
+        rows and this one's, all recomputed for a J2 orbit (its propagation steps from the epoch to each time)."""
+        s, t0 = self.scenario, self.t0_unix_s
+        rows = -(-(end_s + 4 * FIELD_TABLE_STEP_S) // FIELD_TABLE_STEP_S)
+        until = (-(-rows // FIELD_CHUNK_ROWS) * FIELD_CHUNK_ROWS - 4) * FIELD_TABLE_STEP_S
+        kept_orbit, kept_field = (0, 0) if s.orbit.kind == "j2" else (len(self._orbit_rows), len(self._field_rows))
+        new_orbit = _orbit_rows(self.orbit, t0, until, kept_orbit)
+        new_field = _field_rows(self.orbit, t0, until, s.magnetic_model, kept_field)
+        self._orbit_rows = np.concatenate([self._orbit_rows[:kept_orbit], new_orbit])
+        self._field_rows = np.concatenate([self._field_rows[:kept_field], new_field])
+        return (
+            (self._orbit_rows, -ORBIT_TABLE_STEP_S, ORBIT_TABLE_STEP_S),
+            (self._field_rows, -FIELD_TABLE_STEP_S, FIELD_TABLE_STEP_S),
+        )
 
 
 def _initial_batch(
@@ -551,20 +587,21 @@ def loop_config(
     c_pn: np.ndarray,
     dut1: float,
     program: closed_loop.Program,
-    tables_until_s: float | None = None,
+    tables: tuple[Table, Table] | None = None,
 ) -> closed_loop.LoopConfig:
     """The typed configuration of :func:`sim_core.closed_loop.fly_variant` for the scenario: every block's
     parameters by name (plant as modelled and as flown, clock, ephemeris tables, sensors, estimator, law,
-    actuators, disturbances, modes, FDIR). ``tables_until_s``: tabulate the orbit and field that far (default:
-    the scenario's duration)."""
+    actuators, disturbances, modes, FDIR). ``tables``: the orbit and field tables (default: to the scenario's
+    duration)."""
     dt = s.dynamics_dt_s
     every = [int(round(getattr(s, name) / dt)) for name in ("measurement_dt_s", "control_dt_s", "output_dt_s")]
     clock = closed_loop.Clock(
         int(round(s.duration_s / dt)), float(dt), every[0], every[1], every[2], float(t0), float(dut1)
     )
-    until = s.duration_s if tables_until_s is None else max(tables_until_s, s.duration_s)
-    field_tab = _field_table(state, t0, until, s.magnetic_model)
-    orbit_tab = _orbit_table(state, t0, until)
+    orbit_tab, field_tab = tables or (
+        _orbit_table(state, t0, s.duration_s),
+        _field_table(state, t0, s.duration_s, s.magnetic_model),
+    )
     ephemeris = closed_loop.Ephemeris(*orbit_tab, *field_tab, np.ascontiguousarray(c_pn))
     sn, c, ws = s.sensors, s.controller, s.spacecraft.cluster.wheels
     sensor_models = closed_loop.SensorModels(
