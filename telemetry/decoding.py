@@ -106,14 +106,21 @@ def _field_columns(
     shift: np.ndarray,
     mask: np.ndarray,
     sign: np.ndarray,
-) -> np.ndarray:
-    """(F, n) uint64 fields of the n packets at offset in buf, read in place (compiled kernel).
+    slot: np.ndarray,
+    row: np.ndarray,
+    out1: np.ndarray,
+    out2: np.ndarray,
+    out4: np.ndarray,
+    out8: np.ndarray,
+) -> None:
+    """The fields of the n packets at offset in buf, read in place into rows of (·, n) matrices of 1, 2, 4 and
+    8 octets (compiled kernel): field f goes to row row[f] of out1/out2/out4/out8 by slot[f] = 0/1/2/3.
 
     Field f covers octets first[f]..last[f] of its packet; its value is that big-endian word
-    >> shift[f] & mask[f], sign-extended to 64 bits (two's complement) where sign[f] has its sign bit.
+    >> shift[f] & mask[f], sign-extended to 64 bits (two's complement) where sign[f] has its sign bit,
+    kept in the slot's width (the low octets: a narrower signed field is its two's complement there).
     """
     n, n_fields = offset.shape[0], first.shape[0]
-    out = np.empty((n_fields, n), dtype=np.uint64)
     for i in range(n):
         o = offset[i]
         for f in range(n_fields):
@@ -123,14 +130,25 @@ def _field_columns(
             value = (word >> shift[f]) & mask[f]
             if value & sign[f]:
                 value |= ~mask[f]
-            out[f, i] = value
-    return out
+            s, r = slot[f], row[f]
+            if s == 0:
+                out1[r, i] = np.uint8(value & np.uint64(0xFF))
+            elif s == 1:
+                out2[r, i] = np.uint16(value & np.uint64(0xFFFF))
+            elif s == 2:
+                out4[r, i] = np.uint32(value & np.uint64(0xFFFFFFFF))
+            else:
+                out8[r, i] = value
+
+
+_SLOT_OCTETS = (1, 2, 4, 8)  # octets of the kernel's output rows by slot
 
 
 @dataclass(frozen=True)
 class _LayoutPlan:
-    """A fixed layout compiled for :func:`_field_columns`: kernel arrays, and the parameters whose kernel
-    row viewed as int64 is already their engineering value (big-endian integers, no calibration)."""
+    """A fixed layout compiled for :func:`_field_columns`: kernel arrays, each field's slot and row, and the
+    dtype its bits are read as when they are already its raw value (big-endian integers: _integer_dtype),
+    else None (floats, other byte orders: converted from the 64-bit pattern by _raw_value)."""
 
     parameters: tuple[Parameter, ...]
     first: np.ndarray
@@ -138,11 +156,27 @@ class _LayoutPlan:
     shift: np.ndarray
     mask: np.ndarray
     sign: np.ndarray
-    plain: np.ndarray  # bool per parameter
+    slot: np.ndarray
+    row: np.ndarray
+    rows: tuple[int, int, int, int]  # rows of each slot's matrix
+    views: tuple[np.dtype | None, ...]
+    casts: tuple[np.dtype | None, ...]  # integers of other byte orders: the dtype _raw_value's int64 goes to
 
 
 _PLANS: dict[int, _LayoutPlan] = {}  # by id() of a layout's parameter tuple (kept alive by the plan)
 _MAX_PLANS = 4_096
+
+
+def _integer_dtype(p: Parameter) -> np.dtype | None:
+    """The dtype of an integer field's raw values, as wide as ccsdspy makes it (its covering octets: 1, 2,
+    3-4 -> 4, 5-8 -> 8), int64 for an unsigned field of 33..63 bits; None for other fields."""
+    if p.data_type not in ("int", "uint"):
+        return None
+    covering = (p.bit_offset + p.bit_length - 1) // 8 - p.bit_offset // 8 + 1
+    octets = next(w for w in _SLOT_OCTETS if w >= covering)
+    if p.data_type == "uint" and octets == 8 and p.bit_length < 64:
+        return np.dtype(np.int64)  # the archive's integer type; exact below 2**63
+    return np.dtype(f"{'i' if p.data_type == 'int' else 'u'}{octets}")
 
 
 def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
@@ -153,21 +187,31 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
     bit = np.array([p.bit_offset for p in parameters], dtype=np.int64)
     bits = np.array([p.bit_length for p in parameters], dtype=np.int64)
     first, last = bit // 8, (bit + bits - 1) // 8
-    extends = [p.data_type == "int" and p.byte_order == "big" for p in parameters]
+    dtypes = tuple(_integer_dtype(p) for p in parameters)
+    views = tuple(d if p.byte_order == "big" else None for p, d in zip(parameters, dtypes))
+    slot = [3 if v is None else _SLOT_OCTETS.index(v.itemsize) for v in views]
+    row, rows = [], [0, 0, 0, 0]
+    for s in slot:
+        row.append(rows[s])
+        rows[s] += 1
     plan = _LayoutPlan(
         parameters,
         first,
         last,
         (8 * (last + 1) - bit - bits).astype(np.uint64),
         np.array([(1 << b) - 1 for b in bits.tolist()], dtype=np.uint64),
-        np.array([1 << (p.bit_length - 1) if e else 0 for p, e in zip(parameters, extends)], dtype=np.uint64),
         np.array(
             [
-                not p.polynomial and (e or (p.data_type == "uint" and p.byte_order == "big" and p.bit_length < 64))
-                for p, e in zip(parameters, extends)
+                1 << (p.bit_length - 1) if p.data_type == "int" and v is not None else 0
+                for p, v in zip(parameters, views)
             ],
-            dtype=bool,
+            dtype=np.uint64,
         ),
+        np.array(slot, dtype=np.int64),
+        np.array(row, dtype=np.int64),
+        (rows[0], rows[1], rows[2], rows[3]),
+        views,
+        tuple(d if v is None else None for d, v in zip(dtypes, views)),
     )
     if len(_PLANS) >= _MAX_PLANS:
         _PLANS.clear()
@@ -180,19 +224,29 @@ def _layout_values(
 ) -> dict[str, np.ndarray]:
     """Raw (calibrated=False) or engineering values of the parameters in the packets at offset of buf, by name.
 
-    Big-endian integers without calibration are int64 views of the kernel's rows (no copy)."""
+    Big-endian integers are views of the kernel's rows in the width of their field (no copy), as ccsdspy
+    gives them; calibrated ones are float64."""
     plan = _plan(parameters)
-    columns = _field_columns(
-        buf, np.asarray(offset, dtype=np.int64), plan.first, plan.last, plan.shift, plan.mask, plan.sign
+    n = offset.shape[0]
+    outs = [np.empty((rows, n), dtype=f"u{w}") for rows, w in zip(plan.rows, _SLOT_OCTETS)]
+    _field_columns(
+        buf,
+        np.asarray(offset, dtype=np.int64),
+        plan.first,
+        plan.last,
+        plan.shift,
+        plan.mask,
+        plan.sign,
+        plan.slot,
+        plan.row,
+        *outs,
     )
-    as_int = columns.view(np.int64)
     out = {}
-    for f, p in enumerate(parameters):
-        if plan.plain[f] or (not calibrated and plan.sign[f]):
-            out[p.name] = as_int[f]
-        else:
-            raw = as_int[f] if plan.sign[f] else _raw_value(columns[f], p)
-            out[p.name] = calibrate(raw, p) if calibrated else raw
+    for p, s, r, view, cast in zip(parameters, plan.slot.tolist(), plan.row.tolist(), plan.views, plan.casts):
+        raw = outs[s][r].view(view) if view is not None else _raw_value(outs[s][r], p)
+        if cast is not None:
+            raw = raw.astype(cast, copy=False)
+        out[p.name] = calibrate(raw, p) if calibrated and (view is None or p.polynomial) else raw
     return out
 
 
@@ -212,7 +266,8 @@ def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, n
 
 
 def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
-    """Engineering value of a raw field: polynomial Σ c_k x^k (XTCE PolynomialCalibrator), else the native value."""
+    """Engineering value of a raw field: polynomial Σ c_k x^k (XTCE PolynomialCalibrator), else the native value
+    (floats as float64, integers in their own dtype)."""
     if p.polynomial:
         x = raw.astype(np.float64)
         if len(p.polynomial) == 1:
@@ -225,7 +280,7 @@ def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
         return y
     if p.data_type == "float":
         return raw.astype(np.float64, copy=False)
-    return raw if raw.dtype == np.uint64 else raw.astype(np.int64, copy=False)
+    return raw
 
 
 def derive(d: DerivedParameter, values: dict[str, np.ndarray], time_code: ccsds.TimeCode | None) -> np.ndarray:
@@ -480,17 +535,23 @@ def _xtce_bulk(
                 pieces.setdefault(name, []).append((idx, v))
     columns, partial = {}, set()
     for name, have in pieces.items():
-        if len(have) == 1 and len(have[0][0]) == n and have[0][1].dtype.kind == "i":
+        if len(have) == 1 and len(have[0][0]) == n and _exact_in_int64(have[0][1]):
             columns[name] = have[0][1]  # one group of every packet, in order (groups keep ascending positions)
             continue
         every = sum(len(idx) for idx, _ in have) == n
-        column = np.empty(n, np.int64) if every and all(v.dtype.kind == "i" for _, v in have) else np.full(n, np.nan)
+        whole = every and all(_exact_in_int64(v) for _, v in have)
+        column = np.empty(n, np.result_type(*(v for _, v in have))) if whole else np.full(n, np.nan)
         for idx, v in have:
             column[idx] = v
         columns[name] = column
         if not every:
             partial.add(name)
     return columns, {i: f"space_packet_parser would fail: {why}" for i, why in failed.items()}, partial
+
+
+def _exact_in_int64(values: np.ndarray) -> bool:
+    """Whether an array is of an integer type int64 holds (any signed one, unsigned below 64 bits)."""
+    return values.dtype.kind == "i" or (values.dtype.kind == "u" and values.dtype.itemsize < 8)
 
 
 def _xtce_one_by_one(

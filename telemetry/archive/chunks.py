@@ -90,16 +90,20 @@ def encode_values(values: np.ndarray) -> tuple[str, bytes]:
     return spec, blob
 
 
-def encode_values_range(values: np.ndarray) -> tuple[str, bytes, float | None, float | None]:
-    """:func:`encode_values` and the least and greatest finite value (None when there is none).
+def encode_values_range(
+    values: np.ndarray, presented: np.dtype | None = None
+) -> tuple[str, bytes, float | None, float | None]:
+    """:func:`encode_values` and the least and greatest finite value (None when there is none); ``presented``:
+    the dtype to read them back in, if not their own (one that holds every value exactly).
 
     One pass finds both the range and the narrowest dtype (integers: the range is the test).
     """
     array = np.ascontiguousarray(values)
+    shown = array.dtype if presented is None else np.dtype(presented)
     if array.dtype.kind not in STORABLE_KINDS:
         raise ValueError(f"values: dtype {array.dtype} is not numeric (bool, int, uint or float)")
     if array.size == 0:
-        return f"{array.dtype.str}/{array.dtype.str}", _compress(b""), None, None
+        return f"{array.dtype.str}/{shown.str}", _compress(b""), None, None
     v_min, v_max = array.min(), array.max()
     if array.dtype.kind in "iu":
         stored = _narrowest_int(array, int(v_min), int(v_max))
@@ -108,7 +112,7 @@ def encode_values_range(values: np.ndarray) -> tuple[str, bytes, float | None, f
         if not (np.isfinite(v_min) and np.isfinite(v_max)):  # NaN (no such element) or infinities
             finite = array[np.isfinite(array)]
             v_min, v_max = (finite.min(), finite.max()) if finite.size else (None, None)
-    spec = f"{stored.dtype.str}/{array.dtype.str}"
+    spec = f"{stored.dtype.str}/{shown.str}"
     blob = _compress(stored.data.cast("B"))
     return spec, blob, (None if v_min is None else float(v_min)), (None if v_max is None else float(v_max))
 

@@ -1034,8 +1034,14 @@ class _PendingBatches:
 
 
 def _batch_octets(batch: PacketBatch) -> int:
-    """Memory a batch holds: its raw packets and value columns."""
-    return len(batch.raw) + sum(v.nbytes for v in batch.values.values())
+    """Memory a batch holds: its raw packets and every array its columns keep alive (a column that is a view
+    keeps all of the array it views: counted once, whole)."""
+    held = {}
+    for column in (batch.t_utc_ns, batch.seq_count, batch.raw_lengths, *batch.values.values()):
+        while isinstance(column.base, np.ndarray):
+            column = column.base
+        held[id(column)] = column.nbytes
+    return len(batch.raw) + sum(held.values())
 
 
 def _order_and_dedupe(batch: PacketBatch) -> tuple[PacketBatch, int]:
@@ -1078,7 +1084,9 @@ def _limit_changes(
 
 
 def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict[str, Any]:
-    dtype, blob, v_min, v_max = encode_values_range(values)
+    """A value chunk's row; integers (decoded in their field's width) read back as int64, uint64 as uint64."""
+    wide = values.dtype.kind in "iu" and values.dtype != np.uint64
+    dtype, blob, v_min, v_max = encode_values_range(values, np.dtype(np.int64) if wide else None)
     return {
         "parameter_id": param_id,
         "chunk_id": chunk_id,

@@ -310,3 +310,14 @@ def test_exported_members_are_the_documented_surface() -> None:
         ]
     )
     assert all(hasattr(package, name) for name in package.__all__)
+
+
+def test_pending_memory_of_a_batch_counts_whole_arrays_its_columns_view() -> None:
+    """A column that is one row of a decoder's matrix keeps the whole matrix alive: the pending buffer's memory
+    bound counts that matrix, the times, counts and lengths, and the raw octets."""
+    from telemetry.archive.store import _batch_octets
+
+    n = 1_000
+    matrix = np.zeros((40, n), dtype=np.uint16)
+    batch = PacketBatch(7, np.arange(n), np.arange(n) % 16_384, bytes(10 * n), np.full(n, 10), {"a": matrix[3]})
+    assert _batch_octets(batch) == matrix.nbytes + 3 * 8 * n + 10 * n
