@@ -276,6 +276,7 @@ class LiveTwin:
         self._gps_t = np.empty(0, np.int64)
         self._gps: dict[str, np.ndarray] = {}
         self._segment: Segment | None = None
+        self._unsynced_ns: int | None = None  # the sample a failed synchronisation stopped at (None: none failed)
         self._last_forced_ns = -(2**62)
         self._twin_t = np.empty(0, np.int64)
         self._twin_q = np.empty((0, 4))
@@ -308,7 +309,7 @@ class LiveTwin:
     def _restart(self, why: str, kind: str, t_ns: int) -> None:
         self.report(kind, f"{why}: twin re-synchronises", t_ns)
         self._t, self._hk, self._q = np.empty(0, np.int64), {}, np.empty((0, 4))
-        self._segment = None
+        self._segment, self._unsynced_ns = None, None
         self.state.state = WAITING
         if self._epoch_from_run:
             self._epoch_ns = None
@@ -371,14 +372,20 @@ class LiveTwin:
 
     def observe(self, batches: Sequence[SampleBatch], arrived_unix_s: float) -> dict[str, np.ndarray] | None:
         """Take one committed set of decoded batches; the residual columns computed (with ``t_utc_ns``), or None."""
+        newest_fix = self._gps_t[-1] if self._gps_t.size else None
         for batch in batches:
             if self.mapping.orbit_packet and batch.packet == self.mapping.orbit_packet:
                 self._add_gps(batch)
+        fixes_came = self._gps_t.size > 0 and self._gps_t[-1] != newest_fix
         before = int(self._t[-1]) if self._t.size else None
         for batch in batches:
             if batch.packet == self.mapping.packet and self._add_hk(batch):
                 before = None
         new = np.flatnonzero(self._t > before) if before is not None else np.arange(self._t.size)
+        if new.size == 0 and fixes_came and self._unsynced_ns is not None and self.model is not None:
+            # the live link relays each packet type apart: the GPS fixes a failed synchronisation waited for may
+            # come after the last housekeeping samples (the end of a pass): synchronise again where it stopped
+            return self._compare(np.flatnonzero(self._t >= self._unsynced_ns))
         if new.size == 0:
             return None
         s = self.state
@@ -479,9 +486,9 @@ class LiveTwin:
             if seg is None or int(self._t[k]) > seg.end_ns:
                 self._segment = seg = self._fly(k)
                 if seg is None:
-                    self.state.state = WAITING
+                    self.state.state, self._unsynced_ns = WAITING, int(self._t[k])
                     break
-                self.state.state = SYNCHRONISED
+                self.state.state, self._unsynced_ns = SYNCHRONISED, None
             stop = int(np.searchsorted(self._t, seg.end_ns, side="right"))
             rows = np.arange(k, stop)
             rows = rows[self._t[rows] >= seg.start_ns]

@@ -106,6 +106,19 @@ def test_satellite_with_its_own_truth_stays_within_the_mismatch_its_tolerances_a
     assert np.sqrt(np.mean(res["twin_attitude_residual_arcsec"][settled] ** 2)) < TRUTH_MISMATCH_ARCSEC
 
 
+def test_gps_fixes_arriving_after_the_last_housekeeping_samples_synchronise_the_waiting_twin(reference_batches):
+    """The live link relays each packet type apart: a pass's housekeeping may reach the twin before the GPS fixes its
+    orbit fit needs (the fleet bug: the twin stayed waiting for ever once the stream had ended)."""
+    twin = _twin()
+    first = [b for second in _seconds(reference_batches)[:40] for b in second]
+    hk = [b for b in first if b.packet == "ACS_HK"]
+    gps = [b for b in first if b.packet == "GPS_NAV"]
+    assert twin.observe(hk, 0.0) is None and twin.state.state == WAITING
+    rows = twin.observe(gps, 0.0)
+    assert rows is not None and twin.state.state == PROPAGATING
+    assert rows["t_utc_ns"].size == sum(b.t_utc_ns.size for b in hk)  # every sample it waited with is compared
+
+
 def test_time_going_back_and_gaps_are_reported_and_the_twin_resynchronises(reference_batches):
     twin = _twin()
     seconds = _seconds(reference_batches)
