@@ -40,7 +40,7 @@ from sim_core import (
     wheels,
 )
 from sim_core import faults as faults_mod
-from sim_core.faults import T_EARTH, T_GYRO, T_MAG, T_SUN
+from sim_core.faults import T_EARTH, T_GYRO, T_MAG, T_SUN, T_WHEEL, Y_FRICTION, Y_STUCK
 from sim_core.integrators import rk4_step_into
 from sim_core.quaternion import angle_between_1, attitude_difference_1, conjugate_rotate_1, conjugate_rotate_into
 from sim_core.spacecraft import PlantArrays, free_wheel_inertia_1
@@ -519,24 +519,20 @@ def _ephemeris_stage(
 
 
 @njit(cache=True)
-def _fault_stage(
-    faults: np.ndarray,
-    t: float,
-    fault_state: np.ndarray,
-    ev: np.ndarray,
-    n_ev: np.ndarray,
-    cmd: Commands,
-    sensed: Sensed,
-) -> int:
-    """Fault onsets and ends at t of a variant with faults (sim_core.faults); at a 'frozen' onset the outputs in
-    hand are held. Returns the active-fault flags."""
-    new = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
-    if new < 0:
-        new = -new - 1
-        cmd.frozen_cmd[:] = cmd.wheel_cmd
-        cmd.frozen_torque[:] = cmd.body_torque
-        sensed.gyro_frozen[:] = sensed.omega
-    return new
+def _hold_outputs_stage(cmd: Commands, sensed: Sensed) -> None:
+    """At a fault onset: the outputs in hand are what a 'frozen' fault holds (sim_core.faults)."""
+    cmd.frozen_cmd[:] = cmd.wheel_cmd
+    cmd.frozen_torque[:] = cmd.body_torque
+    sensed.gyro_frozen[:] = sensed.omega
+
+
+@njit(cache=True)
+def _flies_wheel_fault(faults: np.ndarray, kind: int) -> bool:
+    """Whether the variant's fault table holds a wheel fault of ``kind`` (sim_core.faults codes)."""
+    for f in range(faults.shape[0]):
+        if int(faults[f, faults_mod.F_TARGET]) == T_WHEEL and int(faults[f, faults_mod.F_TYPE]) == kind:
+            return True
+    return False
 
 
 @njit(cache=True)
@@ -706,9 +702,9 @@ def _mismatch_filter_stage(
 
 
 @njit(cache=True)
-def _sample_estimate_stage(kind: int, x: np.ndarray, sensed: Sensed, sample: StarSample, est: Estimate) -> None:
-    """The estimates that need no filter: the true state (ESTIMATOR_TRUTH) or the star tracker and gyro as
-    sampled (ESTIMATOR_STAR_TRACKER; a missing sample keeps the last one)."""
+def _sample_estimate_stage(kind: int, x: np.ndarray, gyro: np.ndarray, sample: StarSample, est: Estimate) -> None:
+    """The estimates that need no filter: the true state (ESTIMATOR_TRUTH) or the star tracker and ``gyro``
+    (Sensed.omega) as sampled (ESTIMATOR_STAR_TRACKER; a missing sample keeps the last one)."""
     if kind == ESTIMATOR_TRUTH:
         est.q[:] = x[0:4]
         est.omega[:] = x[4:7]
@@ -716,32 +712,28 @@ def _sample_estimate_stage(kind: int, x: np.ndarray, sensed: Sensed, sample: Sta
     if sample.star_ok:
         est.q[:] = sample.q
     if sample.gyro_ok:
-        est.omega[:] = sensed.omega
+        est.omega[:] = gyro
 
 
 @njit(cache=True)
 def _mode_stage(
     mc: ModeConfig,
-    sun_sigma_rad: float,
-    t0_unix_s: float,
-    faults: np.ndarray,
     t: float,
-    x: np.ndarray,
     pos: Position,
+    sun_b: np.ndarray,
     mode_state: np.ndarray,
     mode: int,
     valid: bool,
     est: Estimate,
-    sensed: Sensed,
-    mon: Monitors,
+    available: np.ndarray,
     cmd: Commands,
     ev: np.ndarray,
     n_ev: np.ndarray,
 ) -> int:
-    """Mode machine step (sim_core.modes, seed 001/003) on the Sun sensor and the ORF; in the Sun/safe and ORF
-    modes their program replaces the scenario's in ``cmd.program``. Returns the mode."""
+    """Mode machine step (sim_core.modes, seed 001/003) on the Sun direction ``sun_b`` (body axes, from
+    :func:`_sun_direction_1`) and the ORF; in the Sun/safe and ORF modes their program replaces the scenario's in
+    ``cmd.program``. Returns the mode."""
     q_orf, _, _ = guidance.orf_hold_1(np.array([1.0, 0.0, 0.0, 0.0]), pos.r, pos.v, pos.a)
-    sun_b = _sun_direction_1(sun_sigma_rad, t0_unix_s, faults, t, x, est.q, pos.r, sensed.sun_frozen)
     new_mode = modes.mode_step_1(
         mode_state,
         mc.thresholds,
@@ -751,7 +743,7 @@ def _mode_stage(
         angle_between_1(SUN_AXIS_B, sun_b),
         attitude_difference_1(est.q, q_orf),
         True,
-        np.sum(mon.available) < 2,
+        np.sum(available) < 2,
         False,
     )
     if new_mode != mode:
@@ -788,11 +780,14 @@ def _law_stage(
     speeds: np.ndarray,
     h_wheels: np.ndarray,
     available: np.ndarray,
-    cmd: Commands,
+    program: np.ndarray,
+    lead_lag: np.ndarray,
+    body_torque: np.ndarray,
 ) -> None:
-    """Body torque of the configured law (LawConfig.kind) on the estimate; in the Sun/safe mode and the ORF
-    acquisition the seed 002 eq (18) PD with gyroscopic compensation (acquisition bandwidth)."""
-    q_p, w_p, wd_p = cmd.program[0:4], cmd.program[4:7], cmd.program[7:10]
+    """Body torque of the configured law (LawConfig.kind) on the estimate, into ``body_torque``, tracking
+    ``program`` (Commands.program); in the Sun/safe mode and the ORF acquisition the seed 002 eq (18) PD with
+    gyroscopic compensation (acquisition bandwidth)."""
+    q_p, w_p, wd_p = program[0:4], program[4:7], program[7:10]
     coarse = mode == modes.MODE_SUN_SAFE or (
         mode == modes.MODE_ORF and attitude_difference_1(est.q, q_p) > FINE_POINTING_RAD
     )
@@ -800,17 +795,17 @@ def _law_stage(
         j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
         kp = j_max * ACQUISITION_OMEGA_RAD_S**2  # steady slew rate ≤ kp/kd = ω_n/2 per unit error
         kd = 2.0 * j_max * ACQUISITION_OMEGA_RAD_S
-        cmd.body_torque[:] = control.quaternion_pd_step(
-            est.q, est.omega, q_p, w_p, kp, kd
-        ) + control.gyroscopic_torque_1(est.omega, p.inertia, p.wheel_axes @ h_wheels)
+        body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, kp, kd) + control.gyroscopic_torque_1(
+            est.omega, p.inertia, p.wheel_axes @ h_wheels
+        )
     elif law.kind == LAW_SEED000:
-        cmd.body_torque[:] = control.digital_law_step(
-            est.q, est.omega, q_p, w_p, wd_p, cmd.lead_lag, p.inertia, law.digital_gains
+        body_torque[:] = control.digital_law_step(
+            est.q, est.omega, q_p, w_p, wd_p, lead_lag, p.inertia, law.digital_gains
         )
         if law.gyroscopic_compensation:
-            cmd.body_torque[:] += control.gyroscopic_torque_1(est.omega, p.inertia, p.wheel_axes @ h_wheels)
+            body_torque[:] += control.gyroscopic_torque_1(est.omega, p.inertia, p.wheel_axes @ h_wheels)
     elif law.kind == LAW_MRP_FEEDBACK:
-        cmd.body_torque[:] = control.mrp_tracking_step(
+        body_torque[:] = control.mrp_tracking_step(
             est.q,
             est.omega,
             q_p,
@@ -821,17 +816,17 @@ def _law_stage(
             control.MrpGains(law.mrp_k_nm, law.mrp_p_nms, law.mrp_law_type),
         )
     else:
-        cmd.body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, law.pd_kp_nm, law.pd_kd_nms)
+        body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, law.pd_kp_nm, law.pd_kd_nms)
 
 
 @njit(cache=True)
 def _allocate_1(
-    wheel_axes: np.ndarray, act: Actuators, available: np.ndarray, h_wheels: np.ndarray, sensed: Sensed, cmd: Commands
+    wheel_axes: np.ndarray, act: Actuators, available: np.ndarray, h_wheels: np.ndarray, mag: np.ndarray, cmd: Commands
 ) -> int:
-    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1), then the quantised,
-    limited wheel commands (seed 000 eq 3); returns the allocation status."""
+    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1) on the magnetometer's
+    ``mag``, then the quantised, limited wheel commands (seed 000 eq 3); returns the allocation status."""
     status: int = allocation.allocate_1(
-        cmd.body_torque, wheel_axes, available, h_wheels, sensed.mag, act.allocation, cmd.wheel_alloc, cmd.dipole_alloc
+        cmd.body_torque, wheel_axes, available, h_wheels, mag, act.allocation, cmd.wheel_alloc, cmd.dipole_alloc
     )
     for w in range(cmd.wheel_cmd.shape[0]):
         cmd.wheel_cmd[w] = control.wheel_torque_command_1(
@@ -865,7 +860,7 @@ def _rate_damping_stage(
             cmd.dipole[:] = control.bdot_dipole_step(sensed.mag, sensed.mag_prev, t_u, bdot_gain, act.md_max_am2)
         return
     cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
-    _allocate_1(p.wheel_axes, act, available, h_wheels, sensed, cmd)
+    _allocate_1(p.wheel_axes, act, available, h_wheels, sensed.mag, cmd)
     cmd.dipole[:] = control.unloading_dipole_step(
         sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
     )
@@ -873,37 +868,50 @@ def _rate_damping_stage(
 
 @njit(cache=True)
 def _allocation_stage(
-    p: PlantArrays,
+    wheel_axes: np.ndarray,
     act: Actuators,
-    mc: ModeConfig,
-    t_u: float,
     faults: np.ndarray,
     t: float,
+    mag: np.ndarray,
+    h_wheels: np.ndarray,
+    available: np.ndarray,
+    cmd: Commands,
+) -> int:
+    """Controller faults on the body torque, then wheel torques and MD dipole (seed 000 eq 6, §3; sim_core.
+    allocation) with rod faults and the dipole limit. Returns the allocation status."""
+    faults_mod.controller_faults_1(faults, t, cmd.body_torque, cmd.frozen_torque)
+    status = _allocate_1(wheel_axes, act, available, h_wheels, mag, cmd)
+    cmd.dipole[:] = cmd.dipole_alloc
+    faults_mod.rod_faults_1(faults, t, cmd.dipole)
+    for i in range(3):
+        cmd.dipole[i] = min(max(cmd.dipole[i], -act.md_max_am2), act.md_max_am2)
+    return status
+
+
+@njit(cache=True)
+def _mode_actuation_stage(
+    p: PlantArrays,
+    act: Actuators,
+    bdot_gain: float,
+    t_u: float,
     mode: int,
+    status: int,
     est: Estimate,
     sensed: Sensed,
     have_mag_prev: bool,
     h_wheels: np.ndarray,
     available: np.ndarray,
     cmd: Commands,
-) -> int:
-    """Controller faults on the body torque, then wheel torques and MD dipole (seed 000 eq 6, §3; sim_core.
-    allocation) with rod faults and the dipole limit; the modes' unloading and rate damping. Returns the
-    allocation status."""
-    faults_mod.controller_faults_1(faults, t, cmd.body_torque, cmd.frozen_torque)
-    status = _allocate_1(p.wheel_axes, act, available, h_wheels, sensed, cmd)
-    cmd.dipole[:] = cmd.dipole_alloc
-    faults_mod.rod_faults_1(faults, t, cmd.dipole)
-    for i in range(3):
-        cmd.dipole[i] = min(max(cmd.dipole[i], -act.md_max_am2), act.md_max_am2)
-    if mc.on and (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
+) -> None:
+    """The modes' actuation after the allocation (mode machine on): magnetic unloading in the Sun/safe and ORF
+    modes, rate damping in the rate-damping and fault modes."""
+    if (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
         # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
         cmd.dipole[:] = control.unloading_dipole_step(
             sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
         )
-    if mc.on and (mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT):
-        _rate_damping_stage(p, act, mc.bdot_gain, t_u, mode, est, sensed, have_mag_prev, h_wheels, available, cmd)
-    return status
+    if mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT:
+        _rate_damping_stage(p, act, bdot_gain, t_u, mode, est, sensed, have_mag_prev, h_wheels, available, cmd)
 
 
 @njit(cache=True)
@@ -1070,7 +1078,7 @@ def _record_stage(
     pos: Position,
     est: Estimate,
     cmd: Commands,
-    mon: Monitors,
+    available: np.ndarray,
     status: int,
     flags: int,
     mode: int,
@@ -1096,7 +1104,7 @@ def _record_stage(
     row[R_WHEELS + nw : R_WHEELS + 2 * nw] = cmd.wheel_cmd
     row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = cmd.delivered
     for w in range(nw):
-        row[R_WHEELS + 3 * nw + w] = 1.0 if mon.available[w] else 0.0
+        row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
 
 
 # --- initial state -----------------------------------------------------------------------------------------
@@ -1244,6 +1252,7 @@ def fly_variant(
     t_q, t_u = clk.measure_every * clk.dt_s, clk.control_every * clk.dt_s
     faults, fdir_on = var.faults, var.fdir_on
     has_faults = faults.shape[0] > 0
+    friction_faults, stuck_faults = _flies_wheel_fault(faults, Y_FRICTION), _flies_wheel_fault(faults, Y_STUCK)
     x, sensed, est, cmd, mon, pos = carry.x, carry.sensed, carry.est, carry.cmd, carry.mon, carry.pos
     fault_state, mode_state, scalars = carry.fault_state, carry.mode_state, carry.scalars
     wheel_speeds = x[7 + 2 * nq : 7 + 2 * nq + nw]  # view: the integrator updates x in place
@@ -1270,7 +1279,10 @@ def fly_variant(
         orbit_due = every_step or md_on or control_tick or measure or output
         _ephemeris_stage(eph, clk.t0_unix_s, t, x, orbit_due, md_on or res_on or measure, sun_wanted and measure, pos)
         if has_faults:
-            flags = _fault_stage(faults, t, fault_state, ev, n_ev, cmd, sensed)
+            flags = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
+            if flags < 0:  # a fault began
+                flags = -flags - 1
+                _hold_outputs_stage(cmd, sensed)
 
         if measure:
             sample = _sense_stage(sens, faults, t, x, markov, pos, sensed)
@@ -1289,7 +1301,7 @@ def fly_variant(
                 _mismatch_filter_stage(estc, t_q, q_p, w_p, sensed, sample, est)
                 valid = sample.star_ok
             else:
-                _sample_estimate_stage(estc.kind, x, sensed, sample, est)
+                _sample_estimate_stage(estc.kind, x, sensed.omega, sample, est)
 
         if control_tick:
             shared[slot] = k
@@ -1301,10 +1313,10 @@ def fly_variant(
             cmd.program[4:7] = w_p
             cmd.program[7:10] = wd_p
             if mc.on:
-                mode = _mode_stage(
-                    mc, sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, pos, mode_state, mode, valid, est,
-                    sensed, mon, cmd, ev, n_ev,
-                )  # fmt: skip
+                sun_b = _sun_direction_1(
+                    sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, est.q, pos.r, sensed.sun_frozen
+                )
+                mode = _mode_stage(mc, t, pos, sun_b, mode_state, mode, valid, est, mon.available, cmd, ev, n_ev)
             speeds = _tachometer_stage(sens.tachometer_quantum_rad_s, wheel_speeds)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
@@ -1312,10 +1324,14 @@ def fly_variant(
                 _wheel_monitor_stage(
                     p, act, sens.tachometer_quantum_rad_s, t_u, star_reset, t, speeds, est, mon, ev, n_ev
                 )
-            _law_stage(p, c.law, mc.on, mode, est, speeds, h_wheels, mon.available, cmd)
-            status = _allocation_stage(
-                p, act, mc, t_u, faults, t, mode, est, sensed, have_mag_prev, h_wheels, mon.available, cmd
+            _law_stage(
+                p, c.law, mc.on, mode, est, speeds, h_wheels, mon.available, cmd.program, cmd.lead_lag, cmd.body_torque
             )
+            status = _allocation_stage(p.wheel_axes, act, faults, t, sensed.mag, h_wheels, mon.available, cmd)
+            if mc.on:
+                _mode_actuation_stage(
+                    p, act, mc.bdot_gain, t_u, mode, status, est, sensed, have_mag_prev, h_wheels, mon.available, cmd
+                )
             sensed.mag_prev[:] = sensed.mag
             have_mag_prev = True
             md_on = cmd.dipole[0] != 0.0 or cmd.dipole[1] != 0.0 or cmd.dipole[2] != 0.0
@@ -1323,15 +1339,15 @@ def fly_variant(
                 _wheel_hold_stage(p, act, c.fdir, t_u, speeds, est, sensed, cmd, mon)
 
         if output and out_i < rec.shape[0]:
-            _record_stage(prog, clk, eph.c_pn, nq, t, x, pos, est, cmd, mon, status, flags, mode, rec[out_i])
+            _record_stage(prog, clk, eph.c_pn, nq, t, x, pos, est, cmd, mon.available, status, flags, mode, rec[out_i])
             out_i += 1
 
         _actuator_stage(
             act, p.wheel_inertia, clk.dt_s, faults, t, wheel_speeds, cmd.wheel_cmd, cmd.frozen_cmd, cmd.motor_current,
             cmd.rotor_phase, cmd.delivered,
         )  # fmt: skip
-        if has_faults:
-            faults_mod.extra_friction_1(faults, t, plant.friction, p.friction)
+        if friction_faults:
+            faults_mod.extra_friction_1(faults, t, plant.friction, c.truth.friction)
         _disturbance_stage(
             dist.gravity_gradient, md_on or res_on, res, plant.inertia, x, pos.r, pos.b_body, pos.r_body, cmd.dipole,
             cmd.moment, ext,
@@ -1339,7 +1355,7 @@ def fly_variant(
         if surface_torques:
             _surface_torque_stage(dist, x, pos, ext)
         rk4_step_into(x, clk.dt_s, cmd.delivered, ext, plant, work, x)
-        if has_faults:
+        if stuck_faults:
             faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)
     shared[slot] = k_next
     scalars[C_STEP], scalars[C_MODE], scalars[C_SIGMA_U], scalars[C_FLAGS], scalars[C_STATUS] = (
