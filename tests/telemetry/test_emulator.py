@@ -495,6 +495,11 @@ def test_cli_writes_a_packet_file_that_decodes(tmp_path, dictionary, capsys) -> 
     scenario.write_text(scenario_library.get("somov-ge4-scan").model_copy(update={"duration_s": 4.0}).model_dump_json())
     assert main(["emulate", "--scenario", str(scenario), "--out", str(out)]) == 0
     assert decode_stream(out.read_bytes(), dictionary).report.packets_accepted == 16 + 4
+    for endless in (["--out", str(out)], ["--duration", "20"], ["--segment", "0"]):
+        assert main(["emulate", "--forever", "--port", "9", *endless]) == 2  # refused before anything is sent
+    assert "forever" in capsys.readouterr().err
+    assert main(["emulate", "--port", "9", "--dictionary", "reference_satellite.yaml"]) == 2  # no --satellite
+    assert "dictionary" in capsys.readouterr().err
 
 
 def test_the_satellite_is_the_same_spacecraft_with_its_own_truth_within_the_stated_tolerances() -> None:
