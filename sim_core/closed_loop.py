@@ -1069,13 +1069,12 @@ def _surface_torque_stage(d: Disturbances, x: np.ndarray, pos: Position, ext: np
 
 @njit(cache=True)
 def _record_stage(
-    g: Program,
-    clk: Clock,
-    c_pn: np.ndarray,
     n_modes: int,
-    t: float,
     x: np.ndarray,
-    pos: Position,
+    q_p: np.ndarray,
+    w_p: np.ndarray,
+    observing: bool,
+    r: np.ndarray,
     est: Estimate,
     cmd: Commands,
     available: np.ndarray,
@@ -1084,19 +1083,19 @@ def _record_stage(
     mode: int,
     row: np.ndarray,
 ) -> None:
-    """One output sample (R_* channels): truth, estimate, program, actuators, wheels."""
+    """One output sample (R_* channels): truth, estimate, the scenario's program Λ^p, ω^p (program axes) and
+    observing flag at the sample's time, position ``r``, actuators, wheels."""
     nw = cmd.wheel_cmd.shape[0]
     row[R_Q : R_Q + 4] = x[0:4]
     row[R_W : R_W + 3] = x[4:7]
     row[R_QE : R_QE + 4] = est.q
     row[R_WE : R_WE + 3] = est.omega
-    q_now, w_now, _, obs_now = program_at(g, clk, c_pn, t, pos)
-    row[R_QP : R_QP + 4] = q_now
-    row[R_WP : R_WP + 3] = control.program_in_body_1(q_now, x[0:4], w_now)
+    row[R_QP : R_QP + 4] = q_p
+    row[R_WP : R_WP + 3] = control.program_in_body_1(q_p, x[0:4], w_p)
     row[R_MD : R_MD + 3] = cmd.dipole
     row[R_TORQUE : R_TORQUE + 3] = cmd.body_torque
-    row[R_R : R_R + 3] = pos.r
-    row[R_OBS] = 1.0 if obs_now else 0.0
+    row[R_R : R_R + 3] = r
+    row[R_OBS] = 1.0 if observing else 0.0
     row[R_STATUS] = status
     row[R_FAULTS] = flags
     row[R_MODE] = mode
@@ -1270,6 +1269,7 @@ def fly_variant(
     sun_wanted = dist.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
     surface_torques = dist.aerodynamic or dist.solar_pressure
     k_next = clk.n_steps
+    q_p, w_p, obs_p = np.zeros(4), np.zeros(3), False  # the scenario's program, sampled at T_u and output ticks
 
     for k in range(int(scalars[C_STEP]), clk.n_steps):
         t = k * clk.dt_s
@@ -1308,7 +1308,7 @@ def fly_variant(
             if shared[0] != 0:
                 k_next = k
                 break
-            q_p, w_p, wd_p, _ = program_at(prog, clk, eph.c_pn, t, pos)
+            q_p, w_p, wd_p, obs_p = program_at(prog, clk, eph.c_pn, t, pos)
             cmd.program[0:4] = q_p
             cmd.program[4:7] = w_p
             cmd.program[7:10] = wd_p
@@ -1339,7 +1339,9 @@ def fly_variant(
                 _wheel_hold_stage(p, act, c.fdir, t_u, speeds, est, sensed, cmd, mon)
 
         if output and out_i < rec.shape[0]:
-            _record_stage(prog, clk, eph.c_pn, nq, t, x, pos, est, cmd, mon.available, status, flags, mode, rec[out_i])
+            if not control_tick:  # a control tick has just sampled the scenario's program at t
+                q_p, w_p, _, obs_p = program_at(prog, clk, eph.c_pn, t, pos)
+            _record_stage(nq, x, q_p, w_p, obs_p, pos.r, est, cmd, mon.available, status, flags, mode, rec[out_i])
             out_i += 1
 
         _actuator_stage(
