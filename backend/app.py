@@ -69,6 +69,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        services.database_watch.start()
         services.jobs.start()
         services.diagnoses.start()
         services.telemetry.start()
@@ -81,6 +82,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             await services.telemetry.stop_live()
             services.auth.stop_revocation_watch()
             services.twins.stop()
+            services.database_watch.stop()
             services.close()
 
     app = FastAPI(

@@ -10,7 +10,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from backend.core.audit_repository import AuditRepository
 from backend.core.auth import Authenticator
-from backend.core.database import create_schema, make_engine, make_session_factory
+from backend.core.database import DatabaseWatch, create_schema, make_engine, make_session_factory
 from backend.core.settings import Settings
 from backend.core.token_repository import TokenRepository
 from backend.ingest.live_hub import LiveHub
@@ -44,6 +44,7 @@ class Services:
     twin_sessions: TwinSessionRepository
     twins: LiveTwins
     diagnoses: DiagnosisRuns
+    database_watch: DatabaseWatch
 
     def close(self) -> None:
         """Stop jobs, diagnoses and the Dask cluster, the telemetry side, dispose of the engine."""
@@ -91,4 +92,5 @@ def build_services(settings: Settings) -> Services:
         twin_sessions=TwinSessionRepository(sessions),
         twins=twins,
         diagnoses=diagnoses,
+        database_watch=DatabaseWatch(engine),
     )

@@ -14,6 +14,7 @@ from fastapi.testclient import TestClient
 from pydantic import BaseModel
 
 from backend.app import create_app
+from backend.core.database import DatabaseWatch, make_engine
 from backend.core.settings import Settings
 from tests.backend.conftest import bearer
 
@@ -23,6 +24,22 @@ def test_health_answers_without_token_and_names_the_database(client: TestClient,
     assert body["status"] == "ok"
     assert body["database"] == ("sqlite" if database_url.startswith("sqlite") else "postgresql")
     assert body["auth_enabled"] is True
+
+
+def test_health_is_503_naming_the_database_when_it_does_not_answer(client: TestClient, tmp_path: Path) -> None:
+    unreachable = DatabaseWatch(make_engine(f"sqlite:///{tmp_path / 'no such directory' / 'db.sqlite'}"))
+    unreachable.start()  # its first round trip fails: the directory does not exist
+    unreachable.stop()
+    services = client.app.state.services  # type: ignore[attr-defined]
+    services.database_watch, watch = unreachable, services.database_watch
+    try:
+        answer = client.get("/api/v1/health")
+    finally:
+        services.database_watch = watch
+    assert answer.status_code == 503
+    assert answer.json()["field"] == "database"
+    assert "unable to open database file" in answer.json()["message"]
+    assert client.get("/api/v1/health").status_code == 200  # the server's own watch answers
 
 
 def test_openapi_served_at_fixed_path_with_v1_routes(client: TestClient) -> None:
