@@ -33,7 +33,7 @@ import contextlib
 import math
 import time
 from collections import deque
-from collections.abc import AsyncGenerator, AsyncIterator, Mapping, Sequence
+from collections.abc import AsyncGenerator, AsyncIterator, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -155,12 +155,13 @@ class PacketStream:
 @dataclass
 class TelemetryCarry:
     """What the emulated telemetry carries from one segment of a flight to the next: the sensors' noise stream,
-    the gyro's Markov drift at the next sample (None: drawn from its stationary distribution), the onboard
-    events the telemetry still shows (the last one, the last mode change, every isolation) and the next
-    sequence count per packet."""
+    the gyro's Markov drift at the next sample (None: drawn from its stationary distribution), each sensor's
+    last output (time, value: what a frozen sensor holds), the onboard events the telemetry still shows (the last
+    one, the last mode change, every isolation) and the next sequence count per packet."""
 
     rng: np.random.Generator
     gyro_drift: np.ndarray | None = None
+    held: dict[str, tuple[float, np.ndarray]] = field(default_factory=dict)
     events: list[tuple[float, str, int]] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)
 
@@ -353,21 +354,48 @@ def _split(prefix: str, columns: np.ndarray, suffixes: Sequence[str]) -> dict[st
     return {f"{prefix}_{sfx}": columns[:, k] for k, sfx in enumerate(suffixes)}
 
 
-def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def _faulted(
+    carry: TelemetryCarry,
+    sensor: str,
+    t_s: np.ndarray,
+    samples: np.ndarray,
+    noise: np.ndarray,
+    series: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+) -> tuple[np.ndarray, np.ndarray]:
+    """``series(t, samples, noise)`` (a sim_core.faults series) run on from the sensor's last output of the previous
+    segment, so that a frozen sensor holds it across the seam; keeps this segment's last output."""
+    held = carry.held.get(sensor)
+    if held is not None:
+        t_s = np.concatenate([[held[0]], t_s])
+        samples = np.vstack([held[1], samples])
+        noise = np.vstack([np.zeros(noise.shape[1]), noise])
+    out, failed = series(np.ascontiguousarray(t_s), np.ascontiguousarray(samples), np.ascontiguousarray(noise))
+    if held is not None:
+        out, failed = out[1:], failed[1:]
+    carry.held[sensor] = (float(t_s[-1]), out[-1].copy())
+    return out, failed
+
+
+def _star_tracker(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, carry: TelemetryCarry) -> np.ndarray:
     """Star-tracker quaternions Λ^m = Λ ∘ Λ^n ∘ Λ^f (seed 000 §4), Λ^f the hidden faults' rotation; zeros if failed."""
     q_m, _ = sensors.star_tracker(
         sr["q_ib"],
         sr["omega_b_rad_s"],
         s.sensors.star_tracker_sigma_arcsec * sensors.ARCSEC,
         STAR_TRACKER_TRACKING_RATE_RAD_S,
-        rng,
+        carry.rng,
     )
     e = quaternion.multiply(quaternion.conjugate(sr["q_ib"]), q_m)
     theta = 2.0 * np.arctan2(np.linalg.norm(e[:, 1:], axis=-1), e[:, 0])[:, None]
     noise = theta * e[:, 1:] / np.maximum(np.linalg.norm(e[:, 1:], axis=-1, keepdims=True), 1e-300)
     table, _ = fault_kernels.fault_table(s.variants[:1])
-    q_m, failed = fault_kernels.star_tracker_fault_series(
-        table[0], t_s, np.ascontiguousarray(q_m), np.ascontiguousarray(noise)
+    q_m, failed = _faulted(
+        carry,
+        "star_tracker",
+        t_s,
+        q_m,
+        noise,
+        lambda t, q, n: fault_kernels.star_tracker_fault_series(table[0], t, q, n),
     )
     q_m = quaternion.normalize(q_m)
     q_m[failed] = 0.0
@@ -386,22 +414,34 @@ def _gyro(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, carry: Teleme
     )
     carry.gyro_drift = drift.decay * d[-1] + drift.step_std * rng.standard_normal(3)
     table, _ = fault_kernels.fault_table(s.variants[:1])
-    w_g, failed = fault_kernels.sensor_fault_series(
-        table[0], fault_kernels.T_GYRO, t_s, w_g, w_g - sr["omega_b_rad_s"] - bias - d
+    w_g, failed = _faulted(
+        carry,
+        "gyro",
+        t_s,
+        w_g,
+        w_g - sr["omega_b_rad_s"] - bias - d,
+        lambda t, w, n: fault_kernels.sensor_fault_series(table[0], fault_kernels.T_GYRO, t, w, n),
     )
     w_g[failed] = 0.0
     return w_g
 
 
 def _magnetometer(
-    sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range_t: float, rng: np.random.Generator
+    sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray, range_t: float, carry: TelemetryCarry
 ) -> np.ndarray:
     """Magnetometer field Λ̃ ∘ B_I ∘ Λ + n (seed 003 MAG, field model as flown) under the hidden faults; 0 if failed."""
     b_i = environment.magnetic_field_eci_t(sr["r_eci_m"], _unix_s(s, t_s), s.magnetic_model)
-    b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), s.sensors.magnetometer_noise_t, range_t, rng)
+    b_b, _ = sensors.magnetometer(sr["q_ib"], b_i, np.zeros(3), s.sensors.magnetometer_noise_t, range_t, carry.rng)
     b_true = quaternion.rotate(quaternion.conjugate(sr["q_ib"]), b_i)
     table, _ = fault_kernels.fault_table(s.variants[:1])
-    b_b, failed = fault_kernels.sensor_fault_series(table[0], fault_kernels.T_MAG, t_s, b_b, b_b - b_true)
+    b_b, failed = _faulted(
+        carry,
+        "magnetometer",
+        t_s,
+        b_b,
+        b_b - b_true,
+        lambda t, b, n: fault_kernels.sensor_fault_series(table[0], fault_kernels.T_MAG, t, b, n),
+    )
     clipped: npt.NDArray[np.float64] = np.clip(b_b, -range_t, range_t)
     clipped[failed] = 0.0
     return clipped
@@ -423,13 +463,13 @@ def _hk_values(
     """ACS_HK engineering values at the trajectory rows (estimates, programme, actuators, sensor samples), the
     onboard ``events`` so far."""
     sr = {name: series[0, rows] for name, series in traj.series.items()}
-    t_s, rng = traj.t_s[rows], carry.rng
+    t_s = traj.t_s[rows]
     wheels = [str(k + 1) for k in range(sr["wheel_speed_rad_s"].shape[-1])]
     event, argument = _last_events(events, definition, t_s)
     values = {
-        **_split("q_st_ib", _star_tracker(sr, s, t_s, rng), "0123"),
+        **_split("q_st_ib", _star_tracker(sr, s, t_s, carry), "0123"),
         **_split("omega_gyro_b_rad_s", _gyro(sr, s, t_s, carry), "xyz"),
-        **_split("b_mag_b_t", _magnetometer(sr, s, t_s, _representable(definition, "b_mag_b_t_x"), rng), "xyz"),
+        **_split("b_mag_b_t", _magnetometer(sr, s, t_s, _representable(definition, "b_mag_b_t_x"), carry), "xyz"),
         **_split("q_est_ib", sr["q_est_ib"], "0123"),
         **_split("q_prog_ib", sr["q_prog_ib"], "0123"),
         **_split("omega_est_b_rad_s", sr["omega_est_b_rad_s"], "xyz"),

@@ -458,6 +458,19 @@ def test_an_endless_satellite_keeps_streaming_segment_after_segment_as_one_fligh
     assert abs(r) < NOISE_CORRELATION_MAX  # the sensor noise goes on, it does not start again each segment
 
 
+def test_a_frozen_sensor_holds_its_last_output_across_a_segment_seam(dictionary) -> None:
+    onset_s = 5.0
+    s = emulator.satellite_scenario(faults=[emulator.parse_fault(f"gyro:0:frozen@{onset_s}")])
+    satellite = emulator.Satellite(s, dictionary)
+    parts = [satellite.fly(10.0)[1]["ACS_HK"] for _ in range(2)]  # the seam at 10 s, inside the fault
+    gyro = np.concatenate([p.values["omega_gyro_b_rad_s_x"] for p in parts])
+    t_ns = np.concatenate([p.t_utc_ns for p in parts])
+    t_s = (t_ns - t_ns[0]) / 1e9
+    last_free = gyro[np.flatnonzero(t_s < onset_s)[-1]]
+    assert np.all(gyro[t_s >= onset_s] == last_free)  # frozen at the output before the onset, through the seam
+    assert np.unique(gyro[t_s < onset_s]).size > 1  # noisy before: the hold is the fault's, not a dead stream
+
+
 def test_demo_pass_file_holds_the_window_with_mission_sequence_counts(dictionary) -> None:
     data = emulator.demo_pass_bytes(t_start_s=100.0, t_stop_s=130.0)
     batches = {b.packet: b for b in decode_stream(data, dictionary).batches}
