@@ -16,10 +16,27 @@ construction. Its threshold is a *bound*, not a tuned number: the tachometer qua
 friction is monotonic in speed, so the true
 mean friction over the period lies between m^f at the slowest and fastest speeds the readings
 allow (± q/2); the trapezoid estimate lies there too. r_p exceeding ``WHEEL_SAFETY`` × that bound
-is a detection; ``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
+is a detection, and so is Σ r_p over any window of up to ``WINDOW_PERIODS`` periods ending now exceeding
+its own bound (one quantum J q, since readings telescope, + the other terms summed × ``WHEEL_SAFETY`` +
+the noise bound below): a weak motor's missing momentum adds up while the quantisation error does not;
+``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
 availability mask, so that :func:`sim_core.allocation.allocate_1` passes 4 → 3 → 2 + MD; fewer
 than two wheels left is the fault mode (no wheel law exists). Periods where the motor's momentum
 limit may cut the torque are not tested (the residual is not defined there).
+
+Seed 002 eq 4's noise torque M_x = K_x W/|W_max| (W white, uniform in [−1, 1], drawn afresh every
+sample time τ) acts between rotor and body, so after the decoupling it is wheel p's own noise
+momentum N_p = K_x τ Σ u_i over the T_u/τ samples of a period: zero mean, variance
+σ_N² = K_x² τ T_u / 3, and sub-Gaussian with that variance as proxy (E e^{λu} = sinh λ / λ ≤ e^{λ²/6}),
+so P(|N_p| > a) ≤ 2 exp(−a²/2σ_N²) for any number of samples. The bound a = σ_N √(2 ln(2/P_FA))
+(:func:`wheel_noise_bound`) with P_FA = ``FALSE_ALARM_PROBABILITY`` / ``WINDOW_PERIODS`` (the windows
+tested each period: union bound) is exceeded by a healthy wheel with probability ≤ P_FA per wheel and
+period; over a window of n periods the variance is n σ_N², the bound a√n. It is a
+probability bound, independent of the quantisation and model terms, so it adds to their bound outside
+``WHEEL_SAFETY`` (the safety factor covers modelling error). For HR12 wheels (J_r = 0.019 kg·m²), K_x =
+1e-4 N·m, τ = 0.05 s, T_u = 2 s: σ_N = 1.8e-5 N·m·s per period, a = 7.3 σ_N = 1.3e-4, against one
+0.25 rpm quantum J_r q = 5.0e-4; over a 300 s window a√150 = 1.6e-3 — without it, the noise walked
+the windows past the one-quantum bound within minutes (23 false alarms in 24 h).
 
 Sensors (seed 000 §4 measurements, seed 003 §3.2 preprocessing flags):
 - star tracker: the normalised innovation squared against the MEKF prediction (χ²(3)) above the
@@ -64,12 +81,13 @@ __all__ = [
     "MAG_STATE_SIZE",
     "star_nis_threshold",
     "gaussian_sigmas",
+    "wheel_noise_bound",
     "wheel_state",
     "wheel_state_1",
     "star_state",
     "gyro_state",
     "mag_state",
-    "ACC_WINDOWS_PERIODS",
+    "WINDOW_PERIODS",
     "wheel_bound_1",
     "wheel_residual_1",
     "wheel_decoupling_1",
@@ -102,9 +120,10 @@ T_GYRO, T_STAR, T_EARTH, T_MAG = 1, 2, 3, 4  # sim_core.faults.TARGET_CODES
 
 # Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
 WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR, WS_COUPLING, WS_W = range(9)
-WS_ACC = 11  # accumulated tests: per window (length, stagger) rows Σ r, Σ bound without the quantum, periods
-ACC_WINDOWS_PERIODS = (15, 50, 150)  # 30 s, 100 s, 300 s at T_u = 2 s; each twice, staggered by half a length
-WHEEL_STATE_ROWS = WS_ACC + 3 * 2 * len(ACC_WINDOWS_PERIODS)  # WS_W..WS_W+2: body rate at the hold
+WS_N, WS_HEAD = 11, 12  # periods in the window history, its ring slot of the newest boundary
+WS_HIST = 13  # ring of WINDOW_PERIODS + 1 boundaries: cumulative Σ r, then cumulative Σ bound without the quantum
+WINDOW_PERIODS = 150  # longest window tested: 300 s at T_u = 2 s; every shorter one ending now is tested too
+WHEEL_STATE_ROWS = WS_HIST + 2 * (WINDOW_PERIODS + 1)  # WS_W..WS_W+2: body rate at the hold
 # Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
 # innovation (3), in-jump flag.
 SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM, SS_ZLAST = 0, 4, 5, 6, 9, 10, 11, 12, 15
@@ -132,6 +151,22 @@ def gaussian_sigmas(probability: float = FALSE_ALARM_PROBABILITY) -> float:
     return float(norm.isf(0.5 * probability))
 
 
+def wheel_noise_bound(
+    noise_nm: np.ndarray, sample_s: float, t_u: float, probability: float = FALSE_ALARM_PROBABILITY / WINDOW_PERIODS
+) -> np.ndarray:
+    """Per-wheel bound a = K_x √(τ T_u / 3) √(2 ln(2/P)) on the noise momentum of one control period T_u, N·m·s:
+    seed 002 eq 4's M_x = K_x W/|W_max|, W uniform in [−1, 1] drawn every ``sample_s`` τ (module docstring)."""
+    k_x = np.asarray(noise_nm, dtype=float)
+    if k_x.ndim != 1 or not np.all(np.isfinite(k_x)) or np.any(k_x < 0.0):
+        raise ValueError("noise_nm: expected one finite non-negative K_x per wheel")
+    if not (0.0 < sample_s <= t_u and np.isfinite(t_u)):
+        raise ValueError("sample_s, t_u: expected 0 < sample_s ≤ t_u, finite")
+    if not 0.0 < probability < 1.0:
+        raise ValueError("probability: must lie in (0, 1)")
+    bound: np.ndarray = k_x * np.sqrt(sample_s * t_u / 3.0) * np.sqrt(2.0 * np.log(2.0 / probability))
+    return bound
+
+
 def star_nis_threshold(probability: float = FALSE_ALARM_PROBABILITY) -> float:
     """χ²(3) quantile of the star-tracker innovation test (seed 000 §4 measurement noise)."""
     if not 0.0 < probability < 1.0:
@@ -148,11 +183,8 @@ def wheel_state(n_wheels: int) -> np.ndarray:
 
 @njit(cache=True)
 def wheel_state_1(n_wheels: int) -> np.ndarray:
-    """Compiled :func:`wheel_state`: zeros, the second window of each length started half-way."""
-    state = np.zeros((WHEEL_STATE_ROWS, n_wheels))
-    for i in range(len(ACC_WINDOWS_PERIODS)):
-        state[WS_ACC + 3 * (2 * i + 1) + 2, :] = ACC_WINDOWS_PERIODS[i] // 2
-    return state
+    """Compiled :func:`wheel_state`: zeros (an empty window history)."""
+    return np.zeros((WHEEL_STATE_ROWS, n_wheels))
 
 
 def star_state() -> np.ndarray:
@@ -235,29 +267,43 @@ def wheel_decoupling_1(axes: np.ndarray, inertia: np.ndarray, j_inv: np.ndarray)
 
 @njit(cache=True)
 def _clear_windows_1(state: np.ndarray, p: int) -> None:
-    """Restart the sums of wheel p's accumulated windows (their period counters keep the stagger)."""
-    for w in range(2 * len(ACC_WINDOWS_PERIODS)):
-        state[WS_ACC + 3 * w : WS_ACC + 3 * w + 2, p] = 0.0
+    """Restart wheel p's window history: the current boundary becomes the first one."""
+    head = int(state[WS_HEAD, p])
+    state[WS_N, p] = 0.0
+    state[WS_HIST + head, p] = 0.0
+    state[WS_HIST + WINDOW_PERIODS + 1 + head, p] = 0.0
 
 
 @njit(cache=True)
-def _accumulate_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum: float) -> bool:
-    """Add one period to every accumulated window of wheel p; True if one exceeds its bound.
+def _scan_windows_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum: float, b_noise: float) -> bool:
+    """Add one period to wheel p's history and test every window ending now; True if one exceeds its bound.
 
-    Over a window the tachometer errors telescope (Σ J ΔΩ̃ = J (Ω̃_N − Ω̃_0), two readings each within
-    ±q/2: at most one quantum J q, exactly, so it needs no safety factor), while the missing momentum of a
-    dead or weak motor adds up; the other bound terms add up and keep WHEEL_SAFETY."""
-    hit = False
-    for i in range(len(ACC_WINDOWS_PERIODS)):
-        for s in range(2):
-            row = WS_ACC + 3 * (2 * i + s)
-            if state[row + 2, p] >= ACC_WINDOWS_PERIODS[i]:
-                state[row : row + 3, p] = 0.0
-            state[row, p] += r
-            state[row + 1, p] += b_rest
-            state[row + 2, p] += 1.0
-            hit = hit or abs(state[row, p]) > WHEEL_SAFETY * state[row + 1, p] + b_quantum
-    return hit
+    A window of n periods from boundary j holds Σ r and Σ (bound without the quantum). Over it the tachometer
+    errors telescope (Σ J ΔΩ̃ = J (Ω̃_now − Ω̃_j), two readings each within ±q/2: at most one quantum J q,
+    exactly, so it needs no safety factor), while the missing momentum of a dead or weak motor adds up; the
+    other bound terms add up and keep WHEEL_SAFETY; the wheel's noise momentum over n periods has n times one
+    period's variance, so its bound ``b_noise`` (one period) grows as √n. A window counts only together with
+    the one a period longer: a single wrong reading at boundary j shows in the windows starting there but
+    not in those straddling it, so it cannot isolate a wheel; a lasting fault pays one period for this."""
+    size = WINDOW_PERIODS + 1
+    head = int(state[WS_HEAD, p])
+    now = (head + 1) % size
+    s_now = state[WS_HIST + head, p] + r
+    b_now = state[WS_HIST + size + head, p] + b_rest
+    state[WS_HIST + now, p] = s_now
+    state[WS_HIST + size + now, p] = b_now
+    state[WS_HEAD, p] = now
+    n = int(min(state[WS_N, p] + 1.0, WINDOW_PERIODS))
+    state[WS_N, p] = n
+    longer_hit = False
+    for i in range(1, n + 1):
+        j = (now - i) % size
+        limit = WHEEL_SAFETY * (b_now - state[WS_HIST + size + j, p]) + b_quantum + b_noise * np.sqrt(i)
+        hit = abs(s_now - state[WS_HIST + j, p]) > limit
+        if hit and longer_hit:
+            return True
+        longer_hit = hit
+    return False
 
 
 @njit(cache=True)
@@ -269,6 +315,7 @@ def wheel_check_1(
     max_momentum: np.ndarray,
     friction: np.ndarray,
     tach_q: float,
+    noise: np.ndarray,
     t_u: float,
     decouple: np.ndarray,
     available: np.ndarray,
@@ -278,7 +325,8 @@ def wheel_check_1(
 ) -> bool:
     """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
 
-    ``speeds``: tachometer readings at t (rad/s); ``state`` holds the previous reading, the
+    ``speeds``: tachometer readings at t (rad/s); ``noise`` each wheel's noise-momentum bound over one period
+    (:func:`wheel_noise_bound`, N·m·s; zeros without seed 002's noise torque); ``state`` holds the previous reading, the
     predicted change of the body rate about each axis with its error bound, and the
     limited torque held since (see :func:`wheel_hold_1`); ``decouple`` from
     :func:`wheel_decoupling_1`, so that each decoupled residual answers for its own wheel only;
@@ -330,8 +378,8 @@ def wheel_check_1(
             _clear_windows_1(state, p)
             accumulated = False
         else:
-            accumulated = _accumulate_1(state, p, r, b - bq, bq)
-        exceeded = accumulated or abs(r) > WHEEL_SAFETY * b
+            accumulated = _scan_windows_1(state, p, r, b - bq, bq, noise[p])
+        exceeded = accumulated or abs(r) > WHEEL_SAFETY * b + noise[p]
         if not exceeded:
             state[WS_COUNT, p] = 0.0
             continue
@@ -820,17 +868,26 @@ def observable_time(
     onset_s: float,
     inertia_kg_m2: float,
     tach_quantum_rad_s: float,
+    noise_nms: float = 0.0,
+    control_dt_s: float = 1.0,
 ) -> float | None:
     """When a wheel fault becomes observable: the first sample time at which the momentum it withheld,
-    |∫ (m_cmd − m_delivered) dt| from ``onset_s``, reaches one tachometer quantum of momentum J_r q (no reading
-    can tell less from quantisation); None if it never does. Series sampled uniformly at ``t_s``."""
+    W(t) = |∫ (m_cmd − m_delivered) dt| from ``onset_s``, reaches one tachometer quantum of momentum J_r q plus
+    the noise-momentum bound over the time since the onset, ``noise_nms`` √((t − onset)/T_u) (``noise_nms`` the
+    bound over one control period ``control_dt_s``, :func:`wheel_noise_bound` at the false-alarm probability of
+    one test; 0 without seed 002's noise torque): before that, quantisation and noise can make the readings of a
+    healthy wheel show as much. ``torque_nm`` is the motor torque without the noise. None if it never does.
+    Series sampled uniformly at ``t_s``."""
     t = np.asarray(t_s, dtype=float)
     if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0.0):
         raise ValueError("t_s: expected at least two increasing sample times")
+    if not (noise_nms >= 0.0 and control_dt_s > 0.0):
+        raise ValueError("noise_nms, control_dt_s: expected ≥ 0 and > 0")
     after = t >= onset_s
     gap = np.asarray(torque_cmd_nm, dtype=float)[after] - np.asarray(torque_nm, dtype=float)[after]
     withheld = np.abs(np.cumsum(gap) * (t[1] - t[0]))
-    hit = np.nonzero(withheld >= inertia_kg_m2 * tach_quantum_rad_s)[0]
+    floor = inertia_kg_m2 * tach_quantum_rad_s + noise_nms * np.sqrt((t[after] - onset_s) / control_dt_s)
+    hit = np.nonzero(withheld >= floor)[0]
     return float(t[after][hit[0]]) if hit.size else None
 
 
