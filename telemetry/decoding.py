@@ -38,6 +38,7 @@ __all__ = [
     "derive",
     "decode_packets",
     "decode_stream",
+    "decoded_octets_per_octet",
     "quaternion_of",
 ]
 
@@ -177,6 +178,17 @@ def _integer_dtype(p: Parameter) -> np.dtype | None:
     if p.data_type == "uint" and octets == 8 and p.bit_length < 64:
         return np.dtype(np.int64)  # the archive's integer type; exact below 2**63
     return np.dtype(f"{'i' if p.data_type == 'int' else 'u'}{octets}")
+
+
+def decoded_octets_per_octet(definition: PacketDefinition) -> float:
+    """Most octets of decoded values one octet of these packets yields: exact for a fixed layout (integers in
+    their width, floats and calibrated values 8 octets, derived ones 8); 8 per value otherwise
+    (Dictionary.values_per_octet, an upper bound)."""
+    if definition.xtce is not None or definition.fields:
+        return 8 * definition.values_per_octet
+    dtypes = [_integer_dtype(p) for p in definition.parameters]
+    octets = sum(8 if p.polynomial or d is None else d.itemsize for p, d in zip(definition.parameters, dtypes))
+    return (octets + 8 * len(definition.derived)) / definition.packet_octets
 
 
 def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:

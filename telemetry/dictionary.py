@@ -277,10 +277,6 @@ class Dictionary:
         """Total packet length (octets) of every known APID, for stream framing."""
         return {apid: p.packet_octets for apid, p in self.packets.items()}
 
-    def values_per_octet(self) -> float:
-        """Most values one octet of a stream of these packets can decode to (the densest packet type's)."""
-        return max((p.values_per_octet for p in self.packets.values()), default=0.0)
-
     def crc_apids(self) -> frozenset[int]:
         """APIDs whose packets end with a CRC-16 packet error control field."""
         return frozenset(apid for apid, p in self.packets.items() if p.crc)
