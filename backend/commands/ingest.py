@@ -120,10 +120,14 @@ def run(args: argparse.Namespace) -> int:
             )
         archive = None
         if not args.dry_run:
-            from backend.core.settings import Settings
             from telemetry.archive import Archive
 
-            archive = Archive(args.db or Settings().resolved_database_url())
+            url = args.db
+            if url is None:  # pydantic settings: ~6 MB of the ingest process, only when needed
+                from backend.core.settings import Settings
+
+                url = Settings().resolved_database_url()
+            archive = Archive(url)
         try:
             report = _ingest(args, dictionary, archive, dictionary_limits(dictionary))
         finally:
