@@ -837,37 +837,6 @@ def _allocate_1(
 
 
 @njit(cache=True)
-def _rate_damping_stage(
-    p: PlantArrays,
-    act: Actuators,
-    bdot_gain: float,
-    t_u: float,
-    mode: int,
-    est: Estimate,
-    sensed: Sensed,
-    have_mag_prev: bool,
-    h_wheels: np.ndarray,
-    available: np.ndarray,
-    cmd: Commands,
-) -> None:
-    """Rate damping (seed 001 initial mode, seed 003 eq 29–30): B-dot above 1 °/s or in the fault mode;
-    below it the wheels brake the body (control.rate_brake_torque_1) while the rods unload the cluster."""
-    cmd.body_torque[:] = 0.0
-    cmd.wheel_cmd[:] = 0.0
-    cmd.dipole[:] = 0.0
-    rate = np.sqrt(est.omega @ est.omega)
-    if mode == modes.MODE_FAULT or rate > WHEEL_CAPTURE_RAD_S or np.sum(available) < 2:
-        if have_mag_prev:
-            cmd.dipole[:] = control.bdot_dipole_step(sensed.mag, sensed.mag_prev, t_u, bdot_gain, act.md_max_am2)
-        return
-    cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
-    _allocate_1(p.wheel_axes, act, available, h_wheels, sensed.mag, cmd)
-    cmd.dipole[:] = control.unloading_dipole_step(
-        sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
-    )
-
-
-@njit(cache=True)
 def _allocation_stage(
     wheel_axes: np.ndarray,
     act: Actuators,
@@ -904,15 +873,26 @@ def _mode_actuation_stage(
     available: np.ndarray,
     cmd: Commands,
 ) -> None:
-    """The modes' actuation after the allocation (mode machine on): magnetic unloading in the Sun/safe and ORF
-    modes, rate damping in the rate-damping and fault modes."""
-    if (mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0:
-        # continuous magnetic unloading of the cluster momentum (seed 003 eq 29)
-        cmd.dipole[:] = control.unloading_dipole_step(
-            sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
-        )
+    """The modes' actuation after the allocation (mode machine on). Rate-damping and fault modes (seed 001
+    initial mode, seed 003 eq 29–30): B-dot above 1 °/s, in the fault mode or with fewer than two wheels; below
+    it the wheels brake the body (control.rate_brake_torque_1) while the rods unload the cluster. Sun/safe and
+    ORF modes: continuous magnetic unloading of the cluster momentum (seed 003 eq 29)."""
     if mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT:
-        _rate_damping_stage(p, act, bdot_gain, t_u, mode, est, sensed, have_mag_prev, h_wheels, available, cmd)
+        cmd.body_torque[:] = 0.0
+        cmd.wheel_cmd[:] = 0.0
+        cmd.dipole[:] = 0.0
+        rate = np.sqrt(est.omega @ est.omega)
+        if mode == modes.MODE_FAULT or rate > WHEEL_CAPTURE_RAD_S or np.sum(available) < 2:
+            if have_mag_prev:
+                cmd.dipole[:] = control.bdot_dipole_step(sensed.mag, sensed.mag_prev, t_u, bdot_gain, act.md_max_am2)
+            return
+        cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
+        _allocate_1(p.wheel_axes, act, available, h_wheels, sensed.mag, cmd)
+    elif not ((mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0):
+        return
+    cmd.dipole[:] = control.unloading_dipole_step(
+        sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
+    )
 
 
 @njit(cache=True)
