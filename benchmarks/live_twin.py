@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/live_twin.py [--satellites 100] [--seconds 150] [--exact-model]
     .venv/bin/python benchmarks/live_twin.py --startup [--cold]  # acs-twin serve --no-auth: API, demo twin, monitors
+    .venv/bin/python benchmarks/live_twin.py --resync [--repeats 3]  # CPU of one twin re-synchronisation
 
 Fleet, through the product end to end: ``acs-twin serve --no-auth --no-emulator`` on free ports; one nominal flight
 of the reference satellite (somov-ge4-scan, emulated, ACS_HK thinned to 1 Hz + GPS_NAV at 1 Hz) is flown by N
@@ -16,6 +17,9 @@ SQLite synchronous=FULL), relays to the live twins and publishes their states. P
   * server CPU: CPU time / wall time of the server's process tree by process (1.0 = one of the machine's 2 cores),
     and per satellite;
   * nominal attitude residual RMS over all satellites after 30 s (the star tracker's σ is 3″), wheels in rpm.
+Re-sync (--resync): CPU time (all threads of this process) and wall time of one live-twin synchronisation (the orbit
+fit over the GPS fixes, the engine's set-up and a RESYNC_S segment flown), at 18 instants of a nominal 400 s flight
+outside its scheduled turn, after one warm-up; the fleet's twins pay it once per satellite per RESYNC_S.
 Start-up (--startup): after ``acs-twin warm`` (what scripts/run.sh runs once per install), wall time from launching
 ``acs-twin serve --no-auth`` (fresh data directory, free ports) to the API answering, to the demo satellite's first
 telemetry at its live twin, to the twin propagating with residuals, to the three monitors answering HTTP; ``--cold``
@@ -43,6 +47,37 @@ EPOCH = "2026-03-20T00:00:00Z"
 SETTLE_S = 30.0  # the emulated satellite's own MEKF converges first: residual RMS taken after it
 STAGGER_S = 60  # satellites start spread over one re-sync period
 TARGET_LAG_P99_S = 2.0
+
+
+RESYNC_FLIGHT_S = 400.0  # the scheduled turn of somov-ge4-scan flies 420–520 s: every sync instant is outside it
+
+
+def resync(repeats: int) -> None:
+    """Print the CPU and wall time of one live-twin re-synchronisation (see the module docstring)."""
+    from backend.twin.live import RESYNC_S, LiveTwin
+    from sim_core import scenario_library
+    from telemetry.attitude_mapping import shipped_mapping
+    from telemetry.decoding import decode_stream
+    from telemetry.dictionary import load_dictionary
+    from telemetry.emulator import emulate
+
+    data = emulate("somov-ge4-scan", [], RESYNC_FLIGHT_S, EPOCH)[2].data
+    batches = decode_stream(data, load_dictionary("reference_satellite.yaml"), source="benchmark").batches
+    mapping = shipped_mapping("reference_satellite.yaml")
+    assert mapping is not None
+    twin = LiveTwin("REFSAT", mapping, scenario_library.get("somov-ge4-scan"))
+    twin.observe(batches, 0.0)
+    t = twin.recent()["t_ns"]
+    at = [int(np.searchsorted(t, t[0] + s * 1_000_000_000)) for s in range(40, int(RESYNC_FLIGHT_S), 20)]
+    twin._fly(at[0])  # warm-up: kernels loaded, Earth orientation of these hours kept
+    cpu0, wall0, flown = time.process_time(), time.perf_counter(), 0
+    for _ in range(repeats):
+        flown += sum(twin._fly(k) is not None for k in at)
+    cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+    print(
+        f"live-twin re-sync ({RESYNC_S:g} s segment, somov-ge4-scan): {flown} flown, CPU {cpu / flown * 1e3:.1f} ms, "
+        f"wall {wall / flown * 1e3:.1f} ms each; load average {os.getloadavg()}"
+    )
 
 
 def _fleet_stream(seconds: float, exact_model: bool):
@@ -455,8 +490,12 @@ def main() -> None:
     parser.add_argument("--startup", action="store_true")
     parser.add_argument("--cold", action="store_true", help="--startup with an empty numba cache (compiling)")
     parser.add_argument("--exact-model", action="store_true", help="the satellite flies the twin's model exactly")
+    parser.add_argument("--resync", action="store_true", help="CPU and wall time of one twin re-synchronisation")
+    parser.add_argument("--repeats", type=int, default=3, help="--resync: passes over the 18 sync instants")
     args = parser.parse_args()
-    if args.startup:
+    if args.resync:
+        resync(args.repeats)
+    elif args.startup:
         startup(args.cold)
     else:
         fleet(args.satellites, args.seconds, args.exact_model)

@@ -10,6 +10,7 @@ Multi-rate (seed 000 §4): dynamics at ``dynamics_dt_s`` (RK4), measurements and
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from datetime import datetime
@@ -303,9 +304,15 @@ def _fdir_flags(s: Scenario, on: bool | Sequence[bool]) -> np.ndarray:
     return np.ascontiguousarray(flags)
 
 
+@functools.cache
+def _fdir_quantiles() -> tuple[float, float]:
+    """The FDIR tests' Gaussian σ multiple and star-tracker χ² threshold (scipy quantiles, ~2 ms: computed once)."""
+    return fdir_kernels.gaussian_sigmas(), fdir_kernels.star_nis_threshold()
+
+
 def _fdir_config(s: Scenario) -> closed_loop.FdirConfig:
     """FDIR thresholds from the sensor noise of the scenario (sim_core.fdir)."""
-    n_sigma = fdir_kernels.gaussian_sigmas()
+    n_sigma, nis_threshold = _fdir_quantiles()
     rate_noise = 0.0 if s.estimator.kind == "truth" else n_sigma * np.sqrt(2.0) * s.sensors.gyro_noise_rad_s
     bound = 0.0
     if s.gravity_gradient:
@@ -315,9 +322,7 @@ def _fdir_config(s: Scenario) -> closed_loop.FdirConfig:
     noise = fdir_kernels.wheel_noise_bound(  # the loop draws seed 002's W once per dynamics step
         np.array([w.noise_nm for w in s.spacecraft.cluster.wheels], dtype=float), s.dynamics_dt_s, s.control_dt_s
     )
-    return closed_loop.FdirConfig(
-        float(rate_noise), float(fdir_kernels.star_nis_threshold()), float(n_sigma), float(bound), noise
-    )
+    return closed_loop.FdirConfig(float(rate_noise), float(nis_threshold), float(n_sigma), float(bound), noise)
 
 
 class ProgramSamples(NamedTuple):
@@ -560,25 +565,33 @@ def _surfaces(s: Scenario) -> closed_loop.Surfaces:
     )
 
 
+@functools.lru_cache(maxsize=64)
+def _filter_gains(q: float, r: float, t_q: float) -> tuple[float, float, float, np.ndarray, np.ndarray]:
+    """k_α, k_ω, the smoother's 1 − exp(−T_q/T) and (Φ, Γ) of the per-axis filters for densities q, r at T_q
+    (sim_core.attitude_filters; a Riccati solution and a matrix exponential, ~9 ms: a live twin re-synchronising
+    the same satellite asks for the same ones every time). Callers copy Φ and Γ."""
+    k_alpha, k_omega = attitude_filters.discrete_gains(q, r, t_q)
+    k12, k22 = attitude_filters.continuous_gains(q, r)
+    time_constant, _ = attitude_filters.time_constant_and_damping(k12, k22)
+    phi, gamma = attitude_filters.body_rate_discretisation(k12, k22, t_q)
+    return k_alpha, k_omega, float(1.0 - np.exp(-t_q / time_constant)), phi, gamma
+
+
 def _estimator_config(s: Scenario) -> closed_loop.EstimatorConfig:
     """The estimator the law reads, with the steady-state gains of the per-axis filters (sim_core.attitude_filters):
     measurement density r = σ_st² T_q, disturbance density q = ``estimator.disturbance_density_rad2_s3``."""
     t_q = s.measurement_dt_s
     r = max((s.sensors.star_tracker_sigma_arcsec * ARCSEC) ** 2 * t_q, 1e-30)
-    q = s.estimator.disturbance_density_rad2_s3
-    k_alpha, k_omega = attitude_filters.discrete_gains(q, r, t_q)
-    k12, k22 = attitude_filters.continuous_gains(q, r)
-    time_constant, _ = attitude_filters.time_constant_and_damping(k12, k22)
-    phi, gamma = attitude_filters.body_rate_discretisation(k12, k22, t_q)
+    k_alpha, k_omega, smoothing, phi, gamma = _filter_gains(s.estimator.disturbance_density_rad2_s3, r, t_q)
     return closed_loop.EstimatorConfig(
         ESTIMATORS[s.estimator.kind],
         mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S),
         float(s.sensors.gyro_drift_density_rad_s_sqrt_s),
         k_alpha,
         k_omega,
-        float(1.0 - np.exp(-t_q / time_constant)),
-        np.ascontiguousarray(phi),
-        np.ascontiguousarray(gamma),
+        smoothing,
+        np.array(phi, order="C"),
+        np.array(gamma, order="C"),
     )
 
 

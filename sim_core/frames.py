@@ -7,7 +7,9 @@ Conventions (written once here and in docs/conventions.md):
 * ECI is the GCRS (≈ J2000 to 23 mas). ECEF is the ITRS: ECEF = W · R3(ERA) · C · ECI with ERA the
   IAU 2000 Earth rotation angle of UT1, C the IAU 2000A/2006 celestial-to-intermediate
   (precession-nutation) matrix and W the polar motion (IERS finals2000A.all shipped by skyfield-data),
-  C and W taken from skyfield on an hourly grid and interpolated (error < 1e-10 rad). Against
+  C and W taken from skyfield on an hourly grid and interpolated (error < 1e-10 rad), each hour's values
+  evaluated once per process and kept (``_NODES_KEPT`` hours: a live twin's re-sync asks for the same hours
+  again and again; skyfield took ~10 ms of its ~50 ms). Against
   Vallado's AIAA 2006-6753 example the chain TEME → GCRS → ITRS is good to a few millimetres.
 * TEME (SGP4 output, AIAA 2006-6753 App. C) → GCRS uses skyfield's TEME rotation
   (GMST 1982 minus GAST, then the true-of-date → GCRS matrix), accuracy at the mas level.
@@ -21,6 +23,7 @@ Conventions (written once here and in docs/conventions.md):
 from __future__ import annotations
 
 import functools
+import threading
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -67,6 +70,7 @@ WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 EARTH_ROTATION_RATE_RAD_S = 2.0 * np.pi * 1.00273781191135448 / 86400.0  # dERA/dt (IERS 2010)
 _J2000_UNIX_S = 946728000.0  # 2000-01-01T12:00:00 UTC (ERA epoch JD 2451545.0 of UT1)
 _GRID_STEP_S = 3600.0  # precession-nutation sampling step (nutation curvature error < 1e-10 rad)
+_NODES_KEPT = 24 * 31  # hourly nodes kept (a month of hours, ≈ 0.5 MB); the oldest kept goes first
 _GEODETIC_ITERATIONS = 6  # Bowring/Newton: sub-micrometre for |h| < 1e5 km
 
 
@@ -142,22 +146,43 @@ def _rot3(angle_rad: np.ndarray) -> np.ndarray:
     return r
 
 
+_nodes: dict[float, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # hour → C, W, TEME (see _hour_nodes)
+_nodes_lock = threading.Lock()
+
+
+def _hour_nodes(hours: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """C, W and GCRS→TEME matrices at whole UTC hours (``hours`` × 3600 s): skyfield evaluates the hours not
+    kept yet, in one call; the newest ``_NODES_KEPT`` hours are kept (thread-safe)."""
+    found = {h: _nodes.get(h) for h in hours.tolist()}
+    missing = [h for h, v in found.items() if v is None]
+    if missing:
+        grid = np.array(missing) * _GRID_STEP_S
+        sky = skyfield_time(grid)
+        era = earth_rotation_angle_rad(grid + np.asarray(sky.dut1, dtype=float))
+        gast = np.asarray(sky.gast, dtype=float) * (2.0 * np.pi / 24.0)
+        m_tod = np.moveaxis(np.asarray(sky.M), -1, 0)  # GCRS → true equator and equinox of date
+        c_grid = _rot3(gast - era) @ m_tod  # R3(ERA)·C = R3(GAST)·M
+        from skyfield.sgp4lib import TEME
+
+        teme_grid = np.moveaxis(np.asarray(TEME.rotation_at(sky)), -1, 0)
+        w_grid = np.moveaxis(np.asarray(sky.polar_motion_matrix()), -1, 0)
+        computed = {h: (c_grid[i], w_grid[i], teme_grid[i]) for i, h in enumerate(missing)}
+        found.update(computed)
+        with _nodes_lock:
+            _nodes.update(computed)
+            while len(_nodes) > _NODES_KEPT:
+                del _nodes[next(iter(_nodes))]
+    c, w, teme = zip(*(found[h] for h in hours.tolist()))
+    return np.stack(c), np.stack(w), np.stack(teme)
+
+
 def _slow_matrices(t_unix_s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """GCRS→CIRS (C), polar motion (W) and GCRS→TEME matrices at flat times, linear between the
-    whole UTC hours that bracket them (only those hours are evaluated by skyfield)."""
+    whole UTC hours that bracket them (only those hours are evaluated by skyfield, once: _hour_nodes)."""
     hour = np.floor(t_unix_s / _GRID_STEP_S)
     nodes, k = np.unique(np.concatenate([hour, hour + 1.0]), return_inverse=True)
     k = k[: hour.size]
-    grid = nodes * _GRID_STEP_S
-    sky = skyfield_time(grid)
-    era = earth_rotation_angle_rad(grid + np.asarray(sky.dut1, dtype=float))
-    gast = np.asarray(sky.gast, dtype=float) * (2.0 * np.pi / 24.0)
-    m_tod = np.moveaxis(np.asarray(sky.M), -1, 0)  # GCRS → true equator and equinox of date
-    c_grid = _rot3(gast - era) @ m_tod  # R3(ERA)·C = R3(GAST)·M
-    from skyfield.sgp4lib import TEME
-
-    teme_grid = np.moveaxis(np.asarray(TEME.rotation_at(sky)), -1, 0)
-    w_grid = np.moveaxis(np.asarray(sky.polar_motion_matrix()), -1, 0)
+    c_grid, w_grid, teme_grid = _hour_nodes(nodes)
     k1 = np.searchsorted(nodes, hour + 1.0)
     f = (t_unix_s / _GRID_STEP_S - hour)[:, None, None]
     c = (1.0 - f) * c_grid[k] + f * c_grid[k1]

@@ -162,7 +162,8 @@ def fit_circular_orbit(
     if t.shape[0] < MIN_GPS_FIXES:
         raise ValueError(f"t_unix_s: need at least {MIN_GPS_FIXES} GPS fixes, got {t.shape[0]}")
     r, v = frames.ecef_to_eci(r_ecef_m, v_ecef_m_s, t)
-    normal = np.linalg.svd(np.concatenate([r, GPS_SIGMA_RATIO_S * v]))[2][-1]  # plane nearest the fixes (above)
+    rows = np.concatenate([r, GPS_SIGMA_RATIO_S * v])
+    normal = np.linalg.svd(rows, full_matrices=False)[2][-1]  # plane nearest the fixes (above); not the (2n, 2n) U
     if np.dot(normal, np.cross(r, v).sum(axis=0)) < 0.0:
         normal = -normal
     node = np.cross([0.0, 0.0, 1.0], normal)

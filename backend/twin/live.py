@@ -30,8 +30,9 @@ Re-sync cadence RESYNC_S = 60 s: (1) the twin restarted from telemetry stays at 
 segment (measured: 2–4″ RMS against σ_st = 3″, wheels within one tachometer count over 60 s), so nothing is gained
 by re-syncing more often, while a shorter segment hides slow faults (a drifting gyro, a wheel's friction) in
 its restart; (2) a fault's fast signature (a failed wheel stops answering torque commands: its speed residual
-crosses EXCEED limits within seconds) shows inside any segment and forces an immediate re-sync; (3) one 60 s
-segment costs ≈ 20 ms of engine time, i.e. 100 satellites need ≈ 3 % of one core.
+crosses EXCEED limits within seconds) shows inside any segment and forces an immediate re-sync; (3) one re-sync
+(orbit fit, engine set-up and a 60 s segment) costs ≈ 10 ms of CPU (benchmarks/live_twin.py --resync), i.e. 100
+satellites need ≈ 2 % of one core.
 """
 
 from __future__ import annotations
@@ -267,6 +268,7 @@ class LiveTwin:
         self.mapping, self.model, self._epoch_ns, self._resync_s = mapping, model, epoch_ns, resync_s
         self.stale_after_s = stale_after_s
         self._epoch_from_run = epoch_from_run  # the route starts with each run of telemetry (an emulator's flight)
+        self._epoch_model: tuple[int, Scenario] | None = None  # (epoch ns, the model at that epoch)
         self.state = TwinState(
             satellite, mapping.dictionary, mapping.acs_model if model is not None else None, state=WAITING
         )
@@ -472,10 +474,14 @@ class LiveTwin:
         return self._epoch_ns
 
     def _model_at_epoch(self) -> Scenario:
+        """The satellite's model with its route's epoch (built once per epoch, not per re-sync)."""
         assert self.model is not None
-        data = self.model.model_dump()
-        data["orbit"]["epoch_utc"] = f"{np.datetime64(self._epoch(), 'ns')}Z"
-        return Scenario.model_validate(data)
+        epoch = self._epoch()
+        if self._epoch_model is None or self._epoch_model[0] != epoch:
+            data = self.model.model_dump()
+            data["orbit"]["epoch_utc"] = f"{np.datetime64(epoch, 'ns')}Z"
+            self._epoch_model = epoch, Scenario.model_validate(data)
+        return self._epoch_model[1]
 
     def _compare(self, new: np.ndarray) -> dict[str, np.ndarray] | None:
         """Residuals of the new samples, flying (re-synchronising) segments as needed."""

@@ -61,6 +61,21 @@ def test_interpolated_earth_orientation_matches_skyfield_itrs_rotation():
     np.testing.assert_allclose(frames.eci_to_ecef_matrix(t[1:2])[0], ours[1], rtol=0, atol=1e-15)  # batch-independent
 
 
+def test_kept_hourly_nodes_give_what_one_fresh_evaluation_gives_and_stay_bounded(monkeypatch):
+    """Hours evaluated by skyfield in earlier calls (kept) or in this one give the same matrices as all hours evaluated
+    together in one call; no more than the bound is kept."""
+    t = 1.7e9 + np.array([100.0, 5000.0, 9000.0, 20000.0])
+    frames._nodes.clear()
+    together = frames.eci_to_ecef_matrix(t), frames.teme_to_eci(np.ones((4, 3)), np.ones((4, 3)), t)
+    frames._nodes.clear()
+    frames.eci_to_ecef_matrix(t[:2])  # some hours kept before
+    monkeypatch.setattr(frames, "_NODES_KEPT", 3)  # fewer than the six hours the call needs
+    piecewise = frames.eci_to_ecef_matrix(t), frames.teme_to_eci(np.ones((4, 3)), np.ones((4, 3)), t)
+    np.testing.assert_allclose(piecewise[0], together[0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(piecewise[1], together[1], rtol=0, atol=1e-9)
+    assert len(frames._nodes) == 3
+
+
 # SOFA t_sofa_c.c, t_era00: eraEra00(2400000.5, 54388.0) = 0.4022837240028158102 rad, tol 1e-12.
 SOFA_ERA_JD_UT1 = 2400000.5 + 54388.0
 SOFA_ERA_RAD = 0.4022837240028158102
