@@ -57,9 +57,11 @@ WHEEL_FAULTS = ("failure", "gain_loss", "friction", "stuck", "speed_bias")
 SENSOR_FAULTS = ("gyro_bias", "star_tracker_outage", "magnetometer_bias")
 MIN_SAMPLES = 60  # a minute at 1 Hz: shorter telemetry cannot separate a fault from quantisation
 UNMODELLED_TORQUE_NM = 2e-6  # σ of wheel torque the balance does not model (bearing ripple, drag): 10 % of a GG command
-PRE_ONSET_S = 300.0  # nominal data kept before the onset search window
+NOMINAL_LEAD_S = 60.0  # nominal data kept before the onset search window
 POST_ALARM_S = 20.0  # data after the alarm used to identify the fault (latency budget 30 s)
-ONSET_MARGIN_S = 60.0  # the onset may precede the start of the alarming window by this much
+ONSET_MARGIN_S = 60.0  # an FDIR isolation follows the onset by at most this much
+ONSET_SEARCH_S = 360.0  # the onset may precede the start of the alarming window by this much: a wheel commanded
+# a few µN·m that fails moves its tachometer by the counts a window test needs only minutes later
 PRUNE_SIGMA = 3.0  # a wheel whose balance stays within 3σ (+ quantisation) is not suspected
 INVALID_PROBABILITY = 1e-4  # a healthy star tracker's invalid samples (Sun or Moon in the field of view)
 MAX_REMAINING_GAIN = 0.95  # a gain loss smaller than 5 % is "none" at this resolution
@@ -445,7 +447,23 @@ def _fit(
     penalty = 0.5 * n_params * math.log(max(ch.y.shape[0] - int(onsets[k]), 2))
     magnitude = None if np.isnan(theta[best]) else float(theta[best])
     credit = {q: float(extra[k]) for q, extra in others.items()}
+    sigma = max(sigma, _one_count_s(ch, int(onsets[k]), kind, magnitude, t_s) / math.sqrt(12.0))
     return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude, credit)
+
+
+def _one_count_s(ch: _Channel, k: int, kind: str, magnitude: float | None, t_s: np.ndarray) -> float:
+    """Time the fault needs from onset index ``k`` to move the wheel by one tachometer count: the rounded readings
+    are the same for any onset within it, so the onset is uniform over it whatever the Gaussian profile says (its
+    white rounding noise is sure of an onset the rounding cannot place); the replay's onset grid spans it."""
+    if kind in ("failure", "gain_loss"):
+        effect = np.abs(ch.templates["motor"][k:]) * (1.0 - (magnitude or 0.0))
+    elif kind == "friction":
+        effect = np.abs(ch.templates["friction"][k:]) * abs(magnitude or 0.0)
+    else:
+        return 0.0
+    reached = np.flatnonzero(np.cumsum(effect) >= ch.bound)
+    end = k + (int(reached[0]) + 1 if reached.size else effect.shape[0])
+    return float(t_s[min(end, t_s.shape[0] - 1)] - t_s[k])
 
 
 def _kick_evidence(ch: _Channel, onsets: np.ndarray, nominal: float) -> np.ndarray:
@@ -480,9 +498,9 @@ def _window(alarm: fd.Alarm | None, later: list[int], n: int, dt: float) -> tupl
     so that a second fault soon after the first is in the window its pair hypotheses are fitted on."""
     if alarm is None:
         return 0, n, 1
-    first = max(1, alarm.index - alarm.window - int(ONSET_MARGIN_S / dt))
+    first = max(1, alarm.index - alarm.window - int(ONSET_SEARCH_S / dt))
     last = max([k for k in later if k <= alarm.index + SECOND_FAULT_S / dt], default=alarm.index)
-    return max(0, first - int(PRE_ONSET_S / dt)), min(n, max(alarm.index, last) + int(POST_ALARM_S / dt) + 1), first
+    return max(0, first - int(NOMINAL_LEAD_S / dt)), min(n, max(alarm.index, last) + int(POST_ALARM_S / dt) + 1), first
 
 
 def _cut(ch: _Channel, a: int, b: int) -> _Channel:
@@ -595,8 +613,8 @@ def diagnose(
         sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
     flagged = {p: float(t[k]) for p, k in isolated.items() if k < stop}
     hyps = _rank(fits, [f for f in sensor_fits if f is not None], flagged)
-    if scenario is not None and alarm is not None:
-        hyps = _replayed(hyps, obs, scenario, start, stop, alarm.index, flyer)
+    if scenario is not None and (alarm is not None or hyps[0].wheel is not None):  # a fault below the alarm too
+        hyps = _replayed(hyps, obs, scenario, start, stop, stop - 1 if alarm is None else alarm.index, flyer)
     name = None
     if alarm is not None:
         name = {-1: "star tracker", -2: "onboard FDIR isolation"}.get(alarm.channel) or channels[alarm.channel].name

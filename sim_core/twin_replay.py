@@ -9,6 +9,11 @@ that instant), flies every (hypothesis, onset) pair as one variant of a single b
 (:func:`sim_core.engine.simulate`), and scores each against the telemetered wheel torque commands and
 attitude with a Gaussian likelihood whose σ is the telemetry resolution and the twin's own mismatch
 measured before the onset on the no-fault variant.
+
+A file need not begin where the scenario does (each file has its own epoch): for an inertially pointed
+twin the orbit's phase at the file's first sample is unknown, and the gravity-gradient torque the wheels
+absorb depends on it. :func:`orbit_phase_deg` finds it from the telemetered commands before the onset
+(in fine pointing Σ a_p u_p is the gravity-gradient torque at the telemetered attitude).
 """
 
 from __future__ import annotations
@@ -19,15 +24,18 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from sim_core import engine, orbit, quaternion
+from sim_core import engine, environment, orbit, quaternion
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
 
-__all__ = ["ARCSEC_FLOOR", "fault_specs", "replay_scores", "telemetered_steps", "twin_at"]
+__all__ = ["ARCSEC_FLOOR", "fault_specs", "orbit_phase_deg", "replay_scores", "telemetered_steps", "twin_at"]
 
 ARCSEC_FLOOR = 0.05  # arcsec: float32 quaternion components resolve ~0.01″; below this the twin is "exact"
 PROGRAM_STEP_RAD = 1e-6  # a change of the guidance quaternion above float32 noise is a new inertial step
 TORQUE_FLOOR_NM = 1e-8  # a CSV's engineering torques carry no resolution; the twin's own rounding is below this
 FAULT_TYPES = {"failure": "failure", "gain_loss": "gain", "friction": "friction", "stuck": "stuck"}
+PHASE_FIT_R2 = 0.9  # the gravity-gradient torque must explain 90 % of the commanded torque to set the orbit phase
+PHASE_GAIN_RANGE = (0.8, 1.25)  # and match it in size: commands that are something else (a slew) do not
+PHASE_MIN_ROWS = 30  # telemetry rows before the onset the fit needs
 
 
 def telemetered_steps(t_s: np.ndarray, q_prog_ib: np.ndarray, after_s: float) -> list[tuple[float, list[float]]]:
@@ -53,11 +61,14 @@ def twin_at(
     wheel_speed_rad_s: np.ndarray,
     duration_s: float,
     program: tuple[np.ndarray, np.ndarray] | None = None,
+    arg_latitude0_deg: float | None = None,
 ) -> Scenario:
     """``base`` restarted at ``t_s`` after the telemetry epoch with the telemetered state (seed 000 §7 twin).
 
     An inertial programme is taken from the telemetered guidance quaternions (``program`` = (t_s, q_prog_ib))
     when given, so a file need not begin where the scenario does; other programmes are shifted in time.
+    ``arg_latitude0_deg``: the circular orbit's argument of latitude at the telemetry epoch, if known
+    (:func:`orbit_phase_deg`; else the scenario's, as if the file began where the scenario does).
     """
     data = base.model_dump()
     stamp = np.datetime64(round((epoch_unix_s + t_s) * 1e9), "ns")
@@ -65,7 +76,8 @@ def twin_at(
     if base.orbit.kind in ("circular", "j2"):
         a = orbit.R_EARTH_M + base.orbit.altitude_m
         n = math.sqrt(orbit.MU_EARTH_M3_S2 / a**3)
-        data["orbit"]["arg_latitude_deg"] = (base.orbit.arg_latitude_deg + math.degrees(n * t_s)) % 360.0
+        u0 = base.orbit.arg_latitude_deg if arg_latitude0_deg is None else arg_latitude0_deg
+        data["orbit"]["arg_latitude_deg"] = (u0 + math.degrees(n * t_s)) % 360.0
     if program is not None and base.guidance.kind == "inertial":
         data["guidance"]["inertial_steps"] = telemetered_steps(program[0], program[1], t_s)
     else:
@@ -78,6 +90,37 @@ def twin_at(
     data["output_dt_s"] = max(data["control_dt_s"], 1.0)
     data["initial_mode"] = None if base.initial_mode is None else base.initial_mode
     return Scenario.model_validate(data)
+
+
+def orbit_phase_deg(base: Scenario, t_s: np.ndarray, q_ib: np.ndarray, wheel_torque_cmd_nm: np.ndarray) -> float | None:
+    """Argument of latitude (deg) at ``t_s[0]`` of the base's circular orbit whose gravity-gradient torque
+    (Wertz eq 17-38) at the telemetered attitude best explains the commanded wheel torques Σ a_p u_p (rows before
+    the onset); None when it explains less than PHASE_FIT_R2 of them or differs in size (not in fine pointing).
+    The torque repeats every half orbit, so the phase is found modulo 180°, which is all the twin needs of it."""
+    inclination = base.orbit.inclination_deg
+    if base.orbit.kind not in ("circular", "j2") or inclination is None or not base.gravity_gradient:
+        return None
+    if t_s.shape[0] < PHASE_MIN_ROWS:
+        return None
+    body = np.nan_to_num(wheel_torque_cmd_nm) @ np.asarray(engine.plant_params(base).wheel_axes_b).T
+    inertia = np.asarray(base.spacecraft.inertia_kg_m2, dtype=float)
+    t = t_s - t_s[0]
+
+    def misfit(u0_deg: float) -> tuple[float, float]:
+        r, _ = orbit.circular_orbit(t, base.orbit.altitude_m, inclination, base.orbit.raan_deg, u0_deg)
+        gg = environment.gravity_gradient_torque_nm(r, q_ib, inertia)
+        gain = float(np.sum(gg * body) / max(float(np.sum(gg * gg)), 1e-300))
+        return float(np.sum((body - gain * gg) ** 2)), gain
+
+    coarse = np.arange(0.0, 180.0, 1.0)
+    u0 = float(coarse[int(np.argmin([misfit(u)[0] for u in coarse]))])
+    fine = u0 + np.linspace(-1.0, 1.0, 41)
+    u0 = float(fine[int(np.argmin([misfit(u)[0] for u in fine]))])
+    residual, gain = misfit(u0)
+    explained = 1.0 - residual / max(float(np.sum(body**2)), 1e-300)
+    if explained < PHASE_FIT_R2 or not PHASE_GAIN_RANGE[0] <= gain <= PHASE_GAIN_RANGE[1]:
+        return None
+    return u0 % 180.0
 
 
 def fault_specs(
@@ -129,6 +172,9 @@ def replay_scores(
     """
     duration = float(t_s[stop - 1] - t_s[start]) + 1.0
     program = None if q_prog_ib is None else (t_s, q_prog_ib)
+    phase = None
+    if program is not None and base.guidance.kind == "inertial":  # a file cut anywhere in the orbit
+        phase = orbit_phase_deg(base, t_s[:reference], q_est_ib[:reference], wheel_torque_cmd_nm[:reference])
     twin = twin_at(
         base,
         epoch_unix_s,
@@ -138,6 +184,7 @@ def replay_scores(
         wheel_speed_rad_s[start],
         duration,
         program,
+        phase,
     )
     variants = [VariantSpec(name=f"h{i}", faults=f) for i, (f, _) in enumerate(candidates)]
     variants.append(VariantSpec(name="none"))

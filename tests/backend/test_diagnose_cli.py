@@ -26,6 +26,7 @@ CASES = {
     "gain_loss_w3.csv": ("gain_loss", 3, 300.0, 0.5, 0.05),  # remaining torque gain
     "friction_w1.csv": ("friction", 1, 300.0, 0.002, 2e-4),  # added dry friction, N·m
     "stuck_w4.csv": ("stuck", 4, 300.0, None, None),
+    "slow_failure_w1.csv": ("failure", 1, 184.0, None, None),  # alarms 283 s after its onset
 }
 
 
