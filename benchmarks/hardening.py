@@ -39,7 +39,6 @@ import httpx
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-from backend.core.processes import cpu_seconds  # noqa: E402
 from tests import process_tree  # noqa: E402 - the supervision tests' view of the process tree
 from tests.process_tree import alive, descendants  # noqa: E402
 
@@ -50,8 +49,6 @@ DIARY = REPO.parent / "shared/data/real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-
 PACKET_OCTETS = 71  # the diary's APID 11 packets
 SLICE_PACKETS = 600
 START_TIMEOUT_S = 300.0  # a loaded 2-core machine: the children of a server that answers
-START_STALL_S = 120.0  # a server start fails after this long without progress (no CPU time used by its process tree):
-# at load 30 on 2 cores its imports alone take minutes, so a fixed limit killed servers that were still starting
 GONE_TIMEOUT_S = 25.0
 
 
@@ -84,23 +81,11 @@ class Server:
         with self.log.open("ab") as log:
             self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO)
         self.http = httpx.Client(base_url=f"http://127.0.0.1:{api}/api/v1", timeout=60.0)
-        cpu, progressed = -1.0, time.monotonic()
-        while time.monotonic() - progressed < START_STALL_S and self.process.poll() is None:
-            try:
-                if self.http.get("/health", timeout=2.0).status_code == 200:
-                    return
-            except httpx.TransportError:
-                time.sleep(0.2)
-            if (now_cpu := self.tree_cpu_s()) > cpu:
-                cpu, progressed = now_cpu, time.monotonic()
+        if upload_health.wait_answering(self.process, self.http):
+            return
         self.process.kill()
         tail = self.log.read_text(errors="replace")[-2000:]
         raise RuntimeError(f"server did not answer (exit code {self.process.wait()}); its output ends:\n{tail}")
-
-    def tree_cpu_s(self) -> float:
-        """CPU time (s) used so far by the server and its living descendants."""
-        pids = {self.process.pid} | descendants(self.process.pid)
-        return sum(cpu_seconds(pid) or 0.0 for pid in pids)
 
     def children(self, count: int = 2) -> set[int]:
         """Its descendants once there are ``count`` (ingest process + emulator)."""

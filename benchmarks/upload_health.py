@@ -35,14 +35,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from api_load import free_port, make_tokens  # noqa: E402
 from foreign import CYGNSS_STREAM, CYGNSS_TIME, DATA, _calendar_shift, replicate  # noqa: E402
 
+from backend.core.processes import cpu_seconds  # noqa: E402
 from tests.process_tree import descendants  # noqa: E402 - the supervision tests' view of the process tree
 
+START_STALL_S = 120.0  # a server start fails after this long without progress (no CPU time used by its process tree):
+# at load 30 on 2 cores its imports alone take minutes, so a fixed limit killed servers that were still starting
 IDLE_S = 10.0  # health polled this long on the idle server first: the same run's baseline
 BLOCK_OCTETS = 2**20  # the uploader hands the body to httpx in blocks of this size
 
 
-def start_server(data_dir: Path, port: int, deadline_s: float = 300.0) -> subprocess.Popen:
-    """``acs-twin serve`` in its own process (no live stream), waited for up to deadline_s (a loaded machine)."""
+def start_server(data_dir: Path, port: int) -> subprocess.Popen:
+    """``acs-twin serve`` in its own process (no live stream), waited for while it starts (``wait_answering``)."""
     env = {**os.environ, "ACS_TWIN_DATA_DIR": str(data_dir), "ACS_TWIN_LIVE_ENABLED": "false"}
     server = subprocess.Popen(
         [sys.executable, "-m", "backend", "serve", "--port", str(port)],
@@ -50,15 +53,31 @@ def start_server(data_dir: Path, port: int, deadline_s: float = 300.0) -> subpro
         stdout=subprocess.DEVNULL,
         stderr=subprocess.STDOUT,
     )
-    end = time.monotonic() + deadline_s
-    while time.monotonic() < end:
-        try:
-            httpx.get(f"http://127.0.0.1:{port}/api/v1/health", timeout=1.0)
+    with httpx.Client(base_url=f"http://127.0.0.1:{port}/api/v1") as http:
+        if wait_answering(server, http):
             return server
-        except httpx.TransportError:
-            time.sleep(0.5)
     server.kill()
     raise SystemExit("server did not start")
+
+
+def wait_answering(server: subprocess.Popen, http: httpx.Client) -> bool:
+    """True once ``server`` answers GET /health 200; False if it exited or its process tree used no CPU time for
+    START_STALL_S (on a loaded machine a start takes minutes, but never without progress)."""
+    cpu, progressed = -1.0, time.monotonic()
+    while time.monotonic() - progressed < START_STALL_S and server.poll() is None:
+        try:
+            if http.get("/health", timeout=2.0).status_code == 200:
+                return True
+        except httpx.TransportError:
+            time.sleep(0.2)
+        if (now_cpu := _tree_cpu_s(server.pid)) > cpu:
+            cpu, progressed = now_cpu, time.monotonic()
+    return False
+
+
+def _tree_cpu_s(pid: int) -> float:
+    """CPU time (s) used so far by process ``pid`` and its living descendants."""
+    return sum(cpu_seconds(p) or 0.0 for p in {pid} | descendants(pid))
 
 
 def poll_health(base: str, stop: threading.Event, out: list[float], at: list[float] | None = None) -> None:
