@@ -1,18 +1,18 @@
 """Diagnosis campaign: randomised faults flown by the emulator, telemetry as the link sends it, diagnosed blind.
 
-Each case: the emulator (``telemetry.emulator.emulate``) flies ``somov-ge4-scan`` (MEKF, gyro and
-star-tracker noise, seed 000 §5 route) with its own *truth* parameters (``truth_seed``: inertia ±2 %,
-products ±0.5 %, wheel tilt ≤ 0.1°, gyro bias, its own noise seed; issue 13's ``emulator.truth_scenario``)
-and a hidden fault set drawn at random: single wheel failure, gain loss (remaining gain 0.2–0.7), friction
-(+1–5 mN·m), stuck rotor, tachometer (speed-sensor) bias (±0.05–0.5 rad/s, put in the telemetered reading:
-the engine has no tachometer fault), two wheel faults on different wheels, gyro bias (20–100 µrad/s on one
-axis), star-tracker outage, magnetometer bias (±0.5–3 µT on one axis), or none. Its onboard software is
-never told of the fault and by default does not reconfigure (onboard FDIR off, as the acceptance's
-independent spacecraft); ``--onboard-fdir`` flies the emulator's FDIR, which isolates a failing wheel within
-seconds while it is commanded µN·m, so that a failure and a gain loss of that wheel leave the same data.
-Its packets are encoded and decoded (wheel speeds at the dictionary's 0.25 rpm, torques at 10 µN·m,
-magnetometer at 2 nT) and diagnosed against the nominal scenario by
-``backend.twin.diagnosis.diagnose_batches`` with the onset unknown, the twin replays included.
+Each case: the emulator (``telemetry.emulator.emulate``) flies ``somov-ge4-scan`` (MEKF, gyro and star-tracker
+noise, seed 000 §5 route) with its own *truth* parameters (``truth_seed``: inertia ±2 %, products ±0.5 %, wheel
+tilt ≤ 0.1°, gyro bias, its own noise seed; issue 13's ``emulator.truth_scenario``) and a hidden fault set drawn
+at random: single wheel failure, gain loss (remaining gain 0.2–0.7), friction (+1–5 mN·m), stuck rotor,
+tachometer (speed-sensor) bias (two 0.25 rpm counts to 0.5 rad/s: the diagnosis claims no smaller one; put in
+the telemetered reading: the engine has no tachometer fault), two wheel faults on different wheels, gyro bias
+(20–100 µrad/s on one axis), star-tracker outage, magnetometer bias (±0.5–3 µT on one axis), or none. Its
+onboard software is never told of the fault and by default does not reconfigure (onboard FDIR off, as the
+acceptance's independent spacecraft); ``--onboard-fdir`` flies the emulator's FDIR, which isolates a failing
+wheel within seconds while it is commanded µN·m, so that a failure and a gain loss of that wheel leave the same
+data. Its packets are encoded and decoded (wheel speeds at the dictionary's 0.25 rpm, torques at 10 µN·m,
+magnetometer at 2 nT) and diagnosed against the nominal scenario by ``backend.twin.diagnosis.diagnose_batches``
+with the onset unknown, the twin replays included.
 
 Prints top-1 / top-3 accuracy (fault type and wheel) overall and per category, onset error median / p95,
 gain, friction and magnetometer-bias estimate errors, false alarms in 24 h of nominal telemetry (the
@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
+
+from sim_core.diagnosis import RESOLVED_COUNTS
 
 SCENARIO = "somov-ge4-scan"
 DURATION_S = 1200.0
@@ -72,6 +74,15 @@ def _wheel_fault(rng: np.random.Generator, kind: str) -> float | None:
     return None
 
 
+def _tachometer_quantum_rad_s() -> float:
+    """Wheel-speed resolution of the reference dictionary (0.25 rpm)."""
+    from telemetry import emulator
+    from telemetry.dictionary import load_dictionary
+    from telemetry.housekeeping import calibration_step
+
+    return calibration_step(load_dictionary(emulator.REFERENCE_DICTIONARY), "wheel_speed_rad_s_1")
+
+
 def draw_cases(n: int, seed: int = 14) -> list[Case]:
     """``n`` cases cycling through CATEGORIES with random wheels, onsets and magnitudes."""
     rng = np.random.default_rng(seed)
@@ -99,7 +110,9 @@ def draw_cases(n: int, seed: int = 14) -> list[Case]:
         elif cat == "gyro_bias":
             cases.append(Case(i, cat, None, [onset], [float(rng.uniform(2e-5, 1e-4) * rng.choice([-1, 1]))], i))
         elif cat == "speed_bias":
-            bias = float(rng.uniform(0.05, 0.5) * rng.choice([-1, 1]))
+            # from two tachometer counts: the diagnosis claims no bias a count's rounding could explain
+            # (sim_core.diagnosis.RESOLVED_COUNTS), so smaller draws would be misses by construction
+            bias = float(rng.uniform(RESOLVED_COUNTS * _tachometer_quantum_rad_s(), 0.5) * rng.choice([-1, 1]))
             cases.append(Case(i, cat, int(rng.integers(1, 5)), [onset], [bias], i))
         elif cat == "magnetometer_bias":
             cases.append(Case(i, cat, None, [onset], [float(rng.uniform(5e-7, 3e-6) * rng.choice([-1, 1]))], i))
