@@ -143,6 +143,7 @@ def _field_columns(
 
 
 _SLOT_OCTETS = (1, 2, 4, 8)  # octets of the kernel's output rows by slot
+_NO_ROWS = tuple(np.empty((0, 0), f"u{w}") for w in _SLOT_OCTETS)  # a slot no field of a layout uses
 
 
 @dataclass(frozen=True)
@@ -240,7 +241,10 @@ def _layout_values(
     gives them; calibrated ones are float64."""
     plan = _plan(parameters)
     n = offset.shape[0]
-    outs = [np.empty((rows, n), dtype=f"u{w}") for rows, w in zip(plan.rows, _SLOT_OCTETS)]
+    outs = [
+        np.empty((rows, n), f"u{w}") if rows else _NO_ROWS[s]
+        for s, (rows, w) in enumerate(zip(plan.rows, _SLOT_OCTETS))
+    ]
     _field_columns(
         buf,
         np.asarray(offset, dtype=np.int64),
