@@ -56,7 +56,7 @@ def _json(status: int, message: str, field: str | None, headers: dict[str, str] 
     return JSONResponse(body, status_code=status, headers=headers)
 
 
-def _field_of(loc: Sequence[Any]) -> str | None:
+def _field_of(loc: Sequence[int | str]) -> str | None:
     parts = [str(p) for p in loc if p not in ("body", "query", "path", "header", "cookie")]
     return ".".join(parts) or (str(loc[0]) if loc else None)
 

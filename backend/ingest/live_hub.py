@@ -12,11 +12,19 @@ from __future__ import annotations
 import threading
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypedDict
 
-__all__ = ["LiveHub", "Publisher", "Subscription", "TOPIC_PREFIXES"]
+__all__ = ["Delivery", "LiveHub", "LiveItem", "Publisher", "Subscription", "TOPIC_PREFIXES"]
 
 TOPIC_PREFIXES = ("parameters/", "alarms", "twin", "archive")
+LiveItem = dict[str, Any]  # what a topic carries: a JSON object (parameter samples, alarms, a twin's state)
+
+
+class Delivery(TypedDict):
+    """One pending item of a subscription, as the WebSocket sends it."""
+
+    topic: str
+    data: LiveItem
 
 
 def _check_topic(topic: str) -> str:
@@ -31,7 +39,7 @@ class Subscription:
 
     capacity: int
     topics: set[str] = field(default_factory=set)
-    pending: deque = field(init=False)
+    pending: deque[Delivery] = field(init=False)
     dropped: int = 0
 
     def __post_init__(self) -> None:
@@ -41,13 +49,13 @@ class Subscription:
         """True if ``topic`` matches one of the subscribed topics (``parameters/*`` = all)."""
         return topic in self.topics or (topic.startswith("parameters/") and "parameters/*" in self.topics)
 
-    def offer(self, topic: str, data: Any) -> None:
+    def offer(self, topic: str, data: LiveItem) -> None:
         """Queue one item without waiting; the oldest is dropped when full."""
         if len(self.pending) == self.capacity:
             self.dropped += 1
         self.pending.append({"topic": topic, "data": data})
 
-    def drain(self) -> list[dict[str, Any]]:
+    def drain(self) -> list[Delivery]:
         """Take every pending item (for one batch)."""
         items = []
         for _ in range(len(self.pending)):
@@ -58,7 +66,7 @@ class Subscription:
 class Publisher(Protocol):
     """What a producer of live items needs of the hub (:class:`LiveHub` is one)."""
 
-    def publish(self, topic: str, data: Any) -> None: ...
+    def publish(self, topic: str, data: LiveItem) -> None: ...
 
     def wants_any(self, topic: str) -> bool: ...
 
@@ -88,7 +96,7 @@ class LiveHub:
         with self._lock:
             self._subscriptions = tuple(s for s in self._subscriptions if s is not sub)
 
-    def publish(self, topic: str, data: Any) -> None:
+    def publish(self, topic: str, data: LiveItem) -> None:
         """Offer an item to every matching subscription; never blocks."""
         self.published += 1
         for sub in self._subscriptions:

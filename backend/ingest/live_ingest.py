@@ -19,16 +19,24 @@ import queue
 import signal
 import threading
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Literal, TypeAlias
 
 if TYPE_CHECKING:
     from multiprocessing.queues import Queue
     from multiprocessing.synchronize import Event
 
     from telemetry.archive import Archive
+    from telemetry.ingest_report import SampleBatch
 
-    Outbox = Queue[tuple[str, Any]]  # ("starting" | "port" | "error" | "batch" | "stats", payload) to the server;
-    # "starting" names each start-up step as it begins, a batch's payload is (satellite, SampleBatch)
+    Tallies: TypeAlias = dict[str, int | float | str]  # telemetry.live.LiveStats' fields and forward_dropped
+    OutboxMessage: TypeAlias = (  # to the server: its start-up steps, ("port", n) or ("error", why), then the rest
+        tuple[Literal["starting"], str]  # names each start-up step as it begins
+        | tuple[Literal["port"], int]
+        | tuple[Literal["error"], str]
+        | tuple[Literal["batch"], tuple[str, SampleBatch]]  # (satellite, its decoded batch: raw packets stripped)
+        | tuple[Literal["stats"], Tallies]
+    )
+    Outbox: TypeAlias = Queue[OutboxMessage]
 
 __all__ = ["OUTBOX_MESSAGES", "STATS_PERIOD_S", "run_ingest_process"]
 
@@ -115,7 +123,7 @@ class LivePasses:
         self._from[satellite] = self._newest[satellite]
 
 
-def _offer(outbox: Outbox, message: tuple[str, Any], tally: dict[str, int]) -> None:
+def _offer(outbox: Outbox, message: OutboxMessage, tally: dict[str, int]) -> None:
     """Put ``message`` without waiting on the server; newest wins: a full outbox loses its oldest message (counted
     in ``forward_dropped``). Only this process puts, so once one message is taken out there is room."""
     try:

@@ -20,10 +20,13 @@ from dataclasses import dataclass
 from multiprocessing.process import BaseProcess
 from multiprocessing.queues import Queue
 from multiprocessing.synchronize import Event
-from typing import Any
+from typing import TYPE_CHECKING
 
 from backend.core.settings import Settings
 from telemetry.ingest_report import SampleBatch
+
+if TYPE_CHECKING:
+    from backend.ingest.live_ingest import OutboxMessage, Tallies
 
 __all__ = ["LIVE_START_STALL_S", "LIVE_STOP_TIMEOUT_S", "LiveLink"]
 
@@ -38,11 +41,11 @@ class _LiveChild:
     """The live-ingest process, its outbox to this server and its stop event."""
 
     process: BaseProcess
-    outbox: Queue[tuple[str, Any]]
+    outbox: Queue[OutboxMessage]
     stop: Event
 
 
-def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
+def _first_live_message(live: _LiveChild) -> OutboxMessage:
     """("port", n) from the ingest process, or ("error", why) if it failed, died or made no progress (neither a
     start-up step reported nor CPU time used) for LIVE_START_STALL_S; the error names the step it was in."""
     from backend.core.processes import cpu_seconds
@@ -51,7 +54,7 @@ def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
     step, cpu = "spawn and imports", cpu_seconds(live.process.pid or 0)
     while time.monotonic() - progressed < LIVE_START_STALL_S:
         try:
-            kind, detail = live.outbox.get(timeout=RELAY_POLL_S)
+            message = live.outbox.get(timeout=RELAY_POLL_S)
         except queue.Empty:
             if not live.process.is_alive():
                 return "error", f"the ingest process exited with code {live.process.exitcode} (see its output above)"
@@ -59,9 +62,9 @@ def _first_live_message(live: _LiveChild) -> tuple[str, Any]:
             if now_cpu is not None and now_cpu != cpu:
                 cpu, progressed = now_cpu, time.monotonic()
             continue
-        if kind != "starting":
-            return kind, detail
-        step, progressed = detail, time.monotonic()
+        if message[0] != "starting":
+            return message
+        step, progressed = message[1], time.monotonic()
     return "error", (
         f"the ingest process made no progress for {LIVE_START_STALL_S:.0f} s at its step '{step}' "
         f"({time.monotonic() - started:.0f} s after it was started)"
@@ -76,7 +79,7 @@ class LiveLink:
         self._settings, self._on_batch = settings, on_batch
         self._child: _LiveChild | None = None
         self._relay: threading.Thread | None = None
-        self._stats: dict[str, Any] = {}
+        self._stats: Tallies = {}
         self.port: int | None = None
 
     async def start(self) -> int:
@@ -85,7 +88,7 @@ class LiveLink:
 
         s = self._settings
         ctx = mp.get_context("spawn")
-        outbox: Queue[tuple[str, Any]] = ctx.Queue(OUTBOX_MESSAGES)
+        outbox: Queue[OutboxMessage] = ctx.Queue(OUTBOX_MESSAGES)
         stop = ctx.Event()
         args = (
             s.resolved_database_url(),
@@ -101,30 +104,31 @@ class LiveLink:
         process = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
         child = self._child = _LiveChild(process, outbox, stop)
         process.start()
-        kind, detail = await asyncio.to_thread(_first_live_message, child)
-        if kind != "port":
-            stop.set()
-            await asyncio.to_thread(process.join, LIVE_STOP_TIMEOUT_S)
-            self._child = None
-            raise RuntimeError(f"live ingest did not start: {detail}")
-        self.port = int(detail)
+        match await asyncio.to_thread(_first_live_message, child):
+            case ("port", port):
+                self.port = port
+            case (_, detail):
+                stop.set()
+                await asyncio.to_thread(process.join, LIVE_STOP_TIMEOUT_S)
+                self._child = None
+                raise RuntimeError(f"live ingest did not start: {detail}")
         self._relay = threading.Thread(target=self._relay_loop, args=(child,), name="live-relay", daemon=True)
         self._relay.start()
-        return self.port
+        return port
 
     def _relay_loop(self, child: _LiveChild) -> None:
         while True:
             try:
-                kind, payload = child.outbox.get(timeout=RELAY_POLL_S)
+                message = child.outbox.get(timeout=RELAY_POLL_S)
             except queue.Empty:
                 if child.stop.is_set() and not child.process.is_alive():
                     return
                 continue
-            if kind == "stats":
-                self._stats = payload
-            else:
-                satellite, batch = payload
-                self._on_batch(satellite, batch)
+            match message:
+                case ("stats", tallies):
+                    self._stats = tallies
+                case ("batch", (satellite, batch)):
+                    self._on_batch(satellite, batch)
 
     async def stop(self) -> None:
         """Stop the ingest process (it archives what is pending first) and the relay thread."""
@@ -139,6 +143,6 @@ class LiveLink:
             await asyncio.to_thread(self._relay.join, LIVE_STOP_TIMEOUT_S)
         self._child = None
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> dict[str, int | float | str | None]:
         """Tallies of the live stream (packets received/archived, errors, forward_dropped), empty once stopped."""
         return {} if self._child is None else {"port": self.port, **self._stats}

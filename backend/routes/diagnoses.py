@@ -18,7 +18,10 @@ router = APIRouter(tags=["diagnosis"], responses=ERROR_RESPONSES)
 )
 async def create_diagnosis(body: DiagnosisCreate, services: ServicesDep, principal: OperatorDep) -> DiagnosisPublic:
     """Detect, name and rank the fault in [start_utc, end_utc]; poll GET /diagnoses/{id} for the result."""
-    run = await run_in_threadpool(start_archived, services, body, principal.name)
+    telemetry = services.telemetry
+    run = await run_in_threadpool(
+        start_archived, services.diagnoses, telemetry.archive, telemetry.dictionaries.load, body, principal.name
+    )
     target, details = f"diagnoses/{run['id']}", {"satellite": body.satellite}
     await run_in_threadpool(services.audit.record, principal.name, "diagnosis.create", target, details)
     return DiagnosisPublic(**run)

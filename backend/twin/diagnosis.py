@@ -36,6 +36,7 @@ from telemetry.ingest_report import SampleBatch
 
 if TYPE_CHECKING:
     from backend.ingest.ports import TelemetryArchive
+    from backend.schemas import DiagnosisCreate
     from backend.twin.live import LiveDetection
 
 __all__ = [
@@ -212,7 +213,10 @@ def archived_reader(
 
 
 def diagnose_detection(
-    diagnoses: DiagnosisRuns, archive: Callable[[], Any], dictionaries: Callable[[str], Dictionary], live: LiveDetection
+    diagnoses: DiagnosisRuns,
+    archive: Callable[[], TelemetryArchive | None],
+    dictionaries: Callable[[str], Dictionary],
+    live: LiveDetection,
 ) -> str:
     """Start the diagnosis of a live twin's detection (``backend.twin.live.LiveDetection``); its id.
 
@@ -222,12 +226,15 @@ def diagnose_detection(
 
     t0, t1 = live.window_ns
     fired = live.detection.t_utc_ns
+    opened = archive()
+    if opened is None:
+        raise RuntimeError(f"diagnosis of {live.satellite}: the telemetry archive is closed (the server is stopping)")
 
     def link_alarm(run_id: str) -> None:
         live.archived.wait(ALARM_WAIT_S)
         alarms = [
             a
-            for a in archive().alarms(live.satellite, include_cleared=True)
+            for a in opened.alarms(live.satellite, include_cleared=True)
             if a.parameter == ANOMALY_PARAMETER and a.first_t_ns <= fired
         ]
         if alarms:
@@ -243,11 +250,17 @@ def diagnose_detection(
         "start_utc": _utc(t0 / 1e9, 0.0),
         "end_utc": _utc(t1 / 1e9, 0.0),
     }
-    read = archived_reader(archive(), live.satellite, dictionaries(live.dictionary), t0, t1)
+    read = archived_reader(opened, live.satellite, dictionaries(live.dictionary), t0, t1)
     return str(diagnoses.submit(read, live.scenario, record, before_run=link_alarm)["id"])
 
 
-def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
+def start_archived(
+    diagnoses: DiagnosisRuns,
+    archive: TelemetryArchive,
+    dictionaries: Callable[[str], Dictionary],
+    body: DiagnosisCreate,
+    actor: str,
+) -> dict[str, Any]:
     """Check a REST request (window, dictionary, scenario) and queue its diagnosis on archived packets."""
     from backend.core.errors import ApiError
     from sim_core import scenario_library
@@ -256,11 +269,11 @@ def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
     if not 0.0 < t1 - t0 <= MAX_WINDOW_S:
         raise ApiError(422, f"end_utc: must be after start_utc and within {MAX_WINDOW_S:.0f} s of it", "end_utc")
     try:
-        dictionary = services.telemetry.dictionaries.load(body.dictionary)
+        dictionary = dictionaries(body.dictionary)
         scenario = scenario_library.get(body.scenario)
     except ValueError as exc:
         raise ApiError(422, str(exc), "scenario" if "scenario" in str(exc) else "dictionary") from None
-    read = archived_reader(services.telemetry.archive, body.satellite, dictionary, int(t0 * 1e9), int(t1 * 1e9))
+    read = archived_reader(archive, body.satellite, dictionary, int(t0 * 1e9), int(t1 * 1e9))
     record = {
         "satellite": body.satellite,
         "dictionary": body.dictionary,
@@ -270,4 +283,4 @@ def start_archived(services: Any, body: Any, actor: str) -> dict[str, Any]:
         "start_utc": _utc(t0, 0.0),
         "end_utc": _utc(t1, 0.0),
     }
-    return services.diagnoses.submit(read, scenario, record)
+    return diagnoses.submit(read, scenario, record)

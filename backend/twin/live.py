@@ -215,6 +215,11 @@ class _Backfill:
     t1_ns: int
 
 
+_Committed = tuple[str, str, list[SampleBatch], float]  # satellite, dictionary, batches, when they arrived (clock)
+_Inbox = _Committed | _Backfill | threading.Event  # an Event: set once everything queued before it is archived
+_Group = dict[tuple[str, str], tuple[list[SampleBatch], float]]  # (satellite, dictionary) -> batches, first arrival
+
+
 @dataclass
 class TwinState:
     """What the API and the ``twin`` topic tell about one satellite's live twin."""
@@ -663,7 +668,7 @@ class LiveTwins:
         self._folders = [*mapping_folders, SHIPPED_MAPPINGS]
         self._twins: dict[str, LiveTwin] = {}
         self._models: dict[str, tuple[str, int | None, bool]] = {}
-        self._inbox: queue.Queue = queue.Queue()
+        self._inbox: queue.Queue[_Inbox] = queue.Queue()
         self._pending: dict[str, list[dict[str, np.ndarray]]] = {}
         self._flushed_at: dict[str, float] = {}
         self._stale_published: set[str] = set()
@@ -777,11 +782,11 @@ class LiveTwins:
             self._tick()
         self._flush_all()
 
-    def _take(self, items: list[Any]) -> None:
+    def _take(self, items: list[_Inbox]) -> None:
         """Process queued items in order, the batches of one satellite queued one after another in one call (a twin
         costs ~1 ms of numpy overhead per call whatever the samples: a worker that fell behind catches up instead
         of falling further behind, and each satellite's new samples are compared at once)."""
-        group: dict[tuple[str, str], tuple[list[Any], float]] = {}
+        group: _Group = {}
         for item in items:
             if isinstance(item, tuple):
                 satellite, dictionary_name, batches, arrived = item
@@ -800,7 +805,7 @@ class LiveTwins:
                     log.exception("live twin of %s failed on an archived span", item.satellite)
         self._process_all(group)
 
-    def _process_all(self, group: dict[tuple[str, str], tuple[list[Any], float]]) -> None:
+    def _process_all(self, group: _Group) -> None:
         for (satellite, dictionary_name), (batches, arrived) in group.items():
             try:
                 self._process(satellite, dictionary_name, batches, arrived)

@@ -22,7 +22,6 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from http.cookies import SimpleCookie
-from typing import Any
 from urllib.parse import parse_qsl, urlencode, urlsplit
 
 from backend.core.auth import Authenticator, Principal, Role
@@ -237,6 +236,6 @@ class MonitorGate:
             await sink.drain()
 
 
-def _cancel(tasks: Sequence[asyncio.Future[Any]]) -> None:
+def _cancel(tasks: Sequence[asyncio.Future[None]]) -> None:
     for task in tasks:
         task.cancel()
