@@ -98,4 +98,6 @@ say "installing the project and its test extra into .venv"
 say "compiling the kernels into numba's cache (acs-twin warm)"
 .venv/bin/acs-twin warm >&2
 say "running pytest (PostgreSQL: $ACS_TWIN_TEST_POSTGRES_URL)"
-.venv/bin/python -m pytest -n 2 --dist loadfile "$@"
+# Whole files to the two workers, the files holding a `slow` test first (tests/conftest.py orders them; xdist's
+# own reorder by test count would start the long one-test files last, one worker left alone on them at the end).
+.venv/bin/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder "$@"

@@ -26,3 +26,12 @@ def postgres_url() -> str:
     if not url:
         pytest.skip("ACS_TWIN_TEST_POSTGRES_URL not set")
     return url
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The files holding a ``slow`` test first, each file's tests kept together and in order: scripts/test.sh hands
+    whole files to its two workers in this order (``--dist loadfile --no-loadscope-reorder``), so they start on the
+    long files and finish together on short ones (xdist's own reorder, by test count, left the long one-test
+    files — live diagnosis, OpenAPI fuzzing, the warm command — for the end, one worker alone on them)."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_files)

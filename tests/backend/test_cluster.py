@@ -9,6 +9,8 @@ from backend.jobs import cluster
 from sim_core import engine, faults, scenario_library
 from sim_core.scenario import Scenario, VariantSpec
 
+pytestmark = pytest.mark.slow  # LocalClusters, a separate scheduler: scheduled first (tests/conftest.py)
+
 
 @pytest.fixture(scope="module")
 def client():

@@ -16,6 +16,8 @@ import pytest
 from backend.cli import main
 from backend.jobs import cluster
 
+pytestmark = pytest.mark.slow  # LocalClusters and twin replays: scheduled first (tests/conftest.py)
+
 DATA = Path(__file__).resolve().parents[1] / "data" / "basilisk_faults"
 DICTIONARY = Path(__file__).resolve().parents[2] / "telemetry" / "dictionaries" / "reference_satellite.yaml"
 NOAA = Path(__file__).resolve().parents[2] / "telemetry" / "dictionaries" / "noaa20_apid11_xtce.yaml"

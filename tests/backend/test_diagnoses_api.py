@@ -9,11 +9,14 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.core.auth import Role
 from tests.backend.conftest import bearer, make_settings
+
+pytestmark = pytest.mark.slow  # replays on the server's LocalCluster: scheduled first (tests/conftest.py)
 
 FAILED_WHEEL, FAILURE_ONSET_S = 1, 350.0  # sim_core's 0-based index: the dictionary's wheel 2
 ONSET_TOLERANCE_S = 60.0

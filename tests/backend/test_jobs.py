@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
@@ -21,6 +22,8 @@ from backend.schemas import PARQUET_MEDIA_TYPE
 from backend.services import build_services
 from tests.backend.conftest import bearer, make_settings
 from tests.process_tree import wait_gone
+
+pytestmark = pytest.mark.slow  # a LocalCluster per job test, cancel graces: scheduled first (tests/conftest.py)
 
 JOB_TIMEOUT_S = 300.0  # LocalCluster start-up + run; a worker compiling a cold numba cache shares its CPU with the job
 ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level

@@ -10,12 +10,15 @@ import time
 from datetime import datetime
 from pathlib import Path
 
+import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
 from backend.core.auth import Role
 from backend.twin.live import ANOMALY_PARAMETER
 from tests.backend.conftest import bearer, make_settings
+
+pytestmark = pytest.mark.slow  # live stream, twin, LocalCluster and the replays: scheduled first (tests/conftest.py)
 
 FAILED_WHEEL, FAILURE_ONSET_S, FLIGHT_S = 1, 300.0, 420.0  # sim_core's 0-based index: the dictionary's wheel 2
 DETECTION_DELAY_S = 30.0  # measured 17 s (tests/backend/test_live_twin.py)

@@ -15,6 +15,7 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import pytest
 import schemathesis
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
@@ -28,6 +29,8 @@ from schemathesis.specs.openapi.checks import (
 
 from backend.app import create_app
 from backend.core.settings import Settings
+
+pytestmark = pytest.mark.slow  # hundreds of generated requests: scheduled first (tests/conftest.py)
 
 EXAMPLES_PER_OPERATION = 5  # x 3 passes: the whole run stays well under 2 minutes on 2 cores
 CALL_TIMEOUT_S = 120.0  # schemathesis' default 10 s read timeout failed POST /simulations at load 18 on 2 cores

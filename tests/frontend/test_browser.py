@@ -23,7 +23,7 @@ from tests.frontend.conftest import ALARM_SATELLITE
 if TYPE_CHECKING:  # playwright is optional: the browser tests skip without it (conftest.browser)
     from playwright.sync_api import Page
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers per file: scheduled first
 
 PAINT_TIMEOUT_S = 30.0
 EARTH_SHARE_RANGE = (0.10, 0.80)  # whole-Earth preset: the disc covers ~40 % of the scene area

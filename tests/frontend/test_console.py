@@ -23,7 +23,7 @@ from backend.twin.live import STALE_S as STALE_AFTER_S  # the threshold the page
 from tests.frontend import console_data as data
 from tests.frontend.conftest import _start_uvicorn, free_port
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers per file: scheduled first
 
 SATELLITE = "CONSOLE-1"
 OTHER = "CONSOLE-2"  # a second satellite with data, to switch to

@@ -15,7 +15,7 @@ from sim_core.trajectory import Trajectory
 from tests.frontend.conftest import free_port, synthetic_trajectory
 from tests.frontend.test_browser import PAINT_TIMEOUT_S, _displayed_utc, _wait_for
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers per file: scheduled first
 
 HISTORY_BEFORE_S = 86_400.0  # the archive's past window lies a day before the live feed
 HISTORY_S = 1800.0

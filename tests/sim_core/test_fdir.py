@@ -553,6 +553,7 @@ def test_magnetometer_spikes_are_screened(loop_run):
     assert arg == fdir.SENSOR_ARG + 40 + 2 and SENSOR_ONSET_S <= t_iso < SENSOR_ONSET_S + 1.0
 
 
+@pytest.mark.slow
 def test_random_onsets_and_wheels_are_isolated_right_in_at_least_95_percent():
     variants = faults.random_wheel_failures(100, (20.0, 840.0), seed=11)
     traj = engine.simulate(_scan(variants, output_dt_s=1.0), fdir=True)
@@ -623,6 +624,7 @@ def test_seed002_wheel_noise_with_quantised_tachometer_dead_wheel_isolated_and_n
     assert seen is not None and isolated[0][0] - seen <= OBSERVABLE_WINDOW_S
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("tach_q", [0.0, TACH_025_RPM])
 def test_no_false_alarm_in_24_hours_of_nominal_scan_with_sensor_noise(tach_q):
     s = _quantised([VariantSpec(name="nominal")], duration_s=86400.0, output_dt_s=60.0)

@@ -17,6 +17,8 @@ from sim_core.engine import plant_params, simulate
 from sim_core.scenario import Scenario
 from sim_core.trajectory import ARCSEC_PER_RAD
 
+pytestmark = pytest.mark.slow  # six 1,800-s flights: scheduled first (tests/conftest.py)
+
 DURATION_S = 1800.0
 ROLL_DEG = 20.0  # the route's roll between its two courses
 SCAN_RMS_ARCSEC = 10.0  # seed 000 §5 asks a few arcsec; the four wheels give ~3″
