@@ -131,6 +131,7 @@ def kill_chain(chain: int, trials: int, diary: bytes) -> tuple[int, int, int, in
                         "/telemetry/uploads",
                         params={"satellite": satellite},
                         content=diary[at : at + PACKET_OCTETS * SLICE_PACKETS],
+                        timeout=START_TIMEOUT_S,  # only the kill ends it: the first one warms the decode path
                     )
                 except httpx.TransportError:
                     return  # killed mid-request: not acknowledged
@@ -141,7 +142,8 @@ def kill_chain(chain: int, trials: int, diary: bytes) -> tuple[int, int, int, in
 
         sender = threading.Thread(target=upload)
         sender.start()
-        first_answered.wait(START_TIMEOUT_S)  # the first upload warms the decode path: minutes under load
+        while sender.is_alive() and not first_answered.wait(1.0):  # the first upload: minutes under load
+            pass
         time.sleep(rng.uniform(0.0, 3.0))
         server.process.kill()
         server.process.wait(30)
