@@ -165,7 +165,8 @@ def test_gyro_markov_drift_has_its_sigma_and_correlation_time_in_the_twin_and_th
     assert rho == pytest.approx(np.exp(-1.0), abs=0.15)
     # the emulated satellite's gyro flies the same drift model
     truth = {"omega_b_rad_s": np.zeros((int(1800 / 0.25), 3))}
-    w_g = emulator._gyro(truth, drifting, np.arange(truth["omega_b_rad_s"].shape[0]) * 0.25, np.random.default_rng(1))
+    carry = emulator.TelemetryCarry(np.random.default_rng(1))
+    w_g = emulator._gyro(truth, drifting, np.arange(truth["omega_b_rad_s"].shape[0]) * 0.25, carry)
     assert np.std(w_g) == pytest.approx(np.hypot(sigma, noise), rel=0.25)
 
 
