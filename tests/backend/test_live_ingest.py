@@ -23,9 +23,9 @@ def test_a_full_outbox_loses_its_oldest_messages_and_counts_them() -> None:
     outbox = mp.get_context("spawn").Queue(OUTBOX_MESSAGES)
     tally = {"forward_dropped": 0}
     for i in range(10):  # the server reads nothing meanwhile
-        _offer(outbox, ("batch", i), tally)
+        _offer(outbox, ("starting", str(i)), tally)
     received = [outbox.get(timeout=GET_TIMEOUT_S)[1] for _ in range(OUTBOX_MESSAGES)]
-    assert received == [7, 8, 9]  # the server resumes at the present, in order
+    assert received == ["7", "8", "9"]  # the server resumes at the present, in order
     assert tally["forward_dropped"] == 10 - OUTBOX_MESSAGES
     outbox.close()
 
