@@ -50,11 +50,11 @@ def module_hashes(package_dir: Path) -> dict[str, str]:
     imports = {m: _imported_modules(s.decode(), package_dir.name, set(sources)) for m, s in sources.items()}
     hashes = {}
     for module in sources:
-        closure, todo = {module}, [module]
-        while todo:
-            for dep in imports[todo.pop()] - closure:
+        closure, frontier = {module}, [module]
+        while frontier:
+            for dep in imports[frontier.pop()] - closure:
                 closure.add(dep)
-                todo.append(dep)
+                frontier.append(dep)
         digest = hashlib.sha256()
         for dep in sorted(closure):
             digest.update(dep.encode() + b"\0" + sources[dep])
