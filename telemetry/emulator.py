@@ -64,6 +64,7 @@ __all__ = [
     "REFERENCE_DICTIONARY",
     "PacketSeries",
     "PacketStream",
+    "SendOptions",
     "SendReport",
     "Satellite",
     "TelemetryCarry",
@@ -693,42 +694,66 @@ def demo_pass_bytes(
     return stream.window(epoch_ns + int(round(t_start_s * NS_PER_S)), stop_ns).data
 
 
-async def _connect(
-    host: str, port: int, retry_s: float, attempts: int | None, greeting: bytes = b""
-) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+@dataclass(frozen=True)
+class SendOptions:
+    """Where and how :func:`send_stream` / :func:`send_streams` send: the listener's ``host``:``port``, the pace
+    ``rate`` × the packets' time stamps (inf: as fast as possible), a reconnect every ``retry_s`` (``attempts``
+    None: keep trying), real-time release on the UTC clock (``on_wall_clock``), and the hello line's
+    ``satellite`` and ``dictionary`` (telemetry.live.hello). Checked when made (ValueError naming the field)."""
+
+    host: str = "127.0.0.1"
+    port: int = 10025
+    rate: float = 1.0
+    retry_s: float = RETRY_S
+    attempts: int | None = None
+    on_wall_clock: bool = False
+    satellite: str | None = None
+    dictionary: str | None = None
+
+    def __post_init__(self) -> None:
+        if not self.rate > 0.0:
+            raise ValueError(f"rate: must be > 0 (inf = unpaced), got {self.rate}")
+        if self.on_wall_clock and self.rate != 1.0:
+            raise ValueError(
+                f"on_wall_clock: packets can follow the UTC clock only in real time (rate 1), got rate {self.rate}"
+            )
+        if self.port <= 0 or self.port > 65535:
+            raise ValueError(f"port: expected 1..65535, got {self.port}")
+        if self.attempts is not None and self.attempts < 1:
+            raise ValueError(f"attempts: expected at least 1 (None = keep trying), got {self.attempts}")
+        if self.dictionary is not None and self.satellite is None:
+            raise ValueError("dictionary: a hello line names the dictionary of a named satellite (give satellite)")
+
+    def greeting(self) -> bytes:
+        """The line each connection opens with: the hello naming the satellite, empty without one."""
+        from telemetry.live import hello
+
+        return b"" if self.satellite is None else hello(self.satellite, self.dictionary)
+
+
+async def _connect(options: SendOptions, greeting: bytes) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
     """Open a TCP connection that starts with ``greeting``, retrying every retry_s (attempts None = forever)."""
     tried = 0
     while True:
         try:
-            reader, writer = await asyncio.open_connection(host, port)
+            reader, writer = await asyncio.open_connection(options.host, options.port)
             writer.write(greeting)
             await writer.drain()
             return reader, writer
         except OSError:
             tried += 1
-            if attempts is not None and tried >= attempts:
+            if options.attempts is not None and tried >= options.attempts:
                 raise
-            await asyncio.sleep(retry_s)
+            await asyncio.sleep(options.retry_s)
 
 
-async def send_stream(
-    stream: PacketStream,
-    host: str = "127.0.0.1",
-    port: int = 10025,
-    rate: float = 1.0,
-    retry_s: float = RETRY_S,
-    attempts: int | None = None,
-    on_wall_clock: bool = False,
-    satellite: str | None = None,
-    dictionary: str | None = None,
-) -> SendReport:
-    """Send packets over TCP paced at ``rate`` × their time stamps (inf: as fast as possible), reconnecting
-    (:func:`send_streams` of this one stream)."""
+async def send_stream(stream: PacketStream, options: SendOptions) -> SendReport:
+    """Send packets over TCP as ``options`` say, reconnecting (:func:`send_streams` of this one stream)."""
 
     async def once() -> AsyncIterator[PacketStream]:
         yield stream
 
-    return await send_streams(once(), host, port, rate, retry_s, attempts, on_wall_clock, satellite, dictionary)
+    return await send_streams(once(), options)
 
 
 @dataclass
@@ -742,55 +767,33 @@ class _Link:
     t0_ns: int
 
 
-async def send_streams(
-    streams: AsyncIterator[PacketStream],
-    host: str = "127.0.0.1",
-    port: int = 10025,
-    rate: float = 1.0,
-    retry_s: float = RETRY_S,
-    attempts: int | None = None,
-    on_wall_clock: bool = False,
-    satellite: str | None = None,
-    dictionary: str | None = None,
-) -> SendReport:
-    """Send the packets of each stream in turn over one TCP link, paced at ``rate`` × their time stamps from the
-    first packet's (inf: as fast as possible), reconnecting.
+async def send_streams(streams: AsyncIterator[PacketStream], options: SendOptions) -> SendReport:
+    """Send the packets of each stream in turn over one TCP link, paced at ``options.rate`` × their time stamps from
+    the first packet's (inf: as fast as possible), reconnecting.
 
-    ``satellite``: each connection opens with telemetry.live.hello(satellite, dictionary), so that a listener
+    ``options.satellite``: each connection opens with telemetry.live.hello(satellite, dictionary), so that a listener
     serving a fleet files the packets under that name (without it, under the listener's own satellite) and, for a
     mixed fleet, decodes them with the ``dictionary`` it knows by that id (without it, with its own).
 
-    ``on_wall_clock`` (real time only): each packet leaves when the UTC clock reaches its time stamp
+    ``options.on_wall_clock`` (real time only): each packet leaves when the UTC clock reaches its time stamp
     (those already due leave at once). TCP gives no application acknowledgement, so after a lost link
     the packets of the current stream written in the last ``REWIND_S`` are sent again; the archive drops
     duplicates (same APID, count and time).
     """
-    if not rate > 0.0:
-        raise ValueError(f"rate: must be > 0 (inf = unpaced), got {rate}")
-    if on_wall_clock and rate != 1.0:
-        raise ValueError(f"on_wall_clock: packets can follow the UTC clock only in real time (rate 1), got rate {rate}")
-    if port <= 0 or port > 65535:
-        raise ValueError(f"port: expected 1..65535, got {port}")
-    if attempts is not None and attempts < 1:
-        raise ValueError(f"attempts: expected at least 1 (None = keep trying), got {attempts}")
-    from telemetry.live import hello
-
-    if dictionary is not None and satellite is None:
-        raise ValueError("dictionary: a hello line names the dictionary of a named satellite (give satellite)")
-    greeting = b"" if satellite is None else hello(satellite, dictionary)
+    greeting = options.greeting()
     report, link = SendReport(), None
     try:
         async for stream in streams:
             if len(stream) == 0:
                 continue
             if link is None:
-                reader, writer = await _connect(host, port, retry_s, attempts, greeting)
+                reader, writer = await _connect(options, greeting)
                 report.connections += 1
                 wall0 = time.monotonic()
-                if on_wall_clock:
+                if options.on_wall_clock:
                     wall0 -= time.time() - int(stream.t_utc_ns[0]) / NS_PER_S
                 link = _Link(reader, writer, greeting, wall0, int(stream.t_utc_ns[0]))
-            await _send_one(stream, link, rate, (host, port, retry_s, attempts), report)
+            await _send_one(stream, link, options, report)
     finally:
         if link is not None:
             link.writer.close()
@@ -799,13 +802,11 @@ async def send_streams(
     return report
 
 
-async def _send_one(
-    stream: PacketStream, link: _Link, rate: float, target: tuple[str, int, float, int | None], report: SendReport
-) -> None:
+async def _send_one(stream: PacketStream, link: _Link, options: SendOptions, report: SendReport) -> None:
     """Write one stream's packets on ``link`` at their pace, reconnecting it (and re-sending) when it drops."""
     n = len(stream)
     starts = np.concatenate([[0], stream.ends[:-1]])
-    due_s = (stream.t_utc_ns - link.t0_ns) / NS_PER_S / rate
+    due_s = (stream.t_utc_ns - link.t0_ns) / NS_PER_S / options.rate
     i = 0
     recent: deque[tuple[float, int]] = deque()  # (monotonic s, packet index) written within REWIND_S
     while i < n:
@@ -823,7 +824,7 @@ async def _send_one(
             resume = _rewind(recent, i)
             report.packets_resent += i - resume
             i = resume
-            link.reader, link.writer = await _connect(*target, link.greeting)
+            link.reader, link.writer = await _connect(options, link.greeting)
             report.connections += 1
             continue
         recent.append((time.monotonic(), i))

@@ -129,17 +129,20 @@ def run(args: argparse.Namespace) -> int:
     print(f"sending {length} of {args.scenario} to {args.host}:{port} ({pace})", flush=True)
     try:
         on_clock = args.start_utc == "now" and args.rate == 1.0
-        pacing = {
-            "attempts": args.attempts,
-            "on_wall_clock": on_clock,
-            "satellite": args.satellite,
-            "dictionary": args.dictionary,
-        }
+        options = emulator.SendOptions(
+            args.host,
+            port,
+            args.rate,
+            attempts=args.attempts,
+            on_wall_clock=on_clock,
+            satellite=args.satellite,
+            dictionary=args.dictionary,
+        )
         if args.out:
-            sending = emulator.send_stream(stream, args.host, port, args.rate, **pacing)
+            sending = emulator.send_stream(stream, options)
         else:
             streams = emulator.flight_streams(satellite, args.segment, None if math.isinf(duration) else duration)
-            sending = emulator.send_streams(streams, args.host, port, args.rate, **pacing)
+            sending = emulator.send_streams(streams, options)
         report = asyncio.run(sending)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
+from starlette.testclient import WebSocketTestSession
 from starlette.websockets import WebSocketDisconnect
 
 from backend.app import create_app
@@ -17,11 +18,38 @@ from backend.core.auth import Role
 from backend.ingest.live_hub import LiveHub
 from backend.routes.live import CLOSE_TOO_SLOW, CLOSE_UNAUTHORIZED, _send_batches
 from backend.twin.live import ATTITUDE_LIMIT_ARCSEC, RED_FACTOR
+from telemetry import emulator
 from telemetry.live import hello
 from tests.backend.conftest import bearer, make_settings
 
 QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
 LIVE_ARCHIVE_TIMEOUT_S = 10.0  # archive flushes every 0.5 s; margin for a loaded machine
+NOAA20_DIARY = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
+NOAA20_OCTETS = 71  # one APID 11 packet of the diary
+NOAA20_LISTENER = {"live_enabled": True, "live_satellite": "NOAA-20", "live_dictionary": "noaa20_apid11_ccsdspy.yaml"}
+
+
+def _subscribe(ws: WebSocketTestSession, hub: LiveHub, topic: str) -> None:
+    """Subscribe the WebSocket to ``topic`` and wait until the hub fans it out (the subscribe is asynchronous)."""
+    ws.send_json({"op": "subscribe", "topics": [topic]})
+    deadline = time.monotonic() + 2.0
+    while not hub.wants_any(topic):
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+
+
+def _wait_archived(client: TestClient, n_packets: int, what: str) -> dict:
+    """The health's live block once the ingest process has archived ``n_packets``."""
+    deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
+    while (live := client.get("/api/v1/health").json()["live"]).get("packets_archived", 0) < n_packets:
+        assert time.monotonic() < deadline, f"{what} never reached the archive"
+        time.sleep(0.1)
+    return live
+
+
+def _unpaced(port: int, satellite: str | None = None, dictionary: str | None = None) -> emulator.SendOptions:
+    """Send to the loopback listener on ``port`` as fast as possible, three connection attempts."""
+    return emulator.SendOptions("127.0.0.1", port, float("inf"), attempts=3, satellite=satellite, dictionary=dictionary)
 
 
 def test_publish_never_waits_and_a_full_subscriber_keeps_the_newest_items() -> None:
@@ -91,14 +119,9 @@ def test_websocket_batches_at_most_rate_hz_and_needs_a_token(client: TestClient,
 def test_uploaded_packets_reach_a_websocket_subscriber(
     client: TestClient, tokens: dict[str, str], shared_data: Path
 ) -> None:
-    data = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
+    data = (shared_data / NOAA20_DIARY).read_bytes()
     with client.websocket_connect("/api/v1/ws", headers=bearer(tokens["viewer"])) as ws:
-        ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
-        hub = client.app.state.services.hub
-        deadline = time.monotonic() + 2.0
-        while not hub.wants_any("parameters/q_ib_0"):
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
+        _subscribe(ws, client.app.state.services.hub, "parameters/q_ib_0")
         client.post("/api/v1/telemetry/uploads", content=data, headers=bearer(tokens["operator"]))
         item = ws.receive_json()["items"][0]
     assert item["topic"] == "parameters/q_ib_0" and len(item["data"]["values"]) == 7200
@@ -108,34 +131,20 @@ def test_packets_streamed_over_tcp_are_archived_and_reach_a_websocket_subscriber
     tmp_path: Path, database_url: str, shared_data: Path
 ) -> None:
     """End to end: TCP link (real NOAA-20 packets) → ingest process → archive and → WebSocket subscriber."""
-    packets = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
-    n_sent, packet_octets = 500, 71
-    settings = make_settings(
-        tmp_path,
-        database_url,
-        live_enabled=True,
-        live_satellite="NOAA-20",
-        live_dictionary="noaa20_apid11_ccsdspy.yaml",
-    )
+    packets = (shared_data / NOAA20_DIARY).read_bytes()
+    n_sent = 500
+    settings = make_settings(tmp_path, database_url, **NOAA20_LISTENER)
     with TestClient(create_app(settings)) as client:
         viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
         port = client.get("/api/v1/health").json()["live"]["port"]
-        hub = client.app.state.services.hub
         with client.websocket_connect(f"/api/v1/ws?token={viewer}") as ws:
-            ws.send_json({"op": "subscribe", "topics": ["parameters/q_ib_0"]})
-            deadline = time.monotonic() + 2.0
-            while not hub.wants_any("parameters/q_ib_0"):
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
+            _subscribe(ws, client.app.state.services.hub, "parameters/q_ib_0")
             with socket.create_connection(("127.0.0.1", port)) as link:
-                link.sendall(packets[: n_sent * packet_octets])
+                link.sendall(packets[: n_sent * NOAA20_OCTETS])
             seen = 0
             while seen < n_sent:
                 seen += sum(len(item["data"]["values"]) for item in ws.receive_json()["items"])
-        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
-        while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < n_sent:
-            assert time.monotonic() < deadline, "live packets never reached the archive"
-            time.sleep(0.1)
+        _wait_archived(client, n_sent, "live packets")
         samples = client.get("/api/v1/parameters/q_ib_0/samples", headers=bearer(viewer)).json()
     assert seen == n_sent and samples["total_points"] == n_sent
     assert not client.app.state.services.telemetry.live_stats()  # the ingest process has stopped
@@ -146,30 +155,20 @@ EMULATED_S = 60.0  # one minute of the demo satellite: 240 ACS_HK packets at T_q
 
 def test_emulated_satellite_over_tcp_reaches_archive_and_websocket(tmp_path: Path, database_url: str) -> None:
     """The issue's end-to-end path: emulator → TCP → ingest process → archive, and → WebSocket subscriber."""
-    from telemetry import emulator
-
     settings = make_settings(tmp_path, database_url, live_enabled=True)
     _, series, stream = emulator.emulate("somov-ge4-scan", [], EMULATED_S, "2026-03-20T00:00:00Z")
     sent_q0 = np.asarray(series["ACS_HK"].values["q_est_ib_0"], dtype=float)
     with TestClient(create_app(settings)) as client:
         viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
         port = client.get("/api/v1/health").json()["live"]["port"]
-        hub = client.app.state.services.hub
         with client.websocket_connect(f"/api/v1/ws?token={viewer}") as ws:
-            ws.send_json({"op": "subscribe", "topics": ["parameters/q_est_ib_0"]})
-            deadline = time.monotonic() + 2.0
-            while not hub.wants_any("parameters/q_est_ib_0"):
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
-            asyncio.run(emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3))
+            _subscribe(ws, client.app.state.services.hub, "parameters/q_est_ib_0")
+            asyncio.run(emulator.send_stream(stream, _unpaced(port)))
             live: list[float] = []
             while len(live) < sent_q0.size:
                 for item in ws.receive_json()["items"]:
                     live.extend(item["data"]["values"])
-        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
-        while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < len(stream):
-            assert time.monotonic() < deadline, "emulated packets never reached the archive"
-            time.sleep(0.1)
+        _wait_archived(client, len(stream), "emulated packets")
         archived = client.get(
             f"/api/v1/parameters/q_est_ib_0/samples?satellite={settings.live_satellite}&max_points={sent_q0.size}",
             headers=bearer(viewer),
@@ -183,26 +182,17 @@ def test_a_mixed_fleet_on_one_listener_each_satellite_decoded_with_the_dictionar
 ) -> None:
     """End to end: a listener whose own dictionary is NOAA-20's takes real NOAA-20 packets, the emulated reference
     satellite naming its dictionary in its hello line, and a connection naming an unknown one (refused, said)."""
-    from telemetry import emulator
-
-    noaa = (shared_data / "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1").read_bytes()
-    n_noaa, noaa_octets = 300, 71
-    settings = make_settings(
-        tmp_path,
-        database_url,
-        live_enabled=True,
-        live_satellite="NOAA-20",
-        live_dictionary="noaa20_apid11_ccsdspy.yaml",
-    )
+    noaa = (shared_data / NOAA20_DIARY).read_bytes()
+    n_noaa = 300
+    settings = make_settings(tmp_path, database_url, **NOAA20_LISTENER)
     _, series, stream = emulator.emulate("somov-ge4-scan", [], 20.0, "2026-03-20T00:00:00Z")
     sent_q0 = np.asarray(series["ACS_HK"].values["q_est_ib_0"], dtype=float)
     with TestClient(create_app(settings)) as client:
         viewer = client.app.state.services.auth.issue("viewer", Role.viewer)[1]
         port = client.get("/api/v1/health").json()["live"]["port"]
         with socket.create_connection(("127.0.0.1", port)) as link:
-            link.sendall(noaa[: n_noaa * noaa_octets])  # no hello: the listener's own satellite and dictionary
-        reference = {"satellite": "REF-9", "dictionary": emulator.REFERENCE_DICTIONARY}
-        asyncio.run(emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3, **reference))
+            link.sendall(noaa[: n_noaa * NOAA20_OCTETS])  # no hello: the listener's own satellite and dictionary
+        asyncio.run(emulator.send_stream(stream, _unpaced(port, "REF-9", emulator.REFERENCE_DICTIONARY)))
         with socket.create_connection(("127.0.0.1", port)) as link:
             link.sendall(hello("BAD-1", "nope.yaml") + stream.data)  # a dictionary the listener does not know
         deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
@@ -248,8 +238,6 @@ def test_one_listener_takes_a_fleet_each_satellite_archived_with_its_live_twin(
     """End to end for a fleet: two emulated satellites, each on its own TCP connection naming it (emulator
     satellite=...), and the server's own satellite without a name → one ingest process → each satellite's
     samples in the archive under its name, its own live twin (state, residuals), the twin topic on the WebSocket."""
-    from telemetry import emulator
-
     settings = make_settings(tmp_path, database_url, live_enabled=True)
     _, series, stream = emulator.emulate("somov-ge4-scan", [], FLEET_S, "2026-03-20T00:00:00Z")
     n_hk = series["ACS_HK"].t_utc_ns.size
@@ -261,12 +249,7 @@ def test_one_listener_takes_a_fleet_each_satellite_archived_with_its_live_twin(
             ws.send_json({"op": "subscribe", "topics": ["twin"]})
 
             async def send_all() -> None:
-                await asyncio.gather(
-                    *(
-                        emulator.send_stream(stream, "127.0.0.1", port, float("inf"), attempts=3, satellite=s)
-                        for s in fleet
-                    )
-                )
+                await asyncio.gather(*(emulator.send_stream(stream, _unpaced(port, s)) for s in fleet))
 
             asyncio.run(send_all())
             names = {s or settings.live_satellite for s in fleet}
@@ -275,10 +258,7 @@ def test_one_listener_takes_a_fleet_each_satellite_archived_with_its_live_twin(
                 for item in ws.receive_json()["items"]:
                     if item["data"]["state"] == "propagating":
                         propagating.add(item["data"]["satellite"])
-        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
-        while client.get("/api/v1/health").json()["live"].get("packets_archived", 0) < 3 * len(stream):
-            assert time.monotonic() < deadline, "the fleet's packets never all reached the archive"
-            time.sleep(0.1)
+        _wait_archived(client, 3 * len(stream), "the fleet's packets")
         listed = {s["name"] for s in client.get("/api/v1/satellites", headers=bearer(viewer)).json()}
         for name in names:
             samples = client.get(

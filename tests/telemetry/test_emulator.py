@@ -269,7 +269,7 @@ def test_live_emulator_to_listener_delivers_decoded_samples_paced(nominal, decod
         subscriber = live.subscribe(max_messages=10_000)
         port = await live.start()
         start = time.monotonic()
-        report = await emulator.send_stream(piece, "127.0.0.1", port, rate)
+        report = await emulator.send_stream(piece, emulator.SendOptions("127.0.0.1", port, rate))
         elapsed = time.monotonic() - start
         await asyncio.sleep(SETTLE_S)
         await live.stop()
@@ -310,7 +310,9 @@ def test_sender_reconnects_and_resends_after_the_link_drops_each_connection_nami
 
         server = await asyncio.start_server(handle, "127.0.0.1", 0)
         port = server.sockets[0].getsockname()[1]
-        report = await emulator.send_stream(piece, "127.0.0.1", port, rate=40.0, retry_s=0.05, satellite="SAT-7")
+        report = await emulator.send_stream(
+            piece, emulator.SendOptions("127.0.0.1", port, rate=40.0, retry_s=0.05, satellite="SAT-7")
+        )
         await asyncio.sleep(SETTLE_S)
         server.close()
         await server.wait_closed()
@@ -335,7 +337,9 @@ def test_sender_waits_for_a_listener_that_starts_late(nominal, dictionary) -> No
     probe.close()  # a port nobody listens on yet
 
     async def late() -> tuple[emulator.SendReport, list]:
-        sending = asyncio.create_task(emulator.send_stream(piece, "127.0.0.1", port, rate=math.inf, retry_s=0.05))
+        sending = asyncio.create_task(
+            emulator.send_stream(piece, emulator.SendOptions("127.0.0.1", port, rate=math.inf, retry_s=0.05))
+        )
         await asyncio.sleep(0.3)
         live = LiveStream(dictionary)
         subscriber = live.subscribe(max_messages=1_000)
@@ -348,7 +352,11 @@ def test_sender_waits_for_a_listener_that_starts_late(nominal, dictionary) -> No
     report, messages = asyncio.run(late())
     assert report.connections == 1 and sum(len(m.batch.t_utc_ns) for m in messages) == len(piece) == 25
     with pytest.raises(OSError):
-        asyncio.run(emulator.send_stream(piece, "127.0.0.1", port, rate=math.inf, retry_s=0.01, attempts=2))
+        asyncio.run(
+            emulator.send_stream(
+                piece, emulator.SendOptions("127.0.0.1", port, rate=math.inf, retry_s=0.01, attempts=2)
+            )
+        )
 
 
 def test_real_time_sender_releases_each_packet_at_its_utc_time_stamp(dictionary) -> None:
@@ -364,7 +372,9 @@ def test_real_time_sender_releases_each_packet_at_its_utc_time_stamp(dictionary)
             writer.close()
 
         server = await asyncio.start_server(handle, "127.0.0.1", 0)
-        await emulator.send_stream(stream, "127.0.0.1", server.sockets[0].getsockname()[1], on_wall_clock=True)
+        await emulator.send_stream(
+            stream, emulator.SendOptions("127.0.0.1", server.sockets[0].getsockname()[1], on_wall_clock=True)
+        )
         finished = time.time()
         server.close()
         await server.wait_closed()
@@ -376,7 +386,7 @@ def test_real_time_sender_releases_each_packet_at_its_utc_time_stamp(dictionary)
     assert last_stamp_s - EARLY_TOL_S <= finished < last_stamp_s + LATE_TOL_S
     assert sum(size for _, size in arrivals) == len(stream.data)
     with pytest.raises(ValueError, match="on_wall_clock"):
-        asyncio.run(emulator.send_stream(stream, rate=2.0, on_wall_clock=True))
+        asyncio.run(emulator.send_stream(stream, emulator.SendOptions(rate=2.0, on_wall_clock=True)))
 
 
 def test_cli_streams_to_a_live_listener(dictionary) -> None:
@@ -494,7 +504,7 @@ def test_bad_fault_and_scenario_raise_value_errors_naming_the_field() -> None:
     with pytest.raises(ValueError, match="cluster.wheels: the dictionary carries 4 wheels, the scenario flies 3"):
         emulator.emulate("aist-scheduled-turn", duration_s=1.0)
     with pytest.raises(ValueError, match="rate"):
-        asyncio.run(emulator.send_stream(emulator.PacketStream(b"", np.zeros(0), np.zeros(0), np.zeros(0)), rate=0.0))
+        emulator.SendOptions(rate=0.0)
 
 
 def test_cli_writes_a_packet_file_that_decodes(tmp_path, dictionary, capsys) -> None:
