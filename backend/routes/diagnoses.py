@@ -31,7 +31,9 @@ async def create_diagnosis(body: DiagnosisCreate, services: ServicesDep, princip
 def list_diagnoses(
     services: ServicesDep,
     _: ViewerDep,
-    alarm_id: int | None = Query(None, ge=0, description="Only the diagnosis this alarm started."),
+    alarm_id: int | None = Query(
+        None, ge=0, le=2**62, description="Only the diagnosis this alarm started (a database id, as DbId)."
+    ),
     satellite: str | None = Query(None, min_length=1, max_length=100),
 ) -> list[DiagnosisPublic]:
     """The stored diagnoses (the newest 200), with their state and result."""

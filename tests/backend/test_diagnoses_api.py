@@ -79,6 +79,8 @@ def test_diagnosis_requests_are_checked_and_their_outcome_outlives_a_restart(tmp
         )
         assert too_long.status_code == 422 and too_long.json()["field"] == "end_utc"
         unknown = client.get("/api/v1/diagnoses/nope", headers=operator)
+        past_int64 = client.get(f"/api/v1/diagnoses?alarm_id={2**63}", headers=operator)  # was a 500 (OverflowError)
+        assert past_int64.status_code == 422 and past_int64.json()["field"] == "alarm_id"
         assert unknown.status_code == 404 and unknown.json()["field"] == "diagnosis_id"
         empty = client.post(
             "/api/v1/diagnoses",
