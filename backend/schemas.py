@@ -57,10 +57,8 @@ __all__ = [
 ]
 
 PARQUET_MEDIA_TYPE = "application/vnd.apache.parquet"  # the media type registered for Apache Parquet
-RESULT_FILE_MEDIA_TYPES = {  # a job's result files by suffix; anything else as starlette guesses from the name
-    ".parquet": PARQUET_MEDIA_TYPE,
+RESULT_FILE_MEDIA_TYPES = {  # a job's result files by suffix (CSV and Parquet: its export, streamed)
     ".npz": "application/octet-stream",  # numpy's zip of arrays: no registered type of its own
-    ".csv": "text/csv",
     ".json": "application/json",
 }
 SATELLITE_NAME = r"^[^\x00-\x1f\x7f]+$"  # printable: names reach file names and headers (no CR/LF)

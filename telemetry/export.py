@@ -109,9 +109,11 @@ def export_batches(
 
 
 def _csv_text(batch: pa.RecordBatch, header: bool) -> bytes:
-    """CSV of one batch with t_utc as ISO 8601 ``…T…Z`` (ns)."""
-    t = batch.column(0).cast(pa.int64()).to_numpy()
-    table = pa.table([pa.array(iso_utc_ns(t)), *batch.columns[1:]], names=batch.schema.names)
+    """CSV of one batch, a leading UTC time stamp column (t_utc) as ISO 8601 ``…T…Z`` (ns)."""
+    table = pa.Table.from_batches([batch])
+    if pa.types.is_timestamp(batch.schema.field(0).type):
+        t = batch.column(0).cast(pa.int64()).to_numpy()
+        table = pa.table([pa.array(iso_utc_ns(t)), *batch.columns[1:]], names=batch.schema.names)
     sink = io.BytesIO()
     pa_csv.write_csv(table, sink, pa_csv.WriteOptions(include_header=header, quoting_style="needed"))
     return sink.getvalue()

@@ -1,16 +1,33 @@
-"""Files of a simulation result: npz, CSV, Parquet and PNG plots like seed 000 Figs 4–7."""
+"""Files of a simulation result: npz, CSV, Parquet and PNG plots like seed 000 Figs 4–7; a job's npz as rows."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from sim_core import quaternion
 from sim_core.trajectory import ARCSEC_PER_RAD, Trajectory
 
-__all__ = ["write_npz", "read_npz", "columns", "write_csv", "write_parquet", "write_plots", "write_all"]
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+__all__ = [
+    "EXPORT_BATCH_ROWS",
+    "columns",
+    "npz_rows",
+    "read_npz",
+    "write_all",
+    "write_csv",
+    "write_npz",
+    "write_parquet",
+    "write_plots",
+]
+
+EXPORT_BATCH_ROWS = 50_000  # rows per streamed record batch of npz_rows: a few MB of CSV
 
 
 def write_npz(traj: Trajectory, path: Path) -> Path:
@@ -89,6 +106,36 @@ def write_parquet(traj: Trajectory, path: Path) -> Path:
         tables.append(pa.table(cols))
     pq.write_table(pa.concat_tables(tables), path)
     return path
+
+
+def npz_rows(path: Path) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
+    """A job's trajectory.npz (engine or rigid spin) as rows at full resolution: ``member`` (batch index), ``t_s``,
+    then every time series (an array whose axis 1 is the time axis, the batch on axis 0) as one column per
+    component, ``name_i`` (as :func:`columns`), or ``name`` when scalar; member after member, in record batches of
+    EXPORT_BATCH_ROWS rows. The arrays are read at once (the file is bounded by max_output_mb), the rows made
+    batch by batch."""
+    import pyarrow as pa
+
+    with np.load(path) as npz:
+        t = npz["t_s"]
+        arrays = {k: npz[k] for k in npz.files if k != "t_s"}
+    series = {k: a.reshape(a.shape[0], t.size, -1) for k, a in arrays.items() if a.ndim >= 2 and a.shape[1] == t.size}
+    fields = [pa.field("member", pa.int32()), pa.field("t_s", pa.from_numpy_dtype(t.dtype))]
+    for k, a in series.items():
+        names = [k] if arrays[k].ndim == 2 else [f"{k}_{i}" for i in range(a.shape[2])]
+        fields += [pa.field(name, pa.from_numpy_dtype(a.dtype)) for name in names]
+    schema = pa.schema(fields)
+    members = next(iter(series.values())).shape[0] if series else 1
+
+    def batches() -> Iterator[pa.RecordBatch]:
+        for m in range(members):
+            for lo in range(0, t.size, EXPORT_BATCH_ROWS):
+                rows = slice(lo, lo + EXPORT_BATCH_ROWS)
+                cols = [np.full(t[rows].size, m, dtype=np.int32), t[rows]]
+                cols += [a[m, rows, i] for a in series.values() for i in range(a.shape[2])]
+                yield pa.record_batch([pa.array(c) for c in cols], schema=schema)
+
+    return schema, batches()
 
 
 def write_plots(traj: Trajectory, out_dir: Path, variant: int = 0) -> list[Path]:

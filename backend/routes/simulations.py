@@ -1,14 +1,14 @@
-"""Simulation jobs: submit (202), status, cancel, result files and downsampled time series."""
+"""Simulation jobs: submit (202), status, cancel, result files, downsampled time series, CSV/Parquet export."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from fastapi import APIRouter, Body, Query, Request
 from fastapi.openapi.models import Example
-from fastapi.responses import FileResponse
+from fastapi.responses import FileResponse, StreamingResponse
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
@@ -133,13 +133,11 @@ RESULT_FILE = {"schema": {"type": "string", "format": "binary"}}
     response_class=FileResponse,
     responses={
         200: {
-            "description": "The file's bytes, typed by its extension: trajectory.csv, summary.json and "
-            f"scenario.json as such, trajectory.parquet as {PARQUET_MEDIA_TYPE} (as the samples export), "
-            "trajectory.npz as application/octet-stream.",
+            "description": "The file's bytes, typed by its extension: summary.json and scenario.json as "
+            "application/json, trajectory.npz as application/octet-stream. The time series as CSV or Parquet: "
+            "GET /simulations/{job_id}/export.",
             "content": {
-                "text/csv": RESULT_FILE,
                 "application/json": {"schema": {"type": "object"}},  # summary.json, scenario.json
-                PARQUET_MEDIA_TYPE: RESULT_FILE,
                 "application/octet-stream": RESULT_FILE,
             },
         }
@@ -152,6 +150,28 @@ def get_file(job_id: str, name: str, services: ServicesDep, _: ViewerDep) -> Fil
     if "/" in name or "\\" in name or name.startswith(".") or not path.is_file():
         raise ApiError(404, f"no file {name!r} in job {job_id}", "name")
     return FileResponse(path, filename=name, media_type=RESULT_FILE_MEDIA_TYPES.get(path.suffix))
+
+
+@router.get(
+    "/simulations/{job_id}/export",
+    summary="Export a result's time series as CSV or Parquet",
+    response_class=StreamingResponse,
+    responses={200: {"content": {"text/csv": RESULT_FILE, PARQUET_MEDIA_TYPE: RESULT_FILE}}},
+)
+def export_result(
+    job_id: str, services: ServicesDep, _: ViewerDep, format: Literal["csv", "parquet"] = "csv"
+) -> StreamingResponse:
+    """Every time series of trajectory.npz at full resolution, one row per batch member and sample: ``member``,
+    ``t_s``, one column per component (``q_ib_0`` …); made and streamed batch by batch, nothing spooled (the
+    CSV/Parquet writers of the samples export)."""
+    from backend.jobs.trajectory_files import npz_rows
+    from telemetry.export import csv_chunks, parquet_chunks
+
+    schema, batches = npz_rows(_result_dir(services, job_id) / "trajectory.npz")
+    headers = {"Content-Disposition": f'attachment; filename="{job_id}-trajectory.{format}"'}
+    if format == "csv":
+        return StreamingResponse(csv_chunks(schema, batches), media_type="text/csv", headers=headers)
+    return StreamingResponse(parquet_chunks(schema, batches), media_type=PARQUET_MEDIA_TYPE, headers=headers)
 
 
 def _series_columns(array: np.ndarray, n: int, member: int, name: str) -> np.ndarray:

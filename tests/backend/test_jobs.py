@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
+import pyarrow.csv as pa_csv
 import pyarrow.parquet as pq
 import pytest
 from fastapi.testclient import TestClient
@@ -58,7 +58,7 @@ def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
     assert max(job["summary"]["energy_rel_drift"]) < ENERGY_DRIFT_TOLERANCE
     files = client.get(f"/api/v1/simulations/{job['id']}/files", headers=bearer(tokens["viewer"])).json()
     assert {f["name"] for f in files} == {"scenario.json", "summary.json", "trajectory.npz"}
-    _check_result_media_types(client, job["id"], tokens["viewer"])
+    _check_result_files(client, job["id"], tokens["viewer"])
     series = client.get(
         f"/api/v1/simulations/{job['id']}/series/omega_b_rad_s?member=1&max_points=12", headers=bearer(tokens["viewer"])
     ).json()
@@ -68,18 +68,29 @@ def test_job_runs_in_a_worker_process_and_its_results_conserve_energy(
     assert audit[0]["target"] == f"simulation/{job['id']}"
 
 
-def _check_result_media_types(client: TestClient, job_id: str, token: str) -> None:
-    """npz as generic bytes that numpy reads back; a Parquet result file typed as the samples export types it."""
-    url = f"/api/v1/simulations/{job_id}/files"
-    npz = client.get(f"{url}/trajectory.npz", headers=bearer(token))
+def _check_result_files(client: TestClient, job_id: str, token: str) -> None:
+    """npz as generic bytes that numpy reads back; the export as Parquet and CSV: the same numbers, every member's
+    samples from its initial rate on, each member's kinetic energy ½ Σ J_i ω_i² conserved (torque-free spin)."""
+    url = f"/api/v1/simulations/{job_id}"
+    npz = client.get(f"{url}/files/trajectory.npz", headers=bearer(token))
     assert npz.headers["content-type"] == "application/octet-stream"
     with np.load(io.BytesIO(npz.content)) as arrays:
         assert "omega_b_rad_s" in arrays.files
-    table = pa.table({"t_s": [0.0, 0.01]})
-    pq.write_table(table, client.app.state.services.jobs.result_dir(job_id) / "trajectory.parquet")
-    parquet = client.get(f"{url}/trajectory.parquet", headers=bearer(token))
+    parquet = client.get(f"{url}/export?format=parquet", headers=bearer(token))
     assert parquet.headers["content-type"] == PARQUET_MEDIA_TYPE
-    assert pq.read_table(io.BytesIO(parquet.content)).equals(table)
+    table = pq.read_table(io.BytesIO(parquet.content))
+    csv = client.get(f"{url}/export", headers=bearer(token))
+    assert csv.headers["content-type"].startswith("text/csv")
+    from_csv = pa_csv.read_csv(io.BytesIO(csv.content))
+    assert from_csv.column_names == table.column_names and table.num_rows == 2 * 201
+    for name in table.column_names:
+        assert np.array_equal(from_csv[name].to_numpy(), table[name].to_numpy()), name
+    members = table["member"].to_numpy()
+    for m, (inertia, omega0) in enumerate(zip(SHORT_SPIN["inertia_kg_m2"], SHORT_SPIN["omega0_rad_s"])):
+        omega = np.column_stack([table[f"omega_b_rad_s_{i}"].to_numpy()[members == m] for i in range(3)])
+        assert np.array_equal(omega[0], omega0)
+        energy = 0.5 * omega**2 @ np.asarray(inertia)
+        assert np.ptp(energy) / energy[0] < ENERGY_DRIFT_TOLERANCE
 
 
 def test_over_a_limit_is_422_naming_the_limit(tmp_path: Path, database_url: str) -> None:
@@ -169,11 +180,18 @@ def test_engine_job_returns_exactly_what_sim_core_engine_computes(tmp_path: Path
         series = client.get(
             f"/api/v1/simulations/{job_id}/series/omega_b_rad_s?max_points=100000", headers=operator
         ).json()
+        export = client.get(f"/api/v1/simulations/{job_id}/export?format=parquet", headers=operator)
+        exported = pq.read_table(io.BytesIO(export.content))
     direct = simulate(apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=20"]))
     expected = {k: v for k, v in direct.summary(0).items() if k != "wall_time_s"}
     got = {k: v for k, v in job["summary"]["variants"][0].items() if k != "wall_time_s"}
     assert got == expected
     assert np.array_equal(np.asarray(series["values"]), direct.series["omega_b_rad_s"][0])
+    assert np.array_equal(exported["t_s"].to_numpy(), direct.t_s)
+    for name, array in direct.series.items():  # every series, each component a column (name_i)
+        member = array[0].reshape(direct.t_s.size, -1)
+        names = [name] if array.ndim == 2 else [f"{name}_{i}" for i in range(member.shape[1])]
+        assert np.array_equal(np.column_stack([exported[n].to_numpy() for n in names]), member), name
 
 
 def test_shutdown_stops_running_jobs_and_records_them_interrupted(tmp_path: Path) -> None:

@@ -72,6 +72,7 @@ def _seed(client: TestClient, shared_data: Path) -> dict[str, dict[str, Any]]:
         f"{api}/simulations/{{job_id}}/files": {"job_id": job},
         f"{api}/simulations/{{job_id}}/files/{{name}}": {"job_id": job, "name": series[0]["name"]},
         f"{api}/simulations/{{job_id}}/series/{{name}}": {"job_id": job, "name": "omega_b_rad_s"},
+        f"{api}/simulations/{{job_id}}/export": {"job_id": job},
     }
 
 
