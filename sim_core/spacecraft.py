@@ -30,7 +30,7 @@ from numba import njit
 from numpy.typing import ArrayLike
 
 from sim_core.quaternion import rotate_1
-from sim_core.wheels import WheelParams, friction_torque_one_wheel
+from sim_core.wheels import WheelParams, friction_torque_terms
 
 __all__ = [
     "PlantParams",
@@ -273,7 +273,10 @@ def plant_derivative_into(
         g0 += p.wheel_axes[0, w] * h
         g1 += p.wheel_axes[1, w] * h
         g2 += p.wheel_axes[2, w] * h
-        force[3 + nq + w] = wheel_motor_torque[w] - friction_torque_one_wheel(speed, p.friction, w)
+        fr = friction_torque_terms(  # by element: no array reaches the kernel (see friction_torque_terms)
+            speed, p.friction[0, w], p.friction[1, w], p.friction[2, w], p.friction[3, w]
+        )
+        force[3 + nq + w] = wheel_motor_torque[w] - fr
     force[0] = wz * g1 - wy * g2 + ext_torque_b[0]
     force[1] = wx * g2 - wz * g0 + ext_torque_b[1]
     force[2] = wy * g0 - wx * g1 + ext_torque_b[2]

@@ -49,6 +49,7 @@ __all__ = [
     "friction_torque",
     "friction_torque_1",
     "friction_torque_one_wheel",
+    "friction_torque_terms",
     "limited_motor_torque",
     "limited_motor_torque_1",
     "limit_motor_torque_into",
@@ -203,16 +204,23 @@ def ge_normalized_momentum(h_nms: ArrayLike, max_momentum_nms: float, gamma_rad:
 # --- kernels ---------------------------------------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def friction_torque_terms(speed_rad_s: float, m_f: float, sat_speed: float, k_l: float, k_a: float) -> float:
+    """Resisting torque m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω√|Ω| of one wheel from its coefficients (seed 000 eq 1,
+    seed 002 eq 4). Scalars only: a kernel handed an array is reference-counted at each call, and inside the
+    RK4 derivative those counts (atomic, not pruned across its branches) cost the step 4x its arithmetic."""
+    w = speed_rad_s
+    dry = min(1.0, max(-1.0, w / sat_speed)) if sat_speed > 0.0 else 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
+    torque = m_f * dry + k_l * w
+    if k_a != 0.0:  # aerodynamic drag off costs no square root (adding its ±0 changes no bit)
+        torque += k_a * w * np.sqrt(abs(w))
+    return float(torque)
+
+
 @njit(cache=True)
 def friction_torque_one_wheel(speed_rad_s: float, friction: np.ndarray, p: int) -> float:
-    """Resisting torque of wheel p: m_f Sat(Ω/Ω°) + K_l Ω + K_a Ω√|Ω| (seed 000 eq 1, seed 002 eq 4)."""
-    w = speed_rad_s
-    sat_speed = friction[1, p]
-    dry = min(1.0, max(-1.0, w / sat_speed)) if sat_speed > 0.0 else 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
-    torque = friction[0, p] * dry + friction[2, p] * w
-    if friction[3, p] != 0.0:  # aerodynamic drag off costs no square root (adding its ±0 changes no bit)
-        torque += friction[3, p] * w * np.sqrt(abs(w))
-    return float(torque)
+    """Resisting torque of wheel p (:func:`friction_torque_terms` on column p of the rows m_f, Ω°, K_l, K_a)."""
+    return friction_torque_terms(speed_rad_s, friction[0, p], friction[1, p], friction[2, p], friction[3, p])
 
 
 @njit(cache=True)
