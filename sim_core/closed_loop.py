@@ -763,11 +763,13 @@ def _mode_stage(
 
 
 @njit(cache=True)
-def _tachometer_stage(quantum_rad_s: float, wheel_speeds: np.ndarray) -> np.ndarray:
-    """Wheel speeds as the tachometers read them (sensors.wheel_tachometer_1; exact when the quantum is 0)."""
+def _tachometer_stage(quantum_rad_s: float, faults: np.ndarray, t: float, wheel_speeds: np.ndarray) -> np.ndarray:
+    """Wheel speeds as the tachometers read them (sensors.wheel_tachometer_1; exact when the quantum is 0) under
+    the tachometer faults (faults.tachometer_faults_1)."""
     speeds = wheel_speeds.copy()
     if quantum_rad_s > 0.0:
         speeds, _ = sensors.wheel_tachometer_1(speeds, quantum_rad_s, np.inf)
+    faults_mod.tachometer_faults_1(faults, t, speeds)
     return speeds
 
 
@@ -1300,7 +1302,7 @@ def fly_variant(
                     sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, est.q, pos.r, sensed.sun_frozen
                 )
                 mode = _mode_stage(mc, t, pos, sun_b, mode_state, mode, valid, est, mon.available, cmd, ev, n_ev)
-            speeds = _tachometer_stage(sens.tachometer_quantum_rad_s, wheel_speeds)
+            speeds = _tachometer_stage(sens.tachometer_quantum_rad_s, faults, t, wheel_speeds)
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
                 star_reset = estc.kind == ESTIMATOR_MEKF

@@ -7,7 +7,7 @@
   a batch into the float table (columns ``F_*``) the compiled loop reads.
 - Effect kernels (compiled, one per place a fault acts): :func:`fault_active_1`,
   :func:`fault_transitions_1`, :func:`sensor_faults_1`, :func:`star_tracker_faults_1`,
-  :func:`wheel_commands_1`, :func:`lock_stuck_wheels_1`, :func:`extra_friction_1`,
+  :func:`wheel_commands_1`, :func:`tachometer_faults_1`, :func:`lock_stuck_wheels_1`, :func:`extra_friction_1`,
   :func:`controller_faults_1`, :func:`rod_faults_1`; :func:`sensor_fault_series` and
   :func:`star_tracker_fault_series` run the same kernels over sample series (the emulator's sensors).
 - Catalogue: the named fault sets of the seed experiments and the wheel-failure configurations:
@@ -53,6 +53,7 @@ __all__ = [
     "star_tracker_faults_1",
     "fault_of_type_1",
     "wheel_commands_1",
+    "tachometer_faults_1",
     "lock_stuck_wheels_1",
     "extra_friction_1",
     "controller_faults_1",
@@ -81,6 +82,7 @@ TARGET_CODES = {
     "sun_sensor": 5,
     "controller": 6,
     "md_rod": 7,
+    "tachometer": 8,
 }
 TYPE_CODES = {
     "failure": 0,
@@ -93,7 +95,7 @@ TYPE_CODES = {
     "friction": 7,
     "frozen": 8,
 }
-T_WHEEL, T_GYRO, T_STAR, T_EARTH, T_MAG, T_SUN, T_CTRL, T_ROD = range(8)
+T_WHEEL, T_GYRO, T_STAR, T_EARTH, T_MAG, T_SUN, T_CTRL, T_ROD, T_TACH = range(9)
 Y_FAIL, Y_STUCK, Y_GAIN, Y_BIAS, Y_DRIFT, Y_INTERMITTENT, Y_NOISE, Y_FRICTION, Y_FROZEN = range(9)
 EV_FAULT_ONSET, EV_FAULT_CLEARED = 2, 3  # sim_core.trajectory.EVENT_NAMES
 OPTIONS = ("gain", "value", "period_s", "duty")
@@ -300,6 +302,24 @@ def wheel_commands_1(faults: np.ndarray, t: float, cmd: np.ndarray, frozen_cmd: 
             out[p] += row[F_VALUE]
         elif kind == Y_FROZEN:
             out[p] = frozen_cmd[p]
+
+
+@njit(cache=True)
+def tachometer_faults_1(faults: np.ndarray, t: float, speeds: np.ndarray) -> None:
+    """Tachometer faults on the wheel speeds the onboard software reads, in place (the rotors are untouched):
+    wheel ``index``'s reading Ω̃ + value (bias, rad/s), Ω̃ · gain (scale-factor error), Ω̃ + value · (t − onset)
+    (drift, rad/s²); they act after the quantisation, as an offset of the sensor's output."""
+    for f in range(faults.shape[0]):
+        row = faults[f]
+        if int(row[F_TARGET]) != T_TACH or not fault_active_1(row, t):
+            continue
+        kind, p = int(row[F_TYPE]), int(row[F_INDEX])
+        if kind == Y_BIAS:
+            speeds[p] += row[F_VALUE]
+        elif kind == Y_GAIN:
+            speeds[p] *= row[F_GAIN]
+        elif kind == Y_DRIFT:
+            speeds[p] += row[F_VALUE] * (t - row[F_ONSET])
 
 
 @njit(cache=True)

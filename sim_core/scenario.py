@@ -247,7 +247,18 @@ class AllocationSpec(_Spec):
     phi_rho_per_s: Positive = 0.002
 
 
-FAULT_TARGETS = ("wheel", "gyro", "star_tracker", "earth_sensor", "magnetometer", "sun_sensor", "controller", "md_rod")
+FAULT_TARGETS = (
+    "wheel",
+    "gyro",
+    "star_tracker",
+    "earth_sensor",
+    "magnetometer",
+    "sun_sensor",
+    "controller",
+    "md_rod",
+    "tachometer",
+)
+TACHOMETER_FAULT_TYPES = ("bias", "gain", "drift")  # sim_core.faults.tachometer_faults_1
 FAULT_TYPES = (
     "failure",
     "stuck",
@@ -281,6 +292,12 @@ class FaultSpec(_Spec):
     value: Finite = 0.0
     period_s: Positive | None = None
     duty: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+
+    @model_validator(mode="after")
+    def _tachometer_types(self) -> FaultSpec:
+        if self.target == "tachometer" and self.type not in TACHOMETER_FAULT_TYPES:
+            raise ValueError(f"type: a tachometer fault is one of {', '.join(TACHOMETER_FAULT_TYPES)}")
+        return self
 
 
 class VariantSpec(_Spec):
@@ -351,7 +368,7 @@ class Scenario(_Spec):
         n_wheels = len(self.spacecraft.cluster.wheels)
         for v in self.variants:
             for f in v.faults:
-                if f.target == "wheel" and f.index >= n_wheels:
+                if f.target in ("wheel", "tachometer") and f.index >= n_wheels:
                     raise ValueError(
                         f"variants[{v.name}].faults.index: wheel {f.index} does not exist (n = {n_wheels})"
                     )
