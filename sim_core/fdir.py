@@ -38,6 +38,15 @@ probability bound, independent of the quantisation and model terms, so it adds t
 0.25 rpm quantum J_r q = 5.0e-4; over a 300 s window a√150 = 1.6e-3 — without it, the noise walked
 the windows past the one-quantum bound within minutes (23 false alarms in 24 h).
 
+The windows stop at ``WINDOW_PERIODS``, and a √n bound taken at P_FA/150 each costs a weak loss time; under
+the noise a guarded Page CUSUM of the same residuals runs beside them (:func:`_cusum_1`): it subtracts a drift
+ν = ``CUSUM_DRIFT_SIGMAS`` σ_N per period and tests against J_r q + h, h = σ_N ln(2/P_FA)/(2 ν/σ_N), which a healthy
+wheel's noise crosses from a given start with probability ≤ P_FA (Ville's inequality), however long the window.
+False-alarm budget per wheel and period: P_FA for the windows + P_FA for the CUSUM's windows starting then;
+24 h × 4 wheels at T_u = 2 s is 1.7e5 periods → ≤ 3.5e-4 expected false alarms. A loss of w per period is
+found by the CUSUM after ≈ (J_r q + h)/(w − ν) periods: 0.5 σ_N per period (5e-6 N·m withheld on HR12 with
+K_x = 1e-4 N·m) in ≈ 215 periods, where no window of ≤ 150 periods reaches its bound.
+
 Sensors (seed 000 §4 measurements, seed 003 §3.2 preprocessing flags):
 - star tracker: the normalised innovation squared against the MEKF prediction (χ²(3)) above the
   ``FALSE_ALARM_PROBABILITY`` quantile, reached by a step from the last accepted innovation, is a
@@ -88,6 +97,7 @@ __all__ = [
     "gyro_state",
     "mag_state",
     "WINDOW_PERIODS",
+    "CUSUM_DRIFT_SIGMAS",
     "wheel_bound_1",
     "wheel_residual_1",
     "wheel_decoupling_1",
@@ -123,7 +133,11 @@ WS_SPEED, WS_TORQUE, WS_COUNT, WS_VALID, WS_ISOLATED, WS_AXIAL, WS_AXIAL_ERR, WS
 WS_N, WS_HEAD = 11, 12  # periods in the window history, its ring slot of the newest boundary
 WS_HIST = 13  # ring of WINDOW_PERIODS + 1 boundaries: cumulative Σ r, then cumulative Σ bound without the quantum
 WINDOW_PERIODS = 150  # longest window tested: 300 s at T_u = 2 s; every shorter one ending now is tested too
-WHEEL_STATE_ROWS = WS_HIST + 2 * (WINDOW_PERIODS + 1)  # WS_W..WS_W+2: body rate at the hold
+WS_CUSUM = WS_HIST + 2 * (WINDOW_PERIODS + 1)  # guarded CUSUM of d⁺, its last min(0, d⁺); then the same of d⁻
+WHEEL_STATE_ROWS = WS_CUSUM + 4  # WS_W..WS_W+2: body rate at the hold
+CUSUM_DRIFT_SIGMAS = 0.25  # ν = 0.25 σ_N per period: the CUSUM finds a withheld momentum > ν per period, any length
+CUSUM_LIMIT_SIGMAS = float(np.log(2.0 / FALSE_ALARM_PROBABILITY) / (2.0 * CUSUM_DRIFT_SIGMAS))  # h / σ_N: Ville
+WINDOW_NOISE_SIGMAS = float(np.sqrt(2.0 * np.log(2.0 * WINDOW_PERIODS / FALSE_ALARM_PROBABILITY)))  # a / σ_N
 # Star-tracker state: previous reading, consecutive rejections, isolated flag, last accepted
 # innovation (3), in-jump flag.
 SS_PREV, SS_COUNT, SS_ISOLATED, SS_Z, SS_JUMP, SS_SCALE, SS_N, SS_SUM, SS_ZLAST = 0, 4, 5, 6, 9, 10, 11, 12, 15
@@ -307,6 +321,35 @@ def _scan_windows_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantu
 
 
 @njit(cache=True)
+def _cusum_side_1(state: np.ndarray, row: int, p: int, d: float, first: bool) -> float:
+    """One side of wheel p's guarded CUSUM after a period with increment d: A_k = max(A_{k−1}, min(0, d_{k−1})) + d_k,
+    the largest S_k − S_j − C(j, k) over boundaries j whose window one period longer exceeds as much (the windows'
+    glitch guard: the window from j−1 adds d_j, so min of the two is W(j, k) + min(0, d_j)); −inf until a window
+    one period longer exists (``first``: the history was just restarted)."""
+    a = -np.inf if first else max(state[row, p], state[row + 1, p]) + d
+    state[row, p] = a
+    state[row + 1, p] = min(0.0, d)
+    return a
+
+
+@njit(cache=True)
+def _cusum_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum: float, sigma: float, first: bool) -> bool:
+    """Page's CUSUM of wheel p's residuals, both signs: True when a withheld momentum exceeds its bound over any
+    window ending now, however long (the windows stop at ``WINDOW_PERIODS``).
+
+    Over the window (j, k] a healthy wheel's Σ r is at most J q (telescoping quantisation) + WHEEL_SAFETY Σ b_rest
+    + its noise momentum N_{j,k}; the statistic subtracts the first two and a drift ν = ``CUSUM_DRIFT_SIGMAS`` σ per
+    period. N is a sum of independent sub-Gaussian period momenta of variance proxy σ² (module docstring), so
+    exp(λ(N − ν n)) with λ = 2ν/σ² is a supermartingale and, by Ville's inequality, N_{j,k} − ν (k − j) exceeds
+    h = σ² ln(2/P_FA) / 2ν for some k ≥ j with probability ≤ P_FA/2 per side: P_FA per start j, the
+    windows' budget per period again (seed 002 eq 4; wheel_noise_bound)."""
+    cost = CUSUM_DRIFT_SIGMAS * sigma + WHEEL_SAFETY * b_rest
+    up = _cusum_side_1(state, WS_CUSUM, p, r - cost, first)
+    down = _cusum_side_1(state, WS_CUSUM + 2, p, -r - cost, first)
+    return max(up, down) > b_quantum + CUSUM_LIMIT_SIGMAS * sigma
+
+
+@njit(cache=True)
 def wheel_check_1(
     state: np.ndarray,
     speeds: np.ndarray,
@@ -369,16 +412,20 @@ def wheel_check_1(
             state[WS_COUNT, p] = 0.0
             _clear_windows_1(state, p)
             continue
-        r, b, bq = 0.0, 0.0, 0.0
+        r, b, bq, sigma = 0.0, 0.0, 0.0, 0.0
         for q in range(nw):
             r += decouple[p, q] * raw[q]
             b += abs(decouple[p, q]) * bound[q]
             bq += abs(decouple[p, q]) * quantum[q]
+            sigma += abs(decouple[p, q]) * noise[q] / WINDOW_NOISE_SIGMAS  # ≥ the decoupled noise's σ
         if b - bq > bq:  # the period is ruled by what the model cannot predict (a seizure's kick): not summed
             _clear_windows_1(state, p)
             accumulated = False
         else:
+            first = state[WS_N, p] == 0.0
             accumulated = _scan_windows_1(state, p, r, b - bq, bq, noise[p])
+            if sigma > 0.0:  # without noise the windows' bound is exact and the CUSUM's h would be 0/0
+                accumulated = _cusum_1(state, p, r, b - bq, bq, sigma, first) or accumulated
         exceeded = accumulated or abs(r) > WHEEL_SAFETY * b + noise[p]
         if not exceeded:
             state[WS_COUNT, p] = 0.0

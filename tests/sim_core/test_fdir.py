@@ -241,6 +241,78 @@ def test_noise_momentum_bound_matches_seed002_noise_drawn_by_the_wheel_model():
         fdir.wheel_noise_bound(np.array([k_x]), 3.0, T_U)
 
 
+K_X, TAU = 1e-4, 0.05  # seed 002 eq 4 noise torque of song-components' wheels, drawn every 0.05 s dynamics step
+
+
+def _noisy_check(losses_nms: np.ndarray, torque: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Four wheels at a held ``torque`` with seed 002's noise torque drawn by sim_core.wheels every τ, read by a
+    0.1 rpm tachometer, wheel 3 losing ``losses_nms[k]`` of momentum in period k; the wheel check told the noise
+    bound (fdir.wheel_noise_bound). Returns the availability and the events."""
+    wheels = WheelParams(np.full(4, J_HR12), noise_nm=K_X)
+    state, available = fdir.wheel_state(4), np.ones(4, dtype=np.bool_)
+    ev, n_ev = np.zeros((16, 3)), np.zeros(1, dtype=np.int64)
+    j, zeros = np.full(4, J_HR12), np.zeros((4, 4))
+    noise = fdir.wheel_noise_bound(np.full(4, K_X), TAU, T_U)
+    true = np.full(4, 100.0)
+    steps = int(round(T_U / TAU))
+    for k, loss in enumerate(losses_nms):
+        read = TACH_Q * np.round(true / TACH_Q)
+        fdir.wheel_hold_1(
+            state, read, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0), zeros, *RIGID
+        )
+        kicks = sum(noise_torque(wheels, rng) for _ in range(steps)) * TAU
+        true = true + (torque * T_U + kicks) / J_HR12
+        true[2] -= loss / J_HR12
+        read = TACH_Q * np.round(true / TACH_Q)
+        fdir.wheel_check_1(
+            state,
+            read,
+            W0,
+            j,
+            np.full(4, 12.0),
+            zeros,
+            TACH_Q,
+            noise,
+            T_U,
+            np.eye(4),
+            available,
+            ev,
+            n_ev,
+            (k + 1) * T_U,
+        )
+    return available, ev[: n_ev[0]]
+
+
+def test_healthy_wheels_under_seed002_noise_raise_nothing_in_2000_periods():
+    """Seed 002's noise momentum walks a wheel's window sums by σ √n (σ = K_x √(τ T_u/3) per period): over 2000
+    periods (67 min, 4 wheels) neither the windows nor the CUSUM, each at P_FA per period, raise anything."""
+    available, ev = _noisy_check(np.zeros(2000), 0.01, np.random.default_rng(11))
+    assert available.all() and ev.shape[0] == 0
+
+
+def test_weak_loss_beyond_the_windows_is_isolated_by_the_cusum_when_its_bound_says():
+    """A wheel losing 0.5 σ of momentum per period (σ the noise momentum's, seed 002 eq 4): no window of up to
+    WINDOW_PERIODS reaches its bound J q + a √n, but the loss outgrows the CUSUM's drift ν = σ/4: the statistic
+    (k − j)(0.5σ − ν) + rounding (≤ J q) + noise N crosses J q + h, h = σ ln(2/P_FA)/(2 · 1/4) (Ville's
+    inequality), between (h − 4σ√k)/(0.5σ − ν) and (2 J q + h + 4σ√k)/(0.5σ − ν) periods (|N| ≤ 4σ√k); the
+    healthy wheels stay."""
+    sigma = K_X * np.sqrt(TAU * T_U / 3.0)
+    loss = 0.5 * sigma
+    a = fdir.wheel_noise_bound(np.array([K_X]), TAU, T_U)[0]
+    n = np.arange(1, fdir.WINDOW_PERIODS + 1)
+    assert np.all(loss * n < J_HR12 * TACH_Q + a * np.sqrt(n))  # beyond every window's reach
+    rate = loss - fdir.CUSUM_DRIFT_SIGMAS * sigma
+    h = sigma * np.log(2.0 / fdir.FALSE_ALARM_PROBABILITY) / (2.0 * fdir.CUSUM_DRIFT_SIGMAS)
+    latest = (2.0 * J_HR12 * TACH_Q + h + 4.0 * sigma * np.sqrt(700.0)) / rate
+    assert latest < 700.0
+    available, ev = _noisy_check(np.full(int(latest) + 2, loss), 0.01, np.random.default_rng(12))
+    assert list(available) == [True, True, False, True]
+    isolated = [e for e in ev if e[1] == 5]
+    assert [int(e[2]) for e in isolated] == [2]
+    k = isolated[0][0] / T_U
+    assert (h - 4.0 * sigma * np.sqrt(k)) / rate <= k - 1 <= latest
+
+
 SIGMA_ST = 3.0 / 206265.0  # 3″ star tracker (seed 000 §5)
 N_SAMPLES_CHI2 = 20000
 
