@@ -914,17 +914,17 @@ def observable_time(
     torque_nm: np.ndarray,
     onset_s: float,
     inertia_kg_m2: float,
-    tach_quantum_rad_s: float,
+    tachometer_quantum_rad_s: float,
     noise_nms: float = 0.0,
     control_dt_s: float = 1.0,
 ) -> float | None:
-    """When a wheel fault becomes observable: the first sample time at which the momentum it withheld,
-    W(t) = |∫ (m_cmd − m_delivered) dt| from ``onset_s``, reaches one tachometer quantum of momentum J_r q plus
-    the noise-momentum bound over the time since the onset, ``noise_nms`` √((t − onset)/T_u) (``noise_nms`` the
+    """When a wheel fault becomes observable: the first sample time t at which the momentum it withheld over some
+    window [t₁, t] after ``onset_s``, |∫ (m_cmd − m_delivered) dt| from t₁ to t, reaches one tachometer quantum of
+    momentum J_r q plus the noise-momentum bound over the window, ``noise_nms`` √((t − t₁)/T_u) (``noise_nms`` the
     bound over one control period ``control_dt_s``, :func:`wheel_noise_bound` at the false-alarm probability of
     one test; 0 without seed 002's noise torque): before that, quantisation and noise can make the readings of a
-    healthy wheel show as much. ``torque_nm`` is the motor torque without the noise. None if it never does.
-    Series sampled uniformly at ``t_s``."""
+    healthy wheel show as much over every window. ``torque_nm`` is the motor torque without the noise. None if it
+    never does. Series sampled uniformly at ``t_s``."""
     t = np.asarray(t_s, dtype=float)
     if t.ndim != 1 or t.size < 2 or np.any(np.diff(t) <= 0.0):
         raise ValueError("t_s: expected at least two increasing sample times")
@@ -932,10 +932,14 @@ def observable_time(
         raise ValueError("noise_nms, control_dt_s: expected ≥ 0 and > 0")
     after = t >= onset_s
     gap = np.asarray(torque_cmd_nm, dtype=float)[after] - np.asarray(torque_nm, dtype=float)[after]
-    withheld = np.abs(np.cumsum(gap) * (t[1] - t[0]))
-    floor = inertia_kg_m2 * tach_quantum_rad_s + noise_nms * np.sqrt((t[after] - onset_s) / control_dt_s)
-    hit = np.nonzero(withheld >= floor)[0]
-    return float(t[after][hit[0]]) if hit.size else None
+    withheld = np.concatenate([[0.0], np.cumsum(gap) * (t[1] - t[0])])  # from the onset: boundaries t₁
+    starts = np.concatenate([[onset_s], t[after]])
+    quantum = inertia_kg_m2 * tachometer_quantum_rad_s
+    for k, now in enumerate(t[after], start=1):
+        floor = quantum + noise_nms * np.sqrt((now - starts[:k]) / control_dt_s)
+        if np.any(np.abs(withheld[k] - withheld[:k]) >= floor):
+            return float(now)
+    return None
 
 
 _TARGET_NAMES = {1: "gyro", 2: "star_tracker", 3: "earth_sensor", 4: "magnetometer"}
