@@ -1,11 +1,17 @@
-"""Shared test fixtures: where the real third-party data lives, and the databases under test."""
+"""Shared test fixtures: where the real third-party data lives, the databases under test, one Dask cluster."""
 
 from __future__ import annotations
 
 import os
+import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
+
+if TYPE_CHECKING:
+    from distributed import Client, Worker
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
@@ -26,6 +32,45 @@ def postgres_url() -> str:
     if not url:
         pytest.skip("ACS_TWIN_TEST_POSTGRES_URL not set")
     return url
+
+
+SETTLE_S = 60.0  # a task the test left running gets this long to see its cancel Event before the worker restarts
+WORKER_BACK_S = 300.0  # a restarted worker imports and loads the engine again; minutes on a loaded machine
+
+
+@pytest.fixture(scope="session")
+def shared_dask() -> Iterator[Client]:
+    """This test process's one Dask LocalCluster (one worker process, the engine loaded as it joins), started on
+    first use: the apps and commands whose jobs, twin sessions and diagnoses need no cluster of their own fly on it
+    (one each cost a worker start and an engine load). Tests about a cluster's own processes keep their own."""
+    from backend.jobs import cluster
+
+    client = cluster.dask_client(n_workers=1)
+    yield client
+    cluster.close_client(client)
+
+
+def _executing(dask_worker: Worker) -> int:
+    return dask_worker.state.executing_count  # a released task still running in the worker's thread counts too
+
+
+def settle(client: Client) -> None:
+    """Leave the shared cluster as a fresh one: no task running (waited for, else its worker restarted), a worker
+    up. An app that stops sets its jobs' cancel Events; their tasks stop at their next look."""
+    deadline = time.monotonic() + SETTLE_S
+    while any(client.run(_executing).values()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    if any(client.run(_executing).values()):
+        client.restart(timeout=WORKER_BACK_S)
+    client.wait_for_workers(1, timeout=WORKER_BACK_S)
+
+
+@pytest.fixture
+def dask_scheduler(shared_dask: Client) -> Iterator[str]:
+    """Address of the shared cluster's scheduler for one test (Settings.dask_scheduler, $ACS_TWIN_DASK_SCHEDULER),
+    the cluster settled after it."""
+    yield shared_dask.scheduler.address
+    settle(shared_dask)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

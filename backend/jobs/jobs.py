@@ -45,6 +45,7 @@ __all__ = ["JobManager"]
 CANCEL_GRACE_S = 5.0  # time a task gets to stop by itself (it looks every 0.25 s) before its worker is restarted
 PROGRESS_PERSIST_S = 1.0  # how often running progress is written to the database
 WAIT_STEP_S = 0.1  # a dispatcher looks at its job's progress and cancellation this often
+RESTART_TIMEOUT_S = 300.0  # a worker restart's stop and return; past it Dask removes the worker with its nanny
 
 
 @dataclass
@@ -240,7 +241,7 @@ class JobManager:
         future.cancel()
         if workers:
             with contextlib.suppress(OSError):  # the cluster went away meanwhile: nothing left to stop
-                client.restart_workers(workers, raise_for_error=False)
+                client.restart_workers(workers, timeout=RESTART_TIMEOUT_S, raise_for_error=False)
 
     def _record_outcome(self, job_id: str, future: Future[JobOutput], out: Path) -> None:
         if future.cancelled():

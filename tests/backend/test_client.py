@@ -15,11 +15,17 @@ from backend.app import create_app
 from backend.client import Client, ClientError
 from backend.core.auth import Role
 from backend.core.settings import Settings
-from tests.backend.conftest import free_port
+from tests.backend.conftest import free_port, make_settings
 
 STARTUP_TIMEOUT_S = 20.0
 DIARY = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 ENERGY_DRIFT_TOLERANCE = 1e-9  # RK4 at 0.01 s over 2 s on a slow spin: round-off level
+
+
+@pytest.fixture
+def settings(tmp_path: Path, database_url: str, dask_scheduler: str) -> Settings:
+    """The default test settings, jobs and twin sessions flown on the shared Dask cluster (tests/conftest.py)."""
+    return make_settings(tmp_path, database_url, dask_scheduler=dask_scheduler)
 
 
 @pytest.fixture

@@ -1,9 +1,10 @@
 """``acs-twin diagnose`` on telemetry of an independent simulator: Basilisk flew ``peer-basilisk-rw4`` with a
 hidden wheel fault (benchmarks/basilisk_faults.py, files in tests/data/basilisk_faults, see its README).
 
-The command flies its twin replays on Dask: the fault cases share one LocalCluster through
-``ACS_TWIN_DASK_SCHEDULER`` (a cluster per case would start two worker processes each); one test lets the
-command start its own LocalCluster and checks the result equals the engine's on this process."""
+The command flies its twin replays on Dask: the fault cases share the test process's LocalCluster
+(tests/conftest.py) through ``ACS_TWIN_DASK_SCHEDULER`` (a cluster per case would start its worker processes
+each); one test lets the command start its own LocalCluster and checks the result equals the engine's on this
+process."""
 
 from __future__ import annotations
 
@@ -32,16 +33,9 @@ CASES = {
 }
 
 
-@pytest.fixture(scope="module")
-def shared_scheduler():
-    client = cluster.dask_client(n_workers=2)
-    yield client.scheduler.address
-    cluster.close_client(client)
-
-
 @pytest.fixture
-def on_cluster(shared_scheduler, monkeypatch) -> None:
-    monkeypatch.setenv(cluster.SCHEDULER_ENV, shared_scheduler)
+def on_cluster(dask_scheduler: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(cluster.SCHEDULER_ENV, dask_scheduler)
 
 
 def _diagnose(tmp_path: Path, telemetry: Path, *extra: str, dictionary: Path = DICTIONARY) -> tuple[int, dict]:

@@ -27,12 +27,12 @@ def _iso(t_ns: int) -> str:
     return np.datetime_as_string(np.datetime64(t_ns, "ns"), unit="ms") + "Z"
 
 
-def test_diagnosis_started_over_rest_names_the_hidden_wheel_failure(tmp_path: Path) -> None:
+def test_diagnosis_started_over_rest_names_the_hidden_wheel_failure(tmp_path: Path, dask_scheduler: str) -> None:
     from telemetry import emulator
 
     _, _, stream = emulator.emulate(faults=[emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S}")])
     t0, t1 = int(stream.t_utc_ns[0]), int(stream.t_utc_ns[-1])
-    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'diagnosis.sqlite'}")
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'diagnosis.sqlite'}", dask_scheduler=dask_scheduler)
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])
         upload = client.post(
@@ -67,8 +67,10 @@ def test_diagnosis_started_over_rest_names_the_hidden_wheel_failure(tmp_path: Pa
         assert client.get(f"/api/v1/diagnoses/{run_id}", headers=operator).json() == run
 
 
-def test_diagnosis_requests_are_checked_and_their_outcome_outlives_a_restart(tmp_path: Path, database_url: str) -> None:
-    settings = make_settings(tmp_path, database_url)
+def test_diagnosis_requests_are_checked_and_their_outcome_outlives_a_restart(
+    tmp_path: Path, database_url: str, dask_scheduler: str
+) -> None:
+    settings = make_settings(tmp_path, database_url, dask_scheduler=dask_scheduler)
     start = datetime(2026, 3, 20, tzinfo=UTC)
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])

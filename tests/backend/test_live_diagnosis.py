@@ -34,13 +34,15 @@ def _wait(what: str, answer, timeout_s: float = DIAGNOSIS_TIMEOUT_S):
     return value
 
 
-def test_a_live_wheel_failure_raises_an_alarm_that_links_to_its_automatic_diagnosis(tmp_path: Path) -> None:
+def test_a_live_wheel_failure_raises_an_alarm_that_links_to_its_automatic_diagnosis(
+    tmp_path: Path, dask_scheduler: str
+) -> None:
     from telemetry import emulator
 
     fault = emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{FAILURE_ONSET_S}")
     _, _, stream = emulator.emulate("somov-ge4-scan", [fault], FLIGHT_S, "2026-03-20T00:00:00Z", fdir=False)
     t0 = int(stream.t_utc_ns[0]) / 1e9
-    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'live.sqlite'}")
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'live.sqlite'}", dask_scheduler=dask_scheduler)
     sat = "REFSAT"
     with TestClient(create_app(settings)) as client:
         services = client.app.state.services

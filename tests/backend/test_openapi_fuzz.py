@@ -76,10 +76,11 @@ def _seed(client: TestClient, shared_data: Path) -> dict[str, dict[str, Any]]:
     }
 
 
-def test_api_matches_its_openapi_document(tmp_path: Path, shared_data: Path) -> None:
+def test_api_matches_its_openapi_document(tmp_path: Path, shared_data: Path, dask_scheduler: str) -> None:
     app = create_app(
         Settings(
             data_dir=tmp_path,
+            dask_scheduler=dask_scheduler,  # the generated jobs fly on the shared cluster (tests/conftest.py)
             auth_enabled=False,
             job_queue_size=2,
             max_upload_mb=1.0,

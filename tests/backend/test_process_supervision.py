@@ -73,64 +73,6 @@ def health(port: int) -> int:
     return httpx.get(f"http://127.0.0.1:{port}/api/v1/health", timeout=5.0).status_code
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_a_normal_stop_leaves_no_child_and_prints_no_traceback(tmp_path: Path, sig: signal.Signals) -> None:
-    api, telemetry = free_port(), free_port()
-    process, lines = start_server(tmp_path, api, telemetry)
-    try:
-        assert any("emulator" in line for line in lines), lines
-        children = wait_children(process, 2)
-        assert health(api) == 200
-        process.send_signal(sig)
-        out, _ = process.communicate(timeout=STOP_TIMEOUT_S)
-    finally:
-        process.kill()
-    assert process.returncode == 0, out
-    assert wait_gone(children) == set()
-    assert "Traceback" not in out
-    assert "Traceback" not in (tmp_path / "emulator.log").read_text()
-
-
-def test_kill_9_of_the_server_takes_its_children_and_a_restart_gets_the_ports_back(tmp_path: Path) -> None:
-    api, telemetry = free_port(), free_port()
-    process, lines = start_server(tmp_path, api, telemetry)
-    try:
-        children = wait_children(process, 2)
-        process.kill()
-        process.wait(10)
-        assert wait_gone(children) == set()
-    finally:
-        process.kill()
-    again, lines = start_server(tmp_path, api, telemetry)
-    try:
-        assert any("emulator" in line for line in lines), lines
-        assert health(api) == 200
-        children = wait_children(again, 2)
-        again.send_signal(signal.SIGTERM)
-        again.communicate(timeout=STOP_TIMEOUT_S)
-    finally:
-        again.kill()
-    assert wait_gone(children) == set()
-
-
-def test_a_busy_port_is_named_with_its_holder_and_spends_no_admin_token(tmp_path: Path) -> None:
-    api, telemetry = free_port(), free_port()
-    with socket.socket() as squatter:
-        squatter.bind(("127.0.0.1", telemetry))
-        squatter.listen()
-        process, lines = start_server(tmp_path, api, telemetry, "--no-emulator")
-        out = "\n".join(lines) + process.communicate(timeout=STOP_TIMEOUT_S)[0]
-    assert process.returncode != 0
-    assert f"telemetry port 127.0.0.1:{telemetry}" in out and f"pid {os.getpid()}" in out, out
-    assert "Traceback" not in out and "admin token" not in out
-    process, lines = start_server(tmp_path, api, free_port(), "--no-emulator")
-    try:
-        assert any(re.search(r"admin token .*: acs_\S+", line) for line in lines), lines
-    finally:
-        process.send_signal(signal.SIGTERM)
-        process.communicate(timeout=STOP_TIMEOUT_S)
-
-
 DASK_JOB = {"kind": "rigid-spin", "duration_s": 2000.0, "dt_s": 0.001}  # runs long enough to be stopped mid-way
 CLUSTER_START_TIMEOUT_S = 400.0  # the first job starts the LocalCluster: two workers import and warm the engine
 
@@ -150,18 +92,70 @@ def _job_on_the_cluster(process: subprocess.Popen, lines: list[str], api: int, b
     raise AssertionError(f"the job never ran: {job}")
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
-def test_the_dask_workers_of_a_job_go_with_the_server(tmp_path: Path, sig: signal.Signals) -> None:
+def test_sigterm_stops_the_server_its_children_and_its_dask_workers_without_a_traceback(tmp_path: Path) -> None:
     api = free_port()
-    process, lines = start_server(tmp_path, api, free_port(), "--no-emulator", "--job-workers", "2")
+    process, lines = start_server(tmp_path, api, free_port(), "--job-workers", "2")
     try:
-        before = wait_children(process, 1)  # the ingest process
-        workers = _job_on_the_cluster(process, lines, api, before)
+        assert any("emulator" in line for line in lines), lines
+        children = wait_children(process, 2)  # the ingest process and the emulator
+        assert health(api) == 200
+        workers = _job_on_the_cluster(process, lines, api, children)
         assert len(workers) >= 2, workers  # the LocalCluster's two worker processes (and their helpers)
-        process.send_signal(sig)
+        process.send_signal(signal.SIGTERM)
         out, _ = process.communicate(timeout=STOP_TIMEOUT_S)
     finally:
         process.kill()
-    assert wait_gone(workers | before) == set()
-    if sig == signal.SIGTERM:
-        assert process.returncode == 0 and "Traceback" not in out, out
+    assert process.returncode == 0, out
+    assert wait_gone(children | workers) == set()
+    assert "Traceback" not in out
+    assert "Traceback" not in (tmp_path / "emulator.log").read_text()
+
+
+def test_kill_9_takes_children_and_dask_workers_a_restart_gets_the_ports_back_and_sigint_stops_it(
+    tmp_path: Path,
+) -> None:
+    """One server start-up per stop: kill -9 of a server with a job on its cluster, then SIGINT of its restart."""
+    api, telemetry = free_port(), free_port()
+    process, lines = start_server(tmp_path, api, telemetry, "--job-workers", "2")
+    try:
+        children = wait_children(process, 2)
+        workers = _job_on_the_cluster(process, lines, api, children)
+        assert len(workers) >= 2, workers
+        process.kill()
+        process.wait(10)
+        assert wait_gone(children | workers) == set()
+    finally:
+        process.kill()
+    log = tmp_path / "emulator.log"
+    killed_part = log.stat().st_size  # what the killed server's emulator wrote (it is gone: nothing more comes)
+    again, lines = start_server(tmp_path, api, telemetry)
+    try:
+        assert any("emulator" in line for line in lines), lines
+        assert health(api) == 200
+        children = wait_children(again, 2)
+        again.send_signal(signal.SIGINT)
+        out, _ = again.communicate(timeout=STOP_TIMEOUT_S)
+    finally:
+        again.kill()
+    assert again.returncode == 0, out
+    assert wait_gone(children) == set()
+    assert "Traceback" not in out
+    assert "Traceback" not in log.read_bytes()[killed_part:].decode()
+
+
+def test_a_busy_port_is_named_with_its_holder_and_spends_no_admin_token(tmp_path: Path) -> None:
+    api, telemetry = free_port(), free_port()
+    with socket.socket() as squatter:
+        squatter.bind(("127.0.0.1", telemetry))
+        squatter.listen()
+        process, lines = start_server(tmp_path, api, telemetry, "--no-emulator")
+        out = "\n".join(lines) + process.communicate(timeout=STOP_TIMEOUT_S)[0]
+    assert process.returncode != 0
+    assert f"telemetry port 127.0.0.1:{telemetry}" in out and f"pid {os.getpid()}" in out, out
+    assert "Traceback" not in out and "admin token" not in out
+    process, lines = start_server(tmp_path, api, free_port(), "--no-emulator")
+    try:
+        assert any(re.search(r"admin token .*: acs_\S+", line) for line in lines), lines
+    finally:
+        process.send_signal(signal.SIGTERM)
+        process.communicate(timeout=STOP_TIMEOUT_S)

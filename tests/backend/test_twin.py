@@ -60,10 +60,10 @@ def _wait(client: TestClient, session_id: str, headers: dict[str, str]) -> dict:
 
 
 def test_twin_with_the_right_hypothesis_tracks_telemetry_and_the_nominal_twin_departs(
-    tmp_path: Path, satellite_packets: tuple[bytes, int, float], monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, satellite_packets: tuple[bytes, int, float], monkeypatch: pytest.MonkeyPatch, dask_scheduler: str
 ) -> None:
     data, t0_ns, truth_rpm = satellite_packets
-    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'twin.sqlite'}")
+    settings = make_settings(tmp_path, f"sqlite:///{tmp_path / 'twin.sqlite'}", dask_scheduler=dask_scheduler)
     align = np.datetime_as_string(np.datetime64(t0_ns + int(ALIGN_S * 1e9), "ns"), unit="ms") + "Z"
     with TestClient(create_app(settings)) as client:
         operator = bearer(client.app.state.services.auth.issue("op", Role.operator)[1])

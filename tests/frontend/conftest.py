@@ -131,7 +131,7 @@ def _start_uvicorn(app, port: int) -> tuple[object, threading.Thread]:
 
 
 @pytest.fixture(scope="module")
-def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
+def backend_server(tmp_path_factory, shared_data: Path, shared_dask) -> Iterator[dict]:
     """The backend app (create_app) + dashboard on 127.0.0.1 over a temp SQLite, with the NOAA-20
     diary uploaded, a TLE, the Svalbard station and the passes of the diary's two hours; the same diary
     again as NOAA-20L under a dictionary whose limit on the attitude scalar raises an alarm."""
@@ -148,6 +148,7 @@ def backend_server(tmp_path_factory, shared_data: Path) -> Iterator[dict]:
         job_queue_size=2,
         telemetry_port=0,
         live_enabled=False,
+        dask_scheduler=shared_dask.scheduler.address,  # what-ifs fly on the shared cluster (tests/conftest.py)
     )
     app = create_app(settings)
     if not any(getattr(route, "path", "") == "/dashboard" for route in app.routes):
