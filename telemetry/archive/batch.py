@@ -26,12 +26,13 @@ DERIVED_APID = 2_046
 
 @dataclass(frozen=True)
 class PacketBatch:
-    """Decoded packets of one APID: times, sequence counts, raw bytes and parameter columns."""
+    """Decoded packets of one APID: times, sequence counts, raw bytes (any contiguous octets: bytes, or a view of
+    the decoder's packet array, not copied) and parameter columns."""
 
     apid: int
     t_utc_ns: np.ndarray
     seq_count: np.ndarray
-    raw: bytes
+    raw: bytes | memoryview
     raw_lengths: np.ndarray
     values: Mapping[str, np.ndarray] = field(default_factory=dict)
 
@@ -77,12 +78,11 @@ class PacketBatch:
         if batch.packets is None:
             return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, b"", np.zeros(n, dtype=np.int64), batch.values)
         packets = np.ascontiguousarray(batch.packets, dtype=np.uint8)
+        raw = packets.reshape(-1).data  # a view: the decoder's array is the batch's own (no 40 MB copy per file)
         if batch.packet_lengths is not None:
-            return cls(
-                batch.apid, batch.t_utc_ns, batch.sequence_count, packets.tobytes(), batch.packet_lengths, batch.values
-            )
+            return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, raw, batch.packet_lengths, batch.values)
         lengths = np.full(n, packets.shape[1] if packets.ndim == 2 else 0, dtype=np.int64)
-        return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, packets.tobytes(), lengths, batch.values)
+        return cls(batch.apid, batch.t_utc_ns, batch.sequence_count, raw, lengths, batch.values)
 
     @property
     def n_packets(self) -> int:
@@ -93,7 +93,7 @@ class PacketBatch:
         """The raw packets, one ``bytes`` each, in batch order."""
         ends = np.cumsum(self.raw_lengths)
         starts = ends - self.raw_lengths
-        return [self.raw[s:e] for s, e in zip(starts.tolist(), ends.tolist())]
+        return [bytes(self.raw[s:e]) for s, e in zip(starts.tolist(), ends.tolist())]
 
     def take(self, index: np.ndarray) -> PacketBatch:
         """A new batch with the packets at ``index`` (in that order)."""
