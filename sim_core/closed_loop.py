@@ -497,28 +497,6 @@ def _triad_stage(
 # --- stages: each takes the blocks of the configuration it reads, never the whole LoopConfig -------------------
 
 
-@njit(cache=True, inline="always")  # every dynamics step: compiled into fly_variant, no call
-def _ephemeris_stage(
-    e: Ephemeris,
-    t0_unix_s: float,
-    t: float,
-    x: np.ndarray,
-    orbit_due: bool,
-    field_due: bool,
-    sun_due: bool,
-    pos: Position,
-) -> None:
-    """Orbit and field at t from the batch's tables (field rotated into body axes by the true attitude), and the
-    Sun (environment.sun_position_1) when due."""
-    if sun_due:
-        pos.sun_eci[:] = environment.sun_position_1(t0_unix_s + t)
-    if orbit_due:
-        orbit.hermite_state_into(e.orbit_table, e.orbit_t0_s, e.orbit_step_s, t, pos.r, pos.v, pos.a)
-    if field_due:
-        environment.field_table_into(e.field_table, e.field_t0_s, e.field_step_s, t, pos.b_eci)
-        conjugate_rotate_into(x, pos.b_eci, pos.b_body)
-
-
 @njit(cache=True)
 def _hold_outputs_stage(cmd: Commands, sensed: Sensed) -> None:
     """At a fault onset: the outputs in hand are what a 'frozen' fault holds (sim_core.faults)."""
@@ -968,76 +946,6 @@ def _wheel_hold_stage(
     )
 
 
-@njit(cache=True, inline="always")  # every dynamics step: compiled into fly_variant, no call
-def _actuator_stage(
-    act: Actuators,
-    wheel_inertia: np.ndarray,
-    dt_s: float,
-    faults: np.ndarray,
-    t: float,
-    speeds: np.ndarray,
-    held: np.ndarray,
-    frozen: np.ndarray,
-    motor_current: np.ndarray,
-    rotor_phase: np.ndarray,
-    delivered: np.ndarray,
-) -> None:
-    """Delivered wheel motor torques at the wheel ``speeds``: the ``held`` commands (``frozen`` ones for a frozen
-    controller) under wheel faults, seed 000 eq (2) limits, then (when flown) seed 002's motor electrics
-    (eq 2–3) and its noise and imbalance torques (eq 1, 4; the imbalance at the rotor angles ``rotor_phase``).
-    Runs every dynamics step: it takes the arrays of :class:`Commands` it reads, not the whole tuple (each array
-    passed costs a reference count)."""
-    faults_mod.wheel_commands_1(faults, t, held, frozen, delivered)
-    wheels.limit_motor_torque_into(delivered, speeds, wheel_inertia, act.max_torque_nm, act.max_momentum_nms)
-    m = act.motor
-    if m.on:
-        delivered[:] = wheels.driven_motor_torque_1(
-            motor_current,
-            delivered,
-            speeds,
-            dt_s,
-            m.inductance_h,
-            m.resistance_ohm,
-            m.torque_constant_nm_a,
-            m.back_emf_v_s,
-            m.max_voltage_v,
-        )
-    if act.disturbed:
-        white = np.asarray(np.random.uniform(-1.0, 1.0, speeds.shape[0]))
-        delivered[:] = wheels.delivered_torque_1(
-            delivered, speeds, rotor_phase, act.noise_nm, act.imbalance_nm_s2, white
-        )
-        wheels.advance_rotor_phase_1(rotor_phase, speeds, dt_s)
-
-
-@njit(cache=True, inline="always")  # every dynamics step: compiled into fly_variant, no call
-def _disturbance_stage(
-    gravity_gradient: bool,
-    magnetic_on: bool,
-    residual_dipole_am2: np.ndarray,
-    inertia: np.ndarray,
-    x: np.ndarray,
-    r_eci: np.ndarray,
-    b_body: np.ndarray,
-    r_body: np.ndarray,
-    dipole: np.ndarray,
-    moment: np.ndarray,
-    ext: np.ndarray,
-) -> None:
-    """External torque on the flown body (true ``inertia``) every dynamics step: (MD ``dipole`` + residual dipole)
-    × B (sim_core.magnetic; the sum kept in ``moment``) and the gravity gradient (sim_core.environment; r in body
-    axes kept in ``r_body``). Takes the arrays of :class:`Position` and :class:`Commands` it reads, not the tuples
-    (each array passed costs a reference count)."""
-    ext[:] = 0.0
-    if magnetic_on:
-        for i in range(3):
-            moment[i] = dipole[i] + residual_dipole_am2[i]
-        magnetic.magnetic_torque_into(moment, b_body, ext)
-    if gravity_gradient:
-        conjugate_rotate_into(x, r_eci, r_body)
-        environment.add_gravity_gradient_torque_into(r_body, inertia, ext)
-
-
 @njit(cache=True)
 def _surface_torque_stage(d: Disturbances, x: np.ndarray, pos: Position, ext: np.ndarray) -> None:
     """Aerodynamic and solar-pressure torques on the plates (sim_core.environment) added to ``ext``, when flown."""
@@ -1161,8 +1069,9 @@ def _initial_commands(nw: int) -> Commands:
 
 @njit(cache=True)
 def initial_carry(c: LoopConfig, var: Variant) -> Carry:
-    """The loop's state at t = 0 for variant ``var`` (initial state, estimate at it, t = 0 ephemeris); seeds the
-    thread's random stream with ``var.seed`` and takes its first draw (the gyro's Markov drift)."""
+    """The loop's state at t = 0 for variant ``var`` (initial state, estimate at it; the position is filled by the
+    first step, a measurement tick); seeds the thread's random stream with ``var.seed`` and takes its first draw
+    (the gyro's Markov drift)."""
     np.random.seed(var.seed)
     sens, estc, p, mc = c.sensors, c.estimator, c.model, c.modes
     x = var.x0.copy()
@@ -1172,9 +1081,7 @@ def initial_carry(c: LoopConfig, var: Variant) -> Carry:
     filt = np.zeros(9)
     filt[6:9] = x[4:7]
     est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), estc.covariance0.copy(), filt)
-    pos = Position(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.zeros(3), np.zeros(3))
-    sun_wanted = c.disturbances.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
-    _ephemeris_stage(c.ephemeris, c.clock.t0_unix_s, 0.0, x, True, True, sun_wanted, pos)
+    pos = Position(np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3))
     mode = mc.initial if mc.on else -1
     mode_state = np.full(modes.STATE_SIZE, np.nan)
     mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
@@ -1255,6 +1162,15 @@ def fly_variant(
     surface_torques = dist.aerodynamic or dist.solar_pressure
     k_next = clk.n_steps
     q_p, w_p, obs_p = np.zeros(4), np.zeros(3), False  # the scenario's program, sampled at T_u and output ticks
+    # The arrays the per-step stages read, bound once: a tuple's array read inside the loop, or handed to a
+    # stage function, is reference-counted (atomic, not pruned across the loop's branches) at every step.
+    r_eci, v_eci, a_eci, b_eci, b_body, sun_eci, r_body = pos
+    wheel_cmd, frozen_cmd, delivered, dipole = cmd.wheel_cmd, cmd.frozen_cmd, cmd.delivered, cmd.dipole
+    moment, motor_current, rotor_phase, wheel_inertia = cmd.moment, cmd.motor_current, cmd.rotor_phase, p.wheel_inertia
+    max_torque, max_momentum = act.max_torque_nm, act.max_momentum_nms
+    noise_nm, imbalance = act.noise_nm, act.imbalance_nm_s2
+    orbit_table, field_table, inertia_flown = eph.orbit_table, eph.field_table, plant.inertia
+    friction_flown, friction_base, m = plant.friction, c.truth.friction, act.motor
 
     for k in range(int(scalars[C_STEP]), clk.n_steps):
         t = k * clk.dt_s
@@ -1262,7 +1178,14 @@ def fly_variant(
         control_tick = k % clk.control_every == 0
         output = k % clk.output_every == 0
         orbit_due = every_step or md_on or control_tick or measure or output
-        _ephemeris_stage(eph, clk.t0_unix_s, t, x, orbit_due, md_on or res_on or measure, sun_wanted and measure, pos)
+        # ephemeris: orbit and field from the batch's tables (field into body axes by the true attitude), the Sun
+        if sun_wanted and measure:
+            sun_eci[:] = environment.sun_position_1(clk.t0_unix_s + t)
+        if orbit_due:
+            orbit.hermite_state_into(orbit_table, eph.orbit_t0_s, eph.orbit_step_s, t, r_eci, v_eci, a_eci)
+        if md_on or res_on or measure:
+            environment.field_table_into(field_table, eph.field_t0_s, eph.field_step_s, t, b_eci)
+            conjugate_rotate_into(x, b_eci, b_body)
         if has_faults:
             flags = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
             if flags < 0:  # a fault began
@@ -1330,19 +1253,33 @@ def fly_variant(
             _record_stage(nq, x, q_p, w_p, obs_p, pos.r, est, cmd, mon.available, status, flags, mode, rec[out_i])
             out_i += 1
 
-        _actuator_stage(
-            act, p.wheel_inertia, clk.dt_s, faults, t, wheel_speeds, cmd.wheel_cmd, cmd.frozen_cmd, cmd.motor_current,
-            cmd.rotor_phase, cmd.delivered,
-        )  # fmt: skip
+        # actuators: the held commands (frozen ones for a frozen controller) under wheel faults, seed 000 eq (2)
+        # limits, then (when flown) seed 002's motor electrics (eq 2-3), noise and imbalance (eq 1, 4)
+        faults_mod.wheel_commands_1(faults, t, wheel_cmd, frozen_cmd, delivered)
+        wheels.limit_motor_torque_into(delivered, wheel_speeds, wheel_inertia, max_torque, max_momentum)
+        if m.on:
+            delivered[:] = wheels.driven_motor_torque_1(
+                motor_current, delivered, wheel_speeds, clk.dt_s, m.inductance_h, m.resistance_ohm,
+                m.torque_constant_nm_a, m.back_emf_v_s, m.max_voltage_v,
+            )  # fmt: skip
+        if act.disturbed:
+            white = np.asarray(np.random.uniform(-1.0, 1.0, nw))
+            delivered[:] = wheels.delivered_torque_1(delivered, wheel_speeds, rotor_phase, noise_nm, imbalance, white)
+            wheels.advance_rotor_phase_1(rotor_phase, wheel_speeds, clk.dt_s)
         if friction_faults:
-            faults_mod.extra_friction_1(faults, t, plant.friction, c.truth.friction)
-        _disturbance_stage(
-            dist.gravity_gradient, md_on or res_on, res, plant.inertia, x, pos.r, pos.b_body, pos.r_body, cmd.dipole,
-            cmd.moment, ext,
-        )  # fmt: skip
+            faults_mod.extra_friction_1(faults, t, friction_flown, friction_base)
+        # disturbances on the flown body: (MD + residual dipole) x B (sim_core.magnetic), gravity gradient
+        ext[:] = 0.0
+        if md_on or res_on:
+            for i in range(3):
+                moment[i] = dipole[i] + res[i]
+            magnetic.magnetic_torque_into(moment, b_body, ext)
+        if dist.gravity_gradient:
+            conjugate_rotate_into(x, r_eci, r_body)
+            environment.add_gravity_gradient_torque_into(r_body, inertia_flown, ext)
         if surface_torques:
             _surface_torque_stage(dist, x, pos, ext)
-        rk4_step_into(x, clk.dt_s, cmd.delivered, ext, plant, work, x)
+        rk4_step_into(x, clk.dt_s, delivered, ext, plant, work, x)
         if stuck_faults:
             faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)
     shared[slot] = k_next
