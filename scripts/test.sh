@@ -95,9 +95,23 @@ say "installing the project and its test extra into .venv"
 # Compile the numba kernels once, before the two test workers start: cold, each worker would compile the
 # closed loop itself (minutes of CPU each, past pytest's per-test timeout on a loaded machine) and two
 # processes writing one cache entry at once can fail to load it.
+# CI (.ci/run) hands its lint and type step here (ACS_TWIN_LINT_BESIDE_WARM=1): it runs beside `acs-twin warm`,
+# whose numba compile keeps one core busy and leaves the other idle; its outcome is awaited before pytest starts
+# and decides the exit status with pytest's.
+lint_pid=
+if [ -n "${ACS_TWIN_LINT_BESIDE_WARM:-}" ]; then
+  say "lint and type step (scripts/lint.sh) beside the kernel compile"
+  PYTHON=.venv/bin/python bash scripts/lint.sh & lint_pid=$!
+fi
 say "compiling the kernels into numba's cache (acs-twin warm)"
 .venv/bin/acs-twin warm >&2
+lint_status=0
+if [ -n "$lint_pid" ]; then wait "$lint_pid" || lint_status=$?; fi
 say "running pytest (PostgreSQL: $ACS_TWIN_TEST_POSTGRES_URL)"
 # Whole files to the two workers, the files holding a `slow` test first (tests/conftest.py orders them; xdist's
 # own reorder by test count would start the long one-test files last, one worker left alone on them at the end).
-.venv/bin/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder "$@"
+test_status=0
+.venv/bin/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder "$@" || test_status=$?
+if [ "$lint_status" != 0 ]; then say "the lint and type step failed (lint.sh above)"; fi
+if [ "$test_status" != 0 ]; then exit "$test_status"; fi
+exit "$lint_status"
