@@ -932,11 +932,11 @@ def observable_time(
         raise ValueError("noise_nms, control_dt_s: expected ≥ 0 and > 0")
     after = t >= onset_s
     gap = np.asarray(torque_cmd_nm, dtype=float)[after] - np.asarray(torque_nm, dtype=float)[after]
-    withheld = np.concatenate([[0.0], np.cumsum(gap) * (t[1] - t[0])])  # from the onset: boundaries t₁
-    starts = np.concatenate([[onset_s], t[after]])
+    dt = t[1] - t[0]
+    withheld = np.concatenate([[0.0], np.cumsum(gap) * dt])  # withheld[k]: over the first k samples after the onset
     quantum = inertia_kg_m2 * tachometer_quantum_rad_s
     for k, now in enumerate(t[after], start=1):
-        floor = quantum + noise_nms * np.sqrt((now - starts[:k]) / control_dt_s)
+        floor = quantum + noise_nms * np.sqrt((k - np.arange(k)) * dt / control_dt_s)  # windows of k − j samples
         if np.any(np.abs(withheld[k] - withheld[:k]) >= floor):
             return float(now)
     return None

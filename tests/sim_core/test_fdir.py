@@ -758,3 +758,18 @@ def test_earth_sensor_jump_during_a_star_tracker_outage_is_screened_like_the_oth
     assert fdir.describe_event("fault_isolated", arg) == "earth_sensor"
     err = [quaternion_angle_between(traj["q_est_ib"][v, -1], traj["q_ib"][v, -1]) for v in range(2)]
     assert err[0] < EARTH_SENSOR_HOLD_ARCSEC * ARCSEC < 0.25 * jump_rad < err[1]
+
+
+def test_observable_time_is_the_first_window_whose_withheld_momentum_reaches_its_floor():
+    """Withheld momentum of 1e-4 N·m from onset 10 s, 1 s samples, J q = 1e-3 N·m·s: observable once 10 samples are
+    withheld (the sample at 19 s); a loss that reverses (+0.6 J q then −0.6 J q) never withholds J q from the onset,
+    but does over the window from its peak; under noise a per period (T_u = 1 s) the floor over n samples is
+    J q + a √n: with a = J q the 1e-4 N·m loss needs 1e-4 n ≥ 1e-3 (1 + √n), n ≥ 119.2: 120 samples."""
+    t = np.arange(0.0, 400.0, 1.0)
+    cmd = np.full(t.shape, 1e-4)
+    dead = np.where(t >= 10.0, 0.0, cmd)
+    assert fdir.observable_time(t, cmd, dead, 10.0, 1.0, 1e-3) == 19.0
+    gap = np.where((t >= 10.0) & (t < 16.0), 1e-4, np.where((t >= 16.0) & (t < 28.0), -1e-4, 0.0))
+    assert fdir.observable_time(t, gap, np.zeros_like(t), 10.0, 1.0, 1e-3) == 25.0  # 6 up, then 10 down from the peak
+    n = int(np.ceil(((1.0 + np.sqrt(1.4)) / 0.2) ** 2))  # 0.1 n − √n − 1 ≥ 0
+    assert fdir.observable_time(t, cmd, dead, 10.0, 1.0, 1e-3, 1e-3, 1.0) == 10.0 + n - 1
