@@ -753,11 +753,14 @@ def _tachometer_stage(quantum_rad_s: float, faults: np.ndarray, t: float, wheel_
 
 @njit(cache=True)
 def _law_stage(
-    p: PlantArrays,
+    inertia: np.ndarray,
+    wheel_axes: np.ndarray,
+    wheel_inertia: np.ndarray,
     law: LawConfig,
     modes_on: bool,
     mode: int,
-    est: Estimate,
+    q_est: np.ndarray,
+    w_est: np.ndarray,
     speeds: np.ndarray,
     h_wheels: np.ndarray,
     available: np.ndarray,
@@ -767,52 +770,60 @@ def _law_stage(
 ) -> None:
     """Body torque of the configured law (LawConfig.kind) on the estimate, into ``body_torque``, tracking
     ``program`` (Commands.program); in the Sun/safe mode and the ORF acquisition the seed 002 eq (18) PD with
-    gyroscopic compensation (acquisition bandwidth)."""
+    gyroscopic compensation (acquisition bandwidth). Takes the modelled plant's and the estimate's arrays, not
+    their tuples (each array passed costs a reference count)."""
     q_p, w_p, wd_p = program[0:4], program[4:7], program[7:10]
     coarse = mode == modes.MODE_SUN_SAFE or (
-        mode == modes.MODE_ORF and attitude_difference_1(est.q, q_p) > FINE_POINTING_RAD
+        mode == modes.MODE_ORF and attitude_difference_1(q_est, q_p) > FINE_POINTING_RAD
     )
     if modes_on and coarse:
-        j_max = max(p.inertia[0, 0], p.inertia[1, 1], p.inertia[2, 2])
+        j_max = max(inertia[0, 0], inertia[1, 1], inertia[2, 2])
         kp = j_max * ACQUISITION_OMEGA_RAD_S**2  # steady slew rate ≤ kp/kd = ω_n/2 per unit error
         kd = 2.0 * j_max * ACQUISITION_OMEGA_RAD_S
-        body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, kp, kd) + control.gyroscopic_torque_1(
-            est.omega, p.inertia, p.wheel_axes @ h_wheels
+        body_torque[:] = control.quaternion_pd_step(q_est, w_est, q_p, w_p, kp, kd) + control.gyroscopic_torque_1(
+            w_est, inertia, wheel_axes @ h_wheels
         )
     elif law.kind == LAW_SEED000:
-        body_torque[:] = control.digital_law_step(
-            est.q, est.omega, q_p, w_p, wd_p, lead_lag, p.inertia, law.digital_gains
-        )
+        body_torque[:] = control.digital_law_step(q_est, w_est, q_p, w_p, wd_p, lead_lag, inertia, law.digital_gains)
         if law.gyroscopic_compensation:
-            body_torque[:] += control.gyroscopic_torque_1(est.omega, p.inertia, p.wheel_axes @ h_wheels)
+            body_torque[:] += control.gyroscopic_torque_1(w_est, inertia, wheel_axes @ h_wheels)
     elif law.kind == LAW_MRP_FEEDBACK:
         body_torque[:] = control.mrp_tracking_step(
-            est.q,
-            est.omega,
+            q_est,
+            w_est,
             q_p,
             w_p,
             wd_p,
-            p.inertia,
-            control.MrpWheels(p.wheel_axes, p.wheel_inertia, speeds, available),
+            inertia,
+            control.MrpWheels(wheel_axes, wheel_inertia, speeds, available),
             control.MrpGains(law.mrp_k_nm, law.mrp_p_nms, law.mrp_law_type),
         )
     else:
-        body_torque[:] = control.quaternion_pd_step(est.q, est.omega, q_p, w_p, law.pd_kp_nm, law.pd_kd_nms)
+        body_torque[:] = control.quaternion_pd_step(q_est, w_est, q_p, w_p, law.pd_kp_nm, law.pd_kd_nms)
 
 
 @njit(cache=True)
 def _allocate_1(
-    wheel_axes: np.ndarray, act: Actuators, available: np.ndarray, h_wheels: np.ndarray, mag: np.ndarray, cmd: Commands
+    wheel_axes: np.ndarray,
+    params: np.ndarray,
+    torque_quantum_nm: np.ndarray,
+    max_torque_nm: np.ndarray,
+    available: np.ndarray,
+    h_wheels: np.ndarray,
+    mag: np.ndarray,
+    body_torque: np.ndarray,
+    wheel_alloc: np.ndarray,
+    dipole_alloc: np.ndarray,
+    wheel_cmd: np.ndarray,
 ) -> int:
-    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1) on the magnetometer's
-    ``mag``, then the quantised, limited wheel commands (seed 000 eq 3); returns the allocation status."""
+    """Body torque → wheel torques and MD dipole (seed 000 eq 6, §3; allocation.allocate_1 with
+    Actuators.allocation ``params``) on the magnetometer's ``mag``, then the quantised, limited wheel commands
+    (seed 000 eq 3); returns the allocation status. Takes Commands' arrays, not the tuple (reference counts)."""
     status: int = allocation.allocate_1(
-        cmd.body_torque, wheel_axes, available, h_wheels, mag, act.allocation, cmd.wheel_alloc, cmd.dipole_alloc
+        body_torque, wheel_axes, available, h_wheels, mag, params, wheel_alloc, dipole_alloc
     )
-    for w in range(cmd.wheel_cmd.shape[0]):
-        cmd.wheel_cmd[w] = control.wheel_torque_command_1(
-            cmd.wheel_alloc[w], act.torque_quantum_nm[w], act.max_torque_nm[w]
-        )
+    for w in range(wheel_cmd.shape[0]):
+        wheel_cmd[w] = control.wheel_torque_command_1(wheel_alloc[w], torque_quantum_nm[w], max_torque_nm[w])
     return status
 
 
@@ -829,12 +840,16 @@ def _allocation_stage(
 ) -> int:
     """Controller faults on the body torque, then wheel torques and MD dipole (seed 000 eq 6, §3; sim_core.
     allocation) with rod faults and the dipole limit. Returns the allocation status."""
-    faults_mod.controller_faults_1(faults, t, cmd.body_torque, cmd.frozen_torque)
-    status = _allocate_1(wheel_axes, act, available, h_wheels, mag, cmd)
-    cmd.dipole[:] = cmd.dipole_alloc
-    faults_mod.rod_faults_1(faults, t, cmd.dipole)
+    body_torque, dipole = cmd.body_torque, cmd.dipole
+    faults_mod.controller_faults_1(faults, t, body_torque, cmd.frozen_torque)
+    status = _allocate_1(
+        wheel_axes, act.allocation, act.torque_quantum_nm, act.max_torque_nm, available, h_wheels, mag, body_torque,
+        cmd.wheel_alloc, cmd.dipole_alloc, cmd.wheel_cmd,
+    )  # fmt: skip
+    dipole[:] = cmd.dipole_alloc
+    faults_mod.rod_faults_1(faults, t, dipole)
     for i in range(3):
-        cmd.dipole[i] = min(max(cmd.dipole[i], -act.md_max_am2), act.md_max_am2)
+        dipole[i] = min(max(dipole[i], -act.md_max_am2), act.md_max_am2)
     return status
 
 
@@ -867,7 +882,10 @@ def _mode_actuation_stage(
                 cmd.dipole[:] = control.bdot_dipole_step(sensed.mag, sensed.mag_prev, t_u, bdot_gain, act.md_max_am2)
             return
         cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
-        _allocate_1(p.wheel_axes, act, available, h_wheels, sensed.mag, cmd)
+        _allocate_1(
+            p.wheel_axes, act.allocation, act.torque_quantum_nm, act.max_torque_nm, available, h_wheels, sensed.mag,
+            cmd.body_torque, cmd.wheel_alloc, cmd.dipole_alloc, cmd.wheel_cmd,
+        )  # fmt: skip
     elif not ((mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0):
         return
     cmd.dipole[:] = control.unloading_dipole_step(
@@ -968,8 +986,12 @@ def _record_stage(
     w_p: np.ndarray,
     observing: bool,
     r: np.ndarray,
-    est: Estimate,
-    cmd: Commands,
+    q_est: np.ndarray,
+    w_est: np.ndarray,
+    dipole: np.ndarray,
+    body_torque: np.ndarray,
+    wheel_cmd: np.ndarray,
+    delivered: np.ndarray,
     available: np.ndarray,
     status: int,
     flags: int,
@@ -977,24 +999,25 @@ def _record_stage(
     row: np.ndarray,
 ) -> None:
     """One output sample (R_* channels): truth, estimate, the scenario's program Λ^p, ω^p (program axes) and
-    observing flag at the sample's time, position ``r``, actuators, wheels."""
-    nw = cmd.wheel_cmd.shape[0]
+    observing flag at the sample's time, position ``r``, actuators (MD dipole, body torque, wheel commands and
+    delivered torques), wheels. Takes the arrays, not their tuples (each array passed costs a reference count)."""
+    nw = wheel_cmd.shape[0]
     row[R_Q : R_Q + 4] = x[0:4]
     row[R_W : R_W + 3] = x[4:7]
-    row[R_QE : R_QE + 4] = est.q
-    row[R_WE : R_WE + 3] = est.omega
+    row[R_QE : R_QE + 4] = q_est
+    row[R_WE : R_WE + 3] = w_est
     row[R_QP : R_QP + 4] = q_p
     row[R_WP : R_WP + 3] = control.program_in_body_1(q_p, x[0:4], w_p)
-    row[R_MD : R_MD + 3] = cmd.dipole
-    row[R_TORQUE : R_TORQUE + 3] = cmd.body_torque
+    row[R_MD : R_MD + 3] = dipole
+    row[R_TORQUE : R_TORQUE + 3] = body_torque
     row[R_R : R_R + 3] = r
     row[R_OBS] = 1.0 if observing else 0.0
     row[R_STATUS] = status
     row[R_FAULTS] = flags
     row[R_MODE] = mode
     row[R_WHEELS : R_WHEELS + nw] = x[7 + 2 * n_modes : 7 + 2 * n_modes + nw]
-    row[R_WHEELS + nw : R_WHEELS + 2 * nw] = cmd.wheel_cmd
-    row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = cmd.delivered
+    row[R_WHEELS + nw : R_WHEELS + 2 * nw] = wheel_cmd
+    row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = delivered
     for w in range(nw):
         row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
 
@@ -1171,6 +1194,7 @@ def fly_variant(
     noise_nm, imbalance = act.noise_nm, act.imbalance_nm_s2
     orbit_table, field_table, inertia_flown = eph.orbit_table, eph.field_table, plant.inertia
     friction_flown, friction_base, m = plant.friction, c.truth.friction, act.motor
+    q_est, w_est, body_torque, available = est.q, est.omega, cmd.body_torque, mon.available
 
     for k in range(int(scalars[C_STEP]), clk.n_steps):
         t = k * clk.dt_s
@@ -1234,9 +1258,10 @@ def fly_variant(
                     mon, ev, n_ev,
                 )  # fmt: skip
             _law_stage(
-                p, c.law, mc.on, mode, est, speeds, h_wheels, mon.available, cmd.program, cmd.lead_lag, cmd.body_torque
-            )
-            status = _allocation_stage(p.wheel_axes, act, faults, t, sensed.mag, h_wheels, mon.available, cmd)
+                p.inertia, p.wheel_axes, p.wheel_inertia, c.law, mc.on, mode, q_est, w_est, speeds, h_wheels,
+                available, cmd.program, cmd.lead_lag, body_torque,
+            )  # fmt: skip
+            status = _allocation_stage(p.wheel_axes, act, faults, t, sensed.mag, h_wheels, available, cmd)
             if mc.on:
                 _mode_actuation_stage(
                     p, act, mc.bdot_gain, t_u, mode, status, est, sensed, have_mag_prev, h_wheels, mon.available, cmd
@@ -1250,12 +1275,18 @@ def fly_variant(
         if output and out_i < rec.shape[0]:
             if not control_tick:  # a control tick has just sampled the scenario's program at t
                 q_p, w_p, _, obs_p = program_at(prog, clk, eph.c_pn, t, pos)
-            _record_stage(nq, x, q_p, w_p, obs_p, pos.r, est, cmd, mon.available, status, flags, mode, rec[out_i])
+            _record_stage(
+                nq, x, q_p, w_p, obs_p, r_eci, q_est, w_est, dipole, body_torque, wheel_cmd, delivered, available,
+                status, flags, mode, rec[out_i],
+            )  # fmt: skip
             out_i += 1
 
         # actuators: the held commands (frozen ones for a frozen controller) under wheel faults, seed 000 eq (2)
         # limits, then (when flown) seed 002's motor electrics (eq 2-3), noise and imbalance (eq 1, 4)
-        faults_mod.wheel_commands_1(faults, t, wheel_cmd, frozen_cmd, delivered)
+        if has_faults:
+            faults_mod.wheel_commands_1(faults, t, wheel_cmd, frozen_cmd, delivered)
+        else:
+            delivered[:] = wheel_cmd
         wheels.limit_motor_torque_into(delivered, wheel_speeds, wheel_inertia, max_torque, max_momentum)
         if m.on:
             delivered[:] = wheels.driven_motor_torque_1(
