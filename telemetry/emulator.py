@@ -453,6 +453,16 @@ def _unix_s(s: Scenario, t_s: np.ndarray) -> np.ndarray:
     return parse_utc_ns(s.orbit.epoch_utc) / NS_PER_S + t_s
 
 
+def _tachometer(sr: dict[str, np.ndarray], s: Scenario, t_s: np.ndarray) -> np.ndarray:
+    """Wheel speeds as the satellite's tachometers read them: the rotors' under the hidden tachometer faults (the
+    loop's kernel, faults.tachometer_faults_1); the dictionary's 0.25 rpm counts quantise them on encoding."""
+    table, _ = fault_kernels.fault_table(s.variants[:1])
+    speeds = np.array(sr["wheel_speed_rad_s"], dtype=float, order="C")
+    for k in range(t_s.shape[0]):
+        fault_kernels.tachometer_faults_1(table[0], float(t_s[k]), speeds[k])
+    return speeds
+
+
 def _hk_values(
     traj: Trajectory,
     s: Scenario,
@@ -474,7 +484,7 @@ def _hk_values(
         **_split("q_est_ib", sr["q_est_ib"], "0123"),
         **_split("q_prog_ib", sr["q_prog_ib"], "0123"),
         **_split("omega_est_b_rad_s", sr["omega_est_b_rad_s"], "xyz"),
-        **_split("wheel_speed_rad_s", sr["wheel_speed_rad_s"], wheels),
+        **_split("wheel_speed_rad_s", _tachometer(sr, s, t_s), wheels),
         **_split("wheel_torque_cmd_nm", sr["wheel_torque_cmd_nm"], wheels),
         **_split("wheel_current_a", sr["wheel_torque_nm"] / WHEEL_TORQUE_CONSTANT_NM_A, wheels),
         **_split("md_dipole_am2", sr["md_dipole_am2"], "xyz"),

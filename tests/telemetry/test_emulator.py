@@ -228,6 +228,21 @@ def test_hidden_sensor_faults_show_in_the_raw_sensor_telemetry(nominal, dictiona
     assert np.all(q_st[t_s >= failure_s] == 0.0) and np.all(np.linalg.norm(q_st[t_s < failure_s], axis=-1) > 0.99)
 
 
+def test_hidden_tachometer_bias_shows_in_the_telemetered_wheel_speed_not_the_rotor(dictionary) -> None:
+    """A speed-sensor bias of 3 counts on wheel 2 (sim_core.faults tachometer fault): the satellite telemeters what
+    its tachometer reads, so the decoded speed minus the rotor's (both at 0.25 rpm counts) steps by exactly the bias
+    at the onset; the other wheels read their rotors."""
+    q, onset_s = 0.25 * np.pi / 30.0, 200.0
+    fault = emulator.parse_fault(f"tachometer:1:bias@{onset_s},value={3.0 * q}")
+    traj, _, stream = emulator.emulate(faults=[fault], dictionary=dictionary)
+    hk = {b.packet: b for b in decode_stream(stream.data, dictionary).batches}["ACS_HK"].values
+    t_s = traj.t_s[: len(hk["mode"])]
+    read = np.stack([hk[f"wheel_speed_rad_s_{w}"] for w in range(1, 5)], -1)
+    rotor = q * np.round(traj["wheel_speed_rad_s"][0, : len(t_s)] / q)
+    expected = np.where(t_s[:, None] >= onset_s, [0.0, 3.0 * q, 0.0, 0.0], 0.0)
+    np.testing.assert_allclose(read - rotor, expected, atol=1e-9)
+
+
 def test_onboard_fdir_events_set_the_isolation_flags_and_fault_mode(nominal, dictionary) -> None:
     traj, _, _ = nominal
     gyro_axis_1 = fdir.SENSOR_ARG + 10 * TARGET_CODES["gyro"] + 1  # sim_core.fdir's sensor argument
