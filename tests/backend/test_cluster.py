@@ -1,4 +1,7 @@
-"""The Dask engine on a real LocalCluster (two worker processes): split batches fly bit for bit as one batch."""
+"""The Dask engine on a cluster started apart from the tests (a scheduler and two worker processes, as an operator
+would): split batches fly bit for bit as one batch, cases keep their order, a what-if sweep and a server job equal
+their local runs. The LocalCluster that dask_client starts by itself is the one the other tests fly on
+(tests/conftest.py shared_dask; the shutdown, grace-restart and diagnose-command tests start their own)."""
 
 from __future__ import annotations
 
@@ -8,15 +11,9 @@ import pytest
 from backend.jobs import cluster
 from sim_core import engine, faults, scenario_library
 from sim_core.scenario import Scenario, VariantSpec
+from sim_core.trajectory import Trajectory
 
-pytestmark = pytest.mark.slow  # LocalClusters, a separate scheduler: scheduled first (tests/conftest.py)
-
-
-@pytest.fixture(scope="module")
-def client():
-    c = cluster.dask_client(n_workers=2)
-    yield c
-    cluster.close_client(c)
+pytestmark = pytest.mark.slow  # a separately started cluster: scheduled first (tests/conftest.py)
 
 
 def _batch() -> Scenario:
@@ -27,32 +24,15 @@ def _batch() -> Scenario:
     )
 
 
-def test_split_batch_on_two_workers_equals_one_batch(client) -> None:
-    s = _batch()
-    here = engine.simulate(s)
-    there = cluster.fly(client, s)
-    assert there.variant_names == here.variant_names
-    for name, series in here.series.items():
-        np.testing.assert_array_equal(there.series[name], series, err_msg=name)
-    assert there.events == here.events
-
-
-def test_map_cases_keeps_order(client) -> None:
-    assert cluster.map_cases(client, abs, [-3, 2, -1]) == [3, 2, 1]
+@pytest.fixture(scope="module")
+def here() -> Trajectory:
+    """The batch flown as one on this process: what the cluster's split flight must equal bit for bit."""
+    return engine.simulate(_batch())
 
 
 def test_scheduler_address_is_checked() -> None:
     with pytest.raises(ValueError, match="tcp://"):
         cluster.dask_client("localhost:8786")
-
-
-def test_whatif_sweep_on_the_cluster_equals_the_local_sweep(client) -> None:
-    from sim_core import whatif
-
-    s = _batch()
-    variants = s.variants
-    base = Scenario.model_validate({**s.model_dump(), "variants": [variants[0].model_dump()]})
-    assert whatif.sweep(base, variants, flyer=cluster.flyer(client)) == whatif.sweep(base, variants)
 
 
 @pytest.fixture(scope="module")
@@ -90,17 +70,33 @@ def scheduler_address():
         stop_owned(scheduler)  # each process group: SIGTERM, then SIGKILL of what is left
 
 
-def test_a_separately_started_cluster_flies_the_batch_bit_for_bit(scheduler_address) -> None:
-    s = _batch()
-    client = cluster.dask_client(scheduler_address)
-    try:
-        assert len(client.scheduler_info(n_workers=-1)["workers"]) == 2
-        there = cluster.fly(client, s)
-    finally:
-        cluster.close_client(client)
-    here = engine.simulate(s)
+@pytest.fixture(scope="module")
+def client(scheduler_address):
+    c = cluster.dask_client(scheduler_address)
+    yield c
+    cluster.close_client(c)
+
+
+def test_split_batch_on_two_workers_equals_one_batch(client, here: Trajectory) -> None:
+    assert len(client.scheduler_info(n_workers=-1)["workers"]) == 2
+    there = cluster.fly(client, _batch())
+    assert there.variant_names == here.variant_names
     for name, series in here.series.items():
         np.testing.assert_array_equal(there.series[name], series, err_msg=name)
+    assert there.events == here.events
+
+
+def test_map_cases_keeps_order(client) -> None:
+    assert cluster.map_cases(client, abs, [-3, 2, -1]) == [3, 2, 1]
+
+
+def test_whatif_sweep_on_the_cluster_equals_the_local_sweep(client) -> None:
+    from sim_core import whatif
+
+    s = _batch()
+    variants = s.variants
+    base = Scenario.model_validate({**s.model_dump(), "variants": [variants[0].model_dump()]})
+    assert whatif.sweep(base, variants, flyer=cluster.flyer(client)) == whatif.sweep(base, variants)
 
 
 def test_a_server_job_on_a_separately_started_cluster_equals_the_engine(scheduler_address, tmp_path) -> None:
