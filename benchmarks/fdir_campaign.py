@@ -119,8 +119,7 @@ def run_kind(name: str, n: int, seed: int) -> tuple[list[list[str | float]], lis
         seen = observable_times(s, traj, v, spec)
         for d, at in enumerate(seen):
             out[d].append(classify(isolated, spec.faults[0].index, at, float(traj.t_s[-1])))
-        if seen[0] is not None:
-            lags.append(np.inf if seen[1] is None else seen[1] - seen[0])
+        lags.append(np.nan if seen[0] is None else np.inf if seen[1] is None else seen[1] - seen[0])
     return out, lags, wall
 
 
@@ -144,6 +143,23 @@ def report(label: str, results: list[str | float]) -> None:
         hist, _ = np.histogram(d, bins=[-1e9, 0, 10, 20, 30, 45, 60, 120, 1e9])
         labels = ["<0", "0-10", "10-20", "20-30", "30-45", "45-60", "60-120", ">120"]
         print("    histogram: " + "  ".join(f"{lab}: {h}" for lab, h in zip(labels, hist)))
+
+
+def report_noise_lag(quantisation: list[str | float], lags: list[float]) -> None:
+    """Print how much later the noise makes the faults observable, and how many of the cases late or never isolated
+    by the quantisation-only definition are ones the noise alone keeps unobservable 60 s longer (or for good)."""
+    defined = [lag for lag in lags if not np.isnan(lag)]
+    finite = [lag for lag in defined if np.isfinite(lag)]
+    q = np.percentile(finite, [50, 90, 100]) if finite else [np.nan] * 3
+    over = sum(lag > ISOLATION_WINDOW_S for lag in defined)
+    missed = [lag for r, lag in zip(quantisation, lags) if r == "never" or (isinstance(r, float) and r > 60.0)]
+    hidden = sum(lag > ISOLATION_WINDOW_S for lag in missed)
+    print(
+        "  the noise makes faults observable later by (s): median {:.1f}  p90 {:.1f}  max {:.1f}".format(*q)
+        + f" where it lets them become observable in the run ({len(finite)} of {len(defined)}); later by more than "
+        f"{ISOLATION_WINDOW_S:.0f} s or never in {over} of {len(defined)}; of the {len(missed)} cases late or never "
+        f"isolated by the quantisation-only definition, {hidden} are such cases"
+    )
 
 
 def false_alarms_24h() -> tuple[int, float]:
@@ -180,14 +196,7 @@ def main() -> None:
         report("the quantisation (withheld momentum ≥ J_r q)", results[0])
         if SEED_MODELS:
             report("the quantisation and the noise (≥ J_r q + a √(periods since onset))", results[1])
-            finite = [lag for lag in lags if np.isfinite(lag)]
-            q = np.percentile(finite, [50, 90, 100]) if finite else [np.nan] * 3
-            over = sum(lag > ISOLATION_WINDOW_S for lag in lags)
-            print(
-                "  the noise makes faults observable later by (s): median {:.1f}  p90 {:.1f}  max {:.1f}".format(*q)
-                + f" where it lets them become observable in the run ({len(finite)} of {len(lags)}); later by more "
-                f"than {ISOLATION_WINDOW_S:.0f} s or never in {over} of {len(lags)}"
-            )
+            report_noise_lag(results[0], lags)
     if not args.no_24h:
         n, wall = false_alarms_24h()
         print(f"\n24 h nominal scanning, same sensors: {n} fault events (false alarms), {wall:.1f} s")
