@@ -13,10 +13,14 @@ Pipeline (DESIGN.md "Diagnosis"), pure numerics on telemetered arrays (:class:`O
    the onset search.
 3. **Pruning.** Wheels whose momentum balance never leaves PRUNE_SIGMA of what quantisation and noise
    explain inside the analysis window carry no fault hypothesis (pairs are built from survivors only).
-4. **Estimation.** For every surviving hypothesis the exact Gaussian likelihood of its channel
-   (:func:`sim_core.fault_detection.level_loglik`) is profiled over the onset (every sample of the
-   search window) and the magnitude (the likelihood is quadratic in a remaining gain, an added friction
-   torque or a bias, so three evaluations give its maximum exactly).
+4. **Estimation.** For every surviving hypothesis the likelihood of its channel is profiled over the
+   onset (every sample of the search window) and the magnitude. A wheel's tachometer readings are
+   taken as what they are, the speed rounded to its quantum (:func:`sim_core.fault_detection.count_loglik`):
+   a small fault that shifts when the counts change is evidence, one that changes no reading is as
+   likely as "none". The magnitude starts from the Gaussian model's exact maximum (rounding as white
+   noise q²/12, :func:`sim_core.fault_detection.level_loglik`, quadratic in a remaining gain, an added
+   friction torque or a bias) and is refined on the count likelihood. With nothing alarming, every
+   wheel is fitted (a fault below the alarm is still a hypothesis) on records up to an hour.
 5. **Ranking.** Evidence = log mean over onsets of the profiled likelihood (uniform onset prior, so
    searching many onsets is paid for) − ½ ln n per magnitude parameter (BIC), relative to "none";
    posterior probabilities with equal priors are the scores. Wheel channels are independent given the
@@ -78,6 +82,13 @@ REPLAY_LEAD_S = 60.0  # the twin starts this long before the earliest onset trie
 RESOLVED_COUNTS = 2  # a reading that moves by one count may be the rounding of an arbitrarily small change:
 # a speed bias or a friction is claimed only if it moves the tachometer by two counts or more
 SUB_SAMPLE = 4  # onsets tried per telemetry interval (a fault starts between samples)
+UNALARMED_FIT_SAMPLES = 3_600  # records up to this long are searched for a fault below the alarm (an hour at 1 Hz)
+TACHOMETER_JITTER = 0.02  # σ of a reading's white error beyond its rounding, in counts (float telemetry, sampling
+# instant); a slowly varying model error is the balance's process noise, not this: a white jitter repeated over
+# hundreds of unchanged readings would tell a still speed from one a fraction of a count from the count's edge
+MAGNITUDE_STEPS = (-0.25, 0.25)  # relative steps tried around the Gaussian model's magnitude
+REFINEMENTS = 2  # step halvings around the best magnitude candidate (a gain to 0.025)
+GAIN_GRID = tuple(float(g) for g in np.arange(0.0, 0.91, 0.1))  # remaining gains tried on the count likelihood
 KINEMATIC_RATE_FLOOR_RAD_S = 2e-7  # float32 quaternion components (6e-8) differenced over 1 s, with margin
 
 
@@ -352,15 +363,8 @@ def _profile(
     no_reset = np.zeros((g, n), dtype=np.bool_)
     base = np.broadcast_to(ch.drift, (g, n - 1))
 
-    def run(drift: np.ndarray, offset: np.ndarray, reset: np.ndarray) -> np.ndarray:
-        return fd.level_loglik(
-            ch.y,
-            np.ascontiguousarray(drift),
-            ch.q_var,
-            ch.r_var,
-            np.ascontiguousarray(offset),
-            np.ascontiguousarray(reset),
-        )
+    def run(drift: np.ndarray, offset: np.ndarray, reset: np.ndarray, gaussian: bool = False) -> np.ndarray:
+        return _loglik(ch, drift, offset, reset, gaussian)
 
     if kind == "stuck":
         reset = after_sample.astype(np.bool_)
@@ -369,34 +373,85 @@ def _profile(
     if kind in ("failure", "gain_loss"):
         lost = base - after * ch.templates["motor"]  # motor delivers nothing after the onset
 
-        def at(theta: float) -> np.ndarray:
-            return run(lost + theta * after * ch.templates["motor"], zero_off, no_reset)
+        def at(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:
+            return run(lost + theta * after * ch.templates["motor"], zero_off, no_reset, gaussian)
 
         if not quadratic:
             return at(0.0), np.full(g, np.nan)
-        return _quadratic_max(at, 0.0, MAX_REMAINING_GAIN)
+        return _profiled(ch, at, 0.0, MAX_REMAINING_GAIN, grid=GAIN_GRID)
     if kind == "friction":
 
-        def at(theta: float) -> np.ndarray:
-            return run(base + theta * after * ch.templates["friction"], zero_off, no_reset)
+        def at(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:
+            return run(base + theta * after * ch.templates["friction"], zero_off, no_reset, gaussian)
 
         # a friction that does not move the wheel by RESOLVED_COUNTS tachometer counts after its onset is not resolved
         per_nm = np.abs(after * ch.templates["friction"]).sum(axis=1)
         with np.errstate(divide="ignore"):
             resolvable = np.where(per_nm > 0.0, RESOLVED_COUNTS * ch.bound / per_nm, UNRESOLVED_FRICTION_NM)
-        return _quadratic_max(at, 0.0, np.inf, scale=1e-3, min_abs=resolvable)
+        return _profiled(ch, at, 0.0, np.inf, scale=1e-3, min_abs=resolvable)
 
-    def at_bias(theta: float) -> np.ndarray:  # speed, gyro or magnetometer bias: a step in the measurement
-        return run(base, theta * after_sample, no_reset)
+    def at_bias(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:  # a step in the measurement
+        return run(base, theta * after_sample, no_reset, gaussian)
 
     # a bias below RESOLVED_COUNTS of the sensor's resolution is not identifiable: rounding does as much
-    return _quadratic_max(
+    return _profiled(
+        ch,
         at_bias,
         -np.inf,
         np.inf,
         scale=max(ch.bound, math.sqrt(float(np.median(ch.r_var)))) * 10.0,
         min_abs=RESOLVED_COUNTS * ch.bound,
     )
+
+
+def _loglik(ch: _Channel, drift: np.ndarray, offset: np.ndarray, reset: np.ndarray, gaussian: bool) -> np.ndarray:
+    """Log-likelihood of the channel under each row's drift and offset: the tachometer's rounding taken exactly
+    (:func:`sim_core.fault_detection.count_loglik`) for a quantised channel unless ``gaussian`` (rounding as white
+    noise of variance q²/12, the quadratic model the magnitude search starts from)."""
+    args = (np.ascontiguousarray(drift), ch.q_var)
+    tail = (np.ascontiguousarray(offset), np.ascontiguousarray(reset))
+    if ch.bound > 0.0 and not gaussian:
+        return fd.count_loglik(ch.y, *args, ch.bound, (TACHOMETER_JITTER * ch.bound) ** 2, *tail)
+    return fd.level_loglik(ch.y, *args, ch.r_var, *tail)
+
+
+def _profiled(
+    ch: _Channel,
+    at: Callable[..., np.ndarray],
+    lo: float,
+    hi: float,
+    scale: float = 1.0,
+    min_abs: float | np.ndarray = 0.0,
+    grid: tuple[float, ...] = (),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Profile over the magnitude θ per onset: the Gaussian model's exact maximum (quadratic in θ); for a quantised
+    channel the count likelihood is then maximised over that θ, θ·(1 ± MAGNITUDE_STEPS) and ``grid``, and the best
+    of them refined by REFINEMENTS halvings of the step."""
+    ll, theta = _quadratic_max(lambda th: at(th, True), lo, hi, scale, min_abs)
+    if ch.bound <= 0.0:
+        return ll, theta
+    candidates = [theta] + [theta * (1.0 + f) for f in MAGNITUDE_STEPS] + [np.full_like(theta, v) for v in grid]
+    thetas = np.stack([_clamped(c, lo, hi, min_abs) for c in candidates])
+    lls = np.stack([at(th[:, None]) for th in thetas])
+    cols = np.arange(theta.shape[0])
+    best = np.argmax(lls, axis=0)
+    ll, theta = lls[best, cols], thetas[best, cols]
+    step = np.full_like(theta, np.diff(grid).min()) if len(grid) > 1 else np.abs(theta) * MAGNITUDE_STEPS[-1]
+    for _ in range(REFINEMENTS):  # halve the step around the best candidate
+        step = 0.5 * step
+        for sign in (-1.0, 1.0):
+            trial = _clamped(theta + sign * step, lo, hi, min_abs)
+            trial_ll = at(trial[:, None])
+            better = trial_ll > ll
+            ll, theta = np.where(better, trial_ll, ll), np.where(better, trial, theta)
+    return ll, theta
+
+
+def _clamped(theta: np.ndarray, lo: float, hi: float, min_abs: float | np.ndarray) -> np.ndarray:
+    """θ within [lo, hi] and |θ| ≥ min_abs."""
+    theta = np.clip(theta, lo, hi)
+    out: npt.NDArray[np.float64] = np.where(np.abs(theta) < min_abs, np.where(theta < 0.0, -min_abs, min_abs), theta)
+    return out
 
 
 def _quadratic_max(
@@ -415,8 +470,7 @@ def _quadratic_max(
     with np.errstate(divide="ignore", invalid="ignore"):
         theta = np.where(a < 0.0, -b / (2.0 * a), np.where(b > 0.0, hi, lo))
     theta = np.clip(theta, lo, hi)
-    theta = np.where(np.isfinite(theta), theta, p0)
-    theta = np.where(np.abs(theta) < min_abs, np.where(theta < 0.0, -min_abs, min_abs), theta)
+    theta = _clamped(np.where(np.isfinite(theta), theta, p0), lo, hi, min_abs)
     ll = a * theta**2 + b * theta + c
     return ll, theta
 
@@ -434,7 +488,8 @@ def _fit(
     """Onset-marginal, magnitude-penalised log evidence of one fault in one channel; the onset prior is uniform in
     time, sampled at SUB_SAMPLE fractions of the interval for faults whose effect is an integrated torque."""
     quadratic = kind not in ("failure", "stuck")
-    fractions = np.arange(SUB_SAMPLE) / SUB_SAMPLE if kind in ("failure", "gain_loss", "friction") else [0.0]
+    sub = SUB_SAMPLE if kind in ("failure", "gain_loss", "friction") and np.all(np.diff(onsets) == 1) else 1
+    fractions = np.arange(sub) / sub  # a strided onset grid (no alarm) has no use for fractions of an interval
     lead = t_s[onsets] - t_s[np.maximum(onsets - 1, 0)]
     runs = [_profile(ch, onsets, kind, quadratic, float(phi)) for phi in fractions]
     ll = np.concatenate([r[0] for r in runs])
@@ -466,7 +521,7 @@ def _one_count_s(ch: _Channel, k: int, kind: str, magnitude: float | None, t_s: 
     return float(t_s[min(end, t_s.shape[0] - 1)] - t_s[k])
 
 
-def _kick_evidence(ch: _Channel, onsets: np.ndarray, nominal: float) -> np.ndarray:
+def _kick_evidence(ch: _Channel, onsets: np.ndarray) -> np.ndarray:
     """Log evidence (G,) of a healthy wheel's balance, relative to its nominal model, when another rotor seizes
     between samples o−1 and o (per onset o): the seizure dumps the rotor's momentum into the body in one step,
     and the coupling term J_r aᵗΔω of that interval, taken from estimated rates that do not follow a step, is
@@ -488,7 +543,7 @@ def _kick_evidence(ch: _Channel, onsets: np.ndarray, nominal: float) -> np.ndarr
     a = np.minimum((fp + fm - 2.0 * f0) / (2.0 * h * h), 0.0)
     b = (fp - fm) / (2.0 * h)
     spread = 1.0 - 2.0 * a * s2
-    loglik: npt.NDArray[np.float64] = f0 + b * b * s2 / (2.0 * spread) - 0.5 * np.log(spread) - nominal
+    loglik: npt.NDArray[np.float64] = b * b * s2 / (2.0 * spread) - 0.5 * np.log(spread)
     return loglik
 
 
@@ -519,11 +574,7 @@ def _cut(ch: _Channel, a: int, b: int) -> _Channel:
 
 def _nominal(ch: _Channel) -> float:
     n = ch.y.shape[0]
-    return float(
-        fd.level_loglik(
-            ch.y, ch.drift[None, :].copy(), ch.q_var, ch.r_var, np.zeros((1, n)), np.zeros((1, n), dtype=np.bool_)
-        )[0]
-    )
+    return float(_loglik(ch, ch.drift[None, :], np.zeros((1, n)), np.zeros((1, n), dtype=np.bool_), False)[0])
 
 
 def _suspected(ch: _Channel) -> bool:
@@ -597,22 +648,27 @@ def diagnose(
     nominals = [_nominal(c) for c in cuts]
     kicks: dict[int, np.ndarray] = {}
     for p, cut in enumerate(cuts):
-        if not (_suspected(cut) or (p in isolated and isolated[p] < stop)):
+        if _suspected(cut) or (p in isolated and isolated[p] < stop):
+            suspected.append(p + 1)
+    # a fault too small to alarm is still a hypothesis: with nothing alarming, every wheel is fitted (the count
+    # likelihood says how far the data tell it from "none"), on records short enough to search at that cost
+    unalarmed = alarm is None and not suspected and t.shape[0] <= UNALARMED_FIT_SAMPLES
+    for p, cut in enumerate(cuts):
+        if not (unalarmed or p + 1 in suspected):
             continue
-        suspected.append(p + 1)
         for kind in WHEEL_FAULTS:
             others = None
             if kind == "stuck":
                 for q in range(len(cuts)):
                     if q != p and q not in kicks:
-                        kicks[q] = _kick_evidence(cuts[q], onsets, nominals[q])
+                        kicks[q] = _kick_evidence(cuts[q], onsets)
                 others = {q: kicks[q] for q in range(len(cuts)) if q != p}
             fits.append(_fit(cut, p, kind, onsets, tw, nominals[p], 0 if kind in ("failure", "stuck") else 1, others))
     sensor_fits = [_sensor_fit(kind, group, start, stop, onsets, tw) for kind, group in sensors.items()]
     if valid is not None:
         sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
     flagged = {p: float(t[k]) for p, k in isolated.items() if k < stop}
-    hyps = _rank(fits, [f for f in sensor_fits if f is not None], flagged)
+    hyps = _rank(fits, [f for f in sensor_fits if f is not None], flagged, obs.n_wheels)
     if scenario is not None and (alarm is not None or hyps[0].wheel is not None):  # a fault below the alarm too
         hyps = _replayed(hyps, obs, scenario, start, stop, stop - 1 if alarm is None else alarm.index, flyer)
     name = None
@@ -811,12 +867,17 @@ def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:
     )
 
 
-def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: dict[int, float] | None = None) -> list[Hypothesis]:
+def _rank(
+    wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: dict[int, float] | None = None, n_wheels: int = 4
+) -> list[Hypothesis]:
     """Singles, pairs of wheel faults on different wheels (prior odds PAIR_PRIOR_LOG_ODDS), sensors and "none",
-    scored by posterior probability; each wheel the onboard FDIR isolated (``flagged``: wheel index → time) that
-    a hypothesis leaves healthy costs FDIR_MISS_LOG_ODDS, unless the hypothesis seizes a rotor before that
-    isolation: a seizure's kick (the rotor's momentum dumped into the body in one step) is outside the FDIR's
-    body-rate prediction, so the isolations after it say nothing about the other wheels."""
+    scored by posterior probability. Prior: "none" as likely as some single fault of the fault space, which its
+    n_wheels × WHEEL_FAULTS + SENSOR_FAULTS faults share equally (a fault the data cannot show leaves "none" on
+    top, at a score that says how little the data rule the faults out). Each wheel the onboard FDIR isolated
+    (``flagged``: wheel index → time) that a hypothesis leaves healthy costs FDIR_MISS_LOG_ODDS, unless the
+    hypothesis seizes a rotor before that isolation: a seizure's kick (the rotor's momentum dumped into the body
+    in one step) is outside the FDIR's body-rate prediction, so the isolations after it say nothing about the
+    other wheels."""
     flagged = flagged or {}
 
     def unexplained(*fits: _Fit) -> float:
@@ -824,7 +885,8 @@ def _rank(wheel_fits: list[_Fit], sensor_fits: list[_Fit], flagged: dict[int, fl
         healthy = [t for p, t in flagged.items() if p not in {f.channel for f in fits}]
         return -FDIR_MISS_LOG_ODDS * sum(not any(k <= t for k in kicks) for t in healthy)
 
-    hyps = [Hypothesis("none", None, None, None, None, unexplained())]
+    none_prior = math.log(n_wheels * len(WHEEL_FAULTS) + len(SENSOR_FAULTS))
+    hyps = [Hypothesis("none", None, None, None, None, unexplained() + none_prior)]
     for f in wheel_fits:
         hyps.append(
             Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained(f))

@@ -7,6 +7,9 @@ noise v ~ N(0, R) (a tachometer's rounding to a quantum q is taken as R = q²/12
 process noise w ~ N(0, Q_k) (what the drift does not know: the commands between telemetry samples,
 unmodelled torques). :func:`level_loglik` is the exact Gaussian log-likelihood of that model (the
 innovations of its Kalman filter), batched over hypotheses; a seized rotor is a reset of x to 0.
+:func:`count_loglik` is the same model with the rounding taken exactly (a reading says the speed lies in
+its count's interval): the white-noise model is sure that nothing happened when a small fault moves the
+speed by less than a count, and cannot place an onset while the reading does not move.
 
 Detection (:func:`window_alarm`) does not trust R to be Gaussian: a rounding error is bounded,
 |e| ≤ q/2, and strongly correlated on a slow ramp, so a CUSUM of normalised innovations alarms on a
@@ -30,6 +33,7 @@ __all__ = [
     "N_SIGMA",
     "WINDOWS_S",
     "Alarm",
+    "count_loglik",
     "false_alarms_per_day",
     "level_loglik",
     "open_loop_residual",
@@ -83,6 +87,129 @@ def level_loglik(
             gain = p / s
             x += gain * nu
             p *= 1.0 - gain
+        out[b] = ll
+    return out
+
+
+_LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
+COUNT_COMPONENTS = 4  # slices of the first reading's count carried by :func:`count_loglik`
+INSIDE_SIGMAS = 8.0  # a state this many σ inside its reading's count: the reading's probability is 1 − 1e-15
+
+
+@njit(cache=True)
+def _log_phi_cdf(x: float) -> float:
+    """ln Φ(x), accurate in the far lower tail (asymptotic series where erfc underflows)."""
+    if x > -20.0:
+        return math.log(0.5 * math.erfc(-x / math.sqrt(2.0)))
+    x2 = x * x
+    return -0.5 * x2 - math.log(-x) - _LOG_SQRT_2PI + math.log1p(-1.0 / x2 + 3.0 / (x2 * x2))
+
+
+@njit(cache=True)
+def _log_interval(alpha: float, beta: float) -> float:
+    """ln(Φ(β) − Φ(α)), α < β, without cancellation in either tail."""
+    if beta <= 0.0:
+        hi, lo = _log_phi_cdf(beta), _log_phi_cdf(alpha)
+    elif alpha >= 0.0:
+        hi, lo = _log_phi_cdf(-alpha), _log_phi_cdf(-beta)
+    else:
+        return math.log(1.0 - 0.5 * math.erfc(beta / math.sqrt(2.0)) - 0.5 * math.erfc(-alpha / math.sqrt(2.0)))
+    return hi + math.log1p(-math.exp(lo - hi))
+
+
+@njit(cache=True)
+def _truncated_moments(alpha: float, beta: float, log_z: float) -> tuple[float, float]:
+    """Mean and variance of a standard normal truncated to [α, β] (Z = Φ(β) − Φ(α) given as ln Z)."""
+    pa = math.exp(-0.5 * alpha * alpha - _LOG_SQRT_2PI - log_z)  # φ(α)/Z
+    pb = math.exp(-0.5 * beta * beta - _LOG_SQRT_2PI - log_z)
+    mean = pa - pb
+    var = 1.0 + alpha * pa - beta * pb - mean * mean
+    width = beta - alpha  # a variable on [α, β] has variance ≤ width²/4; round-off in the far tail can break it
+    return min(max(mean, alpha), beta), min(max(var, 1e-12 * width * width), 0.25 * width * width)
+
+
+@njit(cache=True)
+def _count_update(x: float, p: float, y: float, half: float, sensor_var: float) -> tuple[float, float, float]:
+    """One reading y of a state N(x, p) (offset removed): ln P(reading), and the moment-matched posterior."""
+    s = math.sqrt(p + sensor_var)
+    alpha = (y - half - x) / s
+    beta = (y + half - x) / s
+    log_z = _log_interval(alpha, beta)
+    mean, var = _truncated_moments(alpha, beta, log_z)
+    gain = p / (s * s)  # x given the reading's sum z = x + o + v, then z's truncated moments
+    return log_z, x + gain * s * mean, p * (1.0 - gain) + gain * gain * s * s * var
+
+
+@njit(cache=True)
+def count_loglik(
+    y: np.ndarray,
+    drift: np.ndarray,
+    q_var: np.ndarray,
+    quantum: float,
+    sensor_var: float,
+    offset: np.ndarray,
+    reset: np.ndarray,
+) -> np.ndarray:
+    """Log-likelihood (B,) of tachometer readings y (n,), each the speed rounded to a multiple of ``quantum``,
+    under the local-level models of :func:`level_loglik` with the rounding taken exactly: a reading says
+    x_k + o_k + v_k ∈ [y_k − q/2, y_k + q/2] (v ~ N(0, sensor_var) > 0), probability Φ(β) − Φ(α) under the
+    predicted N(x̂, P + sensor_var). A reading that cannot tell two speeds apart gives them the same
+    probability; a count transition earlier or later than predicted is evidence.
+
+    The state density is a sum of Gaussians, each matched to its truncated posterior's mean and variance
+    after every reading (assumed-density filtering); the start, uniform over the first reading's count,
+    is COUNT_COMPONENTS equal slices (variance of each: its slice's, (q/K)²/12), carrying no likelihood.
+    ``reset`` as in :func:`level_loglik`, but the first reset sample reads the rotor braking, uniform between its
+    speed and 0 (a count is exact: a rotor seized between samples is not read at 0 at once).
+    """
+    n_b, n = drift.shape[0], y.shape[0]
+    half = 0.5 * quantum
+    m = COUNT_COMPONENTS
+    out = np.zeros(n_b)
+    xs = np.empty(m)
+    ps = np.empty(m)
+    lw = np.empty(m)
+    for b in range(n_b):
+        started = False
+        ll = 0.0
+        for k in range(n):
+            if k > 0:
+                for i in range(m):
+                    xs[i] += drift[b, k - 1]
+                    ps[i] += q_var[k - 1]
+                    if reset[b, k] and not reset[b, k - 1]:  # seized between samples: read braking, 0 to x
+                        ps[i] += xs[i] * xs[i] / 12.0
+                        xs[i] *= 0.5
+                    elif reset[b, k]:
+                        xs[i] = 0.0
+                        ps[i] = 0.0
+            if np.isnan(y[k]):
+                continue
+            if not started:
+                for i in range(m):
+                    xs[i] = y[k] - offset[b, k] + quantum * ((i + 0.5) / m - 0.5)
+                    ps[i] = (quantum / m) ** 2 / 12.0
+                    lw[i] = -math.log(m)
+                started = True
+                continue
+            top = -np.inf
+            reading = y[k] - offset[b, k]
+            for i in range(m):
+                if lw[i] <= -50.0:  # a slice this unlikely adds nothing to the sum
+                    lw[i] = -np.inf
+                elif half - abs(reading - xs[i]) > INSIDE_SIGMAS * math.sqrt(ps[i] + sensor_var):
+                    pass  # deep inside the count: probability 1 − 2Φ(−INSIDE_SIGMAS), the state unchanged
+                else:
+                    log_z, xs[i], ps[i] = _count_update(xs[i], ps[i], reading, half, sensor_var)
+                    lw[i] += log_z
+                top = max(top, lw[i])
+            total = 0.0
+            for i in range(m):
+                total += math.exp(lw[i] - top)
+            log_sum = top + math.log(total)
+            ll += log_sum
+            for i in range(m):
+                lw[i] -= log_sum
         out[b] = ll
     return out
 

@@ -88,3 +88,77 @@ def test_false_alarm_bound_is_the_union_of_tails() -> None:
     rate = fd.false_alarms_per_day(10, 1.0, n_sigma=6.5, n_windows=5)
     assert math.isclose(rate, 86_400 * 50 * math.erfc(6.5 / math.sqrt(2.0)))
     assert rate < 1e-3
+
+
+def _count_ll(y, drift, q_var: float, sensor_var: float, offset=None) -> float:
+    n = len(y)
+    off = np.zeros((1, n)) if offset is None else np.asarray(offset, dtype=float)[None]
+    d = np.asarray(drift, dtype=float)[None].copy()
+    return float(
+        fd.count_loglik(np.asarray(y, float), d, np.full(n - 1, q_var), 1.0, sensor_var, off, np.zeros((1, n), bool))[0]
+    )
+
+
+def test_count_loglik_of_a_noiseless_ramp_is_the_measure_of_consistent_starts() -> None:
+    """Speed x0 + 0.3 k rounded to counts, x0 uniform over the first count: readings 0 0 1 1 1 2 need
+    x0 + 0.3 < 0.5, x0 + 0.6 ≥ 0.5, x0 + 1.5 ≥ 1.5 and x0 + 1.2 < 1.5, i.e. x0 ∈ [0, 0.2): probability 0.2
+    (by hand). The white-noise model of rounding (variance 1/12) is far off."""
+    y = [0, 0, 1, 1, 1, 2]
+    assert abs(_count_ll(y, [0.3] * 5, 1e-12, 1e-6) - math.log(0.2)) < 0.1
+    assert abs(_count_ll(y[:4], [0.3] * 3, 1e-12, 1e-6) - math.log(0.3)) < 0.1  # x0 ∈ [−0.1, 0.2)
+    gaussian = fd.level_loglik(
+        np.asarray(y, float),
+        np.full((1, 5), 0.3),
+        np.full(5, 1e-12),
+        np.full(6, 1 / 12),
+        np.zeros((1, 6)),
+        np.zeros((1, 6), bool),
+    )[0]
+    assert abs(gaussian - math.log(0.2)) > 0.5
+
+
+def test_count_loglik_matches_a_monte_carlo_of_rounded_noisy_ramps() -> None:
+    """P(readings | model) estimated by flying 400,000 noisy ramps and counting those that round to the same
+    readings; a drift 10 % off the truth included (the evidence a hypothesis gets is a difference of these)."""
+    rng = np.random.default_rng(11)
+    for slope, sq, sr, n in ((0.37, 0.05, 0.02, 8), (0.1, 0.02, 0.01, 12), (0.37, 0.2, 0.05, 8)):
+        x = 0.3 + np.concatenate([[0.0], np.cumsum(slope + sq * rng.standard_normal(n - 1))])
+        y = np.round(x)
+        for drift in (slope, 1.1 * slope):
+            paths = y[0] + rng.uniform(-0.5, 0.5, 400_000)
+            same = np.ones(paths.shape[0], dtype=bool)
+            for k in range(1, n):
+                paths = paths + drift + sq * rng.standard_normal(paths.shape[0])
+                same &= np.round(paths + sr * rng.standard_normal(paths.shape[0])) == y[k]
+            assert abs(_count_ll(y, [drift] * (n - 1), sq**2, sr**2) - math.log(same.mean())) < 0.15
+
+
+def test_count_loglik_cannot_tell_speeds_the_readings_do_not_separate() -> None:
+    """Ten readings of 0: a still wheel keeps them with probability 1, one creeping 0.02 count/s with the
+    probability 0.82 that it started below 0.5 − 0.18 (by hand): a hypothesis the readings cannot rule out keeps
+    a comparable likelihood. A count transition where a ramp predicts it is evidence against a slower ramp."""
+    y = np.zeros(10)
+    assert abs(_count_ll(y, [0.0] * 9, 1e-8, 1e-4)) < 0.1
+    assert abs(_count_ll(y, [0.02] * 9, 1e-8, 1e-4) - math.log(0.82)) < 0.1
+    ramp = [0, 0, 1, 1, 1, 1, 2, 2, 2, 2]  # 0.25 count/s from x0 = 0.1: transitions at 1.6 s and 5.6 s
+    assert _count_ll(ramp, [0.25] * 9, 1e-8, 1e-4) > _count_ll(ramp, [0.2] * 9, 1e-8, 1e-4) + 1.0
+    # a one-count bias from sample 5 explains a jump of a still wheel by one count; without it the jump needs
+    # a start within a few σ = 0.01 of the count's edge (the Gaussian slices of the start leak past it: the
+    # likelihood errs towards "cannot tell", never towards certainty)
+    offset = np.r_[np.zeros(5), np.ones(5)]
+    jump = [0, 0, 0, 0, 0, 1, 1, 1, 1, 1]
+    assert _count_ll(jump, [0.0] * 9, 1e-8, 1e-4, offset) > _count_ll(jump, [0.0] * 9, 1e-8, 1e-4) + 5.0
+
+
+def test_a_rotor_seized_between_samples_may_be_read_braking() -> None:
+    """A wheel at 40 counts seizes between samples 5 and 6 and is read 4 counts at sample 6, then 0: the first
+    reset sample reads anywhere between the speed and 0, so the seizure beats a motionless rotor's reading of 4
+    (which rounding alone cannot give a speed reset to 0 exactly) and beats no fault (a 40-count drop)."""
+    y = np.r_[np.full(6, 40.0), [4.0], np.zeros(5)]
+    n = y.shape[0]
+    reset = np.zeros((2, n), dtype=np.bool_)
+    reset[0, 6:] = True
+    ll = fd.count_loglik(y, np.zeros((2, n - 1)), np.full(n - 1, 1e-8), 1.0, 1e-4, np.zeros((2, n)), reset)
+    assert np.all(np.isfinite(ll))
+    assert ll[0] > ll[1] + 100.0
+    assert ll[0] > math.log(1.0 / 40.0) - 1.0  # the braking reading: one count of the 40 it may take
