@@ -404,12 +404,11 @@ def program_1(
 
 @njit(cache=True)
 def program_at(
-    g: Program, clk: Clock, c_pn: np.ndarray, t: float, pos: Position
+    g: Program, clk: Clock, c_pn: np.ndarray, t: float, r: np.ndarray, v: np.ndarray, a: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    """:func:`program_1` of program ``g`` where the spacecraft is at t (``c_pn``: Ephemeris.c_pn)."""
-    sample: tuple[np.ndarray, np.ndarray, np.ndarray, bool] = program_1(
-        g, t, clk.t0_unix_s, pos.r, pos.v, pos.a, c_pn, clk.dut1_s
-    )
+    """:func:`program_1` of program ``g`` where the spacecraft is at t (ECI ``r``, ``v``, ``a``; ``c_pn``:
+    Ephemeris.c_pn). Takes Position's arrays, not the tuple (each array passed costs a reference count)."""
+    sample: tuple[np.ndarray, np.ndarray, np.ndarray, bool] = program_1(g, t, clk.t0_unix_s, r, v, a, c_pn, clk.dut1_s)
     return sample
 
 
@@ -681,17 +680,20 @@ def _mismatch_filter_stage(
 
 
 @njit(cache=True)
-def _sample_estimate_stage(kind: int, x: np.ndarray, gyro: np.ndarray, sample: StarSample, est: Estimate) -> None:
-    """The estimates that need no filter: the true state (ESTIMATOR_TRUTH) or the star tracker and ``gyro``
-    (Sensed.omega) as sampled (ESTIMATOR_STAR_TRACKER; a missing sample keeps the last one)."""
+def _sample_estimate_stage(
+    kind: int, x: np.ndarray, gyro: np.ndarray, sample: StarSample, q_est: np.ndarray, w_est: np.ndarray
+) -> None:
+    """The estimates that need no filter, into the estimate's ``q_est``, ``w_est``: the true state
+    (ESTIMATOR_TRUTH) or the star tracker and ``gyro`` (Sensed.omega) as sampled (ESTIMATOR_STAR_TRACKER; a
+    missing sample keeps the last one)."""
     if kind == ESTIMATOR_TRUTH:
-        est.q[:] = x[0:4]
-        est.omega[:] = x[4:7]
+        q_est[:] = x[0:4]
+        w_est[:] = x[4:7]
         return
     if sample.star_ok:
-        est.q[:] = sample.q
+        q_est[:] = sample.q
     if sample.gyro_ok:
-        est.omega[:] = gyro
+        w_est[:] = gyro
 
 
 @njit(cache=True)
@@ -830,26 +832,34 @@ def _allocate_1(
 @njit(cache=True)
 def _allocation_stage(
     wheel_axes: np.ndarray,
-    act: Actuators,
+    params: np.ndarray,
+    torque_quantum_nm: np.ndarray,
+    max_torque_nm: np.ndarray,
+    md_max_am2: float,
     faults: np.ndarray,
     t: float,
     mag: np.ndarray,
     h_wheels: np.ndarray,
     available: np.ndarray,
-    cmd: Commands,
+    body_torque: np.ndarray,
+    frozen_torque: np.ndarray,
+    wheel_alloc: np.ndarray,
+    dipole_alloc: np.ndarray,
+    wheel_cmd: np.ndarray,
+    dipole: np.ndarray,
 ) -> int:
     """Controller faults on the body torque, then wheel torques and MD dipole (seed 000 eq 6, §3; sim_core.
-    allocation) with rod faults and the dipole limit. Returns the allocation status."""
-    body_torque, dipole = cmd.body_torque, cmd.dipole
-    faults_mod.controller_faults_1(faults, t, body_torque, cmd.frozen_torque)
+    allocation, Actuators.allocation ``params``) with rod faults and the dipole limit. Returns the allocation
+    status. Takes the Actuators' and Commands' arrays, not the tuples (each array passed costs a reference count)."""
+    faults_mod.controller_faults_1(faults, t, body_torque, frozen_torque)
     status = _allocate_1(
-        wheel_axes, act.allocation, act.torque_quantum_nm, act.max_torque_nm, available, h_wheels, mag, body_torque,
-        cmd.wheel_alloc, cmd.dipole_alloc, cmd.wheel_cmd,
+        wheel_axes, params, torque_quantum_nm, max_torque_nm, available, h_wheels, mag, body_torque, wheel_alloc,
+        dipole_alloc, wheel_cmd,
     )  # fmt: skip
-    dipole[:] = cmd.dipole_alloc
+    dipole[:] = dipole_alloc
     faults_mod.rod_faults_1(faults, t, dipole)
     for i in range(3):
-        dipole[i] = min(max(dipole[i], -act.md_max_am2), act.md_max_am2)
+        dipole[i] = min(max(dipole[i], -md_max_am2), md_max_am2)
     return status
 
 
@@ -1195,6 +1205,8 @@ def fly_variant(
     orbit_table, field_table, inertia_flown = eph.orbit_table, eph.field_table, plant.inertia
     friction_flown, friction_base, m = plant.friction, c.truth.friction, act.motor
     q_est, w_est, body_torque, available = est.q, est.omega, cmd.body_torque, mon.available
+    frozen_torque, wheel_alloc, dipole_alloc, mag = cmd.frozen_torque, cmd.wheel_alloc, cmd.dipole_alloc, sensed.mag
+    wheel_axes, alloc_params, torque_quantum, c_pn = p.wheel_axes, act.allocation, act.torque_quantum_nm, eph.c_pn
 
     for k in range(int(scalars[C_STEP]), clk.n_steps):
         t = k * clk.dt_s
@@ -1229,18 +1241,18 @@ def fly_variant(
                     sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, est
                 )
             elif estc.kind == ESTIMATOR_SEED000 or estc.kind == ESTIMATOR_SEED003:
-                q_p, w_p, _, _ = program_at(prog, clk, eph.c_pn, t, pos)
+                q_p, w_p, _, _ = program_at(prog, clk, c_pn, t, r_eci, v_eci, a_eci)
                 _mismatch_filter_stage(estc, t_q, q_p, w_p, sensed, sample, est)
                 valid = sample.star_ok
             else:
-                _sample_estimate_stage(estc.kind, x, sensed.omega, sample, est)
+                _sample_estimate_stage(estc.kind, x, sensed.omega, sample, q_est, w_est)
 
         if control_tick:
             shared[slot] = k
             if shared[0] != 0:
                 k_next = k
                 break
-            q_p, w_p, wd_p, obs_p = program_at(prog, clk, eph.c_pn, t, pos)
+            q_p, w_p, wd_p, obs_p = program_at(prog, clk, c_pn, t, r_eci, v_eci, a_eci)
             cmd.program[0:4] = q_p
             cmd.program[4:7] = w_p
             cmd.program[7:10] = wd_p
@@ -1261,7 +1273,10 @@ def fly_variant(
                 p.inertia, p.wheel_axes, p.wheel_inertia, c.law, mc.on, mode, q_est, w_est, speeds, h_wheels,
                 available, cmd.program, cmd.lead_lag, body_torque,
             )  # fmt: skip
-            status = _allocation_stage(p.wheel_axes, act, faults, t, sensed.mag, h_wheels, available, cmd)
+            status = _allocation_stage(
+                wheel_axes, alloc_params, torque_quantum, max_torque, act.md_max_am2, faults, t, mag, h_wheels,
+                available, body_torque, frozen_torque, wheel_alloc, dipole_alloc, wheel_cmd, dipole,
+            )  # fmt: skip
             if mc.on:
                 _mode_actuation_stage(
                     p, act, mc.bdot_gain, t_u, mode, status, est, sensed, have_mag_prev, h_wheels, mon.available, cmd
@@ -1274,7 +1289,7 @@ def fly_variant(
 
         if output and out_i < rec.shape[0]:
             if not control_tick:  # a control tick has just sampled the scenario's program at t
-                q_p, w_p, _, obs_p = program_at(prog, clk, eph.c_pn, t, pos)
+                q_p, w_p, _, obs_p = program_at(prog, clk, c_pn, t, r_eci, v_eci, a_eci)
             _record_stage(
                 nq, x, q_p, w_p, obs_p, r_eci, q_est, w_est, dipole, body_torque, wheel_cmd, delivered, available,
                 status, flags, mode, rec[out_i],
