@@ -63,7 +63,7 @@ __all__ = ["Archive", "CHUNK_PACKETS"]
 # Packets per chunk. benchmarks/ingest.py (bench_chunk_sizes) measures bigger chunks committing
 # faster (1k: ~7 M samples/s, 16k: 8-19 M on this shared machine) with short queries alike (2-4 ms).
 CHUNK_PACKETS = 16_384
-PENDING_OCTETS = 8 << 20  # decoded values and raw packets held back to fill archive chunks (memory bound)
+PENDING_OCTETS = 6 << 20  # decoded values and raw packets held back to fill archive chunks (memory bound)
 SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundStation, Tle, Pass))
 UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
 ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
