@@ -1301,7 +1301,8 @@ def fly_variant(
         if has_faults:
             faults_mod.wheel_commands_1(faults, t, wheel_cmd, frozen_cmd, delivered)
         else:
-            delivered[:] = wheel_cmd
+            for w in range(nw):
+                delivered[w] = wheel_cmd[w]
         wheels.limit_motor_torque_into(delivered, wheel_speeds, wheel_inertia, max_torque, max_momentum)
         if m.on:
             delivered[:] = wheels.driven_motor_torque_1(

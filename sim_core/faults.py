@@ -48,6 +48,7 @@ __all__ = [
     "format_fault",
     "fault_table",
     "fault_active_1",
+    "fault_active_at",
     "fault_transitions_1",
     "sensor_faults_1",
     "star_tracker_faults_1",
@@ -180,15 +181,22 @@ def fault_table(variants: Sequence[VariantSpec]) -> tuple[np.ndarray, np.ndarray
 # --- effect kernels (compiled; the loop and the emulator call these) -------------------------------
 
 
+@njit(cache=True, inline="always")
+def fault_active_at(t: float, onset: float, end: float, kind: int, period: float, duty: float) -> bool:
+    """Whether a fault acts at t: inside [onset, end) and, if intermittent, in an on-window. Scalars only, for
+    kernels the loop calls every step (a kernel handed a table row is reference-counted at each call)."""
+    if t < onset or t >= end:
+        return False
+    if kind == Y_INTERMITTENT and period > 0.0:
+        phase = (t - onset) % period
+        return bool(phase < duty * period)
+    return True
+
+
 @njit(cache=True)
 def fault_active_1(row: np.ndarray, t: float) -> bool:
-    """Whether a fault row acts at t: inside [onset, end) and, if intermittent, in an on-window."""
-    if t < row[F_ONSET] or t >= row[F_END]:
-        return False
-    if int(row[F_TYPE]) == Y_INTERMITTENT and row[F_PERIOD] > 0.0:
-        phase = (t - row[F_ONSET]) % row[F_PERIOD]
-        return bool(phase < row[F_DUTY] * row[F_PERIOD])
-    return True
+    """Whether a fault row acts at t (:func:`fault_active_at` on the row's onset, end, type, period, duty)."""
+    return fault_active_at(t, row[F_ONSET], row[F_END], int(row[F_TYPE]), row[F_PERIOD], row[F_DUTY])
 
 
 @njit(cache=True)
@@ -287,19 +295,23 @@ def star_tracker_faults_1(
 @njit(cache=True)
 def wheel_commands_1(faults: np.ndarray, t: float, cmd: np.ndarray, frozen_cmd: np.ndarray, out: np.ndarray) -> None:
     """Torque the wheel motors deliver for the held command under the wheel faults (seed 002 §3.2.2:
-    outage/stuck deliver 0, multiplicative gain, additive bias, frozen command)."""
-    out[:] = cmd
+    outage/stuck deliver 0, multiplicative gain, additive bias, frozen command). Called every dynamics step:
+    element reads and writes only, no row views or slice copies (those keep numba from pruning the reference
+    counts of the arguments: 60 -> 9 ns per call with two faults)."""
+    for i in range(out.shape[0]):
+        out[i] = cmd[i]
     for f in range(faults.shape[0]):
-        row = faults[f]
-        if int(row[F_TARGET]) != T_WHEEL or not fault_active_1(row, t):
+        kind, p = int(faults[f, F_TYPE]), int(faults[f, F_INDEX])
+        if int(faults[f, F_TARGET]) != T_WHEEL or not fault_active_at(
+            t, faults[f, F_ONSET], faults[f, F_END], kind, faults[f, F_PERIOD], faults[f, F_DUTY]
+        ):
             continue
-        kind, p = int(row[F_TYPE]), int(row[F_INDEX])
         if kind in (Y_FAIL, Y_INTERMITTENT, Y_STUCK):
             out[p] = 0.0
         elif kind == Y_GAIN:
-            out[p] *= row[F_GAIN]
+            out[p] *= faults[f, F_GAIN]
         elif kind == Y_BIAS:
-            out[p] += row[F_VALUE]
+            out[p] += faults[f, F_VALUE]
         elif kind == Y_FROZEN:
             out[p] = frozen_cmd[p]
 
