@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import uvicorn
+from fastapi import FastAPI
 
 from backend.app import create_app
 from backend.client import Client, ClientError
@@ -29,9 +30,14 @@ def settings(tmp_path: Path, database_url: str, dask_scheduler: str) -> Settings
 
 
 @pytest.fixture
-def server(settings: Settings) -> Iterator[tuple[str, dict[str, str]]]:
+def app(settings: Settings) -> FastAPI:
+    """The app under test (its services reachable for waits on their state)."""
+    return create_app(settings)
+
+
+@pytest.fixture
+def server(app: FastAPI) -> Iterator[tuple[str, dict[str, str]]]:
     """The app served by uvicorn in a thread; (base URL, token per role)."""
-    app = create_app(settings)
     port = free_port()
     uv = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
     thread = threading.Thread(target=uv.run, daemon=True)
@@ -46,7 +52,9 @@ def server(settings: Settings) -> Iterator[tuple[str, dict[str, str]]]:
     thread.join(15)
 
 
-def test_client_uploads_queries_and_gets_live_samples(server: tuple[str, dict[str, str]], shared_data: Path) -> None:
+def test_client_uploads_queries_and_gets_live_samples(
+    app: FastAPI, server: tuple[str, dict[str, str]], shared_data: Path
+) -> None:
     url, tokens = server
     received: list[dict] = []
 
@@ -58,7 +66,10 @@ def test_client_uploads_queries_and_gets_live_samples(server: tuple[str, dict[st
 
     listener = threading.Thread(target=listen, daemon=True)
     listener.start()
-    time.sleep(1.0)  # let the subscription register before the upload publishes
+    hub, deadline = app.state.services.hub, time.monotonic() + STARTUP_TIMEOUT_S
+    while not hub.wants_any("parameters/q_ib_1"):  # the subscription registered: the upload's samples reach it
+        assert time.monotonic() < deadline and listener.is_alive(), "the subscription never registered"
+        time.sleep(0.01)
     with Client(url, tokens["operator"]) as api:
         report = api.upload(shared_data / DIARY)
         t_ns, q1 = api.samples("q_ib_1", max_points=50)

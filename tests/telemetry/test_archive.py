@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import time
 from pathlib import Path
 
 import ccsdspy
@@ -254,20 +253,17 @@ def test_bad_input_names_the_field(archive: Archive) -> None:
         Archive("mysql://nowhere/db")
 
 
-READ_BESIDE_WRITER_S = 2.0  # a blocked read would wait for the 30 s busy timeout
-
-
 def test_reads_are_not_blocked_by_an_open_upload_transaction(archive: Archive, archive_url: str) -> None:
     whole = synthetic_batch(100)
     archive.ingest(SAT, [whole], source="first", uploaded_by="tester")
     other_writer = create_archive_engine(archive_url)
     with other_writer.begin() as conn:
         conn.execute(text("UPDATE upload SET uploaded_by = 'someone-else'"))  # holds the write lock
-        start = time.perf_counter()
+        # answered while the lock is held (this thread cannot release it meanwhile): a read that waited for the
+        # writer would end in "database is locked" after the busy timeout, or never
         _, v = archive.read_parameter(SAT, "index", int(whole.t_utc_ns[0]), int(whole.t_utc_ns[-1]))
-        elapsed = time.perf_counter() - start
     other_writer.dispose()
-    assert v.size == 100 and elapsed < READ_BESIDE_WRITER_S
+    assert v.size == 100
 
 
 def test_concurrent_overlapping_uploads_store_each_packet_once(archive: Archive, archive_url: str) -> None:
