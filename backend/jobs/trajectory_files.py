@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+import zipfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import numpy as np
 
@@ -108,34 +110,104 @@ def write_parquet(traj: Trajectory, path: Path) -> Path:
     return path
 
 
+@dataclass(frozen=True)
+class _Member:
+    """One .npy member of an npz archive, from its header: the name, shape, dtype and whether it is C-ordered."""
+
+    name: str
+    shape: tuple[int, ...]
+    dtype: np.dtype
+    c_order: bool
+
+
+def _npz_members(archive: zipfile.ZipFile) -> Iterator[tuple[_Member, IO[bytes]]]:
+    """Each .npy member of an npz with its stream opened just past the header (NEP 1 format 1.0 or 2.0), nothing
+    of its data read."""
+    for info in archive.infolist():
+        if not info.filename.endswith(".npy"):
+            continue
+        stream = archive.open(info)
+        version = np.lib.format.read_magic(stream)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(stream)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(stream)
+        else:
+            stream.close()
+            raise ValueError(f"{info.filename}: .npy format {version} (numpy's savez writes 1.0 or 2.0)")
+        yield _Member(info.filename[: -len(".npy")], shape, dtype, not fortran and not dtype.hasobject), stream
+
+
 def npz_rows(path: Path) -> tuple[pa.Schema, Iterator[pa.RecordBatch]]:
     """A job's trajectory.npz (engine or rigid spin) as rows at full resolution: ``member`` (batch index), ``t_s``,
     then every time series (an array whose axis 1 is the time axis, the batch on axis 0) as one column per
     component, ``name_i`` (as :func:`columns`), or ``name`` when scalar; member after member, in record batches of
-    EXPORT_BATCH_ROWS rows. The arrays are read at once (the file is bounded by max_output_mb), the rows made
-    batch by batch."""
+    EXPORT_BATCH_ROWS rows. Streamed per series: member-major rows are the C order of a (member, time, component)
+    array, so each batch reads the next rows of every series' compressed member in turn; only the time axis and
+    one batch are held (a Fortran-ordered series, which np.savez writes only for Fortran-contiguous arrays, is read
+    whole)."""
     import pyarrow as pa
 
-    with np.load(path) as npz:
-        t = npz["t_s"]
-        arrays = {k: npz[k] for k in npz.files if k != "t_s"}
-    series = {k: a.reshape(a.shape[0], t.size, -1) for k, a in arrays.items() if a.ndim >= 2 and a.shape[1] == t.size}
+    with zipfile.ZipFile(path) as archive:
+        members = {}
+        for member, stream in _npz_members(archive):
+            members[member.name] = member
+            stream.close()
+        with np.load(path) as npz:
+            t = npz["t_s"]
+    series = {
+        k: m for k, m in members.items() if k != "t_s" and len(m.shape) >= 2 and m.shape[1] == t.size
+    }  # the npz's own order, as np.load lists it
+    widths = {k: int(np.prod(m.shape[2:], dtype=np.int64)) for k, m in series.items()}
     fields = [pa.field("member", pa.int32()), pa.field("t_s", pa.from_numpy_dtype(t.dtype))]
-    for k, a in series.items():
-        names = [k] if arrays[k].ndim == 2 else [f"{k}_{i}" for i in range(a.shape[2])]
-        fields += [pa.field(name, pa.from_numpy_dtype(a.dtype)) for name in names]
+    for k, m in series.items():
+        names = [k] if len(m.shape) == 2 else [f"{k}_{i}" for i in range(widths[k])]
+        fields += [pa.field(name, pa.from_numpy_dtype(m.dtype)) for name in names]
     schema = pa.schema(fields)
-    members = next(iter(series.values())).shape[0] if series else 1
+    n_members = next(iter(series.values())).shape[0] if series else 1
 
     def batches() -> Iterator[pa.RecordBatch]:
-        for m in range(members):
-            for lo in range(0, t.size, EXPORT_BATCH_ROWS):
-                rows = slice(lo, lo + EXPORT_BATCH_ROWS)
-                cols = [np.full(t[rows].size, m, dtype=np.int32), t[rows]]
-                cols += [a[m, rows, i] for a in series.values() for i in range(a.shape[2])]
-                yield pa.record_batch([pa.array(c) for c in cols], schema=schema)
+        with zipfile.ZipFile(path) as archive:
+            readers: dict[str, Callable[[int], np.ndarray]] = {}
+            for member, stream in _npz_members(archive):
+                if member.name in series:
+                    readers[member.name] = _row_reader(member, stream, widths[member.name], path)
+            for m in range(n_members):
+                for lo in range(0, t.size, EXPORT_BATCH_ROWS):
+                    rows = t[lo : lo + EXPORT_BATCH_ROWS]
+                    cols = [np.full(rows.size, m, dtype=np.int32), rows]
+                    for k in series:
+                        block = readers[k](rows.size)
+                        cols += [block[:, i] for i in range(widths[k])]
+                    yield pa.record_batch([pa.array(c) for c in cols], schema=schema)
 
     return schema, batches()
+
+
+def _row_reader(member: _Member, stream: IO[bytes], width: int, path: Path) -> Callable[[int], np.ndarray]:
+    """The next ``n`` rows (n, width) of a series in member-major order: read from its stream when C-ordered, else
+    sliced from the array read whole."""
+    if not member.c_order:
+        stream.close()
+        with np.load(path) as npz:
+            whole = npz[member.name].reshape(-1, width, order="C")
+        at = 0
+
+        def sliced(n: int) -> np.ndarray:
+            nonlocal at
+            at += n
+            return whole[at - n : at]
+
+        return sliced
+    row_bytes = width * member.dtype.itemsize
+
+    def read(n: int) -> np.ndarray:
+        data = stream.read(n * row_bytes)
+        if len(data) != n * row_bytes:
+            raise ValueError(f"{member.name}.npy: ends early ({len(data)} of {n * row_bytes} bytes)")
+        return np.frombuffer(data, dtype=member.dtype).reshape(n, width)
+
+    return read
 
 
 def write_plots(traj: Trajectory, out_dir: Path, variant: int = 0) -> list[Path]:
