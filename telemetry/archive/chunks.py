@@ -30,7 +30,7 @@ STORABLE_KINDS = "biuf"  # bool, signed, unsigned, float: what min/max and limit
 
 
 _NARROW_INTS = (np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32)
-_INT_RANGES = [(t, int(np.iinfo(t).min), int(np.iinfo(t).max)) for t in _NARROW_INTS]
+_INT_RANGES = [(np.dtype(t), int(np.iinfo(t).min), int(np.iinfo(t).max)) for t in _NARROW_INTS]
 _codec = threading.local()  # a ZstdCompressor is not thread-safe; making one per call costs as much as compressing
 
 
@@ -67,19 +67,29 @@ def narrowest_exact(values: np.ndarray) -> np.ndarray:
     """
     array = np.ascontiguousarray(values)
     if array.dtype == np.float64 and array.size:
-        with np.errstate(over="ignore"):  # beyond float32's range: inf, which fails the comparison below
-            narrow = array.astype(np.float32)
-        if np.array_equal(narrow.astype(np.float64), array, equal_nan=True):
-            return narrow
+        return _as_float32_if_exact(array)
     if array.dtype.kind in "iu" and array.size:
         return _narrowest_int(array, int(array.min()), int(array.max()))
     return array
 
 
+def _as_float32_if_exact(array: np.ndarray) -> np.ndarray:
+    """A float64 column as float32 when that holds every value exactly (NaN as NaN), else itself."""
+    with np.errstate(over="ignore"):  # beyond float32's range: inf, which fails the comparison below
+        narrow = array.astype(np.float32)
+    same = narrow == array  # compared in float64: exact
+    if same.all() or (same | np.isnan(array)).all():  # NaN stays NaN in float32
+        return narrow
+    return array
+
+
 def _narrowest_int(array: np.ndarray, lo: int, hi: int) -> np.ndarray:
     """An integer column in the smallest integer dtype holding lo..hi (its own when none is smaller)."""
+    size = array.dtype.itemsize
     for candidate, t_min, t_max in _INT_RANGES:
-        if t_min <= lo and hi <= t_max and np.dtype(candidate).itemsize < array.dtype.itemsize:
+        if candidate.itemsize >= size:
+            return array
+        if t_min <= lo and hi <= t_max:
             return array.astype(candidate)
     return array
 
@@ -108,7 +118,7 @@ def encode_values_range(
     if array.dtype.kind in "iu":
         stored = _narrowest_int(array, int(v_min), int(v_max))
     else:
-        stored = narrowest_exact(array)
+        stored = _as_float32_if_exact(array) if array.dtype == np.float64 else array
         if not (np.isfinite(v_min) and np.isfinite(v_max)):  # NaN (no such element) or infinities
             finite = array[np.isfinite(array)]
             v_min, v_max = (finite.min(), finite.max()) if finite.size else (None, None)

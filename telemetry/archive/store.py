@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from sqlalchemy import Connection, Row, Table, delete, func, insert, select, update
+from sqlalchemy import Connection, Dialect, Row, Table, bindparam, delete, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
 from telemetry.archive.batch import PacketBatch, sequence_gaps
@@ -68,6 +68,13 @@ SAT, STATION, TLE, PASS = (cast(Table, m.__table__) for m in (Satellite, GroundS
 UPLOAD, PARAM, CHUNK, VALUE = (cast(Table, m.__table__) for m in (Upload, Parameter, PacketChunk, ValueChunk))
 ALARM, EVENT = (cast(Table, m.__table__) for m in (Alarm, AlarmEvent))
 UNDEFINED = cast(Table, UndefinedPacketChunk.__table__)
+# Built once: an upload asks it per APID and archive chunk (building the expression cost more than running it)
+_PACKET_KEYS = select(CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
+    CHUNK.c.satellite_id == bindparam("sat"),
+    CHUNK.c.apid == bindparam("apid"),
+    CHUNK.c.t_start_ns <= bindparam("t1"),
+    CHUNK.c.t_end_ns >= bindparam("t0"),
+)
 
 
 def _now_ns() -> int:
@@ -311,6 +318,7 @@ class Archive:
             archived: dict[int, int] = {}
             pending = _PendingBatches()
             last_written: dict[int, tuple[int, int]] = {}  # gaps between two archive chunks counted once
+            param_ids: dict[str, int] = {}  # parameter ids met in this transaction: looked up once per upload
             for decoded in results:
                 batches = _merge_by_apid([PacketBatch.from_sample_batch(b) for b in decoded.batches])
                 if existing is not None:
@@ -320,10 +328,14 @@ class Archive:
                     continue
                 ready = pending.add(batches)
                 if ready:
-                    parts.append(self._write_batches(conn, sat_id, upload_id, ready, limits or {}, last_written))
+                    parts.append(
+                        self._write_batches(conn, sat_id, upload_id, ready, limits or {}, last_written, param_ids)
+                    )
                 self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
             if pending.batches:
-                parts.append(self._write_batches(conn, sat_id, upload_id, pending.flush(), limits or {}, last_written))
+                parts.append(
+                    self._write_batches(conn, sat_id, upload_id, pending.flush(), limits or {}, last_written, param_ids)
+                )
             if existing is not None:
                 return IngestResult(
                     upload_id, True, packets_duplicate=sum(archived.values()), duplicates_by_apid=archived
@@ -500,9 +512,13 @@ class Archive:
         batches: list[PacketBatch],
         limits: Mapping[str, LimitSet],
         last_written: dict[int, tuple[int, int]] | None = None,
+        param_ids: dict[str, int] | None = None,
     ) -> IngestResult:
         """Write the batches' new packets; ``last_written`` (APID → time and sequence count of the upload's last
-        packet written so far, updated) counts a gap between two writes of one upload once, as one write would."""
+        packet written so far, updated) counts a gap between two writes of one upload once, as one write would;
+        ``param_ids`` (name → id of the satellite's parameters met so far in this transaction, updated) spares
+        a look-up per write."""
+        param_ids = {} if param_ids is None else param_ids
         accepted = duplicates = samples = 0
         gaps: list[Gap] = []
         changes: list[alarm_state.LevelChange] = []
@@ -514,7 +530,7 @@ class Archive:
             by_apid[batch.apid] = by_apid.get(batch.apid, 0) + n_dup_inside + n_dup_archived
             if fresh.n_packets == 0:
                 continue
-            self._write_chunks(conn, sat_id, upload_id, fresh)
+            self._write_chunks(conn, sat_id, upload_id, fresh, param_ids)
             accepted += fresh.n_packets
             samples += fresh.n_packets * len(fresh.values) - sum(
                 int(np.count_nonzero(np.isnan(v))) for v in fresh.values.values() if v.dtype.kind == "f"
@@ -524,7 +540,8 @@ class Archive:
                 gaps.extend(_gaps_of(fresh, previous))
                 if last_written is not None:
                     last_written[fresh.apid] = (int(fresh.t_utc_ns[-1]), int(fresh.seq_count[-1]))
-            changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
+            if limits:
+                changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
         changes.sort(key=lambda c: c.t_ns)
         n_events = alarm_state.apply_level_changes(conn, sat_id, upload_id, changes) if changes else 0
         return IngestResult(upload_id, False, accepted, duplicates, samples, n_events, gaps, by_apid)
@@ -546,20 +563,15 @@ class Archive:
     def _packet_keys(
         self, conn: Connection, sat_id: int, apid: int, t0_ns: int, t1_ns: int
     ) -> tuple[np.ndarray, np.ndarray]:
-        rows = conn.execute(
-            select(CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
-                CHUNK.c.satellite_id == sat_id,
-                CHUNK.c.apid == apid,
-                CHUNK.c.t_start_ns <= t1_ns,
-                CHUNK.c.t_end_ns >= t0_ns,
-            )
-        ).all()
+        rows = conn.execute(_PACKET_KEYS, {"sat": sat_id, "apid": apid, "t0": t0_ns, "t1": t1_ns}).all()
         if not rows:
             return np.empty(0, np.int64), np.empty(0, np.int64)
         return (np.concatenate([decode_int64(r[0]) for r in rows]), np.concatenate([decode_int64(r[1]) for r in rows]))
 
-    def _write_chunks(self, conn: Connection, sat_id: int, upload_id: int, batch: PacketBatch) -> None:
-        param_ids = self._parameter_ids(conn, sat_id, batch.apid, list(batch.values))
+    def _write_chunks(
+        self, conn: Connection, sat_id: int, upload_id: int, batch: PacketBatch, known: dict[str, int]
+    ) -> None:
+        param_ids = self._parameter_ids(conn, sat_id, batch.apid, list(batch.values), known)
         bounds = list(range(0, batch.n_packets, CHUNK_PACKETS)) + [batch.n_packets]
         raw = np.frombuffer(batch.raw, dtype=np.uint8)
         byte_ends = np.concatenate(([0], np.cumsum(batch.raw_lengths)))
@@ -582,14 +594,22 @@ class Archive:
         chunk_ids = (
             conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
         )
-        value_rows = []
+        value_rows: list[tuple[Any, ...]] = []
+        spans = list(zip(chunk_ids, bounds[:-1], bounds[1:]))
         for name, column in batch.values.items():
-            for chunk_id, lo, hi in zip(chunk_ids, bounds[:-1], bounds[1:]):
-                value_rows.append(_value_row(param_ids[name], chunk_id, np.asarray(column)[lo:hi]))
+            param_id, column = param_ids[name], np.asarray(column)
+            value_rows.extend(_value_row(param_id, chunk_id, column[lo:hi]) for chunk_id, lo, hi in spans)
         if value_rows:
-            conn.execute(insert(VALUE), value_rows)
+            _insert_value_rows(conn, value_rows)
 
-    def _parameter_ids(self, conn: Connection, sat_id: int, apid: int, names: list[str]) -> dict[str, int]:
+    def _parameter_ids(
+        self, conn: Connection, sat_id: int, apid: int, names: list[str], known: dict[str, int]
+    ) -> dict[str, int]:
+        """Ids of the satellite's parameters ``names`` (added with ``apid`` when new); ``known`` (ids found before
+        in this transaction) is consulted first and updated."""
+        names = [n for n in names if n not in known]
+        if not names:
+            return known
         rows = conn.execute(
             select(PARAM.c.name, PARAM.c.id, PARAM.c.apid).where(
                 PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(names)
@@ -607,7 +627,8 @@ class Archive:
                 )
             )
             ids.update({name: int(param_id) for name, param_id in added})
-        return ids
+        known.update(ids)
+        return known
 
     # --- reading -------------------------------------------------------------------------
     def satellites(self, exclude_apids: Sequence[int] = ()) -> list[dict[str, Any]]:
@@ -1083,18 +1104,40 @@ def _limit_changes(
     return changes
 
 
-def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> dict[str, Any]:
-    """A value chunk's row; integers (decoded in their field's width) read back as int64, uint64 as uint64."""
-    wide = values.dtype.kind in "iu" and values.dtype != np.uint64
-    dtype, blob, v_min, v_max = encode_values_range(values, np.dtype(np.int64) if wide else None)
-    return {
-        "parameter_id": param_id,
-        "chunk_id": chunk_id,
-        "dtype": dtype,
-        "v_min": v_min,
-        "v_max": v_max,
-        "v_blob": blob,
-    }
+_INT64 = np.dtype(np.int64)
+_UINT64 = np.dtype(np.uint64)
+_VALUE_COLUMNS = ("parameter_id", "chunk_id", "dtype", "v_min", "v_max", "v_blob")
+
+
+def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> tuple[Any, ...]:
+    """A value chunk's row (_VALUE_COLUMNS); integers (decoded in their field's width) read back as int64, uint64
+    as uint64."""
+    wide = values.dtype.kind in "iu" and values.dtype != _UINT64
+    dtype, blob, v_min, v_max = encode_values_range(values, _INT64 if wide else None)
+    return param_id, chunk_id, dtype, v_min, v_max, blob
+
+
+_VALUE_INSERTS: dict[tuple[str, str, str], tuple[str, bool]] = {}
+
+
+def _value_insert_sql(dialect: Dialect) -> tuple[str, bool]:
+    """The value chunks' INSERT (no RETURNING) in the driver's parameter style, and whether its parameters are
+    positional; compiled once per kind of driver."""
+    key = (dialect.name, str(dialect.driver), str(dialect.paramstyle))
+    if key not in _VALUE_INSERTS:
+        compiled = insert(VALUE).inline().compile(dialect=dialect, column_keys=list(_VALUE_COLUMNS))
+        if compiled.positional and tuple(compiled.positiontup or ()) != _VALUE_COLUMNS:
+            raise RuntimeError(f"value_chunk INSERT binds {compiled.positiontup}, expected {_VALUE_COLUMNS}")
+        _VALUE_INSERTS[key] = str(compiled), compiled.positional
+    return _VALUE_INSERTS[key]
+
+
+def _insert_value_rows(conn: Connection, rows: list[tuple[Any, ...]]) -> None:
+    """One executemany of value chunk rows handed to the driver as they are (no per-row statement processing:
+    an upload writes thousands; the columns need no conversion -- ints, str, float or None, bytes), inside the
+    caller's transaction."""
+    sql, positional = _value_insert_sql(conn.dialect)
+    conn.exec_driver_sql(sql, rows if positional else [dict(zip(_VALUE_COLUMNS, row)) for row in rows])
 
 
 def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
