@@ -27,6 +27,7 @@ from telemetry import emulator
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 from telemetry.live import LiveStream, MemoryLink, hello
+from tests.telemetry.test_live import HANG_S, until_decoded
 
 FAILED_WHEEL = 1  # sim_core index: the dictionary's wheel_*_2
 FAILURE_ONSET_S = 350.0  # during the observing hold, before the 20° turn (420–520 s)
@@ -41,7 +42,6 @@ TIMESTAMP_FLOAT_TOL_NS = 1e3  # float64 seconds of 2026 carry ~0.2 µs; CUC 4+2 
 NOISE_STD_REL_TOL = 0.10  # 3,600 samples estimate a standard deviation to ~1.2 % (1σ); 10 % is > 8σ
 GPS_LEAP_S = 18  # GPS − UTC since 2017-01-01 (IERS Bulletin C: TAI − UTC = 37 s, GPS = TAI − 19 s)
 IGRF_NORM_TOL_T = 300e-9  # 6σ of the 50 nT magnetometer noise plus the 2 nT count and the 30 s field table
-SETTLE_S = 0.3  # > telemetry.live.DECODE_INTERVAL_S: lets the listener decode what arrived
 EARLY_TOL_S = 0.005  # time.time() vs time.monotonic() read a few microseconds apart; nothing may leave early
 LATE_TOL_S = 0.5  # event-loop wake-up and loopback delivery on a loaded 2-core machine (load average 8 seen)
 
@@ -286,7 +286,7 @@ def test_live_emulator_to_listener_delivers_decoded_samples_paced(nominal, decod
         start = time.monotonic()
         report = await emulator.send_stream(piece, emulator.SendOptions("127.0.0.1", port, rate))
         elapsed = time.monotonic() - start
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(live, len(piece))
         await live.stop()
         return drain(subscriber), report, elapsed
 
@@ -311,6 +311,7 @@ def test_sender_reconnects_and_resends_after_the_link_drops_each_connection_nami
     t0 = int(stream.t_utc_ns[0])
     piece = stream.window(t0, t0 + 20 * 10**9)
     received: list[bytearray] = []
+    handled: list[bool] = []  # one per connection the server has finished with
 
     async def link() -> emulator.SendReport:
         async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
@@ -322,13 +323,18 @@ def test_sender_reconnects_and_resends_after_the_link_drops_each_connection_nami
                 if first and len(buffer) > 3000:  # drop the first link mid-stream
                     break
             writer.close()
+            handled.append(True)
+
+        async def all_handled(n: int) -> None:
+            while len(handled) < n:
+                await asyncio.sleep(0.01)
 
         server = await asyncio.start_server(handle, "127.0.0.1", 0)
         port = server.sockets[0].getsockname()[1]
         report = await emulator.send_stream(
             piece, emulator.SendOptions("127.0.0.1", port, rate=40.0, retry_s=0.05, satellite="SAT-7")
         )
-        await asyncio.sleep(SETTLE_S)
+        await asyncio.wait_for(all_handled(report.connections), HANG_S)  # the server read each link to its end
         server.close()
         await server.wait_closed()
         return report
@@ -360,7 +366,7 @@ def test_sender_waits_for_a_listener_that_starts_late(nominal, dictionary) -> No
         subscriber = live.subscribe(max_messages=1_000)
         await live.start(port=port)
         report = await sending
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(live, len(piece))
         await live.stop()
         return report, drain(subscriber)
 
@@ -427,7 +433,7 @@ def test_cli_streams_to_a_live_listener(dictionary) -> None:
                 "S9",
             ],
         )
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(live, 50)  # 10 s: 40 ACS_HK at T_q = 0.25 s, 10 GPS_NAV at 1 s
         await live.stop()
         return code, drain(subscriber)
 

@@ -20,7 +20,7 @@ from tests.telemetry.packet_streams import T0_UTC_NS, engineering_values, packet
 
 HK_APID = 256
 STALL_S = 0.5  # about twice the 0.25-s send: most of the stream arrives while the loop is blocked
-SETTLE_S = 0.3  # > DECODE_INTERVAL_S: lets the listener decode what was sent before we look
+HANG_S = 60.0  # a listener that never decodes what was sent fails the wait after this (a hang bound, not a budget)
 
 
 async def send(port: int, data: bytes, piece_sizes: np.ndarray | None = None, pause_s: float = 0.0) -> None:
@@ -40,6 +40,17 @@ async def send(port: int, data: bytes, piece_sizes: np.ndarray | None = None, pa
     await writer.drain()
     writer.close()
     await writer.wait_closed()
+
+
+async def until_decoded(stream: LiveStream, n_packets: int) -> None:
+    """Wait until the listener has decoded ``n_packets`` (its tally says so): they are in its subscribers' queues
+    and its archive's pending batches."""
+
+    async def tally() -> None:
+        while stream.stats.packets_received < n_packets:
+            await asyncio.sleep(live.DECODE_INTERVAL_S)
+
+    await asyncio.wait_for(tally(), HANG_S)
 
 
 def drain(subscriber: Subscriber) -> list[LiveMessage]:
@@ -77,7 +88,7 @@ def test_noise_between_packets_is_quarantined_and_every_packet_delivered() -> No
         subscriber = stream.subscribe()
         port = await stream.start()
         await send(port, data, np.full(12, 500), pause_s=0.03)
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 60)
         await stream.stop()
         return drain(subscriber), stream.stats.stretches_quarantined
 
@@ -98,7 +109,7 @@ def test_packets_cut_at_arbitrary_boundaries_arrive_as_decoded_offline() -> None
         subscriber = stream.subscribe(max_messages=10_000)
         port = await stream.start()
         await send(port, raw.tobytes(), pieces, pause_s=0.001)
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 400)
         await stream.stop()
         return drain(subscriber)
 
@@ -124,11 +135,11 @@ def test_slow_subscriber_never_stalls_the_stream_sees_the_newest_batch_and_is_to
         fast, slow = stream.subscribe(max_messages=10_000), stream.subscribe(max_messages=1)
         port = await stream.start()
         await send(port, raw[:2_000].tobytes(), np.full(20, 100 * raw.shape[1]), pause_s=0.03)
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 2_000)
         fast_messages = drain(fast)
         first_slow = slow.get_nowait()
         await send(port, raw[2_000:].tobytes())
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 2_001)
         await stream.stop()
         assert first_slow.dropped_packets == slow.dropped_packets_total > 0  # every loss lies before it
         assert int(first_slow.batch.sequence_count[-1]) == 1_999  # newest wins: the slow one sees the present
@@ -159,7 +170,7 @@ def test_a_stalled_listener_catches_up_without_losing_packets() -> None:
         sender.start()
         time.sleep(STALL_S)  # the event loop stalls: the kernel buffers the stream meanwhile
         await asyncio.to_thread(sender.join)
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 1_000)
         await stream.stop()
         return drain(subscriber)
 
@@ -177,7 +188,7 @@ def test_corrupt_packet_is_quarantined_and_its_neighbours_delivered() -> None:
         subscriber = stream.subscribe()
         port = await stream.start()
         await send(port, raw.tobytes())
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 49)  # packet 25 quarantined
         await stream.stop()
         return drain(subscriber), stream.stats.stretches_quarantined
 
@@ -195,7 +206,7 @@ def test_stream_is_archived_in_batches(archive: Archive) -> None:
         stream = LiveStream(dictionary, archive=archive, satellite="REF", archive_interval_s=0.05)
         port = await stream.start()
         await send(port, raw.tobytes(), np.full(6, 100 * raw.shape[1]), pause_s=0.1)
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 600)
         await stream.stop()
         return stream.stats.packets_archived
 

@@ -13,7 +13,13 @@ import pytest
 
 from telemetry.live import LOOPBACK_SOURCES, LiveStream, source_networks
 from tests.telemetry.packet_streams import packets, reference
-from tests.telemetry.test_live import HK_APID, SETTLE_S, drain, send
+from tests.telemetry.test_live import HANG_S, HK_APID, drain, send, until_decoded
+
+
+async def door(stream: LiveStream) -> None:
+    """Until the listener has served or refused the connection."""
+    while not stream.stats.connections and not stream.stats.connections_refused:
+        await asyncio.sleep(0.01)
 
 
 def _deliver(sources: tuple[str, ...]) -> tuple[int, int, int]:
@@ -27,7 +33,9 @@ def _deliver(sources: tuple[str, ...]) -> tuple[int, int, int]:
         port = await stream.start()
         with contextlib.suppress(ConnectionError):  # a refused peer may see its connection reset mid-send
             await send(port, raw)
-        await asyncio.sleep(SETTLE_S)
+        await asyncio.wait_for(door(stream), HANG_S)
+        if stream.stats.connections:  # served: every packet decoded before we look
+            await until_decoded(stream, 20)
         await stream.stop()
         delivered = sum(len(m.batch.sequence_count) for m in drain(subscriber))
         return delivered, stream.stats.connections_refused, stream.stats.connections
@@ -60,7 +68,7 @@ def test_stopping_with_a_sender_connected_logs_nothing() -> None:
         _, writer = await asyncio.open_connection("127.0.0.1", port)
         writer.write(packets(reference().packets[HK_APID], 5, seed=4).tobytes())
         await writer.drain()
-        await asyncio.sleep(SETTLE_S)
+        await until_decoded(stream, 5)
         await stream.stop()
         await asyncio.sleep(0.1)
         writer.close()
