@@ -30,6 +30,7 @@ def _routers() -> list:
         diagnoses,
         health,
         live,
+        monitors,
         parameters,
         passes,
         satellites,
@@ -52,6 +53,7 @@ def _routers() -> list:
         live.router,
         satellites.router,
         diagnoses.router,
+        monitors.router,
     ]
 
 

@@ -363,6 +363,59 @@ class DiagnosisPublic(BaseModel):
     )
 
 
+class FlightCreate(BaseModel):
+    """Which diagnosed hypothesis to fly on the simulated monitor."""
+
+    diagnosis_id: str = Field(min_length=1, max_length=64, description="A succeeded diagnosis (GET /diagnoses).")
+    rank: int = Field(1, ge=1, le=100, description="1 = the top hypothesis, then the next ones in the ranking.")
+
+
+class FlightPublic(BaseModel):
+    """A diagnosed hypothesis flown by the diagnosis' replay from before its onset, against the telemetry."""
+
+    diagnosis_id: str
+    rank: int
+    satellite: str
+    scenario: str
+    hypothesis: dict[str, Any] = Field(
+        description="The diagnosis' hypothesis as it ranked it (fault, wheel, onset_utc, …)."
+    )
+    label: str = Field(description="How every monitor panel names the simulated side now.")
+    start_utc: str = Field(description="The twin's start: telemetry before the onset.")
+    end_utc: str
+    summaries: dict[str, dict[str, float]] = Field(
+        description="hypothesis and nominal (the no-fault twin): residuals against the telemetry of the window."
+    )
+    t_s: list[float] = Field(description="Seconds after start_utc of the wheel-speed samples.")
+    wheel_speed_rpm: dict[str, list[list[float]]] = Field(
+        description="telemetry, hypothesis, nominal: wheel speeds (rpm) per sample, min/max downsampled."
+    )
+    flown_by: str
+    on_monitor: bool = Field(
+        description="False when no monitors run (acs-twin serve runs them beside its live satellite)."
+    )
+
+
+class MonitorViewerPublic(BaseModel):
+    """One browser connected to a monitor and what its panel names the simulated side."""
+
+    role: str
+    client_id: int
+    label: str
+
+
+class SimulatedMonitorPublic(BaseModel):
+    """What the simulated monitor flies: the nominal (live) twin or a diagnosed hypothesis."""
+
+    running: bool = Field(description="Whether the 3D monitors run (acs-twin serve with its live satellite).")
+    satellite: str | None
+    showing: Literal["nominal", "hypothesis"]
+    label: str
+    monitor_label: str | None = Field(description="The label the monitors themselves hold (null without monitors).")
+    viewers: list[MonitorViewerPublic]
+    flight: FlightPublic | None = None
+
+
 class LatestValues(RootModel[dict[str, LatestValue]]):
     """The newest sample of each archived parameter, by name."""
 

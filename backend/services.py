@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 
 from sqlalchemy import Engine
@@ -21,6 +21,7 @@ from backend.jobs.jobs import JobManager
 from backend.twin.diagnosis import DiagnosisRuns, diagnose_detection
 from backend.twin.diagnosis_repository import DiagnosisRepository
 from backend.twin.live import LiveTwins
+from backend.twin.monitor_desk import MonitorDesk
 from backend.twin.session_repository import TwinSessionRepository
 
 __all__ = ["Services", "build_services"]
@@ -45,6 +46,7 @@ class Services:
     twins: LiveTwins
     diagnoses: DiagnosisRuns
     database_watch: DatabaseWatch
+    monitors: MonitorDesk = field(default_factory=MonitorDesk)  # the 3D monitors, once acs-twin serve runs them
 
     def close(self) -> None:
         """Stop jobs, diagnoses and the Dask cluster, the telemetry side, dispose of the engine."""

@@ -28,9 +28,11 @@ __all__ = [
     "hermite_orbit",
     "ORBIT_MARGIN_S",
     "ORBIT_TABLE_STEP_S",
+    "NOMINAL_LABEL",
 ]
 
 ORBIT_TABLE_STEP_S = 10.0  # cubic interpolation error ~ (n h)⁴ r / 384 ≈ 0.2 mm at LEO
+NOMINAL_LABEL = "nominal twin"  # what a monitor's simulated side shows unless a diagnosed hypothesis is flown on it
 ORBIT_MARGIN_S = 6000.0  # extrapolate a bit more than one LEO period beyond the data, both ways
 
 

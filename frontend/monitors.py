@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from frontend.feed import TwinFeed, WindowSource
+from frontend.feed import NOMINAL_LABEL, TwinFeed, WindowSource
 from frontend.twin_geometry import TwinFrame, TwinGeometry
 from frontend.twin_panels import PLOT_WINDOW_S
 from frontend.twin_scene import ROLES, Role
@@ -74,6 +74,7 @@ class MonitorHandles:
     windows: WindowSource | None = None
     viewers: dict[str, dict[int, Viewer]] = field(default_factory=dict)
     link: ViewerLink = field(default_factory=ViewerLink)  # viewers that chose to move together (any monitor)
+    label: str = NOMINAL_LABEL  # what the simulated side flies, named on every viewer's panel
     frames_sent: int = 0
     frames_computed: int = 0
     _lock: threading.RLock = field(default_factory=threading.RLock)
@@ -104,6 +105,7 @@ class MonitorHandles:
             geometry = self.geometry
         viewer = Viewer(client, role, geometry, self.n_wheels, self.live, self.windows, self._loader, self.link)
         with self._lock:  # its first frame sent before it is listed: a listed viewer has been shown
+            viewer.panels.show_simulated(self.label)
             self._render_one(viewer, {})
             self.viewers.setdefault(role, {})[viewer.client_id] = viewer
 
@@ -160,6 +162,19 @@ class MonitorHandles:
                 if not viewer.replaying_window:
                     viewer.clock.set_span(feed.span_unix_s)
                 viewer.set_live_geometry(geometry)
+
+    def show_feed(self, feed: TwinFeed, label: str, live: bool = False) -> None:
+        """Put a feed the operator chose on every viewer (a viewer replaying an archived window leaves it), paused
+        at its start or in live follow, its simulated side named ``label`` on every panel (a flown hypothesis, or
+        the nominal twin again)."""
+        if not isinstance(feed, TwinFeed):
+            raise ValueError("feed: does not implement frontend.feed.TwinFeed")
+        geometry = TwinGeometry(feed)
+        with self._lock:
+            self.geometry, self.label = geometry, label
+            for viewer in self.all_viewers():
+                viewer.show_on_live(geometry, live)
+                viewer.panels.show_simulated(label)
 
     def _apply_preset(self, viewer: Viewer, f: TwinFrame) -> None:
         preset = viewer.panels.take_preset()

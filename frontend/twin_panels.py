@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from frontend.feed import FeedWindow
+from frontend.feed import NOMINAL_LABEL, FeedWindow
 from frontend.globe import EARTH_CREDIT
 from frontend.playback import SPEEDS, PlaybackClock
 from frontend.twin_geometry import TwinFrame
@@ -29,6 +29,10 @@ ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 WHEEL_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#46f0f0")
 MD_COLOURS = ("#e6194b", "#3cb44b", "#4363d8")
 REPLAY_LENGTHS_MIN = ("5", "10", "30", "60", "120")  # replay window lengths offered (minutes)
+
+
+def _simulated_markdown(label: str) -> str:
+    return f"simulated: **{label}**"
 
 
 def format_utc(t_unix_s: float) -> str:
@@ -85,6 +89,8 @@ class TwinPanels:
         )
         gui.add_markdown(f"**acs-twin — {role} monitor**")
         self.banner = gui.add_markdown("")  # STALE warning at the top, where the eye is (show_window)
+        self.simulated_label = NOMINAL_LABEL
+        self.simulated_text = gui.add_markdown(_simulated_markdown(NOMINAL_LABEL))  # what the simulated side flies
         t0, t1 = clock.span_unix_s()
         with gui.add_folder("Playback"):
             self.time_text = gui.add_text("UTC", initial_value=format_utc(clock.t_unix_s), disabled=True)
@@ -209,6 +215,11 @@ class TwinPanels:
             self.show_window_status(f"not loaded: {exc}")
             return
         self._on_window(t0, t0 + 60.0 * float(self.window_length.value))
+
+    def show_simulated(self, label: str) -> None:
+        """Name what the simulated side flies (the nominal twin, or a diagnosed hypothesis)."""
+        self.simulated_label = label
+        self.simulated_text.content = _simulated_markdown(label)
 
     def show_window_status(self, text: str) -> None:
         """What the replay-window part says (loading, replaying which window, an error)."""

@@ -186,6 +186,18 @@ class Viewer:
             self.geometry = geometry
             self.scene.rebuild(geometry)
 
+    def show_on_live(self, geometry: TwinGeometry, live: bool) -> None:
+        """Leave any replayed window for the live feed's (new) geometry, paused at its start or in live follow
+        (render thread or under the monitors' lock): a feed the operator put on the monitors reaches every viewer."""
+        with self._lock:
+            self._pending, self._want_live, self._keep_clock = None, False, False
+        self.loading = False
+        self.live_geometry = self.geometry = geometry
+        self.scene.rebuild(geometry)
+        self.clock.set_span(geometry.feed.span_unix_s)
+        self.clock.follow_live(live)
+        self.panels.show_window_status("live" if live else "—")
+
     def apply_pending(self) -> None:
         """Swap in a loaded window or go back to live (render thread)."""
         with self._lock:

@@ -54,6 +54,7 @@ __all__ = [
     "WheelModel",
     "detection_rate_per_day",
     "diagnose",
+    "hypothesis_replay",
     "wheel_model",
 ]
 
@@ -79,6 +80,7 @@ SECOND_FAULT_S = 600.0  # alarms this soon after the first are diagnosed with it
 REPLAYED = 3  # wheel hypotheses flown in the twin replay
 REPLAY_ONSETS = 13  # onsets tried per replayed hypothesis
 REPLAY_LEAD_S = 60.0  # the twin starts this long before the earliest onset tried
+FLIGHT_AFTER_S = 600.0  # a hypothesis flown on the simulated monitor: this long after its onset (issue 14's 10 min)
 RESOLVED_COUNTS = 2  # a reading that moves by one count may be the rounding of an arbitrarily small change:
 # a speed bias or a friction is claimed only if it moves the tachometer by two counts or more
 SUB_SAMPLE = 4  # onsets tried per telemetry interval (a fault starts between samples)
@@ -822,10 +824,7 @@ def _replay_grid(
     from sim_core.twin_replay import fault_specs, replay_scores
 
     t = obs.t_s
-    fdir = scenario.fdir or (obs.wheel_isolated is not None and bool(np.any(obs.wheel_isolated[start:stop] > 0)))
-    scenario = scenario.model_copy(update={"fdir": fdir})
-    first = max(int(np.searchsorted(t, grid[0] - REPLAY_LEAD_S)), start)
-    reference = max(int(np.searchsorted(t, grid[0])), first + 2)
+    scenario, first, reference = _replay_rows(obs, scenario, float(grid[0]), start, stop)
     candidates: list[tuple[list[FaultSpec], float]] = []
     for h in chosen:
         for tau in grid:
@@ -851,6 +850,68 @@ def _replay_grid(
     )
     relative: npt.NDArray[np.float64] = (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
     return relative
+
+
+def _replay_rows(
+    obs: Observations, scenario: Scenario, onset_s: float, start: int, stop: int
+) -> tuple[Scenario, int, int]:
+    """(scenario, first row, reference row) of a replay whose earliest onset is ``onset_s``: the twin starts
+    REPLAY_LEAD_S before it (not before row ``start``), its mismatch is measured up to the onset, and it flies the
+    onboard FDIR if the scenario does or the telemetry shows an isolation in [start, stop)."""
+    t = obs.t_s
+    fdir = scenario.fdir or (obs.wheel_isolated is not None and bool(np.any(obs.wheel_isolated[start:stop] > 0)))
+    first = max(int(np.searchsorted(t, onset_s - REPLAY_LEAD_S)), start)
+    reference = max(int(np.searchsorted(t, onset_s)), first + 2)
+    return scenario.model_copy(update={"fdir": fdir}), first, reference
+
+
+def hypothesis_replay(
+    obs: Observations,
+    scenario: Scenario,
+    fault: str,
+    wheel: int | list[int] | None,
+    onset_s: float | None,
+    magnitude: float | list[float | None] | None,
+    after_s: float = FLIGHT_AFTER_S,
+) -> tuple[Scenario, int, int]:
+    """The batch flying one diagnosed hypothesis (variant ``h0``) beside the no-fault twin (``none``), built as the
+    diagnosis' replay builds it (:func:`_replay_rows`, :func:`sim_core.twin_replay.replay_batch`): from telemetry
+    REPLAY_LEAD_S before the onset to ``after_s`` after it (or the telemetry's end); (batch, first row, stop row).
+
+    ValueError naming what cannot be flown: "none", a sensor or speed-bias hypothesis (the replay flies wheel
+    faults only), an onset outside the telemetry."""
+    from sim_core.twin_replay import fault_specs, replay_batch
+
+    if fault == "none":
+        raise ValueError("hypothesis: 'none' is the nominal twin itself; fly a fault hypothesis")
+    t = obs.t_s
+    if onset_s is None or not t[0] <= onset_s <= t[-1]:
+        raise ValueError(f"hypothesis: {fault} has no onset inside the telemetry ({onset_s})")
+    stop = min(int(np.searchsorted(t, onset_s + after_s, side="right")), t.shape[0])
+    scenario, first, reference = _replay_rows(obs, scenario, onset_s, 0, stop)
+    if stop - first < 3:
+        raise ValueError(f"hypothesis: the telemetry ends at the onset of {fault}; nothing to fly")
+    specs = fault_specs(fault, wheel, float(onset_s - t[first]), magnitude)
+    if specs is None:
+        raise ValueError(
+            f"hypothesis: {fault} cannot be flown: the twin replay flies wheel failure, gain_loss, friction and stuck "
+            "(and pairs of them); sensor faults and speed biases are ranked without it"
+        )
+    batch = replay_batch(
+        scenario,
+        t,
+        obs.epoch_unix_s,
+        obs.q_est_ib,
+        obs.omega_b_rad_s,
+        obs.wheel_speed_rad_s,
+        obs.wheel_torque_cmd_nm,
+        [specs],
+        first,
+        stop,
+        reference,
+        obs.q_prog_ib,
+    )
+    return batch, first, stop
 
 
 def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:

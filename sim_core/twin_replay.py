@@ -27,7 +27,15 @@ import numpy.typing as npt
 from sim_core import engine, environment, orbit, quaternion
 from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
 
-__all__ = ["ARCSEC_FLOOR", "fault_specs", "orbit_phase_deg", "replay_scores", "telemetered_steps", "twin_at"]
+__all__ = [
+    "ARCSEC_FLOOR",
+    "fault_specs",
+    "orbit_phase_deg",
+    "replay_batch",
+    "replay_scores",
+    "telemetered_steps",
+    "twin_at",
+]
 
 ARCSEC_FLOOR = 0.05  # arcsec: float32 quaternion components resolve ~0.01″; below this the twin is "exact"
 PROGRAM_STEP_RAD = 1e-6  # a change of the guidance quaternion above float32 noise is a new inertial step
@@ -145,6 +153,47 @@ def fault_specs(
     return out
 
 
+def replay_batch(
+    base: Scenario,
+    t_s: np.ndarray,
+    epoch_unix_s: float,
+    q_est_ib: np.ndarray,
+    omega_b: np.ndarray,
+    wheel_speed_rad_s: np.ndarray,
+    wheel_torque_cmd_nm: np.ndarray,
+    candidates: Sequence[list[FaultSpec]],
+    start: int,
+    stop: int,
+    reference: int,
+    q_prog_ib: np.ndarray | None = None,
+) -> Scenario:
+    """The replay's batch: the twin restarted at telemetry row ``start`` (:func:`twin_at`, the orbit phase from the
+    commands before row ``reference`` for an inertial programme) flying to row ``stop - 1``, one variant ``h<i>``
+    per candidate (faults, onsets after ``t_s[start]``) and the no-fault variant ``none`` last.
+
+    The one home of the replay: the diagnosis scores its hypotheses on it (:func:`replay_scores`) and the
+    simulated monitor flies a diagnosed hypothesis on it (``sim_core.diagnosis.hypothesis_replay``)."""
+    duration = float(t_s[stop - 1] - t_s[start]) + 1.0
+    program = None if q_prog_ib is None else (t_s, q_prog_ib)
+    phase = None
+    if program is not None and base.guidance.kind == "inertial":  # a file cut anywhere in the orbit
+        phase = orbit_phase_deg(base, t_s[:reference], q_est_ib[:reference], wheel_torque_cmd_nm[:reference])
+    twin = twin_at(
+        base,
+        epoch_unix_s,
+        float(t_s[start]),
+        q_est_ib[start],
+        omega_b[start],
+        wheel_speed_rad_s[start],
+        duration,
+        program,
+        phase,
+    )
+    variants = [VariantSpec(name=f"h{i}", faults=f) for i, f in enumerate(candidates)]
+    variants.append(VariantSpec(name="none"))
+    return Scenario.model_validate({**twin.model_dump(), "variants": [v.model_dump() for v in variants]})
+
+
 def replay_scores(
     base: Scenario,
     t_s: np.ndarray,
@@ -170,25 +219,20 @@ def replay_scores(
     mismatch before row ``reference``), N = span / ``correlation_s`` independent samples (the closed
     loop's residuals are smooth over its settling time, so the sample count would overstate the evidence).
     """
-    duration = float(t_s[stop - 1] - t_s[start]) + 1.0
-    program = None if q_prog_ib is None else (t_s, q_prog_ib)
-    phase = None
-    if program is not None and base.guidance.kind == "inertial":  # a file cut anywhere in the orbit
-        phase = orbit_phase_deg(base, t_s[:reference], q_est_ib[:reference], wheel_torque_cmd_nm[:reference])
-    twin = twin_at(
+    batch = replay_batch(
         base,
+        t_s,
         epoch_unix_s,
-        float(t_s[start]),
-        q_est_ib[start],
-        omega_b[start],
-        wheel_speed_rad_s[start],
-        duration,
-        program,
-        phase,
+        q_est_ib,
+        omega_b,
+        wheel_speed_rad_s,
+        wheel_torque_cmd_nm,
+        [f for f, _ in candidates],
+        start,
+        stop,
+        reference,
+        q_prog_ib,
     )
-    variants = [VariantSpec(name=f"h{i}", faults=f) for i, (f, _) in enumerate(candidates)]
-    variants.append(VariantSpec(name="none"))
-    batch = Scenario.model_validate({**twin.model_dump(), "variants": [v.model_dump() for v in variants]})
     traj = (flyer or engine.simulate)(batch)
     rel = t_s[start:stop] - t_s[start]
     k = np.clip(np.round(rel / batch.output_dt_s).astype(int), 0, traj.t_s.shape[0] - 1)  # type: ignore[attr-defined]

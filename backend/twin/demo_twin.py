@@ -19,7 +19,7 @@ if TYPE_CHECKING:
     from frontend.monitors import MonitorHandles
     from telemetry.archive.records import AlarmRecord
 
-__all__ = ["run_demo_twin", "POLL_S"]
+__all__ = ["run_demo_twin", "serve_live_monitors", "POLL_S"]
 
 POLL_S = 0.5  # how often the start-up checks whether the live twin has its first samples
 
@@ -29,16 +29,12 @@ def _log(services: Services, text: str) -> None:
         log.write(f"{datetime.now(UTC).isoformat()} {text}\n")
 
 
-def run_demo_twin(
-    services: Services, monitor_ports: dict[str, int], scenario: str, stop: threading.Event
-) -> MonitorHandles | None:
-    """Wait for the live satellite's first samples, serve the monitors on its live twin in live follow; handles."""
+def serve_live_monitors(services: Services, satellite: str, ports: dict[str, int]) -> MonitorHandles:
+    """The monitors on ``satellite``'s live twin (it must hold attitude and GPS samples) on loopback ``ports``:
+    every viewer in live follow, any past window of the archive replayable, registered with the services so that a
+    diagnosed hypothesis can be flown on them (backend.twin.monitor_desk)."""
     from backend.twin.live_feed import ArchiveWindows, LiveFeed
-    from backend.twin.monitor_gate import MonitorGate
     from frontend.monitors import serve_monitors
-
-    satellite = services.settings.live_satellite
-    twins = services.twins
 
     def alarms() -> list[AlarmRecord]:
         archive = services.telemetry.opened_archive()
@@ -46,6 +42,22 @@ def run_demo_twin(
             return [] if archive is None else list(archive.alarms(satellite))
         except ValueError:  # nothing archived for the satellite yet
             return []
+
+    feed = LiveFeed(services.twins, satellite, alarms)
+    windows = ArchiveWindows(services.telemetry.opened_archive, services.twins, satellite, alarms)
+    handles = serve_monitors(feed, host="127.0.0.1", ports=ports, live=True, windows=windows)
+    services.monitors.attach(handles, feed, satellite)
+    return handles
+
+
+def run_demo_twin(
+    services: Services, monitor_ports: dict[str, int], scenario: str, stop: threading.Event
+) -> MonitorHandles | None:
+    """Wait for the live satellite's first samples, serve the monitors on its live twin in live follow; handles."""
+    from backend.twin.monitor_gate import MonitorGate
+
+    satellite = services.settings.live_satellite
+    twins = services.twins
 
     def progress() -> str:
         recent = twins.recent(satellite)
@@ -71,11 +83,7 @@ def run_demo_twin(
         for gate in gates.values():
             gate.stop()
         return None
-    feed = LiveFeed(twins, satellite, alarms)
-    windows = ArchiveWindows(services.telemetry.opened_archive, twins, satellite, alarms)
-    handles = serve_monitors(  # private ports; every viewer starts in live follow, any past window replayable
-        feed, host="127.0.0.1", ports=dict.fromkeys(monitor_ports, 0), live=True, windows=windows
-    )
+    handles = serve_live_monitors(services, satellite, dict.fromkeys(monitor_ports, 0))  # private ports
     for role, gate in gates.items():  # the public ports ask for an API token (backend.twin.monitor_gate)
         gate.attach(handles.ports[role])
     _log(

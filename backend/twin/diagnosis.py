@@ -47,6 +47,7 @@ __all__ = [
     "diagnose_detection",
     "diagnose_file",
     "result_json",
+    "scenario_observations",
     "scenario_wheels",
     "start_archived",
 ]
@@ -116,9 +117,23 @@ def diagnose_batches(
 
     ``flyer`` flies the replay batches (:func:`backend.jobs.cluster.flyer` for a Dask cluster)."""
     wm = scenario_wheels(scenario)
-    obs = observations(batches, dictionary, satellite, n_wheels=wm.axes_b.shape[1], field_model=scenario.magnetic_model)
+    obs = scenario_observations(batches, dictionary, scenario, satellite, wm)
     result = diagnose(obs, wm, scenario, flyer=flyer)
     return result_json(result, obs, dictionary.satellite_name, scenario.name)
+
+
+def scenario_observations(
+    batches: list[SampleBatch],
+    dictionary: Dictionary,
+    scenario: Scenario,
+    satellite: str | None = None,
+    wheels: WheelModel | None = None,
+) -> Observations:
+    """The housekeeping the diagnosis reads (and a flown hypothesis is replayed on), for the scenario's spacecraft."""
+    wm = wheels or scenario_wheels(scenario)
+    return observations(
+        batches, dictionary, satellite, n_wheels=wm.axes_b.shape[1], field_model=scenario.magnetic_model
+    )
 
 
 def diagnose_file(

@@ -180,6 +180,6 @@ def backend_server(tmp_path_factory, shared_data: Path, shared_dask) -> Iterator
             f"/api/v1/telemetry/uploads?satellite={ALARM_SATELLITE}&dictionary=limited.yaml",
             content=(shared_data / NOAA20_PACKETS).read_bytes(),
         ).raise_for_status()
-    yield {"base": base, "token": token, "passes": passes}
+    yield {"base": base, "token": token, "passes": passes, "services": app.state.services}
     server.should_exit = True
     thread.join(timeout=10.0)

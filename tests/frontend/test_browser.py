@@ -288,3 +288,61 @@ def test_the_detection_alarm_links_to_its_diagnosis_and_its_top_hypotheses_fly(
         assert rows[0] == "twin" and rows[1].startswith("h1_failure") and len(rows) >= 3, rows
         page.wait_for_function("document.querySelectorAll('#whatif-plots .twin-chart .uplot').length === 3")
         assert errors == []
+
+
+FLIGHT_TIMEOUT_MS = 300_000  # the hypothesis' replay on the shared cluster, on a loaded machine
+
+
+def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_twin_comes_back(
+    browser, backend_server, emulated_telemetry
+):
+    """The monitors run on the emulated satellite's live twin (as acs-twin serve runs them); the diagnosis' top
+    hypothesis (RW2 failure, the previous test) is flown from its "Fly on simulated monitor" button: the dashboard
+    says it is on the monitor, the simulated monitor's panel names it, the API's viewer state agrees, and "Back to
+    nominal twin" puts the live twin back on the panel."""
+    import httpx
+
+    from backend.twin.demo_twin import serve_live_monitors
+    from tests.frontend.conftest import free_port
+
+    services = backend_server["services"]
+    handles = serve_live_monitors(
+        services, EMULATED_SATELLITE, {r: free_port() for r in ("actual", "simulated", "overlay")}
+    )
+    api = httpx.Client(
+        base_url=backend_server["base"], headers={"Authorization": f"Bearer {backend_server['token']}"}, timeout=60.0
+    )
+    monitor = browser.new_page(viewport={"width": 1280, "height": 800})
+    label = f"hypothesis #1: failure RW{HIDDEN_WHEEL + 1}"
+    try:
+        monitor.goto(handles.urls()["simulated"])
+        monitor.wait_for_function("document.body.innerText.includes('simulated: nominal twin')", timeout=60_000)
+        with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
+            alarm = page.wait_for_selector("#alarms tbody tr[data-parameter='twin_anomaly']", timeout=60_000)
+            alarm.query_selector("button.diagnosis-link").click()
+            page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
+            page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
+            page.click("#diagnosis-detail .diagnosis-hypotheses tbody tr[data-rank='1'] button.fly-monitor")
+            page.wait_for_selector("#monitor-flight-status[data-state='flying']", timeout=5_000)
+            page.wait_for_selector("#monitor-flight-status[data-state='shown']", timeout=FLIGHT_TIMEOUT_MS)
+            status = page.inner_text("#monitor-flight-status")
+            assert status.startswith(f"on the simulated monitor: {label} from "), status
+            assert page.eval_on_selector("tr.on-monitor", "r => r.dataset.rank") == "1"
+            # the simulated monitor's own panel names the hypothesis, and the API sees that viewer's label
+            monitor.wait_for_function(f"document.body.innerText.includes('simulated: {label}')", timeout=30_000)
+            state = api.get("/api/v1/monitors/simulated").json()
+            assert state["showing"] == "hypothesis" and state["label"].startswith(label), state
+            shown = {v["role"]: v["label"] for v in state["viewers"]}
+            assert shown == {"simulated": state["label"]}, state["viewers"]
+            flight = state["flight"]["summaries"]
+            assert flight["hypothesis"]["wheel_speed_rms_rpm"] < flight["nominal"]["wheel_speed_rms_rpm"], flight
+            page.click("#monitor-nominal")
+            page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
+            assert page.locator("tr.on-monitor").count() == 0
+            monitor.wait_for_function("document.body.innerText.includes('simulated: nominal twin')", timeout=30_000)
+            assert api.get("/api/v1/monitors/simulated").json()["showing"] == "nominal"
+            assert errors == []
+    finally:
+        monitor.close()
+        api.close()
+        handles.stop()

@@ -2,6 +2,9 @@
 // one chosen: the evidence (detection, false-alarm rate, window, suspected wheels, what could not be tested),
 // the ranked hypotheses with onset, magnitude and posterior score (the server's ranking, unchanged), and the
 // residuals of the top hypotheses: flown as a twin session (what-if panel) from before the earliest onset.
+// Each hypothesis flies on the simulated 3D monitor ("Fly on simulated monitor": the diagnosis' own replay from
+// before its onset, against the telemetry of that window, named on the monitors' panels); the nominal twin is
+// one click back ("none" row, or "Back to nominal twin").
 import { api, errorText } from "./api.js";
 import { $, el, fill, table } from "./dom.js";
 import { satParam, state } from "./state.js";
@@ -70,9 +73,13 @@ export async function showDiagnosis(id) {
     return d;
   }
   const r = d.result;
-  fill(box, head, evidence(r), hypothesesTable(r.hypotheses),
+  fill(box, head, evidence(r), hypothesesTable(d),
     el("button", { type: "button", id: "diagnosis-fly", onclick: () => flyTop(d) }, `residuals of the top ${FLOWN} (twin session)`),
-    el("div", { id: "diagnosis-fly-status" }));
+    el("div", { id: "diagnosis-fly-status" }),
+    el("div", { class: "monitor-flight" },
+      el("button", { type: "button", id: "monitor-nominal", onclick: () => backToNominal() }, "Back to nominal twin"),
+      el("span", { id: "monitor-flight-status", dataset: { state: "idle" } })));
+  api("/monitors/simulated").then((m) => markFlown(m), () => {});  // which row the monitor flies now, if any
   return d;
 }
 
@@ -91,12 +98,67 @@ function evidence(r) {
   return el("ul", { class: "diagnosis-evidence" }, items.map((t) => el("li", {}, t)));
 }
 
-function hypothesesTable(hypotheses) {
-  return table(["#", "fault", "wheel", "onset (UTC)", "± s", "magnitude", "score"],
-    hypotheses.slice(0, SHOWN).map((h, i) => [String(i + 1), h.fault, wheelText(h.wheel), h.onset_utc || "",
+function hypothesesTable(d) {
+  const flyButton = (h, rank) => (h.fault === "none"
+    ? el("button", { type: "button", class: "fly-monitor", dataset: { rank }, title: "no fault: the nominal twin",
+      onclick: () => backToNominal() }, "Nominal twin on simulated monitor")
+    : el("button", { type: "button", class: "fly-monitor", dataset: { rank },
+      title: "fly this hypothesis from before its onset on the simulated 3D monitor, against the telemetry",
+      onclick: (ev) => flyOnMonitor(d, rank, ev.target) }, "Fly on simulated monitor"));
+  const rows = d.result.hypotheses.slice(0, SHOWN).map((h, i) => el("tr", { dataset: { rank: i + 1 } },
+    [String(i + 1), h.fault, wheelText(h.wheel), h.onset_utc || "",
       h.onset_sigma_s === null || h.onset_sigma_s === undefined ? "" : h.onset_sigma_s.toFixed(1),
-      magnitudeText(h.magnitude), scoreText(h.score)]),
+      magnitudeText(h.magnitude), scoreText(h.score)].map((c) => el("td", {}, c)),
+    el("td", {}, flyButton(h, i + 1))));
+  return table(["#", "fault", "wheel", "onset (UTC)", "± s", "magnitude", "score", "3D monitor"], rows,
     { class: "diagnosis-hypotheses" });
+}
+
+function flightStatus(state, text) {
+  const status = $("monitor-flight-status");
+  if (!status) return;
+  status.dataset.state = state;
+  status.className = state === "failed" ? "error" : "";
+  fill(status, text);
+}
+
+/** Mark the hypothesis row the simulated monitor flies (state of GET /monitors/simulated). */
+function markFlown(m) {
+  for (const row of document.querySelectorAll("#diagnosis-detail .diagnosis-hypotheses tbody tr")) {
+    const flown = m.flight && m.flight.diagnosis_id === shown && Number(row.dataset.rank) === m.flight.rank;
+    row.classList.toggle("on-monitor", Boolean(flown));
+  }
+  const monitors = m.running ? "" : " (no 3D monitors run on this server)";
+  flightStatus(m.showing === "hypothesis" ? "shown" : "nominal", `simulated monitor: ${m.label}${monitors}`);
+}
+
+async function flyOnMonitor(d, rank, button) {
+  const buttons = document.querySelectorAll("#diagnosis-detail button.fly-monitor");
+  buttons.forEach((b) => { b.disabled = true; });
+  const text = button.textContent;
+  button.textContent = "flying…";
+  flightStatus("flying", `flying hypothesis #${rank} from before its onset (the diagnosis' replay)…`);
+  try {
+    const f = await api("/monitors/simulated/flight", { method: "POST", json: { diagnosis_id: d.id, rank } });
+    const rms = (v) => f.summaries[v].wheel_speed_rms_rpm.toFixed(2);
+    markFlown({ running: f.on_monitor, showing: "hypothesis", label: f.label, flight: f });
+    flightStatus("shown", `${f.on_monitor ? "on the simulated monitor" : "flown (no 3D monitors run on this server)"}: `
+      + `${f.label}; wheel-speed RMS against the telemetry ${rms("hypothesis")} rpm (nominal twin ${rms("nominal")} rpm)`);
+  } catch (err) {
+    flightStatus("failed", `not flown: ${errorText(err)}`);
+  } finally {
+    button.textContent = text;
+    buttons.forEach((b) => { b.disabled = false; });
+  }
+}
+
+async function backToNominal() {
+  flightStatus("flying", "putting the nominal twin back…");
+  try {
+    markFlown(await api("/monitors/simulated/flight", { method: "DELETE" }));
+  } catch (err) {
+    flightStatus("failed", errorText(err));
+  }
 }
 
 /** One hypothesis in the twin sessions' fault syntax (0-based wheel index), onsets relative to `alignS`;
