@@ -825,28 +825,16 @@ def _replay_grid(
 
     t = obs.t_s
     scenario, first, reference = _replay_rows(obs, scenario, float(grid[0]), start, stop)
-    candidates: list[tuple[list[FaultSpec], float]] = []
+    candidates: list[list[FaultSpec]] = []
     for h in chosen:
         for tau in grid:
             specs = fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude)
             if specs is None:  # _replayed chooses flyable hypotheses only
                 raise ValueError(f"{h.fault}: not a flyable wheel hypothesis")
-            candidates.append((specs, float(tau)))
+            candidates.append(specs)
+    batch = _replay_batch(obs, scenario, candidates, first, stop, reference)
     ll = replay_scores(
-        scenario,
-        t,
-        obs.epoch_unix_s,
-        obs.q_est_ib,
-        obs.omega_b_rad_s,
-        obs.wheel_speed_rad_s,
-        obs.wheel_torque_cmd_nm,
-        candidates,
-        first,
-        stop,
-        reference,
-        obs.torque_quantum_nm,
-        flyer,
-        q_prog_ib=obs.q_prog_ib,
+        batch, t, obs.q_est_ib, obs.wheel_torque_cmd_nm, first, stop, reference, obs.torque_quantum_nm, flyer
     )
     relative: npt.NDArray[np.float64] = (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
     return relative
@@ -865,6 +853,28 @@ def _replay_rows(
     return scenario.model_copy(update={"fdir": fdir}), first, reference
 
 
+def _replay_batch(
+    obs: Observations, scenario: Scenario, candidates: list[list[FaultSpec]], first: int, stop: int, reference: int
+) -> Scenario:
+    """The replay's batch (:func:`sim_core.twin_replay.replay_batch`) on the telemetered observations."""
+    from sim_core.twin_replay import replay_batch
+
+    return replay_batch(
+        scenario,
+        obs.t_s,
+        obs.epoch_unix_s,
+        obs.q_est_ib,
+        obs.omega_b_rad_s,
+        obs.wheel_speed_rad_s,
+        obs.wheel_torque_cmd_nm,
+        candidates,
+        first,
+        stop,
+        reference,
+        obs.q_prog_ib,
+    )
+
+
 def hypothesis_replay(
     obs: Observations,
     scenario: Scenario,
@@ -880,7 +890,7 @@ def hypothesis_replay(
 
     ValueError naming what cannot be flown: "none", a sensor or speed-bias hypothesis (the replay flies wheel
     faults only), an onset outside the telemetry."""
-    from sim_core.twin_replay import fault_specs, replay_batch
+    from sim_core.twin_replay import fault_specs
 
     if fault == "none":
         raise ValueError("hypothesis: 'none' is the nominal twin itself; fly a fault hypothesis")
@@ -897,20 +907,7 @@ def hypothesis_replay(
             f"hypothesis: {fault} cannot be flown: the twin replay flies wheel failure, gain_loss, friction and stuck "
             "(and pairs of them); sensor faults and speed biases are ranked without it"
         )
-    batch = replay_batch(
-        scenario,
-        t,
-        obs.epoch_unix_s,
-        obs.q_est_ib,
-        obs.omega_b_rad_s,
-        obs.wheel_speed_rad_s,
-        obs.wheel_torque_cmd_nm,
-        [specs],
-        first,
-        stop,
-        reference,
-        obs.q_prog_ib,
-    )
+    batch = _replay_batch(obs, scenario, [specs], first, stop, reference)
     return batch, first, stop
 
 

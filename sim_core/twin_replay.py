@@ -172,7 +172,7 @@ def replay_batch(
     per candidate (faults, onsets after ``t_s[start]``) and the no-fault variant ``none`` last.
 
     The one home of the replay: the diagnosis scores its hypotheses on it (:func:`replay_scores`) and the
-    simulated monitor flies a diagnosed hypothesis on it (``sim_core.diagnosis.hypothesis_replay``)."""
+    simulated monitor flies a diagnosed hypothesis on it (both through ``sim_core.diagnosis._replay_batch``)."""
     duration = float(t_s[stop - 1] - t_s[start]) + 1.0
     program = None if q_prog_ib is None else (t_s, q_prog_ib)
     phase = None
@@ -195,44 +195,26 @@ def replay_batch(
 
 
 def replay_scores(
-    base: Scenario,
+    batch: Scenario,
     t_s: np.ndarray,
-    epoch_unix_s: float,
     q_est_ib: np.ndarray,
-    omega_b: np.ndarray,
-    wheel_speed_rad_s: np.ndarray,
     wheel_torque_cmd_nm: np.ndarray,
-    candidates: Sequence[tuple[list[FaultSpec], float]],
     start: int,
     stop: int,
     reference: int,
     torque_quantum_nm: float = 0.0,
     flyer: Callable[[Scenario], object] | None = None,
     correlation_s: float = 10.0,
-    q_prog_ib: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Log-likelihood of telemetry rows [start, stop) under each candidate (faults, onset after t_s[start])
-    flown in one batch from row ``start``, plus a no-fault variant (last); the onboard FDIR flies if ``base.fdir``.
+    """Log-likelihood of telemetry rows [start, stop) under each variant of the replay's ``batch``
+    (:func:`replay_batch` from row ``start``: the candidates, then the no-fault variant last); the onboard FDIR
+    flies if the batch's scenario does.
 
     Concentrated Gaussian likelihood (σ unknown, profiled out) of the command and attitude residuals:
     −(N/2) ln(MSE + σ₀²) per channel, with σ₀ the telemetry resolution (and the no-fault variant's
     mismatch before row ``reference``), N = span / ``correlation_s`` independent samples (the closed
     loop's residuals are smooth over its settling time, so the sample count would overstate the evidence).
     """
-    batch = replay_batch(
-        base,
-        t_s,
-        epoch_unix_s,
-        q_est_ib,
-        omega_b,
-        wheel_speed_rad_s,
-        wheel_torque_cmd_nm,
-        [f for f, _ in candidates],
-        start,
-        stop,
-        reference,
-        q_prog_ib,
-    )
     traj = (flyer or engine.simulate)(batch)
     rel = t_s[start:stop] - t_s[start]
     k = np.clip(np.round(rel / batch.output_dt_s).astype(int), 0, traj.t_s.shape[0] - 1)  # type: ignore[attr-defined]
