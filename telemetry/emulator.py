@@ -35,6 +35,7 @@ import time
 from collections import deque
 from collections.abc import AsyncGenerator, AsyncIterator, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -64,6 +65,8 @@ __all__ = [
     "REFERENCE_DICTIONARY",
     "PacketSeries",
     "PacketStream",
+    "Clock",
+    "SYSTEM_CLOCK",
     "SendOptions",
     "SendReport",
     "Satellite",
@@ -704,12 +707,39 @@ def demo_pass_bytes(
     return stream.window(epoch_ns + int(round(t_start_s * NS_PER_S)), stop_ns).data
 
 
+class Clock(Protocol):
+    """What the sender's pace reads and waits on: a monotonic clock (s), the UTC clock (Unix s) and a wait."""
+
+    def monotonic(self) -> float: ...
+
+    def time(self) -> float: ...
+
+    async def sleep(self, delay_s: float) -> None: ...
+
+
+class _SystemClock:
+    """The machine's clocks (time.monotonic, time.time) and asyncio.sleep."""
+
+    def monotonic(self) -> float:
+        return time.monotonic()
+
+    def time(self) -> float:
+        return time.time()
+
+    async def sleep(self, delay_s: float) -> None:
+        await asyncio.sleep(delay_s)
+
+
+SYSTEM_CLOCK: Clock = _SystemClock()
+
+
 @dataclass(frozen=True)
 class SendOptions:
     """Where and how :func:`send_stream` / :func:`send_streams` send: the listener's ``host``:``port``, the pace
     ``rate`` × the packets' time stamps (inf: as fast as possible), a reconnect every ``retry_s`` (``attempts``
-    None: keep trying), real-time release on the UTC clock (``on_wall_clock``), and the hello line's
-    ``satellite`` and ``dictionary`` (telemetry.live.hello). Checked when made (ValueError naming the field)."""
+    None: keep trying), real-time release on the UTC clock (``on_wall_clock``), the hello line's
+    ``satellite`` and ``dictionary`` (telemetry.live.hello), and the ``clock`` the pace follows (the machine's;
+    a test passes one it steps itself). Checked when made (ValueError naming the field)."""
 
     host: str = "127.0.0.1"
     port: int = 10025
@@ -719,6 +749,7 @@ class SendOptions:
     on_wall_clock: bool = False
     satellite: str | None = None
     dictionary: str | None = None
+    clock: Clock = SYSTEM_CLOCK
 
     def __post_init__(self) -> None:
         if not self.rate > 0.0:
@@ -799,9 +830,9 @@ async def send_streams(streams: AsyncIterator[PacketStream], options: SendOption
             if link is None:
                 reader, writer = await _connect(options, greeting)
                 report.connections += 1
-                wall0 = time.monotonic()
+                wall0 = options.clock.monotonic()
                 if options.on_wall_clock:
-                    wall0 -= time.time() - int(stream.t_utc_ns[0]) / NS_PER_S
+                    wall0 -= options.clock.time() - int(stream.t_utc_ns[0]) / NS_PER_S
                 link = _Link(reader, writer, greeting, wall0, int(stream.t_utc_ns[0]))
             await _send_one(stream, link, options, report)
     finally:
@@ -817,12 +848,12 @@ async def _send_one(stream: PacketStream, link: _Link, options: SendOptions, rep
     n = len(stream)
     starts = np.concatenate([[0], stream.ends[:-1]])
     due_s = (stream.t_utc_ns - link.t0_ns) / NS_PER_S / options.rate
-    i = 0
+    i, clock = 0, options.clock
     recent: deque[tuple[float, int]] = deque()  # (monotonic s, packet index) written within REWIND_S
     while i < n:
-        j = int(np.searchsorted(due_s, time.monotonic() - link.wall0, side="right"))
+        j = int(np.searchsorted(due_s, clock.monotonic() - link.wall0, side="right"))
         if j <= i:
-            await asyncio.sleep(due_s[i] - (time.monotonic() - link.wall0))
+            await clock.sleep(due_s[i] - (clock.monotonic() - link.wall0))
             continue
         try:
             if link.reader.at_eof():
@@ -837,8 +868,8 @@ async def _send_one(stream: PacketStream, link: _Link, options: SendOptions, rep
             link.reader, link.writer = await _connect(options, link.greeting)
             report.connections += 1
             continue
-        recent.append((time.monotonic(), i))
-        while recent and recent[0][0] < time.monotonic() - REWIND_S:
+        recent.append((clock.monotonic(), i))
+        while recent and recent[0][0] < clock.monotonic() - REWIND_S:
             recent.popleft()
         report.packets_sent += j - i
         report.octets_sent += int(stream.ends[j - 1] - starts[i])

@@ -13,7 +13,6 @@ import dataclasses
 import datetime as dt
 import math
 import socket
-import time
 
 import numpy as np
 import ppigrf
@@ -40,10 +39,9 @@ HALF_SPEED_COUNT_RAD_S = 0.5 * np.pi / 120.0 * (1 + 1e-9)  # half of the 0.25 rp
 HALF_TORQUE_COUNT_NM = 0.5e-5 * (1 + 1e-9)  # half of the 10 µN·m count
 TIMESTAMP_FLOAT_TOL_NS = 1e3  # float64 seconds of 2026 carry ~0.2 µs; CUC 4+2 ticks are exact multiples of 2^-16 s
 NOISE_STD_REL_TOL = 0.10  # 3,600 samples estimate a standard deviation to ~1.2 % (1σ); 10 % is > 8σ
+UNIX_S_ROUNDING = 1e-6  # float64 Unix seconds of 2026 step by 2.4e-7 s; sums of the clock's waits round alike
 GPS_LEAP_S = 18  # GPS − UTC since 2017-01-01 (IERS Bulletin C: TAI − UTC = 37 s, GPS = TAI − 19 s)
 IGRF_NORM_TOL_T = 300e-9  # 6σ of the 50 nT magnetometer noise plus the 2 nT count and the 30 s field table
-EARLY_TOL_S = 0.005  # time.time() vs time.monotonic() read a few microseconds apart; nothing may leave early
-LATE_TOL_S = 0.5  # event-loop wake-up and loopback delivery on a loaded 2-core machine (load average 8 seen)
 
 
 @pytest.fixture(scope="module")
@@ -273,26 +271,43 @@ def drain(subscriber) -> list:
     return out
 
 
+class SteppedClock:
+    """A clock the test owns: it moves only when the sender waits, by exactly the wait (then yields to the loop, so
+    the listener reads what arrived); the UTC clock reads ``utc0_s`` plus the seconds stepped."""
+
+    def __init__(self, utc0_s: float = 0.0) -> None:
+        self.now_s, self.utc0_s = 0.0, utc0_s
+
+    def monotonic(self) -> float:
+        return self.now_s
+
+    def time(self) -> float:
+        return self.utc0_s + self.now_s
+
+    async def sleep(self, delay_s: float) -> None:
+        self.now_s += max(delay_s, 0.0)
+        await asyncio.sleep(0)
+
+
 def test_live_emulator_to_listener_delivers_decoded_samples_paced(nominal, decoded, dictionary) -> None:
     _, _, stream = nominal
     t0 = int(stream.t_utc_ns[0])
     piece = stream.window(t0 + 10 * 10**9, t0 + 30 * 10**9)  # 20 s of flight
     rate = 20.0
+    clock = SteppedClock()
 
-    async def fly() -> tuple[list, emulator.SendReport, float]:
+    async def fly() -> tuple[list, emulator.SendReport]:
         live = LiveStream(dictionary)
         subscriber = live.subscribe(max_messages=10_000)
         port = await live.start()
-        start = time.monotonic()
-        report = await emulator.send_stream(piece, emulator.SendOptions("127.0.0.1", port, rate))
-        elapsed = time.monotonic() - start
+        report = await emulator.send_stream(piece, emulator.SendOptions("127.0.0.1", port, rate, clock=clock))
         await until_decoded(live, len(piece))
         await live.stop()
-        return drain(subscriber), report, elapsed
+        return drain(subscriber), report
 
-    messages, report, elapsed = asyncio.run(fly())
+    messages, report = asyncio.run(fly())
     span_s = (piece.t_utc_ns[-1] - piece.t_utc_ns[0]) / 1e9
-    assert span_s / rate <= elapsed < span_s / rate + 0.5  # paced at ×20, not dumped at once
+    assert clock.now_s == pytest.approx(span_s / rate, abs=1e-9)  # paced at ×20: the last packet left when due
     assert report.packets_sent == len(piece) and all(m.dropped_packets == 0 for m in messages)
     hk = [m.batch for m in messages if m.batch.packet == "ACS_HK"]
     live_t = np.concatenate([b.t_utc_ns for b in hk])
@@ -381,31 +396,34 @@ def test_sender_waits_for_a_listener_that_starts_late(nominal, dictionary) -> No
 
 
 def test_real_time_sender_releases_each_packet_at_its_utc_time_stamp(dictionary) -> None:
-    start = int(time.time()) + 2  # whole second: CUC-exact stamps, 1-2 s ahead of the wall clock
-    stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(start))
-    _, _, stream = emulator.emulate(duration_s=2.0, start_utc=stamp, dictionary=dictionary)
-    arrivals: list[tuple[float, int]] = []
+    _, _, stream = emulator.emulate(duration_s=2.0, start_utc="2026-03-20T00:00:00Z", dictionary=dictionary)
+    first_stamp_s = int(stream.t_utc_ns[0]) / 1e9
+    clock = SteppedClock(utc0_s=first_stamp_s - 1.5)  # the UTC clock 1.5 s before the first packet's time stamp
+    arrivals: list[tuple[float, int]] = []  # (UTC s read as the bytes arrived, octets received so far)
 
     async def link() -> float:
         async def handle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
             while data := await reader.read(4096):
-                arrivals.append((time.time(), len(data)))
+                arrivals.append((clock.time(), (arrivals[-1][1] if arrivals else 0) + len(data)))
             writer.close()
 
         server = await asyncio.start_server(handle, "127.0.0.1", 0)
         await emulator.send_stream(
-            stream, emulator.SendOptions("127.0.0.1", server.sockets[0].getsockname()[1], on_wall_clock=True)
+            stream,
+            emulator.SendOptions("127.0.0.1", server.sockets[0].getsockname()[1], on_wall_clock=True, clock=clock),
         )
-        finished = time.time()
+        finished = clock.time()
         server.close()
         await server.wait_closed()
         return finished
 
     finished = asyncio.run(link())
-    last_stamp_s = stream.t_utc_ns[-1] / 1e9
-    assert arrivals[0][0] >= start - EARLY_TOL_S  # nothing leaves before its time stamp
-    assert last_stamp_s - EARLY_TOL_S <= finished < last_stamp_s + LATE_TOL_S
-    assert sum(size for _, size in arrivals) == len(stream.data)
+    stamps_s = stream.t_utc_ns / 1e9
+    starts = np.concatenate([[0], stream.ends[:-1]])
+    for utc_s, octets in arrivals:  # no packet has begun to arrive before its time stamp
+        assert np.all(stamps_s[starts < octets] <= utc_s + UNIX_S_ROUNDING)
+    assert finished == pytest.approx(stamps_s[-1], abs=UNIX_S_ROUNDING)  # the last left at its time stamp, not later
+    assert arrivals[-1][1] == len(stream.data)
     with pytest.raises(ValueError, match="on_wall_clock"):
         asyncio.run(emulator.send_stream(stream, emulator.SendOptions(rate=2.0, on_wall_clock=True)))
 
