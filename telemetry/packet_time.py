@@ -139,9 +139,15 @@ def parse_time_fields(spec: str | Mapping[str, Any] | None) -> TimeFields | None
 
 
 def _days_since_unix(year: np.ndarray) -> np.ndarray:
-    """Days from 1970-01-01 to January 1 of each (proleptic Gregorian) year."""
-    years = np.datetime64("1970", "Y") + (year - 1970).astype("timedelta64[Y]")
-    return years.astype("datetime64[D]").astype(np.int64)
+    """Days from 1970-01-01 to January 1 of each (proleptic Gregorian) year (1..10000): numpy's calendar run once
+    per year of the span the packets cover (usually one), then looked up."""
+    if year.size == 0:
+        return np.zeros(0, np.int64)
+    first = int(year.min())
+    span = np.arange(first, int(year.max()) + 1, dtype=np.int64)
+    table = (np.datetime64("1970", "Y") + (span - 1970).astype("timedelta64[Y]")).astype("datetime64[D]")
+    days: np.ndarray = table.astype(np.int64)[year - first]
+    return days
 
 
 def _calendar(values: Mapping[str, np.ndarray], tf: TimeFields, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -182,7 +182,12 @@ class SequenceState:
         """The state once the time-ordered accepted packets (count, t_ns) follow ``previous``."""
         if count.size == 0:
             return previous
-        if previous is not None:
+        in_order = t_ns.size < 2 or bool(np.all(t_ns[1:] >= t_ns[:-1]))
+        if previous is not None and in_order and t_ns[0] >= previous.recent_t_ns[-1]:  # the usual case: they follow
+            kept = RECENT_PACKETS - min(count.size, RECENT_PACKETS)  # of the previous keys, the newest
+            count = np.concatenate((previous.recent_count[previous.recent_count.size - kept :], count))
+            t_ns = np.concatenate((previous.recent_t_ns[previous.recent_t_ns.size - kept :], t_ns))
+        elif previous is not None:
             count = np.concatenate((previous.recent_count, count))
             t_ns = np.concatenate((previous.recent_t_ns, t_ns))
             if t_ns.size > 1 and np.any(t_ns[1:] < t_ns[:-1]):  # late arrivals among them
