@@ -8,7 +8,7 @@ after the onset, reaches one tachometer quantum of momentum J_r q (fdir.observab
 tell it from quantisation). A wheel isolated earlier, by favourable rounding, counts as isolated in time; the number
 of such cases is printed. Printed: isolation delays from observability (distribution), isolated in ≤ 60 s, late,
 never, never observable, wrong wheel; then 24 h of nominal scanning with the same sensors (false alarms).
-``--seed-models`` adds seed 002's wheel noise torque K_x and gyro Markov drift with song-components' values (its drift
+``--seed-models`` adds seed 002's wheel noise torque K_x and gyro Markov drift with song-table1's values (its drift
 density told to the MEKF); the noise momentum then hides a fault until the withheld momentum over a window of n
 control periods also exceeds the noise bound a √n (fdir.wheel_noise_bound at the false-alarm probability of one
 test; sim_core.fdir's docstring), and both definitions are printed, with how much later the noise makes each fault
@@ -44,12 +44,12 @@ SEED_MODELS = False  # --seed-models: seed 002 wheel noise and gyro Markov drift
 
 def campaign_scenario(variants: list[VariantSpec], duration_s: float, output_dt_s: float = 1.0) -> Scenario:
     """somov-ge4-scan with the quantised tachometer, FDIR on, the given variants (and, with SEED_MODELS, seed
-    002's wheel noise and the gyro's Markov drift of song-components)."""
+    002's wheel noise and the gyro's Markov drift of song-table1)."""
     s = scenario_library.get("somov-ge4-scan")
     d = s.model_dump()
     d["sensors"]["tachometer_quantum_rad_s"] = TACH_QUANTUM_RAD_S
     if SEED_MODELS:
-        song = scenario_library.get("song-components").sensors
+        song = scenario_library.get("song-table1").sensors
         for key in ("gyro_markov_sigma_rad_s", "gyro_markov_tau_s", "gyro_drift_density_rad_s_sqrt_s"):
             d["sensors"][key] = getattr(song, key)
         for w in d["spacecraft"]["cluster"]["wheels"]:
@@ -181,7 +181,7 @@ def main() -> None:
     SEED_MODELS = args.seed_models
     extra = ""
     if SEED_MODELS:
-        song = scenario_library.get("song-components").sensors
+        song = scenario_library.get("song-table1").sensors
         extra = (
             f", wheel noise K_x {scenario_library.SONG_WHEEL_TERMS['noise_nm']:g} N·m, gyro Markov drift "
             f"σ {song.gyro_markov_sigma_rad_s:g} rad/s τ {song.gyro_markov_tau_s:g} s"

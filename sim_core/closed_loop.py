@@ -227,7 +227,7 @@ class FdirConfig(NamedTuple):
     star_nis_max: float  # star-tracker χ²(3) limit
     n_sigma: float  # Gaussian threshold in σ
     disturbance_bound_nm: float  # external torque the loop does not model
-    wheel_noise_nms: np.ndarray  # per wheel: bound on seed 002's noise momentum over one T_u (fdir.wheel_noise_bound)
+    wheel_noise_sigma_nms: np.ndarray  # per wheel: σ_N of seed 002's noise momentum in one T_u (fdir.wheel_noise_sigma)
 
 
 class LoopConfig(NamedTuple):
@@ -908,7 +908,7 @@ def _wheel_monitor_stage(
     p: PlantArrays,
     act: Actuators,
     tachometer_quantum_rad_s: float,
-    wheel_noise_nms: np.ndarray,
+    wheel_noise_sigma_nms: np.ndarray,
     t_u: float,
     star_reset: bool,
     t: float,
@@ -929,7 +929,7 @@ def _wheel_monitor_stage(
         act.max_momentum_nms,
         p.friction,
         tachometer_quantum_rad_s,
-        wheel_noise_nms,
+        wheel_noise_sigma_nms,
         t_u,
         mon.decouple,
         mon.available,
@@ -1266,8 +1266,8 @@ def fly_variant(
             if fdir_on:
                 star_reset = estc.kind == ESTIMATOR_MEKF
                 _wheel_monitor_stage(
-                    p, act, sens.tachometer_quantum_rad_s, c.fdir.wheel_noise_nms, t_u, star_reset, t, speeds, est,
-                    mon, ev, n_ev,
+                    p, act, sens.tachometer_quantum_rad_s, c.fdir.wheel_noise_sigma_nms, t_u, star_reset, t, speeds,
+                    est, mon, ev, n_ev,
                 )  # fmt: skip
             _law_stage(
                 p.inertia, p.wheel_axes, p.wheel_inertia, c.law, mc.on, mode, q_est, w_est, speeds, h_wheels,

@@ -319,7 +319,7 @@ def _fdir_config(s: Scenario) -> closed_loop.FdirConfig:
         r0 = np.linalg.norm(orbit_state(s)(np.array([_epoch_unix_s(s.orbit.epoch_utc)]))[0][0])
         eig = np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2, dtype=float))
         bound = GG_BOUND_MARGIN * 3.0 * orbit.MU_EARTH_M3_S2 / r0**3 * (eig[-1] - eig[0])
-    noise = fdir_kernels.wheel_noise_bound(  # the loop draws seed 002's W once per dynamics step
+    noise = fdir_kernels.wheel_noise_sigma(  # the loop draws seed 002's W once per dynamics step
         np.array([w.noise_nm for w in s.spacecraft.cluster.wheels], dtype=float), s.dynamics_dt_s, s.control_dt_s
     )
     return closed_loop.FdirConfig(float(rate_noise), float(nis_threshold), float(n_sigma), float(bound), noise)

@@ -19,6 +19,9 @@ allow (± q/2); the trapezoid estimate lies there too. r_p exceeding ``WHEEL_SAF
 is a detection, and so is Σ r_p over any window of up to ``WINDOW_PERIODS`` periods ending now exceeding
 its own bound (one quantum J q, since readings telescope, + the other terms summed × ``WHEEL_SAFETY`` +
 the noise bound below): a weak motor's missing momentum adds up while the quantisation error does not;
+a period whose own model bound outweighs the floor every window carries (one quantum J q + one period's noise
+bound a) — a seizure's kick — restarts the history instead (with a perfect tachometer the floor is a alone; were
+it J q = 0, every period would restart it and only the one-period test would be left);
 ``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
 availability mask, so that :func:`sim_core.allocation.allocate_1` passes 4 → 3 → 2 + MD; fewer
 than two wheels left is the fault mode (no wheel law exists). Periods where the motor's momentum
@@ -90,6 +93,7 @@ __all__ = [
     "MAG_STATE_SIZE",
     "star_nis_threshold",
     "gaussian_sigmas",
+    "wheel_noise_sigma",
     "wheel_noise_bound",
     "wheel_state",
     "wheel_state_1",
@@ -165,19 +169,26 @@ def gaussian_sigmas(probability: float = FALSE_ALARM_PROBABILITY) -> float:
     return float(norm.isf(0.5 * probability))
 
 
-def wheel_noise_bound(
-    noise_nm: np.ndarray, sample_s: float, t_u: float, probability: float = FALSE_ALARM_PROBABILITY / WINDOW_PERIODS
-) -> np.ndarray:
-    """Per-wheel bound a = K_x √(τ T_u / 3) √(2 ln(2/P)) on the noise momentum of one control period T_u, N·m·s:
-    seed 002 eq 4's M_x = K_x W/|W_max|, W uniform in [−1, 1] drawn every ``sample_s`` τ (module docstring)."""
+def wheel_noise_sigma(noise_nm: np.ndarray, sample_s: float, t_u: float) -> np.ndarray:
+    """Per-wheel σ_N = K_x √(τ T_u / 3) of the noise momentum of one control period T_u, N·m·s: seed 002 eq 4's
+    M_x = K_x W/|W_max|, W uniform in [−1, 1] drawn every ``sample_s`` τ (module docstring)."""
     k_x = np.asarray(noise_nm, dtype=float)
     if k_x.ndim != 1 or not np.all(np.isfinite(k_x)) or np.any(k_x < 0.0):
         raise ValueError("noise_nm: expected one finite non-negative K_x per wheel")
     if not (0.0 < sample_s <= t_u and np.isfinite(t_u)):
         raise ValueError("sample_s, t_u: expected 0 < sample_s ≤ t_u, finite")
+    sigma: np.ndarray = k_x * np.sqrt(sample_s * t_u / 3.0)
+    return sigma
+
+
+def wheel_noise_bound(
+    noise_nm: np.ndarray, sample_s: float, t_u: float, probability: float = FALSE_ALARM_PROBABILITY / WINDOW_PERIODS
+) -> np.ndarray:
+    """Per-wheel bound a = σ_N √(2 ln(2/P)) on the noise momentum of one control period T_u, N·m·s
+    (σ_N from :func:`wheel_noise_sigma`; sub-Gaussian tail, module docstring)."""
     if not 0.0 < probability < 1.0:
         raise ValueError("probability: must lie in (0, 1)")
-    bound: np.ndarray = k_x * np.sqrt(sample_s * t_u / 3.0) * np.sqrt(2.0 * np.log(2.0 / probability))
+    bound: np.ndarray = wheel_noise_sigma(noise_nm, sample_s, t_u) * np.sqrt(2.0 * np.log(2.0 / probability))
     return bound
 
 
@@ -358,7 +369,7 @@ def wheel_check_1(
     max_momentum: np.ndarray,
     friction: np.ndarray,
     tach_q: float,
-    noise: np.ndarray,
+    noise_sigma: np.ndarray,
     t_u: float,
     decouple: np.ndarray,
     available: np.ndarray,
@@ -368,8 +379,10 @@ def wheel_check_1(
 ) -> bool:
     """Test every available wheel's residual, isolate and drop confirmed faults; True if in fault mode.
 
-    ``speeds``: tachometer readings at t (rad/s); ``noise`` each wheel's noise-momentum bound over one period
-    (:func:`wheel_noise_bound`, N·m·s; zeros without seed 002's noise torque); ``state`` holds the previous reading, the
+    ``speeds``: tachometer readings at t (rad/s); ``noise_sigma`` each wheel's noise-momentum σ_N over one period
+    (:func:`wheel_noise_sigma`, N·m·s; zeros without seed 002's noise torque), whose bound at the windows'
+    false-alarm probability is σ_N ``WINDOW_NOISE_SIGMAS`` (:func:`wheel_noise_bound`'s default) and which the
+    CUSUM takes as it is; ``state`` holds the previous reading, the
     predicted change of the body rate about each axis with its error bound, and the
     limited torque held since (see :func:`wheel_hold_1`); ``decouple`` from
     :func:`wheel_decoupling_1`, so that each decoupled residual answers for its own wheel only;
@@ -380,6 +393,7 @@ def wheel_check_1(
     """
     nw = speeds.shape[0]
     raw, bound, quantum = np.zeros(nw), np.zeros(nw), inertia * tach_q
+    noise = noise_sigma * WINDOW_NOISE_SIGMAS
     tested = np.zeros(nw, dtype=np.bool_)
     dw = 0.0
     for i in range(3):
@@ -417,8 +431,10 @@ def wheel_check_1(
             r += decouple[p, q] * raw[q]
             b += abs(decouple[p, q]) * bound[q]
             bq += abs(decouple[p, q]) * quantum[q]
-            sigma += abs(decouple[p, q]) * noise[q] / WINDOW_NOISE_SIGMAS  # ≥ the decoupled noise's σ
-        if b - bq > bq:  # the period is ruled by what the model cannot predict (a seizure's kick): not summed
+            sigma += abs(decouple[p, q]) * noise_sigma[q]  # ≥ the decoupled noise's σ
+        # Not summed when the period's model bound outweighs the floor every window carries, one quantum + one
+        # period's noise bound (a seizure's kick); with a perfect tachometer that floor is the noise bound alone.
+        if b - bq > bq + noise[p]:
             _clear_windows_1(state, p)
             accumulated = False
         else:

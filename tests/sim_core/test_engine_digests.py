@@ -121,7 +121,7 @@ FLIGHTS: dict[str, Callable[[], Flight]] = {
     "somov-ge4-scan seed000 filter": _estimator("seed000_filter"),
     "somov-ge4-scan seed003 rate": _estimator("seed003_rate"),
     "somov-detumble-to-scan modes": _plain("somov-detumble-to-scan", 4000.0),  # three mode changes,
-    "song-components": _plain("song-components"),
+    "song-table1": _plain("song-table1"),
 }
 
 

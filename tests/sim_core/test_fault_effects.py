@@ -59,10 +59,13 @@ def _x_axis(traj, v: int) -> tuple[np.ndarray, np.ndarray]:
     return 2.0 * e[:, 1], traj["omega_b_rad_s"][v, :, 0]
 
 
-def _pd_response(theta0: float, rate0: float, inertia: float, kp: float, kd: float, gain: float, t: np.ndarray):
-    """Small-angle response J θ̈ = −g (k_p θ/2 + k_d θ̇) of seed 002's quaternion PD (eq 18) from (θ0, θ̇0)."""
+def _pd_response(
+    theta0: float, rate0: float, inertia: float, kp: float, kd: float, gain: float, t: np.ndarray, friction: float
+):
+    """Small-angle response J θ̈ = −g (k_p θ/2 + k_d θ̇) + m_f of seed 002's quaternion PD (eq 18) from (θ0, θ̇0),
+    m_f the wheel's friction torque the body receives (constant while the wheel spins beyond Ω°)."""
     sol = solve_ivp(
-        lambda _, y: [y[1], -gain * (kp * y[0] / 2 + kd * y[1]) / inertia],
+        lambda _, y: [y[1], (friction - gain * (kp * y[0] / 2 + kd * y[1])) / inertia],
         (t[0], t[-1]),
         [theta0, rate0],
         t_eval=t,
@@ -73,8 +76,10 @@ def _pd_response(theta0: float, rate0: float, inertia: float, kp: float, kd: flo
 
 
 def test_seed002_wheel_outage_and_gain_loss_follow_the_axis_dynamics():
-    """Wheel 1 (roll axis) of the song-table1 bus at 7 s: an outage leaves the axis free (θ grows at the
-    rate it had), a 70 % gain loss slows its PD by g = 0.3; both predicted from the state at the onset."""
+    """Wheel 1 (roll axis) of the song-table1 bus at 7 s: an outage leaves the axis to the wheel's friction alone
+    (seed 002 eq 4: the rotor, still spinning at ~9.8 rad/s ≫ Ω°, hands the body m_f = K_nl sign Ω + K_l Ω +
+    K_a Ω√|Ω|, so θ = θ0 + θ̇0 Δt + m_f Δt²/2J), a 70 % gain loss slows its PD by g = 0.3 against the same m_f;
+    both predicted from the state at the onset."""
     s = scenario_library.get("song-table1")
     gain = faults.SEED002_MAGNITUDES["wheel_gain"]
     s = _with(
@@ -94,12 +99,18 @@ def test_seed002_wheel_outage_and_gain_loss_follow_the_axis_dynamics():
     theta0, rate0 = theta[0][0], _x_axis(traj, 0)[1][at]
     assert abs(theta0) > np.radians(0.5)  # the roll transient is still under way at the onset
     scale = abs(theta0)
-    free = theta0 + rate0 * (t - t[0])
+    w, speed = s.spacecraft.cluster.wheels[0], traj["wheel_speed_rad_s"][0, at, 0]
+    assert abs(speed) > 10.0 * w.coulomb_sat_speed_rad_s
+    m_f = w.coulomb_nm * np.sign(speed) + w.viscous_nm_s * speed + w.aero_drag_nm_s15 * speed * np.sqrt(abs(speed))
+    free = theta0 + rate0 * (t - t[0]) + 0.5 * m_f / j * (t - t[0]) ** 2
     assert np.max(np.abs(theta[1] - free)) <= 0.05 * scale
     for v, g in ((0, 1.0), (2, gain)):
-        assert np.max(np.abs(theta[v] - _pd_response(theta0, rate0, j, kp, kd, g, t))) <= 0.05 * scale
-    # effect against nominal: nominal settles, the outage runs away, the weak wheel lags
-    assert abs(theta[0][-1]) < 0.05 * scale < abs(theta[2][-1]) < abs(theta[1][-1])
+        assert np.max(np.abs(theta[v] - _pd_response(theta0, rate0, j, kp, kd, g, t, m_f))) <= 0.05 * scale
+    # effect against nominal over the last 20 s: nominal settles (envelope e^{−k_d t/2J}), the outage runs away, the
+    # weak wheel lags (envelope e^{−g k_d t/2J}: e^{−2}…e^{−3.2} there, against the nominal's e^{−6.6}…e^{−10.6})
+    tail = t >= t[-1] - 20.0
+    rms = [float(np.sqrt(np.mean(th[tail] ** 2))) for th in theta]
+    assert rms[0] < 0.1 * rms[2] and rms[2] < 0.1 * rms[1]
 
 
 # --- residual dipole ------------------------------------------------------------------------------

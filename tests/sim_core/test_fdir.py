@@ -83,35 +83,39 @@ def test_body_spinning_about_an_idle_wheel_is_no_residual():
     assert abs(res_blind[0, 0]) > 1e3 * bound[0, 0]
 
 
+def _hold(state: np.ndarray, speeds: np.ndarray, torque: float) -> None:
+    """fdir.wheel_hold_1 for four frictionless HR12 wheels on AXES4 holding ``torque``, body at rest."""
+    j, zeros = np.full(4, J_HR12), np.zeros((4, 4))
+    fdir.wheel_hold_1(state, speeds, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0), zeros, *RIGID)
+
+
+def _check(
+    state: np.ndarray,
+    speeds: np.ndarray,
+    noise_sigma: np.ndarray,
+    available: np.ndarray,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+    tach_q: float = TACH_Q,
+) -> None:
+    """fdir.wheel_check_1 on the same four wheels, read by a ``tach_q`` tachometer, noise σ_N per wheel and period."""
+    j, zeros = np.full(4, J_HR12), np.zeros((4, 4))
+    fdir.wheel_check_1(
+        state, speeds, W0, j, np.full(4, 12.0), zeros, tach_q, noise_sigma, T_U, np.eye(4), available, ev, n_ev, t
+    )
+
+
 def _check_sequence(deltas_nms: list[float], torque: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     state = fdir.wheel_state(4)
     speeds = np.full(4, 100.0)
     available = np.ones(4, dtype=np.bool_)
     ev, n_ev = np.zeros((16, 3)), np.zeros(1, dtype=np.int64)
-    j = np.full(4, J_HR12)
-    zeros = np.zeros((4, 4))
     for k, dh in enumerate(deltas_nms):
-        fdir.wheel_hold_1(
-            state, speeds, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0), zeros, *RIGID
-        )
+        _hold(state, speeds, torque)
         speeds = speeds + torque * T_U / J_HR12
         speeds[2] += dh / J_HR12
-        fdir.wheel_check_1(
-            state,
-            speeds,
-            W0,
-            j,
-            np.full(4, 12.0),
-            zeros,
-            TACH_Q,
-            np.zeros(4),
-            T_U,
-            np.eye(4),
-            available,
-            ev,
-            n_ev,
-            (k + 1) * T_U,
-        )
+        _check(state, speeds, np.zeros(4), available, ev, n_ev, (k + 1) * T_U)
     return available, ev[: n_ev[0]], state
 
 
@@ -241,45 +245,31 @@ def test_noise_momentum_bound_matches_seed002_noise_drawn_by_the_wheel_model():
         fdir.wheel_noise_bound(np.array([k_x]), 3.0, T_U)
 
 
-K_X, TAU = 1e-4, 0.05  # seed 002 eq 4 noise torque of song-components' wheels, drawn every 0.05 s dynamics step
+K_X, TAU = 1e-4, 0.05  # seed 002 eq 4 noise torque of song-table1's wheels, drawn every 0.05 s dynamics step
 
 
-def _noisy_check(losses_nms: np.ndarray, torque: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def _noisy_check(
+    losses_nms: np.ndarray, torque: float, rng: np.random.Generator, tach_q: float = TACH_Q
+) -> tuple[np.ndarray, np.ndarray]:
     """Four wheels at a held ``torque`` with seed 002's noise torque drawn by sim_core.wheels every τ, read by a
-    0.1 rpm tachometer, wheel 3 losing ``losses_nms[k]`` of momentum in period k; the wheel check told the noise
-    bound (fdir.wheel_noise_bound). Returns the availability and the events."""
+    ``tach_q`` tachometer (0: perfect), wheel 3 losing ``losses_nms[k]`` of momentum in period k; the wheel check
+    told the noise σ_N (fdir.wheel_noise_sigma). Returns the availability and the events."""
     wheels = WheelParams(np.full(4, J_HR12), noise_nm=K_X)
     state, available = fdir.wheel_state(4), np.ones(4, dtype=np.bool_)
     ev, n_ev = np.zeros((16, 3)), np.zeros(1, dtype=np.int64)
-    j, zeros = np.full(4, J_HR12), np.zeros((4, 4))
-    noise = fdir.wheel_noise_bound(np.full(4, K_X), TAU, T_U)
+    noise_sigma = fdir.wheel_noise_sigma(np.full(4, K_X), TAU, T_U)
     true = np.full(4, 100.0)
     steps = int(round(T_U / TAU))
+
+    def read(speed: np.ndarray) -> np.ndarray:
+        return speed.copy() if tach_q == 0.0 else tach_q * np.round(speed / tach_q)
+
     for k, loss in enumerate(losses_nms):
-        read = TACH_Q * np.round(true / TACH_Q)
-        fdir.wheel_hold_1(
-            state, read, W0, AXES4, np.full(4, torque), j, np.full(4, 0.2), np.full(4, 12.0), zeros, *RIGID
-        )
+        _hold(state, read(true), torque)
         kicks = sum(noise_torque(wheels, rng) for _ in range(steps)) * TAU
         true = true + (torque * T_U + kicks) / J_HR12
         true[2] -= loss / J_HR12
-        read = TACH_Q * np.round(true / TACH_Q)
-        fdir.wheel_check_1(
-            state,
-            read,
-            W0,
-            j,
-            np.full(4, 12.0),
-            zeros,
-            TACH_Q,
-            noise,
-            T_U,
-            np.eye(4),
-            available,
-            ev,
-            n_ev,
-            (k + 1) * T_U,
-        )
+        _check(state, read(true), noise_sigma, available, ev, n_ev, (k + 1) * T_U, tach_q)
     return available, ev[: n_ev[0]]
 
 
@@ -311,6 +301,25 @@ def test_weak_loss_beyond_the_windows_is_isolated_by_the_cusum_when_its_bound_sa
     assert [int(e[2]) for e in isolated] == [2]
     k = isolated[0][0] / T_U
     assert (h - 4.0 * sigma * np.sqrt(k)) / rate <= k - 1 <= latest
+
+
+def test_perfect_tachometer_under_noise_sums_the_windows():
+    """A perfect tachometer leaves each window the noise floor a √n alone (no quantum): a wheel withholding w = a/2
+    per period, below the one-period test's a, is isolated once w k outgrows the floor and the noise, |N| ≤ 4σ√k:
+    by k = ((a + 4σ)/w)² periods, + 1 for the longer window and + 1 to confirm (with J q = 0 the history used to
+    restart every period, leaving only the one-period test, which such a loss never trips); the healthy wheels
+    stay through 2000 periods."""
+    sigma = fdir.wheel_noise_sigma(np.array([K_X]), TAU, T_U)[0]
+    assert sigma == pytest.approx(K_X * np.sqrt(TAU * T_U / 3.0), rel=1e-12)
+    a = fdir.wheel_noise_bound(np.array([K_X]), TAU, T_U)[0]
+    loss = 0.5 * a
+    latest = ((a + 4.0 * sigma) / loss) ** 2 + 2.0
+    available, ev = _noisy_check(np.full(int(latest) + 2, loss), 0.01, np.random.default_rng(13), tach_q=0.0)
+    isolated = [e for e in ev if e[1] == 5]
+    assert [int(e[2]) for e in isolated] == [2] and list(available) == [True, True, False, True]
+    assert isolated[0][0] / T_U <= latest
+    available, ev = _noisy_check(np.zeros(2000), 0.01, np.random.default_rng(14), tach_q=0.0)
+    assert available.all() and ev.shape[0] == 0
 
 
 SIGMA_ST = 3.0 / 206265.0  # 3″ star tracker (seed 000 §5)
@@ -676,7 +685,7 @@ def test_quantised_tachometer_dead_and_weak_wheels_are_isolated_within_60_s_of_o
 
 
 def test_seed002_wheel_noise_with_quantised_tachometer_dead_wheel_isolated_and_no_false_alarm():
-    """Seed 002's wheel noise torque K_x = 1e-4 N·m on every wheel (song-components' value), 0.25 rpm tachometer,
+    """Seed 002's wheel noise torque K_x = 1e-4 N·m on every wheel (song-table1's value), 0.25 rpm tachometer,
     gyro noise, MEKF, 20 min of the scanning route: a wheel dying in the first course is isolated on its own wheel
     within 60 s of withholding one quantum of momentum J_r q; the healthy spacecraft raises nothing (before the
     noise bound, the noise walked the window sums past one quantum: 12 fault events in the first 6 min)."""

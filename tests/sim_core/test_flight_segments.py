@@ -55,7 +55,7 @@ def test_a_scheduled_turn_fault_and_isolation_cut_by_seams_fly_as_one_flight() -
 @pytest.mark.parametrize(
     ("name", "lengths"),
     [
-        ("song-components", [73.3, 126.7]),  # wheel noise and imbalance, gyro Markov drift, motor electrics
+        ("song-table1", [73.3, 126.7]),  # wheel noise and imbalance, gyro Markov drift, motor electrics
         ("somov-detumble-to-scan", [61.05, 138.95]),  # mode machine: B-dot rate damping from a tumble
         ("somov-ge4-scan", [3000.0, 1000.0]),  # the second segment adds a whole IGRF hour of field rows
     ],

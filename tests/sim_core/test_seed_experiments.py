@@ -1,10 +1,19 @@
 """The seeds' fault experiments, each asserted against the outcome the seed states (or, where our
 physics disagrees, against what it gives, said so in the test name).
 
-Seed 002 §3.2 on the ``song-table1`` bus (three orthogonal wheels, quaternion PD), 1,000 s of
-Earth pointing as the scenario's description says: without reconfiguration (the paper's runs, star
-tracker as attitude sensor) and with our FDIR (MEKF + screening + wheel isolation). The seed's
-Table 1 is garbled, so magnitudes are :data:`sim_core.faults.SEED002_MAGNITUDES`. Seed 000 §5:
+Seed 002 §3.2 on the ``song-table1`` bus (three orthogonal wheels with the seed's torque balance, motor
+electrics and gyro drift; quaternion PD), 1,000 s of Earth pointing as the scenario's description says: without
+reconfiguration (the paper's runs, star tracker as attitude sensor) and with our FDIR (MEKF + screening + wheel
+isolation). The seed's Table 1 is garbled, so magnitudes are :data:`sim_core.faults.SEED002_MAGNITUDES`.
+
+The nominal error is friction-limited (seed 002 eq 4). The law u = −K_p q_e − K_d ω_e has no integral: at rest
+each axis i holds the torque its wheel's friction m_f(Ω_i) = K_nl sign Ω_i + K_l Ω_i takes from the motor, plus the
+external torque the wheel stores (J_r Ω̇_i), by a standing error q_e,i = θ_i/2, so
+|θ_i| = 2 |m_f(Ω_i) + J_r Ω̇_i| / K_p; the gyro's Markov drift b (eq 13, σ_b) adds 2 K_d b / K_p through the rate
+term. A wheel beyond the Coulomb saturation speed has |m_f| = K_nl = 1e-4 N·m, hence θ = 1e-4 rad = 0.0057° at
+K_p = 2 N·m; with every axis at its worst (external torque ≤ the gravity-gradient bound 3μ/r³ (J_max − J_min), drift
+3σ_b) the whole error stays within √3 · 2 (K_nl + K_l Ω_max + M_gg + 3 K_d σ_b)/K_p = 0.014° (:func:`_friction_band`).
+With ideal wheels the nominal held 4.5e-4°; the seed's faults are now measured against this band. Seed 000 §5:
 wheels 2 and 4 with the magnetic driver fly the trace-scanning route near the 4-wheel accuracy;
 and the 11-configuration table of issue 4 through ``acs-twin faults-table``.
 """
@@ -14,17 +23,30 @@ import json
 import numpy as np
 import pytest
 
-from sim_core import faults, scenario_library
+from sim_core import engine, faults, fdir, orbit, quaternion, scenario_library
 from sim_core.engine import simulate
 from sim_core.scenario import Scenario, VariantSpec
 
 DURATION_S = 1000.0
 SETTLED_S = 200.0  # nominal settles from the 5° start in ~30 s; after 200 s only faults move the error
-GROWTH = 100.0  # "destroyed stability": RMS error after SETTLED_S above 100× the nominal one
+NOT_STABILISED = 10.0  # "cannot be stabilised": the error ends an order of magnitude beyond the nominal band
 LOST_DEG = 10.0  # attitude lost: beyond 10° (the nominal holds a few arcsec)
 RAMP_TRACKING = 0.1  # the loop follows a drifting attitude sensor to 10 % (PD lag at 5e-5 rad/s)
 SETTLING_SAME_S = 2.0  # "no longer response" within 2 s of the nominal 29 s
+MOMENTUM_TOLERANCE = 0.02  # trapezoid of the 0.1 s gravity-gradient samples against the flight, and ω × H terms
+OBSERVABLE_WINDOW_S = 60.0  # issue 13: isolated within 60 s of the fault becoming observable
 ARCSEC = np.pi / 180.0 / 3600.0
+
+
+def _friction_band(s: Scenario, speed_max_rad_s: float) -> float:
+    """Bound on the nominal's pointing error, rad (module docstring): √3 · 2 (K_nl + K_l Ω_max + M_gg + 3 K_d σ_b)/K_p."""
+    w, j = s.spacecraft.cluster.wheels[0], np.linalg.eigvalsh(np.asarray(s.spacecraft.inertia_kg_m2))
+    r = orbit.R_EARTH_M + s.orbit.altitude_m
+    m_gg = 3.0 * orbit.MU_EARTH_M3_S2 / r**3 * (j[-1] - j[0])
+    drift = 3.0 * s.controller.pd_kd_nms * s.sensors.gyro_markov_sigma_rad_s
+    return float(
+        np.sqrt(3.0) * 2.0 * (w.coulomb_nm + w.viscous_nm_s * speed_max_rad_s + m_gg + drift) / s.controller.pd_kp_nm
+    )
 
 
 def _song(estimator: str) -> Scenario:
@@ -57,6 +79,11 @@ class Outcome:
     def settling(self, name: str) -> float:
         return float(self.traj.settling_time_s()[self.names.index(name)])
 
+    def band_deg(self) -> float:
+        """The nominal's friction band (:func:`_friction_band`) at the fastest wheel speed after SETTLED_S, deg."""
+        speed = np.max(np.abs(self.traj["wheel_speed_rad_s"][self.names.index("nominal"), self.late]))
+        return float(np.degrees(_friction_band(scenario_library.get("song-table1"), speed)))
+
 
 @pytest.fixture(scope="module")
 def without_fdir() -> Outcome:
@@ -83,10 +110,50 @@ def test_intermittent_controller_fault_recovers_but_does_not_lengthen_settling_o
     assert abs(without_fdir.settling(name) - without_fdir.settling("nominal")) < SETTLING_SAME_S
 
 
-def test_stuck_wheel_3_destroys_stability_on_three_orthogonal_wheels(without_fdir):
-    err_mid, err_end = without_fdir.at("wheel 3 stuck", 500.0), without_fdir.at("wheel 3 stuck", DURATION_S - 1.0)
-    assert without_fdir.rms_late("wheel 3 stuck") > GROWTH * without_fdir.rms_late("nominal")
-    assert err_end > 2.0 * err_mid  # still diverging
+def test_nominal_error_is_the_wheels_friction_balance(without_fdir):
+    """Module docstring: a wheel beyond the Coulomb saturation speed Ω° all through the late window holds its axis at
+    θ = 2 (K_nl sign Ω + K_l Ω + J_r Ω̇)/K_p (Ω̇ the external torque it stores, fitted from its speeds), within the gyro
+    drift's 2 K_d/K_p · 3σ_b; the whole error stays inside the friction band."""
+    s = scenario_library.get("song-table1")
+    w, v = s.spacecraft.cluster.wheels[0], without_fdir.names.index("nominal")
+    t = without_fdir.traj.t_s
+    late = t >= 2.0 * SETTLED_S  # the gravity gradient has spun one wheel past Ω° by then
+    speeds = without_fdir.traj["wheel_speed_rad_s"][v, late]
+    beyond = np.all(np.abs(speeds) > w.coulomb_sat_speed_rad_s, axis=0)
+    assert beyond.sum() >= 1
+    q = without_fdir.traj["q_ib"][v, late]
+    theta = 2.0 * q[:, 1:] * np.sign(q[:, :1])  # small-angle error per body axis (reference: identity)
+    kp, kd = s.controller.pd_kp_nm, s.controller.pd_kd_nms
+    for axis in np.nonzero(beyond)[0]:  # orthogonal3: wheel i on body axis i
+        sp = speeds[:, axis]
+        stored = w.inertia_kg_m2 * np.polyfit(t[late], sp, 1)[0]
+        expected = 2.0 * (w.coulomb_nm * np.sign(sp.mean()) + w.viscous_nm_s * sp.mean() + stored) / kp
+        drift = 2.0 * kd * 3.0 * s.sensors.gyro_markov_sigma_rad_s / kp
+        assert abs(theta[:, axis].mean() - expected) <= drift
+    assert without_fdir.rms_late("nominal") < without_fdir.band_deg()
+
+
+def test_stuck_wheel_3_frees_its_axis_and_the_attitude_is_not_stabilised(without_fdir):
+    """Seed 002 Fig. 30: 'the system cannot be stabilized' (it claims no ratio). Wheel 3 seized, the z axis has no
+    actuator: its momentum changes by the gravity-gradient torque alone, J_z Δω_z = ∫ (3μ/|r|⁵ r_b × J r_b)_z dt
+    (written out here, from the recorded orbit and attitude), so the error grows without bound while the other two
+    axes stay controlled. It keeps growing and ends beyond ``NOT_STABILISED`` × the nominal's friction band (with
+    ideal wheels it was > 100× the 4.5e-4° nominal; the friction floor is 13× higher, the drift the same)."""
+    s = scenario_library.get("song-table1")
+    v = without_fdir.names.index("wheel 3 stuck")
+    t, j = without_fdir.traj.t_s, np.asarray(s.spacecraft.inertia_kg_m2)
+    q, r = without_fdir.traj["q_ib"][v], without_fdir.traj["r_eci_m"][v]
+    r_b = quaternion.rotate(quaternion.conjugate(q), r)
+    m_gg = 3.0 * orbit.MU_EARTH_M3_S2 / np.linalg.norm(r_b, axis=1)[:, None] ** 5 * np.cross(r_b, r_b @ j.T)
+    impulse = np.concatenate([[0.0], np.cumsum(0.5 * (m_gg[1:, 2] + m_gg[:-1, 2]) * np.diff(t))])
+    h_z = j[2, 2] * without_fdir.traj["omega_b_rad_s"][v, :, 2]
+    k0 = np.searchsorted(t, 10.0)  # after the seizure's momentum dump
+    for k in np.searchsorted(t, [SETTLED_S, 500.0, DURATION_S - 1.0]):
+        assert h_z[k] - h_z[k0] == pytest.approx(impulse[k] - impulse[k0], rel=MOMENTUM_TOLERANCE)
+    err = [without_fdir.at("wheel 3 stuck", tt) for tt in (SETTLED_S, 500.0, 750.0, DURATION_S - 1.0)]
+    assert all(a < b for a, b in zip(err, err[1:]))
+    assert err[-1] > 2.0 * err[1]  # still diverging (a growing torque impulse: faster than linear)
+    assert err[-1] > NOT_STABILISED * without_fdir.band_deg()
 
 
 def test_wheel_3_gain_loss_does_not_destabilise_the_pd_loop_here(without_fdir):
@@ -110,8 +177,13 @@ def test_graded_attitude_sensor_fault_accumulates_its_drift_into_the_attitude(wi
 
 
 def test_graded_gyro_fault_grows_the_error_and_both_together_grow_it_more(without_fdir):
-    gyro = [without_fdir.at("gyro graded", t) for t in (200.0, 500.0, DURATION_S - 1.0)]
-    assert gyro[0] < gyro[1] < gyro[2] and gyro[0] > GROWTH * without_fdir.rms_late("nominal")
+    """A gyro bias b = a (t − t_s) on one axis enters the rate term: J θ̈ = −(K_p/2) θ − K_d (θ̇ + b) is followed by
+    θ = −(2 K_d a/K_p)(t − t_s − 2 K_d/K_p) (the ramp, one time constant 2 K_d/K_p late), to ``RAMP_TRACKING``."""
+    s = scenario_library.get("song-table1")
+    a, kp, kd = faults.SEED002_MAGNITUDES["gyro_drift_rad_s2"], s.controller.pd_kp_nm, s.controller.pd_kd_nms
+    for t in (SETTLED_S, 500.0, DURATION_S - 1.0):
+        expected = np.degrees(2.0 * kd * a / kp * (t - faults.SEED002_ONSET_S - 2.0 * kd / kp))
+        assert without_fdir.at("gyro graded", t) == pytest.approx(expected, rel=RAMP_TRACKING)
     assert without_fdir.rms_late("gyro + attitude sensor graded") > without_fdir.rms_late("attitude sensor graded")
 
 
@@ -122,10 +194,29 @@ def test_more_measurement_noise_gives_more_deviation(without_fdir):
 
 
 def test_fdir_isolates_the_stuck_wheel_and_recovers_on_two_wheels_and_the_md(without_fdir, with_fdir):
-    t_iso = next(t for t, n, arg in with_fdir.events("wheel 3 stuck") if n == "fault_isolated" and arg == 2)
-    assert t_iso - faults.SEED002_ONSET_S <= 2 * scenario_library.get("song-table1").control_dt_s + 1e-9
+    """The seized wheel withholds the ~2e-5 N·m the law asks of it: that is observable once the withheld momentum
+    over some window outgrows the noise momentum seed 002's K_x puts there (fdir.observable_time, perfect
+    tachometer; ≈ 18 s after the onset: (a/m T_u)² ≈ 180 periods); it is isolated within ``OBSERVABLE_WINDOW_S`` of
+    that, on wheel 3 only, and the loop recovers into the nominal's friction band on two wheels + MD."""
+    s = scenario_library.get("song-table1")
+    isolated = [(t, arg) for t, n, arg in with_fdir.events("wheel 3 stuck") if n == "fault_isolated"]
+    assert [arg for _, arg in isolated] == [2]
+    v = with_fdir.names.index("wheel 3 stuck")
+    t = with_fdir.traj.t_s
+    cmd = with_fdir.traj["wheel_torque_cmd_nm"][v, :, 2]
+    noise = fdir.wheel_noise_bound(
+        np.array([s.spacecraft.cluster.wheels[2].noise_nm]),
+        s.dynamics_dt_s,
+        s.control_dt_s,
+        fdir.FALSE_ALARM_PROBABILITY,
+    )[0]
+    j_r = engine.plant_params(s).wheels.inertia_kg_m2[2]
+    onset = faults.SEED002_ONSET_S
+    seen = fdir.observable_time(t, cmd, np.where(t >= onset, 0.0, cmd), onset, j_r, 0.0, float(noise), s.control_dt_s)
+    assert seen is None or isolated[0][0] - seen <= OBSERVABLE_WINDOW_S  # None: isolated before it was
     end = DURATION_S - 1.0
-    assert with_fdir.at("wheel 3 stuck", end) < 0.01 * without_fdir.at("wheel 3 stuck", end)
+    assert with_fdir.at("wheel 3 stuck", end) < without_fdir.band_deg()
+    assert without_fdir.at("wheel 3 stuck", end) > NOT_STABILISED * without_fdir.band_deg()
 
 
 def test_fdir_isolates_the_gyro_drift_and_recovers(without_fdir, with_fdir):

@@ -337,13 +337,13 @@ def test_flexible_modes_ring_at_the_constrained_frequency_after_the_turn():
     assert np.std(dw[:, axis]) > 1e-7
 
 
-@pytest.mark.parametrize("name", ["song-components", "somov-ge4-scan-flex"])
+@pytest.mark.parametrize("name", ["song-table1", "somov-ge4-scan-flex"])
 def test_library_seed_scenarios_fly_their_seed_models(name):
-    """The library flies what the seeds specify: seed 002's wheel terms, motor electrics and gyro drift on song-components;
+    """The library flies what the seeds specify: seed 002's wheel terms, motor electrics and gyro drift on song-table1;
     seed 000's flexible modes and torque quanta on somov-ge4-scan-flex."""
     s = scenario_library.get(name)
     w = s.spacecraft.cluster.wheels[0]
-    if name == "song-components":
+    if name == "song-table1":
         assert w.noise_nm > 0 and w.imbalance_nm_s2 > 0 and w.aero_drag_nm_s15 > 0 and s.spacecraft.cluster.motor
         assert s.sensors.gyro_markov_sigma_rad_s > 0
     else:
