@@ -64,6 +64,7 @@ class FeedWindow:
     mode: np.ndarray  # (N,) int
     fault_flags: np.ndarray  # (N,) int bit set
     observing: np.ndarray  # (N,) bool
+    wheel_speed_simulated_rad_s: np.ndarray | None = None  # (N, n_wheels), the twin's where the feed flies wheels
 
 
 @runtime_checkable

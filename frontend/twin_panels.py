@@ -128,6 +128,7 @@ class TwinPanels:
                 aspect=2.0,
             )
         with gui.add_folder("Wheel speeds (rpm)", expand_by_default=False):
+            self.wheel_source = gui.add_markdown("telemetry")  # the simulated monitor plots the twin's when it flies
             self.wheel_plot = gui.add_uplot(
                 data=_empty(n_wheels),
                 series=({"label": "t − now (s)"},)
@@ -257,9 +258,11 @@ class TwinPanels:
         x = w.t_unix_s - t_unix_s
         if x.size >= 2:
             self.error_plot.data = (x, w.error_angle_rad * ARCSEC_PER_RAD)
-            self.wheel_plot.data = (x,) + tuple(
-                w.wheel_speed_rad_s[:, k] * RPM_PER_RAD_S for k in range(w.wheel_speed_rad_s.shape[1])
-            )
+            wheels, source = w.wheel_speed_rad_s, "telemetry"
+            if self.role == "simulated" and w.wheel_speed_simulated_rad_s is not None:
+                wheels, source = w.wheel_speed_simulated_rad_s, f"simulated: {self.simulated_label}"
+            self.wheel_source.content = source
+            self.wheel_plot.data = (x,) + tuple(wheels[:, k] * RPM_PER_RAD_S for k in range(wheels.shape[1]))
             self.md_plot.data = (x,) + tuple(w.md_dipole_am2[:, k] for k in range(3))
         if x.size:
             self.flags.content = (

@@ -105,8 +105,8 @@ def fly_hypothesis(services: Services, diagnosis_id: str, rank: int, actor: str)
     onset_s = _unix_s(h["onset_utc"]) - obs.epoch_unix_s if h["onset_utc"] else None
     try:
         batch, first, stop = hypothesis_replay(obs, scenario, h["fault"], h["wheel"], onset_s, h["magnitude"])
-    except ValueError as exc:
-        raise ApiError(422, f"rank: {exc}", "rank") from None
+    except ValueError as exc:  # "hypothesis: <what>": none, not flyable, no onset in the telemetry
+        raise ApiError(422, f"rank: hypothesis #{rank}: {str(exc).removeprefix('hypothesis: ')}", "rank") from None
     out = services.settings.data_dir / "flights"
     out.mkdir(parents=True, exist_ok=True)
     npz = write_npz(cluster.flyer(services.cluster.client())(batch), out / f"{diagnosis_id}-{rank}.npz")

@@ -2,7 +2,8 @@
 
 Actual side: the telemetered estimated attitude, rates, wheel speeds, MD moments, mode and wheel
 fault flags of the session window (telemetry.actual_state) and the GPS orbit; simulated side: the
-twin's trajectory (variant 0). Attitudes between samples follow the C¹ splines of seed 000 §7.
+twin's trajectory (variant 0), its attitude and, for the simulated monitor's wheel plot, its wheel
+speeds. Attitudes between samples follow the C¹ splines of seed 000 §7.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class SessionFeed:
         with np.load(twin_npz) as twin:
             t_twin = align_utc_ns / NS_PER_S + twin["t_s"]
             self._spline_s = AttitudeSpline(t_twin, twin["q_ib"][0], twin["omega_b_rad_s"][0])
+            self._twin_t, self._twin_wheels = t_twin, twin["wheel_speed_rad_s"][0]
         self._t_end = min(float(self._t[-1]), float(t_twin[-1]) + SAME_INSTANT_S)  # both sides have data
 
     def span_unix_s(self) -> tuple[float, float]:
@@ -74,7 +76,16 @@ class SessionFeed:
             mode=np.asarray(s["mode"][sel], dtype=np.int64),
             fault_flags=(faulted * (1 << np.arange(faulted.shape[1]))).sum(axis=1).astype(np.int64),
             observing=np.zeros(t.size, dtype=bool),  # the imaging state is not telemetered
+            wheel_speed_simulated_rad_s=self.wheels_simulated(t),
         )
+
+    def wheels_simulated(self, t_unix_s: np.ndarray) -> np.ndarray:
+        """The twin's wheel speeds (rad/s) at the given times, linear between its samples, NaN outside its flight."""
+        out = np.full((t_unix_s.size, self._twin_wheels.shape[1]), np.nan)
+        inside = (t_unix_s >= self._twin_t[0]) & (t_unix_s <= self._twin_t[-1])
+        for k in range(out.shape[1]):
+            out[inside, k] = np.interp(t_unix_s[inside], self._twin_t, self._twin_wheels[:, k])
+        return out
 
     def active_alarms(self, t_unix_s: float) -> list[str]:
         """Archived alarms raised at or before t and not cleared."""

@@ -101,7 +101,14 @@ def flown(tmp_path_factory, shared_dask):
         try:
             with viser_client(handles.ports["simulated"]):
                 wait_for_viewers(handles, "simulated", 1)
-                yield {"client": client, "operator": operator, "viewer": viewer, "ids": ids, "t0": t0}
+                yield {
+                    "client": client,
+                    "operator": operator,
+                    "viewer": viewer,
+                    "ids": ids,
+                    "t0": t0,
+                    "handles": handles,
+                }
         finally:
             handles.stop()
 
@@ -142,6 +149,18 @@ def test_the_true_hypothesis_flies_the_coasting_wheel_the_telemetry_shows(flown)
     assert state["monitor_label"] == state["label"] == flight["label"] and flight["on_monitor"]
     assert [v["label"] for v in state["viewers"]] == [state["label"]]
     assert state["flight"]["summaries"] == flight["summaries"]
+    # and that viewer's wheel plot is the twin's: at the flight's end the failed wheel coasts there too
+    (monitor,) = flown["handles"].viewers["simulated"].values()
+    end_s = np.datetime64(flight["end_utc"].rstrip("Z"), "ns").astype(np.int64) / 1e9
+    monitor.clock.seek(end_s)
+    deadline = time.monotonic() + 10.0
+    while not monitor.panels.wheel_source.content.startswith(f"simulated: {flight['label']}"):
+        assert time.monotonic() < deadline, monitor.panels.wheel_source.content
+        time.sleep(0.1)
+    x, *plotted = monitor.panels.wheel_plot.data
+    rw2 = np.asarray(plotted[FAILED_WHEEL])[np.asarray(x) > -SETTLE_S]
+    assert rw2.size and np.ptp(rw2) < QUANTUM_RPM
+    assert abs(rw2[-1] - w["hypothesis"][-1]) < QUANTUM_RPM
 
 
 def test_a_wrong_wheel_flies_worse_and_the_nominal_twin_comes_back(flown):
