@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import combinations
 
 import numpy as np
@@ -177,6 +177,8 @@ class Hypothesis:
     magnitude: float | list[float | None] | None
     log_evidence: float
     score: float = 0.0
+    # the momentum balance's onset log-likelihood (times s, profiled log-likelihood): the replay's onset prior
+    onset_profile: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass
@@ -346,6 +348,7 @@ class _Fit:
     onset_sigma_s: float
     magnitude: float | None
     credit: dict[int, float] = field(default_factory=dict)  # other channels' evidence included (seizure kick)
+    profile: tuple[np.ndarray, np.ndarray] | None = None  # onset times (s) and the profiled log-likelihood there
 
 
 def _profile(
@@ -499,13 +502,16 @@ def _fit(
     others = others or {}
     for extra in others.values():  # the other channels' evidence under this hypothesis, per onset
         ll = ll + np.tile(extra, len(fractions))
-    onset, sigma, best = _onset_stats(np.concatenate([t_s[onsets] - phi * lead for phi in fractions]), ll)
+    times = np.concatenate([t_s[onsets] - phi * lead for phi in fractions])
+    onset, sigma, best = _onset_stats(times, ll)
     k = best % onsets.shape[0]
     penalty = 0.5 * n_params * math.log(max(ch.y.shape[0] - int(onsets[k]), 2))
     magnitude = None if np.isnan(theta[best]) else float(theta[best])
     credit = {q: float(extra[k]) for q, extra in others.items()}
     sigma = max(sigma, _one_count_s(ch, int(onsets[k]), kind, magnitude, t_s) / math.sqrt(12.0))
-    return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude, credit)
+    order = np.argsort(times, kind="stable")
+    profile = (times[order], ll[order])
+    return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude, credit, profile)
 
 
 def _one_count_s(ch: _Channel, k: int, kind: str, magnitude: float | None, t_s: np.ndarray) -> float:
@@ -767,66 +773,97 @@ def _replayed(
     alarm: int,
     flyer: Callable[[Scenario], object] | None,
 ) -> list[Hypothesis]:
-    """Add the twin replay's evidence (commands and attitude, onset re-estimated on a common coarse-then-fine
-    grid) to the top wheel hypotheses and re-rank (:mod:`sim_core.twin_replay`)."""
+    """Add the twin replay's evidence (commands and attitude) to the top wheel hypotheses and re-rank
+    (:mod:`sim_core.twin_replay`).
+
+    Each hypothesis flies at onsets spanning its own balance posterior (a coarse grid, then a fine one around
+    its best joint onset). The balance's onset posterior is the replay's onset prior: the evidence added is
+    ln E[exp(replay log-likelihood)] under it, and the onset reported is the maximum of the two together (the
+    replay alone may prefer an onset the tachometer counts rule out: a twin that drifts from the spacecraft
+    favours the onset whose fault best hides its drift)."""
     from sim_core.twin_replay import fault_specs  # the engine's kernels: loaded by a replay, not by an import
 
     t = obs.t_s
     chosen = [h for h in hyps if h.onset_s is not None and fault_specs(h.fault, h.wheel, 0.0, h.magnitude)][:REPLAYED]
     if not chosen:
         return hyps
-    top = chosen[0]
-    assert top.onset_s is not None  # chosen keeps hypotheses with an onset
-    half = float(np.clip(3.0 * (top.onset_sigma_s or 0.0) + 20.0, 30.0, 300.0))
     lo, hi = float(t[start + 1]), float(t[min(alarm, stop - 2)])  # the fault began before it was detected
-    grid = np.unique(np.clip(top.onset_s + np.linspace(-half, half, REPLAY_ONSETS), lo, hi))
+    grids = np.stack([_onset_grid(h, lo, hi) for h in chosen])
     try:
-        ll = _replay_grid(chosen, grid, obs, scenario, start, stop, flyer)
+        ll = _replay_grid(chosen, grids, obs, scenario, start, stop, flyer)
     except ValueError:  # the twin cannot restart there (inside a scheduled turn): the balance's ranking stands
         return hyps
-    step = float(np.diff(grid).min(initial=2.0 * half))
-    best = grid[int(np.argmax(ll.max(axis=0)))]
-    fine = np.unique(np.clip(best + np.linspace(-step, step, REPLAY_ONSETS), lo, hi))
+    priors = [_onset_prior(h, grid, lo, hi) for h, grid in zip(chosen, grids)]
+    fines = []
+    for (times, log_w), grid, row in zip(priors, grids, ll):
+        best = float(times[int(np.argmax(log_w + np.interp(times, grid, row)))])
+        step = max(float(np.diff(grid).max(initial=0.0)), 1.0)
+        fines.append(np.clip(best + np.linspace(-step, step, REPLAY_ONSETS), lo, hi))
     try:
-        ll_fine = _replay_grid(chosen, fine, obs, scenario, start, stop, flyer)
+        ll_fine = _replay_grid(chosen, np.stack(fines), obs, scenario, start, stop, flyer)
     except ValueError:  # the twin cannot restart before the fine grid (a scheduled turn): the coarse grid alone
-        fine, ll_fine = grid[:0], ll[:, :0]
-    taus = np.concatenate([grid, fine])
-    all_ll = np.concatenate([ll, ll_fine], axis=1)
+        fines, ll_fine = [grid[:0] for grid in grids], ll[:, :0]
+    evidence, onsets = [], []
+    for i, (times, log_w) in enumerate(priors):
+        taus = np.concatenate([grids[i], fines[i]])
+        order = np.argsort(taus, kind="stable")
+        joint = log_w + np.interp(times, taus[order], np.concatenate([ll[i], ll_fine[i]])[order])
+        evidence.append(_log_sum_exp(joint))
+        onset, sigma, _ = _onset_stats(times, joint)
+        sigma = max(sigma, float(np.diff(fines[i]).min(initial=1.0)))
+        if np.ptp(joint - log_w) < 1.0:  # the replay hardly tells the onsets apart: the balance's uncertainty stands
+            sigma = max(sigma, chosen[i].onset_sigma_s or 0.0)
+        onsets.append((onset, sigma))
     # the replay ranks the hypotheses it flies among themselves: the twin's own mismatch (inertia, alignments)
     # weighs on every variant, so its evidence against hypotheses it did not fly would not be fair
-    ll = ll - np.max([_log_mean_exp(row) for row in ll])
-    updated = {}
-    for i, h in enumerate(chosen):
-        onset, sigma, _ = _onset_stats(taus, all_ll[i])
-        evidence = _log_mean_exp(ll[i])  # the coarse grid spans the onset prior; fine points refine the onset
-        updated[id(h)] = Hypothesis(
-            h.fault,
-            h.wheel,
-            onset,
-            max(sigma, float(np.diff(fine).min(initial=1.0))),
-            h.magnitude,
-            h.log_evidence + evidence,
-        )
+    top = max(evidence)
+    updated = {
+        id(h): replace(h, onset_s=onset, onset_sigma_s=sigma, log_evidence=h.log_evidence + ev - top)
+        for h, ev, (onset, sigma) in zip(chosen, evidence, onsets)
+    }
     return _scored([updated.get(id(h), h) for h in hyps])
+
+
+def _onset_grid(h: Hypothesis, lo: float, hi: float) -> np.ndarray:
+    """REPLAY_ONSETS onsets over the hypothesis's onset ± (3σ + 20 s), at least ± 30 s, at most ± 300 s."""
+    assert h.onset_s is not None  # the replay flies hypotheses with an onset
+    half = float(np.clip(3.0 * (h.onset_sigma_s or 0.0) + 20.0, 30.0, 300.0))
+    grid: npt.NDArray[np.float64] = np.clip(h.onset_s + np.linspace(-half, half, REPLAY_ONSETS), lo, hi)
+    return grid
+
+
+def _onset_prior(h: Hypothesis, grid: np.ndarray, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
+    """Onset times and normalised log weights the replay's likelihood is averaged over: the balance's onset
+    posterior within [lo, hi] (the replay flies no onset after the alarm), else uniform over the grid."""
+    if h.onset_profile is not None:
+        times, ll = h.onset_profile
+        inside = (times >= lo) & (times <= hi)
+        if inside.any():
+            return times[inside], ll[inside] - _log_sum_exp(ll[inside])
+    return grid, np.full(grid.shape[0], -math.log(grid.shape[0]))
+
+
+def _log_sum_exp(x: np.ndarray) -> float:
+    return _log_mean_exp(x) + math.log(x.shape[0])
 
 
 def _replay_grid(
     chosen: list[Hypothesis],
-    grid: np.ndarray,
+    grids: np.ndarray,
     obs: Observations,
     scenario: Scenario,
     start: int,
     stop: int,
     flyer: Callable[[Scenario], object] | None,
 ) -> np.ndarray:
-    """Replay log-likelihood (hypotheses × onsets) relative to the no-fault variant."""
+    """Replay log-likelihood (hypotheses × onsets) relative to the no-fault variant, hypothesis i flown at the
+    onsets grids[i]."""
     from sim_core.twin_replay import fault_specs, replay_scores
 
     t = obs.t_s
-    scenario, first, reference = _replay_rows(obs, scenario, float(grid[0]), start, stop)
+    scenario, first, reference = _replay_rows(obs, scenario, float(grids.min()), start, stop)
     candidates: list[list[FaultSpec]] = []
-    for h in chosen:
+    for h, grid in zip(chosen, grids):
         for tau in grid:
             specs = fault_specs(h.fault, h.wheel, float(tau - t[first]), h.magnitude)
             if specs is None:  # _replayed chooses flyable hypotheses only
@@ -836,7 +873,7 @@ def _replay_grid(
     ll = replay_scores(
         batch, t, obs.q_est_ib, obs.wheel_torque_cmd_nm, first, stop, reference, obs.torque_quantum_nm, flyer
     )
-    relative: npt.NDArray[np.float64] = (ll[:-1] - ll[-1]).reshape(len(chosen), grid.shape[0])
+    relative: npt.NDArray[np.float64] = (ll[:-1] - ll[-1]).reshape(grids.shape)
     return relative
 
 
@@ -917,10 +954,7 @@ def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:
     post = np.exp(ev - ev.max())
     post /= post.sum()
     return sorted(
-        (
-            Hypothesis(h.fault, h.wheel, h.onset_s, h.onset_sigma_s, h.magnitude, h.log_evidence, float(s))
-            for h, s in zip(hyps, post)
-        ),
+        (replace(h, score=float(s)) for h, s in zip(hyps, post)),
         key=lambda h: -h.log_evidence,
     )
 
@@ -947,7 +981,15 @@ def _rank(
     hyps = [Hypothesis("none", None, None, None, None, unexplained() + none_prior)]
     for f in wheel_fits:
         hyps.append(
-            Hypothesis(f.fault, f.channel + 1, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained(f))
+            Hypothesis(
+                f.fault,
+                f.channel + 1,
+                f.onset_s,
+                f.onset_sigma_s,
+                f.magnitude,
+                f.delta + unexplained(f),
+                onset_profile=f.profile,
+            )
         )
     for f in sensor_fits:
         hyps.append(Hypothesis(f.fault, None, f.onset_s, f.onset_sigma_s, f.magnitude, f.delta + unexplained()))

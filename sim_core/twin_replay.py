@@ -29,6 +29,7 @@ from sim_core.scenario import FaultSpec, Scenario, VariantSpec, shifted_guidance
 
 __all__ = [
     "ARCSEC_FLOOR",
+    "effective_samples",
     "fault_specs",
     "orbit_phase_deg",
     "replay_batch",
@@ -212,8 +213,9 @@ def replay_scores(
 
     Concentrated Gaussian likelihood (σ unknown, profiled out) of the command and attitude residuals:
     −(N/2) ln(MSE + σ₀²) per channel, with σ₀ the telemetry resolution (and the no-fault variant's
-    mismatch before row ``reference``), N = span / ``correlation_s`` independent samples (the closed
-    loop's residuals are smooth over its settling time, so the sample count would overstate the evidence).
+    mismatch before row ``reference``), N the independent samples of the best variant's residual in the
+    channel (:func:`effective_samples`), at most span / ``correlation_s`` (the closed loop's settling time):
+    a twin drifting slowly from the spacecraft is one error, not one per row.
     """
     traj = (flyer or engine.simulate)(batch)
     rel = t_s[start:stop] - t_s[start]
@@ -227,11 +229,26 @@ def replay_scores(
     pre = max(reference - start, 2)
     sig_u = max(float(np.sqrt(np.nanmean(du[-1, :pre] ** 2))), torque_quantum_nm / math.sqrt(12.0), TORQUE_FLOOR_NM)
     sig_a = max(float(np.sqrt(np.nanmean(att[-1, :pre] ** 2))), ARCSEC_FLOOR * math.pi / 648000.0)
-    n_eff = max((t_s[stop - 1] - t_s[reference]) / correlation_s, 1.0)
+    cap = max((t_s[stop - 1] - t_s[reference]) / correlation_s, 1.0)
     mse_u = np.nanmean(du[:, pre:] ** 2, axis=(1, 2)) + sig_u**2
     mse_a = np.nanmean(att[:, pre:] ** 2, axis=(1, 2)) + sig_a**2
-    log_likelihood: npt.NDArray[np.float64] = -0.5 * n_eff * (np.log(mse_u) + np.log(mse_a))
+    best = int(np.argmin(np.log(mse_u) + np.log(mse_a)))  # what the best variant leaves is the twin's own mismatch
+    n_u = min(cap, effective_samples(du[best, pre:]))
+    n_a = min(cap, effective_samples(att[best, pre:]))
+    log_likelihood: npt.NDArray[np.float64] = -0.5 * (n_u * np.log(mse_u) + n_a * np.log(mse_a))
     return log_likelihood
+
+
+def effective_samples(residual: np.ndarray) -> float:
+    """Independent samples in residual rows (n, channels) whose errors are AR(1) with the pooled lag-1
+    autocorrelation ρ of the rows (about zero, so a constant offset counts as correlated): n (1 − ρ)/(1 + ρ),
+    at least 1. A twin mismatch that drifts slowly (ρ → 1) is one error, however many rows it spans."""
+    r = residual[np.all(np.isfinite(residual), axis=1)]
+    if r.shape[0] < 3:
+        return 1.0
+    power = float(np.sum(r[:-1] ** 2) + np.sum(r[1:] ** 2))
+    rho = float(np.clip(2.0 * np.sum(r[:-1] * r[1:]) / max(power, 1e-300), 0.0, 1.0))
+    return max(float(r.shape[0]) * (1.0 - rho) / (1.0 + rho), 1.0)
 
 
 def _small_angles(q_a: np.ndarray, q_b: np.ndarray) -> np.ndarray:

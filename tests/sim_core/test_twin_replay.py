@@ -38,3 +38,21 @@ def test_orbit_phase_of_a_cut_basilisk_file_matches_its_flight_time() -> None:
 def test_commands_the_gravity_gradient_does_not_explain_leave_the_phase_unknown() -> None:
     t, q, u = _rows()
     assert orbit_phase_deg(scenario_library.get("peer-basilisk-rw4"), t, q, 3.0 * u) is None
+
+
+def test_effective_samples_of_white_ar1_and_constant_residuals() -> None:
+    """AR(1) errors e_k = ρ e_{k−1} + w_k: the variance of their mean is that of n (1 − ρ)/(1 + ρ) independent
+    samples (large n); white noise counts every row, a constant offset (a twin that drifts from the spacecraft by
+    a fixed amount) counts once."""
+    from sim_core.twin_replay import effective_samples
+
+    rng = np.random.default_rng(7)
+    n = 20_000
+    assert effective_samples(rng.normal(size=(n, 3))) == pytest.approx(n, rel=0.05)
+    for rho in (0.5, 0.9):
+        e = np.zeros((n, 2))
+        w = rng.normal(size=(n, 2))
+        for k in range(1, n):
+            e[k] = rho * e[k - 1] + w[k]
+        assert effective_samples(e) == pytest.approx(n * (1.0 - rho) / (1.0 + rho), rel=0.1)
+    assert effective_samples(np.full((500, 3), 2e-6)) == 1.0
