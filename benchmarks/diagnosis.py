@@ -30,6 +30,7 @@ import argparse
 import time
 from dataclasses import dataclass
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
@@ -199,10 +200,16 @@ def run_case(case: Case, onboard_fdir: bool = False) -> dict:
     if case.fault == "speed_bias":
         stream = emulator.encode_stream(_tachometer_bias(case, series))
     batches = decode_stream(stream.data, dictionary).batches
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     result = diagnose_batches(batches, dictionary, scenario_library.get(SCENARIO))
-    compute_s = time.perf_counter() - start
-    return {"case": case, "result": result, "compute_s": compute_s, "isolated_s": _isolations(series)}
+    compute_s, compute_cpu_s = time.perf_counter() - start, time.process_time() - cpu  # replays flown in-process
+    return {
+        "case": case,
+        "result": result,
+        "compute_s": compute_s,
+        "compute_cpu_s": compute_cpu_s,
+        "isolated_s": _isolations(series),
+    }
 
 
 def _isolations(series: dict) -> dict[int, float]:
@@ -246,7 +253,7 @@ def score(outcomes: list[dict]) -> dict:
     from datetime import datetime
 
     top1 = top3 = unobservable = 0
-    onset_err, gain_err, fric_err, mag_err, latency = [], [], [], [], []
+    onset_err, gain_err, fric_err, mag_err, latency, latency_cpu = [], [], [], [], [], []
     misses = []
     per_category: dict[str, list[int]] = {}
     for o in outcomes:
@@ -264,6 +271,7 @@ def score(outcomes: list[dict]) -> dict:
             misses.append((case.index, case.fault, case.wheel, keys[0], round(res["hypotheses"][0]["score"], 3)))
         if res["detection"]["detected"]:
             latency.append(o["compute_s"] + 20.0)
+            latency_cpu.append(o.get("compute_cpu_s", float("nan")) + 20.0)
         if keys[0] == truth and case.onsets_s:
             h = res["hypotheses"][0]
             epoch = datetime.fromisoformat(res["telemetry_start_utc"]).timestamp()
@@ -293,6 +301,8 @@ def score(outcomes: list[dict]) -> dict:
         "magnetometer_error_p95_t": pct(mag_err, 95),
         "latency_median_s": pct(latency, 50),
         "latency_max_s": max(latency) if latency else float("nan"),
+        "latency_cpu_median_s": pct(latency_cpu, 50),
+        "latency_cpu_max_s": max(latency_cpu) if latency_cpu else float("nan"),
         "misses": misses,
         "unobservable": unobservable,
         "per_category": per_category,
@@ -402,7 +412,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     print(
         f"latency alarm -> ranked result (20 s of telemetry + compute): median {s['latency_median_s']:.1f} s, "
-        f"max {s['latency_max_s']:.1f} s"
+        f"max {s['latency_max_s']:.1f} s; with the compute's CPU time instead of its wall time (the load of other "
+        f"processes left out): median {s['latency_cpu_median_s']:.1f} s, max {s['latency_cpu_max_s']:.1f} s "
+        f"(load {' '.join(Path('/proc/loadavg').read_text().split()[:3])})"
     )
     print(
         f"speed-up on {args.workers} Dask workers: {len(sub)} cases serial {wall_serial:.1f} s, "

@@ -416,7 +416,7 @@ def _loglik(ch: _Channel, drift: np.ndarray, offset: np.ndarray, reset: np.ndarr
     args = (np.ascontiguousarray(drift), ch.q_var)
     tail = (np.ascontiguousarray(offset), np.ascontiguousarray(reset))
     if ch.bound > 0.0 and not gaussian:
-        return fd.count_loglik(ch.y, *args, ch.bound, (TACHOMETER_JITTER * ch.bound) ** 2, *tail)
+        return fd.count_loglik(ch.y, *args, ch.bound, (TACHOMETER_JITTER * ch.bound) ** 2, *tail, ch.drift)
     return fd.level_loglik(ch.y, *args, ch.r_var, *tail)
 
 

@@ -140,7 +140,6 @@ def _count_update(x: float, p: float, y: float, half: float, sensor_var: float) 
     return log_z, x + gain * s * mean, p * (1.0 - gain) + gain * gain * s * s * var
 
 
-@njit(cache=True)
 def count_loglik(
     y: np.ndarray,
     drift: np.ndarray,
@@ -149,6 +148,7 @@ def count_loglik(
     sensor_var: float,
     offset: np.ndarray,
     reset: np.ndarray,
+    nominal_drift: np.ndarray | None = None,
 ) -> np.ndarray:
     """Log-likelihood (B,) of tachometer readings y (n,), each the speed rounded to a multiple of ``quantum``,
     under the local-level models of :func:`level_loglik` with the rounding taken exactly: a reading says
@@ -161,55 +161,125 @@ def count_loglik(
     is COUNT_COMPONENTS equal slices (variance of each: its slice's, (q/K)²/12), carrying no likelihood.
     ``reset`` as in :func:`level_loglik`, but the first reset sample reads the rotor braking, uniform between its
     speed and 0 (a count is exact: a rotor seized between samples is not read at 0 at once).
+
+    ``nominal_drift`` (n−1,): a row that equals it (with zero offset and no reset) up to some sample continues
+    from the nominal model's filter state there instead of filtering that prefix again (a fault hypothesis is
+    the nominal model before its onset); the result is the same, bit for bit.
     """
-    n_b, n = drift.shape[0], y.shape[0]
+    nominal = np.full(y.shape[0] - 1, np.nan) if nominal_drift is None else np.ascontiguousarray(nominal_drift)
+    out: npt.NDArray[np.float64] = _count_loglik(y, drift, q_var, quantum, sensor_var, offset, reset, nominal)
+    return out
+
+
+@njit(cache=True)
+def _count_step(
+    k: int,
+    y: np.ndarray,
+    drift_in: float,
+    q_in: float,
+    reset_now: bool,
+    reset_before: bool,
+    offset: float,
+    quantum: float,
+    sensor_var: float,
+    xs: np.ndarray,
+    ps: np.ndarray,
+    lw: np.ndarray,
+    started: bool,
+) -> tuple[bool, float]:
+    """Propagate the mixture over interval k−1 → k and read sample k (in place); (started, ln P(reading))."""
+    m = xs.shape[0]
     half = 0.5 * quantum
+    if k > 0:
+        for i in range(m):
+            xs[i] += drift_in
+            ps[i] += q_in
+            if reset_now and not reset_before:  # seized between samples: read braking, 0 to x
+                ps[i] += xs[i] * xs[i] / 12.0
+                xs[i] *= 0.5
+            elif reset_now:
+                xs[i] = 0.0
+                ps[i] = 0.0
+    if np.isnan(y[k]):
+        return started, 0.0
+    if not started:
+        for i in range(m):
+            xs[i] = y[k] - offset + quantum * ((i + 0.5) / m - 0.5)
+            ps[i] = (quantum / m) ** 2 / 12.0
+            lw[i] = -math.log(m)
+        return True, 0.0
+    top = -np.inf
+    reading = y[k] - offset
+    for i in range(m):
+        if lw[i] <= -50.0:  # a slice this unlikely adds nothing to the sum
+            lw[i] = -np.inf
+        elif half - abs(reading - xs[i]) > INSIDE_SIGMAS * math.sqrt(ps[i] + sensor_var):
+            pass  # deep inside the count: probability 1 − 2Φ(−INSIDE_SIGMAS), the state unchanged
+        else:
+            log_z, xs[i], ps[i] = _count_update(xs[i], ps[i], reading, half, sensor_var)
+            lw[i] += log_z
+        top = max(top, lw[i])
+    total = 0.0
+    for i in range(m):
+        total += math.exp(lw[i] - top)
+    log_sum = top + math.log(total)
+    for i in range(m):
+        lw[i] -= log_sum
+    return True, log_sum
+
+
+@njit(cache=True)
+def _count_loglik(
+    y: np.ndarray,
+    drift: np.ndarray,
+    q_var: np.ndarray,
+    quantum: float,
+    sensor_var: float,
+    offset: np.ndarray,
+    reset: np.ndarray,
+    nominal: np.ndarray,
+) -> np.ndarray:
+    """:func:`count_loglik`'s kernel: the nominal model filtered once, its state kept after every reading."""
+    n_b, n = drift.shape[0], y.shape[0]
     m = COUNT_COMPONENTS
     out = np.zeros(n_b)
     xs = np.empty(m)
     ps = np.empty(m)
     lw = np.empty(m)
-    for b in range(n_b):
-        started = False
-        ll = 0.0
+    kept_x = np.empty((n, m))
+    kept_p = np.empty((n, m))
+    kept_w = np.empty((n, m))
+    kept_ll = np.empty(n)
+    kept_started = np.zeros(n, dtype=np.bool_)
+    shared = not np.isnan(nominal).any()
+    if shared:
+        started, ll = False, 0.0
         for k in range(n):
-            if k > 0:
-                for i in range(m):
-                    xs[i] += drift[b, k - 1]
-                    ps[i] += q_var[k - 1]
-                    if reset[b, k] and not reset[b, k - 1]:  # seized between samples: read braking, 0 to x
-                        ps[i] += xs[i] * xs[i] / 12.0
-                        xs[i] *= 0.5
-                    elif reset[b, k]:
-                        xs[i] = 0.0
-                        ps[i] = 0.0
-            if np.isnan(y[k]):
-                continue
-            if not started:
-                for i in range(m):
-                    xs[i] = y[k] - offset[b, k] + quantum * ((i + 0.5) / m - 0.5)
-                    ps[i] = (quantum / m) ** 2 / 12.0
-                    lw[i] = -math.log(m)
-                started = True
-                continue
-            top = -np.inf
-            reading = y[k] - offset[b, k]
-            for i in range(m):
-                if lw[i] <= -50.0:  # a slice this unlikely adds nothing to the sum
-                    lw[i] = -np.inf
-                elif half - abs(reading - xs[i]) > INSIDE_SIGMAS * math.sqrt(ps[i] + sensor_var):
-                    pass  # deep inside the count: probability 1 − 2Φ(−INSIDE_SIGMAS), the state unchanged
-                else:
-                    log_z, xs[i], ps[i] = _count_update(xs[i], ps[i], reading, half, sensor_var)
-                    lw[i] += log_z
-                top = max(top, lw[i])
-            total = 0.0
-            for i in range(m):
-                total += math.exp(lw[i] - top)
-            log_sum = top + math.log(total)
-            ll += log_sum
-            for i in range(m):
-                lw[i] -= log_sum
+            d_in = nominal[k - 1] if k > 0 else 0.0
+            q_in = q_var[k - 1] if k > 0 else 0.0
+            started, step = _count_step(k, y, d_in, q_in, False, False, 0.0, quantum, sensor_var, xs, ps, lw, started)
+            ll += step
+            kept_x[k], kept_p[k], kept_w[k], kept_ll[k], kept_started[k] = xs, ps, lw, ll, started
+    for b in range(n_b):
+        first = 0  # first sample whose step differs from the nominal model's
+        if shared:
+            while first < n and offset[b, first] == 0.0 and not reset[b, first]:
+                if first > 0 and drift[b, first - 1] != nominal[first - 1]:
+                    break
+                first += 1
+        if first == 0:
+            started, ll = False, 0.0
+        else:
+            xs[:], ps[:], lw[:] = kept_x[first - 1], kept_p[first - 1], kept_w[first - 1]
+            started, ll = kept_started[first - 1], kept_ll[first - 1]
+        for k in range(first, n):
+            d_in = drift[b, k - 1] if k > 0 else 0.0
+            q_in = q_var[k - 1] if k > 0 else 0.0
+            reset_before = reset[b, k - 1] if k > 0 else False
+            started, step = _count_step(
+                k, y, d_in, q_in, reset[b, k], reset_before, offset[b, k], quantum, sensor_var, xs, ps, lw, started
+            )
+            ll += step
         out[b] = ll
     return out
 

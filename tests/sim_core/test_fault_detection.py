@@ -162,3 +162,25 @@ def test_a_rotor_seized_between_samples_may_be_read_braking() -> None:
     assert np.all(np.isfinite(ll))
     assert ll[0] > ll[1] + 100.0
     assert ll[0] > math.log(1.0 / 40.0) - 1.0  # the braking reading: one count of the 40 it may take
+
+
+def test_count_loglik_of_hypotheses_sharing_the_nominal_prefix_is_unchanged_by_sharing_it() -> None:
+    """Fault hypotheses are the nominal model before their onsets: continuing each from the nominal filter's state
+    at its first differing sample gives the likelihood of filtering every row from the start, bit for bit (rows
+    that differ from sample 0, through a drift, an offset or a reset, and a missing reading included)."""
+    rng = np.random.default_rng(5)
+    n, g = 300, 60
+    drift = 0.05 + 0.02 * np.sin(np.arange(n - 1) / 20.0)
+    y = np.round(0.3 + np.concatenate([[0.0], np.cumsum(drift + 0.01 * rng.standard_normal(n - 1))]))
+    y[40] = np.nan
+    onsets = np.sort(rng.integers(0, n - 1, g))
+    after = np.arange(n - 1)[None, :] >= onsets[:, None]
+    rows = np.where(after, 0.6 * drift[None, :], drift[None, :])
+    offset = np.zeros((g, n))
+    offset[::5] = 0.5 * (np.arange(n)[None, :] >= onsets[::5, None])
+    reset = np.zeros((g, n), dtype=np.bool_)
+    reset[2::7] = np.arange(n)[None, :] >= 200
+    args = (y, rows, np.full(n - 1, 1e-4), 1.0, 1e-4, offset, reset)
+    np.testing.assert_array_equal(fd.count_loglik(*args, nominal_drift=drift), fd.count_loglik(*args))
+    nominal = fd.count_loglik(y, drift[None, :], *args[2:5], np.zeros((1, n)), np.zeros((1, n), bool), drift)
+    assert nominal[0] == fd.count_loglik(y, drift[None, :], *args[2:5], np.zeros((1, n)), np.zeros((1, n), bool))[0]
