@@ -25,8 +25,9 @@ Pipeline (DESIGN.md "Diagnosis"), pure numerics on telemetered arrays (:class:`O
    searching many onsets is paid for) − ½ ln n per magnitude parameter (BIC), relative to "none";
    posterior probabilities with equal priors are the scores. Wheel channels are independent given the
    telemetered commands, so a pair's evidence is the sum of its members'.
-6. **Replay** (:func:`replay`): the top hypotheses are flown as variants of one twin batch from a
-   telemetry instant before the onset, and the attitude residual of each is reported as evidence.
+6. **Replay** (:func:`_replayed`): the top hypotheses are flown as variants of one twin batch from a
+   telemetry instant before the onset, and the fit of each to the commands and attitude is evidence.
+   :func:`hypothesis_replay` builds the same batch for one ranked hypothesis (the simulated monitor flies it).
 
 "No fault" is a hypothesis; the top score is a probability that says how far the data support it.
 """
