@@ -1,5 +1,6 @@
 """The numba cache never serves a caller compiled against an old callee (sim_core.compiled_cache)."""
 
+import json
 import subprocess
 import sys
 import textwrap
@@ -60,6 +61,32 @@ def test_the_stamp_follows_the_sources(tmp_path):
     assert compiled_cache.guard(pkg) and not compiled_cache.guard(pkg)  # first call stamps, second finds it current
     (pkg / "callee.py").write_text(CALLEE.format(3))
     assert compiled_cache.guard(pkg) == ["callee", "caller"]  # the callee changed, the caller imports it
+
+
+def test_unchanged_sources_are_recognised_by_their_digest_without_parsing(tmp_path, monkeypatch):
+    """Every process importing sim_core runs the guard: with nothing changed it must not parse the modules."""
+    _package(tmp_path, 1)
+    pkg = tmp_path / "pkg"
+    assert compiled_cache.guard(pkg) == ["__init__", "callee", "caller"]
+
+    def no_parse(*_):
+        raise AssertionError("parsed the modules although no source changed")
+
+    monkeypatch.setattr(compiled_cache, "_imported_modules", no_parse)
+    assert compiled_cache.guard(pkg) == []
+    monkeypatch.undo()
+    (pkg / "callee.py").write_text(CALLEE.format(3))
+    assert compiled_cache.guard(pkg) == ["callee", "caller"]
+
+
+def test_a_stamp_without_the_digest_is_completed_and_clears_nothing(tmp_path):
+    _package(tmp_path, 1)
+    pkg = tmp_path / "pkg"
+    stamp = compiled_cache.stamp_path(pkg)
+    stamp.parent.mkdir(parents=True)
+    stamp.write_text(json.dumps(compiled_cache.module_hashes(pkg)))  # as written before the digest existed
+    assert compiled_cache.guard(pkg) == []
+    assert compiled_cache.SOURCES_KEY in json.loads(stamp.read_text())
 
 
 def test_a_change_clears_only_the_modules_that_see_it(tmp_path):
