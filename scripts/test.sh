@@ -5,6 +5,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
+# Bytecode is written inside the clone (__pycache__, ignored by git): with PYTHONDONTWRITEBYTECODE set (this
+# machine's image sets it) every process of the run — each pytest worker (which also re-rewrites every test
+# module's asserts), Dask worker, server and CLI subprocess — compiled the project's sources again.
+unset PYTHONDONTWRITEBYTECODE
 say() { echo "test.sh: $*" >&2; }
 
 # Another apt/dpkg (unattended-upgrades, a second shell) may hold the locks: wait for them, saying so.
