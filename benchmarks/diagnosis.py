@@ -4,8 +4,8 @@ Each case: the emulator (``telemetry.emulator.emulate``) flies ``somov-ge4-scan`
 noise, seed 000 §5 route) with its own *truth* parameters (``truth_seed``: inertia ±2 %, products ±0.5 %, wheel
 tilt ≤ 0.1°, gyro bias, its own noise seed; issue 13's ``emulator.truth_scenario``) and a hidden fault set drawn
 at random: single wheel failure, gain loss (remaining gain 0.2–0.7), friction (+1–5 mN·m), stuck rotor,
-tachometer (speed-sensor) bias (two 0.25 rpm counts to 0.5 rad/s: the diagnosis claims no smaller one; put in
-the telemetered reading: the engine has no tachometer fault), two wheel faults on different wheels, gyro bias
+tachometer (speed-sensor) bias (two 0.25 rpm counts to 0.5 rad/s: the diagnosis claims no smaller one; the
+engine's tachometer fault, read by the onboard loop and telemetered), two wheel faults on different wheels, gyro bias
 (20–100 µrad/s on one axis), star-tracker outage, magnetometer bias (±0.5–3 µT on one axis), or none. Its
 onboard software is never told of the fault and by default does not reconfigure (onboard FDIR off, as the
 acceptance's independent spacecraft); ``--onboard-fdir`` flies the emulator's FDIR, which isolates a failing
@@ -152,29 +152,22 @@ def _faults(case: Case) -> list:
         ]
     if case.fault == "star_tracker_outage":
         return [FaultSpec(target="star_tracker", index=0, type="failure", onset_s=case.onsets_s[0])]
-    if case.fault == "speed_bias":
-        return []  # a tachometer fault is not in the engine's fault model: _tachometer_bias puts it in the telemetry
+    if case.fault == "speed_bias":  # the engine's speed-sensor fault: the onboard loop and the telemetry read it
+        return [
+            FaultSpec(
+                target="tachometer",
+                index=int(case.wheel) - 1 if isinstance(case.wheel, int) else 0,
+                type="bias",
+                onset_s=case.onsets_s[0],
+                value=case.magnitudes[0],
+            )
+        ]
     wheels = case.wheel if isinstance(case.wheel, list) else [case.wheel]
     out = []
     for name, w, t, m in zip(case.fault.split("+"), wheels, case.onsets_s, case.magnitudes):
         extra = {"gain": m} if name == "gain_loss" else ({"value": m} if name == "friction" else {})
         out.append(FaultSpec(target="wheel", index=int(w) - 1, type=TYPE_CODES[name], onset_s=t, **extra))
     return out
-
-
-def _tachometer_bias(case: Case, series: dict) -> dict:
-    """The housekeeping's wheel speed read with a constant bias from the onset (a speed-sensor fault seen by the
-    ground only: the emulator's onboard loop reads its tachometer unbiased; with the onboard FDIR off, its use of
-    the speed — gyroscopic term, momentum unloading — changes the flight by far less than the link's rounding)."""
-    from dataclasses import replace
-
-    from telemetry import emulator
-
-    hk = series[emulator.HK_PACKET]
-    t_s = (hk.t_utc_ns - hk.t_utc_ns[0]) / 1e9
-    name = f"wheel_speed_rad_s_{case.wheel}"
-    values = {**hk.values, name: hk.values[name] + np.where(t_s >= case.onsets_s[0], case.magnitudes[0], 0.0)}
-    return {**series, emulator.HK_PACKET: replace(hk, values=values)}
 
 
 def run_case(case: Case, onboard_fdir: bool = False) -> dict:
@@ -197,8 +190,6 @@ def run_case(case: Case, onboard_fdir: bool = False) -> dict:
         fdir=onboard_fdir,
         truth_seed=1000 + case.seed,
     )
-    if case.fault == "speed_bias":
-        stream = emulator.encode_stream(_tachometer_bias(case, series))
     batches = decode_stream(stream.data, dictionary).batches
     start, cpu = time.perf_counter(), time.process_time()
     result = diagnose_batches(batches, dictionary, scenario_library.get(SCENARIO))
