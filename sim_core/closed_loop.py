@@ -28,6 +28,7 @@ from sim_core import (
     allocation,
     attitude_filters,
     control,
+    earth_observer,
     environment,
     estimation,
     fdir,
@@ -51,13 +52,12 @@ PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
 LAW_SEED000, LAW_MRP_FEEDBACK, LAW_QUATERNION_PD = 0, 1, 2
 # Estimators.
 ESTIMATOR_TRUTH, ESTIMATOR_STAR_TRACKER, ESTIMATOR_MEKF, ESTIMATOR_SEED000, ESTIMATOR_SEED003 = 0, 1, 2, 3, 4
-ESTIMATOR_TRIAD = 5
+ESTIMATOR_TRIAD, ESTIMATOR_EARTH_OBSERVER = 5, 6
 
 # Fault codes live in sim_core.faults (re-exported here for the record's readers).
 TARGET_CODES, TYPE_CODES, FAULT_COLUMNS = faults_mod.TARGET_CODES, faults_mod.TYPE_CODES, faults_mod.FAULT_COLUMNS
 
 # Attitude sensors used when the star tracker gives no sample (failed, blinded or rejected by FDIR).
-EARTH_SENSOR_SIGMA_RAD = np.radians(0.05)  # static infrared earth sensor class (seed 002 eq 14 gives none)
 STAR_RESET_SIGMA_RAD = np.radians(1.0)  # attitude uncertainty re-opened after a wheel is isolated (a seizure's kick)
 MAG_DIRECTION_FLOOR_RAD = np.radians(0.5)  # field-model error in direction (IGRF vs crustal/external fields)
 NO_RATE_LIMIT_RAD_S = 1e9  # star tracker without a rate limit (seed 000 §4 gives none)
@@ -131,6 +131,8 @@ class SensorModels(NamedTuple):
     star_boresight_b: np.ndarray  # star-tracker boresight (unit, body axes)
     star_cos_sun_exclusion: float  # cos of the Sun exclusion half-angle (seed 003 §3.2.3.1); NEVER_BLINDED_COS: off
     star_max_rate_rad_s: float  # star tracker invalid above this body rate; NO_RATE_LIMIT_RAD_S: off
+    earth_sigma_rad: float  # earth sensor φ_n, θ_n σ (seed 002 eq 14)
+    earth_bias_rad: np.ndarray  # earth sensor (φ_b, θ_b) (seed 002 eq 14)
 
 
 class EstimatorConfig(NamedTuple):
@@ -138,7 +140,8 @@ class EstimatorConfig(NamedTuple):
     sample and gyro as they come), _MEKF (sim_core.mekf on gyro + star tracker, earth sensor and magnetometer
     without stars), _SEED000 (seed 000 §4's filter of the mismatch ε and the gyro rate, sim_core.attitude_filters)
     or _SEED003 (seed 003's gyro-less body-rate estimator, eqs 15–19, on the star tracker's mismatch angles) or
-    _TRIAD (seed 003 §3.2.1.2.1: TRIAD of the Sun sensor, earth sensor and magnetometer each T_q, gyro rates)."""
+    _TRIAD (seed 003 §3.2.1.2.1: TRIAD of the Sun sensor, earth sensor and magnetometer each T_q, gyro rates) or
+    _EARTH_OBSERVER (seed 002 eq 15: gyro + earth-sensor observer of roll, pitch, yaw about the orbit frame)."""
 
     kind: int
     covariance0: np.ndarray  # initial MEKF covariance (6, 6)
@@ -148,6 +151,11 @@ class EstimatorConfig(NamedTuple):
     smoothing: float  # seed 000 filter: 1 − exp(−T_q/T) of the gyro-rate smoother
     rate_phi: np.ndarray  # seed 003 estimator: (Φ, Γ) of attitude_filters.body_rate_discretisation at T_q
     rate_gamma: np.ndarray
+    observer_phi: np.ndarray  # seed 002 eq 15: exact ZOH (Φ, Γ) at T_q (earth_observer.observer_discretisation)
+    observer_gamma: np.ndarray
+    orbit_rate_rad_s: float  # ω_o the observer's Φ, Γ were built with
+    observer_initial: np.ndarray  # (φ̂, θ̂, ψ̂) at t = 0 when observer_initial_given
+    observer_initial_given: bool  # else the first earth-sensor sample with ψ̂ = 0
 
 
 class LawConfig(NamedTuple):
@@ -327,7 +335,7 @@ class Estimate(NamedTuple):
     omega: np.ndarray
     bias: np.ndarray
     covariance: np.ndarray
-    filter_state: np.ndarray  # seed 000: ε^f, ε̇^f, ω^f; seed 003: α̂ (3), ω̂ of the mismatch (3)
+    filter_state: np.ndarray  # seed 000: ε^f, ε̇^f, ω^f; seed 003: α̂ (3), ω̂ of the mismatch (3); seed 002: φ̂, θ̂, ψ̂
 
 
 class Commands(NamedTuple):
@@ -420,15 +428,26 @@ def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> N
 
 
 @njit(cache=True)
-def _earth_sensor_nadir_1(faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Nadir in body axes from an earth-sensor sample (sensors.earth_sensor_1, seed 002 eq 14) under the
-    variant's earth-sensor faults; False if the sensor has failed."""
+def _earth_sensor_angles_1(
+    sigma: float, bias: np.ndarray, faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """Earth-sensor roll φ_e and pitch θ_e (``angles[0:2]``; sensors.earth_sensor_1, seed 002 eq 14: truth +
+    ``bias`` + noise σ) under the variant's earth-sensor faults; False if the sensor has failed."""
     roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
     normal = np.random.standard_normal(2)
-    meas, _ = sensors.earth_sensor_1(roll, pitch, np.zeros(2), np.full(2, EARTH_SENSOR_SIGMA_RAD), np.inf, normal)
+    meas, _ = sensors.earth_sensor_1(roll, pitch, bias, np.full(2, sigma), np.inf, normal)
     angles = np.zeros(3)
     angles[0:2] = meas
-    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, EARTH_SENSOR_SIGMA_RAD, np.zeros(3))
+    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, sigma, np.zeros(3))
+    return angles, ok
+
+
+@njit(cache=True)
+def _earth_sensor_nadir_1(
+    sigma: float, bias: np.ndarray, faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray
+) -> tuple[np.ndarray, bool]:
+    """Nadir in body axes from an earth-sensor sample (:func:`_earth_sensor_angles_1`); False if it has failed."""
+    angles, ok = _earth_sensor_angles_1(sigma, bias, faults, t, x, r)
     return sensors.nadir_from_roll_pitch_1(angles[0], angles[1]), ok
 
 
@@ -469,7 +488,7 @@ def _sun_sensor_sample_1(
 
 @njit(cache=True)
 def _triad_stage(
-    sun_sigma_rad: float,
+    s: SensorModels,
     t0_unix_s: float,
     faults: np.ndarray,
     t: float,
@@ -483,8 +502,8 @@ def _triad_stage(
     vertical) and magnetometer against the ephemeris Sun, −r and the field model; rates from the gyro. Returns
     whether a sensor pair gave the attitude (else the estimate holds)."""
     sun_eci = environment.sun_position_1(t0_unix_s + t)
-    sun_b, sun_ok = _sun_sensor_sample_1(sun_sigma_rad, faults, t, x, sun_eci, pos.r, sensed.sun_frozen)
-    nadir_b, nadir_ok = _earth_sensor_nadir_1(faults, t, x, pos.r)
+    sun_b, sun_ok = _sun_sensor_sample_1(s.sun_sensor_sigma_rad, faults, t, x, sun_eci, pos.r, sensed.sun_frozen)
+    nadir_b, nadir_ok = _earth_sensor_nadir_1(s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r)
     q, ok = estimation.triad_sensors_1(sun_b, sun_ok, nadir_b, nadir_ok, sensed.mag, sun_eci, -pos.r, pos.b_eci)
     if ok:
         est.q[:] = q if q @ est.q >= 0.0 else -q
@@ -630,18 +649,17 @@ def _mekf_stage(
             n_ev,
         )
     if not st_ok:
-        nadir, earth_ok = _earth_sensor_nadir_1(var.faults, t, x, pos.r)
+        sigma_e = s.earth_sigma_rad
+        nadir, earth_ok = _earth_sensor_nadir_1(sigma_e, s.earth_bias_rad, var.faults, t, x, pos.r)
         if fdir_on and earth_ok:
-            earth_ok = fdir.earth_sensor_check_1(
-                mon.earth, est.q, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD, ev, n_ev, t
-            )
+            earth_ok = fdir.earth_sensor_check_1(mon.earth, est.q, est.covariance, nadir, -pos.r, sigma_e, ev, n_ev, t)
         if fdir_on and earth_ok and sample.star_ok:
             st_ok = fdir.star_readmit_1(
-                mon.star, est.q, q_m, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD, fd.n_sigma, ev, n_ev, t
+                mon.star, est.q, q_m, est.covariance, nadir, -pos.r, sigma_e, fd.n_sigma, ev, n_ev, t
             )
         if not st_ok:
             if earth_ok:
-                mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, nadir, -pos.r, EARTH_SENSOR_SIGMA_RAD)
+                mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, nadir, -pos.r, sigma_e)
             b_norm = np.sqrt(pos.b_eci @ pos.b_eci)
             if s.magnetometer_noise_t > 0.0 and b_norm > 0.0:
                 sigma_dir = s.magnetometer_noise_t / b_norm + MAG_DIRECTION_FLOOR_RAD
@@ -650,6 +668,60 @@ def _mekf_stage(
         mekf.mekf_update_1(est.q, est.bias, est.covariance, q_m, sig3)
     est.omega[:] = sensed.omega - est.bias
     return bool(st_ok), float(sigma_u)
+
+
+@njit(cache=True)
+def _earth_observer_stage(
+    e: EstimatorConfig,
+    s: SensorModels,
+    fdir_on: bool,
+    faults: np.ndarray,
+    k: int,
+    t: float,
+    x: np.ndarray,
+    pos: Position,
+    sensed: Sensed,
+    gyro_ok: bool,
+    est: Estimate,
+    mon: Monitors,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> bool:
+    """Seed 002's attitude determination (§2.2.6, eq 15; sim_core.earth_observer): gyros and the two earth sensors
+    (eq 14: roll φ_e, pitch θ_e of the nadir) drive the observer of roll φ̂, pitch θ̂ and yaw ψ̂ about the orbit
+    frame, advanced each T_q by its exact zero-order hold on the mean of the two gyro samples bracketing the step
+    and the earth sample at its end. Yaw is not measured: it is observed through the orbit-rate coupling of roll
+    and yaw (ψ̂̇ = −ω_o φ̂ + ω_gz + K_ψ (φ_m − φ̂), gyrocompassing), so a yaw error decays at the slow root of
+    s² + K_φ s + ω_o (ω_o + K_ψ). The law reads Λ = Λ_o ∘ [ψ̂]_1 ∘ [θ̂]_3 ∘ [φ̂]_2 (earth_observer.
+    attitude_from_angles_1, Λ_o the orbit frame where the spacecraft is) and the gyro's body rate (eq 15 has no
+    gyro-bias state, so the rate is the gyro's as measured). The earth sensor is screened by FDIR when the variant
+    flies it (fdir.earth_sensor_check_1 against the estimate, with the observer's steady-state error covariance);
+    a rejected or failed sample leaves the step to the gyros (φ_m, θ_m := φ̂, θ̂). Starts from
+    ``e.observer_initial`` or the first earth sample with ψ̂ = 0. Returns whether the earth sample was used."""
+    f = est.filter_state
+    angles, earth_ok = _earth_sensor_angles_1(s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r)
+    if fdir_on and earth_ok:
+        nadir = sensors.nadir_from_roll_pitch_1(angles[0], angles[1])
+        earth_ok = fdir.earth_sensor_check_1(
+            mon.earth, est.q, est.covariance, nadir, -pos.r, s.earth_sigma_rad, ev, n_ev, t
+        )
+    if k == 0:
+        if e.observer_initial_given:
+            f[0:3] = e.observer_initial
+        elif earth_ok:
+            f[0], f[1], f[2] = angles[0], angles[1], 0.0
+    else:
+        roll_m, pitch_m = (angles[0], angles[1]) if earth_ok else (f[0], f[1])
+        earth_observer.body_observer_step_1(
+            f[0:3], e.observer_phi, e.observer_gamma, 0.5 * (sensed.omega + sensed.omega_prev), roll_m, pitch_m,
+            e.orbit_rate_rad_s,
+        )  # fmt: skip
+    sensed.omega_prev[:] = sensed.omega
+    q = earth_observer.attitude_from_angles_1(f[0:3], pos.r, pos.v)
+    est.q[:] = q if q @ est.q >= 0.0 else -q
+    if gyro_ok:
+        est.omega[:] = sensed.omega
+    return bool(earth_ok)
 
 
 @njit(cache=True)
@@ -1155,8 +1227,9 @@ def fly_variant(
 
     ``c.model`` is the plant the onboard software models (law, allocation, FDIR); ``c.truth`` the one the
     dynamics fly. The law reads the estimate of ``c.estimator.kind`` (see :class:`EstimatorConfig`: the true
-    state, the raw star tracker + gyro, the MEKF, seed 000 §4's mismatch filter or seed 003's body-rate
-    estimator); every seed model in ``c`` whose switch is off costs nothing and draws no random number.
+    state, the raw star tracker + gyro, the MEKF, seed 000 §4's mismatch filter, seed 003's body-rate
+    estimator or TRIAD, or seed 002's gyro + earth-sensor observer); every seed model in ``c`` whose switch is
+    off costs nothing and draws no random number.
     Each stage receives only the blocks of ``c`` it reads (a call that carried all of ``c`` would pass and
     reference-count each of its arrays, at every dynamics step).
     ``shared[0]`` non-zero cancels the run (checked each T_u); ``shared[slot]`` receives the steps done.
@@ -1237,8 +1310,10 @@ def fly_variant(
                     estc, sens, c.fdir, t_q, var, k, t, x, pos, sensed, sample, sigma_u, est, mon, ev, n_ev
                 )
             elif estc.kind == ESTIMATOR_TRIAD:
-                valid = _triad_stage(
-                    sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, est
+                valid = _triad_stage(sens, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, est)
+            elif estc.kind == ESTIMATOR_EARTH_OBSERVER:
+                valid = _earth_observer_stage(
+                    estc, sens, fdir_on, faults, k, t, x, pos, sensed, sample.gyro_ok, est, mon, ev, n_ev
                 )
             elif estc.kind == ESTIMATOR_SEED000 or estc.kind == ESTIMATOR_SEED003:
                 q_p, w_p, _, _ = program_at(prog, clk, c_pn, t, r_eci, v_eci, a_eci)

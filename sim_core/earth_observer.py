@@ -7,6 +7,10 @@
 Small-angle kinematics of seed 002's orbit frame (x roll, y pitch, z yaw, orbital rate ω_o about
 y as the seed writes it). Yaw is not measured: it is observed through the orbital coupling with
 roll (gyrocompassing), so the yaw channel is driven by the roll residual, as printed.
+In the twin's axes (DESIGN.md orbit frame: x^o to nadir, y^o along the velocity, z^o = x^o × y^o; body +x the
+boresight) the seed's roll axis is body y (φ = φ2), its pitch axis body z (θ = φ3, the orbit frame turns at −ω_o
+about z^o) and its yaw axis body x (ψ = φ1), so the seed's (ω_gx, ω_gy, ω_gz) are the body gyro's (ω_y, ω_z, ω_x)
+and the attitude is Λ = Λ_o ∘ [ψ]_1 ∘ [θ]_3 ∘ [φ]_2 (seed 000's sequence 132, quaternion.from_euler_132).
 Linear with inputs held over a step, so we discretise it exactly (zero-order hold):
 x̂⁺ = Φ x̂ + Γ u with u = (ω_gx, ω_gy, ω_gz, φ_m, θ_m, ω_o).
 The observer error e = x̂ − x obeys ė = A e: θ decays at K_θ, and (φ, ψ) have the characteristic
@@ -17,9 +21,20 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from scipy.linalg import expm
+from scipy.linalg import expm, solve_continuous_lyapunov
 
-__all__ = ["observer_matrix", "observer_discretisation", "observer_step_1", "design_rates"]
+from sim_core.frames import orf_quaternion_1
+from sim_core.quaternion import multiply_1
+
+__all__ = [
+    "observer_matrix",
+    "observer_discretisation",
+    "observer_step_1",
+    "design_rates",
+    "error_covariance",
+    "body_observer_step_1",
+    "attitude_from_angles_1",
+]
 
 
 def _gains(gains_1_s: np.ndarray, orbit_rate_rad_s: float) -> np.ndarray:
@@ -83,3 +98,44 @@ def observer_step_1(
         for j in range(6):
             new[i] += gamma[i, j] * u[j]
     angles3[:] = new
+
+
+def error_covariance(gains_1_s: np.ndarray, orbit_rate_rad_s: float, sigma_rad: float, dt_s: float) -> np.ndarray:
+    """Steady-state covariance (3, 3) of the error (φ̂−φ, θ̂−θ, ψ̂−ψ) under white earth-sensor noise σ sampled
+    every dt (density σ² dt): A P + P Aᵀ + L σ² dt Lᵀ = 0, L the gains on (φ_m, θ_m) (seed 002 eq 15)."""
+    kp, kt, ky = _gains(gains_1_s, orbit_rate_rad_s)
+    gain = np.array([[kp, 0.0], [0.0, kt], [ky, 0.0]])
+    q = gain @ gain.T * (sigma_rad**2 * dt_s)
+    p: np.ndarray = solve_continuous_lyapunov(observer_matrix(gains_1_s, orbit_rate_rad_s), -q)
+    symmetric: np.ndarray = 0.5 * (p + p.T)
+    return symmetric
+
+
+@njit(cache=True)
+def body_observer_step_1(
+    angles3: np.ndarray,
+    phi: np.ndarray,
+    gamma: np.ndarray,
+    omega_body: np.ndarray,
+    roll_meas: float,
+    pitch_meas: float,
+    orbit_rate: float,
+) -> None:
+    """:func:`observer_step_1` on the twin's body gyro ω (x yaw, y roll, z pitch axes: the seed's ω_g is
+    (ω_y, ω_z, ω_x)) and the earth sensor's roll φ2 and pitch φ3 (sensors.nadir_roll_pitch_1)."""
+    w = np.empty(3)
+    w[0], w[1], w[2] = omega_body[1], omega_body[2], omega_body[0]
+    observer_step_1(angles3, phi, gamma, w, roll_meas, pitch_meas, orbit_rate)
+
+
+@njit(cache=True)
+def attitude_from_angles_1(angles3: np.ndarray, r_eci: np.ndarray, v_eci: np.ndarray) -> np.ndarray:
+    """Attitude Λ (body → ECI) of the observer's (φ̂, θ̂, ψ̂) about the orbit frame at (r, v):
+    Λ_o ∘ [ψ̂]_1 ∘ [θ̂]_3 ∘ [φ̂]_2 (quaternion.from_euler_132's sequence, frames.orf_quaternion_1's Λ_o)."""
+    roll, pitch, yaw = 0.5 * angles3[0], 0.5 * angles3[1], 0.5 * angles3[2]
+    q_yaw = np.array([np.cos(yaw), np.sin(yaw), 0.0, 0.0])
+    q_pitch = np.array([np.cos(pitch), 0.0, 0.0, np.sin(pitch)])
+    q_roll = np.array([np.cos(roll), 0.0, np.sin(roll), 0.0])
+    rel = multiply_1(multiply_1(q_yaw, q_pitch), q_roll)
+    q: np.ndarray = multiply_1(orf_quaternion_1(r_eci, v_eci), rel)
+    return q

@@ -23,6 +23,7 @@ from sim_core import (
     allocation,
     attitude_filters,
     closed_loop,
+    earth_observer,
     environment,
     frames,
     guidance,
@@ -78,6 +79,7 @@ ESTIMATORS = {
     "seed000_filter": closed_loop.ESTIMATOR_SEED000,
     "seed003_rate": closed_loop.ESTIMATOR_SEED003,
     "triad": closed_loop.ESTIMATOR_TRIAD,
+    "earth_observer": closed_loop.ESTIMATOR_EARTH_OBSERVER,
 }
 
 
@@ -577,21 +579,36 @@ def _filter_gains(q: float, r: float, t_q: float) -> tuple[float, float, float, 
     return k_alpha, k_omega, float(1.0 - np.exp(-t_q / time_constant)), phi, gamma
 
 
-def _estimator_config(s: Scenario) -> closed_loop.EstimatorConfig:
+def _estimator_config(s: Scenario, orbit_rate_rad_s: float) -> closed_loop.EstimatorConfig:
     """The estimator the law reads, with the steady-state gains of the per-axis filters (sim_core.attitude_filters):
-    measurement density r = σ_st² T_q, disturbance density q = ``estimator.disturbance_density_rad2_s3``."""
-    t_q = s.measurement_dt_s
+    measurement density r = σ_st² T_q, disturbance density q = ``estimator.disturbance_density_rad2_s3``; for seed
+    002's observer (eq 15) its exact ZOH at T_q and orbital rate ω_o, and as the estimate's covariance (what the
+    earth-sensor screen of sim_core.fdir reads) the observer's steady-state error covariance."""
+    t_q, est = s.measurement_dt_s, s.estimator
     r = max((s.sensors.star_tracker_sigma_arcsec * ARCSEC) ** 2 * t_q, 1e-30)
-    k_alpha, k_omega, smoothing, phi, gamma = _filter_gains(s.estimator.disturbance_density_rad2_s3, r, t_q)
+    k_alpha, k_omega, smoothing, phi, gamma = _filter_gains(est.disturbance_density_rad2_s3, r, t_q)
+    gains = np.array(est.observer_gains_1_s, dtype=float)
+    obs_phi, obs_gamma = earth_observer.observer_discretisation(gains, orbit_rate_rad_s, t_q)
+    covariance = mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S)
+    if est.kind == "earth_observer":
+        covariance = np.zeros((6, 6))
+        p_err = earth_observer.error_covariance(gains, orbit_rate_rad_s, s.sensors.earth_sensor_sigma_rad, t_q)
+        order = [1, 2, 0]  # the seed's (φ, θ, ψ) are about body y, z, x
+        covariance[np.ix_(order, order)] = p_err
     return closed_loop.EstimatorConfig(
-        ESTIMATORS[s.estimator.kind],
-        mekf.initial_covariance(MEKF_SIGMA0_RAD, MEKF_BIAS0_RAD_S),
+        ESTIMATORS[est.kind],
+        covariance,
         float(s.sensors.gyro_drift_density_rad_s_sqrt_s),
         k_alpha,
         k_omega,
         smoothing,
         np.array(phi, order="C"),
         np.array(gamma, order="C"),
+        np.ascontiguousarray(obs_phi),
+        np.ascontiguousarray(obs_gamma),
+        float(orbit_rate_rad_s),
+        np.array(est.observer_initial_rad or [0.0, 0.0, 0.0], dtype=float),
+        est.observer_initial_rad is not None,
     )
 
 
@@ -634,8 +651,11 @@ def loop_config(
         if sn.star_tracker_sun_exclusion_deg > 0.0
         else closed_loop.NEVER_BLINDED_COS,
         float(sn.star_tracker_max_rate_rad_s or closed_loop.NO_RATE_LIMIT_RAD_S),
+        float(sn.earth_sensor_sigma_rad),
+        np.array(sn.earth_sensor_bias_rad, dtype=float),
     )
-    estimator = _estimator_config(s)
+    r0, v0, _ = state(np.array([t0]))
+    estimator = _estimator_config(s, float(np.linalg.norm(np.cross(r0[0], v0[0])) / (r0[0] @ r0[0])))  # ω_o = |h|/r²
     law = closed_loop.LawConfig(
         LAWS[c.kind],
         DigitalLawGains(c.gain_k_per_s2, c.tau1_s, c.tau2_s, s.control_dt_s).as_array(),

@@ -175,15 +175,26 @@ class SensorsSpec(_Spec):
     star_tracker_boresight_b: Vector3 = Field(default_factory=lambda: [-1.0, 0.0, 0.0])  # zenith at nadir pointing
     star_tracker_sun_exclusion_deg: Annotated[float, Field(ge=0.0, lt=90.0)] = 0.0  # 0: never blinded
     star_tracker_max_rate_rad_s: Positive | None = None  # None: valid at any rate
+    earth_sensor_sigma_rad: NonNegative = math.radians(0.05)  # seed 002 eq 14 φ_n, θ_n (static infrared class)
+    earth_sensor_bias_rad: Annotated[list[Finite], Field(min_length=2, max_length=2)] = Field(
+        default_factory=lambda: [0.0, 0.0]
+    )  # seed 002 eq 14 constant deviations (φ_b, θ_b)
 
 
 class EstimatorSpec(_Spec):
     """Attitude determination feeding the control law: the true state, the raw star tracker + gyro, the MEKF,
     seed 000 §4's mismatch filter (gyro + star tracker), seed 003's gyro-less body-rate estimator (eqs 15–19) or
-    seed 003's TRIAD of the Sun sensor, earth sensor and magnetometer with gyro rates (§3.2.1.2.1)."""
+    seed 003's TRIAD of the Sun sensor, earth sensor and magnetometer with gyro rates (§3.2.1.2.1), or seed 002's
+    gyro + earth-sensor observer of roll, pitch and yaw about the orbit frame (eq 15; Earth-pointing flights only)."""
 
-    kind: Literal["truth", "star_tracker", "mekf", "seed000_filter", "seed003_rate", "triad"] = "truth"
+    kind: Literal["truth", "star_tracker", "mekf", "seed000_filter", "seed003_rate", "triad", "earth_observer"] = (
+        "truth"
+    )
     disturbance_density_rad2_s3: Positive = 1e-9  # q of the per-axis filters (white angular acceleration)
+    observer_gains_1_s: Annotated[list[Positive], Field(min_length=3, max_length=3)] = Field(
+        default_factory=lambda: [0.012, 0.01, 0.008]
+    )  # seed 002 eq 15 K_φ, K_θ, K_ψ (its Table 1 K_x, K_y, K_z)
+    observer_initial_rad: Vector3 | None = None  # (φ̂, θ̂, ψ̂) at t = 0; None: first earth-sensor sample, ψ̂ = 0
 
 
 class RouteSegmentSpec(_Spec):

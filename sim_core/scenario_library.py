@@ -195,6 +195,27 @@ def song_table1() -> Scenario:
     )
 
 
+def song_earth_observer() -> Scenario:
+    """Seed 002's attitude determination flown as it specifies it (§2.2.5–2.2.6): song-table1's bus and component
+    models pointing at the Earth (q_d = [1 0 0 0] about the orbit frame, ω_d = 0 relative to it), the law reading the
+    eq-15 observer on the gyros and two earth sensors (eq 14) with Table 1's gains K_φ, K_θ, K_ψ = 0.012, 0.01,
+    0.008 1/s and earth-sensor noise 0.001 (radians taken: the seed prints no unit; 0.057°, the static infrared
+    class) and zero bias. Starts in the orbit frame; the observer from its first earth sample with ψ̂ = 0.
+    song-table1 itself holds an inertial attitude 180° from the orbit frame, which eq 15 cannot serve."""
+    s = song_table1()
+    return s.model_copy(
+        update={
+            "name": "song-earth-observer",
+            "description": "Seed 002 Earth pointing on gyros + two earth sensors through the eq-15 observer",
+            "guidance": GuidanceSpec(kind="orf"),
+            "initial_q_ib": None,
+            "sensors": s.sensors.model_copy(update={"earth_sensor_sigma_rad": 0.001}),
+            "estimator": EstimatorSpec(kind="earth_observer", observer_gains_1_s=[0.012, 0.01, 0.008]),
+            "duration_s": 1000.0,
+        }
+    )
+
+
 def somov_detumble_to_scan() -> Scenario:
     """Seed 001/003 mode chain on the somov-ge4-scan spacecraft: after separation at (2, −1, 1.5) °/s
     B-dot rate damping (25 A·m² rods), Sun/safe one-axis orientation, ORF stabilisation, then the
@@ -244,6 +265,7 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "somov-ge4-scan": somov_ge4_scan,
     "aist-scheduled-turn": aist_scheduled_turn,
     "song-table1": song_table1,
+    "song-earth-observer": song_earth_observer,
     "somov-detumble-to-scan": somov_detumble_to_scan,
     "somov-ge4-scan-flex": somov_ge4_scan_flex,
 }

@@ -122,6 +122,7 @@ FLIGHTS: dict[str, Callable[[], Flight]] = {
     "somov-ge4-scan seed003 rate": _estimator("seed003_rate"),
     "somov-detumble-to-scan modes": _plain("somov-detumble-to-scan", 4000.0),  # three mode changes,
     "song-table1": _plain("song-table1"),
+    "song-earth-observer": _plain("song-earth-observer", 300.0),  # seed 002 eq 15 observer in the loop
 }
 
 

@@ -337,13 +337,17 @@ def test_flexible_modes_ring_at_the_constrained_frequency_after_the_turn():
     assert np.std(dw[:, axis]) > 1e-7
 
 
-@pytest.mark.parametrize("name", ["song-table1", "somov-ge4-scan-flex"])
+@pytest.mark.parametrize("name", ["song-table1", "song-earth-observer", "somov-ge4-scan-flex"])
 def test_library_seed_scenarios_fly_their_seed_models(name):
-    """The library flies what the seeds specify: seed 002's wheel terms, motor electrics and gyro drift on song-table1;
-    seed 000's flexible modes and torque quanta on somov-ge4-scan-flex."""
+    """The library flies what the seeds specify: seed 002's wheel terms, motor electrics and gyro drift on song-table1
+    and song-earth-observer, the latter Earth pointing on the eq-15 observer with Table 1's gains and earth-sensor
+    noise; seed 000's flexible modes and torque quanta on somov-ge4-scan-flex."""
     s = scenario_library.get(name)
     w = s.spacecraft.cluster.wheels[0]
-    if name == "song-table1":
+    if name == "song-earth-observer":
+        assert s.estimator.kind == "earth_observer" and s.guidance.kind == "orf"
+        assert s.estimator.observer_gains_1_s == [0.012, 0.01, 0.008] and s.sensors.earth_sensor_sigma_rad == 0.001
+    if name.startswith("song"):
         assert w.noise_nm > 0 and w.imbalance_nm_s2 > 0 and w.aero_drag_nm_s15 > 0 and s.spacecraft.cluster.motor
         assert s.sensors.gyro_markov_sigma_rad_s > 0
     else:
