@@ -434,11 +434,12 @@ def _earth_sensor_angles_1(
     """Earth-sensor roll φ_e and pitch θ_e (``angles[0:2]``; sensors.earth_sensor_1, seed 002 eq 14: truth +
     ``bias`` + noise σ) under the variant's earth-sensor faults; False if the sensor has failed."""
     roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
-    normal = np.random.standard_normal(2)
-    meas, _ = sensors.earth_sensor_1(roll, pitch, bias, np.full(2, sigma), np.inf, normal)
+    normals = np.zeros(3)  # the sample's noise normals: a noise fault scales these (sim_core.faults)
+    normals[0:2] = np.random.standard_normal(2)
+    meas, _ = sensors.earth_sensor_1(roll, pitch, bias, np.full(2, sigma), np.inf, normals[0:2])
     angles = np.zeros(3)
     angles[0:2] = meas
-    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, sigma, np.zeros(3))
+    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, sigma, normals)
     return angles, ok
 
 

@@ -11,7 +11,9 @@
   1.1e-4 rad is f ≈ 1.2e-7 rad/s, which we have not traced (the second-order kinematics give ~1e-8 rad/s);
 - seed 002 Fig. 36: an earth-sensor graded fault (a drift a (t − t_s) on pitch) accumulates into the attitude as
   the first-order lag of the pitch channel, a (τ − (1 − e^(−K_θ τ))/K_θ);
-- FDIR screens the earth sensor on this flight: a 0.01 rad roll step is isolated and the gyros carry on.
+- FDIR screens the earth sensor on this flight: a 0.01 rad roll step is isolated and the gyros carry on;
+- an earth-sensor noise fault (k σ, sim_core.faults) raises the error by its earth-noise part, (k − 1) times the
+  part σ drives, whose RMS is the steady state of ė = A e + L n: A P + P Aᵀ + L σ² T_q Lᵀ = 0 (solved here).
 
 Errors are the 132 Euler angles (quaternion.to_euler_132) of the estimate and of the flown attitude about the
 orbit frame (the program of the ORF guidance), so no small-angle approximation enters the comparison.
@@ -19,6 +21,7 @@ orbit frame (the program of the ORF guidance), so no small-angle approximation e
 
 import numpy as np
 import pytest
+from scipy.linalg import solve_continuous_lyapunov
 
 from sim_core import fdir, orbit, quaternion, scenario_library
 from sim_core.engine import simulate
@@ -126,3 +129,47 @@ def test_fdir_screens_the_earth_sensor_on_the_observer_flight():
     roll_fdir, roll_open = _angles(traj, "q_ib", 1)[end, 0], _angles(traj, "q_ib", 2)[end, 0]
     assert np.max(np.abs(roll_fdir)) < 1e-3
     assert np.mean(roll_open) < -3e-3  # the spacecraft turns against the biased roll
+
+
+def _noise_flight(s: Scenario, k: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times, estimate error and pointing error (φ, θ, ψ) of ``s`` flown alone (variant 0: the same random seed for
+    every k) with the earth sensor's noise scaled to k σ on roll and pitch from t = 0 (k = 1: nominal)."""
+    faults = [FaultSpec(target="earth_sensor", index=i, type="noise", value=k) for i in (0, 1)] if k != 1 else []
+    traj = simulate(s.model_copy(update={"variants": [VariantSpec(name=f"{k} sigma", faults=faults)]}))
+    true = _angles(traj, "q_ib")
+    return traj.t_s, _angles(traj, "q_est_ib") - true, true
+
+
+def test_earth_sensor_noise_fault_raises_the_error_as_the_eq15_steady_state_covariance():
+    """Issue 13 item 3. Eq 15 is linear in the earth samples, so with the same seed a k σ noise fault adds (k − 1) ε
+    to the nominal error, ε the part the sensor's σ drives: ė = A e + L n with (seed 002 eq 15, e = x̂ − x)
+    ė_φ = −K_φ e_φ + ω_o e_ψ + K_φ n_φ, ė_θ = −K_θ e_θ + K_θ n_θ, ė_ψ = −(ω_o + K_ψ) e_φ + K_ψ n_φ, n white of
+    density σ² T_q (one sample per T_q). ε's RMS is the root of the diagonal of A P + P Aᵀ + L σ² T_q Lᵀ = 0, to
+    the sampling spread of an RMS over T of a process of correlation time τ, 3 √(τ / 2T): roll and yaw share the slow
+    roll/yaw root (τ ≈ 200 s), 22 %; pitch (τ = 1/K_θ = 20 s), 7 %.
+    Measured (20,000 s, from 1,000 s): ε / prediction 1.016, 1.031, 1.011; k = 4 and k = 10 give the same ε to
+    0.2 %. The law holds the estimate at the orbit frame, so the spacecraft follows −ε through its closed loop,
+    which passes ε's slow part only: the pointing error's noise part is 0.87–0.90 of ε, correlation −0.78…−0.81."""
+    gains = [0.05, 0.05, 0.2]  # as the bias test: the slow roll/yaw root (≈ 1/200 s) gives a short τ
+    s = _scenario(20000.0, observer_gains_1_s=gains)
+    k_phi, k_theta, k_psi = gains
+    w_o, sigma, t_q = _orbit_rate(s), s.sensors.earth_sensor_sigma_rad, s.measurement_dt_s
+    a = np.array([[-k_phi, 0.0, w_o], [0.0, -k_theta, 0.0], [-(w_o + k_psi), 0.0, 0.0]])
+    gain = np.array([[k_phi, 0.0], [0.0, k_theta], [k_psi, 0.0]])
+    predicted = np.sqrt(np.diag(solve_continuous_lyapunov(a, -gain @ gain.T * sigma**2 * t_q)))
+    t, e_1, p_1 = _noise_flight(s, 1.0)
+    _, e_4, _ = _noise_flight(s, 4.0)
+    _, e_10, p_10 = _noise_flight(s, 10.0)
+    late = t >= 1000.0
+
+    def rms(z: np.ndarray) -> np.ndarray:
+        return np.sqrt(np.mean(z[late] ** 2, axis=0))
+
+    eps = (e_10 - e_1) / 9.0
+    assert np.all(np.abs(rms(eps) / predicted - 1.0) < [0.22, 0.07, 0.22])
+    assert np.all(rms((e_4 - e_1) / 3.0 - eps) < 0.01 * rms(eps))  # linear in k: (k − 1) ε exactly
+    assert np.all(rms(e_10) > 9.0 * rms(e_1))  # the fault raises the error tenfold (ε dominates the nominal error)
+    pointing = (p_10 - p_1) / 9.0
+    assert np.all((rms(pointing) > 0.7 * rms(eps)) & (rms(pointing) < rms(eps)))
+    for i in range(3):
+        assert np.corrcoef(pointing[late, i], eps[late, i])[0, 1] < -0.7
