@@ -316,7 +316,9 @@ class Sensed(NamedTuple):
     star_frozen: np.ndarray
     mag: np.ndarray
     mag_prev: np.ndarray
-    sun_frozen: np.ndarray
+    sun_frozen: np.ndarray  # the held outputs of Sun sensor, earth sensor (φ_e, θ_e, 0) and magnetometer:
+    earth_frozen: np.ndarray  # NaN until the sensor has given one (faults.held_sensor_faults_1)
+    mag_frozen: np.ndarray
 
 
 class StarSample(NamedTuple):
@@ -429,26 +431,27 @@ def _event(ev: np.ndarray, n_ev: np.ndarray, t: float, code: int, arg: int) -> N
 
 @njit(cache=True)
 def _earth_sensor_angles_1(
-    sigma: float, bias: np.ndarray, faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray
+    sigma: float, bias: np.ndarray, faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray, frozen: np.ndarray
 ) -> tuple[np.ndarray, bool]:
     """Earth-sensor roll φ_e and pitch θ_e (``angles[0:2]``; sensors.earth_sensor_1, seed 002 eq 14: truth +
-    ``bias`` + noise σ) under the variant's earth-sensor faults; False if the sensor has failed."""
+    ``bias`` + noise σ) under the variant's earth-sensor faults, a frozen one holding ``frozen``; False if the
+    sensor has failed."""
     roll, pitch = sensors.nadir_roll_pitch_1(x[0:4], r)
     normals = np.zeros(3)  # the sample's noise normals: a noise fault scales these (sim_core.faults)
     normals[0:2] = np.random.standard_normal(2)
     meas, _ = sensors.earth_sensor_1(roll, pitch, bias, np.full(2, sigma), np.inf, normals[0:2])
     angles = np.zeros(3)
     angles[0:2] = meas
-    ok = faults_mod.sensor_faults_1(faults, T_EARTH, t, angles, angles, sigma, normals)
+    ok = faults_mod.held_sensor_faults_1(faults, T_EARTH, t, angles, frozen, sigma, normals)
     return angles, ok
 
 
 @njit(cache=True)
 def _earth_sensor_nadir_1(
-    sigma: float, bias: np.ndarray, faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray
+    sigma: float, bias: np.ndarray, faults: np.ndarray, t: float, x: np.ndarray, r: np.ndarray, frozen: np.ndarray
 ) -> tuple[np.ndarray, bool]:
     """Nadir in body axes from an earth-sensor sample (:func:`_earth_sensor_angles_1`); False if it has failed."""
-    angles, ok = _earth_sensor_angles_1(sigma, bias, faults, t, x, r)
+    angles, ok = _earth_sensor_angles_1(sigma, bias, faults, t, x, r, frozen)
     return sensors.nadir_from_roll_pitch_1(angles[0], angles[1]), ok
 
 
@@ -482,8 +485,7 @@ def _sun_sensor_sample_1(
     """A Sun-sensor sample in body axes (sensors.sun_sensor_1, noise σ) under its faults, and whether it is valid."""
     normals = np.random.standard_normal(3)
     s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
-    ok = faults_mod.sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
-    frozen[:] = s_b
+    ok = faults_mod.held_sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
     return s_b, ok and s_b @ s_b > 0.0
 
 
@@ -504,7 +506,9 @@ def _triad_stage(
     whether a sensor pair gave the attitude (else the estimate holds)."""
     sun_eci = environment.sun_position_1(t0_unix_s + t)
     sun_b, sun_ok = _sun_sensor_sample_1(s.sun_sensor_sigma_rad, faults, t, x, sun_eci, pos.r, sensed.sun_frozen)
-    nadir_b, nadir_ok = _earth_sensor_nadir_1(s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r)
+    nadir_b, nadir_ok = _earth_sensor_nadir_1(
+        s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r, sensed.earth_frozen
+    )
     q, ok = estimation.triad_sensors_1(sun_b, sun_ok, nadir_b, nadir_ok, sensed.mag, sun_eci, -pos.r, pos.b_eci)
     if ok:
         est.q[:] = q if q @ est.q >= 0.0 else -q
@@ -565,11 +569,12 @@ def _sense_stage(
     st_ok = (
         faults_mod.star_tracker_faults_1(faults, t, q_m, sensed.star_frozen, s.star_sigma_rad, normals[3:6]) and st_ok
     )
-    mag, _ = sensors.magnetometer_1(
-        x[0:4], pos.b_eci, np.zeros(3), s.magnetometer_noise_t, np.inf, np.random.standard_normal(3)
-    )
+    mag_normals = np.random.standard_normal(3)  # the sample's own noise normals: a noise fault scales these
+    mag, _ = sensors.magnetometer_1(x[0:4], pos.b_eci, np.zeros(3), s.magnetometer_noise_t, np.inf, mag_normals)
     sensed.mag[:] = mag
-    faults_mod.sensor_faults_1(faults, T_MAG, t, sensed.mag, sensed.mag, s.magnetometer_noise_t, normals[0:3])
+    faults_mod.held_sensor_faults_1(
+        faults, T_MAG, t, sensed.mag, sensed.mag_frozen, s.magnetometer_noise_t, mag_normals
+    )
     return StarSample(q_m, sig3, st_ok, gyro_ok)
 
 
@@ -651,7 +656,7 @@ def _mekf_stage(
         )
     if not st_ok:
         sigma_e = s.earth_sigma_rad
-        nadir, earth_ok = _earth_sensor_nadir_1(sigma_e, s.earth_bias_rad, var.faults, t, x, pos.r)
+        nadir, earth_ok = _earth_sensor_nadir_1(sigma_e, s.earth_bias_rad, var.faults, t, x, pos.r, sensed.earth_frozen)
         if fdir_on and earth_ok:
             earth_ok = fdir.earth_sensor_check_1(mon.earth, est.q, est.covariance, nadir, -pos.r, sigma_e, ev, n_ev, t)
         if fdir_on and earth_ok and sample.star_ok:
@@ -700,7 +705,9 @@ def _earth_observer_stage(
     a rejected or failed sample leaves the step to the gyros (φ_m, θ_m := φ̂, θ̂). Starts from
     ``e.observer_initial`` or the first earth sample with ψ̂ = 0. Returns whether the earth sample was used."""
     f = est.filter_state
-    angles, earth_ok = _earth_sensor_angles_1(s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r)
+    angles, earth_ok = _earth_sensor_angles_1(
+        s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r, sensed.earth_frozen
+    )
     if fdir_on and earth_ok:
         nadir = sensors.nadir_from_roll_pitch_1(angles[0], angles[1])
         earth_ok = fdir.earth_sensor_check_1(
@@ -1183,7 +1190,11 @@ def initial_carry(c: LoopConfig, var: Variant) -> Carry:
     x = var.x0.copy()
     sig_m = sens.gyro_markov_sigma_rad_s
     drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
-    sensed = Sensed(np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), np.zeros(3))
+    held = np.full(3, np.nan)  # no output given yet (faults.held_sensor_faults_1)
+    sensed = Sensed(
+        np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), held.copy(),
+        held.copy(), held.copy(),
+    )  # fmt: skip
     filt = np.zeros(9)
     filt[6:9] = x[4:7]
     est = Estimate(x[0:4].copy(), x[4:7].copy(), np.zeros(3), estc.covariance0.copy(), filt)

@@ -252,6 +252,21 @@ def sensor_faults_1(
 
 
 @njit(cache=True)
+def held_sensor_faults_1(
+    faults: np.ndarray, target: int, t: float, value: np.ndarray, held: np.ndarray, sigma: float, normals: np.ndarray
+) -> bool:
+    """:func:`sensor_faults_1` for a sensor that keeps its own held output: a frozen fault holds ``held``, the
+    last output it gave before the freeze (``held`` NaN: it has given none, the freeze holds this sample);
+    ``held`` follows the output while the sensor is not frozen. Returns False while the sensor has failed."""
+    if np.isnan(held[0]):
+        held[:] = value
+    ok = sensor_faults_1(faults, target, t, value, held, sigma, normals)
+    if not fault_of_type_1(faults, target, Y_FROZEN, t):
+        held[:] = value
+    return ok
+
+
+@njit(cache=True)
 def fault_of_type_1(faults: np.ndarray, target: int, kind: int, t: float) -> bool:
     """Whether a fault of this target and type acts at t."""
     for f in range(faults.shape[0]):
