@@ -403,9 +403,13 @@ def test_an_embedded_monitor_behind_the_token_gate_opens_with_the_dashboard_toke
         # the frame's viser WebSocket came through the gate (cookie from the dashboard's token): a viewer of its own
         _wait_for(lambda: len(handles.viewers.get("actual", {})) == 1, PAINT_TIMEOUT_S, "the embedded monitor")
         gate_url = f"http://127.0.0.1:{console['viewer_port']}/"  # the gate moved the token into a cookie
-        # looked up now, not before the wait: the gate's redirect replaces the frame the element first held
-        frame = next((f for f in page.frames if f.url == gate_url), None)
-        assert frame is not None, [f.url for f in page.frames]
+        # looked up now, not before the wait: the gate's redirect replaces the frame the element first held, and
+        # the new frame may still be navigating (url '') when the viewer registers: poll, letting playwright
+        # dispatch its frame events between looks
+        deadline = time.monotonic() + PAINT_TIMEOUT_S
+        while (frame := next((f for f in page.frames if f.url == gate_url), None)) is None:
+            assert time.monotonic() < deadline, [f.url for f in page.frames]
+            page.wait_for_timeout(200)
         assert "Software WebGL" in frame.evaluate("document.body.innerText")  # viser's own page, not a refusal
     finally:
         page.close()
