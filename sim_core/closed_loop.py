@@ -307,7 +307,9 @@ class Position(NamedTuple):
 
 
 class Sensed(NamedTuple):
-    """Latest samples and the sensors' own state (frozen outputs, Markov drift)."""
+    """Latest samples and the sensors' own state (Markov drift, held outputs). ``*_frozen`` are the outputs a frozen
+    fault holds: the gyro's, Sun sensor's, earth sensor's (φ_e, θ_e, 0) and magnetometer's are NaN until the sensor
+    has given one (faults.held_sensor_faults_1), the star tracker's is its last attitude (star_tracker_faults_1)."""
 
     omega: np.ndarray  # gyro ω_g
     omega_prev: np.ndarray
@@ -316,8 +318,8 @@ class Sensed(NamedTuple):
     star_frozen: np.ndarray
     mag: np.ndarray
     mag_prev: np.ndarray
-    sun_frozen: np.ndarray  # the held outputs of Sun sensor, earth sensor (φ_e, θ_e, 0) and magnetometer:
-    earth_frozen: np.ndarray  # NaN until the sensor has given one (faults.held_sensor_faults_1)
+    sun_frozen: np.ndarray
+    earth_frozen: np.ndarray
     mag_frozen: np.ndarray
 
 
@@ -521,11 +523,11 @@ def _triad_stage(
 
 
 @njit(cache=True)
-def _hold_outputs_stage(cmd: Commands, sensed: Sensed) -> None:
-    """At a fault onset: the outputs in hand are what a 'frozen' fault holds (sim_core.faults)."""
+def _hold_outputs_stage(cmd: Commands) -> None:
+    """At a fault onset: the commands in hand are what a 'frozen' wheel or controller fault holds (sim_core.faults;
+    the sensors keep their own held outputs, faults.held_sensor_faults_1)."""
     cmd.frozen_cmd[:] = cmd.wheel_cmd
     cmd.frozen_torque[:] = cmd.body_torque
-    sensed.gyro_frozen[:] = sensed.omega
 
 
 @njit(cache=True)
@@ -556,7 +558,7 @@ def _sense_stage(
         np.concatenate((normals[0:3], drift_normals)),
     )
     sensed.omega[:] = w_meas
-    gyro_ok = faults_mod.sensor_faults_1(
+    gyro_ok = faults_mod.held_sensor_faults_1(
         faults, T_GYRO, t, sensed.omega, sensed.gyro_frozen, s.gyro_noise_rad_s, normals[0:3]
     )
     sig3 = np.full(3, s.star_sigma_rad)
@@ -1192,7 +1194,7 @@ def initial_carry(c: LoopConfig, var: Variant) -> Carry:
     drift0 = sig_m * np.random.standard_normal(3) if sig_m > 0.0 else np.zeros(3)
     held = np.full(3, np.nan)  # no output given yet (faults.held_sensor_faults_1)
     sensed = Sensed(
-        np.zeros(3), np.zeros(3), drift0, np.zeros(3), x[0:4].copy(), np.zeros(3), np.zeros(3), held.copy(),
+        np.zeros(3), np.zeros(3), drift0, held.copy(), x[0:4].copy(), np.zeros(3), np.zeros(3), held.copy(),
         held.copy(), held.copy(),
     )  # fmt: skip
     filt = np.zeros(9)
@@ -1311,7 +1313,7 @@ def fly_variant(
             flags = faults_mod.fault_transitions_1(faults, t, fault_state, ev, n_ev)
             if flags < 0:  # a fault began
                 flags = -flags - 1
-                _hold_outputs_stage(cmd, sensed)
+                _hold_outputs_stage(cmd)
 
         if measure:
             sample = _sense_stage(sens, faults, t, x, markov, pos, sensed)

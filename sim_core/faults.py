@@ -6,7 +6,7 @@
 - Codes and table: :data:`TARGET_CODES`, :data:`TYPE_CODES` and :func:`fault_table` turn the specs of
   a batch into the float table (columns ``F_*``) the compiled loop reads.
 - Effect kernels (compiled, one per place a fault acts): :func:`fault_active_1`,
-  :func:`fault_transitions_1`, :func:`sensor_faults_1`, :func:`star_tracker_faults_1`,
+  :func:`fault_transitions_1`, :func:`sensor_faults_1`, :func:`held_sensor_faults_1`, :func:`star_tracker_faults_1`,
   :func:`wheel_commands_1`, :func:`tachometer_faults_1`, :func:`lock_stuck_wheels_1`, :func:`extra_friction_1`,
   :func:`controller_faults_1`, :func:`rod_faults_1`; :func:`sensor_fault_series` and
   :func:`star_tracker_fault_series` run the same kernels over sample series (the emulator's sensors).
@@ -51,6 +51,7 @@ __all__ = [
     "fault_active_at",
     "fault_transitions_1",
     "sensor_faults_1",
+    "held_sensor_faults_1",
     "star_tracker_faults_1",
     "fault_of_type_1",
     "wheel_commands_1",

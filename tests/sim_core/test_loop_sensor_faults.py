@@ -1,11 +1,14 @@
-"""The loop's magnetometer and earth-sensor faults act as their physics says (sim_core.faults through the loop's
-sensing stages, closed_loop._sense_stage and _earth_sensor_angles_1), against truths written here:
+"""The loop's gyro, magnetometer and earth-sensor faults act as their physics says (sim_core.faults through the
+loop's sensing stages, closed_loop._sense_stage and _earth_sensor_angles_1), against truths written here:
 
 - a k·σ noise fault on a magnetometer axis makes the measured-minus-true field on that axis have variance k²σ²
   (true field: the inertial field turned into body axes by the true attitude, a rotation about z written out here),
   the other axes σ², and the fault's noise is the magnetometer's own: uncorrelated with the gyro's noise;
-- a frozen magnetometer or earth sensor (roll, pitch of the nadir, written out here for a turn about z) reads, from the onset to the fault's end, the output it gave last before the
-  onset while the truth turns by many σ, and follows the truth again after.
+- a frozen magnetometer or earth sensor (roll, pitch of the nadir, written out here for a turn about z) reads, from
+  the onset to the fault's end, the output it gave last before the onset while the truth turns by many σ, and
+  follows the truth again after;
+- a frozen gyro (held by the same kernel, faults.held_sensor_faults_1) reads the output it gave last before the
+  onset, or its first output when frozen from t = 0 (the truth plus noise, not the zeros the loop starts from).
 """
 
 import numpy as np
@@ -57,7 +60,7 @@ def _sensors() -> closed_loop.SensorModels:
 def _sensed() -> closed_loop.Sensed:
     held = np.full(3, np.nan)
     z = np.zeros(3)
-    return closed_loop.Sensed(z.copy(), z.copy(), z.copy(), z.copy(), np.array([1.0, 0, 0, 0]), z.copy(), z.copy(),
+    return closed_loop.Sensed(z.copy(), z.copy(), z.copy(), held.copy(), np.array([1.0, 0, 0, 0]), z.copy(), z.copy(),
                               held.copy(), held.copy(), held.copy())  # fmt: skip
 
 
@@ -75,7 +78,7 @@ def _true_field_b(t: float) -> np.ndarray:
     return np.array([c * bx + s * by, -s * bx + c * by, bz])
 
 
-def _fly_magnetometer(fault_rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _fly_sensing(fault_rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """n T_q samples of the sensing stage: times, magnetometer readings, gyro noise (reading − true rate)."""
     s, sensed = _sensors(), _sensed()
     pos = closed_loop.Position(*(np.zeros(3) for _ in range(7)))
@@ -95,7 +98,7 @@ def _fly_magnetometer(fault_rows: np.ndarray, n: int) -> tuple[np.ndarray, np.nd
 def test_magnetometer_noise_fault_has_variance_k2_sigma2_and_its_own_noise(k):
     axis = 1
     rows = _faults(FaultSpec(target="magnetometer", index=axis, type="noise", value=k))
-    t_s, mag, gyro_noise = _fly_magnetometer(rows, N_SAMPLES)
+    t_s, mag, gyro_noise = _fly_sensing(rows, N_SAMPLES)
     resid = mag - np.array([_true_field_b(t) for t in t_s])
     expected = np.full(3, SIGMA_MAG_T**2)
     expected[axis] *= k**2
@@ -109,7 +112,7 @@ def test_magnetometer_noise_fault_has_variance_k2_sigma2_and_its_own_noise(k):
 def test_frozen_magnetometer_holds_its_last_output_while_the_field_turns():
     onset, duration, n = 100.0, 200.0, 400
     rows = _faults(FaultSpec(target="magnetometer", type="frozen", onset_s=onset, duration_s=duration))
-    t_s, mag, _ = _fly_magnetometer(rows, n)
+    t_s, mag, _ = _fly_sensing(rows, n)
     truth = np.array([_true_field_b(t) for t in t_s])
     held = (t_s >= onset) & (t_s < onset + duration)
     last_free = mag[np.flatnonzero(t_s < onset)[-1]]
@@ -118,6 +121,22 @@ def test_frozen_magnetometer_holds_its_last_output_while_the_field_turns():
     free = ~held
     assert np.abs(mag[free] - truth[free]).max() < 6.0 * SIGMA_MAG_T  # before and after: the field plus noise
     assert np.unique(mag[t_s < onset][:, 0]).size == np.count_nonzero(t_s < onset)  # noisy, not a dead stream
+
+
+@pytest.mark.parametrize("onset", [100.0, 0.0])
+def test_frozen_gyro_holds_its_last_output(onset):
+    """The body turns at RATE_RAD_S = 100 σ about z; the gyro's reading minus the truth is its noise, so a held
+    reading is one value repeated, and a held zero would sit 100 σ off."""
+    duration, n = 200.0, 400
+    rows = _faults(FaultSpec(target="gyro", type="frozen", onset_s=onset, duration_s=duration))
+    t_s, _, gyro_noise = _fly_sensing(rows, n)
+    held = (t_s >= onset) & (t_s < onset + duration)
+    last_free = np.flatnonzero(t_s < onset)
+    given = gyro_noise[last_free[-1]] if last_free.size else gyro_noise[0]  # frozen from t = 0: its first output
+    assert np.all(gyro_noise[held] == given)
+    assert np.abs(gyro_noise).max() < 6.0 * SIGMA_GYRO_RAD_S  # truth + noise throughout, never a held zero
+    free = ~held
+    assert np.unique(gyro_noise[free][:, 0]).size == np.count_nonzero(free)  # noisy again after the fault
 
 
 def test_frozen_earth_sensor_holds_its_last_output_while_the_attitude_turns():
