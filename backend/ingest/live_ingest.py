@@ -87,7 +87,9 @@ class _OrphanStop:
         if self._called:
             return
         self._called = True
-        threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,)).start()
+        exit_timer = threading.Timer(ORPHAN_EXIT_S, os._exit, args=(1,))
+        exit_timer.daemon = True  # a bound, not a wait: an orderly stop that ends sooner exits at once
+        exit_timer.start()
         self._outbox.cancel_join_thread()
         self._stop.set()
 
