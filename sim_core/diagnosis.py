@@ -83,7 +83,7 @@ REPLAY_ONSETS = 13  # onsets tried per replayed hypothesis
 REPLAY_LEAD_S = 60.0  # the twin starts this long before the earliest onset tried
 FLIGHT_AFTER_S = 600.0  # a hypothesis flown on the simulated monitor: this long after its onset (issue 14's 10 min)
 RESOLVED_COUNTS = 2  # a reading that moves by one count may be the rounding of an arbitrarily small change:
-# a speed bias or a friction is claimed only if it moves the tachometer by two counts or more
+# a speed bias, a friction or a gain loss is claimed only if it moves the tachometer by two counts or more
 SUB_SAMPLE = 4  # onsets tried per telemetry interval (a fault starts between samples)
 UNALARMED_FIT_SAMPLES = 3_600  # records up to this long are searched for a fault below the alarm (an hour at 1 Hz)
 TACHOMETER_JITTER = 0.02  # σ of a reading's white error beyond its rounding, in counts (float telemetry, sampling
@@ -384,7 +384,12 @@ def _profile(
 
         if not quadratic:
             return at(0.0), np.full(g, np.nan)
-        return _profiled(ch, at, 0.0, MAX_REMAINING_GAIN, grid=GAIN_GRID)
+        # the speed a gain loss takes off the wheel by sample k is (1 − g) Σ_{onset ≤ j < k} motor_j: a remaining gain
+        # whose loss never reaches RESOLVED_COUNTS tachometer counts is not resolved (g = 0 if none reaches them)
+        reach = np.abs(np.cumsum(after * ch.templates["motor"], axis=1)).max(axis=1)
+        with np.errstate(divide="ignore"):
+            resolved = np.clip(1.0 - RESOLVED_COUNTS * ch.bound / reach, 0.0, MAX_REMAINING_GAIN)
+        return _profiled(ch, at, 0.0, MAX_REMAINING_GAIN, grid=GAIN_GRID, ceiling=resolved)
     if kind == "friction":
 
         def at(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:
@@ -429,15 +434,17 @@ def _profiled(
     scale: float = 1.0,
     min_abs: float | np.ndarray = 0.0,
     grid: tuple[float, ...] = (),
+    ceiling: float | np.ndarray = np.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Profile over the magnitude θ per onset: the Gaussian model's exact maximum (quadratic in θ); for a quantised
     channel the count likelihood is then maximised over that θ, θ·(1 ± MAGNITUDE_STEPS) and ``grid``, and the best
-    of them refined by REFINEMENTS halvings of the step."""
-    ll, theta = _quadratic_max(lambda th: at(th, True), lo, hi, scale, min_abs)
+    of them refined by REFINEMENTS halvings of the step. θ ≤ ``ceiling`` (per onset) besides [lo, hi]."""
+    ll, theta = _quadratic_max(lambda th: at(th, True), lo, hi, scale, min_abs, ceiling)
     if ch.bound <= 0.0:
         return ll, theta
+    upper = np.minimum(hi, ceiling)
     candidates = [theta] + [theta * (1.0 + f) for f in MAGNITUDE_STEPS] + [np.full_like(theta, v) for v in grid]
-    thetas = np.stack([_clamped(c, lo, hi, min_abs) for c in candidates])
+    thetas = np.stack([_clamped(c, lo, upper, min_abs) for c in candidates])
     lls = np.stack([at(th[:, None]) for th in thetas])
     cols = np.arange(theta.shape[0])
     best = np.argmax(lls, axis=0)
@@ -446,14 +453,14 @@ def _profiled(
     for _ in range(REFINEMENTS):  # halve the step around the best candidate
         step = 0.5 * step
         for sign in (-1.0, 1.0):
-            trial = _clamped(theta + sign * step, lo, hi, min_abs)
+            trial = _clamped(theta + sign * step, lo, upper, min_abs)
             trial_ll = at(trial[:, None])
             better = trial_ll > ll
             ll, theta = np.where(better, trial_ll, ll), np.where(better, trial, theta)
     return ll, theta
 
 
-def _clamped(theta: np.ndarray, lo: float, hi: float, min_abs: float | np.ndarray) -> np.ndarray:
+def _clamped(theta: np.ndarray, lo: float, hi: float | np.ndarray, min_abs: float | np.ndarray) -> np.ndarray:
     """θ within [lo, hi] and |θ| ≥ min_abs."""
     theta = np.clip(theta, lo, hi)
     out: npt.NDArray[np.float64] = np.where(np.abs(theta) < min_abs, np.where(theta < 0.0, -min_abs, min_abs), theta)
@@ -461,9 +468,15 @@ def _clamped(theta: np.ndarray, lo: float, hi: float, min_abs: float | np.ndarra
 
 
 def _quadratic_max(
-    at: Callable[[float], np.ndarray], lo: float, hi: float, scale: float = 1.0, min_abs: float | np.ndarray = 0.0
+    at: Callable[[float], np.ndarray],
+    lo: float,
+    hi: float,
+    scale: float = 1.0,
+    min_abs: float | np.ndarray = 0.0,
+    ceiling: float | np.ndarray = np.inf,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, hi] and |θ| ≥ min_abs."""
+    """Exact maximum of a log-likelihood quadratic in θ (affine model), θ clipped to [lo, min(hi, ceiling)] and
+    |θ| ≥ min_abs."""
     if np.isfinite(hi) and np.isfinite(lo):
         p0, p1, p2 = lo, 0.5 * (lo + hi), hi
     else:
@@ -475,8 +488,9 @@ def _quadratic_max(
     a, b, c = coef
     with np.errstate(divide="ignore", invalid="ignore"):
         theta = np.where(a < 0.0, -b / (2.0 * a), np.where(b > 0.0, hi, lo))
-    theta = np.clip(theta, lo, hi)
-    theta = _clamped(np.where(np.isfinite(theta), theta, p0), lo, hi, min_abs)
+    upper = np.minimum(hi, ceiling)
+    theta = np.clip(theta, lo, upper)
+    theta = _clamped(np.where(np.isfinite(theta), theta, p0), lo, upper, min_abs)
     ll = a * theta**2 + b * theta + c
     return ll, theta
 
