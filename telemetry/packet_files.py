@@ -55,7 +55,8 @@ def decode_chunks(
     by default chunk_octets_for the dictionary, grown as GROWTH says where that is only a bound); a stream of at
     most chunk_octets is one chunk.
 
-    Each chunk is read into a buffer of its own behind the octets the previous one left (no other copy)."""
+    Each chunk is read into a buffer of its own behind the octets the previous one left (no other copy); neither
+    that buffer nor a yielded result is held while the next chunk is read and decoded (peak memory)."""
     bounded = chunk_octets or chunk_octets_for(dictionary)
     grows = chunk_octets is None and any(p.xtce is not None or p.fields for p in dictionary.packets.values())
     chunk_octets = bounded
@@ -71,13 +72,16 @@ def decode_chunks(
         result = decode_stream(
             buffer[:held], dictionary, source=source, now_utc_ns=now_utc_ns, final=final, carry=carry
         )
-        yield offset, result
-        if final:
-            return
-        offset += result.consumed
-        tail = buffer[result.consumed : held]
+        consumed = result.consumed
+        tail = buffer[consumed:held].copy()  # a copy, so that the chunk's buffer goes now, not after the next read
+        del buffer
         if grows:
             chunk_octets = _grown(bounded, result)
+        yield offset, result
+        del result  # the caller is done with it: its arrays go before the next chunk is decoded
+        if final:
+            return
+        offset += consumed
 
 
 def _grown(bounded: int, result: DecodeResult) -> int:
@@ -134,6 +138,7 @@ def ingest_packet_file(
                 if on_chunk is not None:
                     on_chunk(result)
                 yield result
+                del result  # not held while the next chunk is decoded
 
     if archive is None:
         for _ in results():

@@ -332,6 +332,7 @@ class Archive:
                         self._write_batches(conn, sat_id, upload_id, ready, limits or {}, last_written, param_ids)
                     )
                 self._write_undefined(conn, sat_id, upload_id, decoded.undefined)
+                del decoded, batches, ready  # written or pending: not held while the next chunk is decoded
             if pending.batches:
                 parts.append(
                     self._write_batches(conn, sat_id, upload_id, pending.flush(), limits or {}, last_written, param_ids)
