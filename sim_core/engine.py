@@ -491,16 +491,23 @@ class Flight:
 def _initial_batch(
     s: Scenario, flight: Flight, wheel_available: np.ndarray | None, fdir: bool | Sequence[bool] | None
 ) -> closed_loop.Batch:
-    """Every variant's start: the programmed (or the scenario's) attitude and rate at t = 0, wheel speeds, the
-    wheels the allocation may use, fault rows, FDIR flag and random seed."""
+    """Every variant's start: the scenario's attitude, else the programmed one at t = 0 turned by ``initial_q_pb``
+    (moving with the program: its rate in body axes), wheel speeds, the wheels the allocation may use, fault rows,
+    FDIR flag and random seed."""
     params, t0 = flight.params, flight.t0_unix_s
     nw, nv = params.n_wheels, len(s.variants)
     r0, v0, a0 = flight.orbit(np.array([t0]))
     q_p0, w_p0, _, _ = closed_loop.program_1(
         flight.start_program, 0.0, t0, r0[0], v0[0], a0[0], flight.c_pn, flight.dut1_s
     )
-    q_init = q_p0 if s.initial_q_ib is None else quaternion.normalize(np.array(s.initial_q_ib))
-    w_init = w_p0 if s.initial_omega_b_rad_s is None else np.array(s.initial_omega_b_rad_s)
+    q_init, w_init = q_p0, w_p0
+    if s.initial_q_ib is not None:
+        q_init = quaternion.normalize(np.array(s.initial_q_ib))
+    elif s.initial_q_pb is not None:
+        q_pb = quaternion.normalize(np.array(s.initial_q_pb))
+        q_init, w_init = quaternion.multiply(q_p0, q_pb), quaternion.rotate(quaternion.conjugate(q_pb), w_p0)
+    if s.initial_omega_b_rad_s is not None:
+        w_init = np.array(s.initial_omega_b_rad_s)
     speeds = np.array([w.initial_speed_rpm for w in s.spacecraft.cluster.wheels]) * np.pi / 30.0
     x0 = pack_state(params, q_init, w_init, speeds)
     avail = np.ones((nv, nw), dtype=np.bool_) if wheel_available is None else np.asarray(wheel_available, bool)

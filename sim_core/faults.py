@@ -21,8 +21,9 @@ values (validated there) for batch runs of :func:`sim_core.engine.simulate`:
   {1,2}, {1,3}, {2,3}, {1,2,3}; gyro and attitude-sensor graded faults alone and together; 10σ and
   50σ measurement noise). The seed's Table 1 of magnitudes is garbled (DESIGN.md), so magnitudes are
   ours, chosen in proportion to the ``song-table1`` bus and stated in :data:`SEED002_MAGNITUDES`. The
-  seed's earth sensor is the attitude sensor of that loop; the engine's attitude sensor is the star
-  tracker, so its graded fault is applied there (the earth sensor is the MEKF's fallback when the star tracker is out);
+  attitude sensors are the seed's own (§3.2.3): the gyros and the earth sensors its observer (eq 15) reads; the
+  graded faults act on the pitch axis (the earth sensor's pitch, seed 002 Fig. 36, and the pitch gyro, whose
+  channel of eq 15 is decoupled from roll and yaw);
 - :func:`seed000_two_wheels` : seed 000 §5's wheels 2 and 4 with the MD.
 
 Wheel numbers in names are the seeds' (1-based); indices in specs are 0-based.
@@ -106,8 +107,8 @@ SEED002_ONSET_S = 7.0  # seed 002 §3.2.1: the controller faults start at 7 s; w
 SEED002_MAGNITUDES = {
     "controller_bias_nm": 0.02,  # 20 % of the bus's 0.1 N·m wheels: an abrupt offset the PD must fight
     "wheel_gain": 0.3,  # multiplicative fault: 70 % of the motor torque lost
-    "gyro_drift_rad_s2": 2e-6,  # graded gyro fault: 0.4 mrad/s of extra bias after 200 s
-    "attitude_drift_rad_s": 5e-5,  # graded attitude-sensor fault: 0.57° of cumulative offset after 200 s
+    "gyro_drift_rad_s2": 1e-7,  # graded pitch-gyro fault: 0.1 mrad/s of extra bias after 1,000 s
+    "attitude_drift_rad_s": 5e-5,  # graded earth-sensor pitch fault: 2.9° of cumulative offset after 1,000 s
     "noise_10": 10.0,  # seed 002 §3.2.4: 10σ
     "noise_50": 50.0,  # and 50σ
 }
@@ -477,16 +478,17 @@ def _axes(target: str, kind: str, onset: float, **params: float) -> list[FaultSp
 
 
 def _noise(k: float) -> list[FaultSpec]:
-    """Gyro and star-tracker noise scaled to k·σ on every axis (seed 002 §3.2.4)."""
-    return _axes("gyro", "noise", 0.0, value=k) + _axes("star_tracker", "noise", 0.0, value=k)
+    """Gyro (three axes) and earth-sensor (roll, pitch) noise scaled to k·σ (seed 002 §3.2.4)."""
+    earth = [FaultSpec(target="earth_sensor", index=i, type="noise", value=k) for i in range(2)]
+    return _axes("gyro", "noise", 0.0, value=k) + earth
 
 
 def seed002_fault_sets(onset_s: float = SEED002_ONSET_S) -> dict[str, list[FaultSpec]]:
     """Seed 002 §3.2 experiments as named fault sets for the three-wheel ``song-table1`` bus."""
     m = SEED002_MAGNITUDES
-    gyro_drift = [FaultSpec(target="gyro", index=0, type="drift", onset_s=onset_s, value=m["gyro_drift_rad_s2"])]
+    gyro_drift = [FaultSpec(target="gyro", index=2, type="drift", onset_s=onset_s, value=m["gyro_drift_rad_s2"])]
     att_drift = [
-        FaultSpec(target="star_tracker", index=0, type="drift", onset_s=onset_s, value=m["attitude_drift_rad_s"])
+        FaultSpec(target="earth_sensor", index=1, type="drift", onset_s=onset_s, value=m["attitude_drift_rad_s"])
     ]
     return {
         "nominal": [],

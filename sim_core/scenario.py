@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationInfo, field_validator, model_validator
 
 __all__ = [
     "WheelSpec",
@@ -326,7 +326,8 @@ class Scenario(_Spec):
     description: str = ""
     spacecraft: SpacecraftSpec = Field(default_factory=SpacecraftSpec)
     orbit: OrbitSpec = Field(default_factory=OrbitSpec)
-    initial_q_ib: Quaternion | None = None  # None: aligned with the program at t = 0
+    initial_q_ib: Quaternion | None = None  # None: aligned with the program at t = 0 (turned by initial_q_pb)
+    initial_q_pb: Quaternion | None = None  # start relative to the program, Λ(0) = Λ^p(0) ∘ Λ_pb (initial_q_ib None)
     initial_omega_b_rad_s: Vector3 | None = None
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     estimator: EstimatorSpec = Field(default_factory=EstimatorSpec)
@@ -361,11 +362,11 @@ class Scenario(_Spec):
                 raise ValueError("truth.inertia_kg_m2: not symmetric")
         return self
 
-    @field_validator("initial_q_ib")
+    @field_validator("initial_q_ib", "initial_q_pb")
     @classmethod
-    def _unit(cls, q: list[float] | None) -> list[float] | None:
+    def _unit(cls, q: list[float] | None, info: ValidationInfo) -> list[float] | None:
         if q is not None and abs(math.sqrt(math.fsum(c * c for c in q)) - 1.0) > 1e-6:
-            raise ValueError("initial_q_ib: not a unit quaternion")
+            raise ValueError(f"{info.field_name}: not a unit quaternion")
         return q
 
     @model_validator(mode="after")

@@ -153,66 +153,54 @@ SONG_WHEEL_TERMS = {  # seed 002 eq 4 (its Table 1 values are garbled: K_d = 0.0
 }
 
 
+# song-table1's start: 5° about the roll (y) and pitch (z) axes of the orbit frame, the axes the earth sensors see
+SONG_INITIAL_Q_PB = quaternion.from_axis_angle(np.array([0.0, 1.0, 1.0]), np.radians(5.0)).tolist()
+
+
 def song_table1() -> Scenario:
-    """Seed 002 §3.2 base case with the seed's component models flown: three orthogonal wheels, quaternion PD
-    (eq 18), 1,000 s of Earth pointing from a small initial error (the fault variants of issue 4 run on it).
+    """Seed 002's spacecraft as its §2–3 specify it: three orthogonal wheels, three-axis stabilised about the orbit
+    frame (q_d = [1 0 0 0], ω_d = 0 relative to it, §3.1), the quaternion PD (eq 18) reading the gyro + earth-sensor
+    observer (eq 15) — the only attitude sensors the seed's spacecraft has (§2.2.4–2.2.6, §3.2.3). Starts 5° off the
+    orbit frame about the roll and pitch axes (the seed's Figs 21–22 converge from an error it does not give; the
+    earth sensors measure roll and pitch, so the observer starts from its first sample) and flies 1,000 s (the fault
+    variants of issue 4 run on it, faults.seed002_fault_sets).
 
     Flown as the seed specifies them: each wheel's torque balance (eq 1, 4: viscous and Coulomb friction K_l Ω +
     K_nl sign Ω, noise K_x W/|W_max|, aerodynamic drag K_a Ω√|Ω|, imbalance K_d Ω² sin Ωt; :data:`SONG_WHEEL_TERMS`),
     the motor electrics behind a 28 V driver (eq 2–3, K_m = 0.053 N·m/A from Table 1), the gyro's Markov drift
-    (eq 13, σ = 1e-6 rad/s, τ = 300 s, its random-walk density told to the filter) and an observer on gyro +
-    attitude sensor (eq 15; here the MEKF on gyro + star tracker). Table 1 is garbled in the seed, so the bus and
-    the wheel coefficients are ours, in proportion to it."""
+    (eq 13, σ = 1e-6 rad/s, τ = 300 s), two earth sensors (eq 14: roll and pitch, noise 0.001 — radians taken, the
+    seed prints no unit: 0.057°, the static infrared class — zero bias) and the observer with Table 1's gains
+    K_φ, K_θ, K_ψ = 0.012, 0.01, 0.008 1/s. Table 1 is garbled in the seed, so the bus and the wheel coefficients
+    are ours, in proportion to it."""
     wheels = [
         WheelSpec(inertia_kg_m2=0.01, max_torque_nm=0.1, max_momentum_nms=4.0, **SONG_WHEEL_TERMS) for _ in range(3)
     ]
-    q0 = quaternion.from_axis_angle(np.array([1.0, 1.0, 0.0]), np.radians(5.0))
     return Scenario(
         name="song-table1",
-        description="Seed 002 component-level SACS: three orthogonal wheels with their torque balance and motor "
-        "electrics, gyro Markov drift, quaternion PD",
+        description="Seed 002 component-level SACS: Earth pointing on three orthogonal wheels with their torque "
+        "balance and motor electrics, gyros with Markov drift and two earth sensors through the eq-15 observer, "
+        "quaternion PD",
         spacecraft=SpacecraftSpec(
             inertia_kg_m2=[[20.0, 0, 0], [0, 18.0, 0], [0, 0, 15.0]],
             cluster=ClusterSpec(geometry="orthogonal3", wheels=wheels, motor=MotorSpec()),
         ),
         orbit=OrbitSpec(kind="circular", altitude_m=645e3),
-        guidance=GuidanceSpec(kind="inertial", inertial_steps=[(0.0, [1.0, 0.0, 0.0, 0.0])]),
-        initial_q_ib=q0.tolist(),
-        initial_omega_b_rad_s=[0.0, 0.0, 0.0],
+        guidance=GuidanceSpec(kind="orf"),
+        initial_q_pb=SONG_INITIAL_Q_PB,
         sensors=SensorsSpec(
             gyro_markov_sigma_rad_s=1e-6,
             gyro_markov_tau_s=300.0,
-            gyro_drift_density_rad_s_sqrt_s=8.2e-8,  # σ √(2/τ): the drift's random-walk density
+            gyro_drift_density_rad_s_sqrt_s=8.2e-8,  # σ √(2/τ): the drift's random-walk density (for a filter)
+            earth_sensor_sigma_rad=0.001,
         ),
         controller=ControllerSpec(kind="quaternion_pd", pd_kp_nm=2.0, pd_kd_nms=8.0),
         allocation={"kind": "pseudo_inverse"},
-        estimator=EstimatorSpec(kind="mekf"),
-        duration_s=200.0,
+        estimator=EstimatorSpec(kind="earth_observer", observer_gains_1_s=[0.012, 0.01, 0.008]),
+        duration_s=1000.0,
         dynamics_dt_s=0.05,
         measurement_dt_s=0.1,
         control_dt_s=0.1,
         output_dt_s=0.1,
-    )
-
-
-def song_earth_observer() -> Scenario:
-    """Seed 002's attitude determination flown as it specifies it (§2.2.5–2.2.6): song-table1's bus and component
-    models pointing at the Earth (q_d = [1 0 0 0] about the orbit frame, ω_d = 0 relative to it), the law reading the
-    eq-15 observer on the gyros and two earth sensors (eq 14) with Table 1's gains K_φ, K_θ, K_ψ = 0.012, 0.01,
-    0.008 1/s and earth-sensor noise 0.001 (radians taken: the seed prints no unit; 0.057°, the static infrared
-    class) and zero bias. Starts in the orbit frame; the observer from its first earth sample with ψ̂ = 0.
-    song-table1 itself holds an inertial attitude 180° from the orbit frame, which eq 15 cannot serve."""
-    s = song_table1()
-    return s.model_copy(
-        update={
-            "name": "song-earth-observer",
-            "description": "Seed 002 Earth pointing on gyros + two earth sensors through the eq-15 observer",
-            "guidance": GuidanceSpec(kind="orf"),
-            "initial_q_ib": None,
-            "sensors": s.sensors.model_copy(update={"earth_sensor_sigma_rad": 0.001}),
-            "estimator": EstimatorSpec(kind="earth_observer", observer_gains_1_s=[0.012, 0.01, 0.008]),
-            "duration_s": 1000.0,
-        }
     )
 
 
@@ -265,7 +253,6 @@ SCENARIOS: dict[str, Callable[[], Scenario]] = {
     "somov-ge4-scan": somov_ge4_scan,
     "aist-scheduled-turn": aist_scheduled_turn,
     "song-table1": song_table1,
-    "song-earth-observer": song_earth_observer,
     "somov-detumble-to-scan": somov_detumble_to_scan,
     "somov-ge4-scan-flex": somov_ge4_scan_flex,
 }

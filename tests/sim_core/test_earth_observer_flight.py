@@ -1,5 +1,5 @@
 """Seed 002's gyro + earth-sensor observer (eq 15) flown as the estimator the law reads (library scenario
-``song-earth-observer``), against truths derived here from eq 15 itself, not from sim_core.earth_observer:
+``song-table1``, seed 002's spacecraft), against truths derived here from eq 15 itself, not from sim_core.earth_observer:
 
 - its error e = x̂ − x obeys ė = A e: pitch decays at −K_θ, and the roll/yaw pair at the roots of
   s² + K_φ s + ω_o (ω_o + K_ψ), each seen in its modal coordinate z = λ e_φ + ω_o e_ψ (the left eigenvector
@@ -34,10 +34,12 @@ RAMP_RTOL = 0.05  # graded fault: the PD lags the estimate by 2 K_d/K_p ≈ 8 s 
 
 
 def _scenario(duration_s: float, **estimator: object) -> Scenario:
-    """song-earth-observer without the gyro's Markov drift (its bias would offset the errors by b/K), output at 1 s."""
-    s = scenario_library.get("song-earth-observer")
+    """song-table1 starting in the orbit frame, without the gyro's Markov drift (its bias would offset the errors by
+    b/K), output at 1 s."""
+    s = scenario_library.get("song-table1")
     return s.model_copy(
         update={
+            "initial_q_pb": None,
             "duration_s": duration_s,
             "output_dt_s": 1.0,
             "sensors": s.sensors.model_copy(update={"gyro_markov_sigma_rad_s": 0.0}),
@@ -95,7 +97,7 @@ def test_constant_earth_sensor_bias_gives_the_eq15_steady_state_offset():
 def test_graded_earth_sensor_fault_accumulates_into_the_attitude_as_seed002_fig36():
     """Seed 002 Fig. 36: 'a cumulative deviation in the attitude angle'. A pitch drift a (t − t_s) enters the pitch
     channel θ̂̇ = … + K_θ (θ_m − θ̂), so e_θ = a (τ − (1 − e^(−K_θ τ))/K_θ) and the spacecraft turns by −e_θ."""
-    s = scenario_library.get("song-earth-observer")
+    s = scenario_library.get("song-table1")
     a, onset = 5e-5, 7.0  # faults.SEED002_MAGNITUDES' attitude drift at seed 002's onset
     drift = FaultSpec(target="earth_sensor", index=1, type="drift", onset_s=onset, value=a)
     s = s.model_copy(update={"variants": [VariantSpec(name="nominal"), VariantSpec(name="graded", faults=[drift])]})
@@ -116,7 +118,7 @@ def test_fdir_screens_the_earth_sensor_on_the_observer_flight():
     """A 0.01 rad roll step at 100 s (10 σ of the seed's 0.001 rad noise) is rejected by fdir.earth_sensor_check_1
     and isolated; the observer then runs on the gyros alone and the roll stays where it was, while without FDIR
     the spacecraft follows the biased estimate. The nominal flight raises no alarm."""
-    s = scenario_library.get("song-earth-observer").model_copy(update={"duration_s": 400.0, "output_dt_s": 1.0})
+    s = scenario_library.get("song-table1").model_copy(update={"duration_s": 400.0, "output_dt_s": 1.0})
     step = FaultSpec(target="earth_sensor", index=0, type="bias", onset_s=100.0, value=0.01)
     variants = [VariantSpec(name="nominal"), VariantSpec(name="step", faults=[step])]
     s = s.model_copy(update={"variants": variants + [VariantSpec(name="step, no FDIR", faults=[step])]})

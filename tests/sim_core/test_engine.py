@@ -145,6 +145,8 @@ def test_bad_overrides_name_the_field(assignment, field):
 def test_scenario_rejects_nan_and_non_unit_quaternions():
     with pytest.raises(ValueError, match="initial_q_ib"):
         Scenario(initial_q_ib=[1.0, 1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="initial_q_pb"):
+        Scenario(initial_q_pb=[1.0, 1.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="duration_s"):
         Scenario(duration_s=float("nan"))
 
@@ -212,3 +214,17 @@ def test_the_plant_flies_the_truth_and_the_software_the_model():
         )
     }
     assert drift["truth"] <= 1e-6 < 1e-3 <= drift["model"]
+
+
+def test_start_relative_to_the_program_moves_with_it():
+    """initial_q_pb: Λ(0) = Λ^p(0) ∘ Λ_pb, and the body turns with the program (its rate, in body axes, is the
+    program's: ω^p expressed in the turned axes), so only the attitude offset remains for the law to remove."""
+    s = scenario_library.get("song-table1").model_copy(update={"duration_s": 1.0})
+    traj = engine.simulate(s)
+    q_pb = np.array(s.initial_q_pb)
+    start = quaternion.multiply(
+        quaternion.conjugate(quaternion.multiply(traj["q_prog_ib"][0, 0], q_pb)), traj["q_ib"][0, 0]
+    )
+    assert quaternion.angle(start) < 1e-12
+    np.testing.assert_allclose(traj["omega_b_rad_s"][0, 0], traj["omega_prog_b_rad_s"][0, 0], rtol=0, atol=1e-15)
+    assert np.degrees(traj.pointing_error_rad()[0, 0]) == pytest.approx(5.0)

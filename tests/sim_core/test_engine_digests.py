@@ -121,8 +121,7 @@ FLIGHTS: dict[str, Callable[[], Flight]] = {
     "somov-ge4-scan seed000 filter": _estimator("seed000_filter"),
     "somov-ge4-scan seed003 rate": _estimator("seed003_rate"),
     "somov-detumble-to-scan modes": _plain("somov-detumble-to-scan", 4000.0),  # three mode changes,
-    "song-table1": _plain("song-table1"),
-    "song-earth-observer": _plain("song-earth-observer", 300.0),  # seed 002 eq 15 observer in the loop
+    "song-table1": _plain("song-table1", 300.0),  # seed 002: Earth pointing on the eq-15 observer, wheel models
 }
 
 

@@ -719,8 +719,9 @@ def test_no_false_alarm_in_24_hours_of_nominal_scan_with_sensor_noise(tach_q):
 @pytest.mark.slow
 def test_no_false_alarm_in_24_hours_of_song_table1_with_seed002_wheel_noise():
     """song-table1 (perfect tachometer, seed 002's K_x = 1e-4 N·m on three wheels, T_u = 0.1 s, gyro Markov drift,
-    MEKF) holding for 24 h under FDIR: its windows and CUSUM are summed every period (the floor a, no quantum), 2.6e6
-    wheel-periods at ≤ 2 P_FA each → ≤ 5e-3 false alarms expected; none."""
+    Earth pointing on the eq-15 observer, its earth sensor screened) holding for 24 h under FDIR: the wheels' windows
+    and CUSUM are summed every period (the floor a, no quantum), 2.6e6 wheel-periods at ≤ 2 P_FA each → ≤ 5e-3 false
+    alarms expected; none, and no earth-sensor alarm."""
     s = scenario_library.get("song-table1").model_copy(update={"duration_s": 86400.0, "output_dt_s": 60.0})
     assert s.sensors.tachometer_quantum_rad_s == 0.0 and all(w.noise_nm > 0 for w in s.spacecraft.cluster.wheels)
     traj = engine.simulate(s, fdir=True)
