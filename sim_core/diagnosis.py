@@ -90,6 +90,8 @@ TACHOMETER_JITTER = 0.02  # σ of a reading's white error beyond its rounding, i
 # instant); a slowly varying model error is the balance's process noise, not this: a white jitter repeated over
 # hundreds of unchanged readings would tell a still speed from one a fraction of a count from the count's edge
 MAGNITUDE_STEPS = (-0.25, 0.25)  # relative steps tried around the Gaussian model's magnitude
+STEP_CANDIDATES = 3  # jumps per channel a strided onset grid adds onsets at: a step fault shows as one jump, the
+# three largest leave room for two nominal ones as large (count transitions, a seizure's kick)
 REFINEMENTS = 2  # step halvings around the best magnitude candidate (a gain to 0.025)
 GAIN_GRID = tuple(float(g) for g in np.arange(0.0, 0.91, 0.1))  # remaining gains tried on the count likelihood
 KINEMATIC_RATE_FLOOR_RAD_S = 2e-7  # float32 quaternion components (6e-8) differenced over 1 s, with margin
@@ -325,14 +327,17 @@ def detection_rate_per_day(n_channels: int, dt_s: float) -> float:
     return fd.false_alarms_per_day(n_channels, dt_s)
 
 
-def _log_mean_exp(x: np.ndarray) -> float:
+def _log_mean_exp(x: np.ndarray, weights: np.ndarray | None = None) -> float:
+    """ln of the mean of exp(x), weighted by ``weights`` if given."""
     m = float(np.max(x))
-    return m + math.log(float(np.mean(np.exp(x - m))))
+    e = np.exp(x - m)
+    return m + math.log(float(np.mean(e) if weights is None else np.average(e, weights=weights)))
 
 
-def _onset_stats(t: np.ndarray, ll: np.ndarray) -> tuple[float, float, int]:
-    """Maximum-likelihood onset, posterior σ under a uniform prior, and its index."""
-    w = np.exp(ll - ll.max())
+def _onset_stats(t: np.ndarray, ll: np.ndarray, widths: np.ndarray | None = None) -> tuple[float, float, int]:
+    """Maximum-likelihood onset, posterior σ under a uniform prior (each onset standing for ``widths`` of time if
+    given), and its index."""
+    w = np.exp(ll - ll.max()) * (1.0 if widths is None else widths)
     w /= w.sum()
     mean = float(w @ t)
     return float(t[int(np.argmax(ll))]), float(np.sqrt(max(w @ (t - mean) ** 2, 0.0))), int(np.argmax(ll))
@@ -504,9 +509,11 @@ def _fit(
     nominal: float,
     n_params: int,
     others: dict[int, np.ndarray] | None = None,
+    widths: np.ndarray | None = None,
 ) -> _Fit:
     """Onset-marginal, magnitude-penalised log evidence of one fault in one channel; the onset prior is uniform in
-    time, sampled at SUB_SAMPLE fractions of the interval for faults whose effect is an integrated torque."""
+    time, sampled at SUB_SAMPLE fractions of the interval for faults whose effect is an integrated torque (``widths``:
+    the samples each onset stands for on an uneven grid, :func:`_step_onsets`)."""
     quadratic = kind not in ("failure", "stuck")
     sub = SUB_SAMPLE if kind in ("failure", "gain_loss", "friction") and np.all(np.diff(onsets) == 1) else 1
     fractions = np.arange(sub) / sub  # a strided onset grid (no alarm) has no use for fractions of an interval
@@ -518,7 +525,8 @@ def _fit(
     for extra in others.values():  # the other channels' evidence under this hypothesis, per onset
         ll = ll + np.tile(extra, len(fractions))
     times = np.concatenate([t_s[onsets] - phi * lead for phi in fractions])
-    onset, sigma, best = _onset_stats(times, ll)
+    cells = None if widths is None else np.tile(widths, len(fractions))
+    onset, sigma, best = _onset_stats(times, ll, cells)
     k = best % onsets.shape[0]
     penalty = 0.5 * n_params * math.log(max(ch.y.shape[0] - int(onsets[k]), 2))
     magnitude = None if np.isnan(theta[best]) else float(theta[best])
@@ -526,7 +534,7 @@ def _fit(
     sigma = max(sigma, _one_count_s(ch, int(onsets[k]), kind, magnitude, t_s) / math.sqrt(12.0))
     order = np.argsort(times, kind="stable")
     profile = (times[order], ll[order])
-    return _Fit(kind, index, _log_mean_exp(ll) - nominal - penalty, onset, sigma, magnitude, credit, profile)
+    return _Fit(kind, index, _log_mean_exp(ll, cells) - nominal - penalty, onset, sigma, magnitude, credit, profile)
 
 
 def _one_count_s(ch: _Channel, k: int, kind: str, magnitude: float | None, t_s: np.ndarray) -> float:
@@ -686,7 +694,9 @@ def diagnose(
                     if q != p and q not in kicks:
                         kicks[q] = _kick_evidence(cuts[q], onsets)
                 others = {q: kicks[q] for q in range(len(cuts)) if q != p}
-            fits.append(_fit(cut, p, kind, onsets, tw, nominals[p], 0 if kind in ("failure", "stuck") else 1, others))
+            grid, widths = _step_onsets(onsets, [cut]) if kind == "speed_bias" else (onsets, None)
+            n_params = 0 if kind in ("failure", "stuck") else 1
+            fits.append(_fit(cut, p, kind, grid, tw, nominals[p], n_params, others, widths))
     sensor_fits = [_sensor_fit(kind, group, start, stop, onsets, tw) for kind, group in sensors.items()]
     if valid is not None:
         sensor_fits.append(_outage_fit(valid[start:stop], onsets, tw))
@@ -745,12 +755,14 @@ def _star_tracker_alarm(valid: np.ndarray | None) -> int | None:
 def _sensor_fit(
     kind: str, group: list[_Channel], start: int, stop: int, onsets: np.ndarray, tw: np.ndarray
 ) -> _Fit | None:
-    """A bias step common in onset to the three axes of a sensor: sum of per-axis profiles."""
+    """A bias step common in onset to the three axes of a sensor: sum of per-axis profiles (onsets from
+    :func:`_step_onsets`)."""
+    cuts = [_cut(ch, start, min(stop, ch.y.shape[0])) for ch in group]
+    onsets, widths = _step_onsets(onsets, cuts)
     total = None
     thetas = []
     nominal = 0.0
-    for ch in group:
-        cut = _cut(ch, start, min(stop, ch.y.shape[0]))
+    for cut in cuts:
         if cut.y.shape[0] < 3:
             return None
         grid = onsets[onsets < cut.y.shape[0] - 1]
@@ -759,10 +771,31 @@ def _sensor_fit(
         total = ll if total is None else total[: ll.shape[0]] + ll[: total.shape[0]]
         thetas.append(theta)
     assert total is not None
-    onset, sigma, best = _onset_stats(tw[onsets[: total.shape[0]]], total)
+    cells = None if widths is None else widths[: total.shape[0]]
+    onset, sigma, best = _onset_stats(tw[onsets[: total.shape[0]]], total, cells)
     penalty = 0.5 * 3 * math.log(max(len(tw) - int(onsets[best]), 2))
     magnitude = float(np.linalg.norm([th[best] for th in thetas]))
-    return _Fit(kind, -1, _log_mean_exp(total) - nominal - penalty, onset, sigma, magnitude)
+    return _Fit(kind, -1, _log_mean_exp(total, cells) - nominal - penalty, onset, sigma, magnitude)
+
+
+def _step_onsets(onsets: np.ndarray, channels: list[_Channel]) -> tuple[np.ndarray, np.ndarray | None]:
+    """A strided onset grid (nothing alarms) with the samples around each channel's STEP_CANDIDATES largest jumps
+    |Δy − drift| added, and the samples each onset stands for (the onset prior stays uniform in time): a step fault
+    (a sensor bias) between two grid points fits neither, and its own jump places it. An unstrided grid is returned
+    as it is (widths None: each onset stands for one sample)."""
+    stride = int(onsets[1] - onsets[0]) if onsets.shape[0] > 1 else 1
+    if stride == 1:
+        return onsets, None
+    extra = []
+    for ch in channels:
+        jump = np.nan_to_num(np.abs(np.diff(ch.y) - ch.drift))
+        for k in np.argsort(jump)[-STEP_CANDIDATES:]:
+            extra += [k, k + 1, k + 2]  # a step between samples k and k + 1 starts at sample k + 1; ±1 sample
+    grid = np.unique(np.concatenate([onsets, extra]))
+    last = min([onsets[-1] + stride - 1] + [ch.y.shape[0] - 2 for ch in channels])  # an onset needs a sample after it
+    grid = grid[(grid >= onsets[0]) & (grid <= last)]
+    edges = np.concatenate([[grid[0] - 0.5 * stride], 0.5 * (grid[1:] + grid[:-1]), [grid[-1] + 0.5 * stride]])
+    return grid, np.diff(edges)
 
 
 def _outage_fit(valid: np.ndarray, onsets: np.ndarray, tw: np.ndarray) -> _Fit:

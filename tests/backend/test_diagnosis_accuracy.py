@@ -16,6 +16,7 @@ from telemetry.dictionary import load_dictionary
 
 SCENARIO = "somov-ge4-scan"
 FLIGHT_S = 1200.0  # the campaign's DURATION_S
+COUNT_RAD_S = 0.25 * 2.0 * np.pi / 60.0  # the reference dictionary's tachometer count
 ROUND_OFF = 1e-9  # counts: a gain at the resolution's bound, recomputed here in another order of summation
 
 
@@ -56,3 +57,39 @@ def test_nominal_flight_claims_no_gain_loss_the_tachometer_cannot_resolve(case: 
         )
         reach_counts = np.abs(np.cumsum(speed_per_interval[after])).max() / obs.speed_quantum_rad_s
         assert (1.0 - h.magnitude) * reach_counts >= RESOLVED_COUNTS - ROUND_OFF
+
+
+@pytest.mark.parametrize(
+    ("case", "fault", "expected", "onset_s", "magnitude", "tolerance"),
+    [
+        (
+            68,
+            "tachometer:0:bias@747.6542700263063,value=0.05824959278535158",
+            ("speed_bias", 1),
+            747.65,
+            0.0582,
+            0.5 * COUNT_RAD_S,
+        ),
+        (
+            97,
+            "magnetometer:1:bias@543.926225700488,value=9.60953346714106e-07",
+            ("magnetometer_bias", None),
+            543.93,
+            9.61e-7,
+            0.1 * 9.61e-7,
+        ),
+    ],
+)
+def test_a_step_below_the_alarm_between_onset_grid_points_is_named_at_its_jump(
+    case: int, fault: str, expected: tuple, onset_s: float, magnitude: float, tolerance: float
+) -> None:
+    """Nothing alarms, so onsets are searched every sixth sample; a sensor bias stepping between two of them fitted
+    neither and "none" led at 0.99. The samples around the channel's largest jumps are searched too: the bias is
+    named at its jump (onset within the sample interval it fell in) with its size (a tachometer bias to within
+    half a 0.25 rpm count of rounding, a magnetometer bias to within 10 %)."""
+    d, _, _ = _diagnosed(case, [fault])
+    top = d.hypotheses[0]
+    assert not d.detected
+    assert (top.fault, top.wheel) == expected
+    assert top.onset_s is not None and abs(top.onset_s - onset_s) <= 1.0
+    assert isinstance(top.magnitude, float) and abs(abs(top.magnitude) - magnitude) <= tolerance
