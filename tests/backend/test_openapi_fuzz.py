@@ -109,31 +109,35 @@ def test_api_matches_its_openapi_document(tmp_path: Path, shared_data: Path, das
 
         return check_case
 
-    with TestClient(app) as client:
-        client.app.state.services.settings.max_upload_mb = 100.0  # the diary (1.4 MB) for the seed only
-        known = _seed(client, shared_data)
-        client.app.state.services.settings.max_upload_mb = 1.0
-        schema = schemathesis.openapi.from_asgi("/openapi.json", app)
-        operations = [result.ok() for result in schema.get_all_operations()]
-        assert len(operations) >= 30
-        started = time.monotonic()
-        passes = [(GenerationMode.POSITIVE, False), (GenerationMode.NEGATIVE, False), (GenerationMode.POSITIVE, True)]
-        for mode, on_state in passes:
-            for operation in operations:
-                fixed = known.get(operation.path) if on_state else None
-                if on_state and fixed is None:
-                    continue
-                strategy = operation.as_strategy(generation_mode=mode, path_parameters=fixed)
-                run = settings(
-                    max_examples=EXAMPLES_PER_OPERATION,
-                    deadline=None,
-                    database=None,
-                    suppress_health_check=list(HealthCheck),
-                )(given(case=strategy)(checker(conformance=mode is GenerationMode.POSITIVE)))
-                try:
-                    run()
-                except Unsatisfiable:  # nothing in this operation's schema to violate (e.g. GET /health)
-                    assert mode is GenerationMode.NEGATIVE, operation.path
+    # One lifespan: schemathesis starts the app's on loading the schema and ends it with the test (its pytest
+    # plugin); the seed's client only sends requests. A second one (``with TestClient(app)``) ran every service
+    # twice on one set of objects: the first shutdown waited out the live twins' 30 s join on a writer thread
+    # that the other start had orphaned.
+    schema = schemathesis.openapi.from_asgi("/openapi.json", app)
+    client = TestClient(app)
+    app.state.services.settings.max_upload_mb = 100.0  # the diary (1.4 MB) for the seed only
+    known = _seed(client, shared_data)
+    app.state.services.settings.max_upload_mb = 1.0
+    operations = [result.ok() for result in schema.get_all_operations()]
+    assert len(operations) >= 30
+    started = time.monotonic()
+    passes = [(GenerationMode.POSITIVE, False), (GenerationMode.NEGATIVE, False), (GenerationMode.POSITIVE, True)]
+    for mode, on_state in passes:
+        for operation in operations:
+            fixed = known.get(operation.path) if on_state else None
+            if on_state and fixed is None:
+                continue
+            strategy = operation.as_strategy(generation_mode=mode, path_parameters=fixed)
+            run = settings(
+                max_examples=EXAMPLES_PER_OPERATION,
+                deadline=None,
+                database=None,
+                suppress_health_check=list(HealthCheck),
+            )(given(case=strategy)(checker(conformance=mode is GenerationMode.POSITIVE)))
+            try:
+                run()
+            except Unsatisfiable:  # nothing in this operation's schema to violate (e.g. GET /health)
+                assert mode is GenerationMode.NEGATIVE, operation.path
     print(
         f"schemathesis: {tally['requests']} requests over {len(operations)} operations in "
         f"{time.monotonic() - started:.0f} s, {len(server_errors)} server errors"
