@@ -5,9 +5,10 @@ Pipeline (DESIGN.md "Diagnosis"), pure numerics on telemetered arrays (:class:`O
 1. **Residual channels.** Per wheel p, the momentum balance of seed 000 eq (1) row 3,
    J_r (Ω̇_p + a_pᵗ ω̇) = m_p − m^f_p, integrated between telemetry samples with the *telemetered*
    command (held at the control period T_u, the unseen commands between samples interpolated and their
-   spread counted as process noise), against the tachometer speed rounded to its quantum. Per gyro axis,
-   the gyro rate against the rate of the telemetered attitude quaternions. Star-tracker validity. Per
-   magnetometer axis, the field against the scenario's field model (when the telemetry carries it).
+   spread counted as process noise, its rounding as the held error it is), against the tachometer speed
+   rounded to its quantum. Per gyro axis, the gyro rate against the rate of the telemetered attitude
+   quaternions. Star-tracker validity. Per magnetometer axis, the field against the scenario's field model
+   (when the telemetry carries it).
 2. **Detection** (:func:`sim_core.fault_detection.window_alarm`): quantisation-bounded window tests on
    the open-loop residuals, false-alarm rate stated by :func:`detection_rate_per_day`; the alarm bounds
    the onset search.
@@ -222,6 +223,10 @@ def _wheel_channels(obs: Observations, wm: WheelModel, sigma_torque_nm: float) -
     t = obs.t_s
     dt = np.diff(t)
     sub = np.maximum(1.0, np.round(dt / wm.control_dt_s))  # commands held per telemetry interval
+    # the telemetered command's rounding error (uniform, variance q²/12) is one per command, held over T_u/Δt
+    # intervals (two at 1 Hz, T_u = 2 s) or averaged over Δt/T_u commands: as white noise per interval, q²/12·T_u/Δt
+    # gives the random walk it drives its variance over any long window (spectral density at zero: q²/12·T_u)
+    rounding_var = obs.torque_quantum_nm**2 / 12.0 * wm.control_dt_s / dt
     d_omega = np.diff(obs.omega_b_rad_s, axis=0)
     out = []
     r_var = np.full(t.shape[0], obs.speed_quantum_rad_s**2 / 12.0)
@@ -229,7 +234,7 @@ def _wheel_channels(obs: Observations, wm: WheelModel, sigma_torque_nm: float) -
         u = np.clip(np.nan_to_num(obs.wheel_torque_cmd_nm[:, p]), -wm.max_torque_nm[p], wm.max_torque_nm[p])
         du = np.diff(u)
         u_mean = u[:-1] + du * (sub - 1.0) / (2.0 * sub)  # unseen commands on the line between samples
-        u_var = du**2 * (sub - 1.0) / sub**2 / 12.0 + obs.torque_quantum_nm**2 / 12.0 / sub + sigma_torque_nm**2
+        u_var = du**2 * (sub - 1.0) / sub**2 / 12.0 + rounding_var + sigma_torque_nm**2
         y = obs.wheel_speed_rad_s[:, p]
         spin = np.sign(np.nan_to_num(y[:-1]))
         jr = wm.inertia_kg_m2[p]
