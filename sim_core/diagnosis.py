@@ -379,8 +379,14 @@ def _profile(
     no_reset = np.zeros((g, n), dtype=np.bool_)
     base = np.broadcast_to(ch.drift, (g, n - 1))
 
-    def run(drift: np.ndarray, offset: np.ndarray, reset: np.ndarray, gaussian: bool = False) -> np.ndarray:
-        return _loglik(ch, drift, offset, reset, gaussian)
+    def run(
+        drift: np.ndarray,
+        offset: np.ndarray,
+        reset: np.ndarray,
+        gaussian: bool = False,
+        floor: np.ndarray | None = None,
+    ) -> np.ndarray:
+        return _loglik(ch, drift, offset, reset, gaussian, floor)
 
     if kind == "stuck":
         reset = after_sample.astype(np.bool_)
@@ -389,8 +395,8 @@ def _profile(
     if kind in ("failure", "gain_loss"):
         lost = base - after * ch.templates["motor"]  # motor delivers nothing after the onset
 
-        def at(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:
-            return run(lost + theta * after * ch.templates["motor"], zero_off, no_reset, gaussian)
+        def at(theta: float | np.ndarray, gaussian: bool = False, floor: np.ndarray | None = None) -> np.ndarray:
+            return run(lost + theta * after * ch.templates["motor"], zero_off, no_reset, gaussian, floor)
 
         if not quadratic:
             return at(0.0), np.full(g, np.nan)
@@ -402,8 +408,8 @@ def _profile(
         return _profiled(ch, at, 0.0, MAX_REMAINING_GAIN, grid=GAIN_GRID, ceiling=resolved)
     if kind == "friction":
 
-        def at(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:
-            return run(base + theta * after * ch.templates["friction"], zero_off, no_reset, gaussian)
+        def at(theta: float | np.ndarray, gaussian: bool = False, floor: np.ndarray | None = None) -> np.ndarray:
+            return run(base + theta * after * ch.templates["friction"], zero_off, no_reset, gaussian, floor)
 
         # a friction that does not move the wheel by RESOLVED_COUNTS tachometer counts after its onset is not resolved
         per_nm = np.abs(after * ch.templates["friction"]).sum(axis=1)
@@ -411,8 +417,10 @@ def _profile(
             resolvable = np.where(per_nm > 0.0, RESOLVED_COUNTS * ch.bound / per_nm, UNRESOLVED_FRICTION_NM)
         return _profiled(ch, at, 0.0, np.inf, scale=1e-3, min_abs=resolvable)
 
-    def at_bias(theta: float | np.ndarray, gaussian: bool = False) -> np.ndarray:  # a step in the measurement
-        return run(base, theta * after_sample, no_reset, gaussian)
+    def at_bias(
+        theta: float | np.ndarray, gaussian: bool = False, floor: np.ndarray | None = None
+    ) -> np.ndarray:  # a step
+        return run(base, theta * after_sample, no_reset, gaussian, floor)  # in the measurement
 
     # a bias below RESOLVED_COUNTS of the sensor's resolution is not identifiable: rounding does as much
     return _profiled(
@@ -425,14 +433,21 @@ def _profile(
     )
 
 
-def _loglik(ch: _Channel, drift: np.ndarray, offset: np.ndarray, reset: np.ndarray, gaussian: bool) -> np.ndarray:
+def _loglik(
+    ch: _Channel,
+    drift: np.ndarray,
+    offset: np.ndarray,
+    reset: np.ndarray,
+    gaussian: bool,
+    floor: np.ndarray | None = None,
+) -> np.ndarray:
     """Log-likelihood of the channel under each row's drift and offset: the tachometer's rounding taken exactly
-    (:func:`sim_core.fault_detection.count_loglik`) for a quantised channel unless ``gaussian`` (rounding as white
-    noise of variance q²/12, the quadratic model the magnitude search starts from)."""
+    (:func:`sim_core.fault_detection.count_loglik`, rows below ``floor`` abandoned) for a quantised channel unless
+    ``gaussian`` (rounding as white noise of variance q²/12, the quadratic model the magnitude search starts from)."""
     args = (np.ascontiguousarray(drift), ch.q_var)
     tail = (np.ascontiguousarray(offset), np.ascontiguousarray(reset))
     if ch.bound > 0.0 and not gaussian:
-        return fd.count_loglik(ch.y, *args, ch.bound, (TACHOMETER_JITTER * ch.bound) ** 2, *tail, ch.drift)
+        return fd.count_loglik(ch.y, *args, ch.bound, (TACHOMETER_JITTER * ch.bound) ** 2, *tail, ch.drift, floor)
     return fd.level_loglik(ch.y, *args, ch.r_var, *tail)
 
 
@@ -448,14 +463,18 @@ def _profiled(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Profile over the magnitude θ per onset: the Gaussian model's exact maximum (quadratic in θ); for a quantised
     channel the count likelihood is then maximised over that θ, θ·(1 ± MAGNITUDE_STEPS) and ``grid``, and the best
-    of them refined by REFINEMENTS halvings of the step. θ ≤ ``ceiling`` (per onset) besides [lo, hi]."""
+    of them refined by REFINEMENTS halvings of the step. θ ≤ ``ceiling`` (per onset) besides [lo, hi]. Each
+    candidate's filtering stops where it falls below the best so far (``floor`` of
+    :func:`sim_core.fault_detection.count_loglik`): the maximum is the same."""
     ll, theta = _quadratic_max(lambda th: at(th, True), lo, hi, scale, min_abs, ceiling)
     if ch.bound <= 0.0:
         return ll, theta
     upper = np.minimum(hi, ceiling)
     candidates = [theta] + [theta * (1.0 + f) for f in MAGNITUDE_STEPS] + [np.full_like(theta, v) for v in grid]
     thetas = np.stack([_clamped(c, lo, upper, min_abs) for c in candidates])
-    lls = np.stack([at(th[:, None]) for th in thetas])
+    lls = np.full(thetas.shape, -np.inf)
+    for i, th in enumerate(thetas):
+        lls[i] = at(th[:, None], floor=lls[:i].max(axis=0, initial=-np.inf))
     cols = np.arange(theta.shape[0])
     best = np.argmax(lls, axis=0)
     ll, theta = lls[best, cols], thetas[best, cols]
@@ -464,7 +483,7 @@ def _profiled(
         step = 0.5 * step
         for sign in (-1.0, 1.0):
             trial = _clamped(theta + sign * step, lo, upper, min_abs)
-            trial_ll = at(trial[:, None])
+            trial_ll = at(trial[:, None], floor=ll)
             better = trial_ll > ll
             ll, theta = np.where(better, trial_ll, ll), np.where(better, trial, theta)
     return ll, theta

@@ -23,6 +23,7 @@ bound the rate per sample is at most (windows × channels) × 2Φ(−n) (:func:`
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -94,6 +95,9 @@ def level_loglik(
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 COUNT_COMPONENTS = 4  # slices of the first reading's count carried by :func:`count_loglik`
 INSIDE_SIGMAS = 8.0  # a state this many σ inside its reading's count: the reading's probability is 1 − 1e-15
+NEGLIGIBLE_TAIL_SIGMAS = 9.5  # Φ(−9.5) = 1e-21: next to a probability ≥ ½ it is below a double's resolution
+THREAD_ROWS = 64  # likelihood rows per thread at least: fewer are not worth a thread's start
+ABANDON_MARGIN = 1e-6  # a row abandoned this far below its floor: ≫ the round-off a record's readings can add back
 
 
 @njit(cache=True)
@@ -107,21 +111,26 @@ def _log_phi_cdf(x: float) -> float:
 
 @njit(cache=True)
 def _log_interval(alpha: float, beta: float) -> float:
-    """ln(Φ(β) − Φ(α)), α < β, without cancellation in either tail."""
+    """ln(Φ(β) − Φ(α)), α < β, without cancellation in either tail; a tail beyond NEGLIGIBLE_TAIL_SIGMAS is not
+    computed where the other side holds ½ or more."""
     if beta <= 0.0:
         hi, lo = _log_phi_cdf(beta), _log_phi_cdf(alpha)
     elif alpha >= 0.0:
         hi, lo = _log_phi_cdf(-alpha), _log_phi_cdf(-beta)
     else:
-        return math.log(1.0 - 0.5 * math.erfc(beta / math.sqrt(2.0)) - 0.5 * math.erfc(-alpha / math.sqrt(2.0)))
+        upper = 0.5 * math.erfc(beta / math.sqrt(2.0)) if beta < NEGLIGIBLE_TAIL_SIGMAS else 0.0
+        lower = 0.5 * math.erfc(-alpha / math.sqrt(2.0)) if alpha > -NEGLIGIBLE_TAIL_SIGMAS else 0.0
+        return math.log(1.0 - upper - lower)
     return hi + math.log1p(-math.exp(lo - hi))
 
 
 @njit(cache=True)
 def _truncated_moments(alpha: float, beta: float, log_z: float) -> tuple[float, float]:
-    """Mean and variance of a standard normal truncated to [α, β] (Z = Φ(β) − Φ(α) given as ln Z)."""
-    pa = math.exp(-0.5 * alpha * alpha - _LOG_SQRT_2PI - log_z)  # φ(α)/Z
-    pb = math.exp(-0.5 * beta * beta - _LOG_SQRT_2PI - log_z)
+    """Mean and variance of a standard normal truncated to [α, β] (Z = Φ(β) − Φ(α) given as ln Z); an edge beyond
+    NEGLIGIBLE_TAIL_SIGMAS on the far side of 0 (Z > ½) adds nothing."""
+    far_a, far_b = alpha < -NEGLIGIBLE_TAIL_SIGMAS and beta > 0.0, beta > NEGLIGIBLE_TAIL_SIGMAS and alpha < 0.0
+    pa = 0.0 if far_a else math.exp(-0.5 * alpha * alpha - _LOG_SQRT_2PI - log_z)  # φ(α)/Z
+    pb = 0.0 if far_b else math.exp(-0.5 * beta * beta - _LOG_SQRT_2PI - log_z)
     mean = pa - pb
     var = 1.0 + alpha * pa - beta * pb - mean * mean
     width = beta - alpha  # a variable on [α, β] has variance ≤ width²/4; round-off in the far tail can break it
@@ -149,6 +158,7 @@ def count_loglik(
     offset: np.ndarray,
     reset: np.ndarray,
     nominal_drift: np.ndarray | None = None,
+    floor: np.ndarray | None = None,
 ) -> np.ndarray:
     """Log-likelihood (B,) of tachometer readings y (n,), each the speed rounded to a multiple of ``quantum``,
     under the local-level models of :func:`level_loglik` with the rounding taken exactly: a reading says
@@ -165,10 +175,32 @@ def count_loglik(
     ``nominal_drift`` (n−1,): a row that equals it (with zero offset and no reset) up to some sample continues
     from the nominal model's filter state there instead of filtering that prefix again (a fault hypothesis is
     the nominal model before its onset); the result is the same, bit for bit.
+
+    ``floor`` (B,): a reading's log-probability is never positive, so a row's log-likelihood only falls as it is
+    filtered; a row is abandoned once it lies ABANDON_MARGIN below ``floor[b]`` and its value is then that partial
+    log-likelihood, below ``floor[b]`` as the full one would be (a profile keeping the best of its candidates, the
+    best so far as the floor, chooses the same rows and the same values).
+
+    Rows are filtered independently, in blocks of at least THREAD_ROWS on one thread per core (the kernel releases
+    the GIL); the result does not depend on the split.
     """
+    from concurrent.futures import ThreadPoolExecutor
+
     nominal = np.full(y.shape[0] - 1, np.nan) if nominal_drift is None else np.ascontiguousarray(nominal_drift)
-    out: npt.NDArray[np.float64] = _count_loglik(y, drift, q_var, quantum, sensor_var, offset, reset, nominal)
-    return out
+    lowest = np.full(drift.shape[0], -np.inf) if floor is None else np.ascontiguousarray(floor, dtype=np.float64)
+
+    def block(rows: slice) -> np.ndarray:
+        out: npt.NDArray[np.float64] = _count_loglik(
+            y, drift[rows], q_var, quantum, sensor_var, offset[rows], reset[rows], nominal, lowest[rows]
+        )
+        return out
+
+    n_blocks = max(1, min(os.cpu_count() or 1, drift.shape[0] // THREAD_ROWS))
+    if n_blocks == 1:
+        return block(slice(None))
+    edges = np.linspace(0, drift.shape[0], n_blocks + 1).astype(int)
+    with ThreadPoolExecutor(max_workers=n_blocks) as pool:
+        return np.concatenate(list(pool.map(block, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])])))
 
 
 @njit(cache=True)
@@ -228,7 +260,7 @@ def _count_step(
     return True, log_sum
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _count_loglik(
     y: np.ndarray,
     drift: np.ndarray,
@@ -238,8 +270,10 @@ def _count_loglik(
     offset: np.ndarray,
     reset: np.ndarray,
     nominal: np.ndarray,
+    floor: np.ndarray,
 ) -> np.ndarray:
-    """:func:`count_loglik`'s kernel: the nominal model filtered once, its state kept after every reading."""
+    """:func:`count_loglik`'s kernel: the nominal model filtered once, its state kept after every reading; rows
+    abandoned below their floor."""
     n_b, n = drift.shape[0], y.shape[0]
     m = COUNT_COMPONENTS
     out = np.zeros(n_b)
@@ -280,6 +314,8 @@ def _count_loglik(
                 k, y, d_in, q_in, reset[b, k], reset_before, offset[b, k], quantum, sensor_var, xs, ps, lw, started
             )
             ll += step
+            if ll < floor[b] - ABANDON_MARGIN:
+                break
         out[b] = ll
     return out
 

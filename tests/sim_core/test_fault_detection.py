@@ -184,3 +184,40 @@ def test_count_loglik_of_hypotheses_sharing_the_nominal_prefix_is_unchanged_by_s
     np.testing.assert_array_equal(fd.count_loglik(*args, nominal_drift=drift), fd.count_loglik(*args))
     nominal = fd.count_loglik(y, drift[None, :], *args[2:5], np.zeros((1, n)), np.zeros((1, n), bool), drift)
     assert nominal[0] == fd.count_loglik(y, drift[None, :], *args[2:5], np.zeros((1, n)), np.zeros((1, n), bool))[0]
+
+
+def _ramps(rows: int, n: int = 200) -> tuple:
+    """Readings of a slowly turning wheel (rounded to 1) and ``rows`` hypotheses: its drift scaled after an onset."""
+    rng = np.random.default_rng(11)
+    drift = 0.03 + 0.01 * np.cos(np.arange(n - 1) / 15.0)
+    y = np.round(0.2 + np.concatenate([[0.0], np.cumsum(drift + 0.005 * rng.standard_normal(n - 1))]))
+    onsets = rng.integers(0, n - 1, rows)
+    scale = rng.uniform(0.0, 1.5, rows)
+    hyps = np.where(np.arange(n - 1)[None, :] >= onsets[:, None], scale[:, None] * drift[None, :], drift[None, :])
+    return y, hyps, np.full(n - 1, 1e-5), 1.0, 4e-4, np.zeros((rows, n)), np.zeros((rows, n), dtype=np.bool_), drift
+
+
+def test_count_loglik_rows_abandoned_below_a_floor_stay_below_it_and_the_best_row_is_exact() -> None:
+    """A row's log-likelihood only falls as readings are added: a row abandoned below its floor reports a value
+    below the floor (as its full value is), and the best row of the floor is computed in full."""
+    y, hyps, *rest = _ramps(40)
+    full = fd.count_loglik(y, hyps, *rest)
+    floor = np.full(hyps.shape[0], full.max())
+    cut = fd.count_loglik(y, hyps, *rest, floor=floor)
+    best = int(np.argmax(full))
+    assert cut[best] == full[best]
+    others = np.arange(hyps.shape[0]) != best
+    assert np.all(cut[others] < floor[others])
+    assert np.all(cut[others] >= full[others] - 1e-9)  # filtering stopped early: its partial value, never lower
+    assert np.any(cut[others] > full[others] + 1.0)  # and rows far below the best were stopped early
+
+
+def test_count_loglik_does_not_depend_on_how_rows_are_split_between_threads() -> None:
+    """Rows are independent: one call over many rows (split between threads) equals calls over a few rows each."""
+    y, hyps, q_var, quantum, sensor_var, offset, reset, drift = _ramps(3 * fd.THREAD_ROWS)
+    whole = fd.count_loglik(y, hyps, q_var, quantum, sensor_var, offset, reset, drift)
+    parts = [
+        fd.count_loglik(y, hyps[a : a + 7], q_var, quantum, sensor_var, offset[a : a + 7], reset[a : a + 7], drift)
+        for a in range(0, hyps.shape[0], 7)
+    ]
+    np.testing.assert_array_equal(whole, np.concatenate(parts))
