@@ -7,8 +7,10 @@
 - a constant earth-sensor bias (φ_b, θ_b) (eq 14) leaves the steady error −A⁻¹ L b: e_θ = θ_b,
   e_φ = K_ψ φ_b / (ω_o + K_ψ), e_ψ = −K_φ φ_b / (ω_o + K_ψ), and the law holding the estimate puts the spacecraft
   at −e. Measured to 2 % of φ_b: roll and pitch land within 0.7 %, yaw 1.1e-4 rad (1.1 % of φ_b, 4.6 % of e_ψ)
-  off. Yaw is observed only through ω_o, so a roll-channel rate f the observer does not model moves it by f/ω_o:
-  1.1e-4 rad is f ≈ 1.2e-7 rad/s, which we have not traced (the second-order kinematics give ~1e-8 rad/s);
+  off: the earth sensors' noise averaged over the 300 s window, not a rate the observer misses. With K_ψ = 0.2
+  n_φ reaches yaw (stationary σ 2.0e-4 rad, slow root ≈ 1/210 s), so the window's yaw mean spreads by 5.6e-5 rad;
+  on six seeds it is 3e-6…1.1e-4 off (this seed: 2 spreads), without noise 6e-6…9e-6 (the start's remnant), with
+  pitch 1.1e-6 off (the second-order ω_o φ²/2 through K_θ);
 - seed 002 Fig. 36: an earth-sensor graded fault (a drift a (t − t_s) on pitch) accumulates into the attitude as
   the first-order lag of the pitch channel, a (τ − (1 − e^(−K_θ τ))/K_θ);
 - FDIR screens the earth sensor on this flight: a 0.01 rad roll step is isolated and the gyros carry on;
