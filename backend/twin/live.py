@@ -714,6 +714,7 @@ class LiveTwins:
         """Finish what is queued, archive pending residuals, stop the worker and the writer."""
         self._stop.set()
         if self._thread is not None:
+            self._inbox.put(threading.Event())  # wakes a worker waiting on an empty inbox (it looks every 0.5 s)
             self._thread.join(30.0)
             self._thread = None
         if self._writer is not None:
