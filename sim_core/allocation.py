@@ -44,6 +44,7 @@ __all__ = [
     "STATUS_KAPPA_REFUSED",
     "STATUS_SINGULAR",
     "STATUS_TOO_FEW_WHEELS",
+    "STATUS_NO_DRIVER",
     "LAW_GE_DISTRIBUTION",
     "LAW_PSEUDO_INVERSE",
     "MD_LAW_SEED",
@@ -76,6 +77,7 @@ STATUS_MD_SATURATED = 1  # rods at |l_i| = l^m: wheels and MD command scaled dow
 STATUS_KAPPA_REFUSED = 2  # MD refused by its geometric condition: the two wheels give the in-plane part only
 STATUS_SINGULAR = 3  # wheel (or wheel + MD) geometry singular: least-squares wheel torques only
 STATUS_TOO_FEW_WHEELS = 4  # fewer than two wheels: no torque
+STATUS_NO_DRIVER = 5  # two wheels and no magnetic driver (l^m = 0): least-squares pair torques, in-plane only
 
 LAW_GE_DISTRIBUTION = 0
 LAW_PSEUDO_INVERSE = 1
@@ -99,7 +101,8 @@ class AllocationConfig:
     q_s real over the whole momentum box); ρ = 0.5 inside the seed's 0 < ρ < 1; μ_ρ = 0.05 s⁻¹
     tunes f_ρ in ~20 s, far slower than the 2 s control period; φ_ρ = 0.002 s⁻¹ caps the null-motion
     torque to h^m φ_ρ ≈ 0.024 N·m, 12 % of an HR12's 0.2 N·m; h^m = 12 N·m·s (HR12);
-    l^m = 25 A·m² (seed 000 §5); the seed's MD direction (``md_law``).
+    l^m = 25 A·m² (seed 000 §5; 0: no magnetic driver, two wheels give the least-squares pair torque); the
+    seed's MD direction (``md_law``).
     """
 
     law4: int = LAW_GE_DISTRIBUTION
@@ -120,9 +123,11 @@ class AllocationConfig:
             raise ValueError("gamma_rad: GE half-angle must lie in (0, π/4) so that q_s stays real")
         if not 0.0 < self.rho < 1.0:
             raise ValueError("rho: seed 000 requires 0 < ρ < 1")
-        for name in ("mu_rho_per_s", "phi_rho_per_s", "h_max_nms", "l_max_am2"):
+        for name in ("mu_rho_per_s", "phi_rho_per_s", "h_max_nms"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name}: must be positive")
+        if not self.l_max_am2 >= 0.0:
+            raise ValueError("l_max_am2: must be non-negative (0: no magnetic driver)")
 
     def as_array(self) -> np.ndarray:
         """Parameter vector for the kernels of seed 000 eq (6) and §3, indexed by the P_* constants."""
@@ -374,6 +379,9 @@ def _two_wheels_md(
     (``MD_LAW_PAIR_NORMAL``, :func:`_two_wheels_min_dipole`)."""
     b_norm = np.sqrt(_dot3(b_field, b_field))
     dipole = np.zeros(3)
+    if l_max == 0.0:  # no driver: scaling the seed's solution to a zero dipole would zero the wheels too
+        mp, mq = _pair_least_squares(ap, aq, torque)
+        return mp, mq, dipole, STATUS_NO_DRIVER
     if b_norm == 0.0:
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_SINGULAR

@@ -995,13 +995,16 @@ def _wheel_monitor_stage(
     star_reset: bool,
     t: float,
     speeds: np.ndarray,
+    h_wheels: np.ndarray,
+    mag: np.ndarray,
     est: Estimate,
     mon: Monitors,
     ev: np.ndarray,
     n_ev: np.ndarray,
 ) -> None:
-    """Wheel FDIR at T_u (sim_core.fdir.wheel_check_1); it may drop wheels from ``mon.available``. After an
-    isolation a MEKF (``star_reset``) trusts the star tracker again (a seizing wheel kicks the body)."""
+    """Wheel FDIR at T_u (sim_core.fdir.wheel_check_1); it may drop wheels from ``mon.available`` (not a partly
+    working one whose removal the allocation on ``mag`` could not fly). After an isolation a MEKF (``star_reset``)
+    trusts the star tracker again (a seizing wheel kicks the body)."""
     n_before = np.sum(mon.available)
     fdir.wheel_check_1(
         mon.wheel,
@@ -1015,6 +1018,10 @@ def _wheel_monitor_stage(
         t_u,
         mon.decouple,
         mon.available,
+        p.wheel_axes,
+        h_wheels,
+        mag,
+        act.allocation,
         ev,
         n_ev,
         t,
@@ -1356,7 +1363,7 @@ def fly_variant(
                 star_reset = estc.kind == ESTIMATOR_MEKF
                 _wheel_monitor_stage(
                     p, act, sens.tachometer_quantum_rad_s, c.fdir.wheel_noise_sigma_nms, t_u, star_reset, t, speeds,
-                    est, mon, ev, n_ev,
+                    h_wheels, mag, est, mon, ev, n_ev,
                 )  # fmt: skip
             _law_stage(
                 p.inertia, p.wheel_axes, p.wheel_inertia, c.law, mc.on, mode, q_est, w_est, speeds, h_wheels,

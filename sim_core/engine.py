@@ -292,7 +292,7 @@ def allocation_params(s: Scenario) -> np.ndarray:
         mu_rho_per_s=a.mu_rho_per_s,
         phi_rho_per_s=a.phi_rho_per_s,
         h_max_nms=min(w.max_momentum_nms for w in ws),
-        l_max_am2=max(s.spacecraft.md_max_dipole_am2, 1e-9),
+        l_max_am2=s.spacecraft.md_max_dipole_am2,
         md_law=allocation.MD_LAW_SEED if a.md_law == "seed" else allocation.MD_LAW_PAIR_NORMAL,
     ).as_array()
 

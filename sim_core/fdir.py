@@ -24,7 +24,11 @@ bound a) — a seizure's kick — restarts the history instead (with a perfect t
 it J q = 0, every period would restart it and only the one-period test would be left);
 ``CONFIRM_PERIODS`` consecutive detections isolate the wheel, which leaves the
 availability mask, so that :func:`sim_core.allocation.allocate_1` passes 4 → 3 → 2 + MD; fewer
-than two wheels left is the fault mode (no wheel law exists). Periods where the motor's momentum
+than two wheels left is the fault mode (no wheel law exists). Reconfiguration must not make the spacecraft
+worse: a wheel that still delivers part of its torque (the period's delivered momentum T_u m_p + r_p clear of
+zero and not beyond the command, :func:`_partial_loss_1`) leaves the mask only if the wheels left can still give
+three-axis torque (three of rank 3, or two + MD with its geometric condition met, as the allocation's own status
+says); otherwise it stays in the loop, untested, and the refusal is an event. Periods where the motor's momentum
 limit may cut the torque are not tested (the residual is not defined there).
 
 Seed 002 eq 4's noise torque M_x = K_x W/|W_max| (W white, uniform in [−1, 1], drawn afresh every
@@ -66,8 +70,9 @@ Sensors (seed 000 §4 measurements, seed 003 §3.2 preprocessing flags):
 Events (codes of :data:`sim_core.trajectory.EVENT_NAMES`): ``fault_detected``, ``fault_isolated``
 (argument: wheel index 0..3, or ``SENSOR_ARG + 10 · target code + axis`` for sensors, target codes
 of :data:`sim_core.closed_loop.TARGET_CODES`), ``reconfigured`` (argument: the new wheel
-availability bit mask, or ``SENSOR_ARG + 10 · target code`` for a sensor), ``mode_change``
-(argument: :data:`sim_core.modes.MODE_FAULT`).
+availability bit mask, or ``SENSOR_ARG + 10 · target code`` for a sensor), ``reconfiguration_refused``
+(argument: wheel index + 10 · the allocation status the wheels left would have: a partly working wheel is kept
+where taking it out would lose three-axis torque), ``mode_change`` (argument: :data:`sim_core.modes.MODE_FAULT`).
 """
 
 from __future__ import annotations
@@ -76,6 +81,7 @@ import numpy as np
 from numba import njit
 from scipy.stats import chi2, norm
 
+from sim_core import allocation
 from sim_core.modes import MODE_FAULT
 from sim_core.quaternion import conjugate_rotate_1
 from sim_core.wheels import friction_torque_one_wheel, limited_motor_torque_1
@@ -129,7 +135,7 @@ GYRO_CALIBRATION_WINDOWS = 3  # the first windows fix the reference bias (post-l
 NUMERICAL_FLOOR_NMS = 1e-9  # momentum round-off of RK4 on N·m·s-sized states, a floor for perfect sensors
 MAG_MODEL_ERROR_T = 20e-9  # onboard field table vs truth: linear interpolation of a 30 s table, a few nT
 
-EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED = 1, 4, 5, 6
+EV_MODE, EV_DETECTED, EV_ISOLATED, EV_RECONFIGURED, EV_REFUSED = 1, 4, 5, 6, 10
 T_GYRO, T_STAR, T_EARTH, T_MAG = 1, 2, 3, 4  # sim_core.faults.TARGET_CODES
 
 # Wheel state rows (WHEEL_STATE_ROWS × n_wheels).
@@ -361,6 +367,29 @@ def _cusum_1(state: np.ndarray, p: int, r: float, b_rest: float, b_quantum: floa
 
 
 @njit(cache=True)
+def _partial_loss_1(command_nms: float, residual_nms: float, band_nms: float) -> bool:
+    """True if the wheel's motor still delivers part of its command over the period: the delivered momentum
+    T_u m_p + r_p (the decoupled r_p is T_u times the torque error, wheel_decoupling_1), known to within the band
+    ``band_nms`` a healthy residual stays in, lies with the command's sign between that band (so a dead or stuck
+    motor, delivering 0, cannot pass) and the command plus the band (a seizure's kick, J Ω ≫ T_u m^max, or a gain
+    above one overshoots it)."""
+    delivered = np.sign(command_nms) * (command_nms + residual_nms)
+    return command_nms != 0.0 and band_nms < delivered < abs(command_nms) + band_nms
+
+
+@njit(cache=True)
+def _status_without_1(
+    p: int, axes: np.ndarray, available: np.ndarray, h_wheels: np.ndarray, mag: np.ndarray, params: np.ndarray
+) -> int:
+    """Allocation status of the available wheels without wheel p: ``allocate_1`` of a zero torque, whose status
+    depends on the geometry only (rank of three wheels, the MD's condition for two, seed 000 §3)."""
+    rest = available.copy()
+    rest[p] = False
+    nw = available.shape[0]
+    return allocation.allocate_1(np.zeros(3), axes, rest, h_wheels, mag, params, np.zeros(nw), np.zeros(3))
+
+
+@njit(cache=True)
 def wheel_check_1(
     state: np.ndarray,
     speeds: np.ndarray,
@@ -373,6 +402,10 @@ def wheel_check_1(
     t_u: float,
     decouple: np.ndarray,
     available: np.ndarray,
+    axes: np.ndarray,
+    h_wheels: np.ndarray,
+    mag: np.ndarray,
+    alloc_params: np.ndarray,
     ev: np.ndarray,
     n_ev: np.ndarray,
     t: float,
@@ -389,7 +422,11 @@ def wheel_check_1(
     ``w_body`` the estimated body rate now: the prediction held ω̂ × G constant over the period, so
     its error bound grows with the rate change |Δω̂| (a seizing wheel's kick, a manoeuvre).
     Writes fault_detected / fault_isolated / reconfigured / mode_change events (seed 000 §3
-    reconfiguration 4 → 3 → 2 + MD).
+    reconfiguration 4 → 3 → 2 + MD). An isolated wheel with a partial loss (:func:`_partial_loss_1`) leaves the
+    allocation only if the rest can still give three-axis torque: ``allocation.allocate_1`` of a zero torque on
+    ``axes`` without it (``h_wheels``, magnetometer ``mag``, ``alloc_params``) returns the status the rest's
+    geometry gives; any but ``STATUS_OK`` keeps the wheel in the loop (no longer tested) and writes
+    reconfiguration_refused (argument p + 10 · that status).
     """
     nw = speeds.shape[0]
     raw, bound, quantum = np.zeros(nw), np.zeros(nw), inertia * tach_q
@@ -406,7 +443,8 @@ def wheel_check_1(
         if abs(inertia[p] * state[WS_SPEED, p]) + abs(torque) * t_u >= max_momentum[p]:
             bound[p] = abs(torque) * t_u  # the motor's momentum limit may cut the torque: untested
             continue
-        tested[p] = available[p]  # dropped wheels still enter the decoupling (a rubbing one still pushes)
+        # dropped wheels still enter the decoupling (a rubbing one still pushes); a kept isolated one is not retested
+        tested[p] = available[p] and state[WS_ISOLATED, p] == 0.0
         raw[p] = wheel_residual_1(
             inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u, friction, p
         )
@@ -442,7 +480,8 @@ def wheel_check_1(
             accumulated = _scan_windows_1(state, p, r, b - bq, bq, noise[p])
             if sigma > 0.0:  # without noise the windows' bound is exact and the CUSUM's h would be 0/0
                 accumulated = _cusum_1(state, p, r, b - bq, bq, sigma, first) or accumulated
-        exceeded = accumulated or abs(r) > WHEEL_SAFETY * b + noise[p]
+        band = WHEEL_SAFETY * b + noise[p]
+        exceeded = accumulated or abs(r) > band
         if not exceeded:
             state[WS_COUNT, p] = 0.0
             continue
@@ -451,9 +490,15 @@ def wheel_check_1(
             _emit(ev, n_ev, t, EV_DETECTED, p)
         if state[WS_COUNT, p] >= CONFIRM_PERIODS:
             _emit(ev, n_ev, t, EV_ISOLATED, p)
-            available[p] = False
             state[WS_ISOLATED, p] = 1.0
-            changed = True
+            status = allocation.STATUS_OK
+            if _partial_loss_1(state[WS_TORQUE, p] * t_u, r, band):
+                status = _status_without_1(p, axes, available, h_wheels, mag, alloc_params)
+            if status == allocation.STATUS_OK:
+                available[p] = False
+                changed = True
+            else:
+                _emit(ev, n_ev, t, EV_REFUSED, p + 10 * status)
     n_on = 0
     mask = 0
     for p in range(nw):
@@ -972,4 +1017,7 @@ def describe_event(name: str, arg: int) -> str:
         return "wheels " + ",".join(wheels) if wheels else "no wheels"
     if name == "mode_change":
         return f"mode {arg}"
+    if name == "reconfiguration_refused":
+        p, status = arg % 10, arg // 10
+        return f"wheel {p + 1} kept: without it the allocation status would be {status}"
     return f"wheel {arg + 1}"

@@ -29,6 +29,7 @@ EVENT_NAMES = {
     7: "allocation_infeasible",
     8: "md_saturated",
     9: "wheel_momentum_limit",
+    10: "reconfiguration_refused",
 }
 
 SERIES_UNITS = {

@@ -238,6 +238,25 @@ def test_md_refused_when_its_torque_cannot_leave_the_pair_plane():
     assert status == al.STATUS_SINGULAR and np.all(dipole == 0.0)
 
 
+@pytest.mark.parametrize("md_law", [al.MD_LAW_SEED, al.MD_LAW_PAIR_NORMAL])
+def test_two_wheels_without_a_driver_give_the_least_squares_pair_torque(md_law):
+    """l^m = 0 (no magnetic driver): the seed's A^m_pq solution scaled to the rods' limit would be zero, wheels
+    too; the pair gives instead the in-plane part of M^r, the residual ⟂ the pair plane, with the field such
+    that the MD's condition holds (b ⟂ e_pq, b × e_pq along the pair's normal)."""
+    mask = np.array([True, True, False, False])
+    a1, a2 = AXES[:, 0], AXES[:, 1]
+    b_dir = np.cross(np.cross(a1, a2), a1 + a2)
+    torque_req = np.array([1e-4, 2e-4, -1e-4])
+    cfg = al.AllocationConfig(l_max_am2=0.0, md_law=md_law)
+    wheel, dipole, status = al.allocate(
+        torque_req, AXES, mask, np.zeros(4), B_EARTH_T * b_dir / np.linalg.norm(b_dir), cfg
+    )
+    assert status == al.STATUS_NO_DRIVER and np.all(dipole == 0.0)
+    plane = AXES[:, :2]
+    residual = torque_req - (-plane @ wheel[:2])
+    assert np.allclose(plane.T @ residual, 0.0, atol=EXACT) and np.any(wheel[:2] != 0.0)
+
+
 def test_fewer_than_two_wheels_gives_no_torque_and_a_status():
     wheel, dipole, status = al.allocate([1e-3, 0, 0], AXES, [False, False, True, False], np.zeros(4), [B_EARTH_T, 0, 0])
     assert status == al.STATUS_TOO_FEW_WHEELS and np.all(wheel == 0.0) and np.all(dipole == 0.0)

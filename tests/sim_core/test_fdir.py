@@ -6,7 +6,7 @@ in all single-wheel cases and over random onsets, no false alarm in 24 h of nomi
 import numpy as np
 import pytest
 
-from sim_core import fdir
+from sim_core import allocation, fdir
 from sim_core.wheels import WheelParams, noise_torque
 
 J_HR12 = 12.0 / (6000.0 * np.pi / 30.0)  # HR12 rotor inertia, kg·m²
@@ -20,6 +20,9 @@ W0 = np.zeros(3)  # body at rest: the tachometer reads the absolute spin
 AXES4 = np.eye(3)[:, [0, 1, 2, 0]].copy()
 # a body too heavy to turn: J, J_e⁻¹, MD torque, disturbance and rate-noise bounds, T_u
 RIGID = (np.eye(3) * 1e12, np.eye(3) * 1e-12, np.zeros(3), 0.0, 0.0, T_U)
+B_ORBIT = np.array([3e-5, 0.0, 0.0])  # magnetometer reading, T
+ALLOC = allocation.AllocationConfig(law4=allocation.LAW_PSEUDO_INVERSE).as_array()
+CLUSTER4 = (AXES4, np.zeros(4), B_ORBIT, ALLOC)  # wheel_check_1's allocation arguments for AXES4
 
 
 def _friction() -> np.ndarray:
@@ -102,8 +105,9 @@ def _check(
     """fdir.wheel_check_1 on the same four wheels, read by a ``tach_q`` tachometer, noise σ_N per wheel and period."""
     j, zeros = np.full(4, J_HR12), np.zeros((4, 4))
     fdir.wheel_check_1(
-        state, speeds, W0, j, np.full(4, 12.0), zeros, tach_q, noise_sigma, T_U, np.eye(4), available, ev, n_ev, t
-    )
+        state, speeds, W0, j, np.full(4, 12.0), zeros, tach_q, noise_sigma, T_U, np.eye(4), available, *CLUSTER4,
+        ev, n_ev, t,
+    )  # fmt: skip
 
 
 def _check_sequence(deltas_nms: list[float], torque: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -144,6 +148,57 @@ def test_momentum_that_stays_missing_is_isolated_though_each_period_is_inside_it
     assert [tuple(e[1:]) for e in ev][:2] == [(4, 2), (5, 2)]
 
 
+def _gain_loss(axes: np.ndarray, gain: float, b_field: np.ndarray, l_max_am2: float = 25.0) -> tuple[np.ndarray, list]:
+    """Availability and events after three periods in which every wheel holds 0.05 N·m and the last one delivers
+    ``gain`` of it (frictionless HR12 wheels, 0.1 rpm tachometer, rigid body)."""
+    nw, torque = axes.shape[1], 0.05
+    state, speeds = fdir.wheel_state(nw), np.full(nw, 100.0)
+    available = np.ones(nw, dtype=np.bool_)
+    ev, n_ev = np.zeros((16, 3)), np.zeros(1, dtype=np.int64)
+    params = allocation.AllocationConfig(law4=allocation.LAW_PSEUDO_INVERSE, l_max_am2=l_max_am2).as_array()
+    j, zeros = np.full(nw, J_HR12), np.zeros((4, nw))
+    for k in range(3):
+        fdir.wheel_hold_1(state, speeds, W0, axes, np.full(nw, torque), j, np.full(nw, 0.2), np.full(nw, 12.0), zeros,
+                          *RIGID)  # fmt: skip
+        speeds = speeds + torque * T_U / J_HR12
+        speeds[-1] -= (1.0 - gain) * torque * T_U / J_HR12
+        fdir.wheel_check_1(
+            state, speeds, W0, j, np.full(nw, 12.0), zeros, TACH_Q, np.zeros(nw), T_U, np.eye(nw), available, axes,
+            j * speeds, b_field, params, ev, n_ev, (k + 1) * T_U,
+        )  # fmt: skip
+    return available, [(int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]
+
+
+ORTHOGONAL3 = np.eye(3)
+B_ALONG_PAIR = np.array([3e-5, 3e-5, 0.0]) / np.sqrt(2.0)  # κ = ⟨e_12, b⟩ = 1 > 1/2: MD refused for wheels 1, 2
+B_ACROSS_PAIR = np.array([3e-5, -3e-5, 0.0]) / np.sqrt(2.0)  # κ = 0, e^m = b × e_12 along wheel 3's axis
+
+
+def test_partly_working_wheel_stays_in_the_loop_when_the_rest_cannot_give_three_axis_torque():
+    """70 % of wheel 3's torque lost (seed 002's multiplicative fault) on three orthogonal wheels: isolated, but
+    wheels 1 + 2 with the MD refused by κ (or no MD at all) give no torque about z, so it stays, with the reason."""
+    available, ev = _gain_loss(ORTHOGONAL3, 0.3, B_ALONG_PAIR)
+    assert available.all()
+    assert ev == [(4, 2), (5, 2), (10, 2 + 10 * allocation.STATUS_KAPPA_REFUSED)]
+    available, ev = _gain_loss(ORTHOGONAL3, 0.3, B_ACROSS_PAIR, l_max_am2=0.0)
+    assert available.all() and ev[-1] == (10, 2 + 10 * allocation.STATUS_NO_DRIVER)
+
+
+def test_partly_working_wheel_is_dropped_where_the_rest_can_still_control():
+    """The same loss with the MD's condition met (two wheels + MD), or on four wheels of rank 3 without it."""
+    available, ev = _gain_loss(ORTHOGONAL3, 0.3, B_ACROSS_PAIR)
+    assert list(available) == [True, True, False] and ev[-1] == (6, 0b011)
+    skew4 = np.column_stack([np.eye(3), np.ones(3) / np.sqrt(3.0)])
+    available, ev = _gain_loss(skew4, 0.3, B_ALONG_PAIR)
+    assert list(available) == [True, True, True, False] and ev[-1] == (6, 0b0111)
+
+
+def test_dead_wheel_is_dropped_even_where_the_rest_cannot_give_three_axis_torque():
+    """A motor delivering nothing (gain 0) is no partial loss: dropped as before, whatever the rest can do."""
+    available, ev = _gain_loss(ORTHOGONAL3, 0.0, B_ALONG_PAIR)
+    assert list(available) == [True, True, False] and ev[-1] == (6, 0b011)
+
+
 def test_healthy_sequence_raises_nothing():
     available, ev, _ = _check_sequence([0.0] * 20, torque=0.05)
     assert available.all() and ev.shape[0] == 0
@@ -181,6 +236,10 @@ def test_fewer_than_two_wheels_is_the_fault_mode():
             T_U,
             np.eye(3),
             available,
+            AXES4[:, :3],
+            np.zeros(3),
+            B_ORBIT,
+            ALLOC,
             ev,
             n_ev,
             k * T_U,
@@ -220,6 +279,10 @@ def test_wheel_near_momentum_limit_is_not_tested():
             T_U,
             np.eye(1),
             available,
+            AXES4[:, :1],
+            np.zeros(1),
+            B_ORBIT,
+            ALLOC,
             ev,
             n_ev,
             k * T_U,
@@ -285,7 +348,8 @@ def test_weak_loss_beyond_the_windows_is_isolated_by_the_cusum_when_its_bound_sa
     WINDOW_PERIODS reaches its bound J q + a √n, but the loss outgrows the CUSUM's drift ν = σ/4: the statistic
     (k − j)(0.5σ − ν) + rounding (≤ J q) + noise N crosses J q + h, h = σ ln(2/P_FA)/(2 · 1/4) (Ville's
     inequality), between (h − 4σ√k)/(0.5σ − ν) and (2 J q + h + 4σ√k)/(0.5σ − ν) periods (|N| ≤ 4σ√k); the
-    healthy wheels stay."""
+    healthy wheels stay. The wheel still delivers its torque, and wheels x, y, x cannot replace its z: it stays in
+    the allocation (reconfiguration refused, the three left singular)."""
     sigma = K_X * np.sqrt(TAU * T_U / 3.0)
     loss = 0.5 * sigma
     a = fdir.wheel_noise_bound(np.array([K_X]), TAU, T_U)[0]
@@ -296,9 +360,9 @@ def test_weak_loss_beyond_the_windows_is_isolated_by_the_cusum_when_its_bound_sa
     latest = (2.0 * J_HR12 * TACH_Q + h + 4.0 * sigma * np.sqrt(700.0)) / rate
     assert latest < 700.0
     available, ev = _noisy_check(np.full(int(latest) + 2, loss), 0.01, np.random.default_rng(12))
-    assert list(available) == [True, True, False, True]
     isolated = [e for e in ev if e[1] == 5]
     assert [int(e[2]) for e in isolated] == [2]
+    assert available.all() and (10, 2 + 10 * allocation.STATUS_SINGULAR) in [tuple(e[1:]) for e in ev]
     k = isolated[0][0] / T_U
     assert (h - 4.0 * sigma * np.sqrt(k)) / rate <= k - 1 <= latest
 
@@ -307,8 +371,8 @@ def test_perfect_tachometer_under_noise_sums_the_windows():
     """A perfect tachometer leaves each window the noise floor a √n alone (no quantum): a wheel withholding w = a/2
     per period, below the one-period test's a, is isolated once w k outgrows the floor and the noise, |N| ≤ 4σ√k:
     by k = ((a + 4σ)/w)² periods, + 1 for the longer window and + 1 to confirm (with J q = 0 the history used to
-    restart every period, leaving only the one-period test, which such a loss never trips); the healthy wheels
-    stay through 2000 periods."""
+    restart every period, leaving only the one-period test, which such a loss never trips), and kept in the
+    allocation as in the CUSUM test; the healthy wheels stay through 2000 periods."""
     sigma = fdir.wheel_noise_sigma(np.array([K_X]), TAU, T_U)[0]
     assert sigma == pytest.approx(K_X * np.sqrt(TAU * T_U / 3.0), rel=1e-12)
     a = fdir.wheel_noise_bound(np.array([K_X]), TAU, T_U)[0]
@@ -316,8 +380,8 @@ def test_perfect_tachometer_under_noise_sums_the_windows():
     latest = ((a + 4.0 * sigma) / loss) ** 2 + 2.0
     available, ev = _noisy_check(np.full(int(latest) + 2, loss), 0.01, np.random.default_rng(13), tach_q=0.0)
     isolated = [e for e in ev if e[1] == 5]
-    assert [int(e[2]) for e in isolated] == [2] and list(available) == [True, True, False, True]
-    assert isolated[0][0] / T_U <= latest
+    assert [int(e[2]) for e in isolated] == [2] and isolated[0][0] / T_U <= latest
+    assert available.all() and (10, 2 + 10 * allocation.STATUS_SINGULAR) in [tuple(e[1:]) for e in ev]
     available, ev = _noisy_check(np.zeros(2000), 0.01, np.random.default_rng(14), tach_q=0.0)
     assert available.all() and ev.shape[0] == 0
 
@@ -493,6 +557,8 @@ def test_describe_event_names_subjects():
     assert fdir.describe_event("reconfigured", 0b1010) == "wheels 2,4"
     assert fdir.describe_event("fault_detected", fdir.SENSOR_ARG + 12) == "gyro axis z"
     assert fdir.describe_event("fault_isolated", fdir.SENSOR_ARG + 20) == "star_tracker"
+    refused = fdir.describe_event("reconfiguration_refused", 2 + 10 * allocation.STATUS_KAPPA_REFUSED)
+    assert refused == f"wheel 3 kept: without it the allocation status would be {allocation.STATUS_KAPPA_REFUSED}"
 
 
 def test_bad_inputs_name_the_field():

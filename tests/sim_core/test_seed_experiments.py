@@ -210,6 +210,20 @@ def test_wheel_3_gain_loss_does_not_destabilise_the_pd_loop_here(without_fdir):
     assert without_fdir.rms_late("wheel 3 multiplicative") < 2.0 * without_fdir.rms_late("nominal")
 
 
+def test_fdir_isolates_the_weak_wheel_3_but_keeps_it_where_wheels_1_2_cannot_fly_pitch(with_fdir):
+    """70 % gain loss of wheel 3 with FDIR: isolated (the delivered momentum 0.3 T_u m is outside the healthy band
+    and short of the command: a partial loss, fdir._partial_loss_1), but wheels 1, 2 + MD are refused by κ about
+    the orbit frame (previous test), so the reconfiguration is refused with that status and the PD keeps flying the
+    pitch through the weak wheel: late RMS and final error inside the nominal's derived band (:meth:`band_deg`),
+    against 26° when the wheel was dropped."""
+    name = "wheel 3 multiplicative"
+    ev = [(n, arg) for _, n, arg in with_fdir.events(name) if n != "fault_onset"]
+    assert ("fault_isolated", 2) in ev and not any(n == "reconfigured" for n, _ in ev)
+    assert ("reconfiguration_refused", 2 + 10 * allocation.STATUS_KAPPA_REFUSED) in ev
+    assert with_fdir.rms_late(name) < with_fdir.band_deg()
+    assert with_fdir.at(name, DURATION_S - 1.0) < with_fdir.band_deg()
+
+
 @pytest.mark.parametrize("name", ["wheels 1,2", "wheels 1,3", "wheels 2,3", "wheels 1,2,3"])
 def test_two_or_three_failed_wheels_lose_the_attitude(without_fdir, with_fdir, name):
     assert without_fdir.at(name, SETTLED_S) > LOST_DEG
