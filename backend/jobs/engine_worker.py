@@ -6,6 +6,7 @@ A module of its own so that the server imports ``distributed`` only when it firs
 
 from __future__ import annotations
 
+import logging
 import threading
 from typing import TYPE_CHECKING
 
@@ -16,7 +17,9 @@ from sim_core.scenario import Scenario
 if TYPE_CHECKING:
     from distributed import Worker
 
-__all__ = ["EngineWorker", "warm_engine"]
+__all__ = ["ClosingHeartbeat", "EngineWorker", "warm_engine"]
+
+HEARTBEAT_FAILURE = "Failed to communicate with scheduler during heartbeat"  # distributed.worker's report
 
 
 def warm_engine() -> float:
@@ -30,6 +33,24 @@ def warm_engine() -> float:
     s = scenario_library.get("peer-basilisk-rw4").model_copy(update={"duration_s": 2.0})
     simulate(Scenario.model_validate(s.model_dump()))
     return time.perf_counter() - start
+
+
+class ClosingHeartbeat(logging.Filter):
+    """Drops distributed's heartbeat-failure report (with its traceback) of a worker that is itself closing.
+
+    An orderly stop closes the worker's connection pool under a heartbeat in flight, which distributed reports
+    at ERROR level; the same report from a running worker (a scheduler that vanished) passes.
+    """
+
+    def __init__(self, worker: Worker) -> None:
+        super().__init__()
+        self._worker = worker
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        from distributed.core import Status
+
+        closing = self._worker.status in (Status.closing, Status.closing_gracefully, Status.closed)
+        return not (closing and record.getMessage().startswith(HEARTBEAT_FAILURE))
 
 
 class EngineWorker(WorkerPlugin):
@@ -48,5 +69,6 @@ class EngineWorker(WorkerPlugin):
             from backend.core.processes import become_owned_child
 
             become_owned_child()
+            logging.getLogger("distributed.worker").addFilter(ClosingHeartbeat(worker))
         if self.warm:
             threading.Thread(target=warm_engine, name="engine-warm", daemon=True).start()
