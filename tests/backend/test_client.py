@@ -16,7 +16,8 @@ from backend.app import create_app
 from backend.client import Client, ClientError
 from backend.core.auth import Role
 from backend.core.settings import Settings
-from tests.backend.conftest import free_port, make_settings
+from tests.backend.conftest import make_settings
+from tests.ports import free_port
 
 STARTUP_TIMEOUT_S = 20.0
 DIARY = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"

@@ -42,7 +42,7 @@ def scheduler_address():
     import sys
 
     from backend.core.processes import stop_owned
-    from tests.backend.conftest import free_port
+    from tests.ports import free_port
 
     address = f"tcp://127.0.0.1:{free_port()}"
     host, port = address.removeprefix("tcp://").split(":")

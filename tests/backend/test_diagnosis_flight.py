@@ -51,8 +51,8 @@ def flown(tmp_path_factory, shared_dask):
     from frontend.feed import TrajectoryFeed
     from frontend.monitors import serve_monitors
     from telemetry import emulator
-    from tests.frontend.conftest import free_port
     from tests.frontend.viser_clients import viser_client, wait_for_viewers
+    from tests.ports import free_port
 
     tmp = tmp_path_factory.mktemp("flight")
     fault = emulator.parse_fault(f"wheel:{FAILED_WHEEL}:failure@{ONSET_S}")

@@ -19,7 +19,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from tests.backend.conftest import free_port
+from tests.ports import free_port
 
 pytestmark = pytest.mark.slow
 

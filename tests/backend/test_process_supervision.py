@@ -21,7 +21,7 @@ import httpx
 import pytest
 
 from tests import process_tree
-from tests.backend.conftest import free_port
+from tests.ports import free_port
 from tests.process_tree import descendants
 
 pytestmark = pytest.mark.slow

@@ -21,7 +21,8 @@ from backend.core.auth import REVOCATION_POLL_S, Role
 from backend.core.models import TokenRow
 from backend.twin.monitor_gate import COOKIE, MonitorGate
 from tests.backend.conftest import make_settings
-from tests.frontend.conftest import _start_uvicorn, free_port
+from tests.frontend.conftest import _start_uvicorn
+from tests.ports import free_port
 
 REPO = Path(__file__).resolve().parents[2]
 CLOSE_WITHIN_S = 1.0  # issue 16: revocation closes open WebSockets and monitor sessions within a second

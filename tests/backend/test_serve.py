@@ -12,7 +12,7 @@ from pathlib import Path
 
 import httpx
 
-from tests.backend.conftest import free_port
+from tests.ports import free_port
 
 START_TIMEOUT_S = 60.0  # cold imports of numpy/numba/sqlalchemy on a busy 2-core machine
 

@@ -4,7 +4,6 @@ thread on 127.0.0.1 with a temporary SQLite archive holding the NOAA-20 diary an
 
 from __future__ import annotations
 
-import socket
 import threading
 import time
 from collections.abc import Iterator
@@ -15,6 +14,7 @@ import pytest
 
 from frontend.feed import TrajectoryFeed
 from sim_core.trajectory import Trajectory
+from tests.ports import free_port
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_FLAGS = [
@@ -45,13 +45,6 @@ packets:
     derived:
       - {name: q0_watch, kind: alias, inputs: [ADCFAQ4], limits: {yellow_high: 0.9, red_high: 0.99}}
 """
-
-
-def free_port() -> int:
-    """A TCP port free on loopback right now."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def synthetic_trajectory(duration_s: float = 600.0, dt_s: float = 1.0, offset_deg: float = 0.0) -> Trajectory:

@@ -303,7 +303,7 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
     import httpx
 
     from backend.twin.demo_twin import serve_live_monitors
-    from tests.frontend.conftest import free_port
+    from tests.ports import free_port
 
     services = backend_server["services"]
     handles = serve_live_monitors(

@@ -21,7 +21,8 @@ import pytest
 
 from backend.twin.live import STALE_S as STALE_AFTER_S  # the threshold the page reads from /constants
 from tests.frontend import console_data as data
-from tests.frontend.conftest import _start_uvicorn, free_port
+from tests.frontend.conftest import _start_uvicorn
+from tests.ports import free_port
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers per file: scheduled first
 

@@ -17,8 +17,8 @@ from frontend.monitors import serve_monitors
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 from telemetry.emulator import demo_pass_bytes
-from tests.frontend.conftest import free_port
 from tests.frontend.test_browser import PAINT_TIMEOUT_S, _displayed_utc, _wait_for
+from tests.ports import free_port
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]
 

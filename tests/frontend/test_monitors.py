@@ -13,8 +13,8 @@ import pytest
 from frontend.monitors import camera_pose, serve_monitors
 from frontend.twin_panels import format_utc
 from frontend.twin_scene import TwinScene
-from tests.frontend.conftest import free_port
 from tests.frontend.viser_clients import viser_client, wait_for_viewers
+from tests.ports import free_port
 
 
 def test_monitors_listen_on_loopback_on_the_ports_they_report(monitors):

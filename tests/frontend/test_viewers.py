@@ -10,8 +10,9 @@ from frontend.feed import TrajectoryFeed
 from frontend.monitors import serve_monitors
 from frontend.twin_panels import format_utc, parse_utc
 from sim_core.trajectory import Trajectory
-from tests.frontend.conftest import free_port, synthetic_trajectory
+from tests.frontend.conftest import synthetic_trajectory
 from tests.frontend.test_browser import PAINT_TIMEOUT_S, _displayed_utc, _wait_for
+from tests.ports import free_port
 
 pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers per file: scheduled first
 

@@ -12,7 +12,6 @@ import asyncio
 import dataclasses
 import datetime as dt
 import math
-import socket
 
 import numpy as np
 import ppigrf
@@ -26,6 +25,7 @@ from telemetry import emulator
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 from telemetry.live import LiveStream, MemoryLink, hello
+from tests.ports import free_port
 from tests.telemetry.test_live import HANG_S, until_decoded
 
 FAILED_WHEEL = 1  # sim_core index: the dictionary's wheel_*_2
@@ -367,10 +367,7 @@ def test_sender_reconnects_and_resends_after_the_link_drops_each_connection_nami
 def test_sender_waits_for_a_listener_that_starts_late(nominal, dictionary) -> None:
     _, _, stream = nominal
     piece = stream.window(int(stream.t_utc_ns[0]), int(stream.t_utc_ns[0]) + 5 * 10**9)
-    probe = socket.socket()
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()  # a port nobody listens on yet
+    port = free_port()  # a port nobody listens on yet
 
     async def late() -> tuple[emulator.SendReport, list]:
         sending = asyncio.create_task(
