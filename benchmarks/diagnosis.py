@@ -430,7 +430,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         cluster.close_client(client)
     same = all(a["result"]["hypotheses"] == b["result"]["hypotheses"] for a, b in zip(serial, outcomes))
-    s, alone = score(outcomes), score(serial)
+    s, alone = score(outcomes), (score(serial) if serial else None)
     fdir = "on" if args.onboard_fdir else "off (no onboard reconfiguration, as the acceptance spacecraft)"
     print(
         f"campaign: {s['cases']} cases ({', '.join(sorted(s['per_category']))}), onboard FDIR {fdir}, "
@@ -447,11 +447,15 @@ def main(argv: list[str] | None = None) -> int:
         f"magnetometer bias estimate error: median {1e9 * s['magnetometer_error_median_t']:.0f} nT, "
         f"p95 {1e9 * s['magnetometer_error_p95_t']:.0f} nT"
     )
+    serial_wall = (
+        f"wall, one diagnosis at a time ({alone['detected']} detected cases of the serial pass): median "
+        f"{alone['latency_median_s']:.1f} s, p95 {alone['latency_p95_s']:.1f} s, max {alone['latency_max_s']:.1f} s"
+        if alone
+        else "wall one at a time not measured (--serial-cases 0)"
+    )
     print(
         f"latency detection -> ranked result ({POST_ALARM_S:.0f} s of telemetry after the detection + the server's "
-        f"diagnosis of the packets from {PRE_ALARM_S:.0f} s before it): wall, one diagnosis at a time "
-        f"({alone['detected']} detected cases of the serial pass): median {alone['latency_median_s']:.1f} s, "
-        f"p95 {alone['latency_p95_s']:.1f} s, max {alone['latency_max_s']:.1f} s; CPU ({s['detected']} detected "
+        f"diagnosis of the packets from {PRE_ALARM_S:.0f} s before it): {serial_wall}; CPU ({s['detected']} detected "
         f"cases): median {s['latency_cpu_median_s']:.1f} s, p95 {s['latency_cpu_p95_s']:.1f} s, "
         f"max {s['latency_cpu_max_s']:.1f} s; Dask pass wall (two at once): median {s['latency_median_s']:.1f} s, "
         f"max {s['latency_max_s']:.1f} s "
@@ -461,10 +465,11 @@ def main(argv: list[str] | None = None) -> int:
         f"top-1 of the ranked result at that latency: {100 * s['top1_at_detection']:.1f} % of detected cases (a "
         "double whose second fault follows the detection cannot be named yet: counted as a miss)"
     )
-    print(
-        f"speed-up on {args.workers} Dask workers: {len(sub)} cases serial {wall_serial:.1f} s, "
-        f"Dask {wall_sub_dask:.1f} s -> {wall_serial / wall_sub_dask:.2f}x; results identical: {same}"
-    )
+    if sub:
+        print(
+            f"speed-up on {args.workers} Dask workers: {len(sub)} cases serial {wall_serial:.1f} s, "
+            f"Dask {wall_sub_dask:.1f} s -> {wall_serial / wall_sub_dask:.2f}x; results identical: {same}"
+        )
     print("per category (top-1, top-3 of cases):")
     for k, (a, b, n) in sorted(s["per_category"].items()):
         print(f"  {k:<20} {a}/{n}  {b}/{n}")
