@@ -26,8 +26,8 @@ def _run(root: Path, guarded: bool) -> int:
         print(twice())
     """)
     env_path = str(Path(sim_core.__file__).parent.parent)
-    out = subprocess.run(
-        [sys.executable, "-c", code],
+    out = subprocess.run(  # -B: a module rewritten within the same second at the same size (callee.py's 1 → 5)
+        [sys.executable, "-B", "-c", code],  # would otherwise be imported from its stale .pyc (mtime has 1 s steps)
         capture_output=True,
         text=True,
         check=True,
