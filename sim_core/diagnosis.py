@@ -417,10 +417,9 @@ def _profile(
             resolvable = np.where(per_nm > 0.0, RESOLVED_COUNTS * ch.bound / per_nm, UNRESOLVED_FRICTION_NM)
         return _profiled(ch, at, 0.0, np.inf, scale=1e-3, min_abs=resolvable)
 
-    def at_bias(
-        theta: float | np.ndarray, gaussian: bool = False, floor: np.ndarray | None = None
-    ) -> np.ndarray:  # a step
-        return run(base, theta * after_sample, no_reset, gaussian, floor)  # in the measurement
+    def at_bias(theta: float | np.ndarray, gaussian: bool = False, floor: np.ndarray | None = None) -> np.ndarray:
+        """A step ``theta`` in the measurement after the onset."""
+        return run(base, theta * after_sample, no_reset, gaussian, floor)
 
     # a bias below RESOLVED_COUNTS of the sensor's resolution is not identifiable: rounding does as much
     return _profiled(

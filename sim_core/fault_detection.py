@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -184,8 +185,6 @@ def count_loglik(
     Rows are filtered independently, in blocks of at least THREAD_ROWS on one thread per core (the kernel releases
     the GIL); the result does not depend on the split.
     """
-    from concurrent.futures import ThreadPoolExecutor
-
     nominal = np.full(y.shape[0] - 1, np.nan) if nominal_drift is None else np.ascontiguousarray(nominal_drift)
     lowest = np.full(drift.shape[0], -np.inf) if floor is None else np.ascontiguousarray(floor, dtype=np.float64)
 
