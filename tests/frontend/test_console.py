@@ -276,6 +276,13 @@ def test_alarm_lifecycle_end_to_end_at_1280x720(browser, console):
         page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=5_000)
         row = _alarm_row(page)
         row.locator("select").select_option("900")
+        page.eval_on_selector(WHEEL_ALARM, "tr => { tr.dataset.drawn = 'before'; }")
+        page.check("#show-cleared")  # the table is redrawn (twice) while the operator chooses
+        page.wait_for_selector(f"{WHEEL_ALARM}[data-drawn]", state="detached", timeout=5_000)
+        page.wait_for_selector("#alarms tbody tr.state-cleared", timeout=5_000)
+        page.uncheck("#show-cleared")
+        page.wait_for_selector("#alarms tbody tr.state-cleared", state="detached", timeout=5_000)
+        assert row.locator("select").input_value() == "900"  # a redraw keeps the operator's choice
         row.locator("button:text('shelve')").click()
         page.wait_for_selector(f"{WHEEL_ALARM}.state-shelved", timeout=5_000)
         text = _alarm_row(page).locator("td.lifecycle").inner_text()

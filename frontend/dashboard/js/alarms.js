@@ -12,6 +12,7 @@ const DETECTION_PARAMETER = "twin_anomaly";  // a live twin's detector: its alar
 
 const SHELVE_CHOICES_S = [[900, "15 min"], [3600, "1 h"], [8 * 3600, "8 h"]];
 let known = new Set();  // ids of unacknowledged alarms already announced (sound once per new alarm)
+const shelveChoice = new Map();  // alarm id → the duration an operator picked, kept when the table is redrawn
 let audio = null;
 
 /** What an operator reads for the alarm's state. */
@@ -39,9 +40,10 @@ function actionButtons(a) {
   if (a.state === "active" || a.state === "shelved") buttons.push(el("button", { class: "small", onclick: act("acknowledge") }, "ack"));
   if (a.state === "shelved") buttons.push(el("button", { class: "small", onclick: act("unshelve") }, "unshelve"));
   else if (a.state !== "cleared") {
-    const choice = el("select", { class: "small", "aria-label": "shelve for", onclick: (e) => e.stopPropagation() },
+    const choice = el("select", { class: "small", "aria-label": "shelve for", onclick: (e) => e.stopPropagation(),
+      onchange: () => shelveChoice.set(a.id, choice.value) },
       SHELVE_CHOICES_S.map(([s, label]) => el("option", { value: s }, label)));
-    choice.value = "3600";
+    choice.value = shelveChoice.get(a.id) ?? "3600";
     buttons.push(choice, el("button", { class: "small", onclick: (e) => act("shelve", { duration_s: Number(choice.value) })(e) }, "shelve"));
   }
   buttons.push(el("button", { class: "small", onclick: (e) => { e.stopPropagation(); showHistory(a); } }, "history"));
@@ -140,6 +142,7 @@ export async function showHistory(alarm) {
 
 export function clearAlarms() {
   fill($("alarms").querySelector("tbody"));
+  shelveChoice.clear();
   $("alarm-banner").hidden = true;
   $("alarm-history").hidden = true;
   known = new Set();
