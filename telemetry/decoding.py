@@ -12,10 +12,13 @@ Calibration: polynomial c0 + c1·x + … (XTCE PolynomialCalibrator semantics) o
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from sim_core import quaternion
 from telemetry import ccsds, xtce_bulk
@@ -481,14 +484,37 @@ def _union(parts: list[tuple[np.ndarray, dict[str, np.ndarray]]], n: int) -> dic
     return out
 
 
+@intrinsic
+def _copy_octets(typingctx: Any, dst: Any, dst_start: Any, src: Any, src_start: Any, count: Any) -> Any:
+    """memcpy of ``count`` octets from src[src_start:] to dst[dst_start:] (contiguous uint8 arrays, in bounds: the
+    caller's duty). A numba slice assignment copies ~4 GB/s here, memcpy ~15 GB/s (issue 12)."""
+    sig = types.void(dst, types.intp, src, types.intp, types.intp)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        to = context.make_array(signature.args[0])(context, builder, args[0])
+        of = context.make_array(signature.args[2])(context, builder, args[2])
+        to_octet, of_octet = builder.gep(to.data, [args[1]]), builder.gep(of.data, [args[3]])
+        cgutils.raw_memcpy(builder, to_octet, of_octet, args[4], 1)  # type: ignore[no-untyped-call]
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @njit(cache=True, nogil=True)
 def _gather_octets(buf: np.ndarray, offset: np.ndarray, length: np.ndarray) -> np.ndarray:
-    """The packets at offset (of the given lengths) back to back (compiled kernel)."""
+    """The packets at offset (of the given lengths, each within buf) back to back (compiled kernel): packets that
+    follow one another in buf are one copy."""
     out = np.empty(length.sum(), dtype=np.uint8)
-    k = 0
-    for i in range(offset.shape[0]):
-        out[k : k + length[i]] = buf[offset[i] : offset[i] + length[i]]
-        k += length[i]
+    k, i, n = 0, 0, offset.shape[0]
+    while i < n:
+        start = offset[i]
+        stop = start + length[i]
+        i += 1
+        while i < n and offset[i] == stop:
+            stop += length[i]
+            i += 1
+        _copy_octets(out, k, buf, start, stop - start)  # type: ignore[call-arg]  # typingctx: numba's
+        k += stop - start
     return out
 
 
