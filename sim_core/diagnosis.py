@@ -28,7 +28,8 @@ Pipeline (DESIGN.md "Diagnosis"), pure numerics on telemetered arrays (:class:`O
    telemetered commands, so a pair's evidence is the sum of its members'.
 6. **Replay** (:func:`_replayed`): the top hypotheses are flown as variants of one twin batch from a
    telemetry instant before the onset, and the fit of each to the commands and attitude is evidence.
-   :func:`hypothesis_replay` builds the same batch for one ranked hypothesis (the simulated monitor flies it).
+   :func:`hypothesis_replay` builds the same batch for one ranked hypothesis, of any fault type (the simulated
+   monitor flies it; :func:`hypothesis_faults` maps it to engine faults).
 
 "No fault" is a hypothesis; the top score is a probability that says how far the data support it.
 """
@@ -56,12 +57,16 @@ __all__ = [
     "WheelModel",
     "detection_rate_per_day",
     "diagnose",
+    "flight_sensor_residuals",
+    "hypothesis_faults",
     "hypothesis_replay",
+    "tachometer_readings",
     "wheel_model",
 ]
 
 WHEEL_FAULTS = ("failure", "gain_loss", "friction", "stuck", "speed_bias")
 SENSOR_FAULTS = ("gyro_bias", "star_tracker_outage", "magnetometer_bias")
+SENSOR_BIAS_TARGETS = {"gyro_bias": "gyro", "magnetometer_bias": "magnetometer"}  # engine fault targets, per body axis
 MIN_SAMPLES = 60  # a minute at 1 Hz: shorter telemetry cannot separate a fault from quantisation
 UNMODELLED_TORQUE_NM = 2e-6  # σ of wheel torque the balance does not model (bearing ripple, drag): 10 % of a GG command
 NOMINAL_LEAD_S = 60.0  # nominal data kept before the onset search window
@@ -996,10 +1001,9 @@ def hypothesis_replay(
     diagnosis' replay builds it (:func:`_replay_rows`, :func:`sim_core.twin_replay.replay_batch`): from telemetry
     REPLAY_LEAD_S before the onset to ``after_s`` after it (or the telemetry's end); (batch, first row, stop row).
 
-    ValueError naming what cannot be flown: "none", a sensor or speed-bias hypothesis (the replay flies wheel
-    faults only), an onset outside the telemetry."""
-    from sim_core.twin_replay import fault_specs
-
+    Every fault of the fault space flies, as the engine faults :func:`hypothesis_faults` maps it to (wheel faults as
+    the ranking's replay flies them; tachometer, gyro, magnetometer and star-tracker faults besides).
+    ValueError naming what cannot be flown: "none", an unknown fault, an onset outside the telemetry."""
     if fault == "none":
         raise ValueError("hypothesis: 'none' is the nominal twin itself; fly a fault hypothesis")
     t = obs.t_s
@@ -1009,14 +1013,166 @@ def hypothesis_replay(
     scenario, first, reference = _replay_rows(obs, scenario, onset_s, 0, stop)
     if stop - first < 3:
         raise ValueError(f"hypothesis: the telemetry ends at the onset of {fault}; nothing to fly")
-    specs = fault_specs(fault, wheel, float(onset_s - t[first]), magnitude)
-    if specs is None:
-        raise ValueError(
-            f"hypothesis: {fault} cannot be flown: the twin replay flies wheel failure, gain_loss, friction and stuck "
-            "(and pairs of them); sensor faults and speed biases are ranked without it"
-        )
+    specs = hypothesis_faults(obs, fault, wheel, onset_s, magnitude, first, stop)
     batch = _replay_batch(obs, scenario, [specs], first, stop, reference)
     return batch, first, stop
+
+
+def hypothesis_faults(
+    obs: Observations,
+    fault: str,
+    wheel: int | list[int] | None,
+    onset_s: float,
+    magnitude: float | list[float | None] | None,
+    first: int,
+    stop: int,
+) -> list[FaultSpec]:
+    """The engine faults (:mod:`sim_core.faults`) a diagnosed hypothesis flies as on the simulated monitor, onset
+    ``onset_s`` after the telemetry epoch, for a twin started at row ``first`` and flown to row ``stop - 1``.
+
+    - ``failure``, ``gain_loss``, ``friction``, ``stuck``: :func:`sim_core.twin_replay.fault_specs`, the faults the
+      ranking's replay scores them with (that map is not changed: it would change the scores);
+    - ``speed_bias``: a tachometer bias of that wheel, ``magnitude`` rad/s added to its readings (the diagnosis
+      estimates it as a step of the tachometer channel, in rad/s, signed);
+    - ``gyro_bias``, ``magnetometer_bias``: a bias per body axis, rad/s or T. The diagnosis reports the bias' norm
+      only (``magnitude``); its direction is its own per-axis estimate (:func:`_sensor_bias_b`: the same channels
+      and step model, at the reported onset, on the flown rows [first, stop)), scaled to that norm;
+    - ``star_tracker_outage``: the star tracker failed (no valid sample) from the onset on;
+    - pairs (``a+b``, ``wheel`` and ``magnitude`` lists): both members' faults, at the pair's one onset.
+
+    ValueError for a fault outside the fault space, or a sensor bias the telemetry has no channel for."""
+    from sim_core.twin_replay import FAULT_TYPES, fault_specs
+
+    at = max(float(onset_s - obs.t_s[first]), 0.0)
+    names = fault.split("+")
+    wheels = wheel if isinstance(wheel, list) else [wheel] * len(names)
+    mags = magnitude if isinstance(magnitude, list) else [magnitude] * len(names)
+    out: list[FaultSpec] = []
+    for name, w, m in zip(names, wheels, mags):
+        if name in FAULT_TYPES and w is not None:
+            specs = fault_specs(name, w, at, m)
+            assert specs is not None  # a wheel fault with its wheel: always flyable
+            out += specs
+        elif name == "speed_bias" and w is not None:
+            out.append(FaultSpec(target="tachometer", index=int(w) - 1, type="bias", onset_s=at, value=float(m or 0.0)))
+        elif name in SENSOR_BIAS_TARGETS:
+            bias = _sensor_bias_b(obs, name, onset_s, first, stop)
+            norm = float(np.linalg.norm(bias))
+            if m is not None and norm > 0.0:
+                bias = bias * (float(m) / norm)
+            target = SENSOR_BIAS_TARGETS[name]
+            out += [FaultSpec(target=target, index=a, type="bias", onset_s=at, value=float(bias[a])) for a in range(3)]
+        elif name == "star_tracker_outage":
+            out.append(FaultSpec(target="star_tracker", type="failure", onset_s=at))
+        else:
+            raise ValueError(
+                f"hypothesis: {fault} cannot be flown: {name!r} is not a fault of the diagnosis' fault space "
+                f"({', '.join(WHEEL_FAULTS + SENSOR_FAULTS)}, with a wheel for a wheel fault)"
+            )
+    return out
+
+
+def _sensor_bias_b(obs: Observations, kind: str, onset_s: float, first: int, stop: int) -> np.ndarray:
+    """Per-axis bias step (3,) of a gyro or magnetometer at ``onset_s``: the diagnosis' own estimate (the
+    channels of :func:`_gyro_channels` / :func:`_magnetometer_channels`, the step model of :func:`_profile`, its
+    Gaussian maximum) on rows [first, stop)."""
+    if kind == "magnetometer_bias":
+        if obs.b_mag_b_t is None or obs.b_model_b_t is None:
+            raise ValueError("hypothesis: magnetometer_bias cannot be flown: no magnetometer field in the telemetry")
+        group = _magnetometer_channels(obs)
+    else:
+        group = _gyro_channels(obs)
+    k = int(np.searchsorted(obs.t_s, onset_s - 1e-3)) - first  # the onset's sample (onsets are sample instants)
+    bias = np.zeros(3)
+    for axis, ch in enumerate(group):
+        cut = _cut(ch, first, min(stop, ch.y.shape[0]))
+        if not 0 < k < cut.y.shape[0] - 1:
+            raise ValueError(f"hypothesis: {kind} has no samples on both sides of its onset to estimate it from")
+        _, theta = _profile(cut, np.array([k]), "bias", True)
+        bias[axis] = float(theta[0])
+    return bias
+
+
+def tachometer_readings(batch: Scenario, t_s: np.ndarray, wheel_speed_rad_s: np.ndarray) -> np.ndarray:
+    """Wheel speeds (variant, sample, wheel) of a flown ``batch`` as each variant's tachometers read them: the
+    rotors' under that variant's tachometer faults (:func:`sim_core.faults.tachometer_faults_1`, the loop's and the
+    emulator's kernel); the rotors' themselves for a variant without one."""
+    from sim_core import faults
+
+    table, counts = faults.fault_table(batch.variants)
+    out = np.array(wheel_speed_rad_s, dtype=float, order="C")
+    for v in range(out.shape[0]):
+        rows = np.ascontiguousarray(table[v, : counts[v]])
+        if not np.any(rows[:, faults.F_TARGET] == faults.T_TACH):
+            continue
+        for k in range(t_s.shape[0]):
+            faults.tachometer_faults_1(rows, float(t_s[k]), out[v, k])
+    return out
+
+
+def flight_sensor_residuals(
+    obs: Observations, batch: Scenario, t_s: np.ndarray, series: dict[str, np.ndarray], first: int, onset_s: float
+) -> list[dict[str, float]]:
+    """What each variant's onboard estimator and sensors would have telemetered against the telemetry, over a flight
+    of ``batch`` (:func:`hypothesis_replay`: started at row ``first``; ``t_s`` and ``series`` its trajectory's): RMS of
+    the twin's value minus the telemetered one at the twin's output instants, less their mean difference before
+    ``onset_s`` (the twin's own mismatch: a gyro bias or a field model the twin's scenario does not know, which no
+    hypothesis claims to explain):
+
+    - ``attitude_estimate_rms_arcsec``, ``rate_estimate_rms_deg_h``: the twin's onboard estimate (``q_est_ib``,
+      ``omega_est_b_rad_s``) against the telemetered one (the what-if's residuals hold the twin's true attitude
+      against it, which a sensor fault separates from its estimate);
+    - ``gyro_rms_deg_h``: the twin's body rate + the scenario's gyro bias, under the variant's gyro faults;
+    - ``magnetometer_rms_nt``: the field model at the telemetered GPS position (the diagnosis' ``b_model_b_t``)
+      turned from the telemetered attitude into the twin's, under the variant's magnetometer faults;
+    - ``star_tracker_mismatch``: the share of instants where the twin's star tracker has a valid sample and the
+      telemetry's not, or the other way round (no offset to remove).
+
+    A sensor fault the twin flies shows there; the flight's wheel speeds are its tachometers'
+    (:func:`tachometer_readings`), so a speed bias shows in the wheel-speed residuals."""
+    from sim_core import faults, quaternion
+
+    tm = obs.t_s[first] + t_s
+    k = np.clip(np.searchsorted(obs.t_s, tm - 1e-3), 0, obs.t_s.shape[0] - 1)
+    same = np.abs(obs.t_s[k] - tm) <= 1e-3
+    k, tw = k[same], np.ascontiguousarray(t_s[same])
+    before = obs.t_s[k] < onset_s
+    table, counts = faults.fault_table(batch.variants)
+    bias0 = np.asarray(batch.sensors.gyro_bias_rad_s, dtype=float)
+
+    def rms(diff: np.ndarray) -> float:
+        ok = np.all(np.isfinite(diff), axis=1)
+        if not ok.any():
+            return float("nan")
+        offset = np.mean(diff[ok & before], axis=0) if np.any(ok & before) else 0.0
+        return float(np.sqrt(np.mean(np.sum((diff[ok] - offset) ** 2, axis=1))))
+
+    out = []
+    for v in range(len(batch.variants)):
+        rows = np.ascontiguousarray(table[v, : counts[v]])
+        zeros = np.zeros((tw.shape[0], 3))
+        turn = quaternion.multiply(quaternion.conjugate(obs.q_est_ib[k]), series["q_est_ib"][v][same])
+        attitude = 2.0 * np.sign(turn[:, :1] + 1e-300) * turn[:, 1:]  # small-angle rotation vector, rad
+        rate = series["omega_est_b_rad_s"][v][same] - obs.omega_b_rad_s[k]
+        found: dict[str, float] = {
+            "attitude_estimate_rms_arcsec": math.degrees(rms(attitude)) * 3600.0,
+            "rate_estimate_rms_deg_h": math.degrees(rms(rate)) * 3600.0,
+        }
+        if obs.omega_gyro_b_rad_s is not None:
+            rate = np.ascontiguousarray(series["omega_b_rad_s"][v][same] + bias0)
+            gyro, _ = faults.sensor_fault_series(rows, faults.T_GYRO, tw, rate, zeros)
+            found["gyro_rms_deg_h"] = math.degrees(rms(gyro - obs.omega_gyro_b_rad_s[k])) * 3600.0
+        if obs.b_mag_b_t is not None and obs.b_model_b_t is not None:
+            b_i = quaternion.rotate(obs.q_est_ib[k], obs.b_model_b_t[k])
+            b_twin = quaternion.rotate(quaternion.conjugate(series["q_ib"][v][same]), b_i)
+            mag, _ = faults.sensor_fault_series(rows, faults.T_MAG, tw, np.ascontiguousarray(b_twin), zeros)
+            found["magnetometer_rms_nt"] = rms(mag - obs.b_mag_b_t[k]) * 1e9
+        if obs.q_st_ib is not None:
+            q = np.ascontiguousarray(series["q_ib"][v][same])
+            _, failed = faults.star_tracker_fault_series(rows, tw, q, zeros)
+            found["star_tracker_mismatch"] = float(np.mean(failed == _star_tracker_valid(obs.q_st_ib)[k]))
+        out.append(found)
+    return out
 
 
 def _scored(hyps: list[Hypothesis]) -> list[Hypothesis]:

@@ -1,10 +1,13 @@
 """Fly a diagnosed hypothesis on the simulated monitor (issue 14 item 3), behind /api/v1/monitors/simulated.
 
-A finished diagnosis names hypotheses with an onset and a magnitude; one of them (default the top one) is flown
-by the diagnosis' own replay (:func:`sim_core.diagnosis.hypothesis_replay`: the twin restarted from the
-telemetry REPLAY_LEAD_S before the onset, the fault as engine faults, the no-fault twin beside it as a second
-variant) on the server's Dask cluster, up to FLIGHT_AFTER_S after the onset. The flight is compared with the
-telemetry of the same window (residuals of the hypothesis and of the nominal twin) and put on the monitors
+A finished diagnosis names hypotheses with an onset and a magnitude; one of them (default the top one), of any
+fault type, is flown by the diagnosis' own replay (:func:`sim_core.diagnosis.hypothesis_replay`: the twin restarted
+from the telemetry REPLAY_LEAD_S before the onset, the fault as engine faults
+(:func:`sim_core.diagnosis.hypothesis_faults`), the no-fault twin beside it as a second variant) on the server's
+Dask cluster, up to FLIGHT_AFTER_S after the onset. The flight is compared with the telemetry of the same window
+(residuals of the hypothesis and of the nominal twin: attitude, rate and wheel speeds as the what-if's, the wheel
+speeds as the twin's tachometers read them, and the gyro, magnetometer and star tracker as the twin's would have
+read them, :func:`sim_core.diagnosis.flight_sensor_residuals`) and put on the monitors
 (backend.twin.monitor_desk): the actual monitor replays that telemetry, the simulated one the twin with the
 hypothesis, named on every panel. :func:`land_flight` puts the live twin back.
 """
@@ -87,7 +90,7 @@ def fly_hypothesis(services: Services, diagnosis_id: str, rank: int, actor: str)
     from backend.jobs import cluster
     from backend.jobs.trajectory_files import write_npz
     from sim_core import scenario_library
-    from sim_core.diagnosis import hypothesis_replay
+    from sim_core.diagnosis import flight_sensor_residuals, hypothesis_replay, tachometer_readings
 
     run, h = _chosen(services, diagnosis_id, rank)
     try:
@@ -109,7 +112,11 @@ def fly_hypothesis(services: Services, diagnosis_id: str, rank: int, actor: str)
         raise ApiError(422, f"rank: hypothesis #{rank}: {str(exc).removeprefix('hypothesis: ')}", "rank") from None
     out = services.settings.data_dir / "flights"
     out.mkdir(parents=True, exist_ok=True)
-    npz = write_npz(cluster.flyer(services.cluster.client())(batch), out / f"{diagnosis_id}-{rank}.npz")
+    traj = cluster.flyer(services.cluster.client())(batch)
+    traj.series["wheel_speed_rad_s"] = tachometer_readings(batch, traj.t_s, traj["wheel_speed_rad_s"])
+    assert onset_s is not None  # hypothesis_replay refuses a hypothesis without one
+    sensors = flight_sensor_residuals(obs, batch, traj.t_s, traj.series, first, onset_s)
+    npz = write_npz(traj, out / f"{diagnosis_id}-{rank}.npz")
     align_ns = round((obs.epoch_unix_s + float(obs.t_s[first])) * NS_PER_S)
     end_ns = round((obs.epoch_unix_s + float(obs.t_s[stop - 1])) * NS_PER_S)
     track = actual_track_between(archive, dictionary, run["satellite"], align_ns - int(GPS_MARGIN_S * NS_PER_S), end_ns)
@@ -126,7 +133,7 @@ def fly_hypothesis(services: Services, diagnosis_id: str, rank: int, actor: str)
         "label": hypothesis_label(run, rank),
         "start_utc": _iso(align_ns),
         "end_utc": _iso(end_ns),
-        "summaries": {name: r.summary() for name, r in zip(VARIANTS, found)},
+        "summaries": {name: {**r.summary(), **sensor} for name, r, sensor in zip(VARIANTS, found, sensors)},
         "t_s": t_s[keep].tolist(),
         "wheel_speed_rpm": {name: (s[keep] * RPM_PER_RAD_S).tolist() for name, s in series.items()},
         "flown_by": actor,

@@ -298,8 +298,8 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
 ):
     """The monitors run on the emulated satellite's live twin (as acs-twin serve runs them); the diagnosis' top
     hypothesis (RW2 failure, the previous test) is flown from its "Fly on simulated monitor" button: the dashboard
-    says it is on the monitor, the simulated monitor's panel names it, the API's viewer state agrees, and "Back to
-    nominal twin" puts the live twin back on the panel."""
+    says it is on the monitor, the simulated monitor's panel names it, the API's viewer state agrees; the listed
+    gyro-bias hypothesis flies the same way, and "Back to nominal twin" puts the live twin back on the panel."""
     import httpx
 
     from backend.twin.demo_twin import serve_live_monitors
@@ -336,6 +336,25 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
             assert shown == {"simulated": state["label"]}, state["viewers"]
             flight = state["flight"]["summaries"]
             assert flight["hypothesis"]["wheel_speed_rms_rpm"] < flight["nominal"]["wheel_speed_rms_rpm"], flight
+            # a sensor hypothesis flies too: the gyro bias the diagnosis lists (its gyro channel is always tested),
+            # the dashboard quoting the gyro's residual
+            ranks = page.eval_on_selector_all(
+                "#diagnosis-detail .diagnosis-hypotheses tbody tr",
+                "rs => rs.filter(r => r.cells[1].innerText === 'gyro_bias').map(r => r.dataset.rank)",
+            )
+            assert ranks, "no gyro_bias hypothesis listed"
+            page.click(f"#diagnosis-detail .diagnosis-hypotheses tbody tr[data-rank='{ranks[0]}'] button.fly-monitor")
+            page.wait_for_selector("#monitor-flight-status[data-state='flying']", timeout=5_000)
+            page.wait_for_selector("#monitor-flight-status[data-state='shown']", timeout=FLIGHT_TIMEOUT_MS)
+            status = page.inner_text("#monitor-flight-status")
+            sensor_label = f"hypothesis #{ranks[0]}: gyro_bias from "
+            assert status.startswith(f"on the simulated monitor: {sensor_label}"), status
+            assert "; gyro RMS against the telemetry " in status and " °/h (nominal twin " in status, status
+            assert page.eval_on_selector("tr.on-monitor", "r => r.dataset.rank") == ranks[0]
+            monitor.wait_for_function(f"document.body.innerText.includes('simulated: {sensor_label}')", timeout=30_000)
+            flight = api.get("/api/v1/monitors/simulated").json()["flight"]
+            assert flight["hypothesis"]["fault"] == "gyro_bias", flight["hypothesis"]
+            assert {"gyro_rms_deg_h", "rate_estimate_rms_deg_h"} <= set(flight["summaries"]["hypothesis"]), flight
             page.click("#monitor-nominal")
             page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
             assert page.locator("tr.on-monitor").count() == 0

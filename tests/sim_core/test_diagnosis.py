@@ -48,3 +48,52 @@ def test_a_held_command_s_rounding_explains_the_speed_it_leaves_unexplained() ->
     measured = np.mean(np.diff(unexplained) ** 2)
     stated = np.mean(np.diff(cumulative_q))
     assert abs(measured / stated - 1.0) <= VARIANCE_TOLERANCE
+
+
+def test_every_hypothesis_maps_to_the_engine_faults_the_monitor_flies() -> None:
+    """hypothesis_faults: wheel faults as the ranking's replay scores them, a speed bias as the tachometer's, a gyro
+    bias on the axis the telemetry shows it on (the diagnosis reports its norm only), a star-tracker outage as the
+    tracker failed; pairs both; onsets after the twin's start row; a fault outside the fault space refused."""
+    import pytest
+
+    from sim_core.diagnosis import hypothesis_faults
+    from sim_core.twin_replay import fault_specs
+
+    n, onset, first, bias = 200, 120.0, 50, 1e-4
+    gyro = np.zeros((n, 3))
+    gyro[int(onset) :, 1] = bias  # body y reads 1e-4 rad/s high from the onset on
+    gyro += np.random.default_rng(3).normal(0.0, 1e-7, gyro.shape)
+    obs = Observations(
+        t_s=np.arange(n, dtype=float),
+        epoch_unix_s=0.0,
+        q_est_ib=np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)),
+        omega_b_rad_s=np.zeros((n, 3)),
+        wheel_speed_rad_s=np.zeros((n, 4)),
+        wheel_torque_cmd_nm=np.zeros((n, 4)),
+        speed_quantum_rad_s=0.026,
+        omega_gyro_b_rad_s=gyro,
+    )
+
+    def flown(fault, wheel, magnitude):
+        specs = hypothesis_faults(obs, fault, wheel, onset, magnitude, first, n)
+        assert all(s.onset_s == onset - first for s in specs)
+        return [(s.target, s.index, s.type, s.gain, s.value) for s in specs]
+
+    assert flown("gain_loss", 2, 0.3) == [
+        (s.target, s.index, s.type, s.gain, s.value) for s in fault_specs("gain_loss", 2, onset - first, 0.3) or []
+    ]
+    assert flown("speed_bias", 3, -0.05) == [("tachometer", 2, "bias", 1.0, -0.05)]
+    assert flown("failure+speed_bias", [1, 4], [None, 0.05]) == [
+        ("wheel", 0, "failure", 1.0, 0.0),
+        ("tachometer", 3, "bias", 1.0, 0.05),
+    ]
+    assert flown("star_tracker_outage", None, None) == [("star_tracker", 0, "failure", 1.0, 0.0)]
+    gyro_faults = flown("gyro_bias", None, 2 * bias)  # the reported norm, on the estimated direction
+    assert [f[:3] for f in gyro_faults] == [("gyro", a, "bias") for a in range(3)]
+    values = np.array([f[4] for f in gyro_faults])
+    assert np.linalg.norm(values) == pytest.approx(2 * bias)
+    assert values[1] == pytest.approx(2 * bias, rel=1e-3) and np.abs(values[[0, 2]]).max() < 1e-3 * bias
+    with pytest.raises(ValueError, match="magnetometer_bias cannot be flown: no magnetometer field"):
+        hypothesis_faults(obs, "magnetometer_bias", None, onset, 1e-6, first, n)
+    with pytest.raises(ValueError, match="'warp' is not a fault of the diagnosis' fault space"):
+        hypothesis_faults(obs, "warp", None, onset, None, first, n)

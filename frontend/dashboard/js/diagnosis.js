@@ -132,6 +132,20 @@ function markFlown(m) {
   flightStatus(m.showing === "hypothesis" ? "shown" : "nominal", `simulated monitor: ${m.label}${monitors}`);
 }
 
+// The residual that shows a flown hypothesis (summaries of POST /monitors/simulated/flight): its sensor's for a
+// sensor fault, else the wheel speeds as the tachometers read them (a speed bias included).
+const SENSOR_RESIDUALS = {
+  gyro_bias: ["gyro_rms_deg_h", "gyro RMS", " °/h", 2],
+  magnetometer_bias: ["magnetometer_rms_nt", "magnetometer RMS", " nT", 0],
+  star_tracker_outage: ["star_tracker_mismatch", "share of star-tracker samples valid in one and not the other", "", 3],
+};
+const WHEEL_RESIDUAL = ["wheel_speed_rms_rpm", "wheel-speed RMS", " rpm", 2];
+
+function flightResidual(f) {
+  const sensor = SENSOR_RESIDUALS[f.hypothesis.fault];
+  return sensor && f.summaries.hypothesis[sensor[0]] !== undefined ? sensor : WHEEL_RESIDUAL;
+}
+
 async function flyOnMonitor(d, rank, button) {
   const buttons = document.querySelectorAll("#diagnosis-detail button.fly-monitor");
   buttons.forEach((b) => { b.disabled = true; });
@@ -140,10 +154,11 @@ async function flyOnMonitor(d, rank, button) {
   flightStatus("flying", `flying hypothesis #${rank} from before its onset (the diagnosis' replay)…`);
   try {
     const f = await api("/monitors/simulated/flight", { method: "POST", json: { diagnosis_id: d.id, rank } });
-    const rms = (v) => f.summaries[v].wheel_speed_rms_rpm.toFixed(2);
+    const [key, what, unit, digits] = flightResidual(f);
+    const rms = (v) => `${f.summaries[v][key].toFixed(digits)}${unit}`;
     markFlown({ running: f.on_monitor, showing: "hypothesis", label: f.label, flight: f });
     flightStatus("shown", `${f.on_monitor ? "on the simulated monitor" : "flown (no 3D monitors run on this server)"}: `
-      + `${f.label}; wheel-speed RMS against the telemetry ${rms("hypothesis")} rpm (nominal twin ${rms("nominal")} rpm)`);
+      + `${f.label}; ${what} against the telemetry ${rms("hypothesis")} (nominal twin ${rms("nominal")})`);
   } catch (err) {
     flightStatus("failed", `not flown: ${errorText(err)}`);
   } finally {
