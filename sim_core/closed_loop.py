@@ -1064,20 +1064,6 @@ def _wheel_hold_stage(
 
 
 @njit(cache=True)
-def _surface_torque_stage(d: Disturbances, x: np.ndarray, pos: Position, ext: np.ndarray) -> None:
-    """Aerodynamic and solar-pressure torques on the plates (sim_core.environment) added to ``ext``, when flown."""
-    sf = d.surfaces
-    if d.aerodynamic:
-        ext[:] += environment.aerodynamic_torque_orbit_1(
-            x[0:4], pos.r, pos.v, sf.drag_coefficient, sf.normals_b, sf.areas_m2, sf.centroids_b_m
-        )
-    if d.solar_pressure:
-        ext[:] += environment.solar_pressure_torque_orbit_1(
-            x[0:4], pos.r, pos.sun_eci, sf.normals_b, sf.areas_m2, sf.centroids_b_m, sf.specular, sf.diffuse
-        )
-
-
-@njit(cache=True)
 def _record_stage(
     n_modes: int,
     x: np.ndarray,
@@ -1286,7 +1272,6 @@ def fly_variant(
     md_on, have_mag_prev, valid = scalars[C_MD_ON] != 0.0, scalars[C_MAG_PREV] != 0.0, scalars[C_VALID] != 0.0
     every_step = dist.gravity_gradient or dist.aerodynamic or dist.solar_pressure  # models that need r, v each step
     sun_wanted = dist.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
-    surface_torques = dist.aerodynamic or dist.solar_pressure
     k_next = clk.n_steps
     q_p, w_p, obs_p = np.zeros(4), np.zeros(3), False  # the scenario's program, sampled at T_u and output ticks
     # The arrays the per-step stages read, bound once: a tuple's array read inside the loop, or handed to a
@@ -1301,6 +1286,16 @@ def fly_variant(
     q_est, w_est, body_torque, available = est.q, est.omega, cmd.body_torque, mon.available
     frozen_torque, wheel_alloc, dipole_alloc, mag = cmd.frozen_torque, cmd.wheel_alloc, cmd.dipole_alloc, sensed.mag
     wheel_axes, alloc_params, torque_quantum, c_pn = p.wheel_axes, act.allocation, act.torque_quantum_nm, eph.c_pn
+    plate_normals, plate_areas, plate_centroids = (
+        dist.surfaces.normals_b,
+        dist.surfaces.areas_m2,
+        dist.surfaces.centroids_b_m,
+    )
+    plate_specular, plate_diffuse, drag_coefficient = (
+        dist.surfaces.specular,
+        dist.surfaces.diffuse,
+        dist.surfaces.drag_coefficient,
+    )
 
     for k in range(int(scalars[C_STEP]), clk.n_steps):
         t = k * clk.dt_s
@@ -1420,8 +1415,14 @@ def fly_variant(
         if dist.gravity_gradient:
             conjugate_rotate_into(x, r_eci, r_body)
             environment.add_gravity_gradient_torque_into(r_body, inertia_flown, ext)
-        if surface_torques:
-            _surface_torque_stage(dist, x, pos, ext)
+        if dist.aerodynamic:  # flat plates (sim_core.environment), allocation-free
+            environment.add_aerodynamic_torque_orbit_into(
+                x, r_eci, v_eci, drag_coefficient, plate_normals, plate_areas, plate_centroids, ext
+            )
+        if dist.solar_pressure:
+            environment.add_solar_pressure_torque_orbit_into(
+                x, r_eci, sun_eci, plate_normals, plate_areas, plate_centroids, plate_specular, plate_diffuse, ext
+            )
         rk4_step_into(x, clk.dt_s, delivered, ext, plant, work, x)
         if stuck_faults:
             faults_mod.lock_stuck_wheels_1(faults, t + clk.dt_s, x, plant, j_inv)

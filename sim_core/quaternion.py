@@ -30,6 +30,7 @@ __all__ = [
     "rotate_1",
     "conjugate_rotate_1",
     "conjugate_rotate_into",
+    "conjugate_rotate_components_1",
     "attitude_difference_1",
     "angle_between_1",
     "normalize_1",
@@ -234,13 +235,17 @@ def conjugate_rotate_1(q: np.ndarray, v: np.ndarray) -> np.ndarray:
 @njit(cache=True)
 def conjugate_rotate_into(q: np.ndarray, v: np.ndarray, out: np.ndarray) -> None:
     """Λ̃ ∘ v ∘ Λ with Λ = q[0:4] (inertial → body for ``q_ib``) written into ``out``, no allocation."""
+    out[0], out[1], out[2] = conjugate_rotate_components_1(q, v[0], v[1], v[2])
+
+
+@njit(cache=True)
+def conjugate_rotate_components_1(q: np.ndarray, v0: float, v1: float, v2: float) -> tuple[float, float, float]:
+    """Λ̃ ∘ v ∘ Λ with Λ = q[0:4] for v = (v0, v1, v2), as three floats (kernels that keep vectors in registers)."""
     q0, q1, q2, q3 = q[0], -q[1], -q[2], -q[3]
-    tx = 2.0 * (q2 * v[2] - q3 * v[1])
-    ty = 2.0 * (q3 * v[0] - q1 * v[2])
-    tz = 2.0 * (q1 * v[1] - q2 * v[0])
-    out[0] = v[0] + q0 * tx + q2 * tz - q3 * ty
-    out[1] = v[1] + q0 * ty + q3 * tx - q1 * tz
-    out[2] = v[2] + q0 * tz + q1 * ty - q2 * tx
+    tx = 2.0 * (q2 * v2 - q3 * v1)
+    ty = 2.0 * (q3 * v0 - q1 * v2)
+    tz = 2.0 * (q1 * v1 - q2 * v0)
+    return v0 + q0 * tx + q2 * tz - q3 * ty, v1 + q0 * ty + q3 * tx - q1 * tz, v2 + q0 * tz + q1 * ty - q2 * tx
 
 
 @njit(cache=True)

@@ -4,6 +4,9 @@ skyfield + DE421, the geometry of the Earth's shadow, and closed-form torques.""
 from __future__ import annotations
 
 import datetime as dt
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -274,6 +277,93 @@ def test_solar_pressure_torque_is_zero_in_umbra_and_full_for_a_black_plate_in_su
     force = -environment.SOLAR_PRESSURE_1AU_N_M2 * (environment.AU_M / d_sun) ** 2 * 1.5 * s_hat
     np.testing.assert_allclose(torque[0], np.cross(centroid[0], force), rtol=1e-6)
     assert np.all(torque[1] == 0.0)
+
+
+# The flight loop's kernels (environment.add_*_orbit_into) are the plate torques above where the spacecraft is:
+# only the order of a few roundings may differ from the pieces composed here in numpy, relative to the largest torque
+# (the plates' torques cancel in part).
+ORBIT_KERNEL_REL_TOL = 1e-12
+PLATES_NORMALS = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+PLATES_AREAS = np.array([2.0, 1.0, 1.5, 1.0])
+PLATES_CENTROIDS = np.array([[0.3, 0.4, 0.2], [-0.2, -0.4, 0.1], [0.1, 0.2, 0.6], [0.5, 0.1, -0.2]])
+
+
+def _orbit_attitudes(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Times, ECI r, v along a 600 km, 97.8° orbit and tumbling attitudes q_ib (a fixed-seed draw)."""
+    t = 1.7e9 + np.linspace(0.0, 5800.0, n)
+    r, v = orbit.circular_orbit(t - t[0], 600e3, 97.8, 20.0, 0.0)
+    q = quaternion.normalize(np.random.default_rng(13).standard_normal((n, 4)))
+    return t, r, v, q
+
+
+def test_flight_loop_drag_kernel_adds_the_plate_drag_torque_of_the_co_rotating_wind():
+    _, r, v, q = _orbit_attitudes(50)
+    wind = v - np.cross([0.0, 0.0, environment.EARTH_ROTATION_RAD_S], r)
+    for k in range(len(r)):
+        torque = np.array([1e-6, -2e-6, 3e-6])  # the loop's other torques, added to
+        environment.add_aerodynamic_torque_orbit_into(
+            q[k], r[k], v[k], 2.2, PLATES_NORMALS, PLATES_AREAS, PLATES_CENTROIDS, torque
+        )
+        rho = environment.atmosphere_density_1(np.linalg.norm(r[k]) - frames.WGS84_A_M)
+        w_b = quaternion.rotate(quaternion.conjugate(q[k]), wind[k])
+        drag = environment.aerodynamic_torque_1(w_b, rho, 2.2, PLATES_NORMALS, PLATES_AREAS, PLATES_CENTROIDS)
+        assert np.any(drag != 0.0)
+        tol = ORBIT_KERNEL_REL_TOL * np.abs(drag).max()
+        np.testing.assert_allclose(torque - [1e-6, -2e-6, 3e-6], drag, rtol=0.0, atol=tol)
+
+
+def test_flight_loop_solar_pressure_kernel_adds_the_torque_of_the_vectorised_model():
+    t, r, _, q = _orbit_attitudes(200)  # crosses the eclipse: zero torque in umbra
+    specular, diffuse = np.array([0.3, 0.1, 0.0, 0.5]), np.array([0.1, 0.2, 0.0, 0.3])
+    expected = environment.solar_pressure_torque_nm(
+        r, t, q, PLATES_NORMALS, PLATES_AREAS, PLATES_CENTROIDS, specular, diffuse
+    )
+    got = np.zeros_like(expected)
+    for k in range(len(r)):
+        environment.add_solar_pressure_torque_orbit_into(
+            q[k], r[k], environment.sun_position_1(t[k]), PLATES_NORMALS, PLATES_AREAS, PLATES_CENTROIDS,
+            specular, diffuse, got[k],
+        )  # fmt: skip
+    assert np.any(np.all(expected == 0.0, axis=1)) and np.any(expected != 0.0)
+    np.testing.assert_allclose(got, expected, rtol=0.0, atol=ORBIT_KERNEL_REL_TOL * np.abs(expected).max())
+
+
+# The flight loop calls these kernels at every dynamics step: an allocation there costs more than the physics.
+# numba counts its heap allocations only when NUMBA_NRT_STATS is set at start-up, hence a fresh interpreter.
+_ALLOCATION_PROBE = """
+import numpy as np
+from numba import njit
+from numba.core.runtime import rtsys
+from sim_core import environment as E
+
+@njit
+def fly(n, q, r, v, sun, normals, areas, centroids, specular, diffuse, torque):
+    for _ in range(n):
+        E.add_aerodynamic_torque_orbit_into(q, r, v, 2.2, normals, areas, centroids, torque)
+        E.add_solar_pressure_torque_orbit_into(q, r, sun, normals, areas, centroids, specular, diffuse, torque)
+
+args = (np.array([0.5, 0.5, -0.5, 0.5]), np.array([7.0e6, 0.0, 1.0e5]), np.array([0.0, 7.5e3, 100.0]),
+        np.array([1.5e11, 2e10, 0.0]), np.eye(3), np.ones(3), 0.3 * np.eye(3), np.full(3, 0.2), np.full(3, 0.1),
+        np.zeros(3))
+fly(1, *args)
+
+def allocations(n):
+    before = rtsys.get_allocation_stats().alloc
+    fly(n, *args)
+    return rtsys.get_allocation_stats().alloc - before
+
+print(allocations(1), allocations(1000), float(np.abs(args[-1]).max()))
+"""
+
+
+def test_flight_loop_surface_torque_kernels_allocate_nothing():
+    env = {"PYTHONPATH": str(Path(environment.__file__).parents[1]), "PATH": "/usr/bin:/bin", "NUMBA_NRT_STATS": "1"}
+    out = subprocess.run(
+        [sys.executable, "-c", _ALLOCATION_PROBE], env=env, capture_output=True, text=True, check=True, timeout=300
+    )
+    one_call, thousand_calls, torque = out.stdout.split()
+    assert float(torque) > 0.0  # the kernels ran and added torque
+    assert int(thousand_calls) == int(one_call)  # only the arguments' unboxing allocates, once per call of fly
 
 
 # --- bad input -------------------------------------------------------------------------------------------
