@@ -46,12 +46,32 @@ __all__ = [
 ]
 
 
+@intrinsic
+def _copy_octets(typingctx: Any, dst: Any, dst_start: Any, src: Any, src_start: Any, count: Any) -> Any:
+    """memcpy of ``count`` octets from src[src_start:] to dst[dst_start:] (contiguous uint8 arrays, in bounds: the
+    caller's duty). A numba slice assignment copies ~4 GB/s here, memcpy ~15 GB/s (issue 12)."""
+    if not all(isinstance(a, types.Array) and a.layout == "C" and a.dtype == types.uint8 for a in (dst, src)):
+        return None  # no such function: a strided view would be copied wrong
+    sig = types.void(dst, types.intp, src, types.intp, types.intp)
+
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+        to = context.make_array(signature.args[0])(context, builder, args[0])
+        of = context.make_array(signature.args[2])(context, builder, args[2])
+        to_octet, of_octet = builder.gep(to.data, [args[1]]), builder.gep(of.data, [args[3]])
+        cgutils.raw_memcpy(builder, to_octet, of_octet, args[4], 1)  # type: ignore[no-untyped-call]
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
 @njit(cache=True, nogil=True)
 def _gather(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np.ndarray:
-    """Copy the packets starting at offset into rows of an (n, L) matrix (compiled kernel)."""
+    """Copy the packets starting at offset (each within buf) into rows of an (n, L) matrix (compiled kernel; a
+    memcpy per row: 6-octet rows ~6x faster than a slice assignment)."""
     out = np.empty((offset.shape[0], packet_octets), dtype=np.uint8)
+    rows = out.reshape(-1)
     for i in range(offset.shape[0]):
-        out[i, :] = buf[offset[i] : offset[i] + packet_octets]
+        _copy_octets(rows, i * packet_octets, buf, offset[i], packet_octets)  # type: ignore[call-arg]  # typingctx: numba's
     return out
 
 
@@ -60,7 +80,7 @@ def packet_matrix(buf: np.ndarray, offset: np.ndarray, packet_octets: int) -> np
     offset = np.asarray(offset, dtype=np.int64)
     if offset.size and (offset.min() < 0 or offset.max() + packet_octets > buf.shape[0]):
         raise ValueError("offset: a packet would run past the end of the buffer")
-    return _gather(buf, offset, packet_octets)
+    return _gather(np.ascontiguousarray(buf), offset, packet_octets)
 
 
 def _reorder_octets(pattern: np.ndarray, p: Parameter) -> np.ndarray:
@@ -484,22 +504,6 @@ def _union(parts: list[tuple[np.ndarray, dict[str, np.ndarray]]], n: int) -> dic
     return out
 
 
-@intrinsic
-def _copy_octets(typingctx: Any, dst: Any, dst_start: Any, src: Any, src_start: Any, count: Any) -> Any:
-    """memcpy of ``count`` octets from src[src_start:] to dst[dst_start:] (contiguous uint8 arrays, in bounds: the
-    caller's duty). A numba slice assignment copies ~4 GB/s here, memcpy ~15 GB/s (issue 12)."""
-    sig = types.void(dst, types.intp, src, types.intp, types.intp)
-
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        to = context.make_array(signature.args[0])(context, builder, args[0])
-        of = context.make_array(signature.args[2])(context, builder, args[2])
-        to_octet, of_octet = builder.gep(to.data, [args[1]]), builder.gep(of.data, [args[3]])
-        cgutils.raw_memcpy(builder, to_octet, of_octet, args[4], 1)  # type: ignore[no-untyped-call]
-        return context.get_dummy_value()
-
-    return sig, codegen
-
-
 @njit(cache=True, nogil=True)
 def _gather_octets(buf: np.ndarray, offset: np.ndarray, length: np.ndarray) -> np.ndarray:
     """The packets at offset (of the given lengths, each within buf) back to back (compiled kernel): packets that
@@ -827,6 +831,7 @@ def decode_stream(
     packets are duplicates, as one pass over the whole stream judges them; the entries are updated.
     """
     buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, (bytes, bytearray, memoryview)) else data
+    buf = np.ascontiguousarray(buf)  # the kernels copy packets with memcpy (no copy: it is, as a rule)
     wrapped, octets_in = dictionary.packet_prefix_octets or dictionary.packet_suffix_octets, int(buf.shape[0])
     if wrapped:
         buf, taken = ccsds.unwrap_packets(buf, dictionary.packet_prefix_octets, dictionary.packet_suffix_octets)
