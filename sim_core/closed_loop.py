@@ -70,7 +70,11 @@ EV_MODE_CHANGE, EV_ALLOCATION, EV_MD_SATURATED = 1, 7, 8
 R_Q, R_W, R_QE, R_WE, R_QP, R_WP = 0, 4, 7, 11, 15, 19
 R_MD, R_TORQUE, R_R, R_OBS, R_STATUS, R_FAULTS = 22, 25, 28, 31, 32, 33
 R_MODE = 34  # onboard mode (sim_core.modes codes; −1 when the mode machine is off)
-R_WHEELS = 35  # then: speeds (nw), commands (nw), delivered torques (nw), availability after FDIR (nw)
+R_READINGS = 35  # sensor readings (Sensed.readings[0:RD_TACH]): magnetometer (3), gyro (3), star tracker (4)
+R_WHEELS = R_READINGS + 10  # then per wheel (nw each): speeds, commands, delivered torques, availability, tachometer
+
+# Slots of Sensed.readings, the sensors' last outputs as the onboard software took them (zeros: no valid sample).
+RD_MAG, RD_GYRO, RD_STAR, RD_TACH = 0, 3, 6, 10  # the tachometers' nw readings from RD_TACH on
 
 SUN_AXIS_B = np.array([0.0, 0.0, 1.0])  # solar-array normal the Sun/safe mode points at the Sun
 WHEEL_CAPTURE_RAD_S = np.radians(1.0)  # below this the wheels take over rate damping from B-dot
@@ -288,7 +292,7 @@ class Record(NamedTuple):
 
 def record_width(n_wheels: int) -> int:
     """Number of float channels per output sample for n_wheels wheels."""
-    return R_WHEELS + 4 * n_wheels
+    return R_WHEELS + 5 * n_wheels
 
 
 # --- loop state (arrays the stages update in place) -------------------------------------------------------
@@ -309,7 +313,11 @@ class Position(NamedTuple):
 class Sensed(NamedTuple):
     """Latest samples and the sensors' own state (Markov drift, held outputs). ``*_frozen`` are the outputs a frozen
     fault holds: the gyro's, Sun sensor's, earth sensor's (φ_e, θ_e, 0) and magnetometer's are NaN until the sensor
-    has given one (faults.held_sensor_faults_1), the star tracker's is its last attitude (star_tracker_faults_1)."""
+    has given one (faults.held_sensor_faults_1), the star tracker's is its last attitude (star_tracker_faults_1).
+    ``readings`` (RD_* slots) are what the record shows of the sensors: the magnetometer's field (T), the gyro's
+    rate (rad/s) and the star tracker's Λ^m of the last T_q, the tachometers' speeds (rad/s) of the last T_u, each
+    zeros while its sensor gives no valid sample (failed; the star tracker also blinded or beyond its rate limit),
+    as the telemetry sends them."""
 
     omega: np.ndarray  # gyro ω_g
     omega_prev: np.ndarray
@@ -321,6 +329,7 @@ class Sensed(NamedTuple):
     sun_frozen: np.ndarray
     earth_frozen: np.ndarray
     mag_frozen: np.ndarray
+    readings: np.ndarray  # RD_* slots: what each sensor last output under its faults, zeros when it gave no sample
 
 
 class StarSample(NamedTuple):
@@ -574,9 +583,15 @@ def _sense_stage(
     mag_normals = np.random.standard_normal(3)  # the sample's own noise normals: a noise fault scales these
     mag, _ = sensors.magnetometer_1(x[0:4], pos.b_eci, np.zeros(3), s.magnetometer_noise_t, np.inf, mag_normals)
     sensed.mag[:] = mag
-    faults_mod.held_sensor_faults_1(
+    mag_ok = faults_mod.held_sensor_faults_1(
         faults, T_MAG, t, sensed.mag, sensed.mag_frozen, s.magnetometer_noise_t, mag_normals
     )
+    readings = sensed.readings
+    for i in range(3):
+        readings[RD_MAG + i] = sensed.mag[i] if mag_ok else 0.0
+        readings[RD_GYRO + i] = sensed.omega[i] if gyro_ok else 0.0
+    for i in range(4):
+        readings[RD_STAR + i] = q_m[i] if st_ok else 0.0
     return StarSample(q_m, sig3, st_ok, gyro_ok)
 
 
@@ -1078,6 +1093,7 @@ def _record_stage(
     wheel_cmd: np.ndarray,
     delivered: np.ndarray,
     available: np.ndarray,
+    readings: np.ndarray,
     status: int,
     flags: int,
     mode: int,
@@ -1085,7 +1101,8 @@ def _record_stage(
 ) -> None:
     """One output sample (R_* channels): truth, estimate, the scenario's program Λ^p, ω^p (program axes) and
     observing flag at the sample's time, position ``r``, actuators (MD dipole, body torque, wheel commands and
-    delivered torques), wheels. Takes the arrays, not their tuples (each array passed costs a reference count)."""
+    delivered torques), wheels, the sensors' last ``readings`` (Sensed.readings). Takes the arrays, not their
+    tuples (each array passed costs a reference count)."""
     nw = wheel_cmd.shape[0]
     row[R_Q : R_Q + 4] = x[0:4]
     row[R_W : R_W + 3] = x[4:7]
@@ -1105,6 +1122,8 @@ def _record_stage(
     row[R_WHEELS + 2 * nw : R_WHEELS + 3 * nw] = delivered
     for w in range(nw):
         row[R_WHEELS + 3 * nw + w] = 1.0 if available[w] else 0.0
+    row[R_READINGS:R_WHEELS] = readings[0:RD_TACH]
+    row[R_WHEELS + 4 * nw : R_WHEELS + 5 * nw] = readings[RD_TACH : RD_TACH + nw]
 
 
 # --- initial state -----------------------------------------------------------------------------------------
@@ -1188,7 +1207,7 @@ def initial_carry(c: LoopConfig, var: Variant) -> Carry:
     held = np.full(3, np.nan)  # no output given yet (faults.held_sensor_faults_1)
     sensed = Sensed(
         np.zeros(3), np.zeros(3), drift0, held.copy(), x[0:4].copy(), np.zeros(3), np.zeros(3), held.copy(),
-        held.copy(), held.copy(),
+        held.copy(), held.copy(), np.zeros(RD_TACH + p.wheel_inertia.shape[0]),
     )  # fmt: skip
     filt = np.zeros(9)
     filt[6:9] = x[4:7]
@@ -1285,6 +1304,7 @@ def fly_variant(
     friction_flown, friction_base, m = plant.friction, c.truth.friction, act.motor
     q_est, w_est, body_torque, available = est.q, est.omega, cmd.body_torque, mon.available
     frozen_torque, wheel_alloc, dipole_alloc, mag = cmd.frozen_torque, cmd.wheel_alloc, cmd.dipole_alloc, sensed.mag
+    readings = sensed.readings
     wheel_axes, alloc_params, torque_quantum, c_pn = p.wheel_axes, act.allocation, act.torque_quantum_nm, eph.c_pn
     plate_normals, plate_areas, plate_centroids = (
         dist.surfaces.normals_b,
@@ -1353,6 +1373,7 @@ def fly_variant(
                 )
                 mode = _mode_stage(mc, t, pos, sun_b, mode_state, mode, valid, est, mon.available, cmd, ev, n_ev)
             speeds = _tachometer_stage(sens.tachometer_quantum_rad_s, faults, t, wheel_speeds)
+            readings[RD_TACH:] = speeds
             h_wheels = p.wheel_inertia * speeds
             if fdir_on:
                 star_reset = estc.kind == ESTIMATOR_MEKF
@@ -1383,7 +1404,7 @@ def fly_variant(
                 q_p, w_p, _, obs_p = program_at(prog, clk, c_pn, t, r_eci, v_eci, a_eci)
             _record_stage(
                 nq, x, q_p, w_p, obs_p, r_eci, q_est, w_est, dipole, body_torque, wheel_cmd, delivered, available,
-                status, flags, mode, rec[out_i],
+                readings, status, flags, mode, rec[out_i],
             )  # fmt: skip
             out_i += 1
 

@@ -764,6 +764,10 @@ def _trajectory(
         "wheel_torque_cmd_nm": rec[..., w0 + nw : w0 + 2 * nw],
         "wheel_torque_nm": rec[..., w0 + 2 * nw : w0 + 3 * nw],
         "wheel_available": rec[..., w0 + 3 * nw : w0 + 4 * nw] > 0.5,
+        "b_mag_b_t": rec[..., cl.R_READINGS + cl.RD_MAG : cl.R_READINGS + cl.RD_MAG + 3],
+        "omega_gyro_b_rad_s": rec[..., cl.R_READINGS + cl.RD_GYRO : cl.R_READINGS + cl.RD_GYRO + 3],
+        "q_st_ib": rec[..., cl.R_READINGS + cl.RD_STAR : cl.R_READINGS + cl.RD_STAR + 4],
+        "wheel_tachometer_rad_s": rec[..., w0 + 4 * nw : w0 + 5 * nw],
     }
     events = [
         [

@@ -51,12 +51,18 @@ SERIES_UNITS = {
     "mode": "1",
     "fault_flags": "1",
     "wheel_available": "1",
+    # sensor readings as the onboard software took them (closed_loop.Sensed.readings), zeros while a sensor gives no
+    # valid sample; names as the telemetry's (the tachometers' there: wheel_speed_rad_s)
+    "b_mag_b_t": "T",
+    "omega_gyro_b_rad_s": "rad/s",
+    "q_st_ib": "1",
+    "wheel_tachometer_rad_s": "rad/s",
 }
 
 
 @dataclass
 class Trajectory:
-    """Time histories (variant, sample, …) of truth, estimates, program, commands and actuators."""
+    """Time histories (variant, sample, …) of truth, estimates, program, commands, actuators and sensor readings."""
 
     scenario_name: str
     variant_names: list[str]

@@ -61,7 +61,7 @@ def _sensed() -> closed_loop.Sensed:
     held = np.full(3, np.nan)
     z = np.zeros(3)
     return closed_loop.Sensed(z.copy(), z.copy(), z.copy(), held.copy(), np.array([1.0, 0, 0, 0]), z.copy(), z.copy(),
-                              held.copy(), held.copy(), held.copy())  # fmt: skip
+                              held.copy(), held.copy(), held.copy(), np.zeros(closed_loop.RD_TACH))  # fmt: skip
 
 
 def _state(t: float) -> np.ndarray:
