@@ -107,8 +107,11 @@ if [ -n "${ACS_TWIN_LINT_BESIDE_WARM:-}" ]; then
   say "lint and type step (scripts/lint.sh) beside the kernel compile"
   PYTHON=.venv/bin/python bash scripts/lint.sh & lint_pid=$!
 fi
-say "compiling the kernels into numba's cache (acs-twin warm)"
-.venv/bin/acs-twin warm >&2
+# --recorded: also the kernel signatures the suite calls beyond serve's (backend/jobs/kernel_signatures.json), each
+# compiled once here rather than by whichever test process meets it first (two processes compiling the same function
+# at once can mix up its cache entries).
+say "compiling the kernels into numba's cache (acs-twin warm --recorded)"
+.venv/bin/acs-twin warm --recorded >&2
 lint_status=0
 if [ -n "$lint_pid" ]; then wait "$lint_pid" || lint_status=$?; fi
 say "running pytest (PostgreSQL: $ACS_TWIN_TEST_POSTGRES_URL)"

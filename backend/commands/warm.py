@@ -5,7 +5,9 @@ loaded 2-core machine, on the start-up's critical path. ``scripts/run.sh`` runs 
 whenever a source file of ``sim_core`` or ``telemetry`` changed, since sim_core.compiled_cache then drops the
 cache of the modules that see the change): it flies what ``serve`` flies with the same types — the emulator's
 flight with the demo's hidden fault, the decoding of its packets, the live twin synchronising on them —
-so that ``serve`` only loads machine code.
+so that ``serve`` only loads machine code. With ``--recorded`` it then compiles every signature recorded in
+:mod:`backend.jobs.kernel_signatures` (those the test suite calls: scripts/test.sh passes it, so that the
+pytest workers load the kernels instead of each compiling them).
 """
 
 from __future__ import annotations
@@ -21,6 +23,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add the ``warm`` subcommand."""
     p = sub.add_parser("warm", help="compile the server's kernels into numba's cache (run.sh does it at install)")
     p.add_argument("--scenario", default="somov-ge4-scan", help="scenario the demo satellite flies (as serve)")
+    p.add_argument(
+        "--recorded",
+        action="store_true",
+        help="also compile every kernel signature recorded from a test-suite run (scripts/test.sh passes it)",
+    )
     p.set_defaults(handler=run)
 
 
@@ -60,5 +67,14 @@ def run(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     for step, seconds in warm_kernels(args.scenario).items():
         print(f"  {step}: {seconds:.1f} s")
+    if args.recorded:
+        from backend.jobs import kernel_signatures
+
+        start = time.perf_counter()
+        report = kernel_signatures.compile_recorded(kernel_signatures.RECORD)
+        seconds = time.perf_counter() - start
+        print(f"  recorded signatures ({kernel_signatures.RECORD.name}): {report.compiled} in {seconds:.1f} s")
+        for skipped in report.skipped:
+            print(f"    skipped (numba compiles it on first call instead): {skipped}")
     print(f"acs-twin warm: kernels compiled and cached in {time.perf_counter() - t:.1f} s")
     return 0

@@ -1,0 +1,194 @@
+"""The numba signatures a run compiled, recorded from numba's cache index files and compiled again on demand.
+
+``acs-twin warm`` flies what ``serve`` flies; the test suite (and the what-if, diagnosis and camera paths) call
+further kernels, or the same ones with other argument types, which numba then compiles on first call — in each
+pytest worker and Dask worker that meets them first, one core each, minutes in all on a loaded 2-core machine.
+:func:`record` reads every signature from the cache indexes (``<module>.<function>-<line>.py311.nbi``, each a
+pickle of the cache stamp and a dict keyed by (argument types, target, ...)) of ``sim_core`` and ``telemetry``
+and writes them, by module and function name, to ``kernel_signatures.json`` beside this module;
+``acs-twin warm --recorded`` compiles each of them (:func:`compile_recorded`) so that later processes only load
+machine code. A record is only a list of what to compile: one whose function or types no longer exist is counted
+and skipped (numba compiles at call time as ever), so a stale record costs time, never a result.
+
+Regenerate after a change to the kernels' signatures: run the suite, then
+``python -m backend.jobs.kernel_signatures`` (reads the cache of this checkout, ``$NUMBA_CACHE_DIR`` if set).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import pickle
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal, cast
+
+__all__ = [
+    "RECORD",
+    "CompileReport",
+    "cache_folders",
+    "compile_recorded",
+    "decode_type",
+    "encode_type",
+    "read_cache",
+    "record",
+    "write",
+]
+
+RECORD = Path(__file__).with_name("kernel_signatures.json")
+PACKAGES = ("sim_core", "telemetry")
+
+
+def encode_type(t: Any) -> Any:
+    """A numba argument type as JSON (arrays as ``float64[2d,C]``, ``bool[1d,A,readonly]``; scalars as ``float64``;
+    literals, tuples, named tuples as objects); ValueError for others."""
+    from numba.core import types
+
+    if isinstance(t, types.Array):
+        return f"{t.dtype}[{t.ndim}d,{t.layout}{'' if t.mutable else ',readonly'}]"  # e.g. float64[2d,C]
+    if isinstance(t, types.Literal):
+        return {"literal": t.literal_value}
+    if isinstance(t, types.Boolean | types.Integer | types.Float):
+        return str(t)
+    if isinstance(t, types.NamedUniTuple):
+        cls = f"{t.instance_class.__module__}:{t.instance_class.__qualname__}"
+        return {"named_unituple": cls, "dtype": encode_type(t.dtype), "count": t.count}
+    if isinstance(t, types.NamedTuple):
+        cls = f"{t.instance_class.__module__}:{t.instance_class.__qualname__}"
+        return {"named_tuple": cls, "fields": [encode_type(f) for f in t.types]}
+    if isinstance(t, types.UniTuple):
+        return {"unituple": encode_type(t.dtype), "count": t.count}
+    if isinstance(t, types.Tuple):
+        return {"tuple": [encode_type(f) for f in t.types]}
+    raise ValueError(f"no JSON form for numba type {t!r}")
+
+
+def _scalar(name: str) -> Any:
+    import numpy as np
+    from numba.np.numpy_support import from_dtype
+
+    return from_dtype(np.dtype(name))
+
+
+def _class(ref: str) -> type:
+    module, _, qualname = ref.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in qualname.split("."):
+        obj = getattr(obj, part)
+    return obj  # type: ignore[no-any-return]
+
+
+def decode_type(value: Any) -> Any:
+    """The numba type :func:`encode_type` wrote (ValueError, ImportError or AttributeError if it is gone)."""
+    from numba.core import types
+
+    if isinstance(value, str) and "[" in value:
+        dtype, _, shape = value.rstrip("]").partition("[")
+        ndim, layout, *readonly = shape.split(",")
+        if layout not in ("C", "F", "A"):
+            raise ValueError(f"unknown array layout in {value!r}")
+        order = cast(Literal["C", "F", "A"], layout)
+        return types.Array(_scalar(dtype), int(ndim.rstrip("d")), order, readonly=readonly == ["readonly"])
+    if isinstance(value, str):
+        return _scalar(value)
+    if "literal" in value:
+        return types.literal(value["literal"])
+    if "named_unituple" in value:
+        return types.NamedUniTuple(decode_type(value["dtype"]), value["count"], _class(value["named_unituple"]))
+    if "named_tuple" in value:
+        return types.NamedTuple([decode_type(f) for f in value["fields"]], _class(value["named_tuple"]))
+    if "unituple" in value:
+        return types.UniTuple(decode_type(value["unituple"]), value["count"])
+    if "tuple" in value:
+        return types.Tuple([decode_type(f) for f in value["tuple"]])
+    raise ValueError(f"unknown recorded type {value!r}")
+
+
+def read_cache(cache_dirs: dict[str, list[Path]]) -> dict[str, dict[str, list[list[Any]]]]:
+    """Per ``package.module``, per function name: the encoded argument types of every signature in the cache
+    indexes under ``cache_dirs`` (package -> its cache folders), sorted; functions nested in others are left out."""
+    found: dict[str, dict[str, set[str]]] = {}
+    for package, dirs in cache_dirs.items():
+        for d in dirs:
+            for index in sorted(d.glob("*.nbi")):
+                stem = index.name.split("-")[0]  # <module>.<qualname>-<line>.py<ver>.nbi
+                module, _, function = stem.partition(".")
+                if not function or "." in function:
+                    continue
+                with index.open("rb") as f:
+                    pickle.load(f)  # numba's version
+                    _stamp, overloads = pickle.loads(f.read())
+                for key in overloads:
+                    try:
+                        sig = json.dumps([encode_type(t) for t in key[0]], sort_keys=True)
+                    except ValueError as exc:
+                        print(f"kernel_signatures: {package}.{module}.{function} left out: {exc}", file=sys.stderr)
+                        continue
+                    found.setdefault(f"{package}.{module}", {}).setdefault(function, set()).add(sig)
+    return {
+        m: {fn: [json.loads(s) for s in sorted(sigs)] for fn, sigs in sorted(fns.items())}
+        for m, fns in sorted(found.items())
+    }
+
+
+def cache_folders(package_dir: Path) -> list[Path]:
+    """Where numba caches a package's kernels: the ``__pycache__`` folders beside its sources or, with
+    ``NUMBA_CACHE_DIR`` set, the folders numba names after the package there (``sim_core_<hash of its path>``)."""
+    user = os.environ.get("NUMBA_CACHE_DIR")
+    if user:
+        return sorted(p for p in Path(user).glob(f"{package_dir.name}_*") if p.is_dir())
+    return sorted(p for p in package_dir.rglob("__pycache__") if p.is_dir())
+
+
+def record(path: Path = RECORD) -> int:
+    """Write the signatures in this checkout's numba cache (``sim_core``, ``telemetry``) to ``path``; how many."""
+    root = Path(__file__).resolve().parents[2]
+    return write(read_cache({p: cache_folders(root / p) for p in PACKAGES}), path)
+
+
+def write(signatures: dict[str, dict[str, list[list[Any]]]], path: Path = RECORD) -> int:
+    """Write ``signatures`` (as :func:`read_cache` returns them) to ``path``, one signature a line; how many."""
+    lines = ["{"]
+    for i, (module, functions) in enumerate(signatures.items()):
+        lines.append(f"{json.dumps(module)}: {{")
+        for j, (function, sigs) in enumerate(functions.items()):
+            lines.append(f" {json.dumps(function)}: [")
+            lines += [f"  {json.dumps(sig, sort_keys=True)}," for sig in sigs]
+            lines[-1] = lines[-1].rstrip(",")
+            lines.append(" ]" + ("," if j < len(functions) - 1 else ""))
+        lines.append("}" + ("," if i < len(signatures) - 1 else ""))
+    lines.append("}")
+    path.write_text("\n".join(lines) + "\n")
+    return sum(len(sigs) for fns in signatures.values() for sigs in fns.values())
+
+
+@dataclass(frozen=True)
+class CompileReport:
+    """What :func:`compile_recorded` did: signatures compiled or loaded, and those skipped (gone or failing)."""
+
+    compiled: int
+    skipped: list[str]
+
+
+def compile_recorded(path: Path = RECORD) -> CompileReport:
+    """Compile (or load from the cache) every signature recorded in ``path`` into numba's cache."""
+    recorded = json.loads(path.read_text()) if path.is_file() else {}
+    compiled, skipped = 0, []
+    for module_name, functions in recorded.items():
+        for function, signatures in functions.items():
+            for sig in signatures:
+                where = f"{module_name}.{function}"
+                try:
+                    dispatcher = getattr(importlib.import_module(module_name), function)
+                    dispatcher.compile(tuple(decode_type(t) for t in sig))
+                except Exception as exc:  # a stale record: numba compiles at call time instead
+                    skipped.append(f"{where}: {type(exc).__name__}: {exc}".splitlines()[0][:200])
+                    continue
+                compiled += 1
+    return CompileReport(compiled, skipped)
+
+
+if __name__ == "__main__":
+    print(f"kernel_signatures: {record()} signatures recorded in {RECORD}")
