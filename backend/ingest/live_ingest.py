@@ -35,6 +35,7 @@ if TYPE_CHECKING:
         | tuple[Literal["error"], str]
         | tuple[Literal["batch"], tuple[str, SampleBatch]]  # (satellite, its decoded batch: raw packets stripped)
         | tuple[Literal["stats"], Tallies]
+        | tuple[Literal["stopped"], None]  # the last message: the server's relay ends on it
     )
     Outbox: TypeAlias = Queue[OutboxMessage]
 
@@ -207,3 +208,4 @@ async def _serve(
             task.cancel()
         outbox.put(("stats", {**dataclasses.asdict(stream.stats), **tally}))
         archive.close()
+        outbox.put(("stopped", None))

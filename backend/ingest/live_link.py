@@ -117,6 +117,8 @@ class LiveLink:
         return port
 
     def _relay_loop(self, child: _LiveChild) -> None:
+        """Hand on the child's batches and tallies until its last message (or, if it died without one, until it is
+        gone and the outbox empty)."""
         while True:
             try:
                 message = child.outbox.get(timeout=RELAY_POLL_S)
@@ -129,6 +131,8 @@ class LiveLink:
                     self._stats = tallies
                 case ("batch", (satellite, batch)):
                     self._on_batch(satellite, batch)
+                case ("stopped", _):
+                    return
 
     async def stop(self) -> None:
         """Stop the ingest process (it archives what is pending first) and the relay thread."""

@@ -120,7 +120,7 @@ def test_a_server_job_on_a_separately_started_cluster_equals_the_engine(schedule
             "running",
         ):
             assert time.monotonic() < deadline, job
-            time.sleep(0.5)
+            time.sleep(0.1)
     assert job["status"] == "succeeded", job["error"]
     direct = engine.simulate(apply_overrides(scenario_library.get("somov-ge4-scan"), ["duration_s=20"]))
     expected = {k: v for k, v in direct.summary(0).items() if k != "wall_time_s"}

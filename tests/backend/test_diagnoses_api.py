@@ -51,7 +51,7 @@ def test_diagnosis_started_over_rest_names_the_hidden_wheel_failure(tmp_path: Pa
         deadline = time.monotonic() + POLL_TIMEOUT_S
         while (run := client.get(f"/api/v1/diagnoses/{run_id}", headers=operator).json())["status"] == "running":
             assert time.monotonic() < deadline
-            time.sleep(0.5)
+            time.sleep(0.1)
         assert run["status"] == "succeeded", run["error"]
         top = run["result"]["hypotheses"][0]
         assert (top["fault"], top["wheel"]) == ("failure", FAILED_WHEEL + 1)

@@ -182,7 +182,7 @@ def test_engine_job_returns_exactly_what_sim_core_engine_computes(tmp_path: Path
             "running",
         ):
             assert time.monotonic() < deadline, job
-            time.sleep(0.5)
+            time.sleep(0.1)
         assert job["status"] == "succeeded", job["error"]
         series = client.get(
             f"/api/v1/simulations/{job_id}/series/omega_b_rad_s?max_points=100000", headers=operator

@@ -55,7 +55,7 @@ def _wait(client: TestClient, session_id: str, headers: dict[str, str]) -> dict:
         "running",
     ):
         assert time.monotonic() < deadline, session
-        time.sleep(0.5)
+        time.sleep(0.1)
     return session
 
 
