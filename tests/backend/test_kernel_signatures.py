@@ -1,10 +1,11 @@
-"""The kernel signatures ``acs-twin warm --recorded`` compiles: read from numba's cache indexes, compiled again from
-the record, and a record that still names the kernels of sim_core and telemetry."""
+"""The kernel signatures ``acs-twin warm --recorded`` compiles: read from numba's cache indexes and compiled again
+from the record, an entry whose kernel changed or went skipped (a stale record costs compile time in the tests, never
+a result: ``acs-twin warm --recorded`` names each skipped entry; regenerate with ``python -m
+backend.jobs.kernel_signatures`` after a suite run)."""
 
 from __future__ import annotations
 
 import importlib
-import inspect
 import json
 import subprocess
 import sys
@@ -12,7 +13,6 @@ from pathlib import Path
 
 import pytest
 
-from backend.jobs import kernel_signatures
 from backend.jobs.kernel_signatures import compile_recorded, decode_type, encode_type, read_cache
 
 KERNEL = """
@@ -45,15 +45,16 @@ def test_the_signatures_another_process_compiled_are_read_from_its_cache_index(k
     assert found == {"kernpkg.kern": {"twice": [["float64"], ["float64[1d,C]"]]}}
 
 
-def test_a_record_is_compiled_into_the_dispatcher_and_a_gone_kernel_is_skipped(
+def test_a_record_is_compiled_into_the_dispatcher_and_a_changed_or_gone_kernel_is_skipped(
     kernel_package: Path, tmp_path: Path
 ) -> None:
     record = tmp_path / "record.json"
     array = "float64[2d,C,readonly]"
-    record.write_text(json.dumps({"kernpkg.kern": {"twice": [[array], ["int64"]], "gone": [["float64"]]}}))
+    stale = ["int64", "int64"]  # the kernel since lost an argument
+    record.write_text(json.dumps({"kernpkg.kern": {"twice": [[array], ["int64"], stale], "gone": [["float64"]]}}))
     report = compile_recorded(record)
     assert report.compiled == 2
-    assert len(report.skipped) == 1 and report.skipped[0].startswith("kernpkg.kern.gone: AttributeError")
+    assert [s.split(":")[0] for s in report.skipped] == ["kernpkg.kern.twice", "kernpkg.kern.gone"]
     twice = importlib.import_module("kernpkg.kern").twice
     assert {tuple(encode_type(t) for t in sig) for sig in twice.signatures} == {(array,), ("int64",)}
 
@@ -75,20 +76,3 @@ def test_types_round_trip_through_their_json_form() -> None:
         plant,
     ):
         assert decode_type(json.loads(json.dumps(encode_type(t)))) == t
-
-
-def test_every_recorded_signature_names_a_kernel_of_sim_core_or_telemetry() -> None:
-    """Regenerate with ``python -m backend.jobs.kernel_signatures`` after a suite run if this fails."""
-    from numba.core.registry import CPUDispatcher
-
-    recorded = json.loads(kernel_signatures.RECORD.read_text())
-    assert recorded, "the record is empty"
-    for module_name, functions in recorded.items():
-        assert module_name.split(".")[0] in kernel_signatures.PACKAGES
-        module = importlib.import_module(module_name)
-        for function, signatures in functions.items():
-            kernel = getattr(module, function, None)
-            assert isinstance(kernel, CPUDispatcher), f"{module_name}.{function} is no longer a numba kernel"
-            parameters = len(inspect.signature(kernel.py_func).parameters)
-            for sig in signatures:
-                assert len([decode_type(t) for t in sig]) == parameters, f"{module_name}.{function}{sig}"
