@@ -160,6 +160,8 @@ class EstimatorConfig(NamedTuple):
     orbit_rate_rad_s: float  # ω_o the observer's Φ, Γ were built with
     observer_initial: np.ndarray  # (φ̂, θ̂, ψ̂) at t = 0 when observer_initial_given
     observer_initial_given: bool  # else the first earth-sensor sample with ψ̂ = 0
+    observer_gain_min: float  # seed 002 eq 15: the smallest and largest of K_φ, K_θ, K_ψ (FDIR's gyro/earth split)
+    observer_gain_max: float
 
 
 class LawConfig(NamedTuple):
@@ -377,6 +379,7 @@ class Monitors(NamedTuple):
     gyro: np.ndarray
     mag: np.ndarray
     earth: np.ndarray
+    witness: np.ndarray  # the gyros against the dynamics (fdir.rate_witness_step_1), seed 002's observer only
     available: np.ndarray
     decouple: np.ndarray
     j_eff_inv: np.ndarray
@@ -697,11 +700,15 @@ def _mekf_stage(
 def _earth_observer_stage(
     e: EstimatorConfig,
     s: SensorModels,
+    p: PlantArrays,
+    n_sigma: float,
     fdir_on: bool,
     faults: np.ndarray,
     k: int,
     t: float,
+    t_q: float,
     x: np.ndarray,
+    tach_speeds: np.ndarray,
     pos: Position,
     sensed: Sensed,
     gyro_ok: bool,
@@ -718,18 +725,31 @@ def _earth_observer_stage(
     s² + K_φ s + ω_o (ω_o + K_ψ). The law reads Λ = Λ_o ∘ [ψ̂]_1 ∘ [θ̂]_3 ∘ [φ̂]_2 (earth_observer.
     attitude_from_angles_1, Λ_o the orbit frame where the spacecraft is) and the gyro's body rate (eq 15 has no
     gyro-bias state, so the rate is the gyro's as measured). The earth sensor is screened by FDIR when the variant
-    flies it (fdir.earth_sensor_check_1 against the estimate, with the observer's steady-state error covariance);
-    a rejected or failed sample leaves the step to the gyros (φ_m, θ_m := φ̂, θ̂). Starts from
+    flies it (fdir.earth_witness_check_1 against the estimate, with the observer's steady-state error covariance),
+    the gyros against the rigid-body dynamics of the model plant ``p`` and the tachometers ``tach_speeds``
+    (fdir.rate_witness_step_1: the gravity gradient at the estimated attitude, known to the screen's limit + the
+    earth noise bound), so that the one residual of two sensors is not blamed on the earth sensor when the gyro
+    drifts; a rejected or failed sample leaves the step to the gyros (φ_m, θ_m := φ̂, θ̂). Starts from
     ``e.observer_initial`` or the first earth sample with ψ̂ = 0. Returns whether the earth sample was used."""
     f = est.filter_state
     angles, earth_ok = _earth_sensor_angles_1(
         s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r, sensed.earth_frozen
     )
+    chi = -2.0 * np.log(fdir.FALSE_ALARM_PROBABILITY)
+    p_max = max(est.covariance[0, 0], est.covariance[1, 1], est.covariance[2, 2])
+    att_bound = np.sqrt(chi) * (np.sqrt(s.earth_sigma_rad**2 + p_max) + s.earth_sigma_rad)
+    if fdir_on and gyro_ok and k > 0:
+        fdir.rate_witness_step_1(
+            mon.witness, t, t_q, sensed.omega, tach_speeds, p.inertia, p.wheel_axes, p.wheel_inertia,
+            s.tachometer_quantum_rad_s, s.gyro_noise_rad_s, s.gyro_markov_sigma_rad_s,
+            conjugate_rotate_1(est.q, pos.r), att_bound, n_sigma, ev, n_ev,
+        )  # fmt: skip
     if fdir_on and earth_ok:
         nadir = sensors.nadir_from_roll_pitch_1(angles[0], angles[1])
-        earth_ok = fdir.earth_sensor_check_1(
-            mon.earth, est.q, est.covariance, nadir, -pos.r, s.earth_sigma_rad, ev, n_ev, t
-        )
+        earth_ok = fdir.earth_witness_check_1(
+            mon.earth, mon.witness, est.q, est.covariance, nadir, -pos.r, s.earth_sigma_rad, e.observer_gain_min,
+            e.observer_gain_max, t_q, ev, n_ev, t,
+        )  # fmt: skip
     if k == 0:
         if e.observer_initial_given:
             f[0:3] = e.observer_initial
@@ -1153,6 +1173,7 @@ def _initial_monitors(p: PlantArrays, gyro_drift_density: float, available: np.n
         gyro,
         np.full(fdir.MAG_STATE_SIZE, np.nan),
         np.zeros(fdir.EARTH_STATE_SIZE),
+        fdir.witness_state_1(),
         available.copy(),
         fdir.wheel_decoupling_1(p.wheel_axes, p.wheel_inertia, j_eff_inv),
         j_eff_inv,
@@ -1348,9 +1369,11 @@ def fly_variant(
             elif estc.kind == ESTIMATOR_TRIAD:
                 valid = _triad_stage(sens, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, est)
             elif estc.kind == ESTIMATOR_EARTH_OBSERVER:
+                tach = _tachometer_stage(sens.tachometer_quantum_rad_s, faults, t, wheel_speeds)
                 valid = _earth_observer_stage(
-                    estc, sens, fdir_on, faults, k, t, x, pos, sensed, sample.gyro_ok, est, mon, ev, n_ev
-                )
+                    estc, sens, p, c.fdir.n_sigma, fdir_on, faults, k, t, t_q, x, tach, pos, sensed, sample.gyro_ok,
+                    est, mon, ev, n_ev,
+                )  # fmt: skip
             elif estc.kind == ESTIMATOR_SEED000 or estc.kind == ESTIMATOR_SEED003:
                 q_p, w_p, _, _ = program_at(prog, clk, c_pn, t, r_eci, v_eci, a_eci)
                 _mismatch_filter_stage(estc, t_q, q_p, w_p, sensed, sample, est)

@@ -616,6 +616,8 @@ def _estimator_config(s: Scenario, orbit_rate_rad_s: float) -> closed_loop.Estim
         float(orbit_rate_rad_s),
         np.array(est.observer_initial_rad or [0.0, 0.0, 0.0], dtype=float),
         est.observer_initial_rad is not None,
+        float(np.min(gains)),
+        float(np.max(gains)),
     )
 
 

@@ -65,7 +65,15 @@ Sensors (seed 000 §4 measurements, seed 003 §3.2 preprocessing flags):
   change from the calibration windows beyond the noise bound is drift; on isolation the MEKF's bias
   process noise is widened to the observed drift, so the filter tracks it;
 - magnetometer: the field magnitude against the onboard model's (attitude-free); spikes beyond
-  the noise bound are replaced by the model field rotated by the estimated attitude.
+  the noise bound are replaced by the model field rotated by the estimated attitude;
+- gyros and earth sensor without a star tracker (seed 002's observer, eq 15): the earth sample against the
+  estimate is one residual for two sensors, so a third witness, the gyros against the rigid-body dynamics
+  (:func:`rate_witness_step_1`: the body momentum from the tachometers, every wheel torque internal, propagated
+  over windows of up to 600 s, its error bounded from the gyro noise and Markov drift), decides whom an earth alarm
+  blames (:func:`earth_witness_check_1`): a gyro it isolated explains a slow disagreement; the earth sensor only
+  when the gyro bias the disagreement needs is beyond what the witness allows, or the sample stands out from the
+  running mean of the innovation (its own noise or jump); otherwise the alarm is ``fault_detected`` with
+  :data:`AMBIGUOUS_ARG` (both candidates) and nothing is isolated. A tachometer fault looks like a gyro fault to it.
 
 Events (codes of :data:`sim_core.trajectory.EVENT_NAMES`): ``fault_detected``, ``fault_isolated``
 (argument: wheel index 0..3, or ``SENSOR_ARG + 10 · target code + axis`` for sensors, target codes
@@ -83,6 +91,7 @@ from scipy.stats import chi2, norm
 
 from sim_core import allocation
 from sim_core.modes import MODE_FAULT
+from sim_core.orbit import MU_EARTH_M3_S2
 from sim_core.quaternion import conjugate_rotate_1
 from sim_core.wheels import friction_torque_one_wheel, limited_motor_torque_1
 
@@ -119,6 +128,12 @@ __all__ = [
     "star_reset_1",
     "earth_sensor_check_1",
     "EARTH_STATE_SIZE",
+    "WITNESS_STATE_SIZE",
+    "AMBIGUOUS_ARG",
+    "witness_state",
+    "witness_state_1",
+    "rate_witness_step_1",
+    "earth_witness_check_1",
     "gyro_drift_step_1",
     "magnetometer_check_1",
     "wheel_residuals",
@@ -724,6 +739,204 @@ def earth_sensor_check_1(
     return False
 
 
+# --- gyro vs the rigid-body dynamics (a third witness where no star tracker flies) ------------------------------
+
+RW_ANCHORS = 10  # windows ending now, starting every RW_EVERY_S: the oldest spans 540–600 s
+RW_EVERY_S = 60.0
+RW_INNOVATION_TAU_S = 10.0  # the earth innovation's running mean: σ_e √(T_q/2τ) = 0.07 σ_e at T_q = 0.1 s
+RW_COUNT, RW_ISOLATED, RW_NEXT, RW_HEAD, RW_N, RW_AMBIGUOUS, RW_REACH, RW_NU_V, RW_NU_N = range(9)
+RW_NU, RW_HWPREV, RW_A0 = 9, 12, 15  # running mean of the earth innovation (3), previous wheel momentum (3), anchors
+RW_ANCHOR_SIZE = 5  # anchor time, H_b propagated from it (3), the bound on √E of its error
+WITNESS_STATE_SIZE = RW_A0 + RW_ANCHORS * RW_ANCHOR_SIZE
+CHI3_SIGMAS = float(np.sqrt(chi2.isf(FALSE_ALARM_PROBABILITY, 3)))  # |3-D Gaussian| / σ not exceeded but w.p. P_FA
+AMBIGUOUS_ARG = SENSOR_ARG + 10 * T_EARTH + 9  # fault_detected: the earth sensor or a gyro, the evidence cannot tell
+
+
+def witness_state() -> np.ndarray:
+    """Fresh rate-witness state (no anchor yet, so no bias change excluded; :func:`rate_witness_step_1`)."""
+    return witness_state_1()
+
+
+@njit(cache=True)
+def witness_state_1() -> np.ndarray:
+    """Compiled :func:`witness_state`."""
+    s = np.zeros(WITNESS_STATE_SIZE)
+    s[RW_REACH] = np.inf
+    return s
+
+
+@njit(cache=True)
+def _rotate_by_1(v: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
+    """v seen from a frame that turned by w dt (Rodrigues, angle −|w| dt): a body-fixed vector's new components."""
+    n = np.sqrt(w @ w)
+    if n * dt == 0.0:
+        return v.copy()
+    k = w / n
+    a = -n * dt
+    out: np.ndarray = v * np.cos(a) + np.cross(k, v) * np.sin(a) + k * (k @ v) * (1.0 - np.cos(a))
+    return out
+
+
+@njit(cache=True)
+def rate_witness_step_1(
+    state: np.ndarray,
+    t: float,
+    dt: float,
+    w_gyro: np.ndarray,
+    speeds: np.ndarray,
+    inertia: np.ndarray,
+    axes: np.ndarray,
+    wheel_inertia: np.ndarray,
+    tach_q: float,
+    sigma_g: float,
+    sigma_b: float,
+    r_b: np.ndarray,
+    att_bound: float,
+    n_sigma: float,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+) -> None:
+    """One T_q step of the gyro-vs-dynamics test (seed 000 eq 1, seed 002 eq 13): the body momentum
+    H_b = J ω + A J_r Ω̃ (Ω̃ the tachometers, relative to the body) obeys Ḣ_b = M_gg − ω × H_b, every wheel torque
+    (motor, friction, seed 002 noise, a fault) being internal; from an anchor H_b = J ω̃ + A J_r Ω̃ it is propagated
+    with its own body rate ω_H = J⁻¹(H_b − A J_r Ω̃) (Heun, exact rotations; a gyro fault never enters it) and the
+    gravity gradient at the estimated attitude (``r_b``, the position in estimated body axes), and ρ = ω̃ − ω_H.
+    ω_H's error δω = J⁻¹δH starts as the anchor sample's (white noise + Markov drift, eq 13, Gaussian:
+    |δω₀| ≤ χ₃ σ_r, σ_r = √(σ_g² + σ_b²), χ₃² the χ²(3) quantile at FALSE_ALARM_PROBABILITY) and evolves as
+    δḢ = δM − δω × H − ω × δH: the second term keeps E = δHᵀJ⁻¹δH (the gyroscopic coupling only turns the error),
+    the third changes √E by at most ½ λ √E, λ = |ω| (J_max − J_min)/J_min, and the gravity gradient's error over the
+    attitude error δ = ``att_bound``, |δM| ≤ 3μ/r³ (J_max − J_min) δ, by |δM|/√J_min; so |δω| ≤ √(E/J_min) with
+    √E ≤ e^{λa/2} (√J_max |δω₀| + ∫ |δM| dt/√J_min) over the window's age a.
+    A healthy gyro keeps, per axis i, |ρ_i| ≤ n_σ σ_r + √(E/J_min) + Σ_p |(J⁻¹A)_ip| J_r q (two readings ± q/2).
+    Windows start every ``RW_EVERY_S`` (``RW_ANCHORS`` of them); ``CONFIRM_PERIODS`` steps beyond the bound on any
+    window isolate a gyro axis (a wheel fault cannot: its torque is internal): the one with the largest ratio in the
+    oldest window (a window started after the fault starts from the drifted rate, and the nutation it then predicts
+    spills to the other axes). ``state[RW_REACH]``: the gyro error the oldest window allows, max_i |ρ_i| + bound_i
+    (what :func:`earth_witness_check_1` weighs). Torques neither modelled nor bounded here (aerodynamic, solar
+    pressure, a residual dipole) must be small against J_min times the bound over 600 s."""
+    if state[RW_ISOLATED] != 0.0:
+        return
+    j_inv = np.linalg.inv(inertia)
+    eig = np.linalg.eigvalsh(inertia)
+    hw = axes @ (wheel_inertia * speeds)
+    ja = j_inv @ axes
+    quant = np.zeros(3)
+    for i in range(3):
+        for p in range(wheel_inertia.shape[0]):
+            quant[i] += abs(ja[i, p]) * wheel_inertia[p] * tach_q
+    hw_prev = state[RW_HWPREV : RW_HWPREV + 3].copy()
+    state[RW_HWPREV : RW_HWPREV + 3] = hw
+    rn = np.sqrt(r_b @ r_b)
+    m_gg = 3.0 * MU_EARTH_M3_S2 / rn**5 * np.cross(r_b, inertia @ r_b)
+    gg_err = 3.0 * MU_EARTH_M3_S2 / rn**3 * (eig[2] - eig[0]) * att_bound
+    sigma_r = np.sqrt(sigma_g * sigma_g + sigma_b * sigma_b)
+    lam = (np.sqrt(w_gyro @ w_gyro) + CHI3_SIGMAS * sigma_r) * (eig[2] - eig[0]) / eig[0]
+    n = int(state[RW_N])
+    worst, axis, reach, oldest_age = 0.0, 0, np.inf, -1.0
+    for s in range(n):
+        o = RW_A0 + s * RW_ANCHOR_SIZE
+        h_old = state[o + 1 : o + 4].copy()
+        w_old = j_inv @ (h_old - hw_prev)  # the witness's own body rate (Heun): no gyro in the propagation
+        w_new = j_inv @ (_rotate_by_1(h_old, w_old, dt) + dt * m_gg - hw)
+        h = _rotate_by_1(h_old, 0.5 * (w_old + w_new), dt) + dt * m_gg
+        state[o + 1 : o + 4] = h
+        state[o + 4] += dt * (0.5 * lam * state[o + 4] + gg_err / np.sqrt(eig[0]))
+        rho = w_gyro - j_inv @ (h - hw)
+        age = t - state[o]
+        r_max, w_worst, w_axis = 0.0, 0.0, 0
+        for i in range(3):
+            bound = n_sigma * sigma_r + state[o + 4] / np.sqrt(eig[0]) + quant[i] + NUMERICAL_FLOOR_NMS
+            r_max = max(r_max, abs(rho[i]) + bound)
+            if abs(rho[i]) / bound > w_worst:
+                w_worst, w_axis = abs(rho[i]) / bound, i
+        worst = max(worst, w_worst)
+        if age > oldest_age:
+            oldest_age, reach, axis = age, r_max, w_axis
+    state[RW_REACH] = reach
+    if t >= state[RW_NEXT]:  # a new window starts here (it replaces the oldest)
+        o = RW_A0 + int(state[RW_HEAD]) * RW_ANCHOR_SIZE
+        state[o] = t
+        state[o + 1 : o + 4] = inertia @ w_gyro + hw
+        state[o + 4] = np.sqrt(eig[2]) * CHI3_SIGMAS * sigma_r  # √E₀ bound
+        state[RW_HEAD] = (state[RW_HEAD] + 1.0) % RW_ANCHORS
+        state[RW_N] = min(n + 1, RW_ANCHORS)
+        state[RW_NEXT] = t + RW_EVERY_S
+    if worst <= 1.0:
+        state[RW_COUNT] = 0.0
+        return
+    state[RW_COUNT] += 1.0
+    arg = SENSOR_ARG + 10 * T_GYRO + axis
+    if state[RW_COUNT] == 1.0:
+        _emit(ev, n_ev, t, EV_DETECTED, arg)
+    if state[RW_COUNT] >= CONFIRM_PERIODS:
+        state[RW_ISOLATED] = 1.0
+        _emit(ev, n_ev, t, EV_ISOLATED, arg)
+        _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_GYRO)
+
+
+@njit(cache=True)
+def earth_witness_check_1(
+    state: np.ndarray,
+    witness: np.ndarray,
+    q_est: np.ndarray,
+    p_cov: np.ndarray,
+    nadir_b: np.ndarray,
+    nadir_ref_i: np.ndarray,
+    sigma_earth: float,
+    k_min: float,
+    k_max: float,
+    dt: float,
+    ev: np.ndarray,
+    n_ev: np.ndarray,
+    t: float,
+) -> bool:
+    """The earth-sensor screen (:func:`earth_sensor_check_1`) where the gyros are its only partner (seed 002's
+    observer, eq 15, gains K_min..K_max): one residual for two sensors, so a rejected sample blames the earth sensor
+    only when the gyro is cleared. Cleared: (a) a gyro bias explaining the estimate's error ē (the running mean ν̄ of
+    the innovation over ``RW_INNOVATION_TAU_S``, less its χ²(2) noise bound) needs, in the observer's steady state, a
+    bias change K_min |ē|, more than the dynamics witness allows (``RW_REACH``: seen in a window of up to 600 s,
+    ≥ 4.8/K_min for the song-table1 gains); or (b) this sample's innovation less its own noise bound exceeds what the
+    estimate's error can be (|ν̄| + noise + what it can move in τ: τ (reach + K_max |ν̄|)) — a jump or noise of the
+    sensor itself. A gyro the witness isolated explains any slow disagreement (the sample is used), not (b) (its
+    reach frozen at the isolation). Neither cleared nor
+    convicted: ``fault_detected`` with AMBIGUOUS_ARG (once), the sample used (as without FDIR). True: use it."""
+    ref = nadir_ref_i / np.sqrt(nadir_ref_i @ nadir_ref_i)
+    pred = conjugate_rotate_1(q_est, ref)
+    d = np.cross(pred, nadir_b)
+    n = witness[RW_NU_N] + 1.0
+    alpha = max(1.0 / n, min(1.0, dt / RW_INNOVATION_TAU_S))
+    witness[RW_NU_N] = n
+    witness[RW_NU : RW_NU + 3] += alpha * (d - witness[RW_NU : RW_NU + 3])
+    witness[RW_NU_V] = (1.0 - alpha) ** 2 * witness[RW_NU_V] + alpha * alpha  # variance of ν̄ in σ_e² per axis
+    s2 = sigma_earth**2 + max(p_cov[0, 0], p_cov[1, 1], p_cov[2, 2])
+    chi = -2.0 * np.log(FALSE_ALARM_PROBABILITY)
+    if (d @ d) / s2 <= chi:
+        state[ES_COUNT] = 0.0
+        return True
+    nu = np.sqrt(witness[RW_NU : RW_NU + 3] @ witness[RW_NU : RW_NU + 3])
+    nu_noise = np.sqrt(chi * witness[RW_NU_V]) * sigma_earth
+    reach = witness[RW_REACH]
+    lag = RW_INNOVATION_TAU_S * (reach + k_max * (nu + nu_noise))
+    by_sample = np.sqrt(d @ d) - np.sqrt(chi) * sigma_earth > nu + nu_noise + lag
+    if witness[RW_ISOLATED] != 0.0 and not by_sample:
+        state[ES_COUNT] = 0.0
+        return True
+    by_mean = reach < k_min * (nu - nu_noise)
+    if not (by_mean or by_sample):
+        if witness[RW_AMBIGUOUS] == 0.0:
+            witness[RW_AMBIGUOUS] = 1.0
+            _emit(ev, n_ev, t, EV_DETECTED, AMBIGUOUS_ARG)
+        state[ES_COUNT] = 0.0
+        return True
+    state[ES_COUNT] += 1.0
+    if state[ES_COUNT] == 1.0:
+        _emit(ev, n_ev, t, EV_DETECTED, SENSOR_ARG + 10 * T_EARTH)
+    if state[ES_COUNT] == CONFIRM_PERIODS and state[ES_ISOLATED] == 0.0:
+        state[ES_ISOLATED] = 1.0
+        _emit(ev, n_ev, t, EV_ISOLATED, SENSOR_ARG + 10 * T_EARTH)
+    return False
+
+
 @njit(cache=True)
 def star_reset_1(state: np.ndarray, p_cov: np.ndarray, sigma_att: float) -> None:
     """After an actuator reconfiguration (a seizing wheel kicks the body faster than the filter models), trust
@@ -1011,6 +1224,8 @@ def describe_event(name: str, arg: int) -> str:
     if arg >= SENSOR_ARG:
         code, axis = divmod(arg - SENSOR_ARG, 10)
         sensor = _TARGET_NAMES.get(code, f"sensor {code}")
+        if arg == AMBIGUOUS_ARG:
+            return "earth_sensor or gyro (the evidence cannot tell which: none isolated)"
         return sensor if name == "reconfigured" or code in (T_STAR, T_EARTH) else f"{sensor} axis {'xyz'[axis]}"
     if name == "reconfigured":
         wheels = [str(p + 1) for p in range(8) if arg >> p & 1]

@@ -552,6 +552,88 @@ def test_magnetometer_spike_is_replaced_by_the_model_and_an_attitude_error_is_no
     assert fdir.magnetometer_check_1(state, turned, model, SIGMA_MAG, n_sig, ev, n_ev, 9.5e3)
 
 
+J_SONG = np.diag([20.0, 18.0, 15.0])  # song-table1's bus, kg·m²; three orthogonal 0.01 kg·m² wheels
+J_R3 = np.full(3, 0.01)
+SIGMA_G = 1e-6  # gyro white noise per sample, rad/s
+
+
+def _spin_up(drift_axis: int | None, drift: float = 1e-7, onset: float = 100.0, seconds: float = 600.0):
+    """The rate witness over a torque-free body turning about its z principal axis while the z wheel speeds up
+    (H_z = J_zz ω_z + J_r Ω_z conserved exactly, ω ∥ H: no precession; position along z: no gravity-gradient
+    torque), read by gyros with white noise and, on ``drift_axis``, a bias ramp from ``onset``."""
+    rng = np.random.default_rng(13)
+    state = fdir.witness_state()
+    ev, n_ev = np.zeros((64, 3)), np.zeros(1, dtype=np.int64)
+    h_z, r_b, n_sig = 0.2, np.array([0.0, 0.0, 7.0e6]), fdir.gaussian_sigmas()
+    for k in range(int(seconds / T_Q) + 1):
+        t = k * T_Q
+        speeds = np.array([0.0, 0.0, 5.0 + 0.05 * t])  # the motor's torque is internal: it only moves momentum
+        w = np.array([0.0, 0.0, (h_z - J_R3[2] * speeds[2]) / J_SONG[2, 2]]) + SIGMA_G * rng.standard_normal(3)
+        if drift_axis is not None and t > onset:
+            w[drift_axis] += drift * (t - onset)
+        fdir.rate_witness_step_1(
+            state, t, T_Q, w, speeds, J_SONG, np.eye(3), J_R3, 0.0, SIGMA_G, 0.0, r_b, 0.0, n_sig, ev, n_ev
+        )
+    return state, [(float(e[0]), int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]
+
+
+def test_gyros_that_agree_with_the_dynamics_raise_nothing_while_a_wheel_moves_momentum():
+    state, events = _spin_up(None)
+    assert events == []
+    assert np.isfinite(state[fdir.RW_REACH])
+
+
+@pytest.mark.parametrize("axis", [0, 2])
+def test_gyro_drift_against_the_dynamics_is_isolated_on_its_axis(axis):
+    """A 1e-7 rad/s² ramp from 100 s: isolated on its axis (the oldest window's, started before the onset), after the
+    onset and within the windows' span of it."""
+    _, events = _spin_up(axis)
+    arg = fdir.SENSOR_ARG + 10 * fdir.T_GYRO + axis
+    isolated = [t for t, code, a in events if code == fdir.EV_ISOLATED]
+    assert len(isolated) == 1 and {a for _, code, a in events if code != fdir.EV_RECONFIGURED} == {arg}
+    assert 100.0 < isolated[0] < 100.0 + fdir.RW_ANCHORS * fdir.RW_EVERY_S
+
+
+def _earth_samples(witness: np.ndarray, n: int, offset_rad: float = 0.02):
+    """``n`` earth samples 20σ off the estimate's nadir (σ_e = 1e-3 rad), screened against the gyro witness."""
+    state, ev, n_ev = np.zeros(fdir.EARTH_STATE_SIZE), np.zeros((16, 3)), np.zeros(1, dtype=np.int64)
+    q, ref = np.array([1.0, 0.0, 0.0, 0.0]), np.array([0.0, 0.0, -7.0e6])
+    nadir = np.array([0.0, np.sin(offset_rad), -np.cos(offset_rad)])
+    used = [
+        fdir.earth_witness_check_1(
+            state, witness, q, np.zeros((6, 6)), nadir, ref, 1e-3, 0.008, 0.012, T_Q, ev, n_ev, i * T_Q
+        )
+        for i in range(n)
+    ]
+    return used, [(int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]
+
+
+def test_earth_residual_without_the_witness_evidence_is_ambiguous_and_isolates_nothing():
+    """No window yet: no gyro bias change is excluded, so the earth sensor's offset could be a gyro's doing —
+    detected as ambiguous (once), both candidates named, the samples used as without FDIR."""
+    used, events = _earth_samples(fdir.witness_state(), 50)
+    assert all(used)
+    assert events == [(fdir.EV_DETECTED, fdir.AMBIGUOUS_ARG)]
+    assert "earth_sensor or gyro" in fdir.describe_event("fault_detected", fdir.AMBIGUOUS_ARG)
+
+
+def test_earth_residual_the_gyro_cannot_explain_isolates_the_earth_sensor():
+    """The dynamics allow a gyro bias change of 1e-6 rad/s; the observer would need K_min · 0.02 rad = 1.6e-4 rad/s
+    to hold the mean innovation: the gyro is cleared, the earth sensor rejected and isolated."""
+    witness = fdir.witness_state()
+    witness[fdir.RW_REACH] = 1e-6
+    used, events = _earth_samples(witness, 50)
+    assert not any(used[1:])
+    assert events[:2] == [(fdir.EV_DETECTED, fdir.SENSOR_ARG + 30), (fdir.EV_ISOLATED, fdir.SENSOR_ARG + 30)]
+
+
+def test_earth_residual_after_the_gyro_is_isolated_is_the_gyros():
+    witness = fdir.witness_state()
+    witness[fdir.RW_ISOLATED] = 1.0
+    used, events = _earth_samples(witness, 20)
+    assert all(used) and events == []
+
+
 def test_describe_event_names_subjects():
     assert fdir.describe_event("fault_isolated", 2) == "wheel 3"
     assert fdir.describe_event("reconfigured", 0b1010) == "wheels 2,4"
@@ -787,7 +869,8 @@ def test_no_false_alarm_in_24_hours_of_song_table1_with_seed002_wheel_noise():
     """song-table1 (perfect tachometer, seed 002's K_x = 1e-4 N·m on three wheels, T_u = 0.1 s, gyro Markov drift,
     Earth pointing on the eq-15 observer, its earth sensor screened) holding for 24 h under FDIR: the wheels' windows
     and CUSUM are summed every period (the floor a, no quantum), 2.6e6 wheel-periods at ≤ 2 P_FA each → ≤ 5e-3 false
-    alarms expected; none, and no earth-sensor alarm."""
+    alarms expected; none, no earth-sensor alarm, and the gyros against the dynamics (fdir.rate_witness_step_1, ten
+    windows tested every 0.1 s) neither alarm nor leave an earth alarm ambiguous."""
     s = scenario_library.get("song-table1").model_copy(update={"duration_s": 86400.0, "output_dt_s": 60.0})
     assert s.sensors.tachometer_quantum_rad_s == 0.0 and all(w.noise_nm > 0 for w in s.spacecraft.cluster.wheels)
     traj = engine.simulate(s, fdir=True)
