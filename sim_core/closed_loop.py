@@ -18,7 +18,6 @@ own random stream seeded at its start, so results do not depend on the thread co
 from __future__ import annotations
 
 import ctypes
-import os
 from typing import NamedTuple
 
 import numpy as np
@@ -45,6 +44,7 @@ from sim_core.faults import T_EARTH, T_GYRO, T_MAG, T_SUN, T_WHEEL, Y_FRICTION, 
 from sim_core.integrators import rk4_step_into
 from sim_core.quaternion import angle_between_1, attitude_difference_1, conjugate_rotate_1, conjugate_rotate_into
 from sim_core.spacecraft import PlantArrays, free_wheel_inertia_1
+from sim_core.threads import thread_budget
 
 # Guidance kinds.
 PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1
@@ -1482,7 +1482,8 @@ def fly_variant(
 
 
 def run_batch(config: LoopConfig, batch: Batch, out: Record, carries: list[Carry] | None = None) -> list[Carry]:
-    """Fly every variant of ``batch`` with ``config``, one thread per core, into ``out``; returns each variant's
+    """Fly every variant of ``batch`` with ``config``, one thread per core (this process' share of them:
+    :func:`sim_core.threads.thread_budget`), into ``out``; returns each variant's
     :class:`Carry` at the end.
 
     ``fly_variant`` releases the GIL, so the threads run in parallel; each variant seeds its own
@@ -1511,7 +1512,7 @@ def run_batch(config: LoopConfig, batch: Batch, out: Record, carries: list[Carry
     n = batch.x0.shape[0]
     if n == 1:
         return [one(0)]
-    with ThreadPoolExecutor(max_workers=min(n, os.cpu_count() or 1)) as pool:
+    with ThreadPoolExecutor(max_workers=min(n, thread_budget())) as pool:
         return list(pool.map(one, range(n)))
 
 

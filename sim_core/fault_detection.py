@@ -23,13 +23,14 @@ bound the rate per sample is at most (windows × channels) × 2Φ(−n) (:func:`
 from __future__ import annotations
 
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 from numba import njit
+
+from sim_core.threads import thread_budget
 
 __all__ = [
     "N_SIGMA",
@@ -182,8 +183,9 @@ def count_loglik(
     log-likelihood, below ``floor[b]`` as the full one would be (a profile keeping the best of its candidates, the
     best so far as the floor, chooses the same rows and the same values).
 
-    Rows are filtered independently, in blocks of at least THREAD_ROWS on one thread per core (the kernel releases
-    the GIL); the result does not depend on the split.
+    Rows are filtered independently, in blocks of at least THREAD_ROWS on one thread per core (this process' share
+    of them, :func:`sim_core.threads.thread_budget`; the kernel releases the GIL); the result does not depend on the
+    split.
     """
     nominal = np.full(y.shape[0] - 1, np.nan) if nominal_drift is None else np.ascontiguousarray(nominal_drift)
     lowest = np.full(drift.shape[0], -np.inf) if floor is None else np.ascontiguousarray(floor, dtype=np.float64)
@@ -194,7 +196,7 @@ def count_loglik(
         )
         return out
 
-    n_blocks = max(1, min(os.cpu_count() or 1, drift.shape[0] // THREAD_ROWS))
+    n_blocks = max(1, min(thread_budget(), drift.shape[0] // THREAD_ROWS))
     if n_blocks == 1:
         return block(slice(None))
     edges = np.linspace(0, drift.shape[0], n_blocks + 1).astype(int)

@@ -5,7 +5,10 @@ thread each, bound to 127.0.0.1, no dashboard port; as many as the machine has c
 unless a scheduler address is given (``scheduler=`` / ``--scheduler tcp://host:port`` /
 ``ACS_TWIN_DASK_SCHEDULER``). Every worker loads the engine's compiled kernels when it joins, a
 restarted one too (:mod:`backend.jobs.engine_worker`), so the first task does not pay
-numba's start-up. The workers of a LocalCluster are children of this process that it owns
+numba's start-up, and is given its thread budget (``ACS_TWIN_THREADS``, :mod:`sim_core.threads`): the
+engine's and the diagnosis' thread pools of a task use the worker's share of the host's cores, not every
+core (a LocalCluster's worker: cores / workers; a scheduler's: one, unless its environment sets it). The
+workers of a LocalCluster are children of this process that it owns
 (:func:`backend.core.processes.become_owned_child`: own process group, gone with this process even
 after ``kill -9``); a scheduler's workers belong to whoever started them.
 
@@ -39,6 +42,7 @@ __all__ = [
     "ServerCluster",
     "close_client",
     "dask_client",
+    "local_thread_budget",
     "local_workers",
     "fly",
     "flyer",
@@ -56,6 +60,12 @@ Case = TypeVar("Case")
 def local_workers() -> int:
     """Worker processes of a default LocalCluster: one per core, at most 4 (2 on this project's machines)."""
     return max(1, min(os.cpu_count() or 1, 4))
+
+
+def local_thread_budget(n_workers: int) -> int:
+    """Threads each worker of a LocalCluster of ``n_workers`` single-thread processes may give one task's thread
+    pools (:func:`sim_core.threads.thread_budget`): its share of this machine's cores, at least one."""
+    return max(1, (os.cpu_count() or 1) // max(n_workers, 1))
 
 
 def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm: bool = True) -> Client:
@@ -79,7 +89,8 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm
             silence_logs=40,
         )
         client = Client(cluster)
-    client.register_plugin(EngineWorker(owned=not address, warm=warm))
+    threads = None if address else local_thread_budget(n_workers or local_workers())
+    client.register_plugin(EngineWorker(owned=not address, warm=warm, threads=threads))
     return client
 
 

@@ -54,17 +54,30 @@ class ClosingHeartbeat(logging.Filter):
 
 
 class EngineWorker(WorkerPlugin):
-    """Set up each worker as it joins: owned by this process (a LocalCluster's) and the engine warm."""
+    """Set up each worker as it joins: owned by this process (a LocalCluster's), its thread budget, the engine warm."""
 
     name = "acs-twin-engine"
 
-    def __init__(self, owned: bool, warm: bool) -> None:
-        self.owned, self.warm = owned, warm
+    def __init__(self, owned: bool, warm: bool, threads: int | None = None) -> None:
+        self.owned, self.warm, self.threads = owned, warm, threads
 
     def setup(self, worker: Worker) -> None:
-        """Own process group and death with the parent (owned workers); the kernels compiled in a thread of their
-        own, so the worker takes tasks at once (an engine task meanwhile waits on numba's compile lock; a cold
-        compile takes minutes on a loaded machine, and a rigid-spin job needs none)."""
+        """Own process group and death with the parent (owned workers); the thread budget of a task's thread pools
+        (:func:`sim_core.threads.thread_budget`): ``threads`` if given (a LocalCluster's share of the cores per
+        worker), else the worker's own environment's, else one (a scheduler's workers are sized to their hosts by
+        whoever started them, ``--nworkers`` × ``--nthreads`` tasks at once: Dask's own convention, its nanny's
+        OMP_NUM_THREADS=1);
+        the kernels compiled in a thread of their own, so the worker takes tasks at once (an engine task meanwhile
+        waits on numba's compile lock; a cold compile takes minutes on a loaded machine, and a rigid-spin job needs
+        none)."""
+        import os
+
+        from sim_core.threads import THREADS_ENV
+
+        if self.threads is not None:
+            os.environ[THREADS_ENV] = str(self.threads)
+        elif not os.environ.get(THREADS_ENV):
+            os.environ[THREADS_ENV] = "1"
         if self.owned:
             from backend.core.processes import become_owned_child
 

@@ -86,6 +86,16 @@ def test_split_batch_on_two_workers_equals_one_batch(client, here: Trajectory) -
     assert there.events == here.events
 
 
+def test_each_worker_s_pools_get_one_thread_and_a_local_cluster_s_their_share_of_the_cores(client, shared_dask) -> None:
+    """A scheduler's workers (2 processes × 1 thread, started as an operator would) give a task's thread pools one
+    thread each; the shared LocalCluster's workers the cores over its workers (the engine flew the same above)."""
+    from sim_core.threads import thread_budget
+
+    assert set(client.run(thread_budget).values()) == {1}
+    workers = len(shared_dask.scheduler_info(n_workers=-1)["workers"])
+    assert set(shared_dask.run(thread_budget).values()) == {cluster.local_thread_budget(workers)}
+
+
 def test_map_cases_keeps_order(client) -> None:
     assert cluster.map_cases(client, abs, [-3, 2, -1]) == [3, 2, 1]
 
