@@ -417,16 +417,6 @@ def _links_confirm(
 
 
 @njit(cache=True, nogil=True)
-def _undefined_confirmed(
-    buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
-) -> bool:
-    """A well-formed packet of an APID without definition at p, its length field confirmed by the links from p."""
-    if not _well_formed(buf, p) or lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]] != 0:
-        return False
-    return _links_confirm(buf, p, lengths, crc, table, chain)
-
-
-@njit(cache=True, nogil=True)
 def _other_length_confirmed(
     buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
 ) -> bool:
@@ -497,7 +487,7 @@ def _frame_kernel(
     (unknown APIDs included: their length field is never trusted, so garbage cannot hide packets)
     is quarantined up to the next octet where a dictionary packet fits; an idle packet spanning
     exactly that stretch is counted as idle. With keep_undefined, a well-formed packet of an APID
-    without definition whose length field is confirmed (see _undefined_confirmed) is its own segment.
+    without definition whose length field is confirmed (see _links_confirm) is its own segment.
     lengths[apid]: 0 = no definition, > 0 = exact length, < 0 = any length (taken from the header).
     Unless final (buf is a chunk of longer data), framing stops at the first segment the octets after buf could
     change (see _walk_links), so the segments are those of the whole data; only a quarantined stretch longer
@@ -543,13 +533,18 @@ def _frame_kernel(
             k += 1
             p = q
             continue
-        if keep_undefined and _other_length_confirmed(buf, p, lengths, crc, table, chain):
+        # a well-formed packet's APID picks which of the two confirmations can apply (both need it well formed;
+        # other length: a defined fixed length, undefined: none), so the other is not called (see _fit)
+        defined = -1  # not well formed: neither applies
+        if keep_undefined and _well_formed(buf, p):  # a call of a function without calls: cheap
+            defined = lengths[((np.int64(buf[p]) & 7) << 8) | buf[p + 1]]
+        if defined > 0 and _other_length_confirmed(buf, p, lengths, crc, table, chain):
             offsets[k], sizes[k] = p, ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
             codes[k] = _OK
             p += sizes[k]
             k += 1
             continue
-        if keep_undefined and _undefined_confirmed(buf, p, lengths, crc, table, chain):
+        if defined == 0 and _links_confirm(buf, p, lengths, crc, table, chain):  # undefined, its length confirmed
             offsets[k], sizes[k] = p, ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
             codes[k] = _UNDEFINED
             p += sizes[k]

@@ -119,7 +119,9 @@ def encode_values_range(
         stored = _narrowest_int(array, int(v_min), int(v_max))
     else:
         stored = _as_float32_if_exact(array) if array.dtype == np.float64 else array
-        if not (np.isfinite(v_min) and np.isfinite(v_max)):  # NaN (no such element) or infinities
+        if np.isnan(v_min) or np.isnan(v_max):  # NaN (no such element): the range of the others, no masked copy
+            v_min, v_max = np.fmin.reduce(array), np.fmax.reduce(array)
+        if not (np.isfinite(v_min) and np.isfinite(v_max)):  # infinities, or nothing but NaN
             finite = array[np.isfinite(array)]
             v_min, v_max = (finite.min(), finite.max()) if finite.size else (None, None)
     spec = f"{stored.dtype.str}/{shown.str}"
