@@ -159,7 +159,8 @@ WS_N, WS_HEAD = 11, 12  # periods in the window history, its ring slot of the ne
 WS_HIST = 13  # ring of WINDOW_PERIODS + 1 boundaries: cumulative Σ r, then cumulative Σ bound without the quantum
 WINDOW_PERIODS = 150  # longest window tested: 300 s at T_u = 2 s; every shorter one ending now is tested too
 WS_CUSUM = WS_HIST + 2 * (WINDOW_PERIODS + 1)  # guarded CUSUM of d⁺, its last min(0, d⁺); then the same of d⁻
-WHEEL_STATE_ROWS = WS_CUSUM + 4  # WS_W..WS_W+2: body rate at the hold
+WS_GAIN = WS_CUSUM + 4  # a kept partly working wheel: the share of its command it delivers (0: not kept)
+WHEEL_STATE_ROWS = WS_CUSUM + 5  # WS_W..WS_W+2: body rate at the hold
 CUSUM_DRIFT_SIGMAS = 0.25  # ν = 0.25 σ_N per period: the CUSUM finds a withheld momentum > ν per period, any length
 CUSUM_LIMIT_SIGMAS = float(np.log(2.0 / FALSE_ALARM_PROBABILITY) / (2.0 * CUSUM_DRIFT_SIGMAS))  # h / σ_N: Ville
 WINDOW_NOISE_SIGMAS = float(np.sqrt(2.0 * np.log(2.0 * WINDOW_PERIODS / FALSE_ALARM_PROBABILITY)))  # a / σ_N
@@ -440,8 +441,11 @@ def wheel_check_1(
     reconfiguration 4 → 3 → 2 + MD). An isolated wheel with a partial loss (:func:`_partial_loss_1`) leaves the
     allocation only if the rest can still give three-axis torque: ``allocation.allocate_1`` of a zero torque on
     ``axes`` without it (``h_wheels``, magnetometer ``mag``, ``alloc_params``) returns the status the rest's
-    geometry gives; any but ``STATUS_OK`` keeps the wheel in the loop (no longer tested) and writes
-    reconfiguration_refused (argument p + 10 · that status).
+    geometry gives; any but ``STATUS_OK`` keeps the wheel in the loop and writes reconfiguration_refused (argument
+    p + 10 · that status). A kept wheel stays monitored against what it still delivers, the share g = (T_u m_p +
+    r_p)/(T_u m_p) of the isolating period (``WS_GAIN``): its residual is taken against g m_p, so that a later total
+    loss (nothing delivered, within the band) is isolated again and the wheel dropped whatever the rest can do; a
+    departure that still delivers, with the command's sign, re-estimates g (at most 1), without an event.
     """
     nw = speeds.shape[0]
     raw, bound, quantum = np.zeros(nw), np.zeros(nw), inertia * tach_q
@@ -455,11 +459,13 @@ def wheel_check_1(
         if state[WS_VALID, p] == 0.0:
             continue
         torque = state[WS_TORQUE, p]
+        if state[WS_GAIN, p] > 0.0:
+            torque *= state[WS_GAIN, p]  # a kept wheel: tested against what it still delivers
         if abs(inertia[p] * state[WS_SPEED, p]) + abs(torque) * t_u >= max_momentum[p]:
             bound[p] = abs(torque) * t_u  # the motor's momentum limit may cut the torque: untested
             continue
-        # dropped wheels still enter the decoupling (a rubbing one still pushes); a kept isolated one is not retested
-        tested[p] = available[p] and state[WS_ISOLATED, p] == 0.0
+        # dropped wheels still enter the decoupling (a rubbing one still pushes); a kept one is tested at its share
+        tested[p] = available[p]
         raw[p] = wheel_residual_1(
             inertia[p], state[WS_SPEED, p], speeds[p], state[WS_AXIAL, p], torque, t_u, friction, p
         )
@@ -501,19 +507,29 @@ def wheel_check_1(
             state[WS_COUNT, p] = 0.0
             continue
         state[WS_COUNT, p] += 1.0
+        command = state[WS_TORQUE, p] * t_u * (state[WS_GAIN, p] if state[WS_GAIN, p] > 0.0 else 1.0)
+        if state[WS_GAIN, p] > 0.0 and command != 0.0 and np.sign(command) * (command + r) > band:
+            if state[WS_COUNT, p] >= CONFIRM_PERIODS:  # still delivering (a part): a new share, no event
+                state[WS_GAIN, p] = min(state[WS_GAIN, p] * (command + r) / command, 1.0)
+                state[WS_COUNT, p] = 0.0
+                _clear_windows_1(state, p)
+            continue
         if state[WS_COUNT, p] == 1.0:
             _emit(ev, n_ev, t, EV_DETECTED, p)
         if state[WS_COUNT, p] >= CONFIRM_PERIODS:
             _emit(ev, n_ev, t, EV_ISOLATED, p)
             state[WS_ISOLATED, p] = 1.0
             status = allocation.STATUS_OK
-            if _partial_loss_1(state[WS_TORQUE, p] * t_u, r, band):
+            if state[WS_GAIN, p] == 0.0 and _partial_loss_1(command, r, band):
                 status = _status_without_1(p, axes, available, h_wheels, mag, alloc_params)
             if status == allocation.STATUS_OK:
                 available[p] = False
                 changed = True
             else:
                 _emit(ev, n_ev, t, EV_REFUSED, p + 10 * status)
+                state[WS_GAIN, p] = min((command + r) / command, 1.0)  # its share: > 0 by _partial_loss_1
+                state[WS_COUNT, p] = 0.0
+                _clear_windows_1(state, p)
     n_on = 0
     mask = 0
     for p in range(nw):

@@ -148,20 +148,23 @@ def test_momentum_that_stays_missing_is_isolated_though_each_period_is_inside_it
     assert [tuple(e[1:]) for e in ev][:2] == [(4, 2), (5, 2)]
 
 
-def _gain_loss(axes: np.ndarray, gain: float, b_field: np.ndarray, l_max_am2: float = 25.0) -> tuple[np.ndarray, list]:
+def _gain_loss(
+    axes: np.ndarray, gain: float, b_field: np.ndarray, l_max_am2: float = 25.0, later: tuple[float, ...] = ()
+) -> tuple[np.ndarray, list]:
     """Availability and events after three periods in which every wheel holds 0.05 N·m and the last one delivers
-    ``gain`` of it (frictionless HR12 wheels, 0.1 rpm tachometer, rigid body)."""
+    ``gain`` of it, then one period per entry of ``later`` delivering that share (frictionless HR12 wheels, 0.1 rpm
+    tachometer, rigid body)."""
     nw, torque = axes.shape[1], 0.05
     state, speeds = fdir.wheel_state(nw), np.full(nw, 100.0)
     available = np.ones(nw, dtype=np.bool_)
     ev, n_ev = np.zeros((16, 3)), np.zeros(1, dtype=np.int64)
     params = allocation.AllocationConfig(law4=allocation.LAW_PSEUDO_INVERSE, l_max_am2=l_max_am2).as_array()
     j, zeros = np.full(nw, J_HR12), np.zeros((4, nw))
-    for k in range(3):
+    for k, share in enumerate((gain, gain, gain) + later):
         fdir.wheel_hold_1(state, speeds, W0, axes, np.full(nw, torque), j, np.full(nw, 0.2), np.full(nw, 12.0), zeros,
                           *RIGID)  # fmt: skip
         speeds = speeds + torque * T_U / J_HR12
-        speeds[-1] -= (1.0 - gain) * torque * T_U / J_HR12
+        speeds[-1] -= (1.0 - share) * torque * T_U / J_HR12
         fdir.wheel_check_1(
             state, speeds, W0, j, np.full(nw, 12.0), zeros, TACH_Q, np.zeros(nw), T_U, np.eye(nw), available, axes,
             j * speeds, b_field, params, ev, n_ev, (k + 1) * T_U,
@@ -182,6 +185,18 @@ def test_partly_working_wheel_stays_in_the_loop_when_the_rest_cannot_give_three_
     assert ev == [(4, 2), (5, 2), (10, 2 + 10 * allocation.STATUS_KAPPA_REFUSED)]
     available, ev = _gain_loss(ORTHOGONAL3, 0.3, B_ACROSS_PAIR, l_max_am2=0.0)
     assert available.all() and ev[-1] == (10, 2 + 10 * allocation.STATUS_NO_DRIVER)
+
+
+def test_kept_partly_working_wheel_stays_monitored_and_its_later_death_drops_it():
+    """The kept 30 % wheel (973f486) is monitored against the share it still delivers: ten more periods at 30 % raise
+    nothing; when it then dies (delivers nothing) it is detected and isolated again and dropped, though wheels 1 + 2
+    cannot fly z — a dead wheel gives nothing to keep; the rest still counts two wheels, so no fault mode."""
+    refused = (10, 2 + 10 * allocation.STATUS_KAPPA_REFUSED)
+    available, ev = _gain_loss(ORTHOGONAL3, 0.3, B_ALONG_PAIR, later=(0.3,) * 10)
+    assert available.all() and ev == [(4, 2), (5, 2), refused]
+    available, ev = _gain_loss(ORTHOGONAL3, 0.3, B_ALONG_PAIR, later=(0.3,) * 10 + (0.0,) * 3)
+    assert list(available) == [True, True, False]
+    assert ev == [(4, 2), (5, 2), refused, (4, 2), (5, 2), (6, 0b011)]
 
 
 def test_partly_working_wheel_is_dropped_where_the_rest_can_still_control():
