@@ -45,6 +45,7 @@ __all__ = [
     "STATUS_SINGULAR",
     "STATUS_TOO_FEW_WHEELS",
     "STATUS_NO_DRIVER",
+    "STATUS_NO_FIELD",
     "LAW_GE_DISTRIBUTION",
     "LAW_PSEUDO_INVERSE",
     "MD_LAW_SEED",
@@ -78,6 +79,7 @@ STATUS_KAPPA_REFUSED = 2  # MD refused by its geometric condition: the two wheel
 STATUS_SINGULAR = 3  # wheel (or wheel + MD) geometry singular: least-squares wheel torques only
 STATUS_TOO_FEW_WHEELS = 4  # fewer than two wheels: no torque
 STATUS_NO_DRIVER = 5  # two wheels and no magnetic driver (l^m = 0): least-squares pair torques, in-plane only
+STATUS_NO_FIELD = 6  # two wheels and no field (B = 0: no valid magnetometer sample): no dipole, pair in-plane only
 
 LAW_GE_DISTRIBUTION = 0
 LAW_PSEUDO_INVERSE = 1
@@ -382,9 +384,9 @@ def _two_wheels_md(
     if l_max == 0.0:  # no driver: scaling the seed's solution to a zero dipole would zero the wheels too
         mp, mq = _pair_least_squares(ap, aq, torque)
         return mp, mq, dipole, STATUS_NO_DRIVER
-    if b_norm == 0.0:
+    if b_norm == 0.0:  # L × B is zero for every L: the pair gives the in-plane part of M^r, as without a driver
         mp, mq = _pair_least_squares(ap, aq, torque)
-        return mp, mq, dipole, STATUS_SINGULAR
+        return mp, mq, dipole, STATUS_NO_FIELD
     if md_law == MD_LAW_PAIR_NORMAL:
         return _two_wheels_min_dipole(ap, aq, torque, b_field, b_norm, l_max)
     b = b_field / b_norm

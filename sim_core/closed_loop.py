@@ -335,12 +335,15 @@ class Sensed(NamedTuple):
 
 
 class StarSample(NamedTuple):
-    """One T_q's star-tracker sample Λ^m with its σ per axis, and whether the star tracker and the gyro gave one."""
+    """One T_q's star-tracker sample Λ^m with its σ per axis, and whether the star tracker, the gyro and the
+    magnetometer gave one (a failed sensor's output is read by nothing: Sensed.mag, .omega keep what it would
+    have output, for the held-output faults only)."""
 
     q: np.ndarray
     sigma: np.ndarray
     star_ok: bool
     gyro_ok: bool
+    mag_ok: bool
 
 
 class Estimate(NamedTuple):
@@ -385,9 +388,10 @@ class Monitors(NamedTuple):
     j_eff_inv: np.ndarray
 
 
-# Slots of Carry.scalars: the next step to fly, mode, σ_u, fault flags, allocation status, MD on, field held, valid.
-C_STEP, C_MODE, C_SIGMA_U, C_FLAGS, C_STATUS, C_MD_ON, C_MAG_PREV, C_VALID = 0, 1, 2, 3, 4, 5, 6, 7
-N_SCALARS = 8
+# Slots of Carry.scalars: the next step to fly, mode, σ_u, fault flags, allocation status, MD on, field held, valid,
+# magnetometer valid (its last sample).
+C_STEP, C_MODE, C_SIGMA_U, C_FLAGS, C_STATUS, C_MD_ON, C_MAG_PREV, C_VALID, C_MAG_OK = 0, 1, 2, 3, 4, 5, 6, 7, 8
+N_SCALARS = 9
 
 
 class Carry(NamedTuple):
@@ -513,6 +517,7 @@ def _triad_stage(
     pos: Position,
     sensed: Sensed,
     gyro_ok: bool,
+    mag_ok: bool,
     est: Estimate,
 ) -> bool:
     """Seed 003's vector-sensor determination (estimation.triad_sensors_1): Sun sensor, earth sensor (local
@@ -523,7 +528,7 @@ def _triad_stage(
     nadir_b, nadir_ok = _earth_sensor_nadir_1(
         s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r, sensed.earth_frozen
     )
-    q, ok = estimation.triad_sensors_1(sun_b, sun_ok, nadir_b, nadir_ok, sensed.mag, sun_eci, -pos.r, pos.b_eci)
+    q, ok = estimation.triad_sensors_1(sun_b, sun_ok, nadir_b, nadir_ok, sensed.mag, mag_ok, sun_eci, -pos.r, pos.b_eci)
     if ok:
         est.q[:] = q if q @ est.q >= 0.0 else -q
     if gyro_ok:
@@ -595,7 +600,7 @@ def _sense_stage(
         readings[RD_GYRO + i] = sensed.omega[i] if gyro_ok else 0.0
     for i in range(4):
         readings[RD_STAR + i] = q_m[i] if st_ok else 0.0
-    return StarSample(q_m, sig3, st_ok, gyro_ok)
+    return StarSample(q_m, sig3, st_ok, gyro_ok, mag_ok)
 
 
 @njit(cache=True)
@@ -637,8 +642,8 @@ def _mekf_stage(
     n_ev: np.ndarray,
 ) -> tuple[bool, float]:
     """MEKF (sim_core.mekf) on gyro + star tracker; without a star sample, on the earth sensor's nadir and the
-    magnetometer's field direction; each sensor screened by FDIR when the variant flies it. Returns (attitude
-    valid, σ_u)."""
+    magnetometer's field direction; each sensor screened by FDIR when the variant flies it, and a sensor that gives
+    no valid sample not read (no propagation and the last rate without the gyro). Returns (attitude valid, σ_u)."""
     fdir_on, q_m, sig3, st_ok = var.fdir_on, sample.q, sample.sigma, sample.star_ok
     if k > 0 and sample.gyro_ok:
         # mean of the samples bracketing the step: the held sample's ½ ω̇ T_q² error would
@@ -687,12 +692,13 @@ def _mekf_stage(
             if earth_ok:
                 mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, nadir, -pos.r, sigma_e)
             b_norm = np.sqrt(pos.b_eci @ pos.b_eci)
-            if s.magnetometer_noise_t > 0.0 and b_norm > 0.0:
+            if sample.mag_ok and s.magnetometer_noise_t > 0.0 and b_norm > 0.0:
                 sigma_dir = s.magnetometer_noise_t / b_norm + MAG_DIRECTION_FLOOR_RAD
                 mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, sensed.mag, pos.b_eci, sigma_dir)
     if st_ok:
         mekf.mekf_update_1(est.q, est.bias, est.covariance, q_m, sig3)
-    est.omega[:] = sensed.omega - est.bias
+    if sample.gyro_ok:  # a failed gyro's rate is not read: the estimate keeps the last one
+        est.omega[:] = sensed.omega - est.bias
     return bool(st_ok), float(sigma_u)
 
 
@@ -730,7 +736,8 @@ def _earth_observer_stage(
     (fdir.rate_witness_step_1: the gravity gradient at the estimated attitude, known to the screen's limit + the
     earth noise bound), so that the one residual of two sensors is not blamed on the earth sensor when the gyro
     drifts; a rejected or failed sample leaves the step to the gyros (φ_m, θ_m := φ̂, θ̂). Starts from
-    ``e.observer_initial`` or the first earth sample with ψ̂ = 0. Returns whether the earth sample was used."""
+    ``e.observer_initial`` or the first earth sample with ψ̂ = 0. A failed gyro is not read: the observer steps on the
+    last valid rate. Returns whether the earth sample was used."""
     f = est.filter_state
     angles, earth_ok = _earth_sensor_angles_1(
         s.earth_sigma_rad, s.earth_bias_rad, faults, t, x, pos.r, sensed.earth_frozen
@@ -757,10 +764,11 @@ def _earth_observer_stage(
             f[0], f[1], f[2] = angles[0], angles[1], 0.0
     else:
         roll_m, pitch_m = (angles[0], angles[1]) if earth_ok else (f[0], f[1])
+        # a failed gyro is not read: the step takes the last valid rate (est.omega)
+        rate = 0.5 * (sensed.omega + sensed.omega_prev) if gyro_ok else est.omega.copy()
         earth_observer.body_observer_step_1(
-            f[0:3], e.observer_phi, e.observer_gamma, 0.5 * (sensed.omega + sensed.omega_prev), roll_m, pitch_m,
-            e.orbit_rate_rad_s,
-        )  # fmt: skip
+            f[0:3], e.observer_phi, e.observer_gamma, rate, roll_m, pitch_m, e.orbit_rate_rad_s
+        )
     sensed.omega_prev[:] = sensed.omega
     q = earth_observer.attitude_from_angles_1(f[0:3], pos.r, pos.v)
     est.q[:] = q if q @ est.q >= 0.0 else -q
@@ -990,6 +998,7 @@ def _mode_actuation_stage(
     status: int,
     est: Estimate,
     sensed: Sensed,
+    field: np.ndarray,
     have_mag_prev: bool,
     h_wheels: np.ndarray,
     available: np.ndarray,
@@ -998,7 +1007,9 @@ def _mode_actuation_stage(
     """The modes' actuation after the allocation (mode machine on). Rate-damping and fault modes (seed 001
     initial mode, seed 003 eq 29–30): B-dot above 1 °/s, in the fault mode or with fewer than two wheels; below
     it the wheels brake the body (control.rate_brake_torque_1) while the rods unload the cluster. Sun/safe and
-    ORF modes: continuous magnetic unloading of the cluster momentum (seed 003 eq 29)."""
+    ORF modes: continuous magnetic unloading of the cluster momentum (seed 003 eq 29). The rods act on the
+    magnetometer's ``field`` (zeros while it gives no valid sample: no dipole); ``have_mag_prev``: the previous and
+    this sample are both valid (B-dot differences them)."""
     if mode == modes.MODE_RATE_DAMPING or mode == modes.MODE_FAULT:
         cmd.body_torque[:] = 0.0
         cmd.wheel_cmd[:] = 0.0
@@ -1010,13 +1021,13 @@ def _mode_actuation_stage(
             return
         cmd.body_torque[:] = control.rate_brake_torque_1(p.inertia, est.omega, RATE_DAMPING_TAU_S)
         _allocate_1(
-            p.wheel_axes, act.allocation, act.torque_quantum_nm, act.max_torque_nm, available, h_wheels, sensed.mag,
+            p.wheel_axes, act.allocation, act.torque_quantum_nm, act.max_torque_nm, available, h_wheels, field,
             cmd.body_torque, cmd.wheel_alloc, cmd.dipole_alloc, cmd.wheel_cmd,
         )  # fmt: skip
     elif not ((mode == modes.MODE_SUN_SAFE or mode == modes.MODE_ORF) and status == 0):
         return
     cmd.dipole[:] = control.unloading_dipole_step(
-        sensed.mag, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
+        field, p.wheel_axes @ h_wheels, np.zeros(3), UNLOADING_GAIN_PER_S, act.md_max_am2
     )
 
 
@@ -1073,12 +1084,12 @@ def _wheel_hold_stage(
     t_u: float,
     speeds: np.ndarray,
     est: Estimate,
-    sensed: Sensed,
+    field: np.ndarray,
     cmd: Commands,
     mon: Monitors,
 ) -> None:
     """Wheel FDIR's prediction for the next T_u (sim_core.fdir.wheel_hold_1) from the commands just sent and
-    the MD torque L × B (sim_core.magnetic)."""
+    the MD torque L × B (sim_core.magnetic) on the magnetometer's ``field`` (zeros: no valid sample)."""
     fdir.wheel_hold_1(
         mon.wheel,
         speeds,
@@ -1091,7 +1102,7 @@ def _wheel_hold_stage(
         p.friction,
         p.inertia,
         mon.j_eff_inv,
-        magnetic.magnetic_torque_1(cmd.dipole, sensed.mag),
+        magnetic.magnetic_torque_1(cmd.dipole, field),
         fd.disturbance_bound_nm,
         fd.rate_noise_rad_s,
         t_u,
@@ -1238,7 +1249,7 @@ def initial_carry(c: LoopConfig, var: Variant) -> Carry:
     mode_state = np.full(modes.STATE_SIZE, np.nan)
     mode_state[modes.S_MODE], mode_state[modes.S_ENTERED] = max(mode, 0), 0.0
     scalars = np.zeros(N_SCALARS)
-    scalars[C_MODE], scalars[C_SIGMA_U], scalars[C_VALID] = mode, estc.gyro_drift_density, 1.0
+    scalars[C_MODE], scalars[C_SIGMA_U], scalars[C_VALID], scalars[C_MAG_OK] = mode, estc.gyro_drift_density, 1.0, 1.0
     return Carry(
         x,
         sensed,
@@ -1276,7 +1287,9 @@ def fly_variant(
     dynamics fly. The law reads the estimate of ``c.estimator.kind`` (see :class:`EstimatorConfig`: the true
     state, the raw star tracker + gyro, the MEKF, seed 000 §4's mismatch filter, seed 003's body-rate
     estimator or TRIAD, or seed 002's gyro + earth-sensor observer); every seed model in ``c`` whose switch is
-    off costs nothing and draws no random number.
+    off costs nothing and draws no random number. A sensor that gives no valid sample (failed; the star tracker
+    also blinded or beyond its rate limit) is read by no stage: the estimators skip it, and without a magnetometer
+    sample the rods act on no field (no dipole; two wheels give the in-plane torque, allocation.STATUS_NO_FIELD).
     Each stage receives only the blocks of ``c`` it reads (a call that carried all of ``c`` would pass and
     reference-count each of its arrays, at every dynamics step).
     ``shared[0]`` non-zero cancels the run (checked each T_u); ``shared[slot]`` receives the steps done.
@@ -1310,6 +1323,8 @@ def fly_variant(
     mode, sigma_u = int(scalars[C_MODE]), scalars[C_SIGMA_U]
     flags, status, out_i = int(scalars[C_FLAGS]), int(scalars[C_STATUS]), 0
     md_on, have_mag_prev, valid = scalars[C_MD_ON] != 0.0, scalars[C_MAG_PREV] != 0.0, scalars[C_VALID] != 0.0
+    mag_ok = scalars[C_MAG_OK] != 0.0
+    no_field = np.zeros(3)  # the field the actuation reads while the magnetometer gives no valid sample
     every_step = dist.gravity_gradient or dist.aerodynamic or dist.solar_pressure  # models that need r, v each step
     sun_wanted = dist.solar_pressure or sens.star_cos_sun_exclusion <= 1.0
     k_next = clk.n_steps
@@ -1360,14 +1375,15 @@ def fly_variant(
 
         if measure:
             sample = _sense_stage(sens, faults, t, x, markov, pos, sensed)
-            if fdir_on:
+            mag_ok = sample.mag_ok
+            if fdir_on and mag_ok:
                 _magnetometer_monitor_stage(sens, c.fdir, t, pos, sensed, est, mon, ev, n_ev)
             if estc.kind == ESTIMATOR_MEKF:
                 valid, sigma_u = _mekf_stage(
                     estc, sens, c.fdir, t_q, var, k, t, x, pos, sensed, sample, sigma_u, est, mon, ev, n_ev
                 )
             elif estc.kind == ESTIMATOR_TRIAD:
-                valid = _triad_stage(sens, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, est)
+                valid = _triad_stage(sens, clk.t0_unix_s, faults, t, x, pos, sensed, sample.gyro_ok, sample.mag_ok, est)
             elif estc.kind == ESTIMATOR_EARTH_OBSERVER:
                 tach = _tachometer_stage(sens.tachometer_quantum_rad_s, faults, t, wheel_speeds)
                 valid = _earth_observer_stage(
@@ -1395,6 +1411,7 @@ def fly_variant(
                     sens.sun_sensor_sigma_rad, clk.t0_unix_s, faults, t, x, est.q, pos.r, sensed.sun_frozen
                 )
                 mode = _mode_stage(mc, t, pos, sun_b, mode_state, mode, valid, est, mon.available, cmd, ev, n_ev)
+            field = mag if mag_ok else no_field  # no valid sample: no field, the MD gives nothing (allocation)
             speeds = _tachometer_stage(sens.tachometer_quantum_rad_s, faults, t, wheel_speeds)
             readings[RD_TACH:] = speeds
             h_wheels = p.wheel_inertia * speeds
@@ -1402,25 +1419,26 @@ def fly_variant(
                 star_reset = estc.kind == ESTIMATOR_MEKF
                 _wheel_monitor_stage(
                     p, act, sens.tachometer_quantum_rad_s, c.fdir.wheel_noise_sigma_nms, t_u, star_reset, t, speeds,
-                    h_wheels, mag, est, mon, ev, n_ev,
+                    h_wheels, field, est, mon, ev, n_ev,
                 )  # fmt: skip
             _law_stage(
                 p.inertia, p.wheel_axes, p.wheel_inertia, c.law, mc.on, mode, q_est, w_est, speeds, h_wheels,
                 available, cmd.program, cmd.lead_lag, body_torque,
             )  # fmt: skip
             status = _allocation_stage(
-                wheel_axes, alloc_params, torque_quantum, max_torque, act.md_max_am2, faults, t, mag, h_wheels,
+                wheel_axes, alloc_params, torque_quantum, max_torque, act.md_max_am2, faults, t, field, h_wheels,
                 available, body_torque, frozen_torque, wheel_alloc, dipole_alloc, wheel_cmd, dipole,
             )  # fmt: skip
             if mc.on:
                 _mode_actuation_stage(
-                    p, act, mc.bdot_gain, t_u, mode, status, est, sensed, have_mag_prev, h_wheels, mon.available, cmd
-                )
+                    p, act, mc.bdot_gain, t_u, mode, status, est, sensed, field, have_mag_prev and mag_ok, h_wheels,
+                    mon.available, cmd,
+                )  # fmt: skip
             sensed.mag_prev[:] = sensed.mag
-            have_mag_prev = True
+            have_mag_prev = mag_ok  # B-dot differences two valid samples
             md_on = cmd.dipole[0] != 0.0 or cmd.dipole[1] != 0.0 or cmd.dipole[2] != 0.0
             if fdir_on:
-                _wheel_hold_stage(p, act, c.fdir, t_u, speeds, est, sensed, cmd, mon)
+                _wheel_hold_stage(p, act, c.fdir, t_u, speeds, est, field, cmd, mon)
 
         if output and out_i < rec.shape[0]:
             if not control_tick:  # a control tick has just sampled the scenario's program at t
@@ -1478,7 +1496,7 @@ def fly_variant(
         flags,
         status,
     )
-    scalars[C_MD_ON], scalars[C_MAG_PREV], scalars[C_VALID] = md_on, have_mag_prev, valid
+    scalars[C_MD_ON], scalars[C_MAG_PREV], scalars[C_VALID], scalars[C_MAG_OK] = md_on, have_mag_prev, valid, mag_ok
 
 
 def run_batch(config: LoopConfig, batch: Batch, out: Record, carries: list[Carry] | None = None) -> list[Carry]:

@@ -107,18 +107,20 @@ def triad_sensors_1(
     nadir_b: np.ndarray,
     nadir_ok: bool,
     mag_b: np.ndarray,
+    mag_ok: bool,
     sun_i: np.ndarray,
     nadir_i: np.ndarray,
     mag_i: np.ndarray,
 ) -> tuple[np.ndarray, bool]:
     """q_ib by TRIAD from the vector sensors that see (seed 003 §3.2.1.2.1): the Sun S (SS) as the main vector with
     the local vertical r (HS) as the auxiliary, else S with the field B (MAG), else r with B (eclipse); pairs
-    closer than 10° are skipped. Returns (q_ib, False) when no pair is usable."""
+    closer than 10° are skipped, and a sensor whose ``*_ok`` is False (no valid sample). Returns (q_ib, False)
+    when no pair is usable."""
     if sun_ok and nadir_ok and _distinct_1(sun_b, nadir_b):
         return triad_1(sun_b, nadir_b, sun_i, nadir_i), True
-    if sun_ok and _distinct_1(sun_b, mag_b):
+    if sun_ok and mag_ok and _distinct_1(sun_b, mag_b):
         return triad_1(sun_b, mag_b, sun_i, mag_i), True
-    if nadir_ok and _distinct_1(nadir_b, mag_b):
+    if nadir_ok and mag_ok and _distinct_1(nadir_b, mag_b):
         return triad_1(nadir_b, mag_b, nadir_i, mag_i), True
     return np.array([1.0, 0.0, 0.0, 0.0]), False
 
