@@ -107,9 +107,8 @@ if [ -n "${ACS_TWIN_LINT_BESIDE_WARM:-}" ]; then
   say "lint and type step (scripts/lint.sh) beside the kernel compile"
   PYTHON=.venv/bin/python bash scripts/lint.sh & lint_pid=$!
 fi
-# --recorded: also the kernel signatures the suite calls beyond serve's (backend/jobs/kernel_signatures.json), each
-# compiled once here rather than by whichever test process meets it first (two processes compiling the same function
-# at once can mix up its cache entries).
+# --recorded: also the kernel signatures the suite calls beyond the flight's (backend/jobs/kernel_signatures.json),
+# compiled by a second process beside the flight, rather than by whichever test process meets each first.
 say "compiling the kernels into numba's cache (acs-twin warm --recorded)"
 .venv/bin/acs-twin warm --recorded >&2
 lint_status=0

@@ -73,6 +73,14 @@ def dask_scheduler(shared_dask: Client) -> Iterator[str]:
     settle(shared_dask)
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """Numba cache saves under a lock: the two workers (and warm before them) may save one function's signatures at
+    once, and numba alone could then file both under one data-file name (backend.jobs.kernel_signatures)."""
+    from backend.jobs.kernel_signatures import serialise_cache_saves
+
+    serialise_cache_saves()
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The files holding a ``slow`` test first, each file's tests kept together and in order: scripts/test.sh hands
     whole files to its two workers in this order (``--dist loadfile --no-loadscope-reorder``), so they start on the

@@ -5,15 +5,18 @@ loaded 2-core machine, on the start-up's critical path. ``scripts/run.sh`` runs 
 whenever a source file of ``sim_core`` or ``telemetry`` changed, since sim_core.compiled_cache then drops the
 cache of the modules that see the change): it flies what ``serve`` flies with the same types — the emulator's
 flight with the demo's hidden fault, the decoding of its packets, the live twin synchronising on them —
-so that ``serve`` only loads machine code. With ``--recorded`` it then compiles every signature recorded in
-:mod:`backend.jobs.kernel_signatures` (those the test suite calls: scripts/test.sh passes it, so that the
-pytest workers load the kernels instead of each compiling them).
+so that ``serve`` only loads machine code. With ``--recorded`` a second process compiles, beside the flight, every
+signature recorded in :mod:`backend.jobs.kernel_signatures` (those the test suite calls beyond the flight's:
+scripts/test.sh passes it, so that the pytest workers load the kernels instead of each compiling them); both save
+to numba's cache under a lock (:func:`backend.jobs.kernel_signatures.serialise_cache_saves`).
 """
 
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import time
+from concurrent.futures import ProcessPoolExecutor
 
 WARM_FLIGHT_S = 90.0  # enough telemetry for the live twin to synchronise and fly one segment
 WARM_START_UTC = "2026-03-20T00:00:00Z"
@@ -64,17 +67,26 @@ def warm_kernels(scenario: str) -> dict[str, float]:
 
 def run(args: argparse.Namespace) -> int:
     """Compile (or load) the kernels and say how long each step took."""
-    t = time.perf_counter()
-    for step, seconds in warm_kernels(args.scenario).items():
-        print(f"  {step}: {seconds:.1f} s")
-    if args.recorded:
-        from backend.jobs import kernel_signatures
+    from backend.jobs import kernel_signatures
 
-        start = time.perf_counter()
-        report = kernel_signatures.compile_recorded(kernel_signatures.RECORD)
-        seconds = time.perf_counter() - start
-        print(f"  recorded signatures ({kernel_signatures.RECORD.name}): {report.compiled} in {seconds:.1f} s")
-        for skipped in report.skipped:
-            print(f"    skipped (numba compiles it on first call instead): {skipped}")
+    t = time.perf_counter()
+    kernel_signatures.serialise_cache_saves()
+    pool = beside = None
+    if args.recorded:  # in a process of its own beside the flight: the record holds what the flight does not
+        pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+        beside = pool.submit(kernel_signatures.compile_recorded_beside, kernel_signatures.RECORD)
+    try:
+        for step, seconds in warm_kernels(args.scenario).items():
+            print(f"  {step}: {seconds:.1f} s")
+        if beside is not None:
+            report = beside.result()
+            seconds = time.perf_counter() - t
+            name = kernel_signatures.RECORD.name
+            print(f"  recorded signatures ({name}, beside the flight): {report.compiled}, all done in {seconds:.1f} s")
+            for skipped in report.skipped:
+                print(f"    skipped (numba compiles it on first call instead): {skipped}")
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
     print(f"acs-twin warm: kernels compiled and cached in {time.perf_counter() - t:.1f} s")
     return 0

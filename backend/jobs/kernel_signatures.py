@@ -3,15 +3,21 @@
 ``acs-twin warm`` flies what ``serve`` flies; the test suite (and the what-if, diagnosis and camera paths) call
 further kernels, or the same ones with other argument types, which numba then compiles on first call — in each
 pytest worker and Dask worker that meets them first, one core each, minutes in all on a loaded 2-core machine.
-:func:`record` reads every signature from the cache indexes (``<module>.<function>-<line>.py311.nbi``, each a
-pickle of the cache stamp and a dict keyed by (argument types, target, ...)) of ``sim_core`` and ``telemetry``
-and writes them, by module and function name, to ``kernel_signatures.json`` beside this module;
-``acs-twin warm --recorded`` compiles each of them (:func:`compile_recorded`) so that later processes only load
-machine code. A record is only a list of what to compile: one whose function or types no longer exist is counted
-and skipped (numba compiles at call time as ever), so a stale record costs time, never a result.
+:func:`read_cache` reads every signature from the cache indexes (``<module>.<function>-<line>.py311.nbi``, each a
+pickle of the cache stamp and a dict keyed by (argument types, target, ...)) of ``sim_core`` and ``telemetry``;
+``kernel_signatures.json`` beside this module holds those a suite run compiled beyond what ``acs-twin warm``'s
+flight compiles, and ``acs-twin warm --recorded`` compiles them (:func:`compile_recorded`) in a second process beside
+the flight, both saving under a lock (:func:`serialise_cache_saves`), so that later processes only load machine
+code. A record is only a list of what to compile: an entry whose function or types changed is skipped and named
+(numba compiles at call time as ever), so a stale record costs time, never a result.
 
-Regenerate after a change to the kernels' signatures: run the suite, then
-``python -m backend.jobs.kernel_signatures`` (reads the cache of this checkout, ``$NUMBA_CACHE_DIR`` if set).
+Regenerate it after kernels changed their signatures (on a quiet machine, about ten minutes)::
+
+    NUMBA_CACHE_DIR=/tmp/w acs-twin warm && cp -a /tmp/w /tmp/s
+    NUMBA_CACHE_DIR=/tmp/s python -m pytest -n 2 tests
+    python -m backend.jobs.kernel_signatures /tmp/s --beyond /tmp/w
+
+(tests/sim_core/test_compiled_cache.py expects the cache beside the sources and fails under ``NUMBA_CACHE_DIR``.)
 """
 
 from __future__ import annotations
@@ -28,17 +34,21 @@ from typing import Any, Literal, cast
 __all__ = [
     "RECORD",
     "CompileReport",
+    "beyond",
     "cache_folders",
     "compile_recorded",
+    "compile_recorded_beside",
     "decode_type",
     "encode_type",
     "read_cache",
     "record",
+    "serialise_cache_saves",
     "write",
 ]
 
 RECORD = Path(__file__).with_name("kernel_signatures.json")
 PACKAGES = ("sim_core", "telemetry")
+SAVE_LOCK = ".acs-twin-save.lock"  # in each cache folder: numba's cache saves serialised across processes
 
 
 def encode_type(t: Any) -> Any:
@@ -172,6 +182,41 @@ class CompileReport:
     skipped: list[str]
 
 
+def serialise_cache_saves() -> None:
+    """Make this process's numba cache saves take an exclusive lock on the cache folder (``fcntl.flock``).
+
+    numba's ``IndexDataCacheFile.save`` reads a function's index, takes the first data-file name it does not list
+    and writes both: two processes saving signatures of one function at once can write two signatures under one
+    data-file name, and one of them then loads the other's machine code. Every process of a parallel compile (the
+    warm flight and :func:`compile_recorded` beside it) calls this first."""
+    import fcntl
+
+    from numba.core import caching
+
+    original = caching.IndexDataCacheFile.save
+    if getattr(original, "serialised", False):
+        return
+
+    def save(self: Any, key: Any, data: Any) -> None:
+        try:
+            lock = open(os.path.join(self._cache_path, SAVE_LOCK), "a")  # noqa: SIM115 (held across the save)
+        except OSError:  # a read-only cache: numba's own save fails and falls back to compiling, as without us
+            original(self, key, data)
+            return
+        with lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            original(self, key, data)
+
+    save.serialised = True  # type: ignore[attr-defined]
+    caching.IndexDataCacheFile.save = save  # type: ignore[method-assign]
+
+
+def compile_recorded_beside(path: Path) -> CompileReport:
+    """:func:`compile_recorded` in a process that saves under the cache lock (the target of a spawned process)."""
+    serialise_cache_saves()
+    return compile_recorded(path)
+
+
 def compile_recorded(path: Path = RECORD) -> CompileReport:
     """Compile (or load from the cache) every signature recorded in ``path`` into numba's cache."""
     recorded = json.loads(path.read_text()) if path.is_file() else {}
@@ -190,5 +235,45 @@ def compile_recorded(path: Path = RECORD) -> CompileReport:
     return CompileReport(compiled, skipped)
 
 
+def beyond(
+    signatures: dict[str, dict[str, list[list[Any]]]], known: dict[str, dict[str, list[list[Any]]]]
+) -> dict[str, dict[str, list[list[Any]]]]:
+    """The signatures of ``signatures`` that ``known`` does not hold (empty functions and modules left out)."""
+    out: dict[str, dict[str, list[list[Any]]]] = {}
+    for module, functions in signatures.items():
+        for function, sigs in functions.items():
+            new = [sig for sig in sigs if sig not in known.get(module, {}).get(function, [])]
+            if new:
+                out.setdefault(module, {})[function] = new
+    return out
+
+
+def _user_cache(root: Path) -> dict[str, list[Path]]:
+    return {p: sorted(d for d in root.glob(f"{p}_*") if d.is_dir()) for p in PACKAGES}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Record the signatures in numba caches: this checkout's, or the ``NUMBA_CACHE_DIR`` folders named, minus
+    those in the ``--beyond`` folder (a cache ``acs-twin warm`` alone filled: its flight compiles those itself)."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m backend.jobs.kernel_signatures", description=main.__doc__)
+    parser.add_argument("caches", nargs="*", type=Path, help="NUMBA_CACHE_DIR folders a suite run filled")
+    parser.add_argument("--beyond", type=Path, help="NUMBA_CACHE_DIR folder that `acs-twin warm` alone filled")
+    args = parser.parse_args(argv)
+    if not args.caches:
+        print(f"kernel_signatures: {record()} signatures recorded in {RECORD}")
+        return 0
+    found: dict[str, list[Path]] = {p: [] for p in PACKAGES}
+    for root in args.caches:
+        for package, dirs in _user_cache(root).items():
+            found[package] += dirs
+    signatures = read_cache(found)
+    if args.beyond:
+        signatures = beyond(signatures, read_cache(_user_cache(args.beyond)))
+    print(f"kernel_signatures: {write(signatures)} signatures recorded in {RECORD}")
+    return 0
+
+
 if __name__ == "__main__":
-    print(f"kernel_signatures: {record()} signatures recorded in {RECORD}")
+    sys.exit(main())

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from backend.jobs.kernel_signatures import compile_recorded, decode_type, encode_type, read_cache
+from backend.jobs.kernel_signatures import SAVE_LOCK, compile_recorded, decode_type, encode_type, read_cache
 
 KERNEL = """
 import numpy as np
@@ -57,6 +57,11 @@ def test_a_record_is_compiled_into_the_dispatcher_and_a_changed_or_gone_kernel_i
     assert [s.split(":")[0] for s in report.skipped] == ["kernpkg.kern.twice", "kernpkg.kern.gone"]
     twice = importlib.import_module("kernpkg.kern").twice
     assert {tuple(encode_type(t) for t in sig) for sig in twice.signatures} == {(array,), ("int64",)}
+    # saved through the lock tests/conftest.py put on numba's cache saves, and read back from the index
+    assert (kernel_package / "__pycache__" / SAVE_LOCK).exists()
+    assert read_cache({"kernpkg": [kernel_package / "__pycache__"]}) == {
+        "kernpkg.kern": {"twice": [[array], ["int64"]]}
+    }
 
 
 def test_types_round_trip_through_their_json_form() -> None:

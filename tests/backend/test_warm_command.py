@@ -22,7 +22,7 @@ def test_warm_flies_the_demo_decodes_it_synchronises_a_live_twin_and_compiles_th
     out = capsys.readouterr().out
     for step in ("emulator flight", "decoding", "live twin"):
         assert f"  {step}: " in out
-    assert "  recorded signatures (kernel_signatures.json): 1 in " in out
+    assert "  recorded signatures (kernel_signatures.json, beside the flight): 1, all done in " in out
     assert "skipped (numba compiles it on first call instead): sim_core.quaternion.no_such_kernel" in out
     assert "kernels compiled and cached" in out
 
