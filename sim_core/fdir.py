@@ -761,8 +761,10 @@ RW_ANCHORS = 10  # windows ending now, starting every RW_EVERY_S: the oldest spa
 RW_EVERY_S = 60.0
 RW_INNOVATION_TAU_S = 10.0  # the earth innovation's running mean: σ_e √(T_q/2τ) = 0.07 σ_e at T_q = 0.1 s
 RW_COUNT, RW_ISOLATED, RW_NEXT, RW_HEAD, RW_N, RW_AMBIGUOUS, RW_REACH, RW_NU_V, RW_NU_N = range(9)
-RW_NU, RW_HWPREV, RW_A0 = 9, 12, 15  # running mean of the earth innovation (3), previous wheel momentum (3), anchors
-RW_ANCHOR_SIZE = 5  # anchor time, H_b propagated from it (3), the bound on √E of its error
+RW_NU, RW_HWPREV, RW_KEEP, RW_AXIS = 9, 12, 15, 16  # mean earth innovation (3), previous wheel momentum (3), the
+RW_SCATTER = 17  # the running mean of the oldest window's ρ steps squared (3)
+RW_A0 = 20  # window kept and the axis replaced after an isolation (RW_KEEP < 0: none, a noisy gyro); the anchors
+RW_ANCHOR_SIZE = 8  # anchor time, H_b propagated from it (3), the bound on √E of its error, its last ρ (3)
 WITNESS_STATE_SIZE = RW_A0 + RW_ANCHORS * RW_ANCHOR_SIZE
 CHI3_SIGMAS = float(np.sqrt(chi2.isf(FALSE_ALARM_PROBABILITY, 3)))  # |3-D Gaussian| / σ not exceeded but w.p. P_FA
 AMBIGUOUS_ARG = SENSOR_ARG + 10 * T_EARTH + 9  # fault_detected: the earth sensor or a gyro, the evidence cannot tell
@@ -828,9 +830,14 @@ def rate_witness_step_1(
     window isolate a gyro axis (a wheel fault cannot: its torque is internal): the one with the largest ratio in the
     oldest window (a window started after the fault starts from the drifted rate, and the nutation it then predicts
     spills to the other axes). ``state[RW_REACH]``: the gyro error the oldest window allows, max_i |ρ_i| + bound_i
-    (what :func:`earth_witness_check_1` weighs). Torques neither modelled nor bounded here (aerodynamic, solar
-    pressure, a residual dipole) must be small against J_min times the bound over 600 s."""
-    if state[RW_ISOLATED] != 0.0:
+    (what :func:`earth_witness_check_1` weighs). Reconfiguration: from the isolation on, that oldest window alone is
+    propagated and its rate ω_H replaces the isolated axis of ``w_gyro`` in place (the observer and the law read it;
+    its error, the anchor sample's, is the bound's, not the drift's); no window starts any more. Not for a noisy
+    gyro (the oldest window's step-to-step scatter of ρ, √2 σ_g when healthy, beyond NOISE_RATIO times that): its
+    anchor sample is as noisy, so the gyro is left as it is. Torques neither modelled nor bounded here (aerodynamic,
+    solar pressure, a residual dipole) must be small against J_min times the bound over 600 s."""
+    isolated = state[RW_ISOLATED] != 0.0
+    if isolated and state[RW_KEEP] < 0.0:
         return
     j_inv = np.linalg.inv(inertia)
     eig = np.linalg.eigvalsh(inertia)
@@ -848,8 +855,10 @@ def rate_witness_step_1(
     sigma_r = np.sqrt(sigma_g * sigma_g + sigma_b * sigma_b)
     lam = (np.sqrt(w_gyro @ w_gyro) + CHI3_SIGMAS * sigma_r) * (eig[2] - eig[0]) / eig[0]
     n = int(state[RW_N])
-    worst, axis, reach, oldest_age = 0.0, 0, np.inf, -1.0
+    worst, axis, reach, oldest_age, oldest = 0.0, 0, np.inf, -1.0, 0
     for s in range(n):
+        if isolated and s != int(state[RW_KEEP]):
+            continue
         o = RW_A0 + s * RW_ANCHOR_SIZE
         h_old = state[o + 1 : o + 4].copy()
         w_old = j_inv @ (h_old - hw_prev)  # the witness's own body rate (Heun): no gyro in the propagation
@@ -858,6 +867,14 @@ def rate_witness_step_1(
         state[o + 1 : o + 4] = h
         state[o + 4] += dt * (0.5 * lam * state[o + 4] + gg_err / np.sqrt(eig[0]))
         rho = w_gyro - j_inv @ (h - hw)
+        if isolated:  # the kept window's rate replaces the isolated axis
+            w_gyro[int(state[RW_AXIS])] -= rho[int(state[RW_AXIS])]
+            return
+        if s == int(state[RW_HEAD]) % n:  # the oldest window (the next to be replaced): its steps' scatter
+            step = rho - state[o + 5 : o + 8]
+            alpha = max(dt / max(t - state[o], dt), dt / RW_INNOVATION_TAU_S)  # a mean of all steps, then running
+            state[RW_SCATTER : RW_SCATTER + 3] += alpha * (step * step - state[RW_SCATTER : RW_SCATTER + 3])
+        state[o + 5 : o + 8] = rho
         age = t - state[o]
         r_max, w_worst, w_axis = 0.0, 0.0, 0
         for i in range(3):
@@ -867,13 +884,16 @@ def rate_witness_step_1(
                 w_worst, w_axis = abs(rho[i]) / bound, i
         worst = max(worst, w_worst)
         if age > oldest_age:
-            oldest_age, reach, axis = age, r_max, w_axis
+            oldest_age, reach, axis, oldest = age, r_max, w_axis, s
+    if isolated:
+        return
     state[RW_REACH] = reach
     if t >= state[RW_NEXT]:  # a new window starts here (it replaces the oldest)
         o = RW_A0 + int(state[RW_HEAD]) * RW_ANCHOR_SIZE
         state[o] = t
         state[o + 1 : o + 4] = inertia @ w_gyro + hw
         state[o + 4] = np.sqrt(eig[2]) * CHI3_SIGMAS * sigma_r  # √E₀ bound
+        state[o + 5 : o + 8] = 0.0  # ρ = 0 at the anchor
         state[RW_HEAD] = (state[RW_HEAD] + 1.0) % RW_ANCHORS
         state[RW_N] = min(n + 1, RW_ANCHORS)
         state[RW_NEXT] = t + RW_EVERY_S
@@ -885,7 +905,12 @@ def rate_witness_step_1(
     if state[RW_COUNT] == 1.0:
         _emit(ev, n_ev, t, EV_DETECTED, arg)
     if state[RW_COUNT] >= CONFIRM_PERIODS:
-        state[RW_ISOLATED] = 1.0
+        state[RW_ISOLATED], state[RW_KEEP], state[RW_AXIS] = 1.0, oldest, axis
+        if np.sqrt(0.5 * state[RW_SCATTER + axis]) > NOISE_RATIO * max(sigma_g, NUMERICAL_FLOOR_NMS):
+            state[RW_KEEP] = -1.0  # a noisy gyro: its anchor sample is as noisy, no better rate to give
+        else:
+            o = RW_A0 + oldest * RW_ANCHOR_SIZE
+            w_gyro[axis] = (j_inv @ (state[o + 1 : o + 4] - hw))[axis]
         _emit(ev, n_ev, t, EV_ISOLATED, arg)
         _emit(ev, n_ev, t, EV_RECONFIGURED, SENSOR_ARG + 10 * T_GYRO)
 

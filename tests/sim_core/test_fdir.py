@@ -572,10 +572,13 @@ J_R3 = np.full(3, 0.01)
 SIGMA_G = 1e-6  # gyro white noise per sample, rad/s
 
 
-def _spin_up(drift_axis: int | None, drift: float = 1e-7, onset: float = 100.0, seconds: float = 600.0):
+def _spin_up(
+    drift_axis: int | None, drift: float = 1e-7, onset: float = 100.0, seconds: float = 600.0, noise: float = SIGMA_G
+):
     """The rate witness over a torque-free body turning about its z principal axis while the z wheel speeds up
     (H_z = J_zz ω_z + J_r Ω_z conserved exactly, ω ∥ H: no precession; position along z: no gravity-gradient
-    torque), read by gyros with white noise and, on ``drift_axis``, a bias ramp from ``onset``."""
+    torque), read by gyros with white noise ``noise`` (the model says SIGMA_G) and, on ``drift_axis``, a bias ramp
+    from ``onset``. Returns the state, the events and the last (true rate, gyro rate as the witness left it)."""
     rng = np.random.default_rng(13)
     state = fdir.witness_state()
     ev, n_ev = np.zeros((64, 3)), np.zeros(1, dtype=np.int64)
@@ -583,17 +586,18 @@ def _spin_up(drift_axis: int | None, drift: float = 1e-7, onset: float = 100.0, 
     for k in range(int(seconds / T_Q) + 1):
         t = k * T_Q
         speeds = np.array([0.0, 0.0, 5.0 + 0.05 * t])  # the motor's torque is internal: it only moves momentum
-        w = np.array([0.0, 0.0, (h_z - J_R3[2] * speeds[2]) / J_SONG[2, 2]]) + SIGMA_G * rng.standard_normal(3)
+        truth = np.array([0.0, 0.0, (h_z - J_R3[2] * speeds[2]) / J_SONG[2, 2]])
+        w = truth + noise * rng.standard_normal(3)
         if drift_axis is not None and t > onset:
             w[drift_axis] += drift * (t - onset)
         fdir.rate_witness_step_1(
             state, t, T_Q, w, speeds, J_SONG, np.eye(3), J_R3, 0.0, SIGMA_G, 0.0, r_b, 0.0, n_sig, ev, n_ev
         )
-    return state, [(float(e[0]), int(e[1]), int(e[2])) for e in ev[: n_ev[0]]]
+    return state, [(float(e[0]), int(e[1]), int(e[2])) for e in ev[: n_ev[0]]], (truth, w)
 
 
 def test_gyros_that_agree_with_the_dynamics_raise_nothing_while_a_wheel_moves_momentum():
-    state, events = _spin_up(None)
+    state, events, _ = _spin_up(None)
     assert events == []
     assert np.isfinite(state[fdir.RW_REACH])
 
@@ -602,11 +606,24 @@ def test_gyros_that_agree_with_the_dynamics_raise_nothing_while_a_wheel_moves_mo
 def test_gyro_drift_against_the_dynamics_is_isolated_on_its_axis(axis):
     """A 1e-7 rad/s² ramp from 100 s: isolated on its axis (the oldest window's, started before the onset), after the
     onset and within the windows' span of it."""
-    _, events = _spin_up(axis)
+    _, events, (truth, w) = _spin_up(axis)
     arg = fdir.SENSOR_ARG + 10 * fdir.T_GYRO + axis
     isolated = [t for t, code, a in events if code == fdir.EV_ISOLATED]
     assert len(isolated) == 1 and {a for _, code, a in events if code != fdir.EV_RECONFIGURED} == {arg}
     assert 100.0 < isolated[0] < 100.0 + fdir.RW_ANCHORS * fdir.RW_EVERY_S
+    # reconfigured: the axis reads the dynamics' rate, off by the anchor sample's error (its bound), not the drift
+    n_sig, chi3 = fdir.gaussian_sigmas(), fdir.CHI3_SIGMAS
+    lam = abs(truth[2]) * 5.0 / 15.0 * fdir.RW_ANCHORS * fdir.RW_EVERY_S  # λ a: |ω| (J_max − J_min)/J_min × 600 s
+    bound = n_sig * SIGMA_G + np.sqrt(20.0 / 15.0) * chi3 * SIGMA_G * np.exp(0.5 * lam)
+    assert abs(w[axis] - truth[axis]) < bound < 1e-7 * (600.0 - 100.0)
+
+
+def test_a_noisy_gyro_is_isolated_but_not_replaced_by_a_rate_anchored_on_its_own_noisy_sample():
+    """Ten times the model's white noise: the witness sees it at once, the oldest window's ρ steps scatter 10 √2 σ_g
+    (beyond NOISE_RATIO × √2 σ_g), so no rate anchored on one of its samples is better: the gyro is left as it is."""
+    state, events, (truth, w) = _spin_up(None, seconds=20.0, noise=10.0 * SIGMA_G)
+    assert any(code == fdir.EV_ISOLATED for _, code, _ in events)
+    assert state[fdir.RW_KEEP] < 0.0
 
 
 def _earth_samples(witness: np.ndarray, n: int, offset_rad: float = 0.02):

@@ -306,7 +306,8 @@ def test_fdir_isolates_the_drifting_pitch_gyro_by_the_dynamics_and_never_blames_
     against the rigid-body dynamics (fdir.rate_witness_step_1: the body momentum from the tachometers, every wheel
     torque internal), sees the drift: the pitch gyro is isolated, not before its bias change a_g (t − t_s) outgrows
     the two samples' white noise n_σ √2 σ_g and within the witness's 600 s of windows; the earth sensor is never
-    blamed, and the final error is no worse than without FDIR."""
+    blamed; the gyro's pitch axis then reads the dynamics' rate (the witness's window started before the onset), so
+    the final error is back inside the nominal's band, where without FDIR the drift holds it at 0.55°."""
     name = "gyro graded"
     s = scenario_library.get("song-table1")
     alarms = _alarms(with_fdir, name)
@@ -318,7 +319,7 @@ def test_fdir_isolates_the_drifting_pitch_gyro_by_the_dynamics_and_never_blames_
     assert a_g * (isolated[0] - onset) > floor
     assert isolated[0] - onset < fdir.RW_ANCHORS * fdir.RW_EVERY_S
     end = DURATION_S - 1.0
-    assert with_fdir.at(name, end) <= without_fdir.at(name, end) * (1.0 + NO_WORSE_RTOL)
+    assert with_fdir.at(name, end) < with_fdir.band_deg() < without_fdir.at(name, end)
 
 
 def test_fdir_isolates_the_drifting_earth_sensor_as_the_dynamics_clear_the_gyro(with_fdir):
