@@ -42,7 +42,13 @@ from sim_core import (
 from sim_core import faults as faults_mod
 from sim_core.faults import T_EARTH, T_GYRO, T_MAG, T_SUN, T_WHEEL, Y_FRICTION, Y_STUCK
 from sim_core.integrators import rk4_step_into
-from sim_core.quaternion import angle_between_1, attitude_difference_1, conjugate_rotate_1, conjugate_rotate_into
+from sim_core.quaternion import (
+    angle_between_1,
+    attitude_difference_1,
+    conjugate_rotate_1,
+    conjugate_rotate_into,
+    dot3_1,
+)
 from sim_core.spacecraft import PlantArrays, free_wheel_inertia_1
 from sim_core.threads import thread_budget
 
@@ -488,10 +494,10 @@ def _sun_direction_1(
     eclipse or when failed, the ephemeris Sun seen through the attitude estimate."""
     sun_eci = environment.sun_position_1(t0_unix_s + t)
     s_b, ok = _sun_sensor_sample_1(sigma, faults, t, x, sun_eci, r, frozen)
-    n = np.sqrt(s_b @ s_b)
+    n = np.sqrt(dot3_1(s_b, s_b))
     if not ok or n == 0.0:
         s_b = conjugate_rotate_1(q_est, sun_eci)
-        n = np.sqrt(s_b @ s_b)
+        n = np.sqrt(dot3_1(s_b, s_b))
     unit: np.ndarray = s_b / n
     return unit
 
@@ -504,7 +510,7 @@ def _sun_sensor_sample_1(
     normals = np.random.standard_normal(3)
     s_b, ok = sensors.sun_sensor_1(x[0:4], sun_eci, r, SUN_AXIS_B, SUN_SENSOR_COS_HALF_FOV, sigma, normals)
     ok = faults_mod.held_sensor_faults_1(faults, T_SUN, t, s_b, frozen, sigma, normals) and ok
-    return s_b, ok and s_b @ s_b > 0.0
+    return s_b, ok and dot3_1(s_b, s_b) > 0.0
 
 
 @njit(cache=True)
@@ -691,7 +697,7 @@ def _mekf_stage(
         if not st_ok:
             if earth_ok:
                 mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, nadir, -pos.r, sigma_e)
-            b_norm = np.sqrt(pos.b_eci @ pos.b_eci)
+            b_norm = np.sqrt(dot3_1(pos.b_eci, pos.b_eci))
             if sample.mag_ok and s.magnetometer_noise_t > 0.0 and b_norm > 0.0:
                 sigma_dir = s.magnetometer_noise_t / b_norm + MAG_DIRECTION_FLOOR_RAD
                 mekf.mekf_vector_update_1(est.q, est.bias, est.covariance, sensed.mag, pos.b_eci, sigma_dir)
@@ -844,7 +850,7 @@ def _mode_stage(
         mode_state,
         mc.thresholds,
         t,
-        np.sqrt(est.omega @ est.omega),
+        np.sqrt(dot3_1(est.omega, est.omega)),
         valid,
         angle_between_1(SUN_AXIS_B, sun_b),
         attitude_difference_1(est.q, q_orf),
@@ -1014,7 +1020,7 @@ def _mode_actuation_stage(
         cmd.body_torque[:] = 0.0
         cmd.wheel_cmd[:] = 0.0
         cmd.dipole[:] = 0.0
-        rate = np.sqrt(est.omega @ est.omega)
+        rate = np.sqrt(dot3_1(est.omega, est.omega))
         if mode == modes.MODE_FAULT or rate > WHEEL_CAPTURE_RAD_S or np.sum(available) < 2:
             if have_mag_prev:
                 cmd.dipole[:] = control.bdot_dipole_step(sensed.mag, sensed.mag_prev, t_u, bdot_gain, act.md_max_am2)

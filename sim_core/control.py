@@ -19,7 +19,7 @@ import numpy.typing as npt
 from numba import njit
 from scipy.optimize import brentq
 
-from sim_core.quaternion import conjugate_rotate_1, multiply_1
+from sim_core.quaternion import conjugate_rotate_1, dot3_1, multiply_1
 
 __all__ = [
     "SOMOV_INERTIA_KG_M2",
@@ -427,7 +427,7 @@ def unloading_dipole_step(
     b_b_t: np.ndarray, h_wheels_b_nms: np.ndarray, h_target_b_nms: np.ndarray, gain_per_s: float, l_max_am2: float
 ) -> np.ndarray:
     """Unloading dipole L = B × T / B², T = −k(H − H*) (seed 003 eq 29), |l_i| ≤ l^m; torque L × B ⊥ B."""
-    b2 = b_b_t @ b_b_t
+    b2 = dot3_1(b_b_t, b_b_t)
     if b2 == 0.0:
         return np.zeros(3)
     dipole = np.cross(b_b_t, -gain_per_s * (h_wheels_b_nms - h_target_b_nms))

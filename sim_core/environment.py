@@ -27,16 +27,15 @@ from __future__ import annotations
 
 import datetime as dt
 import functools
-from collections.abc import Callable
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from numba import njit, types
-from numba.extending import intrinsic
+from numba import njit
 
 from sim_core import frames, quaternion
 from sim_core.orbit import MU_EARTH_M3_S2
+from sim_core.quaternion import dot3_floats
 
 __all__ = [
     "IGRF_REFERENCE_RADIUS_M",
@@ -463,24 +462,6 @@ def gravity_gradient_torque_nm(r_eci_m: np.ndarray, q_ib: np.ndarray, inertia_kg
     return _gravity_gradient_many(np.ascontiguousarray(r_b.reshape(-1, 3)), j).reshape(r_b.shape)
 
 
-def _fma_llvm(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
-    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-        return builder.fma(*args)
-
-    return types.float64(types.float64, types.float64, types.float64), codegen
-
-
-# a·b + c rounded once, in compiled code (LLVM's llvm.fma: the FMA instruction where the CPU has one, else libm's)
-_fma = cast("Callable[[float, float, float], float]", intrinsic(_fma_llvm))
-
-
-@njit(cache=True)
-def _dot3(a0: float, a1: float, a2: float, b0: float, b1: float, b2: float) -> float:
-    """a · b summed as OpenBLAS's ddot sums three terms on an FMA CPU, fma(a2, b2, fma(a1, b1, fma(a0, b0, 0))):
-    the bits of numba's ``a @ b`` there (a BLAS call, ≈ 50 ns) in a few cycles and without arrays."""
-    return _fma(a2, b2, _fma(a1, b1, _fma(a0, b0, 0.0)))
-
-
 @njit(cache=True)
 def _drag_plates(
     w0: float,
@@ -495,11 +476,11 @@ def _drag_plates(
     """Σ c_i × (−½ ρ C_D A_i cos θ_i |w| w) over the plates facing the flow w = (w0, w1, w2), body axes, three
     floats."""
     t0 = t1 = t2 = 0.0
-    speed = np.sqrt(_dot3(w0, w1, w2, w0, w1, w2))
+    speed = np.sqrt(dot3_floats(w0, w1, w2, w0, w1, w2))
     if speed == 0.0:
         return t0, t1, t2
     for i in range(areas_m2.size):
-        cos_t = _dot3(normals_b[i, 0], normals_b[i, 1], normals_b[i, 2], w0, w1, w2) / speed
+        cos_t = dot3_floats(normals_b[i, 0], normals_b[i, 1], normals_b[i, 2], w0, w1, w2) / speed
         if cos_t > 0.0:
             k = -0.5 * density_kg_m3 * drag_coefficient * areas_m2[i] * cos_t * speed
             f0, f1, f2 = k * w0, k * w1, k * w2
@@ -527,7 +508,7 @@ def _radiation_plates(
     t0 = t1 = t2 = 0.0
     for i in range(areas_m2.size):
         n0, n1, n2 = normals_b[i, 0], normals_b[i, 1], normals_b[i, 2]
-        cos_t = _dot3(n0, n1, n2, s0, s1, s2)
+        cos_t = dot3_floats(n0, n1, n2, s0, s1, s2)
         if cos_t > 0.0:
             k = -pressure_n_m2 * areas_m2[i] * cos_t
             absorbed = 1.0 - specular[i]
@@ -693,7 +674,7 @@ def add_aerodynamic_torque_orbit_into(
         v_eci_m_s[2],
     )
     r0, r1, r2 = r_eci_m[0], r_eci_m[1], r_eci_m[2]
-    alt = np.sqrt(_dot3(r0, r1, r2, r0, r1, r2)) - _R_EARTH_M
+    alt = np.sqrt(dot3_floats(r0, r1, r2, r0, r1, r2)) - _R_EARTH_M
     t0, t1, t2 = _drag_plates(
         w0, w1, w2, atmosphere_density_1(alt), drag_coefficient, normals_b, areas_m2, centroids_b_m
     )
@@ -718,7 +699,7 @@ def add_solar_pressure_torque_orbit_into(
     loop, every step): Sun direction in body axes (``q_ib`` = q[0:4]), distance and the sunlit fraction of
     :func:`illumination_1` (N·m, body axes)."""
     d0, d1, d2 = sun_eci_m[0] - r_eci_m[0], sun_eci_m[1] - r_eci_m[1], sun_eci_m[2] - r_eci_m[2]
-    dist = np.sqrt(_dot3(d0, d1, d2, d0, d1, d2))
+    dist = np.sqrt(dot3_floats(d0, d1, d2, d0, d1, d2))
     s0, s1, s2 = quaternion.conjugate_rotate_components_1(q_ib, d0 / dist, d1 / dist, d2 / dist)
     p = SOLAR_PRESSURE_1AU_N_M2 * (AU_M / dist) ** 2 * illumination_1(r_eci_m, sun_eci_m)
     t0, t1, t2 = _radiation_plates(s0, s1, s2, p, normals_b, areas_m2, centroids_b_m, specular, diffuse)

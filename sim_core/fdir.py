@@ -92,7 +92,7 @@ from scipy.stats import chi2, norm
 from sim_core import allocation
 from sim_core.modes import MODE_FAULT
 from sim_core.orbit import MU_EARTH_M3_S2
-from sim_core.quaternion import conjugate_rotate_1
+from sim_core.quaternion import conjugate_rotate_1, dot3_1
 from sim_core.wheels import friction_torque_one_wheel, limited_motor_torque_1
 
 __all__ = [
@@ -582,12 +582,12 @@ def wheel_hold_1(
     j_inv_norm = 0.0
     for i in range(3):
         j_inv_norm = max(j_inv_norm, abs(j_inv[i, 0]) + abs(j_inv[i, 1]) + abs(j_inv[i, 2]))
-    err = j_inv_norm * t_u * (dist_torque + rate_noise * np.sqrt(g @ g))
+    err = j_inv_norm * t_u * (dist_torque + rate_noise * np.sqrt(dot3_1(g, g)))
     for p in range(nw):
         state[WS_SPEED, p] = speeds[p]
         state[WS_AXIAL, p] = axes[0, p] * dw[0] + axes[1, p] * dw[1] + axes[2, p] * dw[2]
         state[WS_AXIAL_ERR, p] = err
-        state[WS_COUPLING, p] = j_inv_norm * t_u * np.sqrt(g @ g)  # |Δ(ω × G)| ≤ |Δω| |G| over the period
+        state[WS_COUPLING, p] = j_inv_norm * t_u * np.sqrt(dot3_1(g, g))  # |Δ(ω × G)| ≤ |Δω| |G| over the period
         state[WS_W : WS_W + 3, p] = w_body
         state[WS_TORQUE, p] = limited[p]
         state[WS_VALID, p] = 1.0
@@ -708,14 +708,14 @@ def star_readmit_1(
     if state[SS_JUMP] == 0.0:
         return False
     limit = n_sigma * np.sqrt(2.0) * sigma_earth
-    ref = nadir_ref_i / np.sqrt(nadir_ref_i @ nadir_ref_i)
+    ref = nadir_ref_i / np.sqrt(dot3_1(nadir_ref_i, nadir_ref_i))
     by_star = conjugate_rotate_1(q_meas, ref)
     by_est = conjugate_rotate_1(q_est, ref)
-    if np.arccos(min(1.0, nadir_b @ by_star)) > limit or np.arccos(min(1.0, nadir_b @ by_est)) <= limit:
+    if np.arccos(min(1.0, dot3_1(nadir_b, by_star))) > limit or np.arccos(min(1.0, dot3_1(nadir_b, by_est))) <= limit:
         return False
     z = _rotvec_between_1(q_est, q_meas)
     for i in range(3):
-        p_cov[i, i] += z @ z
+        p_cov[i, i] += dot3_1(z, z)
     state[SS_JUMP] = 0.0
     state[SS_COUNT] = 0.0
     state[SS_ISOLATED] = 0.0
@@ -739,11 +739,11 @@ def earth_sensor_check_1(
     """Screen an earth-sensor nadir (seed 002 eq 14) against the MEKF's prediction: the NIS of the two-axis
     angle |b̂ × b|² / (σ² + the largest attitude variance) above the χ²(2) quantile −2 ln P_FA is rejected;
     ``CONFIRM_PERIODS`` rejections in a row isolate it (event argument SENSOR_ARG + 10·T_EARTH). True: use it."""
-    ref = nadir_ref_i / np.sqrt(nadir_ref_i @ nadir_ref_i)
+    ref = nadir_ref_i / np.sqrt(dot3_1(nadir_ref_i, nadir_ref_i))
     pred = conjugate_rotate_1(q_est, ref)
     d = np.cross(pred, nadir_b)
     s2 = sigma_earth**2 + max(p_cov[0, 0], p_cov[1, 1], p_cov[2, 2])
-    if (d @ d) / s2 <= -2.0 * np.log(FALSE_ALARM_PROBABILITY):
+    if dot3_1(d, d) / s2 <= -2.0 * np.log(FALSE_ALARM_PROBABILITY):
         state[ES_COUNT] = 0.0
         return True
     state[ES_COUNT] += 1.0
@@ -786,12 +786,12 @@ def witness_state_1() -> np.ndarray:
 @njit(cache=True)
 def _rotate_by_1(v: np.ndarray, w: np.ndarray, dt: float) -> np.ndarray:
     """v seen from a frame that turned by w dt (Rodrigues, angle −|w| dt): a body-fixed vector's new components."""
-    n = np.sqrt(w @ w)
+    n = np.sqrt(dot3_1(w, w))
     if n * dt == 0.0:
         return v.copy()
     k = w / n
     a = -n * dt
-    out: np.ndarray = v * np.cos(a) + np.cross(k, v) * np.sin(a) + k * (k @ v) * (1.0 - np.cos(a))
+    out: np.ndarray = v * np.cos(a) + np.cross(k, v) * np.sin(a) + k * dot3_1(k, v) * (1.0 - np.cos(a))
     return out
 
 
@@ -849,11 +849,11 @@ def rate_witness_step_1(
             quant[i] += abs(ja[i, p]) * wheel_inertia[p] * tach_q
     hw_prev = state[RW_HWPREV : RW_HWPREV + 3].copy()
     state[RW_HWPREV : RW_HWPREV + 3] = hw
-    rn = np.sqrt(r_b @ r_b)
+    rn = np.sqrt(dot3_1(r_b, r_b))
     m_gg = 3.0 * MU_EARTH_M3_S2 / rn**5 * np.cross(r_b, inertia @ r_b)
     gg_err = 3.0 * MU_EARTH_M3_S2 / rn**3 * (eig[2] - eig[0]) * att_bound
     sigma_r = np.sqrt(sigma_g * sigma_g + sigma_b * sigma_b)
-    lam = (np.sqrt(w_gyro @ w_gyro) + CHI3_SIGMAS * sigma_r) * (eig[2] - eig[0]) / eig[0]
+    lam = (np.sqrt(dot3_1(w_gyro, w_gyro)) + CHI3_SIGMAS * sigma_r) * (eig[2] - eig[0]) / eig[0]
     n = int(state[RW_N])
     worst, axis, reach, oldest_age, oldest = 0.0, 0, np.inf, -1.0, 0
     for s in range(n):
@@ -941,7 +941,7 @@ def earth_witness_check_1(
     sensor itself. A gyro the witness isolated explains any slow disagreement (the sample is used), not (b) (its
     reach frozen at the isolation). Neither cleared nor
     convicted: ``fault_detected`` with AMBIGUOUS_ARG (once), the sample used (as without FDIR). True: use it."""
-    ref = nadir_ref_i / np.sqrt(nadir_ref_i @ nadir_ref_i)
+    ref = nadir_ref_i / np.sqrt(dot3_1(nadir_ref_i, nadir_ref_i))
     pred = conjugate_rotate_1(q_est, ref)
     d = np.cross(pred, nadir_b)
     n = witness[RW_NU_N] + 1.0
@@ -951,14 +951,14 @@ def earth_witness_check_1(
     witness[RW_NU_V] = (1.0 - alpha) ** 2 * witness[RW_NU_V] + alpha * alpha  # variance of ν̄ in σ_e² per axis
     s2 = sigma_earth**2 + max(p_cov[0, 0], p_cov[1, 1], p_cov[2, 2])
     chi = -2.0 * np.log(FALSE_ALARM_PROBABILITY)
-    if (d @ d) / s2 <= chi:
+    if dot3_1(d, d) / s2 <= chi:
         state[ES_COUNT] = 0.0
         return True
-    nu = np.sqrt(witness[RW_NU : RW_NU + 3] @ witness[RW_NU : RW_NU + 3])
+    nu = np.sqrt(dot3_1(witness[RW_NU : RW_NU + 3], witness[RW_NU : RW_NU + 3]))
     nu_noise = np.sqrt(chi * witness[RW_NU_V]) * sigma_earth
     reach = witness[RW_REACH]
     lag = RW_INNOVATION_TAU_S * (reach + k_max * (nu + nu_noise))
-    by_sample = np.sqrt(d @ d) - np.sqrt(chi) * sigma_earth > nu + nu_noise + lag
+    by_sample = np.sqrt(dot3_1(d, d)) - np.sqrt(chi) * sigma_earth > nu + nu_noise + lag
     if witness[RW_ISOLATED] != 0.0 and not by_sample:
         state[ES_COUNT] = 0.0
         return True

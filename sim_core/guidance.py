@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit
 
 from sim_core import frames, quaternion
-from sim_core.quaternion import multiply_1
+from sim_core.quaternion import dot3_1, multiply_1
 from sim_core.scheduled_turn import PLAN_SIZE, TurnEnvelope, plan_scheduled_turn, scheduled_turn_1, turn_envelope
 
 __all__ = [
@@ -118,11 +118,11 @@ def orf_hold_1(
 @njit(cache=True)
 def _unit_derivatives_1(a: np.ndarray, ad: np.ndarray, add: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """n = a/|a| and its first two time derivatives from a, ȧ, ä (exact differentiation)."""
-    s = np.sqrt(a @ a)
+    s = np.sqrt(dot3_1(a, a))
     n = a / s
-    sd = n @ ad
+    sd = dot3_1(n, ad)
     nd = (ad - sd * n) / s
-    sdd = nd @ ad + n @ add
+    sdd = dot3_1(nd, ad) + dot3_1(n, add)
     ndd = (add - sdd * n - 2.0 * sd * nd) / s
     return n, nd, ndd
 
@@ -164,7 +164,7 @@ def target_pointing_1(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Boresight +x at the target, +z nearest the inertial u; ω^p, ω̇^p by exact differentiation (seed 000 §6 LOS)."""
     x, xd, xdd = _unit_derivatives_1(r_target - r_eci, v_target - v_eci, a_target - a_eci)
-    ux, uxd, uxdd = yaw_ref @ x, yaw_ref @ xd, yaw_ref @ xdd
+    ux, uxd, uxdd = dot3_1(yaw_ref, x), dot3_1(yaw_ref, xd), dot3_1(yaw_ref, xdd)
     zt = yaw_ref - ux * x
     ztd = -uxd * x - ux * xd
     ztdd = -uxdd * x - 2.0 * uxd * xd - ux * xdd
@@ -172,8 +172,8 @@ def target_pointing_1(
     y = np.cross(z, x)
     yd = np.cross(zd, x) + np.cross(z, xd)
     ydd = np.cross(zdd, x) + 2.0 * np.cross(zd, xd) + np.cross(z, xdd)
-    w = np.array([yd @ z, zd @ x, xd @ y])  # Ṙ = R[ω]× with R = [x y z]
-    wd = np.array([ydd @ z + yd @ zd, zdd @ x + zd @ xd, xdd @ y + xd @ yd])
+    w = np.array([dot3_1(yd, z), dot3_1(zd, x), dot3_1(xd, y)])  # Ṙ = R[ω]× with R = [x y z]
+    wd = np.array([dot3_1(ydd, z) + dot3_1(yd, zd), dot3_1(zdd, x) + dot3_1(zd, xd), dot3_1(xdd, y) + dot3_1(xd, yd)])
     return _quaternion_of_axes_1(x, y, z), w, wd
 
 
@@ -482,8 +482,8 @@ def sun_pointing_1(q_ib: np.ndarray, sun_b: np.ndarray, axis_b: np.ndarray) -> n
     """One-axis Sun orientation (seed 001): the attitude nearest q_ib that puts the body axis ``axis_b`` on the
     Sun direction ``sun_b`` (unit, body axes, as the Sun sensor sees it), by the shortest rotation."""
     axis = np.cross(axis_b, sun_b)
-    n = np.sqrt(axis @ axis)
-    ang = np.arctan2(n, axis_b @ sun_b)
+    n = np.sqrt(dot3_1(axis, axis))
+    ang = np.arctan2(n, dot3_1(axis_b, sun_b))
     dq = np.array([1.0, 0.0, 0.0, 0.0])
     if n > 1e-12:
         dq[0] = np.cos(0.5 * ang)

@@ -91,3 +91,31 @@ def test_kinematics_derivative_matches_finite_difference_of_rotation():
 def test_bad_quaternions_are_rejected_with_a_clear_error(bad):
     with pytest.raises(ValueError, match="q"):
         qt.normalize(bad)
+
+
+def _fma_chain_exact(a: np.ndarray, b: np.ndarray) -> float:
+    """fma(a2, b2, fma(a1, b1, fma(a0, b0, 0))) in exact rational arithmetic, each step rounded once to the nearest
+    double (Fraction → float rounds correctly): the truth of an FMA instruction."""
+    from fractions import Fraction
+
+    s = 0.0
+    for x, y in zip(a.tolist(), b.tolist(), strict=True):
+        s = float(Fraction(x) * Fraction(y) + Fraction(s))
+    return s
+
+
+def test_dot3_is_the_rounded_fma_chain_and_numpys_dot_to_an_ulp():
+    """dot3_1 rounds as an FMA chain does, step by step (the sum OpenBLAS's ddot forms for three terms on an FMA CPU,
+    so the loop's kernels keep the bits of ``a @ b`` there: tests/sim_core/test_engine_digests.py), on random,
+    signed, zero and large/small-exponent vectors; it differs from numpy's dot by at most the rounding of two
+    products and two sums."""
+    rng = np.random.default_rng(7)
+    a = rng.standard_normal((2000, 3)) * 10.0 ** rng.integers(-8, 8, (2000, 3))
+    b = rng.standard_normal((2000, 3)) * 10.0 ** rng.integers(-8, 8, (2000, 3))
+    a[::7, 1] = 0.0
+    b[::11, 2] = -0.0
+    for x, y in zip(a, b, strict=True):
+        d = qt.dot3_1(x, y)
+        assert d == _fma_chain_exact(x, y)
+        assert abs(d - float(x @ y)) <= 4.0 * np.finfo(float).eps * float(np.abs(x) @ np.abs(y))
+    assert qt.dot3_floats(1.0, 2.0, 3.0, 4.0, -5.0, 6.0) == 12.0
