@@ -85,7 +85,8 @@ def dask_client(scheduler: str | None = None, n_workers: int | None = None, warm
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
-            dashboard_address=None,
+            dashboard_address="127.0.0.1:0",  # its HTTP routes on a free loopback port, never 8787
+            scheduler_kwargs={"dashboard": False},
             silence_logs=40,
         )
         client = Client(cluster)

@@ -5,6 +5,8 @@ their local runs. The LocalCluster that dask_client starts by itself is the one 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -94,6 +96,15 @@ def test_each_worker_s_pools_get_one_thread_and_a_local_cluster_s_their_share_of
     assert set(client.run(thread_budget).values()) == {1}
     workers = len(shared_dask.scheduler_info(n_workers=-1)["workers"])
     assert set(shared_dask.run(thread_budget).values()) == {cluster.local_thread_budget(workers)}
+
+
+def test_a_local_cluster_serves_http_on_a_free_loopback_port_and_no_dashboard(shared_dask) -> None:
+    """A server's LocalCluster must not take distributed's well-known dashboard port 8787 (it did, with
+    dashboard_address=None, whenever 8787 was free): its scheduler's HTTP routes listen on a loopback port the kernel
+    chose (in its ephemeral range)."""
+    low, high = map(int, Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split())
+    sockets = [sock.getsockname() for sock in shared_dask.cluster.scheduler.http_server._sockets.values()]
+    assert sockets and all(host == "127.0.0.1" and low <= port <= high for host, port, *_ in sockets), sockets
 
 
 def test_map_cases_keeps_order(client) -> None:
