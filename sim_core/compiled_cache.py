@@ -74,10 +74,14 @@ def module_hashes(package_dir: Path) -> dict[str, str]:
 
 def cache_dirs(package_dir: Path) -> list[Path]:
     """Where numba caches the package's functions: the ``__pycache__`` folders beside the sources, or, when
-    ``NUMBA_CACHE_DIR`` is set, the folders named like the package under it (numba mirrors the source path)."""
+    ``NUMBA_CACHE_DIR`` is set, the folder numba names for each source folder under it (``<folder>_<sha1 of its
+    path>``, numba's own ``_CacheLocator.get_suitable_cache_subpath``)."""
     user = os.environ.get("NUMBA_CACHE_DIR")
     if user:
-        return sorted(p for p in Path(user).rglob(package_dir.name) if p.is_dir())
+        from numba.core.caching import _CacheLocator
+
+        names = {_CacheLocator.get_suitable_cache_subpath(str(f)) for f in package_dir.rglob("*.py")}  # type: ignore[no-untyped-call]
+        return sorted(p for p in (Path(user) / name for name in names) if p.is_dir())
     return sorted(p for p in package_dir.rglob("__pycache__") if p.is_dir())
 
 

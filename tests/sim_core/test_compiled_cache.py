@@ -13,8 +13,9 @@ CALLEE = "from numba import njit\n\n\n@njit(cache=True)\ndef value():\n    retur
 CALLER = "from numba import njit\n\nfrom pkg.callee import value\n\n\n@njit(cache=True)\ndef twice():\n    return 2 * value()\n"
 
 
-def _run(root: Path, guarded: bool) -> int:
-    """A fresh interpreter importing ``pkg`` (guarded like sim_core or not) and calling the cached caller."""
+def _run(root: Path, guarded: bool, cache_dir: Path | None = None) -> int:
+    """A fresh interpreter importing ``pkg`` (guarded like sim_core or not) and calling the cached caller; numba's
+    cache beside the sources, or under ``cache_dir`` (NUMBA_CACHE_DIR) when given."""
     code = textwrap.dedent(f"""
         import sys
         from pathlib import Path
@@ -25,13 +26,15 @@ def _run(root: Path, guarded: bool) -> int:
         from pkg.caller import twice
         print(twice())
     """)
-    env_path = str(Path(sim_core.__file__).parent.parent)
+    env = {"PYTHONPATH": str(Path(sim_core.__file__).parent.parent), "PATH": "/usr/bin:/bin"}
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = str(cache_dir)
     out = subprocess.run(  # -B: a module rewritten within the same second at the same size (callee.py's 1 → 5)
         [sys.executable, "-B", "-c", code],  # would otherwise be imported from its stale .pyc (mtime has 1 s steps)
         capture_output=True,
         text=True,
         check=True,
-        env={"PYTHONPATH": env_path, "PATH": "/usr/bin:/bin"},
+        env=env,
     )
     return int(out.stdout.strip())
 
@@ -53,6 +56,17 @@ def test_numba_alone_serves_a_stale_callee_and_the_guard_recompiles(tmp_path):
         _package(root, 5)  # the callee changes, the caller's file does not
     assert _run(plain, False) == 2  # numba's own cache: the caller still has value() == 1 inlined
     assert _run(guarded, True) == 10  # guarded: recompiled against the new callee
+
+
+def test_the_guard_clears_a_user_cache_dir_too(tmp_path):
+    """With NUMBA_CACHE_DIR numba keeps a folder's cache in ``<folder>_<sha1 of its path>`` under it (the guard
+    looked for a folder named like the package there, found none and cleared nothing)."""
+    cache = tmp_path / "numba-cache"
+    _package(tmp_path, 1)
+    assert _run(tmp_path, True, cache) == 2
+    assert not list((tmp_path / "pkg").glob("__pycache__/*.nbi"))  # numba used the user cache dir
+    _package(tmp_path, 5)
+    assert _run(tmp_path, True, cache) == 10
 
 
 def test_the_stamp_follows_the_sources(tmp_path):
