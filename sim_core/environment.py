@@ -463,6 +463,13 @@ def gravity_gradient_torque_nm(r_eci_m: np.ndarray, q_ib: np.ndarray, inertia_kg
 
 
 @njit(cache=True)
+def _plate_moment(centroids_b_m: np.ndarray, i: int, f0: float, f1: float, f2: float) -> tuple[float, float, float]:
+    """c_i × F: the moment about the centre of mass of a force F on plate i (body axes, three floats)."""
+    c0, c1, c2 = centroids_b_m[i, 0], centroids_b_m[i, 1], centroids_b_m[i, 2]
+    return c1 * f2 - c2 * f1, c2 * f0 - c0 * f2, c0 * f1 - c1 * f0
+
+
+@njit(cache=True)
 def _drag_plates(
     w0: float,
     w1: float,
@@ -484,10 +491,8 @@ def _drag_plates(
         if cos_t > 0.0:
             k = -0.5 * density_kg_m3 * drag_coefficient * areas_m2[i] * cos_t * speed
             f0, f1, f2 = k * w0, k * w1, k * w2
-            c0, c1, c2 = centroids_b_m[i, 0], centroids_b_m[i, 1], centroids_b_m[i, 2]
-            t0 += c1 * f2 - c2 * f1
-            t1 += c2 * f0 - c0 * f2
-            t2 += c0 * f1 - c1 * f0
+            m0, m1, m2 = _plate_moment(centroids_b_m, i, f0, f1, f2)
+            t0, t1, t2 = t0 + m0, t1 + m1, t2 + m2
     return t0, t1, t2
 
 
@@ -518,10 +523,8 @@ def _radiation_plates(
                 k * (absorbed * s1 + normal * n1),
                 k * (absorbed * s2 + normal * n2),
             )
-            c0, c1, c2 = centroids_b_m[i, 0], centroids_b_m[i, 1], centroids_b_m[i, 2]
-            t0 += c1 * f2 - c2 * f1
-            t1 += c2 * f0 - c0 * f2
-            t2 += c0 * f1 - c1 * f0
+            m0, m1, m2 = _plate_moment(centroids_b_m, i, f0, f1, f2)
+            t0, t1, t2 = t0 + m0, t1 + m1, t2 + m2
     return t0, t1, t2
 
 

@@ -725,6 +725,19 @@ def star_readmit_1(
 
 
 @njit(cache=True)
+def _earth_rejected(state: np.ndarray, ev: np.ndarray, n_ev: np.ndarray, t: float) -> bool:
+    """An earth-sensor sample rejected: ``fault_detected`` at the first rejection in a row, ``fault_isolated`` at
+    ``CONFIRM_PERIODS`` in a row (event argument SENSOR_ARG + 10·T_EARTH). False: do not use it."""
+    state[ES_COUNT] += 1.0
+    if state[ES_COUNT] == 1.0:
+        _emit(ev, n_ev, t, EV_DETECTED, SENSOR_ARG + 10 * T_EARTH)
+    if state[ES_COUNT] == CONFIRM_PERIODS and state[ES_ISOLATED] == 0.0:
+        state[ES_ISOLATED] = 1.0
+        _emit(ev, n_ev, t, EV_ISOLATED, SENSOR_ARG + 10 * T_EARTH)
+    return False
+
+
+@njit(cache=True)
 def earth_sensor_check_1(
     state: np.ndarray,
     q_est: np.ndarray,
@@ -746,13 +759,7 @@ def earth_sensor_check_1(
     if dot3_1(d, d) / s2 <= -2.0 * np.log(FALSE_ALARM_PROBABILITY):
         state[ES_COUNT] = 0.0
         return True
-    state[ES_COUNT] += 1.0
-    if state[ES_COUNT] == 1.0:
-        _emit(ev, n_ev, t, EV_DETECTED, SENSOR_ARG + 10 * T_EARTH)
-    if state[ES_COUNT] == CONFIRM_PERIODS and state[ES_ISOLATED] == 0.0:
-        state[ES_ISOLATED] = 1.0
-        _emit(ev, n_ev, t, EV_ISOLATED, SENSOR_ARG + 10 * T_EARTH)
-    return False
+    return _earth_rejected(state, ev, n_ev, t)
 
 
 # --- gyro vs the rigid-body dynamics (a third witness where no star tracker flies) ------------------------------
@@ -969,13 +976,7 @@ def earth_witness_check_1(
             _emit(ev, n_ev, t, EV_DETECTED, AMBIGUOUS_ARG)
         state[ES_COUNT] = 0.0
         return True
-    state[ES_COUNT] += 1.0
-    if state[ES_COUNT] == 1.0:
-        _emit(ev, n_ev, t, EV_DETECTED, SENSOR_ARG + 10 * T_EARTH)
-    if state[ES_COUNT] == CONFIRM_PERIODS and state[ES_ISOLATED] == 0.0:
-        state[ES_ISOLATED] = 1.0
-        _emit(ev, n_ev, t, EV_ISOLATED, SENSOR_ARG + 10 * T_EARTH)
-    return False
+    return _earth_rejected(state, ev, n_ev, t)
 
 
 @njit(cache=True)
