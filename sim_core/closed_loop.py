@@ -50,7 +50,9 @@ from sim_core.quaternion import (
     dot3_1,
 )
 from sim_core.spacecraft import PlantArrays, free_wheel_inertia_1
-from sim_core.threads import thread_budget
+from sim_core.threads import single_threaded_kernel_blas, thread_budget
+
+single_threaded_kernel_blas()  # the kernels' BLAS: tiny products, no worker thread spinning beside them
 
 # Guidance kinds.
 PROGRAM_INERTIAL, PROGRAM_ROUTE = 0, 1

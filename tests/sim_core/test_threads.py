@@ -8,7 +8,7 @@ import os
 import numpy as np
 import pytest
 
-from sim_core.threads import THREADS_ENV, thread_budget
+from sim_core.threads import THREADS_ENV, single_threaded_kernel_blas, thread_budget
 
 
 def test_a_plain_process_uses_every_core(monkeypatch) -> None:
@@ -40,3 +40,23 @@ def test_the_tachometer_likelihood_is_the_same_on_one_thread_as_on_many(monkeypa
     monkeypatch.setenv(THREADS_ENV, "4")
     many = fd.count_loglik(y, drift, q_var, quantum, 1e-8, offset, reset)
     np.testing.assert_array_equal(one, many)
+
+
+def test_the_kernels_blas_runs_one_thread_and_numpy_s_keeps_its_own() -> None:
+    """numba's kernels call scipy's bundled OpenBLAS: the engine gives it one thread (its worker thread spun beside
+    every flight, doubling a flight's CPU); numpy's own BLAS is not touched."""
+    from pathlib import Path
+
+    import scipy
+    from threadpoolctl import threadpool_info
+
+    import sim_core.closed_loop  # noqa: F401  (sets the kernels' BLAS as it is imported)
+
+    bundled = Path(scipy.__file__).resolve().parent.parent / "scipy.libs"
+    blas = {
+        Path(i["filepath"]).resolve().parent: i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"
+    }
+    if bundled not in blas:
+        pytest.skip(f"scipy here does not bundle its OpenBLAS in {bundled} (found: {sorted(map(str, blas))})")
+    assert blas[bundled] == 1
+    assert {Path(p).resolve().parent for p in single_threaded_kernel_blas()} == {bundled}  # numpy's BLAS untouched
