@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from telemetry.ccsds import CCSDS_EPOCH_NS, NS_PER_DAY, NS_PER_S, TIME_SCALE_OFFSET_S, scale_to_utc
 
@@ -138,54 +139,80 @@ def parse_time_fields(spec: str | Mapping[str, Any] | None) -> TimeFields | None
     return TimeFields(fields=tuple((str(k), str(v)) for k, v in mapping.items()), **kwargs)
 
 
-def _days_since_unix(year: np.ndarray) -> np.ndarray:
-    """Days from 1970-01-01 to January 1 of each (proleptic Gregorian) year (1..10000): numpy's calendar run once
-    per year of the span the packets cover (usually one), then looked up."""
-    if year.size == 0:
-        return np.zeros(0, np.int64)
-    first = int(year.min())
-    span = np.arange(first, int(year.max()) + 1, dtype=np.int64)
-    table = (np.datetime64("1970", "Y") + (span - 1970).astype("timedelta64[Y]")).astype("datetime64[D]")
-    days: np.ndarray = table.astype(np.int64)[year - first]
-    return days
+_CALENDAR_ROWS = ("year", "doy", "month", "day", *_RANGES)  # rows of _calendar_kernel's field matrix
+_RANGE_CODE = np.array([c for c, _, _ in _RANGES.values()], dtype=np.int8)
+_RANGE_LOW = np.array([lo for _, lo, _ in _RANGES.values()], dtype=np.int64)
+_RANGE_HIGH = np.array([hi for _, _, hi in _RANGES.values()], dtype=np.int64)
+_RANGE_UNIT_NS = np.array([_UNIT_NS[k] for k in _RANGES], dtype=np.int64)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _days_from_civil(year: int, month: int, day: int) -> int:
+    """Days from 1970-01-01 to a proleptic Gregorian date (H. Hinnant's days_from_civil: 400-year eras)."""
+    y = year - (month <= 2)
+    era = (y if y >= 0 else y - 399) // 400
+    yoe = y - era * 400
+    doy = (153 * (month + (-3 if month > 2 else 9)) + 2) // 5 + day - 1
+    doe = yoe * 365 + yoe // 4 - yoe // 100 + doy
+    return era * 146_097 + doe - 719_468
+
+
+@njit(cache=True, nogil=True)
+def _calendar_kernel(
+    fields: np.ndarray,
+    given: np.ndarray,
+    code: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
+    unit_ns: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """UTC ns and problem codes of calendar fields (compiled kernel, one pass): fields[k] is the column of
+    _CALENDAR_ROWS[k] (given[k]: the mission gives it; a row not given is 0), the time-of-day rows checked
+    against low..high (else problem code) and weighted by unit_ns. The first problem found is the packet's;
+    a packet with a problem gets a time of its clipped fields (it is quarantined)."""
+    n = fields.shape[1]
+    t = np.empty(n, dtype=np.int64)
+    problem = np.zeros(n, dtype=np.int8)
+    for i in range(n):
+        year = fields[0, i]
+        if year < 1 or year > 9_999:
+            problem[i], year = 1, 1_970
+        if given[1]:
+            leap = (year % 4 == 0 and year % 100 != 0) or year % 400 == 0
+            doy = fields[1, i]
+            if problem[i] == 0 and (doy < 1 or doy > (366 if leap else 365)):
+                problem[i] = 4
+            day = _days_from_civil(year, 1, 1) + min(max(doy, 1), 366) - 1
+        else:
+            month, dom = fields[2, i], fields[3, i]
+            if problem[i] == 0 and (month < 1 or month > 12):
+                problem[i] = 2
+            month = min(max(month, 1), 12)
+            first = _days_from_civil(year, month, 1)
+            length = _days_from_civil(year + (month == 12), month % 12 + 1, 1) - first
+            if problem[i] == 0 and (dom < 1 or dom > length):
+                problem[i] = 3
+            day = first + min(max(dom, 1), 31) - 1
+        ns = day * NS_PER_DAY
+        for k in range(code.shape[0]):
+            if given[4 + k]:
+                v = fields[4 + k, i]
+                if problem[i] == 0 and (v < low[k] or v > high[k]):
+                    problem[i] = code[k]
+                ns += v * unit_ns[k]
+        t[i] = ns
+    return t, problem
 
 
 def _calendar(values: Mapping[str, np.ndarray], tf: TimeFields, n: int) -> tuple[np.ndarray, np.ndarray]:
     """UTC ns and problem codes of calendar fields (UTC, day of year from 1)."""
-
-    def get(key: str) -> np.ndarray:
+    fields = np.zeros((len(_CALENDAR_ROWS), n), dtype=np.int64)
+    given = np.zeros(len(_CALENDAR_ROWS), dtype=np.bool_)
+    for k, key in enumerate(_CALENDAR_ROWS):
         name = tf.field(key)
-        return np.zeros(n, np.int64) if name is None else np.asarray(values[name]).astype(np.int64)
-
-    problem = np.zeros(n, dtype=np.int8)
-    year = get("year")
-    problem[(year < 1) | (year > 9999)] = 1
-    year = np.where(problem == 0, year, 1970)
-    jan1 = _days_since_unix(year)
-    leap = _days_since_unix(year + 1) - jan1 == 366
-    if tf.field("doy") is not None:
-        doy = get("doy")
-        problem[(problem == 0) & ((doy < 1) | (doy > np.where(leap, 366, 365)))] = 4
-        day = jan1 + np.clip(doy, 1, 366) - 1
-    else:
-        month, dom = get("month"), get("day")
-        problem[(problem == 0) & ((month < 1) | (month > 12))] = 2
-        month = np.clip(month, 1, 12)
-        first = (np.datetime64("1970", "Y") + (year - 1970).astype("timedelta64[Y]")).astype("datetime64[M]")
-        first = first + (month - 1).astype("timedelta64[M]")
-        length = ((first + np.timedelta64(1, "M")).astype("datetime64[D]") - first.astype("datetime64[D]")).astype(
-            np.int64
-        )
-        problem[(problem == 0) & ((dom < 1) | (dom > length))] = 3
-        day = first.astype("datetime64[D]").astype(np.int64) + np.clip(dom, 1, 31) - 1
-    t = day * NS_PER_DAY
-    for key, (code, low, high) in _RANGES.items():
-        if tf.field(key) is None:
-            continue
-        v = get(key)
-        problem[(problem == 0) & ((v < low) | (v > high))] = code
-        t += v * _UNIT_NS[key]
-    return t, problem
+        if name is not None:
+            fields[k], given[k] = values[name], True
+    return _calendar_kernel(fields, given, _RANGE_CODE, _RANGE_LOW, _RANGE_HIGH, _RANGE_UNIT_NS)
 
 
 def field_times(values: Mapping[str, np.ndarray], tf: TimeFields) -> tuple[np.ndarray, np.ndarray]:

@@ -5,6 +5,7 @@ Truths: Python's datetime calendar, and TAI − UTC = 37 s since 2017-01-01 (IER
 
 from __future__ import annotations
 
+import calendar
 import datetime as dt
 
 import numpy as np
@@ -53,6 +54,56 @@ def test_day_of_year_366_only_in_leap_years() -> None:
         0,
         TIME_PROBLEMS.index("day of year outside the year"),
     ]
+
+
+def _calendar_truth(fields: dict[str, int]) -> tuple[int | None, str]:
+    """Python's calendar: UTC ns of valid calendar fields, else None and the first problem (year, date, then the
+    time-of-day fields in order)."""
+    year = fields["year"]
+    if not 1 <= year <= 9_999:
+        return None, "year outside 1..9999"
+    if "doy" in fields:
+        days = 366 if calendar.isleap(year) else 365
+        if not 1 <= fields["doy"] <= days:
+            return None, "day of year outside the year"
+        date = dt.datetime(year, 1, 1) + dt.timedelta(days=fields["doy"] - 1)
+    else:
+        if not 1 <= fields["month"] <= 12:
+            return None, "month outside 1..12"
+        if not 1 <= fields["day"] <= calendar.monthrange(year, fields["month"])[1]:
+            return None, "day outside the month"
+        date = dt.datetime(year, fields["month"], fields["day"])
+    for key, high, problem in (
+        ("hour", 23, "hour outside 0..23"),
+        ("minute", 59, "minute outside 0..59"),
+        ("second", 60, "second outside 0..60"),
+        ("millisecond", 999, "millisecond outside 0..999"),
+    ):
+        if not 0 <= fields[key] <= high:
+            return None, problem
+    rest = dt.timedelta(hours=fields["hour"], minutes=fields["minute"], milliseconds=fields["millisecond"])
+    return _ns(date + rest) + fields["second"] * 10**9, ""  # second 60: a leap second, counted on as plain addition
+
+
+@pytest.mark.parametrize("date_keys", [("doy",), ("month", "day")])
+def test_calendar_fields_over_the_proleptic_gregorian_range_match_pythons_calendar(date_keys: tuple[str, ...]) -> None:
+    rng = np.random.default_rng(12)
+    n = 4_000
+    keys = ("year", *date_keys, "hour", "minute", "second", "millisecond")
+    highs = {"year": 9_999, "doy": 366, "month": 12, "day": 31, "hour": 23, "minute": 59, "second": 60}
+    columns = {k: rng.integers(0 if k != "year" else 1, highs.get(k, 999) + 1, n) for k in keys}
+    columns["year"][:2_000] = rng.integers(1_678, 2_262, 2_000)  # times in int64 ns
+    columns["year"][:600] = rng.choice([1, 4, 100, 400, 1700, 1900, 2000, 2100, 2104, 9_999], 600)  # century rules
+    bad = rng.integers(0, n, n // 10)  # a tenth with one field out of range (some twice: the first problem counts)
+    for i, k in zip(bad.tolist(), rng.choice(keys, bad.size).tolist()):
+        columns[k][i] = rng.choice([0, -1, highs.get(k, 999) + 1, 10_000]) if k != "second" else 61
+    tf = parse_time_fields(",".join(f"{k}={k.upper()}" for k in keys))
+    t, code = field_times({k.upper(): v.astype(np.uint16 if k != "year" else np.int32) for k, v in columns.items()}, tf)
+    for i in range(n):
+        expected, problem = _calendar_truth({k: int(v[i]) for k, v in columns.items()})
+        assert TIME_PROBLEMS[int(code[i])] == problem, (i, {k: int(v[i]) for k, v in columns.items()})
+        if expected is not None and -(2**63) <= expected < 2**63:  # int64 ns span 1677..2262
+            assert int(t[i]) == expected
 
 
 def test_counter_is_epoch_plus_coarse_plus_fine_fraction() -> None:
