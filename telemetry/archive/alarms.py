@@ -11,30 +11,41 @@ All functions run on a connection inside the caller's transaction.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, cast
+from typing import Any, TypeAlias, cast
 
 import numpy as np
+from numpy.typing import NDArray
 from sqlalchemy import Connection, Table, insert, select, update
 
+from telemetry.archive.engine import insert_rows
 from telemetry.archive.models import Alarm, AlarmEvent
 from telemetry.limits import NOMINAL, SEVERITY_NAMES
 
-__all__ = ["LevelChange", "apply_level_changes", "current_levels", "operator_action"]
+__all__ = ["LevelChanges", "apply_level_changes", "current_levels", "operator_action"]
 
 OPEN_STATES = ("active", "acknowledged", "shelved")
 ALARM = cast(Table, Alarm.__table__)
 EVENT = cast(Table, AlarmEvent.__table__)
+EVENT_COLUMNS = ("alarm_id", "upload_id", "t_ns", "kind", "severity", "value", "actor")
+EventRow: TypeAlias = tuple[int, int | None, int, str, str | None, float | None, str | None]  # EVENT_COLUMNS
 
 
 @dataclass(frozen=True)
-class LevelChange:
-    """A parameter changing alarm level at a sample (from limit checking on ingest)."""
+class LevelChanges:
+    """A parameter changing alarm level at samples (from limit checking on ingest), in time order: per change the
+    sample's time, the level it enters and the value that caused it."""
 
     parameter: str
-    t_ns: int
-    level: int
-    value: float
+    t_ns: NDArray[np.int64]
+    level: NDArray[np.int8]
+    value: NDArray[np.float64]
+
+    def part(self, start: int, stop: int | None = None) -> LevelChanges:
+        """The changes ``start`` to ``stop`` (exclusive; None: to the last)."""
+        part = slice(start, stop)
+        return LevelChanges(self.parameter, self.t_ns[part], self.level[part], self.value[part])
 
 
 def current_levels(conn: Connection, satellite_id: int, parameters: list[str]) -> dict[str, tuple[int, int]]:
@@ -49,59 +60,118 @@ def current_levels(conn: Connection, satellite_id: int, parameters: list[str]) -
     return {name: (alarm_id, level) for name, alarm_id, level in rows}
 
 
-def apply_level_changes(conn: Connection, satellite_id: int, upload_id: int, changes: list[LevelChange]) -> int:
-    """Open, update and close alarms for time-ordered level changes; returns events written."""
-    by_parameter: dict[str, list[LevelChange]] = {}
-    for change in changes:
-        by_parameter.setdefault(change.parameter, []).append(change)
-    open_alarms = current_levels(conn, satellite_id, list(by_parameter))
-    events: list[dict[str, Any]] = []
-    for name, param_changes in by_parameter.items():
-        events.extend(_apply_parameter(conn, satellite_id, upload_id, name, param_changes, open_alarms.get(name)))
+def apply_level_changes(conn: Connection, satellite_id: int, upload_id: int, changes: Sequence[LevelChanges]) -> int:
+    """Open, update and close alarms for level changes taken in time order (ties in the order given), parameter by
+    parameter in the order each first changes; returns events written."""
+    changes = [c for c in changes if c.t_ns.size]
+    if not changes:
+        return 0
+    codes: dict[str, int] = {}
+    code = np.repeat([codes.setdefault(c.parameter, len(codes)) for c in changes], [c.t_ns.size for c in changes])
+    t_ns = np.concatenate([c.t_ns for c in changes])
+    order = np.argsort(t_ns, kind="stable")
+    code, t_ns = code[order], t_ns[order]
+    level = np.concatenate([c.level for c in changes])[order]
+    value = np.concatenate([c.value for c in changes])[order]
+    names = list(codes)
+    open_alarms = current_levels(conn, satellite_id, names)
+    _, first = np.unique(code, return_index=True)
+    events: list[EventRow] = []
+    for parameter in code[np.sort(first)].tolist():
+        rows = np.flatnonzero(code == parameter)
+        name = names[parameter]
+        run = LevelChanges(name, t_ns[rows], level[rows], value[rows])
+        events.extend(_apply_parameter(conn, satellite_id, upload_id, run, open_alarms.get(name)))
     if events:
-        conn.execute(insert(EVENT), events)
+        insert_rows(conn, EVENT, EVENT_COLUMNS, events)
     return len(events)
 
 
 def _apply_parameter(
-    conn: Connection,
-    satellite_id: int,
-    upload_id: int,
-    name: str,
-    changes: list[LevelChange],
-    open_alarm: tuple[int, int] | None,
-) -> list[dict[str, Any]]:
-    events: list[dict[str, Any]] = []
+    conn: Connection, satellite_id: int, upload_id: int, changes: LevelChanges, open_alarm: tuple[int, int] | None
+) -> list[EventRow]:
+    """One parameter's alarm through its changes; the events. Out of limits with no alarm open opens one (active);
+    an active or shelved alarm takes every later change as it comes (an event each, no change of state), so those
+    are handled at once; an acknowledged one is re-activated by an escalation and cleared by a return to nominal."""
+    events: list[EventRow] = []
     alarm = _load(conn, open_alarm[0]) if open_alarm else None
-    for change in changes:
-        severity = SEVERITY_NAMES[change.level]
-        if change.level > NOMINAL and alarm is None:
-            alarm = {
-                "id": None,
-                "state": "active",
-                "severity": severity,
-                "level": change.level,
-                "first_t_ns": change.t_ns,
-                "last_t_ns": change.t_ns,
-            }
-            alarm["id"] = _create(conn, satellite_id, name, alarm)
-        elif alarm is None:
-            continue
-        kind = "enter" if change.level > NOMINAL else "leave"
-        events.append(_event(alarm["id"], upload_id, change.t_ns, kind, severity, change.value, None))
-        if change.level > alarm["level"] and alarm["state"] == "acknowledged":
-            alarm["state"] = "active"
-        if change.level == NOMINAL and alarm["state"] == "acknowledged":
-            alarm["state"] = "cleared"
-            events.append(_event(alarm["id"], upload_id, change.t_ns, "clear", None, None, "system"))
-        alarm["severity"] = SEVERITY_NAMES[max(SEVERITY_NAMES.index(alarm["severity"]), change.level)]
-        alarm["level"], alarm["last_t_ns"] = change.level, max(alarm["last_t_ns"], change.t_ns)
-        if alarm["state"] == "cleared":
-            _save(conn, alarm)
-            alarm = None
+    i = 0
+    while i < changes.t_ns.size:
+        if alarm is None:
+            out_of_limits = np.flatnonzero(changes.level[i:] > NOMINAL)
+            if out_of_limits.size == 0:
+                return events
+            i += int(out_of_limits[0])
+            alarm = _open(conn, satellite_id, changes.parameter, int(changes.t_ns[i]), int(changes.level[i]))
+        if alarm["state"] != "acknowledged":
+            rest = changes.part(i)
+            events.extend(_change_events(alarm["id"], upload_id, rest))
+            _follow(alarm, rest)
+            break
+        alarm = _acknowledged_change(conn, alarm, upload_id, changes, i, events)
+        i += 1
     if alarm is not None:
         _save(conn, alarm)
     return events
+
+
+def _open(conn: Connection, satellite_id: int, name: str, t_ns: int, level: int) -> dict[str, Any]:
+    """A new active alarm of ``name``, out of limits at ``level`` since ``t_ns``."""
+    alarm: dict[str, Any] = {
+        "id": None,
+        "state": "active",
+        "severity": SEVERITY_NAMES[level],
+        "level": level,
+        "first_t_ns": t_ns,
+        "last_t_ns": t_ns,
+    }
+    alarm["id"] = _create(conn, satellite_id, name, alarm)
+    return alarm
+
+
+def _change_events(alarm_id: int, upload_id: int, changes: LevelChanges) -> list[EventRow]:
+    """An enter (out of limits) or leave (back within them) event per change."""
+    finite = np.isfinite(changes.value).tolist()
+    return [
+        (
+            alarm_id,
+            upload_id,
+            t_ns,
+            "enter" if level > NOMINAL else "leave",
+            SEVERITY_NAMES[level],
+            value if ok else None,
+            None,
+        )
+        for t_ns, level, value, ok in zip(
+            changes.t_ns.tolist(), changes.level.tolist(), changes.value.tolist(), finite, strict=True
+        )
+    ]
+
+
+def _follow(alarm: dict[str, Any], changes: LevelChanges) -> None:
+    """The alarm's severity (the highest level reached), level (the last) and last time after ``changes``."""
+    alarm["severity"] = SEVERITY_NAMES[max(SEVERITY_NAMES.index(alarm["severity"]), int(changes.level.max()))]
+    alarm["level"], alarm["last_t_ns"] = int(changes.level[-1]), max(alarm["last_t_ns"], int(changes.t_ns.max()))
+
+
+def _acknowledged_change(
+    conn: Connection, alarm: dict[str, Any], upload_id: int, changes: LevelChanges, i: int, events: list[EventRow]
+) -> dict[str, Any] | None:
+    """The ``i``-th change to an acknowledged alarm (its event added to ``events``): an escalation re-activates it,
+    a return to nominal clears it (saved; None returned)."""
+    change = changes.part(i, i + 1)
+    events.extend(_change_events(alarm["id"], upload_id, change))
+    level = int(change.level[0])
+    if level > alarm["level"]:
+        alarm["state"] = "active"
+    elif level == NOMINAL:
+        alarm["state"] = "cleared"
+        events.append(_event(alarm["id"], upload_id, int(change.t_ns[0]), "clear", "system"))
+    _follow(alarm, change)
+    if alarm["state"] != "cleared":
+        return alarm
+    _save(conn, alarm)
+    return None
 
 
 def _load(conn: Connection, alarm_id: int) -> dict[str, Any]:
@@ -127,25 +197,9 @@ def _save(conn: Connection, alarm: dict[str, Any]) -> None:
     conn.execute(update(ALARM).where(ALARM.c.id == alarm["id"]).values(**values))
 
 
-def _event(
-    alarm_id: int,
-    upload_id: int | None,
-    t_ns: int,
-    kind: str,
-    severity: str | None,
-    value: float | None,
-    actor: str | None,
-) -> dict[str, Any]:
-    value_f = None if value is None or not np.isfinite(value) else float(value)
-    return {
-        "alarm_id": alarm_id,
-        "upload_id": upload_id,
-        "t_ns": int(t_ns),
-        "kind": kind,
-        "severity": severity,
-        "value": value_f,
-        "actor": actor,
-    }
+def _event(alarm_id: int, upload_id: int | None, t_ns: int, kind: str, actor: str) -> EventRow:
+    """The row of an event of no level (an operator action or a clear)."""
+    return alarm_id, upload_id, int(t_ns), kind, None, None, actor
 
 
 def operator_action(
@@ -165,10 +219,10 @@ def operator_action(
     if action == "shelve":
         values["shelved_until_ns"] = shelved_until_ns
     conn.execute(update(ALARM).where(ALARM.c.id == alarm_id).values(**values))
-    events = [_event(alarm_id, None, t_ns, action, None, None, actor)]
+    events = [_event(alarm_id, None, t_ns, action, actor)]
     if extra:
-        events.append(_event(alarm_id, None, t_ns, extra, None, None, "system"))
-    conn.execute(insert(EVENT), events)
+        events.append(_event(alarm_id, None, t_ns, extra, "system"))
+    insert_rows(conn, EVENT, EVENT_COLUMNS, events)
 
 
 def _next_state(action: str, state: str, level: int, shelved_until_ns: int | None, t_ns: int) -> tuple[str, str | None]:

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
-from sqlalchemy import Engine, create_engine, event
+from sqlalchemy import Connection, Dialect, Engine, Table, create_engine, event, insert
 from sqlalchemy.engine import make_url
 
-__all__ = ["create_archive_engine", "DEFAULT_URL"]
+__all__ = ["create_archive_engine", "DEFAULT_URL", "insert_rows"]
 
 DEFAULT_URL = "sqlite:///data/archive.sqlite"
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # writers queue behind a bulk upload instead of failing at once
@@ -51,3 +52,26 @@ def create_archive_engine(url: str, *, writer: bool = True) -> Engine:
     if parsed.get_backend_name() == "postgresql":
         return create_engine(url, pool_pre_ping=True)
     raise ValueError(f"url: unsupported database backend {parsed.get_backend_name()!r} (sqlite or postgresql)")
+
+
+_INSERTS: dict[tuple[str, str, str, str, tuple[str, ...]], tuple[str, bool]] = {}
+
+
+def _insert_sql(dialect: Dialect, table: Table, columns: tuple[str, ...]) -> tuple[str, bool]:
+    """``table``'s INSERT of ``columns`` (no RETURNING) in the driver's parameter style, and whether its parameters
+    are positional; compiled once per table, columns and kind of driver."""
+    key = (dialect.name, str(dialect.driver), str(dialect.paramstyle), table.name, columns)
+    if key not in _INSERTS:
+        compiled = insert(table).inline().compile(dialect=dialect, column_keys=list(columns))
+        if compiled.positional and tuple(compiled.positiontup or ()) != columns:
+            raise RuntimeError(f"{table.name} INSERT binds {compiled.positiontup}, expected {columns}")
+        _INSERTS[key] = str(compiled), compiled.positional
+    return _INSERTS[key]
+
+
+def insert_rows(conn: Connection, table: Table, columns: tuple[str, ...], rows: Sequence[tuple[Any, ...]]) -> None:
+    """One executemany of ``rows`` (values of ``columns``) handed to the driver as they are, inside the caller's
+    transaction: no per-row statement processing (an upload writes thousands of rows), so the values must need no
+    conversion (int, str, float, bytes or None)."""
+    sql, positional = _insert_sql(conn.dialect, table, columns)
+    conn.exec_driver_sql(sql, list(rows) if positional else [dict(zip(columns, row, strict=True)) for row in rows])

@@ -15,7 +15,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
-from sqlalchemy import Connection, Dialect, Row, Table, bindparam, delete, func, insert, select, update
+from sqlalchemy import Connection, Row, Table, bindparam, delete, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
 from telemetry.archive.batch import PacketBatch, sequence_gaps
@@ -27,7 +27,7 @@ from telemetry.archive.chunks import (
     encode_raw,
     encode_values_range,
 )
-from telemetry.archive.engine import create_archive_engine
+from telemetry.archive.engine import create_archive_engine, insert_rows
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
     Alarm,
@@ -522,7 +522,7 @@ class Archive:
         param_ids = {} if param_ids is None else param_ids
         accepted = duplicates = samples = 0
         gaps: list[Gap] = []
-        changes: list[alarm_state.LevelChange] = []
+        changes: list[alarm_state.LevelChanges] = []
         by_apid: dict[int, int] = {}
         for batch in batches:
             ordered, n_dup_inside = _order_and_dedupe(batch)
@@ -543,7 +543,6 @@ class Archive:
                     last_written[fresh.apid] = (int(fresh.t_utc_ns[-1]), int(fresh.seq_count[-1]))
             if limits:
                 changes.extend(_limit_changes(fresh, limits, alarm_state.current_levels(conn, sat_id, list(limits))))
-        changes.sort(key=lambda c: c.t_ns)
         n_events = alarm_state.apply_level_changes(conn, sat_id, upload_id, changes) if changes else 0
         return IngestResult(upload_id, False, accepted, duplicates, samples, n_events, gaps, by_apid)
 
@@ -601,7 +600,7 @@ class Archive:
             param_id, column = param_ids[name], np.asarray(column)
             value_rows.extend(_value_row(param_id, chunk_id, column[lo:hi]) for chunk_id, lo, hi in spans)
         if value_rows:
-            _insert_value_rows(conn, value_rows)
+            insert_rows(conn, VALUE, _VALUE_COLUMNS, value_rows)
 
     def _parameter_ids(
         self, conn: Connection, sat_id: int, apid: int, names: list[str], known: dict[str, int]
@@ -1090,18 +1089,16 @@ def _gaps_of(batch: PacketBatch, previous: tuple[int, int] | None = None) -> lis
 
 def _limit_changes(
     batch: PacketBatch, limits: Mapping[str, LimitSet], open_levels: dict[str, tuple[int, int]]
-) -> list[alarm_state.LevelChange]:
-    changes: list[alarm_state.LevelChange] = []
+) -> list[alarm_state.LevelChanges]:
+    changes: list[alarm_state.LevelChanges] = []
     for name, limit in limits.items():
         if name not in batch.values:
             continue
         values = np.asarray(batch.values[name], dtype=np.float64)
         levels = limit_levels(values, limit)
         idx = level_changes(levels, open_levels.get(name, (0, 0))[1])
-        changes.extend(
-            alarm_state.LevelChange(name, int(batch.t_utc_ns[i]), int(levels[i]), float(values[i]))
-            for i in idx.tolist()
-        )
+        if idx.size:
+            changes.append(alarm_state.LevelChanges(name, batch.t_utc_ns[idx], levels[idx], values[idx]))
     return changes
 
 
@@ -1116,29 +1113,6 @@ def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> tuple[Any, .
     wide = values.dtype.kind in "iu" and values.dtype != _UINT64
     dtype, blob, v_min, v_max = encode_values_range(values, _INT64 if wide else None)
     return param_id, chunk_id, dtype, v_min, v_max, blob
-
-
-_VALUE_INSERTS: dict[tuple[str, str, str], tuple[str, bool]] = {}
-
-
-def _value_insert_sql(dialect: Dialect) -> tuple[str, bool]:
-    """The value chunks' INSERT (no RETURNING) in the driver's parameter style, and whether its parameters are
-    positional; compiled once per kind of driver."""
-    key = (dialect.name, str(dialect.driver), str(dialect.paramstyle))
-    if key not in _VALUE_INSERTS:
-        compiled = insert(VALUE).inline().compile(dialect=dialect, column_keys=list(_VALUE_COLUMNS))
-        if compiled.positional and tuple(compiled.positiontup or ()) != _VALUE_COLUMNS:
-            raise RuntimeError(f"value_chunk INSERT binds {compiled.positiontup}, expected {_VALUE_COLUMNS}")
-        _VALUE_INSERTS[key] = str(compiled), compiled.positional
-    return _VALUE_INSERTS[key]
-
-
-def _insert_value_rows(conn: Connection, rows: list[tuple[Any, ...]]) -> None:
-    """One executemany of value chunk rows handed to the driver as they are (no per-row statement processing:
-    an upload writes thousands; the columns need no conversion -- ints, str, float or None, bytes), inside the
-    caller's transaction."""
-    sql, positional = _value_insert_sql(conn.dialect)
-    conn.exec_driver_sql(sql, rows if positional else [dict(zip(_VALUE_COLUMNS, row)) for row in rows])
 
 
 def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:

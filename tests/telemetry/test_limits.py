@@ -114,3 +114,95 @@ def test_operator_actions_refuse_what_the_state_forbids(archive: Archive) -> Non
         archive.alarm_action(alarm.id, "acknowledge", "")
     with pytest.raises(ValueError, match="alarm_id"):
         archive.alarm_action(alarm.id + 99, "acknowledge", "operator")
+
+
+class _ReferenceAlarms:
+    """The alarm rules of telemetry.archive.alarms applied one sample at a time, in plain Python (the truth for the
+    archive's handling of whole runs of changes): per parameter its open alarm, every alarm ever opened and its
+    events (time, kind, severity, value, actor) in the order they happened."""
+
+    def __init__(self) -> None:
+        self.open: dict[str, dict] = {}
+        self.alarms: list[dict] = []
+
+    def upload(self, t_ns: list[int], values: dict[str, list[float]], limit: LimitSet) -> None:
+        for name, series in values.items():
+            previous = self.open[name]["level"] if name in self.open else 0
+            for t, value in zip(t_ns, series, strict=True):
+                level = _reference_level(value, limit)
+                if level != previous:
+                    self._change(name, t, level, value)
+                previous = level
+
+    def _change(self, name: str, t: int, level: int, value: float) -> None:
+        severity = ("nominal", "yellow", "red")[level]
+        alarm = self.open.get(name)
+        if alarm is None:
+            if level == 0:
+                return
+            alarm = {"parameter": name, "state": "active", "severity": severity, "level": level, "first": t, "last": t}
+            alarm["events"] = []
+            self.alarms.append(alarm)
+            self.open[name] = alarm
+        alarm["events"].append((t, "enter" if level else "leave", severity, None if math.isnan(value) else value, None))
+        if alarm["state"] == "acknowledged" and level > alarm["level"]:
+            alarm["state"] = "active"
+        if alarm["state"] == "acknowledged" and level == 0:
+            alarm["state"] = "cleared"
+            alarm["events"].append((t, "clear", None, None, "system"))
+            del self.open[name]
+        alarm["severity"] = max(alarm["severity"], severity, key=("nominal", "yellow", "red").index)
+        alarm["level"], alarm["last"] = level, max(alarm["last"], t)
+
+    def act(self, name: str, action: str, t: int) -> None:
+        alarm = self.open[name]
+        alarm["events"].append((t, action, None, None, "operator"))
+        if action == "acknowledge" and alarm["level"] == 0:
+            alarm["state"] = "cleared"
+            alarm["events"].append((t, "clear", None, None, "system"))
+            del self.open[name]
+        else:
+            alarm["state"] = {"acknowledge": "acknowledged", "shelve": "shelved"}[action]
+
+
+def _reference_level(value: float, limit: LimitSet) -> int:
+    if math.isnan(value) or not limit.red_low <= value <= limit.red_high:
+        return RED
+    return YELLOW if not limit.yellow_low <= value <= limit.yellow_high else 0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_runs_of_changes_across_uploads_and_operator_actions_follow_the_alarm_rules(archive: Archive, seed: int) -> None:
+    """Chattering parameters (each sample nominal, yellow, red or NaN at random) over three uploads, with their open
+    alarms acknowledged after the first and some shelved after the second: the archive's alarms and events are the
+    ones the rules give taken one sample at a time."""
+    rng = np.random.default_rng(seed)
+    reference, names, n = _ReferenceAlarms(), ("wheel_rpm", "rate_x", "rate_y"), 60
+    speeds = np.array([0.0, 5_500.0, -5_500.0, 6_500.0, -7_000.0, math.nan])
+    for upload in range(3):
+        index = np.arange(upload * n, (upload + 1) * n)
+        values = {name: speeds[rng.choice(speeds.size, n, p=[0.4, 0.2, 0.1, 0.15, 0.1, 0.05])] for name in names}
+        batch = PacketBatch.from_packets(
+            200, T0_NS + index * SECOND_NS, index % 16_384, [int(i).to_bytes(4, "big") for i in index], values
+        )
+        limits = dict.fromkeys(names, WHEEL)
+        archive.ingest(SAT, [batch], source=f"u{upload}", uploaded_by="tester", limits=limits)
+        reference.upload((T0_NS + index * SECOND_NS).tolist(), {k: v.tolist() for k, v in values.items()}, WHEEL)
+        t_action = T0_NS + (upload + 1) * n * SECOND_NS - SECOND_NS // 2
+        by_parameter = {a.parameter: a for a in archive.alarms(SAT, now_ns=t_action)}
+        for name in sorted(reference.open):
+            action = "acknowledge" if upload == 0 or name == "rate_y" else "shelve"
+            until = t_action + 10**6 * SECOND_NS if action == "shelve" else None
+            archive.alarm_action(by_parameter[name].id, action, "operator", t_ns=t_action, shelved_until_ns=until)
+            reference.act(name, action, t_action)
+    alarms = archive.alarms(SAT, now_ns=T0_NS, include_cleared=True)
+    got = [(a.parameter, a.state, a.severity, a.level, a.first_t_ns, a.last_t_ns) for a in alarms]
+    want = [(a["parameter"], a["state"], a["severity"], a["level"], a["first"], a["last"]) for a in reference.alarms]
+    assert sorted(got) == sorted(want)
+    assert any(a["state"] == "cleared" for a in reference.alarms)  # the rules' every branch was taken
+    assert {e[1] for a in reference.alarms for e in a["events"]} >= {"enter", "leave", "clear", "shelve"}
+    events = {
+        (a.parameter, a.first_t_ns): [(e.t_ns, e.kind, e.severity, e.value, e.actor) for e in archive.alarm_events(a.id)]
+        for a in alarms
+    }
+    assert events == {(a["parameter"], a["first"]): a["events"] for a in reference.alarms}
