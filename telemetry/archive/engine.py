@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, cast
 
 from sqlalchemy import Connection, Dialect, Engine, Table, create_engine, event, insert
 from sqlalchemy.engine import make_url
+
+if TYPE_CHECKING:
+    import psycopg
 
 __all__ = ["create_archive_engine", "DEFAULT_URL", "insert_rows"]
 
@@ -70,8 +73,22 @@ def _insert_sql(dialect: Dialect, table: Table, columns: tuple[str, ...]) -> tup
 
 
 def insert_rows(conn: Connection, table: Table, columns: tuple[str, ...], rows: Sequence[tuple[Any, ...]]) -> None:
-    """One executemany of ``rows`` (values of ``columns``) handed to the driver as they are, inside the caller's
-    transaction: no per-row statement processing (an upload writes thousands of rows), so the values must need no
-    conversion (int, str, float, bytes or None)."""
+    """Insert ``rows`` (values of ``columns``) inside the caller's transaction, handed to the driver as they are:
+    no per-row statement processing (an upload writes thousands of rows), so the values must need no conversion
+    (int, str, float, bytes or None). One COPY on PostgreSQL (psycopg's executemany sends a statement per row:
+    an upload's 359,361 alarm events took 5 s of CPU), one executemany elsewhere."""
+    if conn.dialect.name == "postgresql" and conn.dialect.driver == "psycopg":
+        _copy_rows(conn, table, columns, rows)
+        return
     sql, positional = _insert_sql(conn.dialect, table, columns)
     conn.exec_driver_sql(sql, list(rows) if positional else [dict(zip(columns, row, strict=True)) for row in rows])
+
+
+def _copy_rows(conn: Connection, table: Table, columns: tuple[str, ...], rows: Sequence[tuple[Any, ...]]) -> None:
+    """``COPY table (columns) FROM STDIN`` of ``rows`` on the connection's psycopg connection (same transaction)."""
+    quote = conn.dialect.identifier_preparer
+    sql = f"COPY {quote.format_table(table)} ({', '.join(quote.quote(c) for c in columns)}) FROM STDIN"
+    dbapi = cast("psycopg.Connection[Any]", conn.connection.dbapi_connection)
+    with dbapi.cursor() as cursor, cursor.copy(sql) as copy:
+        for row in rows:
+            copy.write_row(row)
