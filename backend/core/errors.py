@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from fastapi import FastAPI, Request
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ValidationError
-from starlette.exceptions import HTTPException as StarletteHTTPException
+
+if TYPE_CHECKING:  # FastAPI is imported where it answers: ApiError is raised in the server's own processes too
+    from fastapi import FastAPI, Request
+    from fastapi.responses import JSONResponse
 
 __all__ = ["ApiError", "ErrorBody", "install_error_handlers", "ERROR_RESPONSES"]
 
@@ -52,6 +52,8 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
 
 
 def _json(status: int, message: str, field: str | None, headers: dict[str, str] | None = None) -> JSONResponse:
+    from fastapi.responses import JSONResponse
+
     body = ErrorBody(message=message, field=field, status=status).model_dump()
     return JSONResponse(body, status_code=status, headers=headers)
 
@@ -67,6 +69,8 @@ async def _on_api_error(_: Request, exc: Exception) -> JSONResponse:
 
 
 async def _on_validation(_: Request, exc: Exception) -> JSONResponse:
+    from fastapi.exceptions import RequestValidationError
+
     assert isinstance(exc, RequestValidationError)
     first = exc.errors()[0] if exc.errors() else {"loc": (), "msg": "invalid request"}
     field = _field_of(first.get("loc", ()))
@@ -74,6 +78,8 @@ async def _on_validation(_: Request, exc: Exception) -> JSONResponse:
 
 
 async def _on_http(_: Request, exc: Exception) -> JSONResponse:
+    from starlette.exceptions import HTTPException as StarletteHTTPException
+
     assert isinstance(exc, StarletteHTTPException)
     return _json(exc.status_code, str(exc.detail), None, getattr(exc, "headers", None))
 
@@ -93,6 +99,9 @@ async def _on_value_error(_: Request, exc: Exception) -> JSONResponse:
 
 def install_error_handlers(app: FastAPI) -> None:
     """Route ApiError, request/pydantic validation errors, HTTP errors and ValueError to JSON bodies."""
+    from fastapi.exceptions import RequestValidationError
+    from starlette.exceptions import HTTPException as StarletteHTTPException
+
     app.add_exception_handler(ApiError, _on_api_error)
     app.add_exception_handler(RequestValidationError, _on_validation)
     app.add_exception_handler(StarletteHTTPException, _on_http)
