@@ -1,15 +1,12 @@
-"""Large packet uploads decoded in the server's own decoder process: same report as a one-shot decode, nothing lost
-or half-written when the process is killed mid-file, gone with the server."""
+"""Large packet uploads decoded in the server's own decoder process: same report as a one-shot decode, a re-upload
+a no-op, gone with the server, archive subscribers told to reload. Killed mid-file: tests/backend/
+test_upload_decoder_deaths.py."""
 
 from __future__ import annotations
 
 import os
-import signal
-import threading
 import time
-from collections.abc import Iterator
 
-import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
@@ -20,72 +17,14 @@ from backend.ingest.upload_decoder import NICENESS
 from telemetry.decoding import decode_stream
 from telemetry.packet_files import CHUNK_OCTETS
 from tests.backend.conftest import bearer
-from tests.telemetry.packet_streams import packets, reference
-
-HK_PER_GPS = 4  # ACS_HK at 4 Hz, GPS_NAV at 1 Hz
-N_GPS = 16_000  # 16,000 × (4 × 126 + 62) octets ≈ 9 MB: four chunks and more
-KILL_WAIT_S = 600.0  # the decoder's start (spawn + imports) on a loaded 2-core machine
-
-
-def mixed_stream(n_gps: int) -> bytes:
-    """ACS_HK and GPS_NAV packets of the reference satellite interleaved in time order (4 HK then 1 GPS)."""
-    d = reference()
-    hk = packets(d.packets[256], HK_PER_GPS * n_gps).reshape(n_gps, -1)
-    gps = packets(d.packets[257], n_gps, seed=1)
-    return np.hstack([hk, gps]).tobytes()
-
-
-@pytest.fixture(scope="module")
-def stream() -> bytes:
-    data = mixed_stream(N_GPS)
-    assert len(data) > 4 * CHUNK_OCTETS
-    return data
-
-
-@pytest.fixture
-def client(settings: Settings) -> Iterator[TestClient]:
-    with TestClient(create_app(settings)) as test_client:
-        yield test_client
-
-
-def _upload(client: TestClient, token: str, data: bytes, out: dict) -> None:
-    answer = client.post(
-        "/api/v1/telemetry/uploads?satellite=REFSAT&dictionary=reference_satellite.yaml&source=big",
-        content=data,
-        headers=bearer(token),
-    )
-    out["status"], out["body"] = answer.status_code, answer.json()
-
-
-def _kill_when_decoding(decoder: object, after_pid: int | None, deadline: float) -> int:
-    """SIGKILL the decoder (a process other than after_pid) once it has decoded its first chunk; its pid."""
-    while time.monotonic() < deadline:
-        pid = getattr(decoder, "pid", None)
-        if pid is not None and pid != after_pid and getattr(decoder, "octets_decoded", 0) > 0:
-            os.kill(pid, signal.SIGKILL)
-            return pid
-        time.sleep(0.005)
-    raise AssertionError("the decoder never started decoding")
-
-
-def _upload_killing_the_decoder(client: TestClient, token: str, data: bytes, kills: int) -> tuple[dict, list[int]]:
-    """Upload ``data`` while the decoder is SIGKILLed ``kills`` times mid-file (each time a fresh process); the
-    answer and the killed pids."""
-    decoder = client.app.state.services.telemetry.upload_decoder
-    out: dict = {}
-    uploader = threading.Thread(target=_upload, args=(client, token, data, out))
-    uploader.start()
-    deadline, killed = time.monotonic() + KILL_WAIT_S, []
-    for _ in range(kills):
-        killed.append(_kill_when_decoding(decoder, killed[-1] if killed else None, deadline))
-    uploader.join()
-    return out, killed
-
-
-def _archived_packets(client: TestClient) -> int:
-    archive = client.app.state.services.telemetry.archive
-    keys = archive.packet_keys("REFSAT", -(2**62), 2**62)
-    return sum(len(t) for t, _ in keys.values())
+from tests.backend.packet_uploads import (  # noqa: F401  (fixture: stream)
+    N_GPS,
+    archived_packets,
+    mixed_stream,
+    stream,
+    upload,
+)
+from tests.telemetry.packet_streams import reference
 
 
 def test_large_upload_is_decoded_in_another_process_with_the_one_shot_report(
@@ -93,7 +32,7 @@ def test_large_upload_is_decoded_in_another_process_with_the_one_shot_report(
 ) -> None:
     truth = decode_stream(stream, reference(), source="big").report
     out: dict = {}
-    _upload(client, tokens["operator"], stream, out)
+    upload(client, tokens["operator"], stream, out)
     assert out["status"] == 200, out["body"]
     decoder = client.app.state.services.telemetry.upload_decoder
     assert decoder.pid is not None and decoder.pid != os.getpid()
@@ -104,43 +43,19 @@ def test_large_upload_is_decoded_in_another_process_with_the_one_shot_report(
     assert decoding["samples_accepted"] == truth.samples_accepted
     assert {a: s["accepted"] for a, s in decoding["apids"].items()} == {"256": 4 * N_GPS, "257": N_GPS}
     assert decoding["quarantined_count"] == 0 and archive["packets_accepted"] == 5 * N_GPS
-    assert _archived_packets(client) == 5 * N_GPS
+    assert archived_packets(client) == 5 * N_GPS
     again: dict = {}
-    _upload(client, tokens["operator"], stream, again)  # a re-upload: a reported no-op, per APID
+    upload(client, tokens["operator"], stream, again)  # a re-upload: a reported no-op, per APID
     assert again["body"]["archive"]["duplicate_upload"] is True and again["body"]["archive"]["packets_accepted"] == 0
     assert again["body"]["archive"]["duplicates_by_apid"] == {"256": 4 * N_GPS, "257": N_GPS}
-    assert _archived_packets(client) == 5 * N_GPS
-
-
-def test_decoder_killed_mid_file_loses_nothing_and_writes_nothing_twice(
-    client: TestClient, tokens: dict[str, str], stream: bytes
-) -> None:
-    out, killed = _upload_killing_the_decoder(client, tokens["operator"], stream, kills=1)
-    assert out["status"] == 200, out["body"]
-    assert client.app.state.services.telemetry.upload_decoder.pid not in (None, *killed)  # a fresh one took it again
-    assert out["body"]["archive"]["packets_accepted"] == 5 * N_GPS
-    uploads = client.get("/api/v1/telemetry/uploads?satellite=REFSAT", headers=bearer(tokens["viewer"])).json()
-    assert [u["packets_accepted"] for u in uploads] == [5 * N_GPS]
-    assert _archived_packets(client) == 5 * N_GPS
-
-
-def test_decoder_dying_twice_refuses_the_upload_with_nothing_archived(
-    client: TestClient, tokens: dict[str, str], stream: bytes
-) -> None:
-    out, _ = _upload_killing_the_decoder(client, tokens["operator"], stream, kills=2)
-    assert out["status"] == 503 and out["body"]["field"] == "body", out["body"]
-    assert "nothing of it was archived" in out["body"]["message"]
-    assert client.get("/api/v1/telemetry/uploads?satellite=REFSAT", headers=bearer(tokens["viewer"])).json() == []
-    again: dict = {}
-    _upload(client, tokens["operator"], stream, again)  # sent again: archived whole
-    assert again["status"] == 200 and again["body"]["archive"]["packets_accepted"] == 5 * N_GPS
+    assert archived_packets(client) == 5 * N_GPS
 
 
 def test_decoder_stops_with_the_server(settings: Settings) -> None:
     with TestClient(create_app(settings)) as client:
         token = client.app.state.services.auth.issue("test-operator", Role.operator)[1]
         out: dict = {}
-        _upload(client, token, mixed_stream(N_GPS // 2), out)
+        upload(client, token, mixed_stream(N_GPS // 2), out)
         assert out["status"] == 200, out["body"]
         pid = client.app.state.services.telemetry.upload_decoder.pid
         assert pid is not None
@@ -152,7 +67,7 @@ def test_one_chunk_upload_is_decoded_in_the_server(client: TestClient, tokens: d
     out: dict = {}
     small = mixed_stream(100)
     assert len(small) <= CHUNK_OCTETS
-    _upload(client, tokens["operator"], small, out)
+    upload(client, tokens["operator"], small, out)
     assert out["status"] == 200 and out["body"]["published"] is True
     assert client.app.state.services.telemetry.upload_decoder.pid is None
 
@@ -169,7 +84,7 @@ def test_large_upload_tells_archive_subscribers_to_reload(client: TestClient, to
             assert time.monotonic() < deadline
             time.sleep(0.01)
         out: dict = {}
-        _upload(client, tokens["operator"], data, out)
+        upload(client, tokens["operator"], data, out)
         item = ws.receive_json()["items"][0]
     assert out["status"] == 200 and out["body"]["published"] is False
     assert item["topic"] == "archive"

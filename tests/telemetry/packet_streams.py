@@ -35,3 +35,15 @@ def packets(packet: PacketDefinition, n: int, first_count: int = 0, seed: int = 
     period_ns = int(round((packet.period_s or 1.0) * 1e9))
     t = T0_UTC_NS + np.arange(n, dtype=np.int64) * period_ns
     return encode_packets(packet, t, first_count + np.arange(n), engineering_values(packet, n, seed))
+
+
+HK_PER_GPS = 4  # ACS_HK at 4 Hz, GPS_NAV at 1 Hz
+
+
+def mixed_stream(n_gps: int) -> bytes:
+    """ACS_HK and GPS_NAV packets of the reference satellite interleaved in time order (4 HK then 1 GPS): n_gps
+    seconds, 4 × 126 + 62 octets each."""
+    d = reference()
+    hk = packets(d.packets[256], HK_PER_GPS * n_gps).reshape(n_gps, -1)
+    gps = packets(d.packets[257], n_gps, seed=1)
+    return np.hstack([hk, gps]).tobytes()
