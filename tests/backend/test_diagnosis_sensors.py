@@ -19,22 +19,25 @@ BIAS_T = 1.0e-6  # 1 µT on body y: 20 σ of the 50 nT magnetometer noise, 500 c
 EPOCH = "2026-04-02T00:00:00Z"
 
 
-def _batches(faults: list, keep_gps: bool = True) -> tuple[list, object]:
+def _batches(faults: list) -> tuple[list, object]:
     dictionary = load_dictionary(emulator.REFERENCE_DICTIONARY)
     _, _, stream = emulator.emulate(SCENARIO, faults, FLIGHT_S, EPOCH, dictionary, seed=5, fdir=False, truth_seed=5)
-    batches = decode_stream(stream.data, dictionary).batches
-    if not keep_gps:
-        batches = [b for b in batches if "r_ecef_m_x" not in b.values]
-    return batches, dictionary
+    return decode_stream(stream.data, dictionary).batches, dictionary
+
+
+@pytest.fixture(scope="module")
+def biased() -> tuple[list, object]:
+    """The flight with the magnetometer bias, decoded: one emulation for the tests that diagnose it with and
+    without its GPS packets (the diagnosis reads the batches, never changes them)."""
+    return _batches([emulator.parse_fault(f"magnetometer:1:bias@{ONSET_S},value={BIAS_T}")])
 
 
 def _diagnose(batches: list, dictionary) -> dict:
     return diagnose_batches(batches, dictionary, scenario_library.get(SCENARIO))  # type: ignore[arg-type]
 
 
-def test_magnetometer_bias_is_named_with_its_size_and_onset() -> None:
-    fault = emulator.parse_fault(f"magnetometer:1:bias@{ONSET_S},value={BIAS_T}")
-    result = _diagnose(*_batches([fault]))
+def test_magnetometer_bias_is_named_with_its_size_and_onset(biased) -> None:
+    result = _diagnose(*biased)
     top = result["hypotheses"][0]
     assert (top["fault"], top["wheel"]) == ("magnetometer_bias", None)
     assert top["magnitude"] == pytest.approx(BIAS_T, rel=0.1)
@@ -51,8 +54,8 @@ def test_nominal_flight_compares_the_magnetometer_without_alarm() -> None:
     assert result["hypotheses"][0]["fault"] == "none"
 
 
-def test_without_gps_positions_the_magnetometer_is_untestable_and_says_why() -> None:
-    fault = emulator.parse_fault(f"magnetometer:1:bias@{ONSET_S},value={BIAS_T}")
-    result = _diagnose(*_batches([fault], keep_gps=False))
+def test_without_gps_positions_the_magnetometer_is_untestable_and_says_why(biased) -> None:
+    batches, dictionary = biased
+    result = _diagnose([b for b in batches if "r_ecef_m_x" not in b.values], dictionary)
     assert "r_ecef_m" in result["untestable"]["magnetometer_bias"]
     assert all(h["fault"] != "magnetometer_bias" for h in result["hypotheses"])
