@@ -392,7 +392,7 @@ def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
     return spans
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _bad_link(buf: np.ndarray, x: int) -> bool:
     """No link of a confirmation chain at x: not a whole version-0 packet, a telecommand, segmented, or idle."""
     if not _well_formed(buf, x) or (buf[x] >> 4) & 1 or buf[x + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
@@ -401,7 +401,7 @@ def _bad_link(buf: np.ndarray, x: int) -> bool:
     return idle
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _links_confirm(
     buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
 ) -> bool:
@@ -448,7 +448,7 @@ def _other_length_confirmed(
     return _links_confirm(buf, q, lengths, crc, table, chain)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _walk_links(buf: np.ndarray, q: int, links: int, stopped: bool) -> tuple[int, int, bool, bool]:
     """Walk on from q along length fields until UNDEFINED_CHAIN + 1 packets (``links`` walked already) end within
     buf or a header that is not version 0 stops the walk (``stopped``): (where the walk is, links, stopped, and
