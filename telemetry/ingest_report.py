@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -24,6 +25,7 @@ __all__ = [
     "DecodeResult",
     "REASONS",
     "UndefinedPackets",
+    "absent_samples",
 ]
 
 MAX_LISTED = 10_000  # quarantine records / gaps listed in one report; the rest are counted
@@ -194,10 +196,17 @@ class SampleBatch:
     @property
     def n_samples(self) -> int:
         """Number of parameter samples (packets × parameters, less the NaN where a layout lacks a parameter)."""
-        n = len(self.t_utc_ns)
-        return n * len(self.values) - sum(
-            int(np.count_nonzero(np.isnan(v))) for v in self.values.values() if v.dtype.kind == "f"
-        )
+        return len(self.t_utc_ns) * len(self.values) - absent_samples(self.values)
+
+
+def absent_samples(values: Mapping[str, np.ndarray]) -> int:
+    """NaN elements of float columns: packets whose layout lacks the parameter (no such sample). A column's min is
+    NaN when it holds any (numpy propagates NaN): only such columns are counted, a cheaper pass than isnan."""
+    return sum(
+        int(np.count_nonzero(np.isnan(v)))
+        for v in values.values()
+        if v.dtype.kind == "f" and v.size and np.isnan(v.min())
+    )
 
 
 @dataclass(frozen=True)

@@ -52,7 +52,7 @@ from telemetry.archive.records import (
     StationRecord,
     UploadRecord,
 )
-from telemetry.ingest_report import UndefinedPackets
+from telemetry.ingest_report import UndefinedPackets, absent_samples
 from telemetry.limits import LimitSet, level_changes, limit_levels
 
 if TYPE_CHECKING:
@@ -74,6 +74,10 @@ _PACKET_KEYS = select(CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
     CHUNK.c.apid == bindparam("apid"),
     CHUNK.c.t_start_ns <= bindparam("t1"),
     CHUNK.c.t_end_ns >= bindparam("t0"),
+)
+# ... and per APID its parameters' ids (an IN list given as values builds no clause per name: ~0.4 ms per name list)
+_PARAMETER_IDS = select(PARAM.c.name, PARAM.c.id).where(
+    PARAM.c.satellite_id == bindparam("sat"), PARAM.c.name.in_(bindparam("names", expanding=True))
 )
 
 
@@ -533,9 +537,7 @@ class Archive:
                 continue
             self._write_chunks(conn, sat_id, upload_id, fresh, param_ids)
             accepted += fresh.n_packets
-            samples += fresh.n_packets * len(fresh.values) - sum(
-                int(np.count_nonzero(np.isnan(v))) for v in fresh.values.values() if v.dtype.kind == "f"
-            )  # NaN: no such element
+            samples += fresh.n_packets * len(fresh.values) - absent_samples(fresh.values)
             if fresh.raw:  # ground files carry no sequence counts
                 previous = None if last_written is None else last_written.get(fresh.apid)
                 gaps.extend(_gaps_of(fresh, previous))
@@ -610,22 +612,12 @@ class Archive:
         names = [n for n in names if n not in known]
         if not names:
             return known
-        rows = conn.execute(
-            select(PARAM.c.name, PARAM.c.id, PARAM.c.apid).where(
-                PARAM.c.satellite_id == sat_id, PARAM.c.name.in_(names)
-            )
-        )
-        ids = {}
-        for name, param_id, _ in rows:  # a parameter telemetered in several packets is one series
-            ids[name] = int(param_id)
+        rows = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": names})
+        ids = {name: int(param_id) for name, param_id in rows}  # a parameter telemetered in several packets: one series
         missing = [{"satellite_id": sat_id, "name": n, "apid": apid} for n in names if n not in ids]
         if missing:  # one executemany, then one select (INSERT ... RETURNING runs a statement per row on SQLite)
             conn.execute(insert(PARAM), missing)
-            added = conn.execute(
-                select(PARAM.c.name, PARAM.c.id).where(
-                    PARAM.c.satellite_id == sat_id, PARAM.c.name.in_([row["name"] for row in missing])
-                )
-            )
+            added = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": [row["name"] for row in missing]})
             ids.update({name: int(param_id) for name, param_id in added})
         known.update(ids)
         return known
