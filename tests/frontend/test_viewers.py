@@ -3,6 +3,8 @@ leaves live follow and replays, or loads a past window of the archive, while the
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -19,6 +21,7 @@ pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers p
 HISTORY_BEFORE_S = 86_400.0  # the archive's past window lies a day before the live feed
 HISTORY_S = 1800.0
 WINDOW_MIN = 10
+CLICK_SHOWN_S = 2.0  # a click on 'Live follow' shows in the panel within this, or it was lost
 
 
 def _window(traj: Trajectory, t0_unix_s: float, t1_unix_s: float) -> Trajectory:
@@ -141,9 +144,13 @@ def test_a_viewer_replays_a_past_window_of_the_archive_while_another_stays_live(
 
 
 def _click_again(page) -> bool:
-    """Click 'Live follow' once more if the box still shows off (a click that landed while the panel re-rendered
-    is lost); always False, for _wait_for to look again."""
-    page.wait_for_timeout(2000)
-    if not page.get_by_label("Live follow").is_checked():
-        page.get_by_text("Live follow").click()
+    """Whether 'Live follow' shows on within CLICK_SHOWN_S; else click it once more (a click that landed while the
+    panel re-rendered is lost) and say False, for _wait_for to look again."""
+    box = page.get_by_label("Live follow")
+    deadline = time.monotonic() + CLICK_SHOWN_S
+    while time.monotonic() < deadline:
+        if box.is_checked():
+            return True
+        page.wait_for_timeout(100)
+    page.get_by_text("Live follow").click()
     return False
