@@ -172,7 +172,9 @@ def _reference_level(value: float, limit: LimitSet) -> int:
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_runs_of_changes_across_uploads_and_operator_actions_follow_the_alarm_rules(archive: Archive, seed: int) -> None:
+def test_runs_of_changes_across_uploads_and_operator_actions_follow_the_alarm_rules(
+    archive: Archive, seed: int
+) -> None:
     """Chattering parameters (each sample nominal, yellow, red or NaN at random) over three uploads, with their open
     alarms acknowledged after the first and some shelved after the second: the archive's alarms and events are the
     ones the rules give taken one sample at a time."""
@@ -202,7 +204,9 @@ def test_runs_of_changes_across_uploads_and_operator_actions_follow_the_alarm_ru
     assert any(a["state"] == "cleared" for a in reference.alarms)  # the rules' every branch was taken
     assert {e[1] for a in reference.alarms for e in a["events"]} >= {"enter", "leave", "clear", "shelve"}
     events = {
-        (a.parameter, a.first_t_ns): [(e.t_ns, e.kind, e.severity, e.value, e.actor) for e in archive.alarm_events(a.id)]
+        (a.parameter, a.first_t_ns): [
+            (e.t_ns, e.kind, e.severity, e.value, e.actor) for e in archive.alarm_events(a.id)
+        ]
         for a in alarms
     }
     assert events == {(a["parameter"], a["first"]): a["events"] for a in reference.alarms}
