@@ -11,7 +11,6 @@ from __future__ import annotations
 import hashlib
 import io
 from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -145,33 +144,13 @@ def ingest_packet_file(
         for _ in results():
             pass
         return report, None
-    with ThreadPoolExecutor(1, thread_name_prefix="file-sha256") as hashing:
-        digest = hashing.submit(file_sha256, path)  # hashlib runs without the GIL: beside the first chunk's decode
-        archive.satellite_id(satellite)  # registered before any decoding, as the archive's ingest does
-        chunks = _FirstDecoded(results())
-        stored = archive.ingest_results(
-            satellite,
-            chunks,
-            source=report.source,
-            uploaded_by=uploaded_by,
-            sha256=digest.result(),
-            limits=limits,
-            report=report,
-        )
+    stored = archive.ingest_results(
+        satellite,
+        results(),
+        source=report.source,
+        uploaded_by=uploaded_by,
+        sha256=file_sha256(path),
+        limits=limits,
+        report=report,
+    )
     return report, stored
-
-
-class _FirstDecoded:
-    """The decode results of a file's chunks, the first decoded on creation (while the file is hashed: the archive
-    needs the checksum before it takes a chunk) and not held once handed on."""
-
-    def __init__(self, results: Iterator[DecodeResult]) -> None:
-        self._results = results
-        self._first: DecodeResult | None = next(results, None)
-
-    def __iter__(self) -> Iterator[DecodeResult]:
-        return self
-
-    def __next__(self) -> DecodeResult:
-        first, self._first = self._first, None
-        return next(self._results) if first is None else first
