@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from tests.frontend.conftest import ALARM_SATELLITE
+from tests.frontend.conftest import ALARM_SATELLITE, PANEL_VIEWPORT
 
 if TYPE_CHECKING:  # playwright is optional: the browser tests skip without it (conftest.browser)
     from playwright.sync_api import Page
@@ -312,7 +312,7 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
     api = httpx.Client(
         base_url=backend_server["base"], headers={"Authorization": f"Bearer {backend_server['token']}"}, timeout=60.0
     )
-    monitor = browser.new_page(viewport={"width": 1280, "height": 800})
+    monitor = browser.new_page(viewport=PANEL_VIEWPORT)
     label = f"hypothesis #1: failure RW{HIDDEN_WHEEL + 1}"
     try:
         monitor.goto(handles.urls()["simulated"])

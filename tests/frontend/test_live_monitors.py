@@ -17,6 +17,7 @@ from frontend.monitors import serve_monitors
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 from telemetry.emulator import demo_pass_bytes
+from tests.frontend.conftest import PANEL_VIEWPORT
 from tests.frontend.test_browser import PAINT_TIMEOUT_S, _displayed_utc, _wait_for
 from tests.ports import free_port
 
@@ -103,7 +104,7 @@ def test_monitors_follow_the_live_twin_and_warn_when_it_goes_stale(browser):
                 return
             twins.submit("REFSAT", "reference_satellite.yaml", second)
 
-    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page = browser.new_page(viewport=PANEL_VIEWPORT)
     feeder = threading.Thread(target=stream, daemon=True)
     try:
         page.goto(handles.urls()["overlay"])
@@ -143,7 +144,7 @@ def test_a_starting_monitor_shows_progress_then_turns_into_the_monitor(browser, 
     gate = MonitorGate(services.auth, "127.0.0.1", 0, None, role="overlay", progress=lambda: "waiting for REFSAT")
     gate.start()
     handles = None
-    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    page = browser.new_page(viewport=PANEL_VIEWPORT)
     try:
         page.goto(f"http://127.0.0.1:{gate.port}/")
         assert "?token=" in _page_text(page)  # refused, and told how to open it

@@ -12,7 +12,7 @@ from frontend.feed import TrajectoryFeed
 from frontend.monitors import serve_monitors
 from frontend.twin_panels import format_utc, parse_utc
 from sim_core.trajectory import Trajectory
-from tests.frontend.conftest import synthetic_trajectory
+from tests.frontend.conftest import PANEL_VIEWPORT, synthetic_trajectory
 from tests.frontend.test_browser import PAINT_TIMEOUT_S, _displayed_utc, _wait_for
 from tests.ports import free_port
 
@@ -69,7 +69,7 @@ def live_monitor(twin_feed):
 
 
 def _open(browser, url: str):
-    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    page = browser.new_page(viewport=PANEL_VIEWPORT)
     page.goto(url)
     _wait_for(lambda: _displayed_utc(page) is not None, PAINT_TIMEOUT_S, "the monitor's panel")
     return page
