@@ -75,10 +75,12 @@ def apply_level_changes(conn: Connection, satellite_id: int, upload_id: int, cha
     value = np.concatenate([c.value for c in changes])[order]
     names = list(codes)
     open_alarms = current_levels(conn, satellite_id, names)
+    by_parameter = np.argsort(code, kind="stable")  # each parameter's changes together, still in time order
+    bounds = np.searchsorted(code[by_parameter], np.arange(len(names) + 1))
     _, first = np.unique(code, return_index=True)
     events: list[EventRow] = []
     for parameter in code[np.sort(first)].tolist():
-        rows = np.flatnonzero(code == parameter)
+        rows = by_parameter[bounds[parameter] : bounds[parameter + 1]]
         name = names[parameter]
         run = LevelChanges(name, t_ns[rows], level[rows], value[rows])
         events.extend(_apply_parameter(conn, satellite_id, upload_id, run, open_alarms.get(name)))
