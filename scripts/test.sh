@@ -117,7 +117,8 @@ say "running pytest (PostgreSQL: $ACS_TWIN_TEST_POSTGRES_URL)"
 # Whole files to the two workers, the files holding a `slow` test first (tests/conftest.py orders them; xdist's
 # own reorder by test count would start the long one-test files last, one worker left alone on them at the end).
 test_status=0
-.venv/bin/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder "$@" || test_status=$?
+# --durations: the slowest tests of every run printed at its end, the suite's time kept in sight (issue 17).
+.venv/bin/python -m pytest -n 2 --dist loadfile --no-loadscope-reorder --durations=25 "$@" || test_status=$?
 if [ "$lint_status" != 0 ]; then say "the lint and type step failed (lint.sh above)"; fi
 if [ "$test_status" != 0 ]; then exit "$test_status"; fi
 exit "$lint_status"
