@@ -99,7 +99,19 @@ COUNT_COMPONENTS = 4  # slices of the first reading's count carried by :func:`co
 INSIDE_SIGMAS = 8.0  # a state this many σ inside its reading's count: the reading's probability is 1 − 1e-15
 NEGLIGIBLE_TAIL_SIGMAS = 9.5  # Φ(−9.5) = 1e-21: next to a probability ≥ ½ it is below a double's resolution
 THREAD_ROWS = 64  # likelihood rows per thread at least: fewer are not worth a thread's start
+EXP_UNDERFLOW = -746.0  # e^x below this is 0.0 in double precision (the least subnormal is e^-744.4)
+FAR_EDGE_LOG_RATIO = 50.0  # ln Φ(near) − ln Φ(far) beyond this: the far edge's tail is not computed
 ABANDON_MARGIN = 1e-6  # a row abandoned this far below its floor: ≫ the round-off a record's readings can add back
+
+
+@njit(cache=True)
+def _exp(x: float) -> float:
+    """e^x, bit for bit, without the call where it is known: 1 at 0, 0 below EXP_UNDERFLOW (a dead slice, −∞)."""
+    if x == 0.0:
+        return 1.0
+    if x < EXP_UNDERFLOW:
+        return 0.0
+    return math.exp(x)
 
 
 @njit(cache=True)
@@ -115,10 +127,12 @@ def _log_phi_cdf(x: float) -> float:
 def _log_interval(alpha: float, beta: float) -> float:
     """ln(Φ(β) − Φ(α)), α < β, without cancellation in either tail; a tail beyond NEGLIGIBLE_TAIL_SIGMAS is not
     computed where the other side holds ½ or more."""
-    if beta <= 0.0:
-        hi, lo = _log_phi_cdf(beta), _log_phi_cdf(alpha)
-    elif alpha >= 0.0:
-        hi, lo = _log_phi_cdf(-alpha), _log_phi_cdf(-beta)
+    if beta <= 0.0 or alpha >= 0.0:
+        near, far = (beta, alpha) if beta <= 0.0 else (-alpha, -beta)
+        hi = _log_phi_cdf(near)
+        if -0.5 * far * far - _LOG_SQRT_2PI - hi < -FAR_EDGE_LOG_RATIO:
+            return hi  # Φ(far) < φ(far) ≤ e^-50 Φ(near) (Mills, |far| > 1): below half an ulp of ln Φ(near) ≤ −ln 2
+        lo = _log_phi_cdf(far)
     else:
         upper = 0.5 * math.erfc(beta / math.sqrt(2.0)) if beta < NEGLIGIBLE_TAIL_SIGMAS else 0.0
         lower = 0.5 * math.erfc(-alpha / math.sqrt(2.0)) if alpha > -NEGLIGIBLE_TAIL_SIGMAS else 0.0
@@ -131,8 +145,8 @@ def _truncated_moments(alpha: float, beta: float, log_z: float) -> tuple[float, 
     """Mean and variance of a standard normal truncated to [α, β] (Z = Φ(β) − Φ(α) given as ln Z); an edge beyond
     NEGLIGIBLE_TAIL_SIGMAS on the far side of 0 (Z > ½) adds nothing."""
     far_a, far_b = alpha < -NEGLIGIBLE_TAIL_SIGMAS and beta > 0.0, beta > NEGLIGIBLE_TAIL_SIGMAS and alpha < 0.0
-    pa = 0.0 if far_a else math.exp(-0.5 * alpha * alpha - _LOG_SQRT_2PI - log_z)  # φ(α)/Z
-    pb = 0.0 if far_b else math.exp(-0.5 * beta * beta - _LOG_SQRT_2PI - log_z)
+    pa = 0.0 if far_a else _exp(-0.5 * alpha * alpha - _LOG_SQRT_2PI - log_z)  # φ(α)/Z
+    pb = 0.0 if far_b else _exp(-0.5 * beta * beta - _LOG_SQRT_2PI - log_z)
     mean = pa - pb
     var = 1.0 + alpha * pa - beta * pb - mean * mean
     width = beta - alpha  # a variable on [α, β] has variance ≤ width²/4; round-off in the far tail can break it
@@ -254,8 +268,8 @@ def _count_step(
         top = max(top, lw[i])
     total = 0.0
     for i in range(m):
-        total += math.exp(lw[i] - top)
-    log_sum = top + math.log(total)
+        total += _exp(lw[i] - top)
+    log_sum = top + (0.0 if total == 1.0 else math.log(total))  # ln 1 = 0 exactly: one slice left
     for i in range(m):
         lw[i] -= log_sum
     return True, log_sum
