@@ -477,9 +477,15 @@ def _profiled(
     candidates = [theta] + [theta * (1.0 + f) for f in MAGNITUDE_STEPS] + [np.full_like(theta, v) for v in grid]
     thetas = np.stack([_clamped(c, lo, upper, min_abs) for c in candidates])
     lls = np.full(thetas.shape, -np.inf)
-    for i, th in enumerate(thetas):
-        lls[i] = at(th[:, None], floor=lls[:i].max(axis=0, initial=-np.inf))
     cols = np.arange(theta.shape[0])
+    for i, th in enumerate(thetas):
+        # a candidate clamped onto an earlier one of its onset is that one (same rows, same likelihood): not filtered
+        # again (an infinite floor abandons its row at once), its likelihood copied
+        same = thetas[:i] == th
+        again = same.any(axis=0)
+        lls[i] = at(th[:, None], floor=np.where(again, np.inf, lls[:i].max(axis=0, initial=-np.inf)))
+        if again.any():
+            lls[i, again] = lls[np.argmax(same, axis=0)[again], cols[again]]
     best = np.argmax(lls, axis=0)
     ll, theta = lls[best, cols], thetas[best, cols]
     step = np.full_like(theta, np.diff(grid).min()) if len(grid) > 1 else np.abs(theta) * MAGNITUDE_STEPS[-1]
@@ -487,8 +493,9 @@ def _profiled(
         step = 0.5 * step
         for sign in (-1.0, 1.0):
             trial = _clamped(theta + sign * step, lo, upper, min_abs)
-            trial_ll = at(trial[:, None], floor=ll)
-            better = trial_ll > ll
+            same = trial == theta  # clamped back onto the best: no better, not filtered
+            trial_ll = at(trial[:, None], floor=np.where(same, np.inf, ll))
+            better = (trial_ll > ll) & ~same
             ll, theta = np.where(better, trial_ll, ll), np.where(better, trial, theta)
     return ll, theta
 
