@@ -75,7 +75,7 @@ class MonitorHandles:
     viewers: dict[str, dict[int, Viewer]] = field(default_factory=dict)
     link: ViewerLink = field(default_factory=ViewerLink)  # viewers that chose to move together (any monitor)
     label: str = NOMINAL_LABEL  # what the simulated side flies, named on every viewer's panel
-    frames_sent: int = 0
+    frames_sent: int = 0  # frames sent to a client (a frame it already shows is not sent again)
     frames_computed: int = 0
     _lock: threading.RLock = field(default_factory=threading.RLock)
     _stop: threading.Event = field(default_factory=threading.Event)
@@ -129,10 +129,10 @@ class MonitorHandles:
             clocks[id(viewer.clock)] = viewer.clock.advance(wall_dt_s)
         t = clocks[id(viewer.clock)]
         f = self._frame(viewer.geometry, t, cache)
-        viewer.scene.show(f)
+        if viewer.scene.show(f):  # a frame the client already shows is not sent again
+            self.frames_sent += 1
         viewer.panels.show_time(f)
         self._apply_preset(viewer, f)
-        self.frames_sent += 1
         return f
 
     def render(self, wall_dt_s: float = 0.0) -> dict[int, TwinFrame]:

@@ -6,6 +6,7 @@ ground stations with visibility circles and the day/night boundary (seed 000 §6
 
 from __future__ import annotations
 
+import dataclasses
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -17,7 +18,7 @@ from sim_core import quaternion
 if TYPE_CHECKING:
     import viser
 
-__all__ = ["Role", "ROLES", "TwinScene", "polyline_segments"]
+__all__ = ["Role", "ROLES", "TwinScene", "polyline_segments", "same_frame"]
 
 Role = Literal["actual", "simulated", "overlay"]
 ROLES: tuple[Role, ...] = ("actual", "simulated", "overlay")
@@ -59,6 +60,7 @@ class TwinScene:
         self.server, self.role, self.geometry = server, role, geometry
         self.sides = {"actual": ("actual",), "simulated": ("simulated",), "overlay": ("actual", "simulated")}[role]
         self._trace_split = -1
+        self._shown: TwinFrame | None = None  # the frame the client holds (None: not shown since the last build)
         self._build()
 
     def _build(self) -> None:
@@ -132,10 +134,15 @@ class TwinScene:
         """Redraw every node for another feed's geometry (viser replaces nodes of the same name)."""
         self.geometry = geometry
         self._trace_split = -1
+        self._shown = None
         self._build()
 
-    def show(self, f: TwinFrame) -> None:
-        """Move everything to the frame's instant (one batched websocket update)."""
+    def show(self, f: TwinFrame) -> bool:
+        """Move everything to the frame's instant (one batched websocket update); False, and nothing done, when the
+        client already shows this very frame (a paused view, or live follow between two samples)."""
+        if self._shown is not None and same_frame(self._shown, f):
+            return False
+        self._shown = f
         g = self.geometry
         with self.server.atomic():
             self.earth.wxyz = f.earth_wxyz
@@ -160,6 +167,19 @@ class TwinScene:
                 ccd = f.ccd_actual_ecef if side == "actual" else f.ccd_simulated_ecef
                 _set_segments(self.footprints[side], polyline_segments(_closed(foot) * 1.0002), f.observing)
                 _set_segments(self.ccd[side], polyline_segments(ccd * 1.0002), f.observing)
+        return True
+
+
+def same_frame(a: TwinFrame, b: TwinFrame) -> bool:
+    """True when two frames hold the same values (NaN equal to NaN: a line of sight that misses the Earth)."""
+    for field in dataclasses.fields(a):
+        x, y = getattr(a, field.name), getattr(b, field.name)
+        if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+            if not np.array_equal(x, y, equal_nan=True):
+                return False
+        elif x != y:
+            return False
+    return True
 
 
 def _ecef_of(f: TwinFrame) -> np.ndarray:

@@ -65,6 +65,45 @@ def test_each_viewer_has_its_own_clock_and_one_moving_leaves_the_other_where_it_
         handles.stop()
 
 
+def _quiet(received: list, quiet_s: float = 0.5, timeout_s: float = 30.0) -> None:
+    """Wait until the server has sent nothing to the client for quiet_s (its first scene and panel delivered)."""
+    deadline = time.monotonic() + timeout_s
+    while not received or time.monotonic() - received[-1] < quiet_s:
+        if time.monotonic() > deadline:
+            raise AssertionError(f"the server kept sending for {timeout_s} s")
+        time.sleep(0.05)
+
+
+def test_an_idle_viewer_is_sent_nothing_until_its_view_moves(twin_feed):
+    """Paused at one instant, three seconds of 30 Hz frames and 2 Hz panel updates send the page no message at all
+    (the browser then has nothing to redraw); a seek sends the new frame."""
+    handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False)
+    received: list[float] = []
+    try:
+        with viser_client(handles.ports["overlay"], received=received):
+            (viewer,) = wait_for_viewers(handles, "overlay", 1)
+            handles.render()
+            handles.update_panels()
+            _quiet(received)
+            before, sent = len(received), handles.frames_sent
+            for k in range(90):
+                handles.render(wall_dt_s=1.0 / 30.0)
+                if k % 15 == 0:
+                    handles.update_panels()
+            handles.servers["overlay"].flush()
+            _quiet(received)
+            assert len(received) == before and handles.frames_sent == sent
+            viewer.clock.seek(viewer.clock.t_unix_s + 10.0)
+            handles.render()
+            assert handles.frames_sent == sent + 1
+            deadline = time.monotonic() + 30.0
+            while len(received) == before:
+                assert time.monotonic() < deadline, "the moved frame never reached the client"
+                time.sleep(0.05)
+    finally:
+        handles.stop()
+
+
 def test_a_role_shows_its_sides_only(monitors):
     with viser_client(monitors.ports["actual"]), viser_client(monitors.ports["simulated"]):
         (actual,) = wait_for_viewers(monitors, "actual", 1)

@@ -29,8 +29,9 @@ CAMERA = {
 
 
 @contextmanager
-def viser_client(port: int, headers: dict[str, str] | None = None) -> Iterator[object]:
-    """An open viser client on 127.0.0.1:port (registered once the server has read its camera message)."""
+def viser_client(port: int, headers: dict[str, str] | None = None, received: list | None = None) -> Iterator[object]:
+    """An open viser client on 127.0.0.1:port (registered once the server has read its camera message); the arrival
+    time (time.monotonic) of every websocket message the server sends is appended to ``received`` if given."""
     with connect(
         f"ws://127.0.0.1:{port}/",
         subprotocols=[f"viser-v{viser.__version__}"],
@@ -45,6 +46,8 @@ def viser_client(port: int, headers: dict[str, str] | None = None) -> Iterator[o
             while not stop.is_set():
                 try:
                     ws.recv(timeout=0.2)
+                    if received is not None:
+                        received.append(time.monotonic())
                 except TimeoutError:
                     continue
                 except ConnectionClosed:
