@@ -8,20 +8,62 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 if TYPE_CHECKING:
     from telemetry.ingest_report import SampleBatch
 
-__all__ = ["PacketBatch", "SEQUENCE_COUNT_MODULUS", "DERIVED_APID", "sequence_gaps"]
+__all__ = ["PacketBatch", "ColumnMatrices", "SEQUENCE_COUNT_MODULUS", "DERIVED_APID", "sequence_gaps"]
 
 SEQUENCE_COUNT_MODULUS = 16_384  # 14-bit packet sequence count, CCSDS 133.0-B-2 §4.1.3.4.2.2
 MAX_APID = 2_047  # 11-bit APID, CCSDS 133.0-B-2 §4.1.3.3.4
 # Archive APID of parameters derived on the ground (the live twin's residuals): no raw packets, sequence counts 0;
 # 2047 is the idle packet (CCSDS 133.0-B-2 §4.1.3.3.4.4), so the highest APID a mission may use is 2045 here.
 DERIVED_APID = 2_046
+
+
+class ColumnMatrices(dict[str, np.ndarray]):
+    """Parameter columns (name -> 1-D array, in their order) that are the rows of one 2-D matrix per dtype.
+
+    ``groups``: (dtype, positions of its columns, matrix of shape (len(positions), n)). The archive reads each
+    matrix with one numpy call per step (range, narrowing, compression) where a mapping of separate columns
+    costs one call per column and step (CYGNSS: ~100 columns of a few thousand samples per archive chunk).
+    """
+
+    def __init__(self, names: Sequence[str], groups: Sequence[tuple[np.dtype, Sequence[int], np.ndarray]]) -> None:
+        columns: list[np.ndarray | None] = [None] * len(names)
+        for _, positions, matrix in groups:
+            for row, position in enumerate(positions):
+                columns[position] = matrix[row]
+        if any(c is None for c in columns):
+            raise ValueError("groups: every column needs a row of one matrix")
+        super().__init__(zip(names, cast("list[np.ndarray]", columns)))
+        self.groups = [(np.dtype(d), list(p), m) for d, p, m in groups]
+
+    @classmethod
+    def concatenated(cls, parts: Sequence[Mapping[str, np.ndarray]], lengths: Sequence[int]) -> dict[str, np.ndarray]:
+        """The columns of ``parts`` (same names in the same order, ``lengths`` samples each) joined end to end: one
+        matrix per dtype filled by one call per part and dtype; separate columns (np.concatenate's dtype
+        promotion) when a column's dtype differs between parts."""
+        names = list(parts[0])
+        columns = [list(p.values()) for p in parts]
+        dtypes = [c.dtype for c in columns[0]]
+        if not names or any([c.dtype for c in part] != dtypes for part in columns[1:]):
+            return {n: np.concatenate([np.asarray(p[n]) for p in parts]) for n in names}
+        positions: dict[np.dtype, list[int]] = {}
+        for i, dtype in enumerate(dtypes):
+            positions.setdefault(dtype, []).append(i)
+        ends = np.cumsum([0, *lengths]).tolist()
+        groups = []
+        for members in positions.values():
+            joined = np.concatenate([part[members[0]][:0] for part in columns]).dtype  # np.concatenate's: native order
+            matrix = np.empty((len(members), ends[-1]), dtype=joined)
+            for part, lo, hi in zip(columns, ends[:-1], ends[1:]):
+                np.stack([part[i] for i in members], out=matrix[:, lo:hi])
+            groups.append((joined, members, matrix))
+        return cls(names, groups)
 
 
 @dataclass(frozen=True)
@@ -49,10 +91,17 @@ class PacketBatch:
         lengths = np.asarray(self.raw_lengths)
         if lengths.shape != (n,) or int(lengths.sum()) != len(self.raw):
             raise ValueError(f"raw_lengths: expected {n} lengths summing to len(raw) = {len(self.raw)}")
-        values = {name: c if isinstance(c, np.ndarray) else np.asarray(c) for name, c in self.values.items()}
-        for name, column in values.items():
-            if column.shape != (n,):
-                raise ValueError(f"values[{name!r}]: expected shape ({n},), got {column.shape}")
+        values: Mapping[str, np.ndarray]
+        if isinstance(self.values, ColumnMatrices):  # rows of its matrices: their shapes are the columns'
+            values = self.values
+            for _, _, matrix in values.groups:
+                if matrix.ndim != 2 or matrix.shape[1] != n:
+                    raise ValueError(f"values: expected matrices of {n} columns, got shape {matrix.shape}")
+        else:
+            values = {name: c if isinstance(c, np.ndarray) else np.asarray(c) for name, c in self.values.items()}
+            for name, column in values.items():
+                if column.shape != (n,):
+                    raise ValueError(f"values[{name!r}]: expected shape ({n},), got {column.shape}")
         object.__setattr__(self, "t_utc_ns", t.astype(np.int64, copy=False))
         object.__setattr__(self, "seq_count", seq.astype(np.int64, copy=False))
         object.__setattr__(self, "raw_lengths", lengths.astype(np.int64, copy=False))

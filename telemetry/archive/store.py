@@ -18,14 +18,14 @@ import numpy as np
 from sqlalchemy import Connection, Row, Table, bindparam, delete, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
-from telemetry.archive.batch import PacketBatch, sequence_gaps
+from telemetry.archive.batch import ColumnMatrices, PacketBatch, sequence_gaps
 from telemetry.archive.chunks import (
     decode_int64,
     decode_raw,
     decode_values,
     encode_int64,
     encode_raw,
-    encode_values_range,
+    encode_value_rows,
 )
 from telemetry.archive.engine import create_archive_engine, insert_rows
 from telemetry.archive.migrate import upgrade
@@ -596,11 +596,14 @@ class Archive:
         chunk_ids = (
             conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
         )
-        value_rows: list[tuple[Any, ...]] = []
-        spans = list(zip(chunk_ids, bounds[:-1], bounds[1:]))
-        for name, column in batch.values.items():
-            param_id, column = param_ids[name], np.asarray(column)
-            value_rows.extend(_value_row(param_id, chunk_id, column[lo:hi]) for chunk_id, lo, hi in spans)
+        names = list(batch.values)
+        rows: list[list[tuple[Any, ...]]] = [[] for _ in names]  # per column, its rows in chunk order
+        for dtype, members, matrix in _value_matrices(batch.values):
+            presented = _INT64 if dtype.kind in "iu" and dtype != _UINT64 else None  # integers read back as int64
+            for chunk_id, lo, hi in zip(chunk_ids, bounds[:-1], bounds[1:]):
+                for i, (spec, blob, v_min, v_max) in zip(members, encode_value_rows(matrix[:, lo:hi], presented)):
+                    rows[i].append((param_ids[names[i]], chunk_id, spec, v_min, v_max, blob))
+        value_rows = [row for column_rows in rows for row in column_rows]  # by parameter, then chunk, as ever
         if value_rows:
             insert_rows(conn, VALUE, _VALUE_COLUMNS, value_rows)
 
@@ -1004,7 +1007,7 @@ def _concatenate(parts: list[PacketBatch]) -> PacketBatch:
         np.concatenate([p.seq_count for p in parts]),
         b"".join(p.raw for p in parts),
         np.concatenate([p.raw_lengths for p in parts]),
-        {n: np.concatenate([np.asarray(p.values[n]) for p in parts]) for n in names},
+        ColumnMatrices.concatenated([p.values for p in parts], [p.n_packets for p in parts]),
     )
 
 
@@ -1099,12 +1102,16 @@ _UINT64 = np.dtype(np.uint64)
 _VALUE_COLUMNS = ("parameter_id", "chunk_id", "dtype", "v_min", "v_max", "v_blob")
 
 
-def _value_row(param_id: int, chunk_id: int, values: np.ndarray) -> tuple[Any, ...]:
-    """A value chunk's row (_VALUE_COLUMNS); integers (decoded in their field's width) read back as int64, uint64
-    as uint64."""
-    wide = values.dtype.kind in "iu" and values.dtype != _UINT64
-    dtype, blob, v_min, v_max = encode_values_range(values, _INT64 if wide else None)
-    return param_id, chunk_id, dtype, v_min, v_max, blob
+def _value_matrices(values: Mapping[str, np.ndarray]) -> list[tuple[np.dtype, list[int], np.ndarray]]:
+    """The columns as one matrix per dtype: (dtype, the columns' positions, matrix); the batch's own matrices when
+    it has them (pending parts joined), else stacked (one copy, so that each later step is one call)."""
+    if isinstance(values, ColumnMatrices):
+        return values.groups
+    columns = list(values.values())
+    positions: dict[np.dtype, list[int]] = {}
+    for i, column in enumerate(columns):
+        positions.setdefault(column.dtype, []).append(i)
+    return [(d, members, np.stack([columns[i] for i in members], dtype=d)) for d, members in positions.items()]
 
 
 def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:

@@ -5,13 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from telemetry.archive.batch import ColumnMatrices
 from telemetry.archive.chunks import (
     decode_int64,
     decode_raw,
     decode_values,
     encode_int64,
     encode_raw,
+    encode_value_rows,
     encode_values,
+    encode_values_range,
     narrowest_exact,
 )
 
@@ -54,3 +57,68 @@ def test_int64_columns_and_raw_bytes_round_trip() -> None:
 def test_non_numeric_values_name_the_field() -> None:
     with pytest.raises(ValueError, match="values"):
         encode_values(np.array(["a", "b"]))
+
+
+MATRIX_DTYPES = ["u1", "i1", "<u2", ">u2", "<i2", "<u4", "<i4", "<i8", "<u8", "<f8", "<f4", "?"]
+
+
+@pytest.mark.parametrize("dtype", MATRIX_DTYPES)
+def test_matrix_rows_encode_as_each_row_alone(dtype: str) -> None:
+    """encode_value_rows gives each row of a matrix the spec, blob and range that encode_values_range gives it
+    alone: rows narrowing to different dtypes, rows with NaN, infinities or nothing finite, strided slices."""
+    rng = np.random.default_rng(12)
+    kind, size = np.dtype(dtype).kind, np.dtype(dtype).itemsize
+    rows = []
+    for scale in (1, 100, 200, 40_000, 70_000, 2**31, 2**40):
+        if kind == "b":
+            rows.append(rng.integers(0, 2, 50).astype(bool))
+            continue
+        info = np.finfo(dtype) if kind == "f" else np.iinfo(dtype)
+        high = min(scale, info.max)
+        low = 0 if kind == "u" else max(-scale, info.min)
+        rows.append(rng.integers(int(low), int(high), 50, endpoint=True).astype(dtype))
+    if kind == "f":
+        rows.append(rng.normal(size=50).astype(dtype))  # not float32-exact (as float64)
+        for special in ([np.nan], [np.inf, -np.inf], [np.nan, np.inf]):
+            row = rng.normal(size=50).astype(np.float32).astype(dtype)
+            row[: len(special)] = special
+            rows.append(row)
+        rows.append(np.full(50, np.nan, dtype=dtype))
+        rows.append(np.full(50, np.inf, dtype=dtype))
+    matrix = np.stack(rows, dtype=dtype)  # byte order kept
+    assert size and matrix.dtype == np.dtype(dtype)
+    wide = np.dtype(np.int64) if kind in "iu" and np.dtype(dtype) != np.uint64 else None
+    for view in (matrix, matrix[:, 7:40], matrix[::-1]):
+        expected = [encode_values_range(row, wide) for row in view]
+        assert encode_value_rows(view, wide) == expected
+        for (spec, blob, _, _), row in zip(expected, view):
+            assert np.array_equal(decode_values(spec, blob), row.astype(wide or row.dtype), equal_nan=kind == "f")
+
+
+def test_matrix_rows_of_no_samples_or_no_rows() -> None:
+    assert encode_value_rows(np.empty((0, 5))) == []
+    assert encode_value_rows(np.empty((2, 0), dtype=np.uint8)) == [encode_values_range(np.empty(0, np.uint8))] * 2
+    with pytest.raises(ValueError, match="2-D"):
+        encode_value_rows(np.zeros(3))
+    with pytest.raises(ValueError, match="not numeric"):
+        encode_value_rows(np.array([["a", "b"]]))
+
+
+def test_pending_parts_join_into_one_matrix_per_dtype() -> None:
+    """Columns joined end to end equal np.concatenate's (in its dtype: native byte order); rows of one matrix per dtype; a column
+    whose dtype differs between parts is joined alone, promoted as np.concatenate promotes it."""
+    parts = [
+        {"a": np.arange(3).astype(">u2"), "b": np.full(3, 0.5), "c": np.arange(3, 6).astype(">u2")},
+        {"a": np.arange(2).astype(">u2"), "b": np.full(2, np.nan), "c": np.arange(7, 9).astype(">u2")},
+    ]
+    joined = ColumnMatrices.concatenated(parts, [3, 2])
+    assert isinstance(joined, ColumnMatrices) and list(joined) == ["a", "b", "c"]
+    for name, column in joined.items():
+        expected = np.concatenate([p[name] for p in parts])
+        assert column.dtype == expected.dtype and np.array_equal(column, expected, equal_nan=True)
+    assert [(d.str, members, m.shape) for d, members, m in joined.groups] == [
+        ("<u2", [0, 2], (2, 5)),
+        ("<f8", [1], (1, 5)),
+    ]
+    mixed = ColumnMatrices.concatenated([parts[0], {**parts[1], "a": np.arange(2, dtype=np.uint32)}], [3, 2])
+    assert not isinstance(mixed, ColumnMatrices) and mixed["a"].dtype == np.uint32
