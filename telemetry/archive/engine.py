@@ -11,7 +11,7 @@ from sqlalchemy.engine import make_url
 if TYPE_CHECKING:
     import psycopg
 
-__all__ = ["create_archive_engine", "DEFAULT_URL", "insert_rows"]
+__all__ = ["create_archive_engine", "DEFAULT_URL", "insert_rows", "insert_returning_ids"]
 
 DEFAULT_URL = "sqlite:///data/archive.sqlite"
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # writers queue behind a bulk upload instead of failing at once
@@ -82,6 +82,28 @@ def insert_rows(conn: Connection, table: Table, columns: tuple[str, ...], rows: 
         return
     sql, positional = _insert_sql(conn.dialect, table, columns)
     conn.exec_driver_sql(sql, list(rows) if positional else [dict(zip(columns, row, strict=True)) for row in rows])
+
+
+def insert_returning_ids(
+    conn: Connection, table: Table, columns: tuple[str, ...], rows: Sequence[tuple[Any, ...]]
+) -> list[int]:
+    """Insert ``rows`` (values of ``columns``, as for :func:`insert_rows`) and return their ids in row order. On
+    SQLite one prepared statement per row through the driver and its ``lastrowid`` (SQLAlchemy's executemany with
+    RETURNING built a multi-row statement and processed every parameter: ~1 ms per call of 1-2 archive chunks);
+    elsewhere INSERT ... RETURNING, sorted as the rows were given."""
+    if conn.dialect.name == "sqlite":
+        sql, positional = _insert_sql(conn.dialect, table, columns)
+        cursor = conn.connection.dbapi_connection.cursor()  # type: ignore[union-attr]
+        try:
+            ids = []
+            for row in rows:
+                cursor.execute(sql, row if positional else dict(zip(columns, row, strict=True)))
+                ids.append(int(cursor.lastrowid))
+            return ids
+        finally:
+            cursor.close()
+    statement = insert(table).returning(table.c.id, sort_by_parameter_order=True)
+    return [int(i) for i in conn.execute(statement, [dict(zip(columns, row, strict=True)) for row in rows]).scalars()]
 
 
 def _copy_rows(conn: Connection, table: Table, columns: tuple[str, ...], rows: Sequence[tuple[Any, ...]]) -> None:

@@ -27,7 +27,7 @@ from telemetry.archive.chunks import (
     encode_raw,
     encode_value_rows,
 )
-from telemetry.archive.engine import create_archive_engine, insert_rows
+from telemetry.archive.engine import create_archive_engine, insert_returning_ids, insert_rows
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
     Alarm,
@@ -577,25 +577,22 @@ class Archive:
         bounds = list(range(0, batch.n_packets, CHUNK_PACKETS)) + [batch.n_packets]
         raw = np.frombuffer(batch.raw, dtype=np.uint8)
         byte_ends = np.concatenate(([0], np.cumsum(batch.raw_lengths)))
-        chunk_rows = []
-        for lo, hi in zip(bounds[:-1], bounds[1:]):
-            chunk_rows.append(
-                {
-                    "satellite_id": sat_id,
-                    "upload_id": upload_id,
-                    "apid": batch.apid,
-                    "t_start_ns": int(batch.t_utc_ns[lo]),
-                    "t_end_ns": int(batch.t_utc_ns[hi - 1]),
-                    "n_packets": hi - lo,
-                    "t_blob": encode_int64(batch.t_utc_ns[lo:hi]),
-                    "seq_blob": encode_int64(batch.seq_count[lo:hi]),
-                    "length_blob": encode_int64(batch.raw_lengths[lo:hi]),
-                    "raw_blob": encode_raw(raw[byte_ends[lo] : byte_ends[hi]]),
-                }
+        chunk_rows = [
+            (
+                sat_id,
+                upload_id,
+                batch.apid,
+                int(batch.t_utc_ns[lo]),
+                int(batch.t_utc_ns[hi - 1]),
+                hi - lo,
+                encode_int64(batch.t_utc_ns[lo:hi]),
+                encode_int64(batch.seq_count[lo:hi]),
+                encode_int64(batch.raw_lengths[lo:hi]),
+                encode_raw(raw[byte_ends[lo] : byte_ends[hi]]),
             )
-        chunk_ids = (
-            conn.execute(insert(CHUNK).returning(CHUNK.c.id, sort_by_parameter_order=True), chunk_rows).scalars().all()
-        )
+            for lo, hi in zip(bounds[:-1], bounds[1:])
+        ]
+        chunk_ids = insert_returning_ids(conn, CHUNK, _CHUNK_COLUMNS, chunk_rows)
         names = list(batch.values)
         rows: list[list[tuple[Any, ...]]] = [[] for _ in names]  # per column, its rows in chunk order
         for dtype, members, matrix in _value_matrices(batch.values):
@@ -617,10 +614,10 @@ class Archive:
             return known
         rows = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": names})
         ids = {name: int(param_id) for name, param_id in rows}  # a parameter telemetered in several packets: one series
-        missing = [{"satellite_id": sat_id, "name": n, "apid": apid} for n in names if n not in ids]
-        if missing:  # one executemany, then one select (INSERT ... RETURNING runs a statement per row on SQLite)
-            conn.execute(insert(PARAM), missing)
-            added = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": [row["name"] for row in missing]})
+        missing = [(sat_id, n, apid) for n in names if n not in ids]
+        if missing:  # one executemany (COPY on PostgreSQL), then one select
+            insert_rows(conn, PARAM, ("satellite_id", "name", "apid"), missing)
+            added = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": [row[1] for row in missing]})
             ids.update({name: int(param_id) for name, param_id in added})
         known.update(ids)
         return known
@@ -1052,11 +1049,17 @@ class _PendingBatches:
 def _batch_octets(batch: PacketBatch) -> int:
     """Memory a batch holds: its raw packets and every array its columns keep alive (a column that is a view
     keeps all of the array it views: counted once, whole)."""
-    held = {}
+    held, bases = {}, {}
     for column in (batch.t_utc_ns, batch.seq_count, batch.raw_lengths, *batch.values.values()):
-        while isinstance(column.base, np.ndarray):
-            column = column.base
-        held[id(column)] = column.nbytes
+        base = column.base
+        if isinstance(base, np.ndarray):
+            bases[id(base)] = base  # columns of one decoded matrix: its chain walked once, not once per column
+        else:
+            held[id(column)] = column.nbytes
+    for base in bases.values():
+        while isinstance(base.base, np.ndarray):
+            base = base.base
+        held[id(base)] = base.nbytes
     return len(batch.raw) + sum(held.values())
 
 
@@ -1099,6 +1102,18 @@ def _limit_changes(
 
 _INT64 = np.dtype(np.int64)
 _UINT64 = np.dtype(np.uint64)
+_CHUNK_COLUMNS = (
+    "satellite_id",
+    "upload_id",
+    "apid",
+    "t_start_ns",
+    "t_end_ns",
+    "n_packets",
+    "t_blob",
+    "seq_blob",
+    "length_blob",
+    "raw_blob",
+)
 _VALUE_COLUMNS = ("parameter_id", "chunk_id", "dtype", "v_min", "v_max", "v_blob")
 
 
