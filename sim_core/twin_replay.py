@@ -52,12 +52,9 @@ def telemetered_steps(t_s: np.ndarray, q_prog_ib: np.ndarray, after_s: float) ->
     q = quaternion.normalize(np.asarray(q_prog_ib, dtype=float))
     k0 = max(int(np.searchsorted(t_s, after_s, side="right")) - 1, 0)
     steps = [(0.0, q[k0].tolist())]
-    for k in range(k0 + 1, q.shape[0]):
-        if (
-            np.all(np.isfinite(q[k]))
-            and quaternion.angle(quaternion.multiply(quaternion.conjugate(q[k - 1]), q[k])) > PROGRAM_STEP_RAD
-        ):
-            steps.append((float(t_s[k] - after_s), q[k].tolist()))
+    turn = quaternion.angle(quaternion.multiply(quaternion.conjugate(q[k0:-1]), q[k0 + 1 :]))  # row k−1 → k
+    for k in k0 + 1 + np.flatnonzero(np.all(np.isfinite(q[k0 + 1 :]), axis=1) & (turn > PROGRAM_STEP_RAD)):
+        steps.append((float(t_s[k] - after_s), q[k].tolist()))
     return steps
 
 
