@@ -280,6 +280,11 @@ class _LayoutPlan:
     rows: tuple[int, int, int, int]  # rows of each slot's matrix
     views: tuple[np.dtype | None, ...]
     casts: tuple[np.dtype | None, ...]  # integers of other byte orders: the dtype _raw_value's int64 goes to
+    # big-endian integers without calibration (values = raw = a row of their slot's matrix): (name, slot, row), and
+    # each slot's one dtype when all its such fields share it (else None: those fields are in `others`)
+    plain: tuple[tuple[str, int, int], ...]
+    plain_dtypes: tuple[np.dtype | None, ...]
+    others: tuple[tuple[Parameter, int, int, np.dtype | None, np.dtype | None], ...]  # (p, slot, row, view, cast)
 
 
 _PLANS: dict[int, _LayoutPlan] = {}  # by id() of a layout's parameter tuple (kept alive by the plan)
@@ -324,6 +329,21 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
     for s in slot:
         row.append(rows[s])
         rows[s] += 1
+    casts = tuple(d if v is None else None for d, v in zip(dtypes, views))
+    plain_dtypes: list[np.dtype | None] = [None] * len(_SLOT_OCTETS)
+    shared = [True] * len(_SLOT_OCTETS)
+    for p, s, v in zip(parameters, slot, views):
+        if v is not None and not p.polynomial:
+            shared[s] = shared[s] and plain_dtypes[s] in (None, v)
+            plain_dtypes[s] = v
+    plain_dtypes = [d if ok else None for d, ok in zip(plain_dtypes, shared)]
+    plain, others = [], []
+    unique = len({p.name for p in parameters}) == len(parameters)  # else in order, the last of a name kept
+    for p, s, r, v, c in zip(parameters, slot, row, views, casts):
+        if unique and v is not None and not p.polynomial and plain_dtypes[s] is not None:
+            plain.append((p.name, s, r))
+        else:
+            others.append((p, s, r, v, c))
     plan = _LayoutPlan(
         parameters,
         first,
@@ -341,7 +361,10 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
         np.array(row, dtype=np.int64),
         (rows[0], rows[1], rows[2], rows[3]),
         views,
-        tuple(d if v is None else None for d, v in zip(dtypes, views)),
+        casts,
+        tuple(plain),
+        tuple(plain_dtypes),
+        tuple(others),
     )
     if len(_PLANS) >= _MAX_PLANS:
         _PLANS.clear()
@@ -391,11 +414,16 @@ def _layout_values(
     else:
         read(0, n)
     out = {}
-    for p, s, r, view, cast in zip(parameters, plan.slot.tolist(), plan.row.tolist(), plan.views, plan.casts):
+    viewed = [m.view(d) if d is not None else m for m, d in zip(outs, plan.plain_dtypes)]
+    for name, s, r in plan.plain:  # a row of its slot's matrix in its dtype: one index per parameter
+        out[name] = viewed[s][r]
+    for p, s, r, view, cast in plan.others:
         raw = outs[s][r].view(view) if view is not None else _raw_value(outs[s][r], p)
         if cast is not None:
             raw = raw.astype(cast, copy=False)
         out[p.name] = calibrate(raw, p) if calibrated and (view is None or p.polynomial) else raw
+    if plan.plain and plan.others:  # in the parameters' order (plain only when their names are unique)
+        out = {p.name: out[p.name] for p in parameters}
     return out
 
 
