@@ -64,6 +64,15 @@ def _empty(n_series: int) -> tuple[np.ndarray, ...]:
     return (np.array([-PLOT_WINDOW_S, 0.0]),) + tuple(np.zeros(2) for _ in range(n_series))
 
 
+def _set_plot(plot: viser.GuiUplotHandle, data: tuple[np.ndarray, ...]) -> None:
+    """Send a plot's data unless the client already holds the same values (viser resends a tuple of arrays on every
+    assignment, equal or not: a paused view would get its three plots again at every panel update)."""
+    held = plot.data
+    if len(held) == len(data) and all(np.array_equal(a, b, equal_nan=True) for a, b in zip(held, data, strict=True)):
+        return
+    plot.data = data
+
+
 class TwinPanels:
     """GUI of one browser client (``target`` is its viser ClientHandle, or a server for a shared panel), bound to
     the viewer's own clock; the camera preset and the replay window are this client's alone."""
@@ -257,13 +266,13 @@ class TwinPanels:
         )
         x = w.t_unix_s - t_unix_s
         if x.size >= 2:
-            self.error_plot.data = (x, w.error_angle_rad * ARCSEC_PER_RAD)
+            _set_plot(self.error_plot, (x, w.error_angle_rad * ARCSEC_PER_RAD))
             wheels, source = w.wheel_speed_rad_s, "telemetry"
             if self.role == "simulated" and w.wheel_speed_simulated_rad_s is not None:
                 wheels, source = w.wheel_speed_simulated_rad_s, f"simulated: {self.simulated_label}"
             self.wheel_source.content = source
-            self.wheel_plot.data = (x,) + tuple(wheels[:, k] * RPM_PER_RAD_S for k in range(wheels.shape[1]))
-            self.md_plot.data = (x,) + tuple(w.md_dipole_am2[:, k] for k in range(3))
+            _set_plot(self.wheel_plot, (x,) + tuple(wheels[:, k] * RPM_PER_RAD_S for k in range(wheels.shape[1])))
+            _set_plot(self.md_plot, (x,) + tuple(w.md_dipole_am2[:, k] for k in range(3)))
         if x.size:
             self.flags.content = (
                 f"mode **{int(w.mode[-1])}** · fault flags **0x{int(w.fault_flags[-1]):04x}** · "

@@ -75,15 +75,17 @@ def _quiet(received: list, quiet_s: float = 0.5, timeout_s: float = 30.0) -> Non
 
 
 def test_an_idle_viewer_is_sent_nothing_until_its_view_moves(twin_feed):
-    """Paused at one instant, three seconds of 30 Hz frames and 2 Hz panel updates send the page no message at all
-    (the browser then has nothing to redraw); a seek sends the new frame."""
+    """Paused at one instant (its plots full), three seconds of 30 Hz frames and 2 Hz panel updates send the page no
+    message at all (the browser then has nothing to redraw or re-plot); a seek sends the new frame."""
     handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False)
     received: list[float] = []
     try:
         with viser_client(handles.ports["overlay"], received=received):
             (viewer,) = wait_for_viewers(handles, "overlay", 1)
+            viewer.clock.seek(twin_feed.span_unix_s()[0] + 400.0)  # 300 s of samples in the plots
             handles.render()
             handles.update_panels()
+            assert viewer.panels.error_plot.data[0].size > 2
             _quiet(received)
             before, sent = len(received), handles.frames_sent
             for k in range(90):
