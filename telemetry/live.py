@@ -434,6 +434,7 @@ class LiveStream:
         self._link: Link | None = None
         self._connections: set[asyncio.Task[None]] = set()
         self._flushes: set[asyncio.Task[bool]] = set()
+        self._commits: set[asyncio.Future[list[IngestResult]]] = set()  # in the worker thread now
         self._flusher: asyncio.Task[None] | None = None
         self._flush_count = 0
         self._on_committed = on_committed
@@ -460,7 +461,8 @@ class LiveStream:
         return bound
 
     async def stop(self) -> None:
-        """Close the listener and its connections, then archive everything pending."""
+        """Close the listener and its connections, then archive everything pending (a commit under way included);
+        what the archive refuses stays counted in ``stats.archive_pending_packets`` and is logged as an error."""
         if self._link is not None:
             self._link.close()
         for task in list(self._connections):
@@ -471,8 +473,19 @@ class LiveStream:
             await asyncio.gather(self._flusher, return_exceptions=True)
         if self._link is not None:
             await self._link.wait_closed()
+        # a commit the cancelled flusher had handed to the worker thread goes on there: it is counted (or its batches
+        # are pending again, for the final flush) only once it ends
+        await asyncio.gather(*self._commits, return_exceptions=True)
         while self._pending and await self.flush(everything=True):
             pass
+        if self._pending:
+            self._note_backlog()
+            log.error(
+                "live stream: stopped with %d decoded packets of %s not archived: %s",
+                self.stats.archive_pending_packets,
+                ", ".join(sorted(self._pending)),
+                self.stats.last_archive_error,
+            )
         if self._archive is not None:
             await asyncio.to_thread(self._after_commit, self._archive, [], True)
 
@@ -665,17 +678,29 @@ class LiveStream:
                 )
                 for satellite, (batches, _, _) in taken.items()
             ]
-            try:
-                results = await asyncio.to_thread(self._commit, self._archive, uploads)
-            except Exception as error:  # the database may be away: keep the data, retry next time
-                self.stats.archive_errors += 1
-                self.stats.last_archive_error = repr(error)
-                for satellite, (batches, since, packets) in taken.items():
-                    self._pending[satellite] = batches + self._pending.get(satellite, [])
-                    self._pending_since[satellite] = since
-                    self._pending_packets[satellite] = packets + self._pending_packets.get(satellite, 0)
+            commit = asyncio.ensure_future(asyncio.to_thread(self._commit, self._archive, uploads))
+            self._commits.add(commit)
+            commit.add_done_callback(lambda done: self._committed(done, taken))
+            try:  # cancelled here (stop cancels the flusher), the thread commits anyway and the callback counts it
+                await asyncio.shield(commit)
+            except Exception:
                 return False
-            finally:
-                self._note_backlog()
-            self.stats.packets_archived += sum(r.packets_accepted for r in results)
             return True
+
+    def _committed(
+        self, commit: asyncio.Future[list[IngestResult]], taken: dict[str, tuple[list[SampleBatch], float, int]]
+    ) -> None:
+        """Account for a group commit once its worker thread is done, whoever still waits for it: its packets counted
+        as archived, or (the database may be away) its batches pending again ahead of newer ones, for a retry."""
+        self._commits.discard(commit)
+        error = commit.exception() if not commit.cancelled() else asyncio.CancelledError()
+        if error is None:
+            self.stats.packets_archived += sum(r.packets_accepted for r in commit.result())
+        else:
+            self.stats.archive_errors += 1
+            self.stats.last_archive_error = repr(error)
+            for satellite, (batches, since, packets) in taken.items():
+                self._pending[satellite] = batches + self._pending.get(satellite, [])
+                self._pending_since[satellite] = min(since, self._pending_since.get(satellite, since))
+                self._pending_packets[satellite] = packets + self._pending_packets.get(satellite, 0)
+        self._note_backlog()

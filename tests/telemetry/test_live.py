@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import socket
 import threading
 import time
+from typing import Any, cast
 
 import numpy as np
 import pytest
 
 from telemetry import live
-from telemetry.archive import Archive
+from telemetry.archive import Archive, IngestResult, PendingUpload
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 from telemetry.live import LiveMessage, LiveStream, MemoryLink, Subscriber, complete_prefix, hello
@@ -218,6 +220,92 @@ def test_stream_is_archived_in_batches(archive: Archive) -> None:
         v, engineering_values(dictionary.packets[HK_APID], 600, seed=4)["wheel_speed_rad_s_2"]
     )
     assert b"".join(p for _, p in archive.replay("REF", T0_UTC_NS, T0_UTC_NS + 10**12)) == raw.tobytes()
+
+
+class _HeldArchive:
+    """The real archive, but its first group commit waits in the worker thread until ``release`` is set."""
+
+    def __init__(self, archive: Archive) -> None:
+        self._archive = archive
+        self.entered, self.release = threading.Event(), threading.Event()
+
+    def ingest_many(self, uploads: list[PendingUpload]) -> list[IngestResult]:
+        if not self.entered.is_set():
+            self.entered.set()
+            self.release.wait(HANG_S)
+        return self._archive.ingest_many(uploads)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._archive, name)
+
+
+class _ReleasingLink(MemoryLink):
+    """A memory link that lets the held commit go once ``stop`` has closed the link (its flusher cancelled)."""
+
+    def __init__(self, held: _HeldArchive) -> None:
+        super().__init__()
+        self._held = held
+
+    async def wait_closed(self) -> None:
+        self._held.release.set()
+
+
+def test_stop_counts_and_keeps_the_commit_its_flusher_had_under_way(archive: Archive) -> None:
+    """``stop`` cancels the periodic flusher while its group commit runs in the worker thread: the commit ends there
+    anyway, and stop returns only once it is counted, then commits the rest (every decoded packet archived)."""
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 300, seed=5)
+    held = _HeldArchive(archive)
+
+    async def scenario() -> live.LiveStats:
+        link = _ReleasingLink(held)
+        stream = LiveStream(
+            dictionary, archive=cast(Archive, held), satellite="REF", archive_interval_s=0.01, archive_uploads_per_s=1e3
+        )
+        await stream.start(link=link)
+        first = link.connect()
+        first.write(raw[:200].tobytes())
+        await first.aclose()
+        assert await asyncio.to_thread(held.entered.wait, HANG_S)  # a commit is under way in the worker thread
+        second = link.connect()
+        second.write(raw[200:].tobytes())
+        await second.aclose()
+        await stream.stop()
+        return stream.stats
+
+    stats = asyncio.run(scenario())
+    assert (stats.packets_archived, stats.archive_pending_packets, stats.archive_errors) == (300, 0, 0)
+    t, _ = archive.read_parameter("REF", "wheel_speed_rad_s_2", T0_UTC_NS, T0_UTC_NS + 10**12)
+    assert t.size == 300
+    assert b"".join(p for _, p in archive.replay("REF", T0_UTC_NS, T0_UTC_NS + 10**12)) == raw.tobytes()
+
+
+class _RefusingArchive:
+    """An archive whose database is away: every group commit fails."""
+
+    def ingest_many(self, uploads: list[PendingUpload]) -> list[IngestResult]:
+        raise OSError("database away")
+
+
+def test_stop_says_what_it_could_not_archive(caplog: pytest.LogCaptureFixture) -> None:
+    dictionary = reference()
+    raw = packets(dictionary.packets[HK_APID], 50, seed=6)
+
+    async def scenario() -> live.LiveStats:
+        link = MemoryLink()
+        stream = LiveStream(dictionary, archive=cast(Archive, _RefusingArchive()), satellite="REF")
+        await stream.start(link=link)
+        connection = link.connect()
+        connection.write(raw.tobytes())
+        await connection.aclose()
+        await stream.stop()
+        return stream.stats
+
+    with caplog.at_level(logging.ERROR, logger="telemetry.live"):
+        stats = asyncio.run(scenario())
+    assert (stats.packets_archived, stats.archive_pending_packets, stats.archive_errors) == (0, 50, 1)
+    assert "stopped with 50 decoded packets of REF not archived" in caplog.text
+    assert "database away" in caplog.text
 
 
 def test_archived_stream_needs_a_satellite_and_subscribers_a_positive_queue() -> None:
