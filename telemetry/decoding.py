@@ -11,9 +11,6 @@ Calibration: polynomial c0 + c1·x + … (XTCE PolynomialCalibrator semantics) o
 
 from __future__ import annotations
 
-import os
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -46,37 +43,7 @@ __all__ = [
     "decode_stream",
     "decoded_octets_per_octet",
     "quaternion_of",
-    "decode_threads",
-    "THREADS_ENV",
 ]
-
-THREADS_ENV = "ACS_TWIN_DECODE_THREADS"
-
-
-def decode_threads() -> int:
-    """Threads a decode runs its compiled kernels on (1 or 2): ACS_TWIN_DECODE_THREADS if set, else 2 when this
-    process may run on two CPUs or more (os.sched_getaffinity) and at least one of them is idle (1-minute load
-    average below their number less one half), else 1. The kernels run without the GIL, so a second thread takes
-    half of a kernel's packets on a free core; on a busy machine it waits for one (CYGNSS ingest at load 7-11:
-    wall min 0.67 -> 1.23 s; CPU within noise), hence the load test (issue 12)."""
-    given = os.environ.get(THREADS_ENV, "").strip()
-    if given:
-        return 2 if int(given) >= 2 else 1
-    cpus = len(os.sched_getaffinity(0))
-    return 2 if cpus >= 2 and os.getloadavg()[0] < cpus - 0.5 else 1
-
-
-_HELPER: tuple[int, ThreadPoolExecutor] | None = None  # (pid, its one helper thread): a forked child makes its own
-_HELPER_LOCK = threading.Lock()
-
-
-def _helper() -> ThreadPoolExecutor:
-    """The process's one helper thread for halves of compiled kernels (made on first use, again after a fork)."""
-    global _HELPER
-    with _HELPER_LOCK:
-        if _HELPER is None or _HELPER[0] != os.getpid():
-            _HELPER = (os.getpid(), ThreadPoolExecutor(1, thread_name_prefix="decode-half"))
-        return _HELPER[1]
 
 
 @intrinsic
@@ -185,10 +152,8 @@ def _field_columns(
     out2: np.ndarray,
     out4: np.ndarray,
     out8: np.ndarray,
-    begin: int,
-    end: int,
 ) -> None:
-    """The fields of packets begin..end-1 at offset in buf, read in place into rows of (·, n) matrices of 1, 2, 4 and
+    """The fields of the n packets at offset in buf, read in place into rows of (·, n) matrices of 1, 2, 4 and
     8 octets (compiled kernel): field f goes to row row[f] of out1/out2/out4/out8 by slot[f] = 0/1/2/3.
 
     Field f covers octets first[f]..last[f] of its packet; its value is that big-endian word
@@ -197,12 +162,11 @@ def _field_columns(
     Packets are taken _BLOCK_PACKETS at a time, field after field (each output row written contiguously, the
     slot's branch taken once per field); a field covering 1, 2, 3-4 octets in a slot of that width, or an unsigned
     one of 4 or 8 octets in the 8-octet slot, has a loop of its own (CYGNSS: ~70 M fields/s -> ~130 M fields/s,
-    2026-12-03; ECM's signed 24-bit fields ~10 -> 4-8 ns each, 2026-12-04). Two calls on disjoint packet ranges
-    may run at once (nogil; they write disjoint columns).
+    2026-12-03; ECM's signed 24-bit fields ~10 -> 4-8 ns each, 2026-12-04).
     """
-    n_fields = first.shape[0]
-    for start in range(begin, end, _BLOCK_PACKETS):
-        stop = min(start + _BLOCK_PACKETS, end)
+    n, n_fields = offset.shape[0], first.shape[0]
+    for start in range(0, n, _BLOCK_PACKETS):
+        stop = min(start + _BLOCK_PACKETS, n)
         for f in range(n_fields):
             lo, hi, sh, m, sg, s, r = first[f], last[f] + 1, shift[f], mask[f], sign[f], slot[f], row[f]
             octets = hi - lo
@@ -258,7 +222,6 @@ def _field_columns(
                         out8[r, i] = value
 
 
-_SPLIT_FIELDS = 1 << 17  # fields (packets x parameters) from which a layout's packets are read in two halves at once
 _SLOT_OCTETS = (1, 2, 4, 8)  # octets of the kernel's output rows by slot
 _NO_ROWS = tuple(np.empty((0, 0), f"u{w}") for w in _SLOT_OCTETS)  # a slot no field of a layout uses
 
@@ -385,34 +348,18 @@ def _layout_values(
         np.empty((rows, n), f"u{w}") if rows else _NO_ROWS[s]
         for s, (rows, w) in enumerate(zip(plan.rows, _SLOT_OCTETS))
     ]
-    offset = np.asarray(offset, dtype=np.int64)
-
-    def read(begin: int, end: int) -> None:
-        _field_columns(
-            buf,
-            offset,
-            plan.first,
-            plan.last,
-            plan.shift,
-            plan.mask,
-            plan.sign,
-            plan.slot,
-            plan.row,
-            outs[0],
-            outs[1],
-            outs[2],
-            outs[3],
-            begin,
-            end,
-        )
-
-    half = n // 2 // _BLOCK_PACKETS * _BLOCK_PACKETS  # whole blocks on the helper thread
-    if n * len(parameters) >= _SPLIT_FIELDS and half and decode_threads() > 1:
-        other = _helper().submit(read, half, n)
-        read(0, half)
-        other.result()
-    else:
-        read(0, n)
+    _field_columns(
+        buf,
+        np.asarray(offset, dtype=np.int64),
+        plan.first,
+        plan.last,
+        plan.shift,
+        plan.mask,
+        plan.sign,
+        plan.slot,
+        plan.row,
+        *outs,
+    )
     out = {}
     viewed = [m.view(d) if d is not None else m for m, d in zip(outs, plan.plain_dtypes)]
     for name, s, r in plan.plain:  # a row of its slot's matrix in its dtype: one index per parameter

@@ -11,13 +11,12 @@ from __future__ import annotations
 import hashlib
 import io
 from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 from telemetry.archive import Archive, IngestResult
-from telemetry.decoding import decode_stream, decode_threads, decoded_octets_per_octet
+from telemetry.decoding import decode_stream, decoded_octets_per_octet
 from telemetry.dictionary import Dictionary
 from telemetry.ingest_report import DecodeResult, IngestReport
 from telemetry.limits import LimitSet
@@ -105,16 +104,12 @@ def _fill(stream: io.BufferedIOBase, view: memoryview) -> int:
 
 
 def file_sha256(path: Path, block: int = 1 << 20) -> str:
-    """SHA-256 of a file, read in blocks (each read into one reused buffer)."""
+    """SHA-256 of a file, read in blocks."""
     digest = hashlib.sha256()
-    buffer = memoryview(bytearray(block))
     with path.open("rb") as f:
-        while got := f.readinto(buffer):
-            digest.update(buffer[:got])
+        while chunk := f.read(block):
+            digest.update(chunk)
     return digest.hexdigest()
-
-
-HASH_BLOCK_OCTETS = 8 << 20  # a file hashed beside the decode: few, long stretches without the GIL
 
 
 def ingest_packet_file(
@@ -149,47 +144,13 @@ def ingest_packet_file(
         for _ in results():
             pass
         return report, None
-    if decode_threads() < 2:
-        stored = archive.ingest_results(
-            satellite,
-            results(),
-            source=report.source,
-            uploaded_by=uploaded_by,
-            sha256=file_sha256(path),
-            limits=limits,
-            report=report,
-        )
-        return report, stored
-    with ThreadPoolExecutor(1, thread_name_prefix="file-sha256") as hashing:
-        # hashlib and the file's reads run without the GIL: on another core, beside the first chunk's decode
-        digest = hashing.submit(file_sha256, path, HASH_BLOCK_OCTETS)
-        archive.satellite_id(satellite)  # registered before any decoding, as the archive's ingest does
-        chunks = _FirstDecoded(results())
-        stored = archive.ingest_results(
-            satellite,
-            chunks,
-            source=report.source,
-            uploaded_by=uploaded_by,
-            sha256=digest.result(),
-            limits=limits,
-            report=report,
-        )
+    stored = archive.ingest_results(
+        satellite,
+        results(),
+        source=report.source,
+        uploaded_by=uploaded_by,
+        sha256=file_sha256(path),
+        limits=limits,
+        report=report,
+    )
     return report, stored
-
-
-class _FirstDecoded:
-    """The decode results of a file's chunks, the first decoded on creation (while the file is hashed: the archive
-    needs the checksum before it takes a chunk) and not held once handed on."""
-
-    def __init__(self, results: Iterator[DecodeResult]) -> None:
-        self._results = results
-        self._first: DecodeResult | None = next(results, None)
-
-    def __iter__(self) -> Iterator[DecodeResult]:
-        return self
-
-    def __next__(self) -> DecodeResult:
-        first, self._first = self._first, None
-        if first is None:
-            return next(self._results)
-        return first

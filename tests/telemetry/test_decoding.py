@@ -17,16 +17,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from telemetry import ccsds
-from telemetry.decoding import (
-    THREADS_ENV,
-    calibrate,
-    decode_packets,
-    decode_raw,
-    decode_stream,
-    decode_threads,
-    derive,
-    quaternion_of,
-)
+from telemetry.decoding import calibrate, decode_packets, decode_raw, decode_stream, derive, quaternion_of
 from telemetry.dictionary import DerivedParameter, PacketDefinition, Parameter
 from tests.telemetry.packet_streams import NOW_UTC_NS, T0_UTC_NS, engineering_values, packets, reference
 
@@ -75,25 +66,6 @@ def test_unaligned_bit_fields_match_ccsdspy() -> None:
         if p.data_type != "float":  # ccsdspy 2.0.1 misreads floats that straddle octets
             np.testing.assert_array_equal(ours[p.name], theirs[p.name], err_msg=p.name)
         np.testing.assert_array_equal(ours[p.name], [_python_bit_field(r, p) for r in rows], err_msg=p.name)
-
-
-def test_two_threads_read_the_same_fields_as_one(monkeypatch: pytest.MonkeyPatch) -> None:
-    """A layout read in two halves at once (ACS_TWIN_DECODE_THREADS=2) gives what one thread gives, the packets
-    each side of the halves' boundary and at the ends as an independent decoder reads them."""
-    packet = _odd_packet()
-    n = 2 * 10_000 + 37  # 240,444 fields: read in two halves, the second one not whole blocks
-    rows = np.random.default_rng(22).integers(0, 256, (n, packet.packet_octets), dtype=np.uint8)
-    rows[:, :6] = ccsds.encode_primary_headers(77, np.arange(n) % 16384, packet.packet_octets)
-    decoded = {}
-    for threads in ("1", "2"):
-        monkeypatch.setenv(THREADS_ENV, threads)
-        assert decode_threads() == int(threads)
-        decoded[threads] = decode_raw(rows, packet)
-    for p in packet.parameters:
-        np.testing.assert_array_equal(decoded["2"][p.name], decoded["1"][p.name], err_msg=p.name)
-        assert decoded["2"][p.name].dtype == decoded["1"][p.name].dtype
-        for i in (0, 1, 9_982, 9_983, 9_984, 9_985, 10_047, 10_048, n - 2, n - 1):
-            assert decoded["2"][p.name][i] == _python_bit_field(rows[i], p), (p.name, i)
 
 
 def _python_bit_field(row: np.ndarray, p: Parameter) -> float | int:
