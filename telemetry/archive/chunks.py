@@ -10,6 +10,7 @@ samples/s here, zlib level 1 at ~5 M samples/s, which is why the archive depends
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -18,6 +19,7 @@ import zstandard
 __all__ = [
     "narrowest_exact",
     "encode_int64",
+    "encode_int64_rows",
     "decode_int64",
     "encode_values",
     "encode_values_range",
@@ -31,8 +33,11 @@ ZSTD_LEVEL = 1  # fastest level: ingest throughput matters more than a few % of 
 STORABLE_KINDS = "biuf"  # bool, signed, unsigned, float: what min/max and limits make sense on
 
 
-_NARROW_INTS = (np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32)
+_NARROW_INTS = (np.int8, np.uint8, np.int16, np.uint16, np.int32, np.uint32)  # by size, signed first
 _INT_RANGES = [(np.dtype(t), int(np.iinfo(t).min), int(np.iinfo(t).max)) for t in _NARROW_INTS]
+_INT_MINIMA = np.array([lo for _, lo, _ in _INT_RANGES], dtype=np.int64)
+_INT_MAXIMA = np.array([hi for _, _, hi in _INT_RANGES], dtype=np.int64)  # growing along _INT_RANGES
+_NARROWER = {size: sum(t.itemsize < size for t, _, _ in _INT_RANGES) for size in (1, 2, 4, 8)}  # candidates
 _codec = threading.local()  # a ZstdCompressor is not thread-safe; making one per call costs as much as compressing
 
 
@@ -58,6 +63,18 @@ def encode_int64(values: np.ndarray) -> bytes:
     delta[:1] = a[:1]
     np.subtract(a[1:], a[:-1], out=delta[1:])
     return _compress(delta.data)
+
+
+def encode_int64_rows(columns: Sequence[np.ndarray]) -> list[bytes]:
+    """:func:`encode_int64` of each of equally long columns (a packet chunk's times, counts and lengths), the same
+    blobs, the deltas of all taken and compressed by one call each."""
+    a = np.array(columns, dtype=np.int64)
+    if a.ndim != 2 or not a.shape[1]:
+        return [encode_int64(c) for c in columns]
+    delta = np.empty_like(a)
+    delta[:, :1] = a[:, :1]
+    np.subtract(a[:, 1:], a[:, :-1], out=delta[:, 1:])
+    return _compress_rows(delta)
 
 
 def decode_int64(blob: bytes) -> np.ndarray:
@@ -91,13 +108,9 @@ def _as_float32_if_exact(array: np.ndarray) -> np.ndarray:
 
 def _narrowest_int(array: np.ndarray, lo: int, hi: int) -> np.ndarray:
     """An integer column in the smallest integer dtype holding lo..hi (its own when none is smaller)."""
-    size = array.dtype.itemsize
-    for candidate, t_min, t_max in _INT_RANGES:
-        if candidate.itemsize >= size:
-            return array
-        if t_min <= lo and hi <= t_max:
-            return array.astype(candidate)
-    return array
+    bounds = np.array([lo, hi], dtype=array.dtype)  # the column's own least and greatest values: they fit
+    choice = int(_narrowest_int_rows(array.dtype, bounds[:1], bounds[1:])[0])
+    return array if choice < 0 else array.astype(_INT_RANGES[choice][0])
 
 
 def encode_values(values: np.ndarray) -> tuple[str, bytes]:
@@ -162,7 +175,7 @@ def encode_value_rows(
         return [encode_values_range(row, presented) for row in m]
     shown = (m.dtype if presented is None else np.dtype(presented)).str
     low, high = m.min(axis=1), m.max(axis=1)
-    parts: list[tuple[np.ndarray, list[int] | None, np.dtype | None]]  # (values, their rows or all, stored dtype)
+    parts: list[tuple[np.ndarray, np.ndarray | None, np.dtype | None]]  # (values, their rows or all, stored dtype)
     if kind in "iu":
         choice = _narrowest_int_rows(m.dtype, low, high)
         parts = [(m, rows, None if c < 0 else _INT_RANGES[c][0]) for c, rows in _rows_by_choice(choice)]
@@ -176,36 +189,48 @@ def encode_value_rows(
         if m.dtype == np.float64:
             with np.errstate(over="ignore"):  # beyond float32's range: inf, which fails the comparison below
                 narrow = m.astype(np.float32)
-            exact = ((narrow == m) | np.isnan(m)).all(axis=1)  # compared in float64: exact; NaN stays NaN
+            exact = (narrow == m).all(axis=1)  # compared in float64: exact
+            nan_rows = np.flatnonzero(np.isnan(low) & ~exact)  # a row's min is NaN when it holds any
+            if nan_rows.size:  # NaN stays NaN in float32
+                exact[nan_rows] = ((narrow[nan_rows] == m[nan_rows]) | np.isnan(m[nan_rows])).all(axis=1)
             parts = [(narrow if c == 0 else m, rows, None) for c, rows in _rows_by_choice(np.where(exact, 0, -1))]
     out: list[Any] = [None] * m.shape[0]
     for values, rows, dtype in parts:
         block = values if rows is None else values[rows]
         block = np.ascontiguousarray(block) if dtype is None else block.astype(dtype)
         spec = f"{block.dtype.str}/{shown}"
-        for i, blob in zip(range(m.shape[0]) if rows is None else rows, _compress_rows(block)):
+        for i, blob in zip(range(m.shape[0]) if rows is None else rows.tolist(), _compress_rows(block)):
             out[i] = (spec, blob, lows[i], highs[i])
     return out
 
 
 def _narrowest_int_rows(dtype: np.dtype, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-    """Per row, the index in _INT_RANGES of the narrowest integer dtype holding low..high (-1: its own), chosen
-    as :func:`_narrowest_int` chooses for one column."""
-    choice = np.full(low.shape, -1, dtype=np.int64)
-    for j, (candidate, t_min, t_max) in enumerate(_INT_RANGES):
-        if candidate.itemsize >= dtype.itemsize:
-            break
-        fits = high <= t_max if dtype.kind == "u" else (low >= t_min) & (high <= t_max)  # unsigned: low >= 0
-        choice[(choice < 0) & fits] = j
-    return choice
+    """Per row (its least and greatest value ``low``, ``high``, of integer ``dtype``), the index in _INT_RANGES of
+    the narrowest integer dtype holding low..high, -1 when none is narrower than ``dtype``: the first that fits,
+    _INT_RANGES being ordered by size. The one choice of the archive's integer narrowing (rows and columns)."""
+    k = _NARROWER[dtype.itemsize]
+    if k == 0:  # 8-bit: nothing narrower
+        return np.full(low.shape, -1, dtype=np.int64)
+    if dtype.kind == "u":  # low >= 0: the first whose maximum holds high (compared as float64 beside uint64 values:
+        choice = np.searchsorted(_INT_MAXIMA[:k], high)  # exact below 2**53, far above every candidate's maximum)
+    else:
+        fits = np.ones((k + 1, low.shape[0]), dtype=bool)  # row k: the dtype itself, which always fits
+        np.greater_equal(low, _INT_MINIMA[:k, None], out=fits[:k])
+        fits[:k] &= high <= _INT_MAXIMA[:k, None]
+        choice = fits.argmax(axis=0)  # the first that fits
+    return np.where(choice < k, choice, -1)
 
 
-def _rows_by_choice(choice: np.ndarray) -> list[tuple[int, list[int] | None]]:
-    """(choice, rows having it) for each distinct choice; rows None when every row has the same."""
+def _rows_by_choice(choice: np.ndarray) -> list[tuple[int, np.ndarray | None]]:
+    """(choice, rows having it, in order) for each distinct choice (-1..len(_INT_RANGES) - 1); rows None when every
+    row has the same."""
     first = int(choice[0])
     if (choice == first).all():
         return [(first, None)]
-    return [(int(c), np.flatnonzero(choice == c).tolist()) for c in np.unique(choice)]
+    counts = np.bincount(choice + 1).tolist()  # a handful of values: not np.unique's sort or hash
+    order = np.argsort(choice, kind="stable")
+    ends = np.cumsum(counts).tolist()
+    return [(c - 1, order[e - n : e]) for c, (n, e) in enumerate(zip(counts, ends)) if n]
 
 
 def _compress_rows(block: np.ndarray) -> list[bytes]:

@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, cast
 
-from sqlalchemy import Connection, Dialect, Engine, Table, create_engine, event, insert
+from sqlalchemy import Connection, Dialect, Engine, Select, Table, create_engine, event, insert
 from sqlalchemy.engine import make_url
+from sqlalchemy.sql.compiler import SQLCompiler
 
 if TYPE_CHECKING:
     import psycopg
 
-__all__ = ["create_archive_engine", "DEFAULT_URL", "insert_rows", "insert_returning_ids"]
+__all__ = ["create_archive_engine", "DEFAULT_URL", "fetch_rows", "insert_rows", "insert_returning_ids"]
 
 DEFAULT_URL = "sqlite:///data/archive.sqlite"
 SQLITE_BUSY_TIMEOUT_MS = 30_000  # writers queue behind a bulk upload instead of failing at once
@@ -70,6 +71,35 @@ def _insert_sql(dialect: Dialect, table: Table, columns: tuple[str, ...]) -> tup
             raise RuntimeError(f"{table.name} INSERT binds {compiled.positiontup}, expected {columns}")
         _INSERTS[key] = str(compiled), compiled.positional
     return _INSERTS[key]
+
+
+_SELECTS: dict[tuple[str, str, str, int], tuple[Select[Any], SQLCompiler]] = {}
+
+
+def fetch_rows(conn: Connection, statement: Select[Any], params: Mapping[str, Any]) -> list[tuple[Any, ...]]:
+    """The rows of ``statement`` (a SELECT of plain columns: int, str, float or bytes, no conversion) with
+    ``params``, run through the driver inside the caller's transaction: compiled once per statement and kind of
+    driver; an expanding IN list is rendered per call. SQLAlchemy's execute costs ~40 us of Python per statement
+    where the driver runs an indexed look-up in ~2 us on SQLite, and an upload runs one per APID and archive
+    chunk."""
+    dialect = conn.dialect
+    key = (dialect.name, str(dialect.driver), str(dialect.paramstyle), id(statement))
+    cached = _SELECTS.get(key)
+    if cached is None or cached[0] is not statement:
+        cached = _SELECTS[key] = (statement, statement.compile(dialect=dialect))
+    compiled = cached[1]
+    if compiled.literal_execute_params or compiled.post_compile_params:  # an expanding IN: rendered for its values
+        state = compiled.construct_expanded_state(dict(params))
+        sql, names, values = state.statement, state.positiontup, state.parameters
+    else:
+        sql, names, values = compiled.string, compiled.positiontup, params
+    args = [values[n] for n in names] if compiled.positional and names is not None else dict(values)
+    cursor = conn.connection.dbapi_connection.cursor()  # type: ignore[union-attr]
+    try:
+        cursor.execute(sql, args)
+        return cast("list[tuple[Any, ...]]", cursor.fetchall())
+    finally:
+        cursor.close()
 
 
 def insert_rows(conn: Connection, table: Table, columns: tuple[str, ...], rows: Sequence[tuple[Any, ...]]) -> None:

@@ -18,16 +18,17 @@ import numpy as np
 from sqlalchemy import Connection, Row, Table, bindparam, delete, func, insert, select, update
 
 from telemetry.archive import alarms as alarm_state
-from telemetry.archive.batch import ColumnMatrices, PacketBatch, sequence_gaps
+from telemetry.archive.batch import ColumnMatrices, PacketBatch, sequence_gaps, value_matrices
 from telemetry.archive.chunks import (
     decode_int64,
     decode_raw,
     decode_values,
     encode_int64,
+    encode_int64_rows,
     encode_raw,
     encode_value_rows,
 )
-from telemetry.archive.engine import create_archive_engine, insert_returning_ids, insert_rows
+from telemetry.archive.engine import create_archive_engine, fetch_rows, insert_returning_ids, insert_rows
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
     Alarm,
@@ -52,7 +53,7 @@ from telemetry.archive.records import (
     StationRecord,
     UploadRecord,
 )
-from telemetry.ingest_report import UndefinedPackets, absent_samples
+from telemetry.ingest_report import UndefinedPackets
 from telemetry.limits import LimitSet, level_changes, limit_levels
 
 if TYPE_CHECKING:
@@ -449,20 +450,20 @@ class Archive:
         self, conn: Connection, sat_id: int, upload_id: int, undefined: Sequence[UndefinedPackets]
     ) -> None:
         rows = [
-            {
-                "satellite_id": sat_id,
-                "upload_id": upload_id,
-                "apid": u.apid,
-                "n_packets": len(u.packet_lengths),
-                "seq_blob": encode_int64(np.asarray(u.sequence_count, dtype=np.int64)),
-                "length_blob": encode_int64(np.asarray(u.packet_lengths, dtype=np.int64)),
-                "raw_blob": encode_raw(u.packets),
-            }
+            (
+                sat_id,
+                upload_id,
+                int(u.apid),
+                len(u.packet_lengths),
+                encode_int64(np.asarray(u.sequence_count, dtype=np.int64)),
+                encode_int64(np.asarray(u.packet_lengths, dtype=np.int64)),
+                encode_raw(u.packets),
+            )
             for u in undefined
             if len(u.packet_lengths)
         ]
         if rows:
-            conn.execute(insert(UNDEFINED), rows)
+            insert_rows(conn, UNDEFINED, _UNDEFINED_COLUMNS, rows)
 
     def undefined_counts(self, satellite: str) -> dict[int, int]:
         """Packets kept raw per APID (no definition when they came, or quarantined by a later one)."""
@@ -535,9 +536,9 @@ class Archive:
             by_apid[batch.apid] = by_apid.get(batch.apid, 0) + n_dup_inside + n_dup_archived
             if fresh.n_packets == 0:
                 continue
-            self._write_chunks(conn, sat_id, upload_id, fresh, param_ids)
+            absent = self._write_chunks(conn, sat_id, upload_id, fresh, param_ids)
             accepted += fresh.n_packets
-            samples += fresh.n_packets * len(fresh.values) - absent_samples(fresh.values)
+            samples += fresh.n_packets * len(fresh.values) - absent
             if fresh.raw:  # ground files carry no sequence counts
                 previous = None if last_written is None else last_written.get(fresh.apid)
                 gaps.extend(_gaps_of(fresh, previous))
@@ -553,6 +554,8 @@ class Archive:
         if t.size == 0:
             return batch, 0
         old_t, old_seq = self._packet_keys(conn, sat_id, batch.apid, int(t[0]), int(t[-1]))
+        if old_t.size == 0:  # nothing archived in its time span: the usual case
+            return batch, 0
         candidates = np.flatnonzero(np.isin(t, old_t))
         if candidates.size == 0:
             return batch, 0
@@ -565,14 +568,15 @@ class Archive:
     def _packet_keys(
         self, conn: Connection, sat_id: int, apid: int, t0_ns: int, t1_ns: int
     ) -> tuple[np.ndarray, np.ndarray]:
-        rows = conn.execute(_PACKET_KEYS, {"sat": sat_id, "apid": apid, "t0": t0_ns, "t1": t1_ns}).all()
+        rows = fetch_rows(conn, _PACKET_KEYS, {"sat": sat_id, "apid": apid, "t0": t0_ns, "t1": t1_ns})
         if not rows:
             return np.empty(0, np.int64), np.empty(0, np.int64)
         return (np.concatenate([decode_int64(r[0]) for r in rows]), np.concatenate([decode_int64(r[1]) for r in rows]))
 
     def _write_chunks(
         self, conn: Connection, sat_id: int, upload_id: int, batch: PacketBatch, known: dict[str, int]
-    ) -> None:
+    ) -> int:
+        """Write a time-ordered batch of new packets as archive chunks; the samples its columns lack (NaN)."""
         param_ids = self._parameter_ids(conn, sat_id, batch.apid, list(batch.values), known)
         bounds = list(range(0, batch.n_packets, CHUNK_PACKETS)) + [batch.n_packets]
         raw = np.frombuffer(batch.raw, dtype=np.uint8)
@@ -585,9 +589,7 @@ class Archive:
                 int(batch.t_utc_ns[lo]),
                 int(batch.t_utc_ns[hi - 1]),
                 hi - lo,
-                encode_int64(batch.t_utc_ns[lo:hi]),
-                encode_int64(batch.seq_count[lo:hi]),
-                encode_int64(batch.raw_lengths[lo:hi]),
+                *encode_int64_rows([batch.t_utc_ns[lo:hi], batch.seq_count[lo:hi], batch.raw_lengths[lo:hi]]),
                 encode_raw(raw[byte_ends[lo] : byte_ends[hi]]),
             )
             for lo, hi in zip(bounds[:-1], bounds[1:])
@@ -595,7 +597,8 @@ class Archive:
         chunk_ids = insert_returning_ids(conn, CHUNK, _CHUNK_COLUMNS, chunk_rows)
         names = list(batch.values)
         rows: list[list[tuple[Any, ...]]] = [[] for _ in names]  # per column, its rows in chunk order
-        for dtype, members, matrix in _value_matrices(batch.values):
+        groups = value_matrices(batch.values)
+        for dtype, members, matrix in groups:
             presented = _INT64 if dtype.kind in "iu" and dtype != _UINT64 else None  # integers read back as int64
             for chunk_id, lo, hi in zip(chunk_ids, bounds[:-1], bounds[1:]):
                 for i, (spec, blob, v_min, v_max) in zip(members, encode_value_rows(matrix[:, lo:hi], presented)):
@@ -603,6 +606,7 @@ class Archive:
         value_rows = [row for column_rows in rows for row in column_rows]  # by parameter, then chunk, as ever
         if value_rows:
             insert_rows(conn, VALUE, _VALUE_COLUMNS, value_rows)
+        return _absent_samples(groups)
 
     def _parameter_ids(
         self, conn: Connection, sat_id: int, apid: int, names: list[str], known: dict[str, int]
@@ -612,13 +616,12 @@ class Archive:
         names = [n for n in names if n not in known]
         if not names:
             return known
-        rows = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": names})
+        rows = fetch_rows(conn, _PARAMETER_IDS, {"sat": sat_id, "names": names})
         ids = {name: int(param_id) for name, param_id in rows}  # a parameter telemetered in several packets: one series
         missing = [(sat_id, n, apid) for n in names if n not in ids]
-        if missing:  # one executemany (COPY on PostgreSQL), then one select
-            insert_rows(conn, PARAM, ("satellite_id", "name", "apid"), missing)
-            added = conn.execute(_PARAMETER_IDS, {"sat": sat_id, "names": [row[1] for row in missing]})
-            ids.update({name: int(param_id) for name, param_id in added})
+        if missing:  # their ids as they are inserted (SQLite: lastrowid; else INSERT ... RETURNING), no select again
+            added = insert_returning_ids(conn, PARAM, ("satellite_id", "name", "apid"), missing)
+            ids.update(zip([row[1] for row in missing], added))
         known.update(ids)
         return known
 
@@ -1114,19 +1117,20 @@ _CHUNK_COLUMNS = (
     "length_blob",
     "raw_blob",
 )
+_UNDEFINED_COLUMNS = ("satellite_id", "upload_id", "apid", "n_packets", "seq_blob", "length_blob", "raw_blob")
 _VALUE_COLUMNS = ("parameter_id", "chunk_id", "dtype", "v_min", "v_max", "v_blob")
 
 
-def _value_matrices(values: Mapping[str, np.ndarray]) -> list[tuple[np.dtype, list[int], np.ndarray]]:
-    """The columns as one matrix per dtype: (dtype, the columns' positions, matrix); the batch's own matrices when
-    it has them (pending parts joined), else stacked (one copy, so that each later step is one call)."""
-    if isinstance(values, ColumnMatrices):
-        return values.groups
-    columns = list(values.values())
-    positions: dict[np.dtype, list[int]] = {}
-    for i, column in enumerate(columns):
-        positions.setdefault(column.dtype, []).append(i)
-    return [(d, members, np.stack([columns[i] for i in members], dtype=d)) for d, members in positions.items()]
+def _absent_samples(groups: Sequence[tuple[np.dtype, Sequence[int], np.ndarray]]) -> int:
+    """What ``absent_samples`` (telemetry.ingest_report) counts, for the columns of value matrices: NaN elements of
+    float rows, the rows holding any found by one min per matrix (NaN propagates), not one per column."""
+    absent = 0
+    for dtype, _, matrix in groups:
+        if dtype.kind == "f" and matrix.size:
+            rows = np.flatnonzero(np.isnan(matrix.min(axis=1)))
+            if rows.size:
+                absent += int(np.count_nonzero(np.isnan(matrix[rows])))
+    return absent
 
 
 def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:

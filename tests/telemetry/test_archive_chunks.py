@@ -11,6 +11,7 @@ from telemetry.archive.chunks import (
     decode_raw,
     decode_values,
     encode_int64,
+    encode_int64_rows,
     encode_raw,
     encode_value_rows,
     encode_values,
@@ -52,6 +53,33 @@ def test_int64_columns_and_raw_bytes_round_trip() -> None:
     np.testing.assert_array_equal(decode_int64(encode_int64(t)), t)
     raw = bytes(range(256)) * 7
     assert decode_raw(encode_raw(raw)) == raw
+
+
+INT_DTYPES = ["u1", "i1", "u2", "i2", "u4", "i4", "u8", "i8"]
+NARROW_INTS = [np.dtype(t) for t in ("i1", "u1", "i2", "u2", "i4", "u4")]  # by size, signed first
+
+
+@pytest.mark.parametrize("dtype", INT_DTYPES)
+def test_integers_stored_in_the_first_smaller_dtype_holding_their_range(dtype: str) -> None:
+    """Every edge of every smaller integer range, as a column's least or greatest value: stored in the first of
+    int8, uint8, int16, uint16, int32, uint32 narrower than the column holding both (np.iinfo), else as given."""
+    own = np.dtype(dtype)
+    info = np.iinfo(own)
+    edges = sorted({e for t in NARROW_INTS for b in (np.iinfo(t).min, np.iinfo(t).max) for e in (b - 1, b, b + 1)})
+    edges = [e for e in edges if info.min <= e <= info.max]
+    pairs = [(lo, hi) for lo in edges for hi in edges if lo <= hi]
+    matrix = np.array(pairs, dtype=own)  # each row: its least and greatest value
+    for (lo, hi), row, (spec, _, _, _) in zip(pairs, matrix, encode_value_rows(matrix)):
+        fits = [t for t in NARROW_INTS if t.itemsize < own.itemsize and np.iinfo(t).min <= lo and hi <= np.iinfo(t).max]
+        expected = fits[0] if fits else own
+        assert narrowest_exact(row).dtype == expected and spec.split("/")[0] == expected.str, (lo, hi)
+
+
+def test_a_chunk_s_int64_columns_encoded_together_as_each_alone() -> None:
+    t = 1_750_000_000 * 10**9 + np.cumsum(np.random.default_rng(2).integers(1, 10**9, 500))
+    columns = [t, np.arange(500) % 16_384, np.full(500, 1_508)]
+    assert encode_int64_rows(columns) == [encode_int64(c) for c in columns]
+    assert encode_int64_rows([t[:0], t[:0]]) == [encode_int64(t[:0])] * 2
 
 
 def test_non_numeric_values_name_the_field() -> None:
