@@ -99,19 +99,34 @@ class MonitorHandles:
         with self._lock:
             return [v for per_role in self.viewers.values() for v in per_role.values()]
 
+    def _open_viewers(self) -> list[Viewer]:
+        """Every viewer whose browser is still there (under the lock): one whose connection viser has closed is
+        dropped now, before anything more is pushed to it, as its disconnect callback would (that comes later,
+        from viser's thread pool)."""
+        viewers = []
+        for viewer in self.all_viewers():
+            if viewer.closed:
+                self._drop(viewer.role, viewer.client_id)
+            else:
+                viewers.append(viewer)
+        return viewers
+
     def _connect(self, role: Role, client: viser.ClientHandle) -> None:
         """A browser connected: give it a viewer of its own (clock, scene, panel)."""
         with self._lock:
             geometry = self.geometry
         viewer = Viewer(client, role, geometry, self.n_wheels, self.live, self.windows, self._loader, self.link)
-        with self._lock:  # its first frame sent before it is listed: a listed viewer has been shown
+        with self._lock, viewer.sending():  # its first frame sent before it is listed: a listed viewer has been shown
             viewer.panels.show_simulated(self.label)
             self._render_one(viewer, {})
-            self.viewers.setdefault(role, {})[viewer.client_id] = viewer
+            self.viewers.setdefault(role, {})[viewer.client_id] = viewer  # gone already: the next render drops it
 
     def _disconnect(self, role: Role, client: viser.ClientHandle) -> None:
+        self._drop(role, int(client.client_id))
+
+    def _drop(self, role: Role, client_id: int) -> None:
         with self._lock:
-            viewer = self.viewers.get(role, {}).pop(int(client.client_id), None)
+            viewer = self.viewers.get(role, {}).pop(client_id, None)
         if viewer is not None:
             self.link.leave(viewer)
 
@@ -141,9 +156,10 @@ class MonitorHandles:
         cache: dict = {}
         shown = {}
         with self._lock:
-            for viewer in self.all_viewers():
+            for viewer in self._open_viewers():
                 try:
-                    shown[viewer.client_id] = self._render_one(viewer, cache, wall_dt_s)
+                    with viewer.sending():
+                        shown[viewer.client_id] = self._render_one(viewer, cache, wall_dt_s)
                 except Exception:  # a client that went away mid-frame must not stop the others
                     log.debug("monitor viewer %s: frame not sent", viewer.client_id, exc_info=True)
         return shown
@@ -158,10 +174,11 @@ class MonitorHandles:
         geometry = TwinGeometry(feed)
         with self._lock:
             self.geometry = geometry
-            for viewer in self.all_viewers():
+            for viewer in self._open_viewers():
                 if not viewer.replaying_window:
                     viewer.clock.set_span(feed.span_unix_s)
-                viewer.set_live_geometry(geometry)
+                with viewer.sending():
+                    viewer.set_live_geometry(geometry)
 
     def show_feed(self, feed: TwinFeed, label: str, live: bool = False) -> None:
         """Put a feed the operator chose on every viewer (a viewer replaying an archived window leaves it), paused
@@ -172,9 +189,10 @@ class MonitorHandles:
         geometry = TwinGeometry(feed)
         with self._lock:
             self.geometry, self.label = geometry, label
-            for viewer in self.all_viewers():
-                viewer.show_on_live(geometry, live)
-                viewer.panels.show_simulated(label)
+            for viewer in self._open_viewers():
+                with viewer.sending():
+                    viewer.show_on_live(geometry, live)
+                    viewer.panels.show_simulated(label)
 
     def _apply_preset(self, viewer: Viewer, f: TwinFrame) -> None:
         preset = viewer.panels.take_preset()
@@ -197,15 +215,16 @@ class MonitorHandles:
         geometry = TwinGeometry(self.geometry.feed)
         with self._lock:
             self.geometry = geometry
-            for viewer in self.all_viewers():
-                viewer.set_live_geometry(geometry)
+            for viewer in self._open_viewers():
+                with viewer.sending():
+                    viewer.set_live_geometry(geometry)
         return True
 
     def update_panels(self) -> None:
         """Plots, flags and alarms of the last PLOT_WINDOW_S at each viewer's instant."""
         cache: dict = {}
         with self._lock:
-            for viewer in self.all_viewers():
+            for viewer in self._open_viewers():
                 t, feed = viewer.clock.t_unix_s, viewer.geometry.feed
                 key = (id(viewer.geometry), t)
                 if key not in cache:
@@ -215,7 +234,8 @@ class MonitorHandles:
                         viewer.geometry.image_motion_rad_s(t),
                     )
                 try:
-                    viewer.panels.show_window(t, *cache[key])
+                    with viewer.sending():
+                        viewer.panels.show_window(t, *cache[key])
                 except Exception:
                     log.debug("monitor viewer %s: panels not sent", viewer.client_id, exc_info=True)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import threading
 import time
 from concurrent.futures import Executor
+from contextlib import AbstractContextManager
 from typing import TYPE_CHECKING
 
 from frontend.feed import WindowSource
@@ -81,6 +82,7 @@ class Viewer:
         link: ViewerLink | None = None,
     ) -> None:
         self.client, self.role, self.live_geometry, self._link = client, role, live_geometry, link
+        self._outbox = client._websock_connection.get_message_buffer()  # what viser sends this browser
         self.geometry = live_geometry
         self.clock = PlaybackClock(live_geometry.feed.span_unix_s)
         if live:
@@ -93,21 +95,34 @@ class Viewer:
         self.loading = False
         self.window_load_s: float | None = None  # wall time of the last window load (request → swapped in)
         self._requested_at = 0.0
-        self.scene = TwinScene(client, role, live_geometry)
-        self.panels = TwinPanels(
-            client,
-            role,
-            self.clock,
-            n_wheels,
-            archive_span=windows.archive_span_unix_s if windows is not None else None,
-            on_live=self.request_live,
-            on_window=self.request_window if windows is not None else None,
-            on_link=self.set_linked if link is not None else None,
-        )
+        with self.sending():  # the browser may leave while its scene is built
+            self.scene = TwinScene(client, role, live_geometry)
+            self.panels = TwinPanels(
+                client,
+                role,
+                self.clock,
+                n_wheels,
+                archive_span=windows.archive_span_unix_s if windows is not None else None,
+                on_live=self.request_live,
+                on_window=self.request_window if windows is not None else None,
+                on_link=self.set_linked if link is not None else None,
+            )
 
     @property
     def client_id(self) -> int:
         return int(self.client.client_id)
+
+    @property
+    def closed(self) -> bool:
+        """True once the browser has gone: viser closes the client's connection first and calls the disconnect
+        callback (which drops the viewer) later, on its thread pool."""
+        return bool(self._outbox.done)
+
+    def sending(self) -> AbstractContextManager[None]:
+        """Scope of the monitors' pushes to this browser, made while it was not :attr:`closed`: a push that races
+        its departure is discarded by viser without its dead-connection warning (the viewer is dropped at the next
+        look, so nothing is pushed to it after that)."""
+        return self._outbox.sanctioned_dead_writes()
 
     @property
     def replaying_window(self) -> bool:
@@ -171,7 +186,9 @@ class Viewer:
         except ValueError as exc:
             for viewer in viewers:
                 viewer.loading = False
-                viewer.panels.show_window_status(f"not loaded: {exc}")
+                if not viewer.closed:
+                    with viewer.sending():
+                        viewer.panels.show_window_status(f"not loaded: {exc}")
             return
         for viewer in viewers:
             with viewer._lock:

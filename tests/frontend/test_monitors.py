@@ -6,6 +6,7 @@ from __future__ import annotations
 import socket
 import threading
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -61,6 +62,34 @@ def test_each_viewer_has_its_own_clock_and_one_moving_leaves_the_other_where_it_
             assert shown[moved.client_id].t_unix_s == target + 100.0 and shown[watching.client_id].t_unix_s == t1
             assert watching.clock.speed != 100.0
             assert handles.frames_computed - computed == 4  # one frame per distinct instant and render, not per viewer
+    finally:
+        handles.stop()
+
+
+def test_a_viewer_whose_browser_left_is_dropped_before_anything_more_is_sent_to_it(twin_feed):
+    """viser closes a departed browser's connection first and calls the disconnect callback later (from its thread
+    pool): a render in between drops that viewer instead of queueing its moved frame on the closed connection (viser's
+    "Queued a ... on a closed connection" warning), and the viewer that stayed goes on."""
+    handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False, live=True)
+    try:
+        with viser_client(handles.ports["overlay"]), viser_client(handles.ports["overlay"]) as leaving:
+            staying, gone = wait_for_viewers(handles, "overlay", 2)
+            with handles._lock:  # the disconnect callback waits for the lock: the render below comes before it
+                leaving.close()
+                deadline = time.monotonic() + 30.0
+                while not gone.closed:
+                    assert time.monotonic() < deadline, "viser never closed the departed client's connection"
+                    time.sleep(0.01)
+                t0, _ = twin_feed.span_unix_s()
+                gone.clock.seek(t0 + 50.0)  # a new frame for it, had it stayed listed
+                staying.clock.seek(t0 + 60.0)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    shown = handles.render(wall_dt_s=0.1)
+                    handles.update_panels()
+            assert [str(w.message) for w in caught if "closed connection" in str(w.message)] == []
+            assert set(shown) == {staying.client_id} and handles.all_viewers() == [staying]
+            assert staying.panels.time_text.value == format_utc(t0 + 60.0)
     finally:
         handles.stop()
 
