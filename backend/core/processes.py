@@ -55,13 +55,22 @@ def _watch_parent(parent_pid: int, sig: int) -> None:
 
 
 def become_owned_child() -> None:
-    """First call of a multiprocessing child: own process group (no terminal Ctrl-C), dies with the parent."""
+    """First call of a multiprocessing child: own process group (no terminal Ctrl-C), dies with the parent.
+
+    A child of a ``forkserver`` context is the fork server's child: it dies with the fork server, which
+    exits as soon as the process that started it does (multiprocessing closes its end of the server's alive pipe).
+    """
     import multiprocessing
 
     parent = multiprocessing.parent_process()
     with contextlib.suppress(OSError):
         os.setpgid(0, 0)
-    if parent is not None and parent.pid:
+    if parent is None or not parent.pid:
+        return
+    forked_by = os.getppid()
+    if forked_by != parent.pid and parent.is_alive():  # forked by a fork server, which exits with the server
+        die_with_parent(forked_by)
+    else:
         die_with_parent(parent.pid)
 
 

@@ -1,7 +1,7 @@
 """Uploaded packet files decoded and archived in a process of the server's own, away from its GIL.
 
 A file of more than one decode chunk (telemetry.packet_files.CHUNK_OCTETS) is decoded and committed by
-the upload decoder, a spawned process the server owns (backend.core.processes.become_owned_child: own
+the upload decoder, a process the server owns (backend.core.processes.become_owned_child: own
 process group, SIGTERM when the server dies) and stops with it, at a lower CPU priority (NICENESS); the
 event loop only waits on a pipe, so /health keeps answering during a 200 MB upload
 (benchmarks/upload_health.py). A smaller file costs
@@ -11,6 +11,10 @@ Bad input loses nothing: a file is committed in one transaction (telemetry.archi
 dies mid-file leaves nothing of it archived; the file (still on disk) is then decoded by a fresh
 process, and if that one dies too the upload is refused with 503, nothing archived, and may be sent
 again.
+
+Decoders are forked by a multiprocessing fork server (started with the first one, single-threaded, with the
+decoder's modules imported: PRELOAD), so a decoder replacing a dead one starts in milliseconds instead of
+importing numpy, numba, SQLAlchemy and the telemetry package again (seconds of CPU, at NICENESS).
 """
 
 from __future__ import annotations
@@ -50,6 +54,14 @@ T_co = TypeVar("T_co", covariant=True)
 REPLY_POLL_S = 0.2  # how often a waiting request checks that the decoder is still alive
 STOP_GRACE_S = 5.0  # a decoder mid-file rolls back at once on SIGTERM
 NICENESS = 10  # bulk work: on a busy CPU the server's requests go first (/health during a 200 MB upload)
+PRELOAD = [  # imported once by the fork server, not by each decoder it forks
+    __name__,
+    "backend.core.processes",
+    "backend.ingest.dictionary_catalogue",
+    "telemetry.decoding",
+    "telemetry.packet_files",
+    "telemetry.passes",
+]
 
 
 class DecoderJob(Protocol[T_co]):
@@ -242,7 +254,8 @@ class UploadDecoder:
 
     def __init__(self, database_url: str, dictionaries_dir: Path) -> None:
         self._database_url, self._dictionaries_dir = database_url, dictionaries_dir
-        self._ctx = mp.get_context("spawn")
+        self._ctx = mp.get_context("forkserver")
+        self._ctx.set_forkserver_preload(PRELOAD)  # for the fork server this process starts (first decoder)
         self._progress: Synchronized[int] | None = None  # made with the first decoder (a semaphore: a tracker process)
         self._busy = threading.Lock()
         self._process: BaseProcess | None = None
