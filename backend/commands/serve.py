@@ -22,6 +22,7 @@ if TYPE_CHECKING:  # imported where used: `serve` binds its ports before the ser
     import uvicorn
 
     from backend.core.settings import Settings
+    from backend.ingest.live_link import LiveChild
     from backend.services import Services
 
 
@@ -169,14 +170,17 @@ class _Children:
     """What ``serve`` started beside the server and stops when it stops."""
 
     emulator: subprocess.Popen[bytes] | None = None  # the demo satellite
+    live_ingest: LiveChild | None = None  # the live link's ingest process, spawned ahead (backend.ingest.live_link)
     twin: threading.Thread | None = None  # the demo's 3D monitors (backend.twin.demo_twin)
 
 
 def run(args: argparse.Namespace) -> int:
     """Build the app from Settings, serve until SIGTERM/SIGINT; children stop on exit.
 
-    The demo emulator starts first, before the server's imports: its own imports and flight run beside the
-    server's start-up (it keeps trying to connect until the live listener is up), off the critical path.
+    The demo emulator and the live link's ingest process start first, before the server's imports: their own
+    imports, the emulator's flight and the ingest process's dictionary and decoder run beside the server's start-up
+    (the emulator keeps trying to connect until the live listener is up; the ingest process opens the archive and
+    listens once the app's start-up reaches the live link), off the critical path.
     """
     from backend.core.processes import stop_owned
     from backend.core.settings import Settings
@@ -188,9 +192,15 @@ def run(args: argparse.Namespace) -> int:
     children = _Children()
     if not args.no_emulator:
         children.emulator = start_emulator(settings, args.emulator_scenario, settings.telemetry_port)
+    if settings.live_enabled:
+        from backend.ingest.live_link import spawn_ingest
+
+        children.live_ingest = spawn_ingest(settings)
     stop = threading.Event()
     try:
         config, services = _app_for(settings, args, children.emulator is not None)
+        if children.live_ingest is not None:
+            services.telemetry.adopt_live_ingest(children.live_ingest)
         server = _owned_server(config, lambda: _on_started(services, settings, args, children, stop))
         server.run(sockets=[api_socket])
     finally:
@@ -199,6 +209,10 @@ def run(args: argparse.Namespace) -> int:
             stop_owned(children.emulator)
         if children.twin is not None:
             children.twin.join(5)
+        if children.live_ingest is not None:  # gone already, unless the server stopped before the live link started
+            from backend.ingest.live_link import abandon_ingest
+
+            abandon_ingest(children.live_ingest)
         api_socket.close()
     if not server.started:
         print("acs-twin serve: start-up failed (see above); no admin token was issued", file=sys.stderr)

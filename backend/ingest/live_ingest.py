@@ -63,15 +63,22 @@ def run_ingest_process(
     outbox: Outbox,
     stop: Event,
     sources: tuple[str, ...],
+    go: Event,
 ) -> None:
     """Process entry: serve the live stream (packets only from ``sources``, CIDR) until ``stop`` is set or the
-    server dies; ("starting", step) as each start-up step begins, then ("port", n) or ("error", why)."""
+    server dies; ("starting", step) as each start-up step begins, then ("port", n) or ("error", why).
+
+    What needs neither the archive nor the port (imports, the dictionary, the decoder's kernels) is done at once;
+    the archive is opened and the port bound only once ``go`` is set (the server has migrated the archive), so
+    ``acs-twin serve`` spawns this process first and its start-up runs beside the server's own."""
     from backend.core.processes import become_owned_child
 
     outbox.put(("starting", "process entry"))
     become_owned_child()  # SIGTERM when the server dies, even by kill -9: stop as if told to
     signal.signal(signal.SIGTERM, _OrphanStop(outbox, stop))
-    asyncio.run(_serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop, sources))
+    asyncio.run(
+        _serve(database_url, Path(dictionaries_dir), dictionary, satellite, host, port, outbox, stop, sources, go)
+    )
     _exit_at_once(outbox)
 
 
@@ -167,18 +174,25 @@ async def _serve(
     outbox: Outbox,
     stop: Event,
     sources: tuple[str, ...],
+    go: Event,
 ) -> None:
     outbox.put(("starting", "imports of the live stream"))
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
     from telemetry.archive import Archive
     from telemetry.limits import dictionary_limits
-    from telemetry.live import LiveStream
+    from telemetry.live import LiveStream, warm_decoder
 
-    outbox.put(("starting", "opening the archive"))
-    archive = Archive(database_url, migrate=False)
     outbox.put(("starting", f"loading the dictionary {dictionary_name}"))
     catalogue = DictionaryCatalogue(dictionaries_dir)
     dictionary = catalogue.load(dictionary_name)
+    outbox.put(("starting", "warming the decoder"))
+    warm_decoder(dictionary)  # LiveStream.start warms it again: by then a few packets' decode, milliseconds
+    outbox.put(("starting", "waiting for the server's archive"))
+    while not go.wait(STOP_POLL_S):
+        if stop.is_set():  # the server stopped before its start-up reached the live link
+            return
+    outbox.put(("starting", "opening the archive"))
+    archive = Archive(database_url, migrate=False)
     outbox.put(("starting", f"listening on {host}:{port}"))
     stream = LiveStream(
         dictionary,

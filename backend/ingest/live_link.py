@@ -28,7 +28,7 @@ from telemetry.ingest_report import SampleBatch
 if TYPE_CHECKING:
     from backend.ingest.live_ingest import OutboxMessage, Tallies
 
-__all__ = ["LIVE_START_STALL_S", "LIVE_STOP_TIMEOUT_S", "LiveLink"]
+__all__ = ["LIVE_START_STALL_S", "LIVE_STOP_TIMEOUT_S", "LiveChild", "LiveLink", "abandon_ingest", "spawn_ingest"]
 
 LIVE_START_STALL_S = 60.0  # the ingest process's start-up fails only after this long without progress (neither a
 # step reported nor CPU time used): on a loaded machine its spawn and imports may take minutes, never silently
@@ -37,15 +37,53 @@ RELAY_POLL_S = 0.2
 
 
 @dataclass(frozen=True)
-class _LiveChild:
-    """The live-ingest process, its outbox to this server and its stop event."""
+class LiveChild:
+    """The live-ingest process, its outbox to this server, its stop event and its go event (set: open the archive
+    and listen)."""
 
     process: BaseProcess
     outbox: Queue[OutboxMessage]
     stop: Event
+    go: Event | None = None
 
 
-def _first_live_message(live: _LiveChild) -> OutboxMessage:
+def spawn_ingest(settings: Settings) -> LiveChild:
+    """Start the live-ingest process of ``settings``: its spawn, imports, dictionary and decoder warm-up run now,
+    beside the server's start-up; it opens the archive and listens once :meth:`LiveLink.start` sets its go event.
+    ``acs-twin serve`` calls this before its own imports (end it with :func:`abandon_ingest` if no link takes it)."""
+    from backend.ingest.live_ingest import OUTBOX_MESSAGES, run_ingest_process
+
+    ctx = mp.get_context("spawn")
+    outbox: Queue[OutboxMessage] = ctx.Queue(OUTBOX_MESSAGES)
+    stop, go = ctx.Event(), ctx.Event()
+    args = (
+        settings.resolved_database_url(),
+        str(settings.data_dir / "dictionaries"),
+        settings.live_dictionary,
+        settings.live_satellite,
+        settings.host,
+        settings.telemetry_port,
+        outbox,
+        stop,
+        tuple(settings.telemetry_sources),
+        go,
+    )
+    process = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
+    process.start()
+    return LiveChild(process, outbox, stop, go)
+
+
+def abandon_ingest(child: LiveChild) -> None:
+    """Stop a spawned ingest process (one no link started exits before opening the archive; a stopped one is
+    already gone)."""
+    child.stop.set()
+    child.process.join(LIVE_STOP_TIMEOUT_S)
+    if child.process.is_alive():
+        child.process.terminate()
+        child.process.join()
+
+
+def _first_live_message(live: LiveChild) -> OutboxMessage:
     """("port", n) from the ingest process, or ("error", why) if it failed, died or made no progress (neither a
     start-up step reported nor CPU time used) for LIVE_START_STALL_S; the error names the step it was in."""
     from backend.core.processes import cpu_seconds
@@ -75,35 +113,23 @@ class LiveLink:
     """The live-ingest process of ``settings`` (its satellite, dictionary, host, port, allowed sources) and the relay
     of its batches to ``on_batch``."""
 
-    def __init__(self, settings: Settings, on_batch: Callable[[str, SampleBatch], None]) -> None:
-        self._settings, self._on_batch = settings, on_batch
-        self._child: _LiveChild | None = None
+    def __init__(
+        self, settings: Settings, on_batch: Callable[[str, SampleBatch], None], spawned: LiveChild | None = None
+    ) -> None:
+        self._settings, self._on_batch, self._spawned = settings, on_batch, spawned
+        self._child: LiveChild | None = None
         self._relay: threading.Thread | None = None
         self._stats: Tallies = {}
         self.port: int | None = None
 
     async def start(self) -> int:
-        """Spawn the ingest process, wait for its port and start the relay; RuntimeError naming why it did not."""
-        from backend.ingest.live_ingest import OUTBOX_MESSAGES, run_ingest_process
-
-        s = self._settings
-        ctx = mp.get_context("spawn")
-        outbox: Queue[OutboxMessage] = ctx.Queue(OUTBOX_MESSAGES)
-        stop = ctx.Event()
-        args = (
-            s.resolved_database_url(),
-            str(s.data_dir / "dictionaries"),
-            s.live_dictionary,
-            s.live_satellite,
-            s.host,
-            s.telemetry_port,
-            outbox,
-            stop,
-            tuple(s.telemetry_sources),
-        )
-        process = ctx.Process(target=run_ingest_process, args=args, name="acs-twin-live-ingest", daemon=True)
-        child = self._child = _LiveChild(process, outbox, stop)
-        process.start()
+        """Spawn the ingest process (or take the one spawned ahead), let it open the archive and listen, wait for its
+        port and start the relay; RuntimeError naming why it did not."""
+        child = self._child = self._spawned or spawn_ingest(self._settings)
+        self._spawned = None
+        process, stop = child.process, child.stop
+        assert child.go is not None
+        child.go.set()
         match await asyncio.to_thread(_first_live_message, child):
             case ("port", port):
                 self.port = port
@@ -116,7 +142,7 @@ class LiveLink:
         self._relay.start()
         return port
 
-    def _relay_loop(self, child: _LiveChild) -> None:
+    def _relay_loop(self, child: LiveChild) -> None:
         """Hand on the child's batches and tallies until its last message (or, if it died without one, until it is
         gone and the outbox empty)."""
         while True:

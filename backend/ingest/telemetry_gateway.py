@@ -44,7 +44,7 @@ from telemetry.limits import dictionary_limits
 if TYPE_CHECKING:
     import pyarrow as pa
 
-    from backend.ingest.live_link import LiveLink
+    from backend.ingest.live_link import LiveChild, LiveLink
 
 __all__ = ["COMPONENTS", "TelemetryGateway"]
 
@@ -74,6 +74,7 @@ class TelemetryGateway:
         self._archive: Archive | None = None
         self._upload_decoder: UploadDecoder | None = None
         self._live: LiveLink | None = None
+        self._live_spawned: LiveChild | None = None  # the ingest process acs-twin serve spawned ahead
         self._samples = SampleCache()
         self._committed: list[Callable[[str, str, list[SampleBatch]], None]] = []
         self._backfilled: list[Callable[[str, str, int, int], None]] = []
@@ -116,6 +117,11 @@ class TelemetryGateway:
         self._archive = Archive(self._settings.resolved_database_url())
         self._upload_decoder = UploadDecoder(self._archive.url, self._settings.data_dir / "dictionaries")
 
+    def adopt_live_ingest(self, child: LiveChild) -> None:
+        """Use the live-ingest process ``child`` (spawned ahead by ``acs-twin serve``, its start-up beside the
+        server's) for the live link, instead of spawning one in :meth:`start_live`."""
+        self._live_spawned = child
+
     async def start_live(self) -> None:
         """Start the live link (backend.ingest.live_link: the ingest process and the relay of its batches)."""
         if not (self._settings.live_enabled and self._archive is not None):
@@ -123,7 +129,8 @@ class TelemetryGateway:
         from backend.ingest.live_link import LiveLink
 
         self.dictionaries.load(self._settings.live_dictionary)  # fail here, naming the dictionary
-        self._live = LiveLink(self._settings, self._on_live_batch)
+        self._live = LiveLink(self._settings, self._on_live_batch, self._live_spawned)
+        self._live_spawned = None
         try:
             await self._live.start()
         except RuntimeError:

@@ -93,7 +93,7 @@ def _first_message_of_child(busy_s: float, stalls: bool) -> tuple[str, object]:
     process = ctx.Process(target=_starts_slowly, args=(outbox, busy_s, stalls), daemon=True)
     process.start()
     try:
-        return live_link._first_live_message(live_link._LiveChild(process, outbox, stop))
+        return live_link._first_live_message(live_link.LiveChild(process, outbox, stop))
     finally:
         process.terminate()
         process.join()
