@@ -10,7 +10,6 @@ samples/s here, zlib level 1 at ~5 M samples/s, which is why the archive depends
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -19,7 +18,6 @@ import zstandard
 __all__ = [
     "narrowest_exact",
     "encode_int64",
-    "encode_int64_rows",
     "decode_int64",
     "encode_values",
     "encode_values_range",
@@ -63,18 +61,6 @@ def encode_int64(values: np.ndarray) -> bytes:
     delta[:1] = a[:1]
     np.subtract(a[1:], a[:-1], out=delta[1:])
     return _compress(delta.data)
-
-
-def encode_int64_rows(columns: Sequence[np.ndarray]) -> list[bytes]:
-    """:func:`encode_int64` of each of equally long columns (a packet chunk's times, counts and lengths), the same
-    blobs, the deltas of all taken and compressed by one call each."""
-    a = np.array(columns, dtype=np.int64)
-    if a.ndim != 2 or not a.shape[1]:
-        return [encode_int64(c) for c in columns]
-    delta = np.empty_like(a)
-    delta[:, :1] = a[:, :1]
-    np.subtract(a[:, 1:], a[:, :-1], out=delta[:, 1:])
-    return _compress_rows(delta)
 
 
 def decode_int64(blob: bytes) -> np.ndarray:
@@ -222,15 +208,12 @@ def _narrowest_int_rows(dtype: np.dtype, low: np.ndarray, high: np.ndarray) -> n
 
 
 def _rows_by_choice(choice: np.ndarray) -> list[tuple[int, np.ndarray | None]]:
-    """(choice, rows having it, in order) for each distinct choice (-1..len(_INT_RANGES) - 1); rows None when every
-    row has the same."""
+    """(choice, rows having it, in order) for each distinct choice, in increasing order; rows None when every row
+    has the same."""
     first = int(choice[0])
     if (choice == first).all():
         return [(first, None)]
-    counts = np.bincount(choice + 1).tolist()  # a handful of values: not np.unique's sort or hash
-    order = np.argsort(choice, kind="stable")
-    ends = np.cumsum(counts).tolist()
-    return [(c - 1, order[e - n : e]) for c, (n, e) in enumerate(zip(counts, ends)) if n]
+    return [(c, np.flatnonzero(choice == c)) for c in sorted(set(choice.tolist()))]  # a handful: not np.unique
 
 
 def _compress_rows(block: np.ndarray) -> list[bytes]:

@@ -24,11 +24,10 @@ from telemetry.archive.chunks import (
     decode_raw,
     decode_values,
     encode_int64,
-    encode_int64_rows,
     encode_raw,
     encode_value_rows,
 )
-from telemetry.archive.engine import create_archive_engine, fetch_rows, insert_returning_ids, insert_rows
+from telemetry.archive.engine import create_archive_engine, fetch_rows, insert_returning_ids, insert_rows, run_update
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
     Alarm,
@@ -79,6 +78,29 @@ _PACKET_KEYS = select(CHUNK.c.t_blob, CHUNK.c.seq_blob).where(
 # ... and per APID its parameters' ids (an IN list given as values builds no clause per name: ~0.4 ms per name list)
 _PARAMETER_IDS = select(PARAM.c.name, PARAM.c.id).where(
     PARAM.c.satellite_id == bindparam("sat"), PARAM.c.name.in_(bindparam("names", expanding=True))
+)
+
+# ... and per upload its look-up by checksum, its row and its result (built per call, each cost ~1 ms of SQLAlchemy:
+# most of a live group commit's small uploads)
+_UPLOAD_BY_SHA = select(UPLOAD.c.id).where(
+    UPLOAD.c.satellite_id == bindparam("sat"), UPLOAD.c.sha256 == bindparam("sha")
+)
+_UPLOAD_COLUMNS = (
+    "satellite_id",
+    "uploaded_by",
+    "uploaded_at_ns",
+    "source",
+    "sha256",
+    "packets_accepted",
+    "samples_accepted",
+    "report_json",
+)
+_UPLOAD_RESULT = (
+    update(UPLOAD)
+    .where(UPLOAD.c.id == bindparam("upload"))
+    .values(
+        packets_accepted=bindparam("packets"), samples_accepted=bindparam("samples"), report_json=bindparam("report")
+    )
 )
 
 
@@ -252,9 +274,7 @@ class Archive:
     ) -> IngestResult:
         """One upload inside the caller's transaction (satellite locked): duplicates dropped, limits checked."""
         checksum = sha256 or _batches_sha256(batches)
-        existing = conn.execute(
-            select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == checksum)
-        ).scalar()
+        existing = _upload_by_sha(conn, sat_id, checksum)
         if existing is not None:
             archived = {b.apid: self._drop_archived(conn, sat_id, _order_and_dedupe(b)[0])[1] for b in batches}
             return IngestResult(
@@ -311,9 +331,7 @@ class Archive:
         sat_id = self.satellite_id(satellite)
         with self._writer.begin() as conn:
             self._lock_satellite(conn, sat_id)
-            existing = conn.execute(
-                select(UPLOAD.c.id).where(UPLOAD.c.satellite_id == sat_id, UPLOAD.c.sha256 == sha256)
-            ).scalar()
+            existing = _upload_by_sha(conn, sat_id, sha256)
             upload_id = (
                 int(existing)
                 if existing is not None
@@ -374,15 +392,8 @@ class Archive:
     ) -> IngestResult:
         """``result``: its counts and report (with the decoder's) stored on the upload's row."""
         stored = {**result.as_report(), "decode": dict(decode_report)}
-        conn.execute(
-            update(UPLOAD)
-            .where(UPLOAD.c.id == upload_id)
-            .values(
-                packets_accepted=result.packets_accepted,
-                samples_accepted=result.samples_accepted,
-                report_json=json.dumps(stored),
-            )
-        )
+        values = {"packets": result.packets_accepted, "samples": result.samples_accepted, "report": json.dumps(stored)}
+        run_update(conn, _UPLOAD_RESULT, {"upload": upload_id, **values})
         return result
 
     def redecode_undefined(
@@ -498,17 +509,8 @@ class Archive:
             conn.execute(select(SAT.c.id).where(SAT.c.id == sat_id).with_for_update())
 
     def _insert_upload(self, conn: Connection, sat_id: int, source: str, uploaded_by: str, checksum: str) -> int:
-        row = {
-            "satellite_id": sat_id,
-            "uploaded_by": uploaded_by,
-            "uploaded_at_ns": _now_ns(),
-            "source": source,
-            "sha256": checksum,
-            "packets_accepted": 0,
-            "samples_accepted": 0,
-            "report_json": "{}",
-        }
-        return int(conn.execute(insert(UPLOAD).values(**row).returning(UPLOAD.c.id)).scalar_one())
+        row = (sat_id, uploaded_by, _now_ns(), source, checksum, 0, 0, "{}")
+        return insert_returning_ids(conn, UPLOAD, _UPLOAD_COLUMNS, [row])[0]
 
     def _write_batches(
         self,
@@ -589,7 +591,9 @@ class Archive:
                 int(batch.t_utc_ns[lo]),
                 int(batch.t_utc_ns[hi - 1]),
                 hi - lo,
-                *encode_int64_rows([batch.t_utc_ns[lo:hi], batch.seq_count[lo:hi], batch.raw_lengths[lo:hi]]),
+                encode_int64(batch.t_utc_ns[lo:hi]),
+                encode_int64(batch.seq_count[lo:hi]),
+                encode_int64(batch.raw_lengths[lo:hi]),
                 encode_raw(raw[byte_ends[lo] : byte_ends[hi]]),
             )
             for lo, hi in zip(bounds[:-1], bounds[1:])
@@ -976,6 +980,12 @@ class Archive:
                     packets_missing=int(packets_missing),
                 )
             )
+
+
+def _upload_by_sha(conn: Connection, sat_id: int, checksum: str) -> int | None:
+    """Id of the satellite's upload with this SHA-256, if any."""
+    rows = fetch_rows(conn, _UPLOAD_BY_SHA, {"sat": sat_id, "sha": checksum})
+    return int(rows[0][0]) if rows else None
 
 
 def _batches_sha256(batches: Sequence[PacketBatch]) -> str:

@@ -317,3 +317,20 @@ def test_pending_memory_of_a_batch_counts_whole_arrays_its_columns_view() -> Non
     matrix = np.zeros((40, n), dtype=np.uint16)
     batch = PacketBatch(7, np.arange(n), np.arange(n) % 16_384, bytes(10 * n), np.full(n, 10), {"a": matrix[3]})
     assert _batch_octets(batch) == matrix.nbytes + 3 * 8 * n + 10 * n
+
+
+def test_an_ingest_result_reports_as_its_dataclass_fields() -> None:
+    """The stored and returned report of an upload: its fields in order, gaps and duplicates as plain values,
+    the same JSON as dataclasses.asdict gives (upload rows written before keep reading alike)."""
+    import dataclasses
+    import json
+
+    from telemetry.archive import Gap, IngestResult
+
+    result = IngestResult(3, False, 10, 2, 100, 1, [Gap(5, 1, 2, 3), Gap(6, 4, 5, 6)], {5: 1, 6: 1})
+    for r in (result, IngestResult(4, True)):
+        assert json.dumps(r.as_report()) == json.dumps(dataclasses.asdict(r))
+    report = result.as_report()
+    report["gaps"].clear()
+    report["duplicates_by_apid"].clear()
+    assert result.gaps and result.duplicates_by_apid  # copies, not the result's own

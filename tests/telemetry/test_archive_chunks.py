@@ -11,7 +11,6 @@ from telemetry.archive.chunks import (
     decode_raw,
     decode_values,
     encode_int64,
-    encode_int64_rows,
     encode_raw,
     encode_value_rows,
     encode_values,
@@ -73,13 +72,6 @@ def test_integers_stored_in_the_first_smaller_dtype_holding_their_range(dtype: s
         fits = [t for t in NARROW_INTS if t.itemsize < own.itemsize and np.iinfo(t).min <= lo and hi <= np.iinfo(t).max]
         expected = fits[0] if fits else own
         assert narrowest_exact(row).dtype == expected and spec.split("/")[0] == expected.str, (lo, hi)
-
-
-def test_a_chunk_s_int64_columns_encoded_together_as_each_alone() -> None:
-    t = 1_750_000_000 * 10**9 + np.cumsum(np.random.default_rng(2).integers(1, 10**9, 500))
-    columns = [t, np.arange(500) % 16_384, np.full(500, 1_508)]
-    assert encode_int64_rows(columns) == [encode_int64(c) for c in columns]
-    assert encode_int64_rows([t[:0], t[:0]]) == [encode_int64(t[:0])] * 2
 
 
 def test_non_numeric_values_name_the_field() -> None:
