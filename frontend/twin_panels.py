@@ -109,6 +109,7 @@ class TwinPanels:
             self.play = gui.add_button_group("Replay", ("play", "pause"))
             self.speed = gui.add_dropdown("Speed", tuple(f"x{s:g}" for s in SPEEDS), initial_value=f"x{clock.speed:g}")
             self.live = gui.add_checkbox("Live follow", initial_value=clock.live)
+            self._live_shown = clock.live  # the clock's follow state last put on the box (see show_time)
             self.link = (
                 gui.add_checkbox(
                     "Link viewers",
@@ -244,12 +245,16 @@ class TwinPanels:
             return preset
 
     def show_time(self, f: TwinFrame) -> None:
-        """Time, timeline and control states, every frame (cheap: unchanged values are not sent)."""
+        """Time, timeline and control states, every frame (cheap: unchanged values are not sent).
+
+        The Live follow box is set only when the clock's follow state changes: an operator's click reaches the box
+        before its callback reaches the clock, and a frame in between would untick the box they just ticked."""
         t0, t1 = self.clock.span_unix_s()
         self.time_text.value = format_utc(f.t_unix_s)
         self.slider.max = max(t1 - t0, 1.0)
         self.slider.value = float(np.round((f.t_unix_s - t0) * 4.0) / 4.0)
-        self.live.value = self.clock.live
+        if self.clock.live != self._live_shown:
+            self.live.value = self._live_shown = self.clock.live
         self.speed.value = f"x{self.clock.speed:g}"
 
     def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str], image_motion_rad_s: np.ndarray) -> None:

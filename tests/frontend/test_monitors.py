@@ -94,6 +94,31 @@ def test_a_viewer_whose_browser_left_is_dropped_before_anything_more_is_sent_to_
         handles.stop()
 
 
+def test_a_ticked_live_follow_box_stays_ticked_until_its_callback_moves_the_clock(twin_feed):
+    """An operator's click reaches the panel's Live follow box (viser sets its value) before the box's callback
+    reaches the viewer's clock: a frame in between leaves the box ticked (it used to untick it from the clock, and
+    the browser test's second click then turned live follow off), and the callback's live follow then shows."""
+    handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False, live=True)
+    try:
+        with viser_client(handles.ports["overlay"]):
+            (viewer,) = wait_for_viewers(handles, "overlay", 1)
+            t0, t1 = twin_feed.span_unix_s()
+            viewer.clock.seek(t0 + 100.0)  # out of live follow
+            handles.render()
+            assert not viewer.clock.live and not viewer.panels.live.value
+            viewer.panels.live.value = True  # the click, as viser applies it before the callback runs
+            handles.render(wall_dt_s=0.1)
+            assert viewer.panels.live.value and not viewer.clock.live
+            viewer.request_live(True)  # the callback
+            shown = handles.render(wall_dt_s=0.1)
+            assert viewer.clock.live and viewer.panels.live.value and shown[viewer.client_id].t_unix_s == t1
+            viewer.clock.seek(t0 + 50.0)  # the clock leaving live follow unticks the box
+            handles.render()
+            assert not viewer.panels.live.value
+    finally:
+        handles.stop()
+
+
 def _quiet(received: list, quiet_s: float = 0.5, timeout_s: float = 30.0) -> None:
     """Wait until the server has sent nothing to the client for quiet_s (its first scene and panel delivered)."""
     deadline = time.monotonic() + timeout_s
