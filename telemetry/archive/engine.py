@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Any, cast
 
 from sqlalchemy import Connection, Dialect, Engine, Select, Table, Update, create_engine, event, insert
 from sqlalchemy.engine import make_url
-from sqlalchemy.sql.compiler import SQLCompiler
+from sqlalchemy.sql.compiler import ExpandedState, SQLCompiler
 
 if TYPE_CHECKING:
     import psycopg
@@ -73,6 +73,8 @@ def _insert_sql(dialect: Dialect, table: Table, columns: tuple[str, ...]) -> tup
     return _INSERTS[key]
 
 
+_EXPANDED: dict[tuple[tuple[str, str, str, int], tuple[tuple[str, int], ...]], tuple[SQLCompiler, ExpandedState]] = {}
+_EXPANDED_MAX = 1_024  # expanded statements kept (per statement, driver and lengths of its IN lists)
 _STATEMENTS: dict[tuple[str, str, str, int], tuple[Select[Any] | Update, SQLCompiler]] = {}
 
 
@@ -103,9 +105,22 @@ def _execute(conn: Connection, statement: Select[Any] | Update, params: Mapping[
     if cached is None or cached[0] is not statement:
         cached = _STATEMENTS[key] = (statement, statement.compile(dialect=dialect))
     compiled = cached[1]
-    if compiled.literal_execute_params or compiled.post_compile_params:  # an expanding IN: rendered for its values
+    if compiled.literal_execute_params:  # values rendered into the SQL: expanded for them
         state = compiled.construct_expanded_state(dict(params))
         sql, names, values = state.statement, state.positiontup, state.parameters
+    elif compiled.post_compile_params:  # an expanding IN: one placeholder per value, rendered once per list length
+        lengths = tuple((name, len(v)) for name, v in params.items() if isinstance(v, list | tuple))
+        known = _EXPANDED.get((key, lengths))
+        if known is None or known[0] is not compiled:
+            if len(_EXPANDED) >= _EXPANDED_MAX:
+                _EXPANDED.clear()
+            known = _EXPANDED[(key, lengths)] = (compiled, compiled.construct_expanded_state(dict(params)))
+        expansion = known[1]
+        values = dict(expansion.parameters)  # the statement's own values (a literal IN list), then this call's
+        for name, value in params.items():
+            expanded = expansion.parameter_expansion.get(name)
+            values.update({name: value} if expanded is None else zip(expanded, value, strict=True))
+        sql, names = expansion.statement, expansion.positiontup
     else:
         sql, names, values = compiled.string, compiled.positiontup, params
     args = [values[n] for n in names] if compiled.positional and names is not None else dict(values)
