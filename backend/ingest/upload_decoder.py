@@ -13,8 +13,9 @@ process, and if that one dies too the upload is refused with 503, nothing archiv
 again.
 
 Decoders are forked by a multiprocessing fork server (started with the first one, single-threaded, with the
-decoder's modules imported: PRELOAD), so a decoder replacing a dead one starts in milliseconds instead of
-importing numpy, numba, SQLAlchemy and the telemetry package again (seconds of CPU, at NICENESS).
+decoder's modules imported and its numba kernels loaded: PRELOAD), so a decoder replacing a dead one starts in
+milliseconds instead of importing numpy, numba, SQLAlchemy and the telemetry package and loading the kernels
+again (seconds of CPU, at NICENESS).
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ PRELOAD = [  # imported once by the fork server, not by each decoder it forks
     "telemetry.decoding",
     "telemetry.packet_files",
     "telemetry.passes",
+    "backend.ingest.decoder_warmup",  # last: loads the decode kernels (numba) in the fork server
 ]
 
 
