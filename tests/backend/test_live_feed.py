@@ -3,12 +3,18 @@ satellite uploaded through the app, its window read back as the telemetry and th
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
+from backend.app import create_app
+from backend.core.auth import Role
 from backend.twin import live_feed
 from backend.twin.live_feed import MAX_WINDOW_S, ArchiveWindows
+from tests.backend.conftest import make_settings, postgres_schema_url
 from tests.backend.test_satellites_api import _upload, reference_pass  # noqa: F401 (the fixture)
 
 SAME_ATTITUDE = 1e-9  # |<q_a, q_b>| of one attitude read twice: float round-off only
@@ -19,9 +25,31 @@ def _same_attitude(q_a: np.ndarray, q_b: np.ndarray) -> bool:
     return bool(np.all(np.abs(np.abs(np.einsum("ij,ij->i", q_a, q_b)) - 1.0) < SAME_ATTITUDE))
 
 
+@pytest.fixture(scope="module", params=["sqlite", pytest.param("postgres", marks=pytest.mark.postgres)])
+def client(
+    request: pytest.FixtureRequest,
+    tmp_path_factory: pytest.TempPathFactory,
+    reference_pass: bytes,  # noqa: F811
+) -> Iterator[TestClient]:
+    """One started app per database for this module, the reference pass uploaded through it once (its live twin
+    drained): every test only reads the archive and the twin's samples, none changes them."""
+    data = tmp_path_factory.mktemp("live_feed")
+    with contextlib.ExitStack() as stack:
+        if request.param == "sqlite":
+            url = f"sqlite:///{data / 'api.sqlite'}"
+        else:
+            url = stack.enter_context(
+                contextlib.contextmanager(postgres_schema_url)(request.getfixturevalue("postgres_url"))
+            )
+        client = stack.enter_context(TestClient(create_app(make_settings(data, url))))
+        operator = client.app.state.services.auth.issue("test-operator", Role.operator)[1]
+        _upload(client, operator, "REFSAT", "reference_satellite.yaml", reference_pass)
+        yield client
+
+
 @pytest.fixture
-def windows(client: TestClient, tokens: dict[str, str], reference_pass: bytes) -> ArchiveWindows:  # noqa: F811
-    _upload(client, tokens["operator"], "REFSAT", "reference_satellite.yaml", reference_pass)
+def windows(client: TestClient) -> ArchiveWindows:
+    """A new ArchiveWindows (its own span cache) over the module's app."""
     services = client.app.state.services
     return ArchiveWindows(services.telemetry.opened_archive, services.twins, "REFSAT")
 
