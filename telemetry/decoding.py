@@ -247,6 +247,10 @@ class _LayoutPlan:
     # each slot's one dtype when all its such fields share it (else None: those fields are in `others`)
     plain: tuple[tuple[str, int, int], ...]
     plain_dtypes: tuple[np.dtype | None, ...]
+    # big-endian IEEE floats without calibration: the first rows of the 8-octet matrix, 32-bit ones then 64-bit
+    # ones, converted a block at a time (one astype for all 32-bit ones, not two per field); names in that order
+    floats32: tuple[str, ...]
+    floats64: tuple[str, ...]
     others: tuple[tuple[Parameter, int, int, np.dtype | None, np.dtype | None], ...]  # (p, slot, row, view, cast)
 
 
@@ -288,10 +292,19 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
     dtypes = tuple(_integer_dtype(p) for p in parameters)
     views = tuple(d if p.byte_order == "big" else None for p, d in zip(parameters, dtypes))
     slot = [3 if v is None else _SLOT_OCTETS.index(v.itemsize) for v in views]
-    row, rows = [], [0, 0, 0, 0]
-    for s in slot:
-        row.append(rows[s])
-        rows[s] += 1
+    unique = len({p.name for p in parameters}) == len(parameters)  # else in order, the last of a name kept
+    floating = [
+        unique and p.data_type == "float" and p.byte_order == "big" and not p.polynomial and p.bit_length in (32, 64)
+        for p in parameters
+    ]
+    blocked = [i for b in (32, 64) for i, p in enumerate(parameters) if floating[i] and p.bit_length == b]
+    row, rows = [0] * len(parameters), [0, 0, 0, len(blocked)]
+    for r, i in enumerate(blocked):
+        row[i] = r
+    for i, s in enumerate(slot):
+        if not floating[i]:
+            row[i] = rows[s]
+            rows[s] += 1
     casts = tuple(d if v is None else None for d, v in zip(dtypes, views))
     plain_dtypes: list[np.dtype | None] = [None] * len(_SLOT_OCTETS)
     shared = [True] * len(_SLOT_OCTETS)
@@ -301,11 +314,10 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
             plain_dtypes[s] = v
     plain_dtypes = [d if ok else None for d, ok in zip(plain_dtypes, shared)]
     plain, others = [], []
-    unique = len({p.name for p in parameters}) == len(parameters)  # else in order, the last of a name kept
-    for p, s, r, v, c in zip(parameters, slot, row, views, casts):
+    for p, s, r, v, c, f in zip(parameters, slot, row, views, casts, floating):
         if unique and v is not None and not p.polynomial and plain_dtypes[s] is not None:
             plain.append((p.name, s, r))
-        else:
+        elif not f:
             others.append((p, s, r, v, c))
     plan = _LayoutPlan(
         parameters,
@@ -327,6 +339,8 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
         casts,
         tuple(plain),
         tuple(plain_dtypes),
+        tuple(parameters[i].name for i in blocked if parameters[i].bit_length == 32),
+        tuple(parameters[i].name for i in blocked if parameters[i].bit_length == 64),
         tuple(others),
     )
     if len(_PLANS) >= _MAX_PLANS:
@@ -364,13 +378,20 @@ def _layout_values(
     viewed = [m.view(d) if d is not None else m for m, d in zip(outs, plan.plain_dtypes)]
     for name, s, r in plan.plain:  # a row of its slot's matrix in its dtype: one index per parameter
         out[name] = viewed[s][r]
+    if plan.floats32:  # as _raw_value and calibrate do per field: the low 32 bits as float32, float64 calibrated
+        singles = outs[3][: len(plan.floats32)].astype(np.uint32).view(np.float32)
+        out.update(zip(plan.floats32, singles.astype(np.float64) if calibrated else singles))
+    if plan.floats64:
+        out.update(
+            zip(plan.floats64, outs[3][len(plan.floats32) : len(plan.floats32) + len(plan.floats64)].view(np.float64))
+        )
     for p, s, r, view, cast in plan.others:
         raw = outs[s][r].view(view) if view is not None else _raw_value(outs[s][r], p)
         if cast is not None:
             raw = raw.astype(cast, copy=False)
         out[p.name] = calibrate(raw, p) if calibrated and (view is None or p.polynomial) else raw
-    if plan.plain and plan.others:  # in the parameters' order (plain only when their names are unique)
-        out = {p.name: out[p.name] for p in parameters}
+    if sum(map(bool, (plan.plain, plan.floats32 or plan.floats64, plan.others))) > 1:  # in the parameters' order
+        out = {p.name: out[p.name] for p in parameters}  # (plain and floats only when their names are unique)
     return out
 
 
@@ -453,8 +474,10 @@ def quaternion_of(values: dict[str, np.ndarray], prefix: str) -> np.ndarray:
 
 def _frame_records(buf: np.ndarray, frames: ccsds.Frames) -> list[QuarantineRecord]:
     """Quarantine records of the stretches framing rejected (not packets, not idle packets)."""
-    kept = (ccsds.FrameCode.OK, ccsds.FrameCode.IDLE, ccsds.FrameCode.UNDEFINED)
-    bad = np.flatnonzero(~np.isin(frames.code, kept))
+    code = frames.code  # three comparisons: ~10 us on a chunk's 20 k codes, np.isin ~90 us
+    bad = np.flatnonzero(
+        (code != ccsds.FrameCode.OK) & (code != ccsds.FrameCode.IDLE) & (code != ccsds.FrameCode.UNDEFINED)
+    )
     records = []
     for i in bad:
         off, size = int(frames.offset[i]), int(frames.length[i])
@@ -891,7 +914,8 @@ def decode_stream(
     apid = ((buf[offset].astype(np.int64) & 7) << 8) | buf[offset + 1]
     window = dictionary.time_window(now_utc_ns)
     batches = [
-        _decode_apid(buf, offset[apid == a], dictionary.packets[int(a)], window, report, carry) for a in np.unique(apid)
+        _decode_apid(buf, offset[apid == a], dictionary.packets[a], window, report, carry)
+        for a in np.flatnonzero(np.bincount(apid)).tolist()  # the APIDs in order (np.unique's hashing: ~0.35 ms)
     ]
     report.quarantined.sort(key=lambda q: q.offset)
     for q in report.quarantined:
