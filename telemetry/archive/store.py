@@ -52,7 +52,7 @@ from telemetry.archive.records import (
     StationRecord,
     UploadRecord,
 )
-from telemetry.ingest_report import UndefinedPackets
+from telemetry.ingest_report import UndefinedPackets, absent_in_rows
 from telemetry.limits import LimitSet, level_changes, limit_levels
 
 if TYPE_CHECKING:
@@ -610,7 +610,7 @@ class Archive:
         value_rows = [row for column_rows in rows for row in column_rows]  # by parameter, then chunk, as ever
         if value_rows:
             insert_rows(conn, VALUE, _VALUE_COLUMNS, value_rows)
-        return _absent_samples(groups)
+        return sum(absent_in_rows(matrix) for _, _, matrix in groups)  # NaN: samples the columns lack
 
     def _parameter_ids(
         self, conn: Connection, sat_id: int, apid: int, names: list[str], known: dict[str, int]
@@ -1129,18 +1129,6 @@ _CHUNK_COLUMNS = (
 )
 _UNDEFINED_COLUMNS = ("satellite_id", "upload_id", "apid", "n_packets", "seq_blob", "length_blob", "raw_blob")
 _VALUE_COLUMNS = ("parameter_id", "chunk_id", "dtype", "v_min", "v_max", "v_blob")
-
-
-def _absent_samples(groups: Sequence[tuple[np.dtype, Sequence[int], np.ndarray]]) -> int:
-    """What ``absent_samples`` (telemetry.ingest_report) counts, for the columns of value matrices: NaN elements of
-    float rows, the rows holding any found by one min per matrix (NaN propagates), not one per column."""
-    absent = 0
-    for dtype, _, matrix in groups:
-        if dtype.kind == "f" and matrix.size:
-            rows = np.flatnonzero(np.isnan(matrix.min(axis=1)))
-            if rows.size:
-                absent += int(np.count_nonzero(np.isnan(matrix[rows])))
-    return absent
 
 
 def _ordered_window(t: np.ndarray, v: np.ndarray, t0_ns: int, t1_ns: int) -> tuple[np.ndarray, np.ndarray]:
