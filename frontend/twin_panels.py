@@ -8,7 +8,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 from datetime import UTC, datetime
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Generic, TypeVar
 
 import numpy as np
 
@@ -20,7 +20,15 @@ from frontend.twin_geometry import TwinFrame
 if TYPE_CHECKING:
     import viser
 
-__all__ = ["TwinPanels", "CAMERA_PRESETS", "PLOT_WINDOW_S", "REPLAY_LENGTHS_MIN", "format_utc", "parse_utc"]
+__all__ = [
+    "TwinPanels",
+    "ClockMirror",
+    "CAMERA_PRESETS",
+    "PLOT_WINDOW_S",
+    "REPLAY_LENGTHS_MIN",
+    "format_utc",
+    "parse_utc",
+]
 
 CAMERA_PRESETS = ("whole Earth", "chase", "line of sight")
 PLOT_WINDOW_S = 300.0
@@ -29,6 +37,8 @@ ARCSEC_PER_RAD = 180.0 / np.pi * 3600.0
 WHEEL_COLOURS = ("#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#46f0f0")
 MD_COLOURS = ("#e6194b", "#3cb44b", "#4363d8")
 REPLAY_LENGTHS_MIN = ("5", "10", "30", "60", "120")  # replay window lengths offered (minutes)
+
+T = TypeVar("T")
 
 
 def _simulated_markdown(label: str) -> str:
@@ -73,6 +83,45 @@ def _set_plot(plot: viser.GuiUplotHandle, data: tuple[np.ndarray, ...]) -> None:
     plot.data = data
 
 
+class ClockMirror(Generic[T]):
+    """A control that shows a state of the viewer's clock and that the operator sets (the timeline, the speed, the
+    Live follow box): :meth:`show` puts the clock's state on it every frame, the control's callback hands the
+    operator's value to ``apply``.
+
+    viser sets an operator's value on the handle (its event loop) before it runs the handle's callback (its thread
+    pool): a frame in between must not put the clock's state back, or it reverts the operator's change in the
+    browser and the callback then reads the reverted value (the change is lost). So a frame leaves the control alone
+    while it holds a value that its callback has not applied yet (the handle differs from what was last shown or
+    applied), and puts the clock's state on it only when that state has changed since the last frame: the
+    timeline moves with the clock's advance but not over the operator's drag, and a box the operator ticked is not
+    unticked by a frame between its callback and the clock following it (a window swapped back to live follow at
+    the next render). A frame may still overwrite a value viser sets within the few instructions between its check
+    and its write (viser takes none of our locks): the browser then shows the clock's state again (consistent, the
+    change lost)."""
+
+    def __init__(self, handle: viser.GuiInputHandle[T], apply: Callable[[T], None]) -> None:
+        self.handle, self._apply = handle, apply
+        self._lock = threading.Lock()  # a callback (any of viser's pool threads) against the render thread's frame
+        self._shown = self._clock = handle.value  # last put on the control or applied from it; the clock's state
+
+        @handle.on_update
+        def _(event) -> None:
+            if event.client is None:  # our own show() (viser calls the callbacks of a server-side assignment too)
+                return
+            with self._lock:  # callbacks in order: each applies the newest value the operator left
+                value = self.handle.value
+                self._apply(value)
+                self._shown = value
+
+    def show(self, clock_state: T) -> None:
+        """Put the clock's state on the control (every frame), unless the operator's change is still on its way to
+        the clock or the clock has not moved since the last frame."""
+        with self._lock:
+            if self.handle.value != self._shown or clock_state == self._clock:
+                return
+            self._clock = self.handle.value = self._shown = clock_state
+
+
 class TwinPanels:
     """GUI of one browser client (``target`` is its viser ClientHandle, or a server for a shared panel), bound to
     the viewer's own clock; the camera preset and the replay window are this client's alone."""
@@ -109,7 +158,6 @@ class TwinPanels:
             self.play = gui.add_button_group("Replay", ("play", "pause"))
             self.speed = gui.add_dropdown("Speed", tuple(f"x{s:g}" for s in SPEEDS), initial_value=f"x{clock.speed:g}")
             self.live = gui.add_checkbox("Live follow", initial_value=clock.live)
-            self._live_shown = clock.live  # the clock's follow state last put on the box (see show_time)
             self.link = (
                 gui.add_checkbox(
                     "Link viewers",
@@ -173,10 +221,9 @@ class TwinPanels:
         return f"archive holds {format_utc(span[0])} … {format_utc(span[1])}"
 
     def _wire(self) -> None:  # self.clock, not a copy: linking viewers swaps it
-        @self.slider.on_update
-        def _(event) -> None:
-            if event.client is not None:
-                self.clock.seek(self.clock.span_unix_s()[0] + float(self.slider.value))
+        self._timeline = ClockMirror(self.slider, lambda v: self.clock.seek(self.clock.span_unix_s()[0] + float(v)))
+        self._speed = ClockMirror(self.speed, lambda v: self.clock.set_speed(float(v[1:])))
+        self._live = ClockMirror(self.live, self._follow_live)
 
         @self.play.on_click
         def _(event) -> None:
@@ -184,19 +231,6 @@ class TwinPanels:
                 self.clock.play()
             else:
                 self.clock.pause()
-
-        @self.speed.on_update
-        def _(event) -> None:
-            if event.client is not None:
-                self.clock.set_speed(float(self.speed.value[1:]))
-
-        @self.live.on_update
-        def _(event) -> None:
-            if event.client is not None:
-                if self._on_live is not None:
-                    self._on_live(bool(self.live.value))
-                else:
-                    self.clock.follow_live(bool(self.live.value))
 
         if self.link is not None:
 
@@ -216,6 +250,12 @@ class TwinPanels:
             @self.window_load.on_click
             def _(event) -> None:
                 self.load_window()
+
+    def _follow_live(self, on: bool) -> None:
+        if self._on_live is not None:
+            self._on_live(on)
+        else:
+            self.clock.follow_live(on)
 
     def load_window(self) -> None:
         """Ask for the window the panel's From and Length name (what the Load button does)."""
@@ -245,17 +285,14 @@ class TwinPanels:
             return preset
 
     def show_time(self, f: TwinFrame) -> None:
-        """Time, timeline and control states, every frame (cheap: unchanged values are not sent).
-
-        The Live follow box is set only when the clock's follow state changes: an operator's click reaches the box
-        before its callback reaches the clock, and a frame in between would untick the box they just ticked."""
+        """Time, timeline and control states, every frame (cheap: unchanged values are not sent; the controls the
+        operator sets as :class:`ClockMirror`)."""
         t0, t1 = self.clock.span_unix_s()
         self.time_text.value = format_utc(f.t_unix_s)
         self.slider.max = max(t1 - t0, 1.0)
-        self.slider.value = float(np.round((f.t_unix_s - t0) * 4.0) / 4.0)
-        if self.clock.live != self._live_shown:
-            self.live.value = self._live_shown = self.clock.live
-        self.speed.value = f"x{self.clock.speed:g}"
+        self._timeline.show(float(np.round((f.t_unix_s - t0) * 4.0) / 4.0))
+        self._speed.show(f"x{self.clock.speed:g}")
+        self._live.show(self.clock.live)
 
     def show_window(self, t_unix_s: float, w: FeedWindow, alarms: list[str], image_motion_rad_s: np.ndarray) -> None:
         """Plots of the last PLOT_WINDOW_S, mode/flags, image motion, alarms and the archive's span (a few times

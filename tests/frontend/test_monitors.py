@@ -7,9 +7,12 @@ import socket
 import threading
 import time
 import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
+import viser
 
 from frontend.monitors import camera_pose, serve_monitors
 from frontend.twin_panels import format_utc
@@ -94,29 +97,84 @@ def test_a_viewer_whose_browser_left_is_dropped_before_anything_more_is_sent_to_
         handles.stop()
 
 
-def test_a_ticked_live_follow_box_stays_ticked_until_its_callback_moves_the_clock(twin_feed):
-    """An operator's click reaches the panel's Live follow box (viser sets its value) before the box's callback
-    reaches the viewer's clock: a frame in between leaves the box ticked (it used to untick it from the clock, and
-    the browser test's second click then turned live follow off), and the callback's live follow then shows."""
+@contextmanager
+def _one_viewer(twin_feed) -> Iterator:
+    """A live overlay monitor (no render loop: the test renders) and the viewer of its one client."""
     handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",), start=False, live=True)
     try:
         with viser_client(handles.ports["overlay"]):
             (viewer,) = wait_for_viewers(handles, "overlay", 1)
-            t0, t1 = twin_feed.span_unix_s()
-            viewer.clock.seek(t0 + 100.0)  # out of live follow
-            handles.render()
-            assert not viewer.clock.live and not viewer.panels.live.value
-            viewer.panels.live.value = True  # the click, as viser applies it before the callback runs
-            handles.render(wall_dt_s=0.1)
-            assert viewer.panels.live.value and not viewer.clock.live
-            viewer.request_live(True)  # the callback
-            shown = handles.render(wall_dt_s=0.1)
-            assert viewer.clock.live and viewer.panels.live.value and shown[viewer.client_id].t_unix_s == t1
-            viewer.clock.seek(t0 + 50.0)  # the clock leaving live follow unticks the box
-            handles.render()
-            assert not viewer.panels.live.value
+            yield handles, viewer
     finally:
         handles.stop()
+
+
+def _operator_sets(viewer, handle, value) -> Callable[[], None]:
+    """An operator's change as viser applies it: the value set on the handle now (viser's event loop: no message
+    back, no callbacks), the handle's callbacks run by the returned function (later, on viser's thread pool)."""
+    handle._impl.value = value
+
+    def callbacks() -> None:
+        for cb in handle._impl.update_cb:
+            cb(viser.GuiEvent(viewer.client, viewer.client_id, handle))
+
+    return callbacks
+
+
+def test_a_dragged_timeline_is_not_moved_back_by_the_replay_before_its_callback_seeks(twin_feed):
+    """The timeline moves with the replaying clock every frame, but a frame between the operator's drag and its
+    callback leaves the drag alone (it used to put the clock's instant back, and the callback then sought there:
+    the drag was lost); after the callback the timeline moves on from where it was dragged."""
+    with _one_viewer(twin_feed) as (handles, viewer):
+        t0, _ = twin_feed.span_unix_s()
+        viewer.clock.seek(t0 + 200.0)
+        viewer.clock.play()  # x10: 1 s of data per 0.1 s of wall time
+        handles.render(wall_dt_s=0.1)
+        assert viewer.panels.slider.value == 201.0
+        callbacks = _operator_sets(viewer, viewer.panels.slider, 50.0)
+        handles.render(wall_dt_s=0.1)
+        assert viewer.panels.slider.value == 50.0 and viewer.clock.t_unix_s == t0 + 202.0
+        callbacks()
+        assert viewer.clock.t_unix_s == t0 + 50.0 and viewer.clock.playing
+        for t in (51.0, 52.0):  # the clock's advance moves the timeline again
+            handles.render(wall_dt_s=0.1)
+            assert viewer.panels.slider.value == t
+
+
+def test_a_chosen_speed_is_not_put_back_by_a_frame_before_its_callback_sets_it(twin_feed):
+    """A frame between the operator's choice of speed and its callback leaves the choice shown (it used to put the
+    clock's speed back, and the callback then set that: the choice was lost); a speed set otherwise still shows."""
+    with _one_viewer(twin_feed) as (handles, viewer):
+        assert viewer.panels.speed.value == "x10" and viewer.clock.speed == 10.0
+        callbacks = _operator_sets(viewer, viewer.panels.speed, "x100")
+        handles.render(wall_dt_s=0.1)
+        assert viewer.panels.speed.value == "x100" and viewer.clock.speed == 10.0
+        callbacks()
+        handles.render(wall_dt_s=0.1)
+        assert viewer.clock.speed == 100.0 and viewer.panels.speed.value == "x100"
+        viewer.clock.set_speed(2.0)  # e.g. a linked viewer's choice on the shared clock
+        handles.render(wall_dt_s=0.1)
+        assert viewer.panels.speed.value == "x2"
+
+
+def test_a_ticked_live_follow_box_stays_ticked_until_its_callback_moves_the_clock(twin_feed):
+    """An operator's click reaches the panel's Live follow box (viser sets its value) before the box's callback
+    reaches the viewer's clock: a frame in between leaves the box ticked (it used to untick it from the clock, and
+    the browser test's second click then turned live follow off), and the callback's live follow then shows."""
+    with _one_viewer(twin_feed) as (handles, viewer):
+        t0, t1 = twin_feed.span_unix_s()
+        viewer.clock.seek(t0 + 100.0)  # out of live follow
+        handles.render()
+        assert not viewer.clock.live and not viewer.panels.live.value
+        callbacks = _operator_sets(viewer, viewer.panels.live, True)
+        handles.render(wall_dt_s=0.1)
+        assert viewer.panels.live.value and not viewer.clock.live
+        callbacks()
+        shown = handles.render(wall_dt_s=0.1)
+        assert viewer.clock.live and viewer.panels.live.value and shown[viewer.client_id].t_unix_s == t1
+        viewer.clock.seek(t0 + 50.0)  # the clock leaving live follow unticks the box
+        handles.render()
+        assert not viewer.panels.live.value
 
 
 def _quiet(received: list, quiet_s: float = 0.5, timeout_s: float = 30.0) -> None:
