@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import hashlib
 import io
+import mmap
+import threading
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
@@ -33,6 +35,9 @@ CHUNK_DECODED_OCTETS = 6 << 20  # decoded octets a chunk may yield at its denses
 # (XTCE) yields 0.09 decoded octets per octet against a bound of 4.5: its 1.4 MB chunks cost ~30 % more CPU than
 # 8 MiB ones (per-chunk, per-parameter work), issue 12.
 GROWTH = 4
+# Chunks decoded at most while the file's SHA-256 is computed beside them (the archive needs the checksum before it
+# writes: a repeated upload adds nothing). Each holds at most ~GROWTH x CHUNK_DECODED_OCTETS: bounded memory.
+AHEAD_WHILE_HASHING = 3
 
 
 def chunk_octets_for(dictionary: Dictionary) -> int:
@@ -103,13 +108,46 @@ def _fill(stream: io.BufferedIOBase, view: memoryview) -> int:
     return got
 
 
-def file_sha256(path: Path, block: int = 1 << 20) -> str:
-    """SHA-256 of a file, read in blocks."""
+def _released_then(ahead: list[DecodeResult], rest: Iterator[DecodeResult]) -> Iterator[DecodeResult]:
+    """The items of ``ahead`` (each let go of once yielded: bounded memory), then those of ``rest``."""
+    ahead.reverse()
+    while ahead:
+        yield ahead.pop()
+    yield from rest
+
+
+def file_sha256(path: Path) -> str:
+    """SHA-256 of a file, hashed in one call over its memory map (hashlib releases the GIL for the whole file)."""
     digest = hashlib.sha256()
     with path.open("rb") as f:
-        while chunk := f.read(block):
-            digest.update(chunk)
+        if path.stat().st_size:
+            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+                digest.update(mapped)
     return digest.hexdigest()
+
+
+class _FileHash(threading.Thread):
+    """:func:`file_sha256` on a thread of its own: the file is hashed while its first chunks decode."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(name="file-sha256", daemon=True)
+        self._path = path
+        self._sha256: str | None = None
+        self._error: BaseException | None = None
+        self.start()
+
+    def run(self) -> None:
+        try:
+            self._sha256 = file_sha256(self._path)
+        except BaseException as e:  # re-raised by result() in the caller's thread
+            self._error = e
+
+    def result(self) -> str:
+        self.join()
+        if self._error is not None:
+            raise self._error
+        assert self._sha256 is not None
+        return self._sha256
 
 
 def ingest_packet_file(
@@ -144,12 +182,19 @@ def ingest_packet_file(
         for _ in results():
             pass
         return report, None
+    hashing = _FileHash(path)
+    chunks = results()
+    ahead: list[DecodeResult] = []  # decoded while the file is hashed (on the other core)
+    while hashing.is_alive() and len(ahead) < AHEAD_WHILE_HASHING and (chunk := next(chunks, None)) is not None:
+        ahead.append(chunk)
+        del chunk
+    sha256 = hashing.result()
     stored = archive.ingest_results(
         satellite,
-        results(),
+        _released_then(ahead, chunks),
         source=report.source,
         uploaded_by=uploaded_by,
-        sha256=file_sha256(path),
+        sha256=sha256,
         limits=limits,
         report=report,
     )

@@ -9,6 +9,7 @@ IDEX SUDA science stream (polymorphic XTCE, any length: 304-4,080 octets of most
 
 from __future__ import annotations
 
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +123,38 @@ def test_archive_counts_gaps_and_duplicates_across_chunks_as_one_pass(tmp_path: 
             assert stored is not None
             results.append((stored.packets_accepted, stored.packets_duplicate, stored.gaps))
     assert results[1] == results[0]
+
+
+def test_an_archived_file_is_known_by_the_sha256_of_its_bytes_and_again_adds_nothing(
+    tmp_path: Path, shared_data: Path
+) -> None:
+    """The upload's checksum is hashlib's SHA-256 of the file's bytes although the file is hashed beside the decode
+    of its first chunks (997 octets: several decoded before the checksum is known); the same file again is a
+    duplicate upload that counts every archived packet of it per APID and adds nothing."""
+    data = damaged_noaa20(shared_data)
+    path = tmp_path / "damaged.bin"
+    path.write_bytes(data)
+    dictionary = load_dictionary("noaa20_apid11_ccsdspy.yaml")
+    with Archive(f"sqlite:///{tmp_path / 'a'}.sqlite") as archive:
+        _, first = ingest_packet_file(archive, path, dictionary, satellite="S", uploaded_by="test", chunk_octets=997)
+        _, again = ingest_packet_file(archive, path, dictionary, satellite="S", uploaded_by="test", chunk_octets=997)
+        uploads = archive.uploads("S")
+    assert first is not None and again is not None
+    assert [u.sha256 for u in uploads] == [hashlib.sha256(data).hexdigest()]
+    assert again.duplicate_upload and again.duplicates_by_apid == {11: first.packets_accepted}
+
+
+def test_an_empty_file_is_an_upload_of_nothing(tmp_path: Path) -> None:
+    path = tmp_path / "empty.bin"
+    path.write_bytes(b"")
+    with Archive(f"sqlite:///{tmp_path / 'a'}.sqlite") as archive:
+        report, stored = ingest_packet_file(
+            archive, path, load_dictionary("noaa20_apid11_ccsdspy.yaml"), satellite="S", uploaded_by="test"
+        )
+        uploads = archive.uploads("S")
+    assert stored is not None and stored.packets_accepted == 0
+    assert [u.sha256 for u in uploads] == [hashlib.sha256(b"").hexdigest()]
+    assert report.packets_accepted == 0
 
 
 def test_archive_gaps_across_its_own_chunk_flushes_are_those_of_one_pass(
