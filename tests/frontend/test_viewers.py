@@ -138,4 +138,3 @@ def test_a_viewer_replays_a_past_window_of_the_archive_while_another_stays_live(
     finally:
         for page in pages:
             page.close()
-
