@@ -62,7 +62,6 @@ DRAW_HOOK = """
   }
 })();
 """
-SCENE_FRACTION = 0.62
 CLOCK_TICKS_S = os.sysconf("SC_CLK_TCK")
 
 
@@ -116,20 +115,13 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS_S
 
 
-def _earth_share(png: bytes) -> float:
-    import io
-
-    from PIL import Image
-
-    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
-    scene = img[:, : int(img.shape[1] * SCENE_FRACTION)]
-    return float(np.mean(np.max(np.abs(scene - scene[5, 5]), axis=-1) > 24))
-
-
 def bench_playback_and_paint(seconds: float) -> None:
     from playwright.sync_api import sync_playwright
 
     from frontend import globe
+
+    sys.path.insert(0, str(REPO))  # the browser tests' measure of the globe
+    from tests.frontend.conftest import earth_share
 
     ports_file = Path(tempfile.mkdtemp()) / "ports.json"
     proc = subprocess.Popen([sys.executable, __file__, "--serve", str(ports_file)], cwd=REPO)
@@ -149,7 +141,7 @@ def bench_playback_and_paint(seconds: float) -> None:
                 page.goto(f"http://127.0.0.1:{port}/")
                 page.wait_for_function("window.__globeDrawnAt !== undefined", timeout=60_000)
                 first_paint_s = page.evaluate("window.__globeDrawnAt") / 1e3
-                share = _earth_share(page.screenshot())
+                share = earth_share(page.screenshot())
                 print(
                     f"first paint ({role} monitor): {first_paint_s:.2f} s, globe covers {100 * share:.0f} % "
                     f"of the scene  (target < 3 s; load average {os.getloadavg()[0]:.1f})"

@@ -72,7 +72,7 @@ class TwinScene:
         self.ambient = s.add_light_ambient("/ambient", intensity=AMBIENT)
         self.sun = s.add_light_directional("/sun", intensity=SUN_INTENSITY)
         self.earth = s.add_frame("/earth", show_axes=False)
-        s.add_glb("/earth/globe", globe.earth_glb(), cast_shadow=False, receive_shadow=False)
+        self.globe = s.add_glb("/earth/globe", globe.earth_glb(), cast_shadow=False, receive_shadow=False)
         for k, (name, pos, circle) in enumerate(
             zip([st.name for st in g.stations], g.station_ecef, g.station_circles_ecef)
         ):

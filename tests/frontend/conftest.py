@@ -4,6 +4,7 @@ thread on 127.0.0.1 with a temporary SQLite archive holding the NOAA-20 diary an
 
 from __future__ import annotations
 
+import io
 import threading
 import time
 from collections.abc import Iterator
@@ -33,6 +34,10 @@ CHROMIUM_FLAGS = [
 # a monitor page whose panel is read but whose pixels are not: headless chromium renders the WebGL scene in software
 # every frame the page is open (~0.5 core at 1280x900 against ~0.35 at 800x600, a live monitor, load 3-6)
 PANEL_VIEWPORT = {"width": 800, "height": 600}
+SCENE_FRACTION = 0.62  # left part of a 1280-wide monitor page: the control panel floats on the right
+EARTH_CHROMA = 16  # a pixel of the globe is coloured (max - min channel above this), its night side too (navy, about
+# (15, 16, 43)); the background, viser's toasts, the white lines and the labels are grey
+EARTH_LINE_PX = 4  # coloured lines (orbit, traces, terminator, station circles) are <= 3 px: eroded away at this radius
 NOAA20_PACKETS = Path("real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1")
 NOAA20_TLE = Path("tle/real_sso_smallsats.tle")
 STATION = {"name": "Svalbard", "lat_deg": 78.23, "lon_deg": 15.39, "alt_m": 500.0, "min_elevation_deg": 5.0}
@@ -48,6 +53,20 @@ packets:
     derived:
       - {name: q0_watch, kind: alias, inputs: [ADCFAQ4], limits: {yellow_high: 0.9, red_high: 0.99}}
 """
+
+
+def earth_share(png: bytes | Path) -> float:
+    """Share of a monitor screenshot's scene covered by the globe: coloured pixels in areas wider than a line (an
+    erosion by EARTH_LINE_PX drops the lines and labels drawn over an empty background; the disc stays, day and
+    night side). About 0.35 for the whole-Earth preset at 1280x800; 0.000 with the globe hidden."""
+    from PIL import Image
+    from scipy import ndimage
+
+    img = np.asarray(Image.open(io.BytesIO(png) if isinstance(png, bytes) else png).convert("RGB"), dtype=int)
+    scene = img[:, : int(img.shape[1] * SCENE_FRACTION)]
+    coloured = np.ptp(scene, axis=-1) > EARTH_CHROMA
+    side = 2 * EARTH_LINE_PX + 1
+    return float(np.mean(ndimage.binary_erosion(coloured, structure=np.ones((side, side), dtype=bool))))
 
 
 def synthetic_trajectory(duration_s: float = 600.0, dt_s: float = 1.0, offset_deg: float = 0.0) -> Trajectory:

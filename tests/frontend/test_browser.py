@@ -16,9 +16,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
-from PIL import Image
 
-from tests.frontend.conftest import ALARM_SATELLITE, PANEL_VIEWPORT
+from tests.frontend.conftest import ALARM_SATELLITE, PANEL_VIEWPORT, earth_share
+from tests.frontend.viser_clients import wait_for_viewers
 
 if TYPE_CHECKING:  # playwright is optional: the browser tests skip without it (conftest.browser)
     from playwright.sync_api import Page
@@ -26,11 +26,10 @@ if TYPE_CHECKING:  # playwright is optional: the browser tests skip without it (
 pytestmark = [pytest.mark.browser, pytest.mark.slow]  # a chromium and servers per file: scheduled first
 
 PAINT_TIMEOUT_S = 30.0
-EARTH_SHARE_RANGE = (0.10, 0.80)  # whole-Earth preset: the disc covers ~40 % of the scene area
-BACKGROUND_DELTA = 24  # a pixel belongs to the picture if a channel differs this much from the corner
+EARTH_SHARE_RANGE = (0.15, 0.80)  # whole-Earth preset: the disc covers ~35 % of the scene area (conftest.earth_share)
+NO_EARTH_SHARE = 0.02  # the same view with the globe hidden (lines, labels, toasts alone: 0.000)
 WHATIF_TIMEOUT_MS = 180_000
 UTC_PATTERN = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z$"
-SCENE_FRACTION = 0.62  # left part of the page: the control panel floats on the right
 
 
 def _displayed_utc(page) -> str | None:
@@ -48,13 +47,6 @@ def _wait_for(predicate, timeout_s: float, what: str) -> None:
         time.sleep(0.2)
 
 
-def _earth_share(png_path) -> float:
-    img = np.asarray(Image.open(png_path).convert("RGB"), dtype=int)
-    scene = img[:, : int(img.shape[1] * SCENE_FRACTION)]
-    corner = scene[5, 5]
-    return float(np.mean(np.max(np.abs(scene - corner), axis=-1) > BACKGROUND_DELTA))
-
-
 @pytest.mark.parametrize("role", ["actual", "simulated", "overlay"])
 def test_each_monitor_paints_a_globe(browser, monitors, role, tmp_path):
     page = browser.new_page(viewport={"width": 1280, "height": 800})
@@ -64,13 +56,15 @@ def test_each_monitor_paints_a_globe(browser, monitors, role, tmp_path):
         _wait_for(lambda: _displayed_utc(page) is not None, PAINT_TIMEOUT_S, "the monitor's panel")
         shares = []
 
-        def painted() -> bool:
-            page.screenshot(path=tmp_path / f"{role}.png")
-            shares.append(_earth_share(tmp_path / f"{role}.png"))
-            return shares[-1] > EARTH_SHARE_RANGE[0]
+        def share_above(low: float) -> bool:
+            shares.append(earth_share(page.screenshot(path=tmp_path / f"{role}-{len(shares)}.png")))
+            return shares[-1] > low
 
-        _wait_for(painted, PAINT_TIMEOUT_S, f"the globe on the {role} monitor")
+        _wait_for(lambda: share_above(EARTH_SHARE_RANGE[0]), PAINT_TIMEOUT_S, f"the globe on the {role} monitor")
         assert EARTH_SHARE_RANGE[0] < shares[-1] < EARTH_SHARE_RANGE[1], shares
+        viewer = wait_for_viewers(monitors, role, 1)[-1]  # this page's (the newest)
+        viewer.scene.globe.visible = False  # the criterion fails the same view without the globe
+        _wait_for(lambda: not share_above(NO_EARTH_SHARE), PAINT_TIMEOUT_S, f"the {role} monitor without its globe")
     finally:
         page.close()
 
