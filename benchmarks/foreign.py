@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -282,9 +283,16 @@ class Case:
 
     label: str
     peer: str
-    build: Callable[[float, Path], None]  # (MB, path): write the replicated file
-    ours: Callable[[Path, Path], Run]  # (file, workdir)
+    source: Path  # the real file replicated
+    scale: float  # the replicated file's size: scale x --mb MB
+    shift: Callable[[], Callable]  # a new shift of each copy's times (see replicate)
+    dictionary: Callable[[], Any]  # ours: the dictionary to decode the file with
     theirs: Callable[[Path], Run]  # (file)
+
+    def build(self, mb: float, path: Path, block: int = 500) -> None:
+        """Write a file of about scale x ``mb`` MB of copies of the source (at least one copy)."""
+        data = self.source.read_bytes()
+        replicate(data, max(int(self.scale * mb * 1e6 / len(data)), 1), path, self.shift(), block)
 
 
 def _cygnss_dictionary():
@@ -299,22 +307,14 @@ def _ecm_dictionary(apid: int):
     return load_dictionary(ECM_DEFS / f"apid{apid:05d}.csv", apid=apid, time_fields=ECM_TIME)
 
 
-def _replicated(source: Path, scale: float, shift: Callable[[], Callable], block: int = 500) -> Callable:
-    """Builder of a file of about scale x MB MB from copies of ``source`` (at least one copy)."""
-
-    def build(mb: float, path: Path) -> None:
-        data = source.read_bytes()
-        replicate(data, max(int(scale * mb * 1e6 / len(data)), 1), path, shift(), block)
-
-    return build
-
-
 def _ecm_case(apid: int, label: str) -> Case:
     return Case(
         label,
         "ccsdspy",
-        _replicated(ECM_FILE, 1.0, lambda: _coarse_shift({apid}, 48, 1000)),
-        lambda path, workdir: ours(path, _ecm_dictionary(apid), workdir),
+        ECM_FILE,
+        1.0,
+        lambda: _coarse_shift({apid}, 48, 1000),
+        lambda: _ecm_dictionary(apid),
         lambda path: ccsdspy_mixed(path, {apid: ECM_DEFS / f"apid{apid:05d}.csv"}),
     )
 
@@ -327,8 +327,10 @@ CASES = {
     "cygnss": Case(
         "CYGNSS mixed, 6 fixed APIDs, ccsdspy CSV",
         "ccsdspy",
-        _replicated(CYGNSS_STREAM, 1.0, lambda: _calendar_shift(_cygnss_dictionary())),
-        lambda path, workdir: ours(path, _cygnss_dictionary(), workdir),
+        CYGNSS_STREAM,
+        1.0,
+        lambda: _calendar_shift(_cygnss_dictionary()),
+        _cygnss_dictionary,
         lambda path: ccsdspy_mixed(
             path, {a: DATA / "cygnss_f7" / "ccsdspy" / f"apid{a:05d}.csv" for a in _cygnss_dictionary().packets}
         ),
@@ -338,8 +340,10 @@ CASES = {
     "noaa20": Case(  # a quarter of the size of the others: space_packet_parser reads ~0.1 M values/s
         "NOAA-20 fixed, XTCE",
         "spp",
-        _replicated(SHARED / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1", 0.25, _cds_day_shift),
-        lambda path, workdir: ours(path, _load_named("noaa20_apid11_xtce.yaml"), workdir),
+        SHARED / "J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1",
+        0.25,
+        _cds_day_shift,
+        lambda: _load_named("noaa20_apid11_xtce.yaml"),
         lambda path: spp_parse(path, SHARED / "jpss1_geolocation_xtce_v1.xml"),
     ),
     # half the size of the others: space_packet_parser reads ~0.03 M values/s here; ours has a fixed ~25 ms
@@ -347,8 +351,10 @@ CASES = {
     "idex": Case(
         "IDEX polymorphic variable, XTCE",
         "spp",
-        _replicated(IDEX / "sciData_2023_052_14_45_05", 0.5, lambda: _coarse_shift({1424}, 48, 10_000)),
-        lambda path, workdir: ours(path, _load_named(IDEX_XTCE, IMAP_TIME), workdir),
+        IDEX / "sciData_2023_052_14_45_05",
+        0.5,
+        lambda: _coarse_shift({1424}, 48, 10_000),
+        lambda: _load_named(IDEX_XTCE, IMAP_TIME),
         lambda path: spp_parse(path, IDEX_XTCE),
     ),
 }
@@ -485,7 +491,7 @@ def main() -> None:
     if args.child:
         side, key, path, workdir = args.child
         case = CASES[key]
-        run = case.ours(Path(path), Path(workdir)) if side == "ours" else case.theirs(Path(path))
+        run = ours(Path(path), case.dictionary(), Path(workdir)) if side == "ours" else case.theirs(Path(path))
         print(json.dumps(run))
         return
     with tempfile.TemporaryDirectory() as tmp:
