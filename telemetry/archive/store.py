@@ -11,7 +11,8 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -27,7 +28,14 @@ from telemetry.archive.chunks import (
     encode_raw,
     encode_value_rows,
 )
-from telemetry.archive.engine import create_archive_engine, fetch_rows, insert_returning_ids, insert_rows, run_update
+from telemetry.archive.engine import (
+    WalCheckpointer,
+    create_archive_engine,
+    fetch_rows,
+    insert_returning_ids,
+    insert_rows,
+    run_update,
+)
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
     Alarm,
@@ -113,17 +121,36 @@ class Archive:
 
     def __init__(self, url: str, *, migrate: bool = True) -> None:
         self.url = url
-        self._writer = create_archive_engine(url)
+        self._writer = create_archive_engine(url, autocheckpoint=False)
         self._is_postgres = self._writer.dialect.name == "postgresql"
         self.engine = self._writer if self._is_postgres else create_archive_engine(url, writer=False)
+        self._checkpoints = None if self._is_postgres else WalCheckpointer(self._writer)
         self._satellite_ids: dict[str, int] = {}
         if migrate:
             upgrade(url, self._writer)
 
     def close(self) -> None:
-        """Release the database connections."""
+        """Release the database connections (on SQLite after the WAL checkpoint under way, if any)."""
+        if self._checkpoints is not None:
+            self._checkpoints.close()
         self.engine.dispose()
         self._writer.dispose()
+
+    def wait_for_checkpoint(self) -> None:
+        """Return once the WAL checkpoint after every commit so far has run (SQLite; at once on PostgreSQL).
+
+        A commit returns without checkpointing the WAL into the database file (engine.WalCheckpointer): that runs
+        on the archive's own thread after it."""
+        if self._checkpoints is not None:
+            self._checkpoints.wait()
+
+    @contextmanager
+    def _write(self) -> Iterator[Connection]:
+        """A write transaction; once it has committed, the WAL checkpoint of its pages is started (SQLite)."""
+        with self._writer.begin() as conn:
+            yield conn
+        if self._checkpoints is not None:
+            self._checkpoints.committed()
 
     def __enter__(self) -> Archive:
         return self
@@ -138,7 +165,7 @@ class Archive:
             raise ValueError("satellite: a satellite name is required")
         if name in self._satellite_ids:
             return self._satellite_ids[name]
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             found = conn.execute(select(SAT.c.id).where(SAT.c.name == name)).scalar()
             if found is None:
                 found = conn.execute(insert(SAT).values(name=name, norad_id=norad_id).returning(SAT.c.id)).scalar_one()
@@ -167,7 +194,7 @@ class Archive:
         if not -90.0 <= min_elevation_deg < 90.0:
             raise ValueError(f"min_elevation_deg: {min_elevation_deg} outside -90..90")
         values = {"lat_deg": lat_deg, "lon_deg": lon_deg, "alt_m": alt_m, "min_elevation_deg": min_elevation_deg}
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             found = conn.execute(select(STATION.c.id).where(STATION.c.name == name)).scalar()
             if found is not None:
                 conn.execute(update(STATION).where(STATION.c.id == found).values(**values))
@@ -190,7 +217,7 @@ class Archive:
         if epoch_ns is None:
             epoch_ns = round(orbit.tle_epoch_unix_s(satrec) * 1e9)
         sat_id = self.satellite_id(satellite)
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             found = conn.execute(
                 select(TLE.c.id).where(TLE.c.satellite_id == sat_id, TLE.c.epoch_ns == epoch_ns)
             ).scalar()
@@ -233,7 +260,7 @@ class Archive:
             raise ValueError("uploaded_by: the uploader's name is required")
         batches = _merge_by_apid(list(batches))
         sat_id = self.satellite_id(satellite)
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             self._lock_satellite(conn, sat_id)
             return self._ingest_in(
                 conn, sat_id, batches, source, uploaded_by, sha256, limits or {}, decode_report or {}, undefined
@@ -252,7 +279,7 @@ class Archive:
                 raise ValueError("uploaded_by: the uploader's name is required")
         sat_ids = [self.satellite_id(u.satellite) for u in uploads]
         merged = [_merge_by_apid(list(u.batches)) for u in uploads]
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             for sat_id in sorted(set(sat_ids)):  # one lock order for every writer (PostgreSQL)
                 self._lock_satellite(conn, sat_id)
             return [
@@ -329,7 +356,7 @@ class Archive:
         if not uploaded_by:
             raise ValueError("uploaded_by: the uploader's name is required")
         sat_id = self.satellite_id(satellite)
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             self._lock_satellite(conn, sat_id)
             existing = _upload_by_sha(conn, sat_id, sha256)
             upload_id = (
@@ -417,7 +444,7 @@ class Archive:
         if not uploaded_by:
             raise ValueError("uploaded_by: the uploader's name is required")
         sat_id = self._known_satellite(satellite)
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             self._lock_satellite(conn, sat_id)
             kept = UNDEFINED.c.satellite_id == sat_id, UNDEFINED.c.apid.in_(list(apids))
             ids = conn.execute(select(UNDEFINED.c.id).where(*kept).order_by(UNDEFINED.c.id)).scalars().all()
@@ -845,7 +872,7 @@ class Archive:
         self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None
     ) -> None:
         """Acknowledge, shelve (until ``shelved_until_ns``), unshelve or clear an alarm."""
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             alarm_state.operator_action(
                 conn, alarm_id, action, actor, _now_ns() if t_ns is None else t_ns, shelved_until_ns
             )
@@ -857,7 +884,7 @@ class Archive:
         """Store predicted passes (aos_ns, los_ns, max_elevation_ns, max_elevation_deg); idempotent on AOS."""
         sat_id, station_id = self.satellite_id(satellite), self.ground_station(station).id
         ids = []
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             for aos_ns, los_ns, tmax_ns, max_el_deg in passes:
                 if not aos_ns <= tmax_ns <= los_ns:
                     raise ValueError(
@@ -897,7 +924,7 @@ class Archive:
             "los_ns": int(los_ns),
             "max_elevation_ns": (int(aos_ns) + int(los_ns)) // 2,
         }
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             if pass_id is not None:
                 conn.execute(update(PASS).where(PASS.c.id == pass_id, PASS.c.origin == "data").values(**row))
                 return pass_id
@@ -921,7 +948,7 @@ class Archive:
         sat_id = self.satellite_id(satellite)
         station_id = None if station is None else self.ground_station(station).id
         mine = (PASS.c.satellite_id == sat_id) & (PASS.c.origin == "data")
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             conn.execute(delete(PASS).where(mine, PASS.c.id.in_([int(i) for i in merged_ids if i != keep_id])))
             conn.execute(
                 update(PASS)
@@ -969,7 +996,7 @@ class Archive:
         packets_missing: int,
     ) -> None:
         """Store what was received during a pass (span, packets, missing packets)."""
-        with self._writer.begin() as conn:
+        with self._write() as conn:
             conn.execute(
                 update(PASS)
                 .where(PASS.c.id == pass_id)

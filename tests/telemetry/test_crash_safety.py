@@ -4,7 +4,9 @@ A forked child process commits uploads in a loop and writes ``ACK k`` to a pipe 
 commit returns; the test kills it with SIGKILL at a random moment (seed printed on failure),
 forks a new one on the same database, and after all runs audits every upload: each
 acknowledged upload is present and every stored upload holds exactly the packets and samples
-its report claims, with the values it was given.  SQLite runs in WAL mode with synchronous=FULL (telemetry.archive.engine).
+its report claims, with the values it was given.  SQLite runs in WAL mode with synchronous=FULL (telemetry.archive.engine),
+its WAL checkpointed on the archive's thread after each commit; a second test kills the child inside those
+checkpoints.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import pytest
 from sqlalchemy import text
 
 from telemetry.archive import Archive, PacketBatch, upgrade
+from telemetry.archive.engine import WalCheckpointer
 from tests.telemetry.archive_databases import archive_url  # noqa: F401  (fixture)
 
 PACKETS_PER_UPLOAD = 4_000
@@ -26,6 +29,7 @@ T0_NS = 1_750_000_000 * 10**9
 PERIOD_NS = 1_000_000
 KILL_WINDOW_S = 0.6  # uploads take ~50-100 ms here, so kills land inside transactions most of the time
 RUNS = {"sqlite": 20, "postgresql": 8}
+CHECKPOINT_KILLS = 12  # kills within the first half of a checkpoint's duration: most land inside one
 SATELLITE = "CRASH"
 
 
@@ -79,7 +83,82 @@ def test_kill_9_during_bulk_ingest_loses_nothing_acknowledged(archive_url: str) 
         acked = run_and_kill(archive_url, next_k, float(rng.uniform(0.0, KILL_WINDOW_S)))
         acknowledged += acked
         next_k = acked[-1] + 2  # the upload after the last ACK may or may not have committed
-    with Archive(archive_url, migrate=False) as store:
+    audit(archive_url, acknowledged, seed)
+
+
+def checkpoint_forever(url: str, first: int, ack_fd: int) -> None:
+    """Child process body: commit upload k, acknowledge it, then run the WAL checkpoint after it (the archive's
+    thread), saying on the pipe when each checkpoint starts and how long the finished one took."""
+    store = Archive(url, migrate=False)
+    checkpoint = WalCheckpointer.checkpoint
+
+    def announced(self: WalCheckpointer) -> tuple[int, int, int]:
+        os.write(ack_fd, b"CKPT\n")
+        t0 = time.perf_counter()
+        done = checkpoint(self)
+        os.write(ack_fd, f"DONE {time.perf_counter() - t0}\n".encode())
+        return done
+
+    WalCheckpointer.checkpoint = announced  # type: ignore[method-assign]  # in this forked child only
+    k = first
+    while True:
+        store.ingest(SATELLITE, [upload_batch(k)], source=f"upload-{k}", uploaded_by="crash-test")
+        os.write(ack_fd, f"ACK {k}\n".encode())
+        store.wait_for_checkpoint()
+        k += 1
+
+
+def kill_in_checkpoint(url: str, first: int, fraction: float) -> tuple[list[int], bool]:
+    """Fork a child at upload ``first``; once a checkpoint has taken d seconds, SIGKILL it ``fraction`` x d after
+    the next checkpoint starts. The acknowledged k, and whether the kill came before that checkpoint finished."""
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(read_fd)
+        try:
+            checkpoint_forever(url, first, write_fd)
+        finally:
+            os._exit(1)
+    os.close(write_fd)
+    acked, took = [], None
+    with os.fdopen(read_fd) as lines:
+        for line in lines:
+            word, _, value = line.strip().partition(" ")
+            if word == "ACK":
+                acked.append(int(value))
+            elif word == "DONE":
+                took = float(value)
+            elif word == "CKPT" and took is not None:
+                time.sleep(fraction * took)
+                os.kill(pid, signal.SIGKILL)
+                break
+        os.waitpid(pid, 0)
+        rest = lines.read().split()
+    acked += [int(v) for w, v in zip(rest, rest[1:], strict=False) if w == "ACK"]
+    return acked, "DONE" not in rest
+
+
+@pytest.mark.slow
+def test_kill_9_during_a_wal_checkpoint_loses_nothing_committed(tmp_path) -> None:
+    url = f"sqlite:///{tmp_path / 'archive.sqlite'}"
+    upgrade(url)
+    seed = int.from_bytes(os.urandom(4), "little")
+    rng = np.random.default_rng(seed)
+    acknowledged: list[int] = []
+    inside = 0
+    next_k = 0
+    for _ in range(CHECKPOINT_KILLS):
+        acked, during = kill_in_checkpoint(url, next_k, float(rng.uniform(0.0, 0.5)))
+        acknowledged += acked
+        inside += during
+        next_k = acked[-1] + 2
+    assert inside >= CHECKPOINT_KILLS // 4, f"only {inside} kills landed inside a checkpoint (seed {seed})"
+    audit(url, acknowledged, seed)
+
+
+def audit(url: str, acknowledged: list[int], seed: int) -> None:
+    """Every acknowledged upload is stored; every stored upload holds exactly what it reports and was given."""
+    with Archive(url, migrate=False) as store:
         uploads = {u.source: u for u in store.uploads(SATELLITE)}
         missing = [k for k in acknowledged if f"upload-{k}" not in uploads]
         assert not missing, f"acknowledged uploads lost (seed {seed}): {missing}"
@@ -93,6 +172,6 @@ def test_kill_9_during_bulk_ingest_loses_nothing_acknowledged(archive_url: str) 
         t, v = store.read_parameter(SATELLITE, "p07", T0_NS, T0_NS + 10**15)
         assert t.size == len(uploads) * PACKETS_PER_UPLOAD
         np.testing.assert_array_equal(v, (t - T0_NS) // PERIOD_NS * 8.0)
-        if backend == "sqlite":
+        if url.startswith("sqlite"):
             with store.engine.connect() as conn:
                 assert conn.execute(text("PRAGMA integrity_check")).scalar() == "ok"
