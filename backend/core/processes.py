@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import IO
 
 __all__ = [
+    "BULK_NICENESS",
     "PARENT_ENV",
     "become_owned_child",
     "cpu_seconds",
@@ -35,6 +36,8 @@ PARENT_ENV = "ACS_TWIN_PARENT_PID"  # set by spawn_owned; the child's CLI calls 
 PR_SET_PDEATHSIG = 1  # linux/prctl.h
 PARENT_POLL_S = 0.5  # backstop where the parent-death signal is missing (macOS) or was armed too late
 STOP_GRACE_S = 10.0  # a child gets this long after SIGTERM before SIGKILL
+BULK_NICENESS = 10  # a child doing bulk work (the upload decoders and their fork server): on a busy CPU the server's
+# requests go first (/health during a 200 MB upload: benchmarks/upload_health.py)
 
 
 def die_with_parent(parent_pid: int | None = None, sig: int = signal.SIGTERM) -> None:

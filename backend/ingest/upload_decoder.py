@@ -2,7 +2,7 @@
 
 A file of more than one decode chunk (telemetry.packet_files.CHUNK_OCTETS) is decoded and committed by
 the upload decoder, a process the server owns (backend.core.processes.become_owned_child: own
-process group, SIGTERM when the server dies) and stops with it, at a lower CPU priority (NICENESS); the
+process group, SIGTERM when the server dies) and stops with it, at a lower CPU priority (BULK_NICENESS); the
 event loop only waits on a pipe, so /health keeps answering during a 200 MB upload
 (benchmarks/upload_health.py). A smaller file costs
 less to decode than a round trip to the process and is decoded in a thread of the server.
@@ -15,13 +15,14 @@ again.
 Decoders are forked by a multiprocessing fork server (started with the first one, single-threaded, with the
 decoder's modules imported and its numba kernels loaded: PRELOAD), so a decoder replacing a dead one starts in
 milliseconds instead of importing numpy, numba, SQLAlchemy and the telemetry package and loading the kernels
-again (seconds of CPU, at NICENESS).
+again (seconds of CPU). The fork server lowers its own priority to BULK_NICENESS before it imports anything
+(backend.ingest.decoder_warmup, first in PRELOAD): its imports and warm-up, and every decoder it forks (they inherit
+it), run below the server's requests.
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -43,7 +44,6 @@ __all__ = [
     "PacketFileOutcome",
     "RedecodeJob",
     "RedecodeOutcome",
-    "NICENESS",
     "UploadDecoder",
     "archive_packet_file",
     "redecode_kept",
@@ -54,15 +54,13 @@ T_co = TypeVar("T_co", covariant=True)
 
 REPLY_POLL_S = 0.2  # how often a waiting request checks that the decoder is still alive
 STOP_GRACE_S = 5.0  # a decoder mid-file rolls back at once on SIGTERM
-NICENESS = 10  # bulk work: on a busy CPU the server's requests go first (/health during a 200 MB upload)
 PRELOAD = [  # imported once by the fork server, not by each decoder it forks
+    "backend.ingest.decoder_warmup",  # first: lowers the fork server's priority, then loads the decode kernels
     __name__,
-    "backend.core.processes",
     "backend.ingest.dictionary_catalogue",
     "telemetry.decoding",
     "telemetry.packet_files",
     "telemetry.passes",
-    "backend.ingest.decoder_warmup",  # last: loads the decode kernels (numba) in the fork server
 ]
 
 
@@ -220,8 +218,7 @@ def _serve(jobs: Connection, database_url: str, dictionaries_dir: str, progress:
     from backend.core.processes import become_owned_child
     from backend.ingest.dictionary_catalogue import DictionaryCatalogue
 
-    become_owned_child()
-    os.nice(NICENESS)
+    become_owned_child()  # at BULK_NICENESS already: the fork server's (backend.ingest.decoder_warmup)
     archive = Archive(database_url, migrate=False)  # the server migrated it
 
     def advance(octets: int) -> None:
