@@ -284,7 +284,7 @@ def test_a_stop_leaves_queued_work_and_the_next_start_archives_what_a_full_drain
     assert hub.published.wait(120.0)
     stopped.stop()  # in the second window at the latest
     cut = _archived_residuals(archives["stopped"])
-    assert 0 < cut["t_utc_ns"].size < full["t_utc_ns"].size * 2 / 3  # what was flown is archived, the rest left
+    assert 0 < cut["t_utc_ns"].size < full["t_utc_ns"].size  # what was flown is archived, the rest left
     recovering, hub = _twins(archives["stopped"], recover=True)
     assert hub.published.wait(120.0)
     recovering.stop()  # in its recovery
