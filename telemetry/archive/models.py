@@ -97,7 +97,6 @@ class Pass(Base):
     satellite_id: Mapped[int] = mapped_column(ForeignKey("satellite.id"))
     station_id: Mapped[int | None] = mapped_column(ForeignKey("ground_station.id"))  # None: a pass from data
     tle_id: Mapped[int | None] = mapped_column(ForeignKey("tle.id"))
-    origin: Mapped[str] = mapped_column(String(16), default="predicted", server_default="predicted")
     aos_ns: Mapped[int] = mapped_column(BigInteger)
     los_ns: Mapped[int] = mapped_column(BigInteger)
     max_elevation_ns: Mapped[int] = mapped_column(BigInteger)
@@ -106,6 +105,8 @@ class Pass(Base):
     received_end_ns: Mapped[int | None] = mapped_column(BigInteger)
     packets_received: Mapped[int] = mapped_column(Integer, default=0)
     packets_missing: Mapped[int] = mapped_column(Integer, default=0)
+    # last, as migration 0002 added it: a new archive has the columns in the migrated order
+    origin: Mapped[str] = mapped_column(String(16), default="predicted", server_default="predicted")
 
 
 class Upload(Base):
