@@ -201,8 +201,10 @@ class SampleBatch:
 
 
 def absent_samples(values: Mapping[str, np.ndarray]) -> int:
-    """NaN elements of float columns: packets whose layout lacks the parameter (no such sample)."""
-    return sum(absent_in_rows(v) for v in values.values())
+    """NaN elements of float columns of one length: packets whose layout lacks the parameter (no such sample).
+    The float columns are counted as one matrix (a batch's ~15 of them: ~40 us -> ~20 us, issue 12)."""
+    floats = [v for v in values.values() if v.dtype.kind == "f"]
+    return absent_in_rows(np.stack(floats)) if floats else 0
 
 
 def absent_in_rows(values: np.ndarray) -> int:
