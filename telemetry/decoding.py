@@ -799,35 +799,30 @@ def _decode_apid(
                 )
             )
     keep = np.flatnonzero(~dropped)
+    whole = keep.size == n  # the usual case: every packet kept, its arrays used as they are (no copies)
+    kept = (offset, headers.sequence_count, t) if whole else (offset[keep], headers.sequence_count[keep], t[keep])
     previous = None if carry is None else carry.get(apid)
-    verdict = validate_packets(
-        apid,
-        offset[keep],
-        headers.sequence_count[keep],
-        t[keep],
-        0,
-        *window,
-        period_s=definition.period_s,
-        previous=previous,
-    )
+    verdict = validate_packets(apid, *kept, 0, *window, period_s=definition.period_s, previous=previous)
     accepted = keep[verdict.accepted]
+    # all in file order (a permutation of 0..n-1 that increases is the identity): the arrays as they are
+    in_order = whole and accepted.size == n and bool(np.all(verdict.accepted[1:] > verdict.accepted[:-1]))
+    count, t = (headers.sequence_count, t) if in_order else (headers.sequence_count[accepted], t[accepted])
     if carry is not None:
-        state = SequenceState.after(previous, headers.sequence_count[accepted], t[accepted])
+        state = SequenceState.after(previous, count, t)
         if state is not None:
             carry[apid] = state
-    in_order = accepted.size == n and bool(np.all(accepted == np.arange(n)))  # the usual case: no copy needed
     values = {name: v if in_order else v[accepted] for name, v in _union(parts, n).items()}
     for d in definition.derived:
         values[d.name] = derive(d, values, definition.time_code)
-    lengths = length[accepted]
-    packets = _gather_octets(buf, offset[accepted], lengths)
+    lengths = length if in_order else length[accepted]
+    packets = _gather_octets(buf, offset if in_order else offset[accepted], lengths)
     if lengths.size and bool(np.all(lengths == lengths[0])):  # one length: the (n, L) packet matrix, a free reshape
         packets, lengths = packets.reshape(lengths.size, int(lengths[0])), None
     batch = SampleBatch(
         packet=definition.name,
         apid=apid,
-        t_utc_ns=t[accepted],
-        sequence_count=headers.sequence_count[accepted],
+        t_utc_ns=t,
+        sequence_count=count,
         values=values,
         packets=packets,
         packet_lengths=lengths,

@@ -149,13 +149,18 @@ def validate_packets(
         for i in np.flatnonzero(~in_window)
     ]
     idx = np.flatnonzero(in_window)
-    idx = idx[np.lexsort((count[idx], t[idx]))]
+    t_in = t[idx]
+    if t_in.size > 1 and not bool(np.all(t_in[1:] > t_in[:-1])):  # else already in (time, count) order
+        idx = idx[np.lexsort((count[idx], t_in))]
     period_ns = int(round(period_s * 1e9)) if period_s else 0
     if previous is None:
         return _judged(apid, offset, count, t, idx, period_ns, packet_octets, quarantined)
     older = t[idx] < previous.t_ns
-    seen = older & previous.holds(count[idx], t[idx])
-    early = _judged(apid, offset, count, t, idx[older & ~seen], period_ns, packet_octets, quarantined)
+    if older.any():
+        seen = older & previous.holds(count[idx], t[idx])
+        early = _judged(apid, offset, count, t, idx[older & ~seen], period_ns, packet_octets, quarantined)
+    else:  # the usual case: every packet follows the previous ones
+        seen, early = older, PacketVerdict(idx[:0], sorted(quarantined, key=lambda q: q.offset), 0, [])
     lead = offset.size  # the previous packet, appended: it leads the rest in time order
     count, t = np.append(count, previous.count), np.append(t, previous.t_ns)
     later = _judged(apid, offset, count, t, np.concatenate(([lead], idx[~older])), period_ns, packet_octets, [])
