@@ -15,7 +15,6 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
@@ -487,14 +486,6 @@ def _frame_records(buf: np.ndarray, frames: ccsds.Frames) -> list[QuarantineReco
     return records
 
 
-def _packet_lengths(buf: np.ndarray, offset: np.ndarray) -> np.ndarray:
-    """Total octets of the packets at offset, from their packet data length fields (CCSDS 133.0-B-2 §4.1.3.5)."""
-    octets: npt.NDArray[np.int64] = ((buf[offset + 4].astype(np.int64) << 8) | buf[offset + 5]) + (
-        ccsds.PRIMARY_HEADER_OCTETS + 1
-    )
-    return octets
-
-
 def _layout_groups(
     buf: np.ndarray, offset: np.ndarray, length: np.ndarray, definition: PacketDefinition
 ) -> tuple[list[tuple[np.ndarray, PacketDefinition]], dict[int, str]]:
@@ -753,11 +744,14 @@ def _decode_apid(
             "(give --time-code or --time-fields)"
         )
     n, apid = offset.shape[0], definition.apid
-    length = _packet_lengths(buf, offset)
+    headers = ccsds.parse_primary_headers(packet_matrix(buf, offset, ccsds.PRIMARY_HEADER_OCTETS))
+    length = headers.packet_octets
     summary = ApidSummary(apid, definition.name)
     report.apids[apid] = summary
-    summary.packet_octets = dict(zip(*(a.tolist() for a in np.unique(length, return_counts=True))))
-    headers = ccsds.parse_primary_headers(packet_matrix(buf, offset, ccsds.PRIMARY_HEADER_OCTETS))
+    if n and bool(np.all(length == length[0])):  # the usual case: one length (np.unique sorts: ~30 us)
+        summary.packet_octets = {int(length[0]): n}
+    else:
+        summary.packet_octets = dict(zip(*(a.tolist() for a in np.unique(length, return_counts=True))))
     mismatch = header_mismatch(headers, secondary_header=definition.time_code is not None)
     if definition.time_code is None:
         mismatch[mismatch == 1] = 0  # time in named fields: the secondary header flag is the mission's business
