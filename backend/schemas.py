@@ -9,6 +9,7 @@ from typing import Annotated, Any, Literal, get_type_hints
 from fastapi import Path
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, RootModel, create_model
 
+from backend.ingest.dictionary_catalogue import DICTIONARY_NAME, DICTIONARY_NAME_MAX
 from telemetry.archive.records import AlarmRecord, PassRecord
 
 __all__ = [
@@ -151,7 +152,7 @@ class TwinSessionCreate(BaseModel):
     """Where to align the twin, how long to fly it, and the operator's fault hypothesis."""
 
     satellite: str = Field("REFSAT", min_length=1, max_length=100)
-    dictionary: str = Field("reference_satellite.yaml", max_length=130)
+    dictionary: str = Field("reference_satellite.yaml", max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME)
     scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
     align_utc: datetime | None = Field(
         None,
@@ -332,7 +333,7 @@ class DiagnosisCreate(BaseModel):
     """Which satellite and telemetry window to diagnose, with the scenario its ACS flies."""
 
     satellite: str = Field("REFSAT", min_length=1, max_length=100)
-    dictionary: str = Field("reference_satellite.yaml", max_length=130)
+    dictionary: str = Field("reference_satellite.yaml", max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME)
     scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
     start_utc: datetime = Field(examples=["2026-03-20T00:00:00Z"])
     end_utc: datetime = Field(examples=["2026-03-20T00:20:00Z"], description="At most 24 h after start_utc.")

@@ -19,15 +19,24 @@ from typing import Any
 from backend.core.errors import ApiError
 from telemetry.dictionary import Dictionary, Limits
 
-__all__ = ["DICTIONARY_SUFFIXES", "DictionaryCatalogue"]
+__all__ = ["DICTIONARY_NAME", "DICTIONARY_NAME_MAX", "DICTIONARY_SUFFIXES", "DictionaryCatalogue"]
 
 DICTIONARY_SUFFIXES = (".yaml", ".yml", ".xml", ".csv")
-_SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,120}$")
+# A dictionary's name is its file name: a letter or digit, then letters, digits, '_', '.', '-', ending in one of
+# DICTIONARY_SUFFIXES in any case. The API declares it (OpenAPI pattern and maxLength), so a bad name is a 422
+# before an upload's body is read, and generated requests (tests/backend/test_openapi_fuzz.py) name real files.
+DICTIONARY_NAME_MAX = 121
+DICTIONARY_NAME = (
+    r"^[A-Za-z0-9][A-Za-z0-9_.-]*\.(?:"
+    + "|".join("".join(f"[{c.upper()}{c}]" for c in suffix[1:]) for suffix in DICTIONARY_SUFFIXES)
+    + ")$"
+)
+_NAME = re.compile(DICTIONARY_NAME)
 VERSIONS = ".versions"
 
 
 def _check_name(name: str) -> str:
-    if not _SAFE_NAME.match(name) or Path(name).suffix.lower() not in DICTIONARY_SUFFIXES:
+    if len(name) > DICTIONARY_NAME_MAX or not _NAME.fullmatch(name):
         raise ValueError(f"dictionary: {name!r} must be a plain file name ending in {DICTIONARY_SUFFIXES}")
     return name
 

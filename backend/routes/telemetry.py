@@ -6,13 +6,16 @@ import os
 import tempfile
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any, BinaryIO, Literal
+from typing import Annotated, Any, BinaryIO, Literal
 
 from fastapi import APIRouter, Query, Request
+from fastapi import Path as PathParam
+from pydantic import Field
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
+from backend.ingest.dictionary_catalogue import DICTIONARY_NAME, DICTIONARY_NAME_MAX
 from backend.ingest.telemetry_gateway import TelemetryGateway
 from backend.schemas import (
     SATELLITE_NAME,
@@ -132,7 +135,12 @@ async def upload_telemetry(
     services: ServicesDep,
     principal: OperatorDep,
     satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"]),
-    dictionary: str = Query("noaa20_apid11_ccsdspy.yaml", examples=["noaa20_apid11_ccsdspy.yaml"]),
+    dictionary: str = Query(
+        "noaa20_apid11_ccsdspy.yaml",
+        max_length=DICTIONARY_NAME_MAX,
+        pattern=DICTIONARY_NAME,
+        examples=["noaa20_apid11_ccsdspy.yaml"],
+    ),
     format: Literal["ccsds", "csv", "jsonl"] = Query("ccsds"),
     source: str = Query("upload", max_length=200),
 ) -> dict[str, Any]:
@@ -205,17 +213,14 @@ async def redecode_kept(
     services: ServicesDep,
     principal: OperatorDep,
     satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME),
-    dictionary: str = Query(..., min_length=1, max_length=200, examples=["cygnss_adcs.csv"]),
-    apid: list[int] = Query(
+    dictionary: str = Query(max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME, examples=["cygnss_adcs.csv"]),
+    apid: list[Annotated[int, Field(ge=0, le=2047)]] = Query(
         [], description="Only these APIDs (repeat the key); default: every APID the dictionary defines."
     ),
 ) -> dict[str, Any]:
     """The kept packets of the dictionary's APIDs decoded and archived as one upload, in the upload decoder process;
     packets the dictionary quarantines stay kept (a corrected one may read them later). A second call finds
     nothing kept and archives nothing."""
-    bad = [a for a in apid if not 0 <= a <= 2047]
-    if bad:
-        raise ApiError(422, f"apid: {bad[0]} is not an APID (0 to 2047)", "apid")
     report = await run_in_threadpool(
         services.telemetry.redecode, satellite, dictionary, tuple(sorted(set(apid))), principal.name
     )
@@ -248,7 +253,7 @@ def list_dictionaries(services: ServicesDep, _: ViewerDep) -> list[str]:
     openapi_extra=DEFINITION_BODY,
 )
 async def upload_dictionary(
-    name: str,
+    name: Annotated[str, PathParam(max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME, examples=["ops.yaml"])],
     request: Request,
     services: ServicesDep,
     principal: OperatorDep,
