@@ -242,10 +242,10 @@ class _LayoutPlan:
     rows: tuple[int, int, int, int]  # rows of each slot's matrix
     views: tuple[np.dtype | None, ...]
     casts: tuple[np.dtype | None, ...]  # integers of other byte orders: the dtype _raw_value's int64 goes to
-    # big-endian integers without calibration (values = raw = a row of their slot's matrix): (name, slot, row), and
-    # each slot's one dtype when all its such fields share it (else None: those fields are in `others`)
+    # big-endian integers without calibration (values = raw = a row of their slot's matrix in their dtype): (name,
+    # index in plain_views, row), and the (slot, dtype) views they are rows of (a slot may hold several dtypes)
     plain: tuple[tuple[str, int, int], ...]
-    plain_dtypes: tuple[np.dtype | None, ...]
+    plain_views: tuple[tuple[int, np.dtype], ...]
     # big-endian IEEE floats without calibration: the first rows of the 8-octet matrix, 32-bit ones then 64-bit
     # ones, converted a block at a time (one astype for all 32-bit ones, not two per field); names in that order
     floats32: tuple[str, ...]
@@ -305,17 +305,11 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
             row[i] = rows[s]
             rows[s] += 1
     casts = tuple(d if v is None else None for d, v in zip(dtypes, views))
-    plain_dtypes: list[np.dtype | None] = [None] * len(_SLOT_OCTETS)
-    shared = [True] * len(_SLOT_OCTETS)
-    for p, s, v in zip(parameters, slot, views):
-        if v is not None and not p.polynomial:
-            shared[s] = shared[s] and plain_dtypes[s] in (None, v)
-            plain_dtypes[s] = v
-    plain_dtypes = [d if ok else None for d, ok in zip(plain_dtypes, shared)]
+    plain_views: dict[tuple[int, np.dtype], int] = {}
     plain, others = [], []
     for p, s, r, v, c, f in zip(parameters, slot, row, views, casts, floating):
-        if unique and v is not None and not p.polynomial and plain_dtypes[s] is not None:
-            plain.append((p.name, s, r))
+        if unique and v is not None and not p.polynomial:
+            plain.append((p.name, plain_views.setdefault((s, v), len(plain_views)), r))
         elif not f:
             others.append((p, s, r, v, c))
     plan = _LayoutPlan(
@@ -337,7 +331,7 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
         views,
         casts,
         tuple(plain),
-        tuple(plain_dtypes),
+        tuple(plain_views),
         tuple(parameters[i].name for i in blocked if parameters[i].bit_length == 32),
         tuple(parameters[i].name for i in blocked if parameters[i].bit_length == 64),
         tuple(others),
@@ -374,9 +368,9 @@ def _layout_values(
         *outs,
     )
     out = {}
-    viewed = [m.view(d) if d is not None else m for m, d in zip(outs, plan.plain_dtypes)]
-    for name, s, r in plan.plain:  # a row of its slot's matrix in its dtype: one index per parameter
-        out[name] = viewed[s][r]
+    viewed = [outs[s].view(d) for s, d in plan.plain_views]
+    for name, k, r in plan.plain:  # a row of its slot's matrix in its dtype: one index per parameter
+        out[name] = viewed[k][r]
     if plan.floats32:  # as _raw_value and calibrate do per field: the low 32 bits as float32, float64 calibrated
         singles = outs[3][: len(plan.floats32)].astype(np.uint32).view(np.float32)
         out.update(zip(plan.floats32, singles.astype(np.float64) if calibrated else singles))
