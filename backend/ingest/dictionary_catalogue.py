@@ -41,6 +41,16 @@ def _check_name(name: str) -> str:
     return name
 
 
+def _body_error(exc: Exception, path: Path) -> Exception:
+    """A definition that does not load as a ValueError naming the upload's body, never the server's file path
+    (the loaders name the file they read: right for the CLI, the data folder's layout to an API client)."""
+    if isinstance(exc, UnicodeDecodeError):
+        return ValueError(f"body: not UTF-8 text: {exc}")
+    if isinstance(exc, ValueError) and str(exc).startswith(f"{path}: "):
+        return ValueError(f"body: {str(exc).removeprefix(f'{path}: ')}")
+    return exc
+
+
 def _write_atomically(path: Path, content: bytes) -> None:
     """``path`` holds either its old content or all of ``content``, never a part (fsync, then rename)."""
     part = path.with_name(f".part.{path.name}")
@@ -141,11 +151,11 @@ class DictionaryCatalogue:
             _write_atomically(path, content)
             try:
                 dictionary = load_dictionary(path, apid=apid, time_code=time_code, time_fields=time_fields)
-            except Exception:
+            except Exception as exc:
                 path.unlink()
                 if previous:
                     kept.replace(path)
-                raise
+                raise _body_error(exc, path) from exc
             if previous:
                 (self._folder / f"{name}.meta.json").replace(kept.with_name(f"{kept.name}.meta.json"))
             meta = {"apid": apid, "time_code": time_code, "time_fields": time_fields, "version": previous + 1}

@@ -223,6 +223,22 @@ def test_bad_dictionary_is_rejected_naming_the_body(client: TestClient, tokens: 
     assert "broken.xml" not in client.get("/api/v1/dictionaries", headers=bearer(tokens["viewer"])).json()
 
 
+@pytest.mark.parametrize(
+    ("name", "params", "body"),
+    [("binary.yaml", {}, b"\x89PNG\r\n"), ("binary.csv", {"apid": 7}, b"\x89PNG\r\n"), ("plain.yaml", {}, b"a: 1\n")],
+)
+def test_unloadable_dictionary_names_the_body_not_the_server_file(
+    client: TestClient, tokens: dict[str, str], name: str, params: dict[str, int], body: bytes
+) -> None:
+    """Not UTF-8 (was a 422 whose field was the decoder's message) or refused by a loader that names the file it
+    read (was the server's path to it, as message and field)."""
+    answer = client.post(
+        f"/api/v1/dictionaries/{name}", params=params, content=body, headers=bearer(tokens["operator"])
+    )
+    assert answer.status_code == 422 and answer.json()["field"] == "body", answer.json()
+    assert "dictionaries/" not in answer.json()["message"], answer.json()
+
+
 VALLADO_TLE = (
     "1 00005U 58002B   00179.78495062  .00000023  00000-0  28098-4 0  4753\n"
     "2 00005  34.2682 348.7242 1859667 331.7664  19.3264 10.82419157413667\n"
