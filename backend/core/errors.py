@@ -11,7 +11,16 @@ if TYPE_CHECKING:  # FastAPI is imported where it answers: ApiError is raised in
     from fastapi import FastAPI, Request
     from fastapi.responses import JSONResponse
 
-__all__ = ["ApiError", "ErrorBody", "install_error_handlers", "ERROR_RESPONSES"]
+__all__ = ["ApiError", "ErrorBody", "install_error_handlers", "ERROR_RESPONSES", "described_pattern"]
+
+_PATTERN_MEANINGS: dict[str, str] = {}
+
+
+def described_pattern(pattern: str, meaning: str) -> str:
+    """``pattern`` (returned as given, to declare on a field), with what it means in words: a value that does not
+    match is a 422 saying "must be <meaning>" instead of quoting the regular expression."""
+    _PATTERN_MEANINGS[pattern] = meaning
+    return pattern
 
 
 class ErrorBody(BaseModel):
@@ -58,6 +67,15 @@ def _json(status: int, message: str, field: str | None, headers: dict[str, str] 
     return JSONResponse(body, status_code=status, headers=headers)
 
 
+def _message(error: Any) -> str:
+    """A validation error's message; a declared pattern said in words where :func:`described_pattern` gave them."""
+    if error.get("type") == "string_pattern_mismatch":
+        meaning = _PATTERN_MEANINGS.get((error.get("ctx") or {}).get("pattern", ""))
+        if meaning is not None:
+            return f"must be {meaning}"
+    return str(error.get("msg"))
+
+
 def _field_of(loc: Sequence[int | str]) -> str | None:
     parts = [str(p) for p in loc if p not in ("body", "query", "path", "header", "cookie")]
     return ".".join(parts) or (str(loc[0]) if loc else None)
@@ -74,7 +92,7 @@ async def _on_validation(_: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, RequestValidationError)
     first = exc.errors()[0] if exc.errors() else {"loc": (), "msg": "invalid request"}
     field = _field_of(first.get("loc", ()))
-    return _json(422, f"{field}: {first.get('msg')}" if field else str(first.get("msg")), field)
+    return _json(422, f"{field}: {_message(first)}" if field else _message(first), field)
 
 
 async def _on_http(_: Request, exc: Exception) -> JSONResponse:
@@ -88,7 +106,7 @@ async def _on_pydantic(_: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, ValidationError)
     first = exc.errors()[0]
     field = _field_of(first.get("loc", ())) or exc.title
-    return _json(422, f"{field}: {first.get('msg')}", field)
+    return _json(422, f"{field}: {_message(first)}", field)
 
 
 async def _on_value_error(_: Request, exc: Exception) -> JSONResponse:

@@ -16,7 +16,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from backend.core.errors import ApiError
+from backend.core.errors import ApiError, described_pattern
 from telemetry.dictionary import Dictionary, Limits
 
 __all__ = ["DICTIONARY_NAME", "DICTIONARY_NAME_MAX", "DICTIONARY_SUFFIXES", "DictionaryCatalogue"]
@@ -26,10 +26,12 @@ DICTIONARY_SUFFIXES = (".yaml", ".yml", ".xml", ".csv")
 # DICTIONARY_SUFFIXES in any case. The API declares it (OpenAPI pattern and maxLength), so a bad name is a 422
 # before an upload's body is read, and generated requests (tests/backend/test_openapi_fuzz.py) name real files.
 DICTIONARY_NAME_MAX = 121
-DICTIONARY_NAME = (
+DICTIONARY_NAME = described_pattern(
     r"^[A-Za-z0-9][A-Za-z0-9_.-]*\.(?:"
     + "|".join("".join(f"[{c.upper()}{c}]" for c in suffix[1:]) for suffix in DICTIONARY_SUFFIXES)
-    + ")$"
+    + ")$",
+    "a plain file name (a letter or digit, then letters, digits, '_', '.', '-') ending in "
+    + ", ".join(DICTIONARY_SUFFIXES),
 )
 _NAME = re.compile(DICTIONARY_NAME)
 VERSIONS = ".versions"

@@ -239,6 +239,27 @@ def test_unloadable_dictionary_names_the_body_not_the_server_file(
     assert "dictionaries/" not in answer.json()["message"], answer.json()
 
 
+@pytest.mark.parametrize(
+    ("method", "url", "field"),
+    [
+        ("post", "/api/v1/telemetry/uploads?satellite=S&dictionary=../secret.yaml", "dictionary"),
+        ("post", "/api/v1/dictionaries/ops.txt", "name"),
+        ("post", "/api/v1/telemetry/redecode?satellite=S&dictionary=.hidden.csv&apid=7", "dictionary"),
+    ],
+)
+def test_a_bad_dictionary_name_is_said_in_words_not_as_its_pattern(
+    client: TestClient, tokens: dict[str, str], method: str, url: str, field: str
+) -> None:
+    """The name's rule is declared in the OpenAPI document as a pattern; the 422 says what it means."""
+    answer = client.request(method.upper(), url, content=b"x", headers=bearer(tokens["operator"]))
+    body = answer.json()
+    assert answer.status_code == 422 and body["field"] == field, body
+    assert body["message"] == (
+        f"{field}: must be a plain file name (a letter or digit, then letters, digits, '_', '.', '-') ending in "
+        ".yaml, .yml, .xml, .csv"
+    ), body
+
+
 VALLADO_TLE = (
     "1 00005U 58002B   00179.78495062  .00000023  00000-0  28098-4 0  4753\n"
     "2 00005  34.2682 348.7242 1859667 331.7664  19.3264 10.82419157413667\n"
