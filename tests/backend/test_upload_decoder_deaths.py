@@ -60,7 +60,10 @@ def test_decoder_dying_twice_refuses_the_upload_with_nothing_archived(
     out, _ = _upload_killing_the_decoder(client, tokens["operator"], stream, kills=2)
     assert out["status"] == 503 and out["body"]["field"] == "body", out["body"]
     assert "nothing of it was archived" in out["body"]["message"]
-    assert client.get("/api/v1/telemetry/uploads?satellite=REFSAT", headers=bearer(tokens["viewer"])).json() == []
+    listing = client.get("/api/v1/telemetry/uploads?satellite=REFSAT", headers=bearer(tokens["viewer"]))
+    # no upload; the satellite itself is unknown when the decoder died before the archive registered it (it decodes
+    # the file's first chunks while the file is hashed, before it opens the upload's transaction)
+    assert listing.json() == [] if listing.status_code == 200 else "nothing archived" in listing.json()["message"]
     again: dict = {}
     upload(client, tokens["operator"], stream, again)  # sent again: archived whole
     assert again["status"] == 200 and again["body"]["archive"]["packets_accepted"] == 5 * N_GPS
