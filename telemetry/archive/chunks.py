@@ -36,7 +36,7 @@ _INT_RANGES = [(np.dtype(t), int(np.iinfo(t).min), int(np.iinfo(t).max)) for t i
 _INT_MINIMA = np.array([lo for _, lo, _ in _INT_RANGES], dtype=np.int64)
 _INT_MAXIMA = np.array([hi for _, _, hi in _INT_RANGES], dtype=np.int64)  # growing along _INT_RANGES
 _NARROWER = {size: sum(t.itemsize < size for t, _, _ in _INT_RANGES) for size in (1, 2, 4, 8)}  # candidates
-_codec = threading.local()  # a ZstdCompressor is not thread-safe; making one per call costs as much as compressing
+_codec = threading.local()  # zstd (de)compressors are not thread-safe; making one per call costs as much as the call
 
 
 def _compressor() -> zstandard.ZstdCompressor:
@@ -50,8 +50,15 @@ def _compress(data: bytes | memoryview) -> bytes:
     return _compressor().compress(data)
 
 
+def _decompressor() -> zstandard.ZstdDecompressor:
+    decompressor = getattr(_codec, "decompressor", None)
+    if decompressor is None:
+        decompressor = _codec.decompressor = zstandard.ZstdDecompressor()
+    return decompressor
+
+
 def _decompress(blob: bytes) -> bytes:
-    return zstandard.ZstdDecompressor().decompress(blob)
+    return _decompressor().decompress(blob)
 
 
 def encode_int64(values: np.ndarray) -> bytes:
