@@ -287,6 +287,24 @@ def test_the_detection_alarm_links_to_its_diagnosis_and_its_top_hypotheses_fly(
 FLIGHT_TIMEOUT_MS = 300_000  # the hypothesis' replay on the shared cluster, on a loaded machine
 
 
+def _record_flight_states(page) -> None:
+    """Record from now on each state the monitor flight status changes to (a flight the diagnosis already replayed
+    may show 'flying' for only a few milliseconds: a wait for it could miss it)."""
+    page.evaluate(
+        """() => {
+          const states = window.flightStates = [];
+          const status = document.querySelector('#monitor-flight-status');
+          new MutationObserver(() => {
+            if (states[states.length - 1] !== status.dataset.state) states.push(status.dataset.state);
+          }).observe(status, { attributes: true, attributeFilter: ['data-state'] });
+        }"""
+    )
+
+
+def _flight_states(page) -> list[str]:
+    return page.evaluate("() => window.flightStates")
+
+
 def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_twin_comes_back(
     browser, backend_server, emulated_telemetry
 ):
@@ -316,9 +334,10 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
             alarm.query_selector("button.diagnosis-link").click()
             page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
             page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
+            _record_flight_states(page)
             page.click("#diagnosis-detail .diagnosis-hypotheses tbody tr[data-rank='1'] button.fly-monitor")
-            page.wait_for_selector("#monitor-flight-status[data-state='flying']", timeout=5_000)
-            page.wait_for_selector("#monitor-flight-status[data-state='shown']", timeout=FLIGHT_TIMEOUT_MS)
+            page.wait_for_function("window.flightStates.includes('shown')", timeout=FLIGHT_TIMEOUT_MS)
+            assert _flight_states(page) == ["flying", "shown"]
             status = page.inner_text("#monitor-flight-status")
             assert status.startswith(f"on the simulated monitor: {label} from "), status
             assert page.eval_on_selector("tr.on-monitor", "r => r.dataset.rank") == "1"
@@ -337,9 +356,10 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
                 "rs => rs.filter(r => r.cells[1].innerText === 'gyro_bias').map(r => r.dataset.rank)",
             )
             assert ranks, "no gyro_bias hypothesis listed"
+            _record_flight_states(page)
             page.click(f"#diagnosis-detail .diagnosis-hypotheses tbody tr[data-rank='{ranks[0]}'] button.fly-monitor")
-            page.wait_for_selector("#monitor-flight-status[data-state='flying']", timeout=5_000)
-            page.wait_for_selector("#monitor-flight-status[data-state='shown']", timeout=FLIGHT_TIMEOUT_MS)
+            page.wait_for_function("window.flightStates.includes('shown')", timeout=FLIGHT_TIMEOUT_MS)
+            assert _flight_states(page) == ["flying", "shown"]
             status = page.inner_text("#monitor-flight-status")
             sensor_label = f"hypothesis #{ranks[0]}: gyro_bias from "
             assert status.startswith(f"on the simulated monitor: {sensor_label}"), status
