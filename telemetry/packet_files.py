@@ -38,6 +38,7 @@ GROWTH = 4
 # Chunks decoded at most while the file's SHA-256 is computed beside them (the archive needs the checksum before it
 # writes: a repeated upload adds nothing). Each holds at most ~GROWTH x CHUNK_DECODED_OCTETS: bounded memory.
 AHEAD_WHILE_HASHING = 3
+HASH_WINDOW_OCTETS = 16 << 20  # a multiple of mmap.ALLOCATIONGRANULARITY; one GIL hand-over per window
 
 
 def chunk_octets_for(dictionary: Dictionary) -> int:
@@ -116,12 +117,14 @@ def _released_then(ahead: list[DecodeResult], rest: Iterator[DecodeResult]) -> I
     yield from rest
 
 
-def file_sha256(path: Path) -> str:
-    """SHA-256 of a file, hashed in one call over its memory map (hashlib releases the GIL for the whole file)."""
+def file_sha256(path: Path, window: int = HASH_WINDOW_OCTETS) -> str:
+    """SHA-256 of a file, hashed one memory-mapped window at a time: hashlib releases the GIL for each whole
+    window, and an unmapped window's pages leave the process (its peak RSS grows by one window, not the file)."""
     digest = hashlib.sha256()
+    size = path.stat().st_size
     with path.open("rb") as f:
-        if path.stat().st_size:
-            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+        for offset in range(0, size, window):
+            with mmap.mmap(f.fileno(), min(window, size - offset), offset=offset, access=mmap.ACCESS_READ) as mapped:
                 digest.update(mapped)
     return digest.hexdigest()
 

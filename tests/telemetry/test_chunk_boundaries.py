@@ -19,7 +19,7 @@ from telemetry.archive import Archive
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import Dictionary, load_dictionary
 from telemetry.ingest_report import IngestReport
-from telemetry.packet_files import ingest_packet_file
+from telemetry.packet_files import file_sha256, ingest_packet_file
 
 NOAA20_PACKETS = Path("real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1")
 NOAA20_OCTETS = 71
@@ -142,6 +142,15 @@ def test_an_archived_file_is_known_by_the_sha256_of_its_bytes_and_again_adds_not
     assert first is not None and again is not None
     assert [u.sha256 for u in uploads] == [hashlib.sha256(data).hexdigest()]
     assert again.duplicate_upload and again.duplicates_by_apid == {11: first.packets_accepted}
+
+
+@pytest.mark.parametrize("octets", [0, 1, 65_535, 65_536, 65_537, 3 * 65_536 + 5])
+def test_a_file_hashed_in_mapped_windows_has_hashlib_s_sha256(tmp_path: Path, octets: int) -> None:
+    """Windows of 64 KiB (the smallest mmap offset step): a file shorter, equal, one octet longer and several."""
+    data = np.random.default_rng(octets).integers(0, 256, octets, dtype=np.uint8).tobytes()
+    path = tmp_path / "f.bin"
+    path.write_bytes(data)
+    assert file_sha256(path, window=65_536) == hashlib.sha256(data).hexdigest()
 
 
 def test_an_empty_file_is_an_upload_of_nothing(tmp_path: Path) -> None:
