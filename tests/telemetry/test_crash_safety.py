@@ -14,6 +14,7 @@ from __future__ import annotations
 import os
 import signal
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -51,17 +52,24 @@ def ingest_forever(url: str, first: int, ack_fd: int) -> None:
         k += 1
 
 
-def run_and_kill(url: str, first: int, delay_s: float) -> list[int]:
-    """Fork a child at upload ``first``, SIGKILL it ``delay_s`` after its first ACK; acknowledged k."""
+def forked(body: Callable[[str, int, int], None], url: str, first: int) -> tuple[int, int]:
+    """A child running ``body(url, first, write end of a pipe)`` until it is killed (forked: the runs do not pay an
+    interpreter start-up each); its pid and the pipe's read end."""
     read_fd, write_fd = os.pipe()
     pid = os.fork()
-    if pid == 0:  # child: forked so the 20 runs do not pay 20 interpreter start-ups
+    if pid == 0:
         os.close(read_fd)
         try:
-            ingest_forever(url, first, write_fd)
+            body(url, first, write_fd)
         finally:
             os._exit(1)
     os.close(write_fd)
+    return pid, read_fd
+
+
+def run_and_kill(url: str, first: int, delay_s: float) -> list[int]:
+    """Fork a child at upload ``first``, SIGKILL it ``delay_s`` after its first ACK; acknowledged k."""
+    pid, read_fd = forked(ingest_forever, url, first)
     with os.fdopen(read_fd) as acks:
         acked = [int(acks.readline().split()[1])]
         time.sleep(delay_s)
@@ -111,15 +119,7 @@ def checkpoint_forever(url: str, first: int, ack_fd: int) -> None:
 def kill_in_checkpoint(url: str, first: int, fraction: float) -> tuple[list[int], bool]:
     """Fork a child at upload ``first``; once a checkpoint has taken d seconds, SIGKILL it ``fraction`` x d after
     the next checkpoint starts. The acknowledged k, and whether the kill came before that checkpoint finished."""
-    read_fd, write_fd = os.pipe()
-    pid = os.fork()
-    if pid == 0:
-        os.close(read_fd)
-        try:
-            checkpoint_forever(url, first, write_fd)
-        finally:
-            os._exit(1)
-    os.close(write_fd)
+    pid, read_fd = forked(checkpoint_forever, url, first)
     acked, took = [], None
     with os.fdopen(read_fd) as lines:
         for line in lines:
