@@ -2,16 +2,11 @@
 figures of the server's process lifecycle (issue 17):
 
     .venv/bin/python -m benchmarks.serve_process [--repeats 3]
-    .venv/bin/python -m benchmarks.serve_process --stop [--repeats 3]  # SIGINT -> exit with live-twin work queued
 
 ``acs-twin serve`` (fresh SQLite data directory, live link on an ephemeral port, no emulator) from the command to
 /health 200 and from SIGINT to its exit, with the CPU of the server and its children; the upload decoder's first
 file (process start, imports, kernels), a file on the running decoder, and a file right after it was SIGKILLed.
-With --stop, SIGINT -> exit of a server whose live twins have work: (a) right after the 200 of an upload of
-LONG_PASS_S of the reference satellite (several decode chunks: its twin reads it back from the archive, a window at a
-time), (b) the README's server (demo emulator on) on a copy of a data directory that holds that pass and its residuals,
-right after /health 200 (its twins recover from the archive). Medians of the repeats, wall seconds, with the load
-average before and after."""
+Medians of the repeats, wall seconds, with the load average before and after."""
 
 from __future__ import annotations
 
@@ -27,7 +22,6 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import httpx
-import numpy as np
 
 from tests.ports import free_port
 
@@ -36,11 +30,6 @@ START_TIMEOUT_S = 300.0  # spawn, imports and the numba cache's load on a loaded
 POLL_S = 0.3
 STOP_TIMEOUT_S = 60.0
 DECODER_CHUNKS = 3  # decode chunks (telemetry.packet_files.CHUNK_OCTETS) per file of the decoder figures
-LONG_PASS_S = (
-    5200.0  # ≈ 2.94 MB of the reference satellite: more than one decode chunk (tests/backend/test_satellites_api)
-)
-UPLOADED = "REFSAT-LONG"  # not the demo satellite (REFSAT)
-DRAIN_TIMEOUT_S = 900.0  # the prepared server's twin flies the whole pass (87 minutes of telemetry)
 
 
 def start_serve(
@@ -114,92 +103,12 @@ def _decoder_runs(data_dir: Path) -> tuple[float, float, float]:
     return walls[0], walls[1], walls[2]
 
 
-def _ports_env() -> dict[str, str]:
-    return {"ACS_TWIN_TELEMETRY_PORT": str(free_port()), "ACS_TWIN_VIEWER_PORT": str(free_port())}
-
-
-def _long_pass() -> bytes:
-    from telemetry.emulator import emulate
-
-    return emulate("somov-ge4-scan", [], LONG_PASS_S, "2026-03-20T00:00:00Z", truth_seed=None)[2].data
-
-
-def _upload(port: int, data: bytes) -> None:
-    query = f"satellite={UPLOADED}&dictionary=reference_satellite.yaml"
-    url = f"http://127.0.0.1:{port}/api/v1/telemetry/uploads?{query}"
-    answer = httpx.post(url, content=data, timeout=STOP_TIMEOUT_S)
-    answer.raise_for_status()
-
-
-def _interrupt(server: subprocess.Popen[bytes]) -> float:
-    """Wall s from SIGINT to the server's exit."""
-    stopping = time.monotonic()
-    server.send_signal(signal.SIGINT)
-    server.wait(STOP_TIMEOUT_S)
-    return time.monotonic() - stopping
-
-
-def _stop_after_upload(data: bytes) -> float:
-    """SIGINT -> exit right after the 200 of the long pass's upload (no emulator, no auth)."""
-    with tempfile.TemporaryDirectory() as data_dir:
-        port = free_port()
-        server = start_serve(Path(data_dir), port, "--no-emulator", "--no-auth", env=_ports_env())
-        _upload(port, data)
-        return _interrupt(server)
-
-
-def _drained_data_dir(data: bytes, data_dir: Path) -> None:
-    """The long pass uploaded to a server with the demo emulator, its twin's residuals archived to its end."""
-    port = free_port()
-    server = start_serve(data_dir, port, "--no-auth", env=_ports_env())
-    _upload(port, data)
-    deadline = time.monotonic() + DRAIN_TIMEOUT_S
-    api = f"http://127.0.0.1:{port}/api/v1/satellites"
-    last = next(s["latest_telemetry_utc"] for s in httpx.get(api, timeout=10.0).json() if s["name"] == UPLOADED)
-    while time.monotonic() < deadline and httpx.get(f"{api}/{UPLOADED}/twin", timeout=10.0).json()["twin_utc"] != last:
-        time.sleep(1.0)
-    _interrupt(server)
-
-
-def _stop_after_start(prepared: Path) -> float:
-    """SIGINT -> exit of the README's server (demo emulator on) on a copy of ``prepared``, right after /health 200."""
-    import shutil
-
-    with tempfile.TemporaryDirectory() as tmp:
-        data_dir = Path(tmp) / "data"
-        shutil.copytree(prepared, data_dir)
-        server = start_serve(data_dir, free_port(), "--no-auth", env=_ports_env())
-        return _interrupt(server)
-
-
-def stop_figures(repeats: int) -> None:
-    """Print SIGINT -> exit with queued live-twin work (median, least and every run)."""
-    data = _long_pass()
-    with tempfile.TemporaryDirectory() as prepared:
-        _drained_data_dir(data, Path(prepared))
-        for name, measure in (
-            ("right after a long upload's 200", lambda: _stop_after_upload(data)),
-            ("right after start (README server, archive to recover)", lambda: _stop_after_start(Path(prepared))),
-        ):
-            walls = []
-            for _ in range(repeats):
-                load = os.getloadavg()[0]
-                walls.append(measure())
-                print(f"  SIGINT -> exit {name}: {walls[-1]:.2f} s (load {load:.2f})", flush=True)
-            print(f"SIGINT -> exit {name}: median {np.median(walls):.2f} s, least {min(walls):.2f} s")
-
-
 def main() -> None:
     """Print the figures of the server's process lifecycle (median of --repeats) and the load average."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--stop", action="store_true", help="SIGINT -> exit with live-twin work queued")
     args = parser.parse_args()
     print(f"load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-    if args.stop:
-        stop_figures(args.repeats)
-        print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
-        return
     cycles = [_serve_cycle(free_port()) for _ in range(args.repeats)]
     for name, values in zip(("start -> /health 200", "SIGINT -> exit", "server CPU"), zip(*cycles, strict=True)):
         runs = ", ".join(f"{v:.2f}" for v in values)

@@ -214,12 +214,6 @@ class _Backfill:
     t0_ns: int
     t1_ns: int
 
-    def split(self) -> tuple[_Backfill, _Backfill | None]:
-        """The first BACKFILL_WINDOW_S of the span, and the rest (None: nothing left)."""
-        end = min(self.t1_ns, self.t0_ns + int(BACKFILL_WINDOW_S * NS_PER_S))
-        first = _Backfill(self.satellite, self.dictionary, self.t0_ns, end)
-        return first, _Backfill(self.satellite, self.dictionary, end + 1, self.t1_ns) if end < self.t1_ns else None
-
 
 _Committed = tuple[str, str, list[SampleBatch], float]  # satellite, dictionary, batches, when they arrived (clock)
 _Inbox = _Committed | _Backfill | threading.Event  # an Event: set once everything queued before it is archived
@@ -275,10 +269,8 @@ class LiveTwin:
         epoch_from_run: bool = False,
         wheel_quantum_rad_s: float = 0.0,
         stale_after_s: float = STALE_S,
-        halt: threading.Event | None = None,
     ) -> None:
         self.mapping, self.model, self._epoch_ns, self._resync_s = mapping, model, epoch_ns, resync_s
-        self._halt = halt  # once set, a comparison stops before its next segment (a stopping server)
         self.stale_after_s = stale_after_s
         self._epoch_from_run = epoch_from_run  # the route starts with each run of telemetry (an emulator's flight)
         self._epoch_model: tuple[int, Scenario] | None = None  # (epoch ns, the model at that epoch)
@@ -497,11 +489,10 @@ class LiveTwin:
         return self._epoch_model[1]
 
     def _compare(self, new: np.ndarray) -> dict[str, np.ndarray] | None:
-        """Residuals of the new samples, flying (re-synchronising) segments as needed (up to the segment in flight
-        once the halt is set)."""
+        """Residuals of the new samples, flying (re-synchronising) segments as needed."""
         out: list[dict[str, np.ndarray]] = []
         k = int(new[0])
-        while k < self._t.size and not (self._halt is not None and self._halt.is_set()):
+        while k < self._t.size:
             seg = self._segment
             if seg is None or int(self._t[k]) > seg.end_ns:
                 self._segment = seg = self._fly(k)
@@ -689,7 +680,7 @@ class LiveTwins:
         self._stop = threading.Event()
         self.latencies_s: deque = deque(maxlen=100_000)
         self._detected: dict[str, list[Detection]] = {}  # waiting for POST_ALARM_S of telemetry after them
-        self._diagnosed_ns: dict[str, int] = {}  # recovered: detections up to this telemetry time had their diagnosis
+        self._recovering = False
         self._backfills = 0  # archived spans not yet read to their end
         self.on_detection: Callable[[LiveDetection], str | None] | None = None  # starts a diagnosis: its id
 
@@ -720,9 +711,7 @@ class LiveTwins:
         self._thread.start()
 
     def stop(self) -> None:
-        """Stop promptly: the comparison in progress stops before its next segment, what is queued is left (all of
-        it archived telemetry: the next start's :meth:`recover` flies it), the residuals computed are archived,
-        then the worker and the writer stop."""
+        """Finish what is queued, archive pending residuals, stop the worker and the writer."""
         self._stop.set()
         if self._thread is not None:
             self._inbox.put(threading.Event())  # wakes a worker waiting on an empty inbox (it looks every 0.5 s)
@@ -779,7 +768,7 @@ class LiveTwins:
                 self.recover()
             except Exception:  # a damaged archive must not stop the live twins of new telemetry
                 log.exception("live twins: recovery from the archive failed")
-        while not self._stop.is_set():
+        while not (self._stop.is_set() and self._inbox.empty()):
             try:
                 items = [self._inbox.get(timeout=0.5)]
             except queue.Empty:
@@ -792,10 +781,6 @@ class LiveTwins:
                     break
             self._take(items)
             self._tick()
-        left: list[_Inbox] = []
-        while not self._inbox.empty():
-            left.append(self._inbox.get_nowait())
-        self._take(left)  # stopping: only the drain markers, set once the residuals computed are archived
         self._flush_all()
 
     def _take(self, items: list[_Inbox]) -> None:
@@ -804,9 +789,6 @@ class LiveTwins:
         of falling further behind, and each satellite's new samples are compared at once)."""
         group: _Group = {}
         for item in items:
-            if self._stop.is_set() and not isinstance(item, threading.Event):
-                self._leave(item)
-                continue
             if isinstance(item, tuple):
                 satellite, dictionary_name, batches, arrived = item
                 taken, first = group.get((satellite, dictionary_name), ([], arrived))
@@ -824,16 +806,8 @@ class LiveTwins:
                     log.exception("live twin of %s failed on an archived span", item.satellite)
         self._process_all(group)
 
-    def _leave(self, item: _Committed | _Backfill) -> None:
-        """A stopping server leaves queued telemetry to the next start's recovery (it is archived)."""
-        if isinstance(item, _Backfill):
-            with self._lock:
-                self._backfills -= 1
-
     def _process_all(self, group: _Group) -> None:
         for (satellite, dictionary_name), (batches, arrived) in group.items():
-            if self._stop.is_set():
-                break
             try:
                 self._process(satellite, dictionary_name, batches, arrived)
             except Exception:
@@ -866,7 +840,6 @@ class LiveTwins:
                 epoch_from_run=from_run,
                 wheel_quantum_rad_s=quantum,
                 stale_after_s=self.stale_after_s,
-                halt=self._stop,
             )
         return twin
 
@@ -901,34 +874,28 @@ class LiveTwins:
 
     def _backfill(self, item: _Backfill) -> None:
         """Read, decode and fly the first BACKFILL_WINDOW_S of an archived span; queue the rest behind what waits."""
-        window, rest = item.split()
+        from telemetry.decoding import decode_stream
+
+        archive = self._archive()
+        end = min(item.t1_ns, item.t0_ns + int(BACKFILL_WINDOW_S * NS_PER_S))
+        rest = _Backfill(item.satellite, item.dictionary, end + 1, item.t1_ns) if end < item.t1_ns else None
         try:
-            self._fly_archived(window, self._clock())
+            if archive is not None:
+                packets = archive.replay(item.satellite, item.t0_ns, end)
+                data = b"".join(p for _, p in packets)
+                decoded = decode_stream(data, self._dictionary(item.dictionary), source="twin backfill")
+                self._process(item.satellite, item.dictionary, decoded.batches, self._clock())
         finally:
-            if rest is not None and not self._stop.is_set():  # a stopping server leaves the rest to the next start
+            if rest is not None and not self._stop.is_set():  # a stopping server drops the rest (it is archived)
                 self._inbox.put(rest)
             else:
                 with self._lock:
                     self._backfills -= 1
 
-    def _fly_archived(self, span: _Backfill, arrived: float) -> None:
-        """Read the span back from the archive, decode it and hand it to the satellite's twin."""
-        from telemetry.decoding import decode_stream
-
-        archive = self._archive()
-        if archive is None:
-            return
-        packets = archive.replay(span.satellite, span.t0_ns, span.t1_ns)
-        data = b"".join(p for _, p in packets)
-        decoded = decode_stream(data, self._dictionary(span.dictionary), source="twin backfill")
-        self._process(span.satellite, span.dictionary, decoded.batches, arrived)
-
     def _start_diagnoses(self, satellite: str, twin: LiveTwin) -> None:
-        """Detections followed by POST_ALARM_S of telemetry: archive what is pending, then ``on_detection`` (not for
-        those a recovered twin finds again where the archive held its residuals: they had their diagnosis)."""
-        diagnosed_ns = self._diagnosed_ns.get(satellite)
-        if diagnosed_ns is not None and satellite in self._detected:
-            self._detected[satellite] = [d for d in self._detected[satellite] if d.t_utc_ns > diagnosed_ns]
+        """Detections followed by POST_ALARM_S of telemetry: archive what is pending, then ``on_detection``."""
+        if self._recovering:
+            return
         newest = twin.state.telemetry_utc_ns or 0
         ready = [d for d in self._detected.get(satellite, []) if newest - d.t_utc_ns >= POST_ALARM_S * NS_PER_S]
         if not ready:
@@ -1039,40 +1006,27 @@ class LiveTwins:
         return True
 
     def recover(self) -> None:
-        """Re-create the twins of every archived satellite with a shipped mapping, and compute the residuals a stop
-        left undone: a twin with an ACS model flies from RECENT_S before its newest archived residual (from the
-        satellite's first telemetry if it has none) to its newest telemetry, BACKFILL_WINDOW_S at a time, before
-        any new batch; one without, its newest RECENT_S. The residuals it computes again are duplicates (the archive
-        keeps what it holds); detections up to the newest archived residual had their diagnosis."""
+        """Re-create the twins of every archived satellite with a shipped mapping from its newest RECENT_S."""
+        from telemetry.decoding import decode_stream
+
         archive = self._archive()
         if archive is None:
             return
         for row in archive.satellites(exclude_apids=(TWIN_APID,)):
-            satellite = row["name"]
-            if self._stop.is_set():
-                return
-            if row["last_t_ns"] is None or satellite in self._twins:
+            if row["last_t_ns"] is None or row["name"] in self._twins:
                 continue
-            archived = archive.parameters(satellite)
-            names = set(archived)
-            mapping = next((m for f in self._folders if (m := mapping_for_parameters(names, f)) is not None), None)
+            archived = set(archive.parameters(row["name"]))
+            mapping = next((m for f in self._folders if (m := mapping_for_parameters(archived, f)) is not None), None)
             if mapping is None:
                 continue
             t1 = int(row["last_t_ns"])
-            resume = t1
-            if self._models.get(satellite, (mapping.acs_model,))[0] is not None:
-                watermark = RESIDUAL_PARAMETERS[0]
-                resume = int(row["first_t_ns"])
-                if watermark in archived:
-                    resume = min(archive.latest_values(satellite, [watermark])[watermark][0], t1)
-                    self._diagnosed_ns[satellite] = resume
-            rest: _Backfill | None = _Backfill(
-                satellite, mapping.dictionary, max(int(row["first_t_ns"]), resume - int(RECENT_S * NS_PER_S)), t1
+            packets = archive.replay(row["name"], t1 - int(RECENT_S * NS_PER_S), t1)
+            decoded = decode_stream(
+                b"".join(p for _, p in packets), self._dictionary(mapping.dictionary), source="twin recovery"
             )
-            if t1 - resume > RECENT_S * NS_PER_S:  # ~0.8 s of CPU per hour of reference telemetry (~0.5 s unsynced)
-                log.info(
-                    "live twin of %s: flying the %.0f s of telemetry its residuals lack", satellite, (t1 - resume) / 1e9
-                )
-            while rest is not None and not self._stop.is_set():
-                window, rest = rest.split()
-                self._fly_archived(window, t1 / 1e9)  # arrived when it was sent: stale until new telemetry
+            self._recovering = True  # detections in what was archived before the restart had their diagnosis
+            try:
+                self._process(row["name"], mapping.dictionary, decoded.batches, t1 / 1e9)
+            finally:
+                self._recovering = False
+                self._detected.pop(row["name"], None)

@@ -1,34 +1,19 @@
-"""The live twin of one satellite against the emulated reference satellite and real NOAA-20 packets; every
-satellite's twins (LiveTwins) stopped and restarted over an archive."""
+"""The live twin of one satellite against the emulated reference satellite and real NOAA-20 packets."""
 
 from __future__ import annotations
 
 import dataclasses
-import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from backend.twin.live import (
-    ACTUAL_ONLY,
-    GPS_FULL_SPAN_S,
-    PROPAGATING,
-    RESIDUAL_PARAMETERS,
-    RESYNC_S,
-    TWIN_ATTITUDE_PARAMETERS,
-    WAITING,
-    LiveTwin,
-    LiveTwins,
-)
+from backend.twin.live import ACTUAL_ONLY, GPS_FULL_SPAN_S, PROPAGATING, RESYNC_S, WAITING, LiveTwin
 from sim_core import scenario_library
-from telemetry.archive import Archive
 from telemetry.attitude_mapping import shipped_mapping
 from telemetry.decoding import decode_stream
 from telemetry.dictionary import load_dictionary
 from telemetry.emulator import emulate, parse_fault
 from telemetry.ingest_report import SampleBatch
-from telemetry.packet_files import ingest_packet_file
 
 EPOCH = "2026-03-20T00:00:00Z"
 FLIGHT_S = 560.0  # two scanning courses and the 100 s scheduled turn between them (starts at 420 s)
@@ -224,74 +209,3 @@ def test_a_wheel_failure_in_the_stream_is_detected_on_that_wheel_soon_after_its_
     assert det.channel == channel
     assert res["twin_anomaly"].sum() == 1.0 and res["t_utc_ns"][res["twin_anomaly"] == 1.0][0] == det.t_utc_ns
     assert twin.state.detection["channel"] == channel
-
-
-STOPPED_PASS_S = 900.0  # three BACKFILL_WINDOW_S windows: a stop after the first leaves two queued
-
-
-class _Hub:
-    """The live hub as the twins see it; ``published`` is set at the first twin state (a window was flown)."""
-
-    def __init__(self) -> None:
-        self.published = threading.Event()
-
-    def publish(self, topic: str, message: object) -> None:
-        if topic == "twin":
-            self.published.set()
-
-    def wants_any(self, topic: str) -> bool:
-        return False
-
-
-def _archived_residuals(archive: Archive) -> dict[str, np.ndarray]:
-    """Every archived residual and twin attitude sample of REFSAT, with the instants of the first."""
-    names = [*RESIDUAL_PARAMETERS, *TWIN_ATTITUDE_PARAMETERS]
-    out = {n: archive.read_parameter("REFSAT", n, 0, 2**62)[1] for n in names if n in archive.parameters("REFSAT")}
-    if out:
-        out["t_utc_ns"] = archive.read_parameter("REFSAT", names[0], 0, 2**62)[0]
-    return out
-
-
-def _twins(archive: Archive, recover: bool, span: tuple[int, int] | None = None) -> tuple[LiveTwins, _Hub]:
-    hub = _Hub()
-    twins = LiveTwins(lambda: archive, hub, load_dictionary)
-    if span is not None:
-        twins.submit_archived("REFSAT", "reference_satellite.yaml", *span)
-    twins.start(recover=recover)
-    return twins, hub
-
-
-def test_a_stop_leaves_queued_work_and_the_next_start_archives_what_a_full_drain_would_have(tmp_path: Path) -> None:
-    """Stopping in an archived span's flight and again in the next start's recovery loses no residual: the third
-    start's twin flies the pass from its first telemetry again and archives exactly the full drain's residuals."""
-    path = tmp_path / "pass.bin"
-    path.write_bytes(emulate("somov-ge4-scan", [], STOPPED_PASS_S, EPOCH, truth_seed=None)[2].data)
-    archives = {}
-    for name in ("drained", "stopped"):
-        archives[name] = Archive(f"sqlite:///{tmp_path / name}.db")
-        ingest_packet_file(
-            archives[name], path, load_dictionary("reference_satellite.yaml"), satellite="REFSAT", uploaded_by="test"
-        )
-    row = next(r for r in archives["drained"].satellites() if r["name"] == "REFSAT")
-    span = (row["first_t_ns"], row["last_t_ns"])
-    drained, _ = _twins(archives["drained"], recover=False, span=span)
-    drained.drain(120.0)
-    drained.stop()
-    full = _archived_residuals(archives["drained"])
-    assert full["t_utc_ns"].size > 0.95 * 4 * STOPPED_PASS_S
-
-    stopped, hub = _twins(archives["stopped"], recover=False, span=span)
-    assert hub.published.wait(120.0)
-    stopped.stop()  # in the second window at the latest
-    cut = _archived_residuals(archives["stopped"])
-    assert 0 < cut["t_utc_ns"].size < full["t_utc_ns"].size  # what was flown is archived, the rest left
-    recovering, hub = _twins(archives["stopped"], recover=True)
-    assert hub.published.wait(120.0)
-    recovering.stop()  # in its recovery
-    recovered, _ = _twins(archives["stopped"], recover=True)
-    recovered.drain(120.0)
-    recovered.stop()
-    after = _archived_residuals(archives["stopped"])
-    assert after.keys() == full.keys()
-    for name, values in full.items():
-        np.testing.assert_array_equal(after[name], values, err_msg=name)
