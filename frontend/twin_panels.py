@@ -110,8 +110,10 @@ class ClockMirror(Generic[T]):
                 return
             with self._lock:  # callbacks in order: each applies the newest value the operator left
                 value = self.handle.value
-                self._apply(value)
-                self._shown = value
+                try:
+                    self._apply(value)
+                finally:  # a refused value too: the control follows the clock again at its next change
+                    self._shown = value
 
     def show(self, clock_state: T) -> None:
         """Put the clock's state on the control (every frame), unless the operator's change is still on its way to

@@ -15,7 +15,7 @@ import pytest
 import viser
 
 from frontend.monitors import camera_pose, serve_monitors
-from frontend.twin_panels import format_utc
+from frontend.twin_panels import ClockMirror, format_utc
 from frontend.twin_scene import TwinScene
 from tests.frontend.viser_clients import viser_client, wait_for_viewers
 from tests.ports import free_port
@@ -155,6 +155,27 @@ def test_a_chosen_speed_is_not_put_back_by_a_frame_before_its_callback_sets_it(t
         viewer.clock.set_speed(2.0)  # e.g. a linked viewer's choice on the shared clock
         handles.render(wall_dt_s=0.1)
         assert viewer.panels.speed.value == "x2"
+
+
+def test_a_value_its_callback_refuses_leaves_the_control_following_the_clock() -> None:
+    """An operator's value that ``apply`` refuses (it raises) does not freeze the control: it used to stay 'on its
+    way to the clock' for ever, and no frame put the clock's state on it again."""
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    try:
+        slider = server.gui.add_slider("t", min=0.0, max=100.0, step=1.0, initial_value=10.0)
+
+        def refuse(value: float) -> None:
+            raise ValueError(f"t: {value} is outside the archive")
+
+        mirror = ClockMirror(slider, refuse)
+        slider._impl.value = 70.0  # the operator's value as viser sets it, then its callback:
+        with pytest.raises(ValueError):
+            for cb in slider._impl.update_cb:
+                cb(viser.GuiEvent(client=object(), client_id=1, target=slider))  # type: ignore[arg-type]
+        mirror.show(11.0)
+        assert slider.value == 11.0
+    finally:
+        server.stop()
 
 
 def test_a_ticked_live_follow_box_stays_ticked_until_its_callback_moves_the_clock(twin_feed):
