@@ -60,11 +60,16 @@ def _serve_cycle(port: int) -> tuple[float, float, float]:
     with tempfile.TemporaryDirectory() as data_dir:
         started = time.monotonic()
         server = start_serve(Path(data_dir), port, env={"ACS_TWIN_TELEMETRY_PORT": "0"})
-        healthy = time.monotonic() - started
-        stopping = time.monotonic()
-        server.send_signal(signal.SIGINT)
-        server.wait(STOP_TIMEOUT_S)
-        stopped = time.monotonic() - stopping
+        try:
+            healthy = time.monotonic() - started
+            stopping = time.monotonic()
+            server.send_signal(signal.SIGINT)
+            server.wait(STOP_TIMEOUT_S)
+            stopped = time.monotonic() - stopping
+        finally:  # a server that did not stop in time is killed (its children die with it), not left running
+            if server.poll() is None:
+                server.kill()
+                server.wait()
     after = os.times()
     cpu = after.children_user - before.children_user + after.children_system - before.children_system
     return healthy, stopped, cpu

@@ -157,7 +157,10 @@ class DictionaryCatalogue:
                 path.unlink()
                 if previous:
                     kept.replace(path)
-                raise _body_error(exc, path) from exc
+                error = _body_error(exc, path)
+                if error is exc:
+                    raise
+                raise error from exc
             if previous:
                 (self._folder / f"{name}.meta.json").replace(kept.with_name(f"{kept.name}.meta.json"))
             meta = {"apid": apid, "time_code": time_code, "time_fields": time_fields, "version": previous + 1}
