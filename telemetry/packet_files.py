@@ -11,8 +11,8 @@ from __future__ import annotations
 import hashlib
 import io
 import mmap
-import threading
 from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -129,30 +129,6 @@ def file_sha256(path: Path, window: int = HASH_WINDOW_OCTETS) -> str:
     return digest.hexdigest()
 
 
-class _FileHash(threading.Thread):
-    """:func:`file_sha256` on a thread of its own: the file is hashed while its first chunks decode."""
-
-    def __init__(self, path: Path) -> None:
-        super().__init__(name="file-sha256", daemon=True)
-        self._path = path
-        self._sha256: str | None = None
-        self._error: BaseException | None = None
-        self.start()
-
-    def run(self) -> None:
-        try:
-            self._sha256 = file_sha256(self._path)
-        except BaseException as e:  # re-raised by result() in the caller's thread
-            self._error = e
-
-    def result(self) -> str:
-        self.join()
-        if self._error is not None:
-            raise self._error
-        assert self._sha256 is not None
-        return self._sha256
-
-
 def ingest_packet_file(
     archive: Archive | None,
     path: Path,
@@ -185,13 +161,14 @@ def ingest_packet_file(
         for _ in results():
             pass
         return report, None
-    hashing = _FileHash(path)
-    chunks = results()
-    ahead: list[DecodeResult] = []  # decoded while the file is hashed (on the other core)
-    while hashing.is_alive() and len(ahead) < AHEAD_WHILE_HASHING and (chunk := next(chunks, None)) is not None:
-        ahead.append(chunk)
-        del chunk
-    sha256 = hashing.result()
+    with ThreadPoolExecutor(1, thread_name_prefix="file-sha256") as hasher:
+        hashing = hasher.submit(file_sha256, path)  # beside the first chunks' decode (the other core)
+        chunks = results()
+        ahead: list[DecodeResult] = []
+        while not hashing.done() and len(ahead) < AHEAD_WHILE_HASHING and (chunk := next(chunks, None)) is not None:
+            ahead.append(chunk)
+            del chunk
+        sha256 = hashing.result()
     stored = archive.ingest_results(
         satellite,
         _released_then(ahead, chunks),
