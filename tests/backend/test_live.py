@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,12 @@ from telemetry.live import hello
 from tests.backend.conftest import bearer, make_settings
 
 QUATERNION_RESOLUTION = 1e-6  # the dictionary's float32 quaternion fields round the sent values
-LIVE_ARCHIVE_TIMEOUT_S = 10.0  # archive flushes every 0.5 s; margin for a loaded machine
+# The ingest process commits every ARCHIVE_INTERVAL_S = 0.5 s: a wait for it fails once none of its tallies has moved
+# for this long (a stalled ingest), not after a fixed total (10 s before) that a loaded machine can overrun while the
+# ingest still progresses
+LIVE_STALL_S = 30.0
+LIVE_TALLIES = ("packets_received", "packets_archived", "connections", "hellos_refused")
+SUBSCRIBE_HANG_S = 60.0  # the app's receive task takes a subscribe within milliseconds: a hang bound, not a budget
 NOAA20_DIARY = "real/noaa20_jpss1_apid11/J01_G011_LZ_2021-04-09T00-00-00Z_V01.DAT1"
 NOAA20_OCTETS = 71  # one APID 11 packet of the diary
 NOAA20_LISTENER = {"live_enabled": True, "live_satellite": "NOAA-20", "live_dictionary": "noaa20_apid11_ccsdspy.yaml"}
@@ -32,19 +38,27 @@ NOAA20_LISTENER = {"live_enabled": True, "live_satellite": "NOAA-20", "live_dict
 def _subscribe(ws: WebSocketTestSession, hub: LiveHub, topic: str) -> None:
     """Subscribe the WebSocket to ``topic`` and wait until the hub fans it out (the subscribe is asynchronous)."""
     ws.send_json({"op": "subscribe", "topics": [topic]})
-    deadline = time.monotonic() + 2.0
+    deadline = time.monotonic() + SUBSCRIBE_HANG_S
     while not hub.wants_any(topic):
-        assert time.monotonic() < deadline
+        assert time.monotonic() < deadline, f"the subscribe to {topic} never reached the hub"
         time.sleep(0.01)
+
+
+def _wait_live(client: TestClient, done: Callable[[dict], bool], what: str) -> dict:
+    """The health's live block once ``done`` holds for it; fails when the ingest process's tallies (packets received
+    and archived, connections, refused hellos) have not moved for LIVE_STALL_S before that."""
+    moved_at, last = time.monotonic(), ()
+    while not done(live := client.get("/api/v1/health").json()["live"]):
+        if (tallies := tuple(live.get(name) for name in LIVE_TALLIES)) != last:
+            moved_at, last = time.monotonic(), tallies
+        assert time.monotonic() - moved_at < LIVE_STALL_S, f"{what} never reached the archive: stalled at {live}"
+        time.sleep(0.1)
+    return live
 
 
 def _wait_archived(client: TestClient, n_packets: int, what: str) -> dict:
     """The health's live block once the ingest process has archived ``n_packets``."""
-    deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
-    while (live := client.get("/api/v1/health").json()["live"]).get("packets_archived", 0) < n_packets:
-        assert time.monotonic() < deadline, f"{what} never reached the archive"
-        time.sleep(0.1)
-    return live
+    return _wait_live(client, lambda live: live.get("packets_archived", 0) >= n_packets, what)
 
 
 def _unpaced(port: int, satellite: str | None = None, dictionary: str | None = None) -> emulator.SendOptions:
@@ -98,18 +112,20 @@ def test_websocket_batches_what_was_published_and_needs_a_token(client: TestClie
         assert ws.receive_json()["field"] == "topics"
         ws.send_json(["not", "an", "object"])
         assert ws.receive_json()["field"] == "op"
-        ws.send_json({"op": "subscribe", "topics": ["parameters/x"]})
-        deadline = time.monotonic() + 2.0
-        while hub.subscriber_count == 0 or not hub.wants_any("parameters/x"):
-            assert time.monotonic() < deadline
-            time.sleep(0.01)
-        for i in range(50):  # published at once: they leave in one batch (two if the sender drained mid-way)
-            hub.publish("parameters/x", i)
+        _subscribe(ws, hub, "parameters/x")
+
+        def publish_fifty() -> None:
+            for i in range(50):
+                hub.publish("parameters/x", i)
+
+        # published at once, in one call on the app's event loop: its sender task cannot drain between two of them
+        # (from the test's thread, a pause of the thread longer than the 0.1-s period could split them)
+        ws.portal.call(publish_fifty)
         received, batches = 0, 0
         while received < 50:
             message = ws.receive_json()
             batches, received = batches + 1, received + len(message["items"])
-        assert batches <= 2
+        assert batches == 1 and received == 50
 
 
 class _Enough(Exception):
@@ -224,12 +240,13 @@ def test_a_mixed_fleet_on_one_listener_each_satellite_decoded_with_the_dictionar
         asyncio.run(emulator.send_stream(stream, _unpaced(port, "REF-9", emulator.REFERENCE_DICTIONARY)))
         with socket.create_connection(("127.0.0.1", port)) as link:
             link.sendall(hello("BAD-1", "nope.yaml") + stream.data)  # a dictionary the listener does not know
-        deadline = time.monotonic() + LIVE_ARCHIVE_TIMEOUT_S
-        while (live := client.get("/api/v1/health").json()["live"]).get("packets_archived", 0) < n_noaa + len(
-            stream
-        ) or not live.get("hellos_refused"):
-            assert time.monotonic() < deadline, "the fleet's packets never reached the archive"
-            time.sleep(0.1)
+        live = _wait_live(
+            client,
+            lambda block: (
+                block.get("packets_archived", 0) >= n_noaa + len(stream) and bool(block.get("hellos_refused"))
+            ),
+            "the fleet's packets",
+        )
         archived = client.get(
             f"/api/v1/parameters/q_est_ib_0/samples?satellite=REF-9&max_points={sent_q0.size}", headers=bearer(viewer)
         ).json()

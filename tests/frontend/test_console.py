@@ -33,7 +33,10 @@ VIEWPORTS = [{"width": 1280, "height": 720}, {"width": 1920, "height": 1080}]
 LOAD_MS = 20_000
 TICK_MARGIN_PX = 4  # the label must fit inside the axis box with this much to spare
 ISO_UTC = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d{3})?Z$"
-LIVE_AGE_S = 7.0  # a live sample this old is fresh, and stale a few seconds later
+# The page's clock is held (Playwright's clock.set_fixed_time; its timers run on) where the live sample is FRESH_AGE_S
+# old, then STALE_AGE_S. On the wall clock a sample uploaded 7 s old turned stale 3 s later, whether or not a loaded
+# machine had carried it to the page by then (the wait for it allowed 5 s)
+FRESH_AGE_S, STALE_AGE_S = 1.0, STALE_AFTER_S + 1.0
 
 
 @pytest.fixture(scope="module")
@@ -214,20 +217,20 @@ def test_live_values_change_without_reload_and_the_stale_indicator_appears(brows
     try:
         _plot(page, ["wheel_speed_rpm_1"])
         page.wait_for_selector("#live-link.ok", timeout=LOAD_MS)
-        stale = page.locator(f"#satellite-ages .age[data-satellite='{SATELLITE}']")
+        ages = f"#satellite-ages .age[data-satellite='{SATELLITE}']"
+        stale = page.locator(ages)
         assert "stale" in stale.inner_text()  # its newest sample is a minute old
-        t_new = data.now_s() - LIVE_AGE_S
+        t_new = data.now_s()
+        page.clock.set_fixed_time(t_new + FRESH_AGE_S)  # however long the sample takes to reach the page
         with _client(console) as c:
             data.upload(c, SATELLITE, *data.one_row(t_new, wheel_speed_rpm_1=-1234.5))
         cell = "#latest tbody tr[data-parameter='wheel_speed_rpm_1'] td.value"
-        page.wait_for_function(f"document.querySelector(\"{cell}\").textContent === '-1234.5 rpm'", timeout=5_000)
+        page.wait_for_function(f"document.querySelector(\"{cell}\").textContent === '-1234.5 rpm'", timeout=LOAD_MS)
         assert "stale" not in stale.inner_text() and "last packet" in stale.inner_text()
         last_x = page.evaluate("(() => { const t = acsTwin.plotsIn('#plots')[0].data[0]; return t[t.length - 1]; })()")
         assert abs(last_x - t_new) < 1e-3  # the plot followed without a reload
-        deadline = t_new + STALE_AFTER_S + 5.0
-        while "stale" not in stale.inner_text():
-            assert data.now_s() < deadline, stale.inner_text()
-            time.sleep(0.2)
+        page.clock.set_fixed_time(t_new + STALE_AGE_S)  # no newer sample: the indicator's next 1-s tick says stale
+        page.wait_for_function(f'document.querySelector("{ages}").innerText.includes("stale")', timeout=LOAD_MS)
         # switching satellites clears the previous one's plots and values
         page.fill("#satellite", OTHER)
         page.click("#satellite-form button[type=submit]")
