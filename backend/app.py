@@ -9,7 +9,7 @@ from fastapi import FastAPI
 from fastapi.responses import HTMLResponse, RedirectResponse
 
 from backend.core.errors import install_error_handlers
-from backend.core.request_bounds import JsonBodyBounds
+from backend.core.request_bounds import RequestBounds
 from backend.core.settings import Settings
 from backend.services import build_services
 
@@ -92,7 +92,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.services = services
     install_error_handlers(app)
-    app.add_middleware(JsonBodyBounds, max_bytes=int(settings.max_json_kb * 1000))
+    app.add_middleware(RequestBounds, max_bytes=int(settings.max_json_kb * 1000))
     for router in _routers():
         app.include_router(router, prefix=API_PREFIX)
     from frontend.dashboard_site import dashboard_app, offline_docs_html

@@ -6,13 +6,14 @@ import dataclasses
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal, get_type_hints
 
-from fastapi import Path
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, RootModel, create_model
 
 from backend.ingest.dictionary_catalogue import DICTIONARY_NAME, DICTIONARY_NAME_MAX
+from backend.twin.diagnosis import MAX_WINDOW_S
 from telemetry.archive.records import AlarmRecord, PassRecord
 
 __all__ = [
+    "DB_ID_MAX",
     "DbId",
     "Health",
     "TokenCreate",
@@ -71,7 +72,10 @@ def _as_utc(moment: datetime) -> datetime:
 
 
 UtcDatetime = Annotated[datetime, AfterValidator(_as_utc)]
-DbId = Annotated[int, Path(ge=1, le=2**62, description="Database id (positive 64-bit integer).")]
+DB_ID_MAX = 2**31 - 1  # id columns are INTEGER: 32 bits on PostgreSQL (64 on SQLite); a larger id was a 500 there
+DbId = Annotated[
+    int, Field(ge=1, le=DB_ID_MAX, description=f"Database id, 1 to {DB_ID_MAX} (a 32-bit INTEGER column).")
+]  # every integer id in a path or query: its one bound
 
 
 class Health(BaseModel):
@@ -336,7 +340,10 @@ class DiagnosisCreate(BaseModel):
     dictionary: str = Field("reference_satellite.yaml", max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME)
     scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
     start_utc: datetime = Field(examples=["2026-03-20T00:00:00Z"])
-    end_utc: datetime = Field(examples=["2026-03-20T00:20:00Z"], description="At most 24 h after start_utc.")
+    end_utc: datetime = Field(
+        examples=["2026-03-20T00:20:00Z"],
+        description=f"After start_utc, at most {MAX_WINDOW_S:,.0f} s after it (else a 422 naming end_utc).",
+    )
 
 
 class DiagnosisPublic(BaseModel):

@@ -91,7 +91,11 @@ async def _on_validation(_: Request, exc: Exception) -> JSONResponse:
 
     assert isinstance(exc, RequestValidationError)
     first = exc.errors()[0] if exc.errors() else {"loc": (), "msg": "invalid request"}
-    field = _field_of(first.get("loc", ()))
+    loc = tuple(first.get("loc", ()))
+    if len(loc) == 3 and loc[0] == "query" and isinstance(loc[2], int):  # one value of a repeated key (?apid=1&apid=2)
+        key, value = str(loc[1]), str(first.get("input"))[:40]
+        return _json(422, f"{key}: {value} (value {loc[2] + 1} of the repeated {key}): {_message(first)}", key)
+    field = _field_of(loc)
     return _json(422, f"{field}: {_message(first)}" if field else _message(first), field)
 
 

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from typing import Annotated
+
 from fastapi import APIRouter, Query
 from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import DiagnosisCreate, DiagnosisPublic
+from backend.schemas import DbId, DiagnosisCreate, DiagnosisPublic
 from backend.twin.diagnosis import start_archived
 
 router = APIRouter(tags=["diagnosis"], responses=ERROR_RESPONSES)
@@ -31,9 +33,7 @@ async def create_diagnosis(body: DiagnosisCreate, services: ServicesDep, princip
 def list_diagnoses(
     services: ServicesDep,
     _: ViewerDep,
-    alarm_id: int | None = Query(
-        None, ge=0, le=2**62, description="Only the diagnosis this alarm started (a database id, as DbId)."
-    ),
+    alarm_id: Annotated[DbId | None, Query(description="Only the diagnosis this alarm started.")] = None,
     satellite: str | None = Query(None, min_length=1, max_length=100),
 ) -> list[DiagnosisPublic]:
     """The stored diagnoses (the newest 200), with their state and result."""

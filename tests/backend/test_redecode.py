@@ -107,6 +107,18 @@ def test_redecode_refuses_an_apid_the_dictionary_does_not_define(client: TestCli
     assert _kept(client, tokens["viewer"]) == KEPT
 
 
+def test_redecode_names_the_repeated_apid_past_the_11_bit_field(client: TestClient, tokens: dict[str, str]) -> None:
+    """CCSDS 133.0-B-2 §4.1.3.3.4: the APID is 11 bits, 0..2047; the second of ?apid=393&apid=2048 is named."""
+    answer = client.post(
+        "/api/v1/telemetry/redecode",
+        params={"satellite": "CYGNSS-FM07", "dictionary": "cygnss_adcsio.csv", "apid": [393, 2048]},
+        headers=bearer(tokens["operator"]),
+    )
+    assert answer.status_code == 422 and answer.json()["field"] == "apid", answer.json()
+    assert answer.json()["message"].startswith("apid: 2048 (value 2 of the repeated apid): "), answer.json()
+    assert "2047" in answer.json()["message"]
+
+
 def test_cli_redecode_archives_the_kept_packets_once(tmp_path: Path, capsys) -> None:
     db = f"sqlite:///{tmp_path / 'archive.sqlite'}"
     adcsio, pvt = str(CYGNSS / "ccsdspy" / "apid00393.csv"), str(CYGNSS / "ccsdspy" / "apid00394.csv")
