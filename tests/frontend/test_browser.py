@@ -69,6 +69,15 @@ def test_each_monitor_paints_a_globe(browser, monitors, role, tmp_path):
         page.close()
 
 
+def _alarm_row(page, selector: str, timeout_ms: float):
+    """The first alarm row matching ``selector`` once one shows, as a Locator: found again at each action, since the
+    table is redrawn whenever alarms change (an element handle taken before a redraw is detached, and a click on it
+    fails)."""
+    row = page.locator(selector).first
+    row.wait_for(timeout=timeout_ms)
+    return row
+
+
 def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_server):
     page = browser.new_page(viewport={"width": 1920, "height": 1080})
     errors: list[str] = []
@@ -123,9 +132,9 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
 
         page.fill("#satellite", ALARM_SATELLITE)
         page.click("#satellite-form button[type=submit]")
-        alarm = page.wait_for_selector("#alarms tbody tr.state-active", timeout=20_000)
+        alarm = _alarm_row(page, "#alarms tbody tr.state-active", 20_000)
         assert "q0_watch" in alarm.inner_text()
-        alarm.query_selector("button:text('shelve')").click()
+        alarm.locator("button:text('shelve')").click()
         page.wait_for_selector("#alarms tbody tr.state-shelved", timeout=10_000)
         # the diary ends back inside the limits: acknowledging clears the alarm off the active list
         page.click("#alarms tbody tr.state-shelved button:text('ack')")  # shelved alarms can be acknowledged
@@ -254,6 +263,7 @@ def test_what_if_where_no_hypothesis_fits_says_so_with_the_residuals(browser, ba
         assert errors == []
 
 
+TWIN_ANOMALY_ROW = "#alarms tbody tr[data-parameter='twin_anomaly']"
 DIAGNOSIS_TIMEOUT_MS = 600_000  # the automatic diagnosis: LocalCluster start and the replays, on a loaded machine
 
 
@@ -264,8 +274,7 @@ def test_the_detection_alarm_links_to_its_diagnosis_and_its_top_hypotheses_fly(
     anomaly: the twin_anomaly alarm's "diagnosis" button shows the automatic diagnosis (evidence, ranked
     hypotheses with RW2 failure on top), and its top hypotheses fly as a twin session whose residuals plot."""
     with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
-        alarm = page.wait_for_selector("#alarms tbody tr[data-parameter='twin_anomaly']", timeout=60_000)
-        alarm.query_selector("button.diagnosis-link").click()
+        _alarm_row(page, TWIN_ANOMALY_ROW, 60_000).locator("button.diagnosis-link").click()
         page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
         evidence = page.inner_text("#diagnosis-detail .diagnosis-evidence")
         assert "false-alarm rate" in evidence and "analysis window" in evidence
@@ -330,8 +339,7 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
         monitor.goto(handles.urls()["simulated"])
         monitor.wait_for_function("document.body.innerText.includes('simulated: nominal twin')", timeout=60_000)
         with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
-            alarm = page.wait_for_selector("#alarms tbody tr[data-parameter='twin_anomaly']", timeout=60_000)
-            alarm.query_selector("button.diagnosis-link").click()
+            _alarm_row(page, TWIN_ANOMALY_ROW, 60_000).locator("button.diagnosis-link").click()
             page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
             page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
             _record_flight_states(page)
