@@ -79,6 +79,10 @@ def _input_showing(page, value: str):
     return page.locator("input").nth(index)
 
 
+def _live_clocks(handles) -> int:
+    return [v.clock.live for v in handles.all_viewers()].count(True)
+
+
 def _utc_s(page) -> float:
     return parse_utc(_displayed_utc(page))
 
@@ -92,12 +96,16 @@ def test_one_viewer_replaying_leaves_the_other_live(browser, live_monitor):
         for page in pages:
             _wait_for(lambda p=page: _displayed_utc(p) == live_end, 10.0, "both viewers live at the newest instant")
         mover.get_by_text("Live follow").click()  # leave live follow …
-        mover.get_by_role("button", name="play").click()  # … and replay from the start of the data
+        # … and, once its callback has moved the mover's clock, replay from the start of the data: viser runs each
+        # callback on a thread of its pool, so a play clicked sooner could run first and the live-follow callback
+        # then stopped the replay (follow_live(False) pauses)
+        _wait_for(lambda: _live_clocks(handles) == 1, 10.0, "the mover's clock out of live follow")
+        mover.get_by_role("button", name="play").click()
         _wait_for(lambda: _displayed_utc(mover) != live_end, 10.0, "the replaying viewer to move")
         first = _utc_s(mover)
         _wait_for(lambda: _utc_s(mover) > first, 10.0, "the replay to advance")  # replay advances …
         assert _displayed_utc(watcher) == live_end  # … and the other viewer never left live follow
-        assert [v.clock.live for v in handles.all_viewers()].count(True) == 1
+        assert _live_clocks(handles) == 1
     finally:
         for page in pages:
             page.close()
