@@ -30,6 +30,9 @@ SATELLITE = "CONSOLE-1"
 OTHER = "CONSOLE-2"  # a second satellite with data, to switch to
 EMPTY = "EMPTY-1"  # registered, never sent telemetry
 VIEWPORTS = [{"width": 1280, "height": 720}, {"width": 1920, "height": 1080}]
+# Every wait for the page: a hang bound, each wait ending as soon as the page shows what it waits for. The alarm
+# lifecycle's waits (an upload or a POST, the 'alarms' event, a fetch and a redraw) had 5 s, a page sharing two cores
+# with its servers and the other test worker's browser or flight
 LOAD_MS = 20_000
 TICK_MARGIN_PX = 4  # the label must fit inside the axis box with this much to spare
 ISO_UTC = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d{3})?Z$"
@@ -257,7 +260,7 @@ def test_alarm_lifecycle_end_to_end_at_1280x720(browser, console):
         t0 = data.now_s() - 30.0
         with _client(console) as c:
             data.upload(c, OTHER, *data.one_row(t0, fault_wheel_1=1.0))
-        page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=5_000)
+        page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=LOAD_MS)
         row = _alarm_row(page)
         assert row.locator("td.severity").inner_text() == "critical"  # a wheel failure is red
         banner = page.inner_text("#alarm-banner")
@@ -268,26 +271,26 @@ def test_alarm_lifecycle_end_to_end_at_1280x720(browser, console):
             assert box and box["x"] >= 0 and box["x"] + box["width"] <= VIEWPORTS[0]["width"], box
 
         row.locator("button:text('ack')").click()
-        page.wait_for_selector("#alarms tbody tr.state-acknowledged", timeout=5_000)
+        page.wait_for_selector("#alarms tbody tr.state-acknowledged", timeout=LOAD_MS)
         assert "fault_wheel_1" not in page.inner_text("#alarm-banner")
         with _client(console) as c:  # back in limits: an acknowledged alarm clears itself
             data.upload(c, OTHER, *data.one_row(t0 + 1, fault_wheel_1=0.0))
-        page.wait_for_selector(WHEEL_ALARM, state="detached", timeout=5_000)
+        page.wait_for_selector(WHEEL_ALARM, state="detached", timeout=LOAD_MS)
 
         with _client(console) as c:  # a second failure: shelve, unshelve, back to normal unacknowledged, ack
             data.upload(c, OTHER, *data.one_row(t0 + 2, fault_wheel_1=1.0))
-        page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=5_000)
+        page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=LOAD_MS)
         row = _alarm_row(page)
         row.locator("select").select_option("900")
         page.eval_on_selector(WHEEL_ALARM, "tr => { tr.dataset.drawn = 'before'; }")
         page.check("#show-cleared")  # the table is redrawn (twice) while the operator chooses
-        page.wait_for_selector(f"{WHEEL_ALARM}[data-drawn]", state="detached", timeout=5_000)
-        page.wait_for_selector("#alarms tbody tr.state-cleared", timeout=5_000)
+        page.wait_for_selector(f"{WHEEL_ALARM}[data-drawn]", state="detached", timeout=LOAD_MS)
+        page.wait_for_selector("#alarms tbody tr.state-cleared", timeout=LOAD_MS)
         page.uncheck("#show-cleared")
-        page.wait_for_selector("#alarms tbody tr.state-cleared", state="detached", timeout=5_000)
+        page.wait_for_selector("#alarms tbody tr.state-cleared", state="detached", timeout=LOAD_MS)
         assert row.locator("select").input_value() == "900"  # a redraw keeps the operator's choice
         row.locator("button:text('shelve')").click()
-        page.wait_for_selector(f"{WHEEL_ALARM}.state-shelved", timeout=5_000)
+        page.wait_for_selector(f"{WHEEL_ALARM}.state-shelved", timeout=LOAD_MS)
         text = _alarm_row(page).locator("td.lifecycle").inner_text()
         until = re.search(r"shelved until (\S+)", text).group(1)
         assert (
@@ -295,13 +298,13 @@ def test_alarm_lifecycle_end_to_end_at_1280x720(browser, console):
             and 850 < np.datetime64(until.rstrip("Z")).astype("datetime64[s]").astype(float) - time.time() < 950
         )
         _alarm_row(page).locator("button:text('unshelve')").click()
-        page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=5_000)
+        page.wait_for_selector(f"{WHEEL_ALARM}.state-active", timeout=LOAD_MS)
         with _client(console) as c:
             data.upload(c, OTHER, *data.one_row(t0 + 3, fault_wheel_1=0.0))
         page.wait_for_function(
             f'document.querySelector("{WHEEL_ALARM} td.lifecycle")?.textContent === '
             "'returned to normal, unacknowledged'",
-            timeout=5_000,
+            timeout=LOAD_MS,
         )
         _alarm_row(page).locator("button:text('history')").click()
         page.wait_for_selector("#alarm-history table.history-events tbody tr")
@@ -313,7 +316,7 @@ def test_alarm_lifecycle_end_to_end_at_1280x720(browser, console):
         every = page.eval_on_selector_all("#alarm-history table.history-parameter tbody tr", "rs => rs.length")
         assert every == 2  # the cleared first alarm and this one
         _alarm_row(page).locator("button:text('ack')").click()
-        page.wait_for_selector(WHEEL_ALARM, state="detached", timeout=5_000)
+        page.wait_for_selector(WHEEL_ALARM, state="detached", timeout=LOAD_MS)
         page.check("#show-cleared")
         page.wait_for_function(f'document.querySelectorAll("{WHEEL_ALARM}.state-cleared").length === 2')
         assert page.errors == []
