@@ -6,10 +6,26 @@ import dataclasses
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal, get_type_hints
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, RootModel, create_model
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    GetJsonSchemaHandler,
+    RootModel,
+    Tag,
+    TypeAdapter,
+    create_model,
+)
+from pydantic.json_schema import JsonSchemaValue
+from pydantic_core import CoreSchema
 
 from backend.ingest.dictionary_catalogue import DICTIONARY_NAME, DICTIONARY_NAME_MAX
+from backend.jobs.simulators import LibraryScenario, scenario_kind
 from backend.twin.diagnosis import MAX_WINDOW_S
+from sim_core.rigid_spin import RigidSpinScenario
+from sim_core.scenario import Scenario
 from telemetry.archive.records import AlarmRecord, PassRecord
 
 __all__ = [
@@ -20,6 +36,7 @@ __all__ = [
     "TokenPublic",
     "TokenIssued",
     "AuditPublic",
+    "SimulationCreate",
     "JobAccepted",
     "JobPublic",
     "SeriesPublic",
@@ -127,6 +144,32 @@ class AuditPublic(BaseModel):
     action: str
     target: str
     detail: dict[str, Any]
+
+
+class _DocumentedAs:
+    """JSON-schema hook: a body taken as a JSON object and validated by its service, documented as ``shape``."""
+
+    def __init__(self, shape: Any) -> None:
+        self._core = TypeAdapter(shape).core_schema
+
+    def __get_pydantic_json_schema__(self, _: CoreSchema, handler: GetJsonSchemaHandler) -> JsonSchemaValue:
+        return handler(self._core)
+
+
+# POST /simulations: exactly one of three bodies (each forbids unknown keys; the rigid spin requires its kind, the
+# library body its library), told apart by backend.jobs.simulators.scenario_kind. validate_scenario validates it,
+# with the limits, in the service: the route takes the JSON object, so the answers and messages are the service's.
+SimulationCreate = Annotated[
+    dict[str, Any],
+    _DocumentedAs(
+        Annotated[
+            Annotated[RigidSpinScenario, Tag("rigid-spin")]
+            | Annotated[LibraryScenario, Tag("library")]
+            | Annotated[Scenario, Tag("scenario")],
+            Discriminator(scenario_kind),
+        ]
+    ),
+]
 
 
 class JobAccepted(BaseModel):

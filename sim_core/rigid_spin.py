@@ -29,7 +29,9 @@ PROGRESS_STEPS = 500  # progress is reported every 1 % and at least every 500 st
 class RigidSpinScenario(BaseModel):
     """Inputs of a torque-free spin: batch of inertia diagonals and initial body rates."""
 
-    model_config = ConfigDict(allow_inf_nan=False)  # every number finite: Infinity / NaN name their field
+    # every number finite (Infinity / NaN name their field); an unknown key (a typo) names itself, as in Scenario.
+    # As JSON, a rigid spin is told from a Scenario by its kind: the schema requires it, Python callers may omit it.
+    model_config = ConfigDict(allow_inf_nan=False, extra="forbid", json_schema_extra={"required": ["kind"]})
 
     kind: str = Field("rigid-spin", pattern="^rigid-spin$")
     duration_s: float = Field(10.0, gt=0, examples=[10.0])

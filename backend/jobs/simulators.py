@@ -1,10 +1,10 @@
 """Which simulation a job runs: the sim_core engine, or the built-in rigid spin (``kind: rigid-spin``).
 
 A body is either a full sim_core Scenario, a library scenario ``{"library": NAME, "set": [...]}``
-(``acs-twin scenarios`` lists them), or a rigid-spin scenario. It is validated in the API process
-(limits are checked before queueing) and run on a Dask worker by :func:`run_job`, which returns the
-``trajectory.npz`` bytes and the summary; the task reports progress as Dask events on
-``PROGRESS_TOPIC`` and stops at the next report once the job's cancel Event is set.
+(``acs-twin scenarios`` lists them), or a rigid-spin scenario (``kind: rigid-spin``): :func:`scenario_kind`
+tells which. It is validated in the API process (limits are checked before queueing) and run on a Dask
+worker by :func:`run_job`, which returns the ``trajectory.npz`` bytes and the summary; the task reports
+progress as Dask events on ``PROGRESS_TOPIC`` and stops at the next report once the job's cancel Event is set.
 """
 
 from __future__ import annotations
@@ -13,7 +13,9 @@ import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
 
 if TYPE_CHECKING:
     from sim_core.scenario import Scenario
@@ -23,9 +25,12 @@ __all__ = [
     "JobCancelled",
     "JobCost",
     "JobOutput",
+    "LibraryScenario",
+    "ScenarioKind",
     "cancel_event_name",
     "library_names",
     "run_job",
+    "scenario_kind",
     "validate_scenario",
 ]
 
@@ -46,8 +51,27 @@ class JobCost:
     output_bytes: int
 
 
-def _is_rigid_spin(body: dict[str, Any]) -> bool:
-    return body.get("kind") == "rigid-spin"
+ScenarioKind = Literal["rigid-spin", "library", "scenario"]
+
+
+def scenario_kind(body: object) -> ScenarioKind:
+    """Which simulation a body asks for: ``kind: rigid-spin``, else a ``library`` key, else a full Scenario."""
+    if isinstance(body, dict) and body.get("kind") == "rigid-spin":
+        return "rigid-spin"
+    return "library" if isinstance(body, dict) and "library" in body else "scenario"
+
+
+class LibraryScenario(BaseModel):
+    """A library scenario by name, with overrides applied in order (sim_core.scenario.apply_overrides)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    library: str = Field(description="A name GET /api/v1/scenarios lists.", examples=["somov-ge4-scan"])
+    set: list[str] = Field(
+        default_factory=list,
+        description="Overrides 'path.to.field=value' (a scenario field, dotted), applied in order.",
+        examples=[["duration_s=600", "output_dt_s=1.0"]],
+    )
 
 
 def library_names() -> list[str]:
@@ -61,17 +85,12 @@ def _engine_scenario(body: dict[str, Any]) -> Scenario:
     from sim_core import scenario_library
     from sim_core.scenario import Scenario, apply_overrides
 
-    if "library" not in body:
+    if scenario_kind(body) == "scenario":
         return Scenario.model_validate(body)
-    unknown = set(body) - {"library", "set"}
-    if unknown:
-        raise ValueError(f"{sorted(unknown)[0]}: a library body has only 'library' and 'set'")
-    if body["library"] not in scenario_library.names():
-        raise ValueError(f"library: unknown scenario {body['library']!r}; one of {scenario_library.names()}")
-    sets = body.get("set", [])
-    if not isinstance(sets, list) or not all(isinstance(s, str) for s in sets):
-        raise ValueError("set: expected a list of 'path.to.field=value' strings")
-    return apply_overrides(scenario_library.get(body["library"]), sets)
+    request = LibraryScenario.model_validate(body)  # ValidationError naming the field: an unknown key, a set not text
+    if request.library not in scenario_library.names():
+        raise ValueError(f"library: unknown scenario {request.library!r}; one of {scenario_library.names()}")
+    return apply_overrides(scenario_library.get(request.library), request.set)
 
 
 MAX_STEPS = 10**9  # dynamics steps of one job: far above any real scenario (one orbit at 0.01 s: 580,100)
@@ -100,7 +119,7 @@ def _engine_cost(scenario: Scenario) -> JobCost:
 
 def validate_scenario(body: dict[str, Any]) -> tuple[dict[str, Any], JobCost]:
     """Parse a scenario body (ValueError/ValidationError naming the field) and estimate its cost."""
-    if _is_rigid_spin(body):
+    if scenario_kind(body) == "rigid-spin":
         from sim_core.rigid_spin import RigidSpinScenario
 
         spin = RigidSpinScenario.model_validate(body)
@@ -190,7 +209,7 @@ def run_job(job_id: str, body: dict[str, Any], options: dict[str, Any] | None = 
     link = _JobLink(job_id)
     with tempfile.TemporaryDirectory(prefix="acs-twin-job-") as scratch:
         out = Path(scratch) / "trajectory.npz"
-        if _is_rigid_spin(body):
+        if scenario_kind(body) == "rigid-spin":
             summary = _rigid_spin_npz(body, link, out)
         else:
             summary = _engine_npz(body, link, options or {}, out)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from fastapi import APIRouter, Body, Query, Request
@@ -20,6 +20,7 @@ from backend.schemas import (
     JobPublic,
     ScenarioNames,
     SeriesPublic,
+    SimulationCreate,
 )
 from backend.services import Services
 from telemetry.downsampling import minmax_indices
@@ -72,7 +73,15 @@ def create_simulation(
     request: Request,
     services: ServicesDep,
     principal: OperatorDep,
-    scenario: dict[str, Any] = Body(..., openapi_examples=SCENARIO_EXAMPLES),
+    scenario: Annotated[
+        SimulationCreate,
+        Body(
+            title="SimulationCreate",
+            description='A rigid spin when "kind" is "rigid-spin", else a library scenario when it has a "library" '
+            "key, else a full sim_core Scenario (every omitted field takes its default).",
+            openapi_examples=SCENARIO_EXAMPLES,
+        ),
+    ],
 ) -> JobAccepted:
     """Validate the scenario and its limits, queue it; poll the returned URL."""
     job_id = services.jobs.submit(scenario, principal.name)
