@@ -7,7 +7,6 @@ Truth: the service's verdict (a body accepted, or refused naming a field) on bod
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import jsonschema_rs
