@@ -139,6 +139,8 @@ def test_monitors_follow_the_live_twin_and_warn_when_it_goes_stale(browser):
 
 
 def test_a_starting_monitor_shows_progress_then_turns_into_the_monitor(browser, twin_feed, tmp_path):
+    from playwright.sync_api import expect
+
     from backend.core.auth import Role
     from backend.core.settings import Settings
     from backend.services import build_services
@@ -154,7 +156,11 @@ def test_a_starting_monitor_shows_progress_then_turns_into_the_monitor(browser, 
         page.goto(f"http://127.0.0.1:{gate.port}/")
         assert "?token=" in _page_text(page)  # refused, and told how to open it
         page.goto(f"http://127.0.0.1:{gate.port}/?token={token}")
-        assert "starting: waiting for REFSAT" in _page_text(page) and page.locator("progress").count() == 1
+        # the starting page reloads itself every STARTING_REFRESH_S (2 s): read through Playwright's retrying
+        # assertions, which find the page again after a reload (a single read that met one failed: no context, or
+        # no element yet in the reloading document)
+        expect(page.locator("body")).to_contain_text("starting: waiting for REFSAT")
+        expect(page.locator("progress")).to_have_count(1)
         assert "token=" not in page.url  # kept in a cookie, out of the address bar
         handles = serve_monitors(twin_feed, ports={"overlay": free_port()}, roles=("overlay",))
         gate.attach(handles.ports["overlay"])
