@@ -26,10 +26,14 @@ from backend.jobs.simulators import LibraryScenario, scenario_kind
 from backend.twin.diagnosis import MAX_WINDOW_S
 from sim_core.rigid_spin import RigidSpinScenario
 from sim_core.scenario import Scenario
+from telemetry.archive import NAME_MAX
 from telemetry.archive.records import AlarmRecord, PassRecord
 
 __all__ = [
     "DB_ID_MAX",
+    "NAME_MAX",
+    "SatelliteName",
+    "StationName",
     "DbId",
     "Health",
     "TokenCreate",
@@ -89,6 +93,10 @@ def _as_utc(moment: datetime) -> datetime:
 
 
 UtcDatetime = Annotated[datetime, AfterValidator(_as_utc)]
+SatelliteName = Annotated[  # the archive's name columns hold NAME_MAX characters: the one bound of every name
+    str, Field(min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME, examples=["NOAA-20"])
+]
+StationName = Annotated[str, Field(min_length=1, max_length=NAME_MAX, examples=["Svalbard"])]
 DB_ID_MAX = 2**31 - 1  # id columns are INTEGER: 32 bits on PostgreSQL (64 on SQLite); a larger id was a 500 there
 DbId = Annotated[
     int, Field(ge=1, le=DB_ID_MAX, description=f"Database id, 1 to {DB_ID_MAX} (a 32-bit INTEGER column).")
@@ -113,7 +121,7 @@ class Health(BaseModel):
 class TokenCreate(BaseModel):
     """Ask for a new API token."""
 
-    name: str = Field(min_length=1, max_length=100, examples=["ops-console"])
+    name: str = Field(min_length=1, max_length=NAME_MAX, examples=["ops-console"], description="Also its actor name.")
     role: Literal["viewer", "operator", "admin"] = Field(examples=["operator"])
 
 
@@ -198,7 +206,7 @@ class JobPublic(BaseModel):
 class TwinSessionCreate(BaseModel):
     """Where to align the twin, how long to fly it, and the operator's fault hypothesis."""
 
-    satellite: str = Field("REFSAT", min_length=1, max_length=100)
+    satellite: str = Field("REFSAT", min_length=1, max_length=NAME_MAX)
     dictionary: str = Field("reference_satellite.yaml", max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME)
     scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
     align_utc: datetime | None = Field(
@@ -379,7 +387,7 @@ class FilePublic(BaseModel):
 class DiagnosisCreate(BaseModel):
     """Which satellite and telemetry window to diagnose, with the scenario its ACS flies."""
 
-    satellite: str = Field("REFSAT", min_length=1, max_length=100)
+    satellite: str = Field("REFSAT", min_length=1, max_length=NAME_MAX)
     dictionary: str = Field("reference_satellite.yaml", max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME)
     scenario: str = Field("somov-ge4-scan", max_length=100, description="Library scenario the satellite flies.")
     start_utc: datetime = Field(examples=["2026-03-20T00:00:00Z"])
@@ -602,14 +610,14 @@ class ShelveRequest(BaseModel):
 class SatelliteCreate(BaseModel):
     """Register a satellite by name (and NORAD id)."""
 
-    name: str = Field(min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
+    name: SatelliteName
     norad_id: int | None = Field(None, ge=1, le=999_999, examples=[43013])
 
 
 class StationCreate(BaseModel):
     """A ground station (WGS84 geodetic) and its elevation mask."""
 
-    name: str = Field(min_length=1, max_length=100, examples=["Svalbard"])
+    name: StationName
     lat_deg: float = Field(ge=-90, le=90, examples=[78.23])
     lon_deg: float = Field(ge=-180, le=360, examples=[15.39])
     alt_m: float = Field(0.0, ge=-500, le=10_000, examples=[500.0])

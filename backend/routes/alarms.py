@@ -11,7 +11,7 @@ from fastapi import APIRouter, Query
 from backend.core.auth import Principal
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import AlarmActed, DbId, ShelveRequest
+from backend.schemas import NAME_MAX, AlarmActed, DbId, ShelveRequest
 from backend.services import Services
 from telemetry.archive.records import AlarmEventRecord, AlarmRecord
 
@@ -22,7 +22,7 @@ router = APIRouter(tags=["alarms"], responses=ERROR_RESPONSES)
 def list_alarms(
     services: ServicesDep,
     _: ViewerDep,
-    satellite: str = Query("NOAA-20", min_length=1, max_length=100),
+    satellite: str = Query("NOAA-20", min_length=1, max_length=NAME_MAX),
     include_cleared: bool = False,
 ) -> list[dict[str, Any]]:
     """Active (and optionally cleared) alarms with state, severity and level."""

@@ -10,7 +10,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES
 from backend.deps import ServicesDep, ViewerDep
-from backend.schemas import Caller, ConsoleConstants, ParametersInfo, ShelveRequest
+from backend.schemas import NAME_MAX, Caller, ConsoleConstants, ParametersInfo, ShelveRequest
 from backend.twin.twin_sessions import GPS_MARGIN_S
 
 router = APIRouter(tags=["console"], responses=ERROR_RESPONSES)
@@ -42,7 +42,7 @@ def whoami(principal: ViewerDep) -> dict[str, Any]:
 
 @router.get("/parameters/info", response_model=ParametersInfo, summary="Dictionary entry of each archived parameter")
 async def parameters_info(
-    services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=100)
+    services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=NAME_MAX)
 ) -> dict[str, Any]:
     """{name: {units, description, enumeration, limits}} from the dictionaries that define the satellite's names."""
     archived = await run_in_threadpool(services.telemetry.archive.parameters, satellite)

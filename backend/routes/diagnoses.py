@@ -9,7 +9,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
-from backend.schemas import DbId, DiagnosisCreate, DiagnosisPublic
+from backend.schemas import NAME_MAX, DbId, DiagnosisCreate, DiagnosisPublic
 from backend.twin.diagnosis import start_archived
 
 router = APIRouter(tags=["diagnosis"], responses=ERROR_RESPONSES)
@@ -34,7 +34,7 @@ def list_diagnoses(
     services: ServicesDep,
     _: ViewerDep,
     alarm_id: Annotated[DbId | None, Query(description="Only the diagnosis this alarm started.")] = None,
-    satellite: str | None = Query(None, min_length=1, max_length=100),
+    satellite: str | None = Query(None, min_length=1, max_length=NAME_MAX),
 ) -> list[DiagnosisPublic]:
     """The stored diagnoses (the newest 200), with their state and result."""
     return [DiagnosisPublic(**r) for r in services.diagnoses.list(alarm_id=alarm_id, satellite=satellite)]

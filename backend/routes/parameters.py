@@ -13,11 +13,11 @@ from starlette.concurrency import run_in_threadpool
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 from backend.deps import ServicesDep, ViewerDep
-from backend.schemas import PARQUET_MEDIA_TYPE, SATELLITE_NAME, LatestValues, ParameterApids, SamplesPublic
+from backend.schemas import NAME_MAX, PARQUET_MEDIA_TYPE, SATELLITE_NAME, LatestValues, ParameterApids, SamplesPublic
 
 router = APIRouter(tags=["parameters"], responses=ERROR_RESPONSES)
 
-SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
+SatelliteQuery = Query("NOAA-20", min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 MAX_EXPORT_PARAMETERS = 200
 
 

@@ -14,13 +14,16 @@ from backend.core.time import EARLIEST_NS, LATEST_NS, utc_ns
 from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.routes.telemetry import read_limited
 from backend.schemas import (
+    NAME_MAX,
     SATELLITE_NAME,
     DbId,
     PassPublic,
     PassSummaryPublic,
     SatelliteCreate,
     SatelliteCreated,
+    SatelliteName,
     StationCreate,
+    StationName,
     TlePublic,
     TleStored,
 )
@@ -29,7 +32,7 @@ from telemetry.archive.records import PassRecord, StationRecord
 
 router = APIRouter(tags=["passes"], responses=ERROR_RESPONSES)
 
-SatelliteQuery = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"])
+SatelliteQuery = Query("NOAA-20", min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 MAX_TLE_BYTES = 64_000
 TLE_BODY = {
     "requestBody": {
@@ -74,7 +77,9 @@ def _tle_lines(text: str) -> tuple[str, str, int]:
 @router.post(
     "/satellites/{name}/tles", status_code=201, response_model=TleStored, summary="Upload a TLE", openapi_extra=TLE_BODY
 )
-async def upload_tle(name: str, request: Request, services: ServicesDep, principal: OperatorDep) -> dict[str, Any]:
+async def upload_tle(
+    name: SatelliteName, request: Request, services: ServicesDep, principal: OperatorDep
+) -> dict[str, Any]:
     """Store a two-line element set (epoch read by SGP4)."""
     text = (await read_limited(request, MAX_TLE_BYTES)).decode("ascii", errors="replace")
     line1, line2, epoch_ns = _tle_lines(text)
@@ -90,7 +95,7 @@ def _store_tle(services: Services, caller: str, name: str, line1: str, line2: st
 
 
 @router.get("/satellites/{name}/tle", response_model=TlePublic, summary="Newest TLE of a satellite")
-def latest_tle(name: str, services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
+def latest_tle(name: SatelliteName, services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     """The most recent TLE (id and lines)."""
     tle_id, line1, line2 = services.telemetry.archive.latest_tle(name)
     return {"id": tle_id, "line1": line1, "line2": line2}
@@ -109,7 +114,7 @@ def create_station(body: StationCreate, services: ServicesDep, principal: Operat
 
 
 @router.get("/ground-stations/{name}", response_model=StationRecord, summary="One ground station")
-def get_station(name: str, services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
+def get_station(name: StationName, services: ServicesDep, _: ViewerDep) -> dict[str, Any]:
     """Location and elevation mask."""
     return asdict(services.telemetry.archive.ground_station(name))
 
@@ -151,7 +156,11 @@ def pass_summary(pass_id: DbId, services: ServicesDep, _: ViewerDep, satellite: 
     summary="Recount reception of passes in a window",
 )
 def record_reception(
-    name: str, services: ServicesDep, principal: OperatorDep, start: datetime | None = None, end: datetime | None = None
+    name: SatelliteName,
+    services: ServicesDep,
+    principal: OperatorDep,
+    start: datetime | None = None,
+    end: datetime | None = None,
 ) -> list[dict[str, Any]]:
     """Per pass: received span, packets and missing packets (sequence-count gaps) → completeness."""
     records = services.telemetry.record_reception(name, utc_ns(start, EARLIEST_NS), utc_ns(end, LATEST_NS))
@@ -165,10 +174,10 @@ def record_reception(
     summary="Predict passes over a station from the TLE",
 )
 def predict_passes(
-    name: str,
+    name: SatelliteName,
     services: ServicesDep,
     principal: OperatorDep,
-    station: str = Query(..., min_length=1, max_length=100),
+    station: str = Query(..., min_length=1, max_length=NAME_MAX),
     start: datetime = Query(...),
     end: datetime = Query(...),
 ) -> list[dict[str, Any]]:

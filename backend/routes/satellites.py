@@ -10,7 +10,7 @@ from starlette.concurrency import run_in_threadpool
 
 from backend.core.errors import ERROR_RESPONSES, ApiError
 from backend.deps import ServicesDep, ViewerDep
-from backend.schemas import LiveTwinPublic, SatellitePublic
+from backend.schemas import NAME_MAX, LiveTwinPublic, SatellitePublic
 from backend.twin.live import TWIN_APID
 
 router = APIRouter(tags=["satellites"], responses=ERROR_RESPONSES)
@@ -43,7 +43,7 @@ async def list_satellites(services: ServicesDep, _: ViewerDep) -> list[Satellite
 
 @router.get("/satellites/{name}/twin", response_model=LiveTwinPublic, summary="The live twin of one satellite")
 def get_twin(
-    services: ServicesDep, _: ViewerDep, name: str = Path(min_length=1, max_length=100, examples=["REFSAT"])
+    services: ServicesDep, _: ViewerDep, name: str = Path(min_length=1, max_length=NAME_MAX, examples=["REFSAT"])
 ) -> dict[str, Any]:
     """State of the satellite's live twin; the same object is published on the WebSocket topic ``twin`` whenever a
     telemetry batch has been compared and once when the satellite turns stale.

@@ -18,6 +18,7 @@ from backend.deps import OperatorDep, ServicesDep, ViewerDep
 from backend.ingest.dictionary_catalogue import DICTIONARY_NAME, DICTIONARY_NAME_MAX
 from backend.ingest.telemetry_gateway import TelemetryGateway
 from backend.schemas import (
+    NAME_MAX,
     SATELLITE_NAME,
     DictionaryNames,
     DictionaryStored,
@@ -134,7 +135,7 @@ async def upload_telemetry(
     request: Request,
     services: ServicesDep,
     principal: OperatorDep,
-    satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME, examples=["NOAA-20"]),
+    satellite: str = Query("NOAA-20", min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME, examples=["NOAA-20"]),
     dictionary: str = Query(
         "noaa20_apid11_ccsdspy.yaml",
         max_length=DICTIONARY_NAME_MAX,
@@ -184,7 +185,7 @@ async def upload_telemetry(
     summary="Uploads of a satellite (who, when, source, report)",
 )
 def list_uploads(
-    services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=100)
+    services: ServicesDep, _: ViewerDep, satellite: str = Query("NOAA-20", min_length=1, max_length=NAME_MAX)
 ) -> list[dict[str, Any]]:
     """Every upload with its checksum, tallies and stored ingest report, oldest first."""
     return [asdict(u) for u in services.telemetry.archive.uploads(satellite)]
@@ -198,7 +199,7 @@ def list_uploads(
 def kept_raw(
     services: ServicesDep,
     _: ViewerDep,
-    satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME),
+    satellite: str = Query("NOAA-20", min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME),
 ) -> dict[str, int]:
     """APID (as text) → packets kept raw: no definition when they came, or quarantined by a later one."""
     return {str(a): n for a, n in services.telemetry.archive.undefined_counts(satellite).items()}
@@ -212,7 +213,7 @@ def kept_raw(
 async def redecode_kept(
     services: ServicesDep,
     principal: OperatorDep,
-    satellite: str = Query("NOAA-20", min_length=1, max_length=100, pattern=SATELLITE_NAME),
+    satellite: str = Query("NOAA-20", min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME),
     dictionary: str = Query(max_length=DICTIONARY_NAME_MAX, pattern=DICTIONARY_NAME, examples=["cygnss_adcs.csv"]),
     apid: list[Annotated[int, Field(ge=0, le=2047)]] = Query(
         [], description="Only these APIDs (repeat the key); default: every APID the dictionary defines."

@@ -2,6 +2,7 @@
 
 from telemetry.archive.batch import DERIVED_APID, PacketBatch, sequence_gaps
 from telemetry.archive.migrate import upgrade
+from telemetry.archive.models import NAME_MAX
 from telemetry.archive.records import (
     AlarmEventRecord,
     AlarmRecord,
@@ -17,6 +18,7 @@ from telemetry.archive.store import Archive
 __all__ = [
     "Archive",
     "DERIVED_APID",
+    "NAME_MAX",
     "PacketBatch",
     "sequence_gaps",
     "upgrade",

@@ -24,6 +24,8 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
 __all__ = [
+    "NAME_MAX",
+    "PARAMETER_NAME_MAX",
     "Base",
     "Satellite",
     "GroundStation",
@@ -46,6 +48,10 @@ NAMING_CONVENTION = {
 }
 
 
+NAME_MAX = 64  # satellite, station and actor names: String(NAME_MAX) (PostgreSQL refuses longer, SQLite stores them)
+PARAMETER_NAME_MAX = 128  # parameter names (their dictionaries'), in parameter and alarm rows
+
+
 class Base(DeclarativeBase):
     """Declarative base with deterministic constraint names (needed by alembic on SQLite)."""
 
@@ -57,7 +63,7 @@ class Satellite(Base):
 
     __tablename__ = "satellite"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    name: Mapped[str] = mapped_column(String(64), unique=True)
+    name: Mapped[str] = mapped_column(String(NAME_MAX), unique=True)
     norad_id: Mapped[int | None] = mapped_column(Integer)
 
 
@@ -66,7 +72,7 @@ class GroundStation(Base):
 
     __tablename__ = "ground_station"
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
-    name: Mapped[str] = mapped_column(String(64), unique=True)
+    name: Mapped[str] = mapped_column(String(NAME_MAX), unique=True)
     lat_deg: Mapped[float] = mapped_column(Float)
     lon_deg: Mapped[float] = mapped_column(Float)
     alt_m: Mapped[float] = mapped_column(Float)
@@ -116,7 +122,7 @@ class Upload(Base):
     __table_args__ = (UniqueConstraint("satellite_id", "sha256"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     satellite_id: Mapped[int] = mapped_column(ForeignKey("satellite.id"))
-    uploaded_by: Mapped[str] = mapped_column(String(64))
+    uploaded_by: Mapped[str] = mapped_column(String(NAME_MAX))
     uploaded_at_ns: Mapped[int] = mapped_column(BigInteger)
     source: Mapped[str] = mapped_column(String(512))
     sha256: Mapped[str] = mapped_column(String(64))
@@ -132,7 +138,7 @@ class Parameter(Base):
     __table_args__ = (UniqueConstraint("satellite_id", "name"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     satellite_id: Mapped[int] = mapped_column(ForeignKey("satellite.id"))
-    name: Mapped[str] = mapped_column(String(128))
+    name: Mapped[str] = mapped_column(String(PARAMETER_NAME_MAX))
     apid: Mapped[int] = mapped_column(Integer)
 
 
@@ -194,13 +200,13 @@ class Alarm(Base):
     __table_args__ = (Index("ix_alarm_state", "satellite_id", "state"),)
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     satellite_id: Mapped[int] = mapped_column(ForeignKey("satellite.id"))
-    parameter: Mapped[str] = mapped_column(String(128))
+    parameter: Mapped[str] = mapped_column(String(PARAMETER_NAME_MAX))
     state: Mapped[str] = mapped_column(String(16))
     severity: Mapped[str] = mapped_column(String(8))
     level: Mapped[int] = mapped_column(Integer)
     first_t_ns: Mapped[int] = mapped_column(BigInteger)
     last_t_ns: Mapped[int] = mapped_column(BigInteger)
-    acknowledged_by: Mapped[str | None] = mapped_column(String(64))
+    acknowledged_by: Mapped[str | None] = mapped_column(String(NAME_MAX))
     shelved_until_ns: Mapped[int | None] = mapped_column(BigInteger)
 
 
@@ -215,4 +221,4 @@ class AlarmEvent(Base):
     kind: Mapped[str] = mapped_column(String(16))
     severity: Mapped[str | None] = mapped_column(String(8))
     value: Mapped[float | None] = mapped_column(Float)
-    actor: Mapped[str | None] = mapped_column(String(64))
+    actor: Mapped[str | None] = mapped_column(String(NAME_MAX))

@@ -4,12 +4,15 @@ a 422 naming the parameter (or a 404 for an id in range that names nothing), nev
 Truths: PostgreSQL's INTEGER is 32 bits (our id columns; SQLite's hold 64), Python's sqlite3 refuses ints past
 64 bits (OverflowError), and PostgreSQL's text holds no NUL (U+0000). Before the bounds, ids from 2**31 were a 500 on
 PostgreSQL, 2**63 a 500 on SQLite, and a NUL in a name, id, query value or JSON string a 500 on PostgreSQL.
-The parameters are read from the document, not listed by hand, so a new one is covered when it is declared.
+Names the archive stores (satellites, stations, the actors that token names become) are varchar(NAME_MAX) there:
+a longer one was a 500 on PostgreSQL, so the API declares NAME_MAX. The parameters are read from the document, not
+listed by hand, so a new one is covered when it is declared.
 """
 
 from __future__ import annotations
 
 import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -18,7 +21,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from backend.app import create_app
-from backend.schemas import DB_ID_MAX
+from backend.core.auth import Role
+from backend.schemas import DB_ID_MAX, NAME_MAX
 from tests.backend.conftest import make_settings
 
 OUT_OF_RANGE = [DB_ID_MAX + 1, 2**63, 10**30, -1, 0]  # past INTEGER on PostgreSQL, past int64, past any int, <= 0
@@ -141,3 +145,38 @@ def test_json_strings_with_a_nul_are_422_naming_their_place(
 ) -> None:
     answer = client.post(url, json=body)
     assert answer.status_code == 422 and answer.json()["field"] == field, answer.text
+
+
+def test_every_satellite_and_station_name_in_the_document_fits_the_archive_s_name_column(client: TestClient) -> None:
+    names = [
+        (method, path, parameter)
+        for method, path, parameter, _ in _operations(client, "string")
+        if parameter["name"] in ("satellite", "station")
+        or (parameter["name"] == "name" and path.startswith(("/api/v1/satellites", "/api/v1/ground-stations")))
+    ]
+    assert len(names) >= 20
+    for method, path, parameter in names:
+        schema = parameter["schema"]
+        declared = next(
+            (option["maxLength"] for option in [schema, *schema.get("anyOf", [])] if "maxLength" in option), None
+        )
+        assert declared == NAME_MAX, (method, path, parameter)
+
+
+def test_names_up_to_the_column_width_are_stored_and_longer_ones_are_422(tmp_path: Path, database_url: str) -> None:
+    """Names of NAME_MAX + 1 to 100 characters were a 500 on PostgreSQL (varchar(64)), and so was every upload by a
+    token named so (its name is the upload's actor); the API declared 100."""
+    with TestClient(create_app(make_settings(tmp_path, database_url))) as app_client:
+        admin = {"Authorization": f"Bearer {app_client.app.state.services.auth.issue('admin', Role.admin)[1]}"}
+        for width, status in ((NAME_MAX, 201), (NAME_MAX + 1, 422)):
+            station = {"name": "S" * width, "lat_deg": 64.86, "lon_deg": -147.85}
+            for url, body in (("/api/v1/satellites", {"name": "N" * width}), ("/api/v1/ground-stations", station)):
+                answer = app_client.post(url, json=body, headers=admin)
+                assert answer.status_code == status and (status == 201 or answer.json()["field"] == "name"), answer.text
+            token = app_client.post("/api/v1/tokens", json={"name": "T" * width, "role": "operator"}, headers=admin)
+            assert token.status_code == status, token.text
+            if status == 201:
+                operator = {"Authorization": f"Bearer {token.json()['token']}"}
+        csv = f"t_utc_ns,ADCFAQ4\n{(int(time.time()) - 3600) * 10**9},0.5\n".encode()
+        upload = app_client.post("/api/v1/telemetry/uploads?format=csv", content=csv, headers=operator)
+        assert upload.status_code == 200 and upload.json()["archive"]["samples_accepted"] == 1, upload.text
