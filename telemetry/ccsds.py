@@ -394,8 +394,9 @@ def _idle_until(buf: np.ndarray, p: int, q: int) -> bool:
 
 @njit(cache=True, nogil=True, inline="always")
 def _bad_link(buf: np.ndarray, x: int) -> bool:
-    """No link of a confirmation chain at x: not a whole version-0 packet, a telecommand, segmented, or idle."""
-    if not _well_formed(buf, x) or (buf[x] >> 4) & 1 or buf[x + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
+    """No link of a confirmation chain at x: not a whole version-0 packet, a telecommand, or idle (segmented
+    telemetry packets link: missions send them, e.g. IMAP-HIT science and IMAP-Lo direct events)."""
+    if not _well_formed(buf, x) or (buf[x] >> 4) & 1:
         return True
     idle: bool = (((np.int64(buf[x]) & 7) << 8) | buf[x + 1]) == IDLE_APID
     return idle
@@ -405,7 +406,7 @@ def _bad_link(buf: np.ndarray, x: int) -> bool:
 def _links_confirm(
     buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
 ) -> bool:
-    """True when the data ends at q, a dictionary packet fits at q, or UNDEFINED_CHAIN well-formed, unsegmented
+    """True when the data ends at q, a dictionary packet fits at q, or UNDEFINED_CHAIN well-formed
     telemetry packets follow one another from q (each where the previous one's length field ends) before either.
 
     This confirms a length field that no dictionary definition checks: garbage rarely forms even two links.
@@ -442,7 +443,7 @@ def _other_length_confirmed(
     if not _well_formed(buf, p):
         return False
     apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1 or buf[p + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED:
+    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1:
         return False
     q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
     return _links_confirm(buf, q, lengths, crc, table, chain)

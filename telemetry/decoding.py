@@ -11,6 +11,7 @@ Calibration: polynomial c0 + c1·x + … (XTCE PolynomialCalibrator semantics) o
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -410,20 +411,37 @@ def decode_raw(packets: np.ndarray, definition: PacketDefinition) -> dict[str, n
 
 def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
     """Engineering value of a raw field: polynomial Σ c_k x^k (XTCE PolynomialCalibrator), else the native value
-    (floats as float64, integers in their own dtype)."""
+    (floats as float64, integers in their own dtype).
+
+    The sum runs term by term from k = 0, each power of an integer exact and rounded once to float64, as
+    space_packet_parser's PolynomialCalibrator computes ``sum(c * x**k)`` on Python ints: the values agree to
+    the last bit (Horner's scheme, one rounding per step, differs by an ulp in about one value of ten of a
+    cubic, e.g. IMAP-Lo's BHV_DEF_NEG_I). Linear calibrations give c0 + c1·x either way.
+    """
     if p.polynomial:
-        x = raw.astype(np.float64)
-        if len(p.polynomial) == 1:
-            return np.full(x.shape, p.polynomial[0])
-        y = x * p.polynomial[-1]
-        y += p.polynomial[-2]
-        for c in p.polynomial[-3::-1]:
-            y *= x
-            y += c
+        y = np.full(raw.shape, p.polynomial[0])
+        for c, power in zip(p.polynomial[1:], _powers(raw, len(p.polynomial) - 1)):
+            if c != 0.0:  # a term the calibrator does not list (space_packet_parser sums only those it lists)
+                y += c * power
         return y
     if p.data_type == "float":
         return raw.astype(np.float64, copy=False)
     return raw
+
+
+def _powers(raw: np.ndarray, degree: int) -> Iterator[np.ndarray]:
+    """float64 of raw**k for k = 1..degree: for integers the exact power rounded once (Python's ``float(x**k)``),
+    in int64 while it fits, else with Python ints; for floats the float64 power (C ``pow``, as Python's)."""
+    if raw.dtype.kind == "f":
+        x = raw.astype(np.float64, copy=False)
+        yield from (x if k == 1 else x**k for k in range(1, degree + 1))
+        return
+    top = max(abs(int(raw.min())), abs(int(raw.max()))) if raw.size else 0
+    power = exact = raw.astype(np.int64) if top < 2**63 else raw.astype(object)  # object: Python ints
+    for k in range(1, degree + 1):
+        if k > 1:
+            power = power * exact if top**k < 2**63 else power.astype(object) * raw.astype(object)
+        yield power.astype(np.float64)
 
 
 def derive(d: DerivedParameter, values: dict[str, np.ndarray], time_code: ccsds.TimeCode | None) -> np.ndarray:
@@ -751,7 +769,10 @@ def _decode_apid(
         summary.packet_octets = {int(length[0]): n}
     else:
         summary.packet_octets = dict(zip(*(a.tolist() for a in np.unique(length, return_counts=True))))
-    mismatch = header_mismatch(headers, secondary_header=definition.time_code is not None)
+    mismatch = header_mismatch(
+        headers, secondary_header=definition.time_code is not None, segments=definition.accepts_segments
+    )
+    summary.segmented = int(np.count_nonzero(headers.sequence_flags != ccsds.SEQUENCE_FLAGS_UNSEGMENTED))
     if definition.time_code is None:
         mismatch[mismatch == 1] = 0  # time in named fields: the secondary header flag is the mission's business
     records = [

@@ -165,6 +165,9 @@ class PacketDefinition:
     Fixed layouts list every parameter with its bit offset. A variable layout keeps its ``fields``
     (ccsdspy semantics); ``parameters`` then hold the fixed part before the first variable array and
     ``packet_octets`` the octets that fixed part needs; :meth:`resolve` lays a packet's fields out.
+    ``accepts_segments``: a packet whose sequence flags mark a segment of a larger unit (CCSDS 133.0-B-2
+    §4.1.3.4.2.2) decodes by this layout like any other, as space_packet_parser (segments not combined) and
+    ccsdspy read it (XTCE and ccsdspy CSV definitions, YAML ``segmented: true``); else it is bad_header.
     """
 
     name: str
@@ -179,6 +182,7 @@ class PacketDefinition:
     time_fields: TimeFields | None = None
     fields: tuple[FieldSpec, ...] = ()
     xtce: XtceSource | None = None
+    accepts_segments: bool = False
 
     @property
     def variable(self) -> bool:
@@ -410,6 +414,7 @@ class _PacketCommon(TypedDict):
     period_s: float | None
     description: str
     derived: tuple[DerivedParameter, ...]
+    accepts_segments: bool
 
 
 def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
@@ -424,6 +429,7 @@ def _yaml_packet(spec: dict[str, Any], folder: Path) -> PacketDefinition:
         period_s=float(spec["period_s"]) if spec.get("period_s") is not None else None,
         description=str(spec.get("description", "")),
         derived=_derived(spec.get("derived")),
+        accepts_segments=bool(spec.get("segmented", False)),
     )
     source = spec.get("layout_from")
     if source:
@@ -571,6 +577,7 @@ def load_ccsdspy_csv(
             time_code=time_code,
             time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
             fields=fields if variable else (),
+            accepts_segments=True,
         )
     except ValueError as exc:
         raise ValueError(f"{path.name}: {exc}") from exc
@@ -677,17 +684,64 @@ def xtce_parameter(param: Any, bit: int) -> Parameter:
     )
 
 
-def _xtce_apid(definition: Any, container: Any) -> int | None:
-    """The APID a container's restriction criteria (or its bases') select, if any."""
+_APID_NAMES = ("PKT_APID", "APID", "CCSDS_APID")
+_HEADER_NAMES = (*_APID_NAMES, "VERSION", "TYPE")
+
+
+def _criterion_terms(criterion: Any) -> tuple[list[Any], bool]:
+    """The conditions of one restriction criterion (XTCE Comparison, or a BooleanExpression's Condition,
+    ANDed or ORed conditions without nesting) as (parameter, operator, value) objects, and True when they are
+    ORed (ValueError for deeper nesting that names the APID: not read as an APID selection)."""
+    from space_packet_parser.xtce import comparisons
+
+    if not isinstance(criterion, comparisons.BooleanExpression):
+        return [criterion], False
+    expression = criterion.expression
+    if isinstance(expression, comparisons.Condition):
+        return [expression], False
+    nested = expression.ands if isinstance(expression, comparisons.Ored) else expression.ors
+    if nested:
+        return [], False  # nested AND/OR: a restriction beyond the APID (space_packet_parser evaluates it)
+    return list(expression.conditions), isinstance(expression, comparisons.Ored)
+
+
+def _term_parameter(term: Any) -> str | None:
+    """The parameter a Comparison or Condition tests (None when it compares two parameters)."""
+    if getattr(term, "right_param", None) is not None:
+        return None
+    return getattr(term, "referenced_parameter", None) or getattr(term, "left_param", None)
+
+
+def _term_value(term: Any) -> Any:
+    return term.required_value if hasattr(term, "required_value") else term.right_value
+
+
+def _criterion_apids(container: Any, criterion: Any) -> set[int] | None:
+    """APIDs one restriction criterion selects: PKT_APID == N, or an OR of such (one container for several
+    APIDs, as IMAP-Ultra's team writes it), or an AND holding one; None when it does not test the APID."""
+    terms, ored = _criterion_terms(criterion)
+    on_apid = [t for t in terms if _term_parameter(t) in _APID_NAMES]
+    if not on_apid:
+        return None
+    if any(t.operator not in ("==", "eq") for t in on_apid):
+        raise ValueError(f"{container.name}: APID restriction {on_apid[0].operator!r} is not an equality")
+    if ored and len(on_apid) != len(terms):
+        raise ValueError(f"{container.name}: an APID ORed with another condition does not select APIDs")
+    if not ored and len(on_apid) > 1:
+        raise ValueError(f"{container.name}: two APID equalities ANDed")
+    return {int(_term_value(t)) for t in on_apid}
+
+
+def _xtce_apids(definition: Any, container: Any) -> set[int]:
+    """The APIDs a container's restriction criteria (or its bases') select (empty when none do)."""
     while container is not None:
-        for comparison in container.restriction_criteria:
-            if getattr(comparison, "referenced_parameter", None) in ("PKT_APID", "APID", "CCSDS_APID"):
-                if comparison.operator not in ("==", "eq"):
-                    raise ValueError(f"{container.name}: APID restriction {comparison.operator!r} is not an equality")
-                return int(comparison.required_value)
+        for criterion in container.restriction_criteria:
+            apids = _criterion_apids(container, criterion)
+            if apids is not None:
+                return apids
         base = container.base_container_name
         container = definition.containers.get(base) if base else None
-    return None
+    return set()
 
 
 def _xtce_chain(definition: Any, container: Any) -> list[Any]:
@@ -722,17 +776,25 @@ def _xtce_fixed(
         time_code=time_code,
         time_fields=time_fields.bound_to(p.name for p in params) if time_fields else None,
         description=container.short_description or container.long_description or "",
+        accepts_segments=True,
     )
 
 
 def _xtce_numeric_names(definition: Any, containers: list[Any]) -> tuple[str, ...]:
-    """Integer, float, enumerated and boolean parameters the containers (and their bases) carry, in order."""
+    """Integer, float, enumerated and boolean parameters the containers (and their bases) carry, in order, but
+    the primary header's (its first 48 bits: VERSION … PKT_LEN): as for fixed layouts and ccsdspy, the header
+    is the packet's, kept as its sequence count and raw octets, not a series."""
     from space_packet_parser.xtce import encodings
 
     names: dict[str, None] = {}
     for container in containers:
+        bit = 0
         for entry in (e for c in _xtce_chain(definition, container) for e in _xtce_entries(c)):
             encoding = getattr(entry.parameter_type, "encoding", None)
+            if bit < PRIMARY_HEADER_BITS:
+                size = getattr(encoding, "size_in_bits", None)
+                bit += size if isinstance(size, int) else PRIMARY_HEADER_BITS
+                continue
             if isinstance(encoding, (encodings.IntegerDataEncoding, encodings.FloatDataEncoding)):
                 names.setdefault(entry.name)
     return tuple(names)
@@ -760,11 +822,12 @@ def _xtce_values_per_octet(definition: Any, containers: list[Any]) -> float:
 
 def _restricts_beyond_apid(definition: Any, container: Any) -> bool:
     """True when a container (or a base) is selected by more than the APID (XTCE polymorphism)."""
-    return any(
-        getattr(r, "referenced_parameter", None) not in ("PKT_APID", "APID", "CCSDS_APID", "VERSION", "TYPE")
-        for c in _xtce_chain(definition, container)
-        for r in c.restriction_criteria
-    )
+    for c in _xtce_chain(definition, container):
+        for criterion in c.restriction_criteria:
+            terms, _ = _criterion_terms(criterion)
+            if not terms or any(_term_parameter(t) not in _HEADER_NAMES for t in terms):
+                return True
+    return False
 
 
 def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None) -> Dictionary:
@@ -780,9 +843,9 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: 
     definition = spp.load_xtce(Path(path))
     by_apid: dict[int, list[Any]] = {}
     for container in definition.containers.values():
-        apid = _xtce_apid(definition, container)
-        if not container.abstract and apid is not None:
-            by_apid.setdefault(apid, []).append(container)
+        if not container.abstract:
+            for apid in sorted(_xtce_apids(definition, container)):
+                by_apid.setdefault(apid, []).append(container)
     packets = {}
     for apid, containers in by_apid.items():
         polymorphic = len(containers) > 1
@@ -812,6 +875,7 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: 
             xtce=XtceSource(
                 definition, tuple(c.name for c in containers), numeric, _xtce_values_per_octet(definition, containers)
             ),
+            accepts_segments=True,
         )
     if not packets:
         raise ValueError(f"{path}: no concrete container selects an APID")

@@ -90,6 +90,7 @@ class ApidSummary:
     definition_octets: int | None = None
     longer_than_definition: int = 0
     shorter_than_definition: int = 0
+    segmented: int = 0  # packets whose sequence flags mark a segment (CCSDS 133.0-B-2 §4.1.3.4.2.2)
 
     def absorb(self, other: ApidSummary) -> None:
         """Add the tallies of the same APID from the next chunk of the input."""
@@ -100,6 +101,7 @@ class ApidSummary:
             "missing",
             "longer_than_definition",
             "shorter_than_definition",
+            "segmented",
         ):
             setattr(self, name, getattr(self, name) + getattr(other, name))
         self.gaps.extend(other.gaps[: max(MAX_LISTED - len(self.gaps), 0)])

@@ -98,15 +98,17 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
     return status, missing
 
 
-def header_mismatch(headers: PrimaryHeaders, secondary_header: bool) -> np.ndarray:
+def header_mismatch(headers: PrimaryHeaders, secondary_header: bool, segments: bool = False) -> np.ndarray:
     """Per packet, an index into HEADER_PROBLEMS of what contradicts a fixed-length telemetry packet (0 = nothing).
 
     Expected: packet type 0 = telemetry (CCSDS 133.0-B-2 §4.1.3.3.2), sequence flags 3 =
-    unsegmented (§4.1.3.4.2.2), secondary header flag set when the packet carries a time code (§4.1.3.3.3).
+    unsegmented (§4.1.3.4.2.2) unless ``segments`` (the definition reads each segment on its own),
+    secondary header flag set when the packet carries a time code (§4.1.3.3.3).
     """
     problems = np.zeros(headers.apid.shape, dtype=np.int8)
     problems[headers.secondary_header_flag != int(secondary_header)] = 1
-    problems[headers.sequence_flags != SEQUENCE_FLAGS_UNSEGMENTED] = 2
+    if not segments:
+        problems[headers.sequence_flags != SEQUENCE_FLAGS_UNSEGMENTED] = 2
     problems[headers.packet_type != 0] = 3
     return problems
 

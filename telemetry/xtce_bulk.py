@@ -63,7 +63,7 @@ class _Node:
     name: str
     abstract: bool
     entries: list[_Field | _Skip] = field(default_factory=list)
-    criteria: list[tuple[str, Callable[[np.ndarray, Any], np.ndarray], str]] = field(default_factory=list)
+    criteria: list[Callable[[dict[str, np.ndarray]], np.ndarray]] = field(default_factory=list)
     inheritors: list[str] = field(default_factory=list)
 
 
@@ -172,10 +172,8 @@ class XtceWalk:
         matches = []
         for name in node.inheritors:
             ok = np.ones(group.idx.size, dtype=bool)
-            for param, compare, required in self._node(name).criteria:
-                if param not in group.values:
-                    raise Unsupported(f"{name}: criterion on {param}, not read before it")
-                ok &= compare(group.values[param], _coerce(group.values[param], required))
+            for holds in self._node(name).criteria:
+                ok &= holds(group.values)
             matches.append(ok)
         count = np.sum(matches, axis=0) if matches else np.zeros(group.idx.size, dtype=np.int64)
         out = []
@@ -204,14 +202,68 @@ class XtceWalk:
 
         node = _Node(container.name, bool(container.abstract), inheritors=list(container.inheritors))
         for criterion in container.restriction_criteria:
-            if type(criterion) is not comparisons.Comparison:
+            if type(criterion) is comparisons.Comparison:
+                node.criteria.append(
+                    self._compare(
+                        container.name,
+                        criterion.referenced_parameter,
+                        criterion.operator,
+                        criterion.required_value,
+                        criterion.use_calibrated_value,
+                    )
+                )
+            elif type(criterion) is comparisons.BooleanExpression:
+                node.criteria.append(self._expression(container.name, criterion.expression))
+            else:
                 raise Unsupported(f"{container.name}: restriction {criterion!r}")
-            if criterion.use_calibrated_value:
-                self._plain(criterion.referenced_parameter)
-            operator = comparisons.Comparison._valid_operators[criterion.operator]
-            node.criteria.append((criterion.referenced_parameter, _OPERATORS[operator], criterion.required_value))
         node.entries = [self._entry(e) for e in _flat_entries(container)]
         return node
+
+    def _compare(
+        self, container: str, param: str, operator: str, required: Any, calibrated: bool
+    ) -> Callable[[dict[str, np.ndarray]], np.ndarray]:
+        """Per packet, whether ``param <operator> required`` holds (the value coerced as space_packet_parser does)."""
+        from space_packet_parser.xtce import comparisons
+
+        if calibrated:
+            self._plain(param)
+        compare = _OPERATORS[comparisons.MatchCriteria._valid_operators[operator]]
+
+        def holds(values: dict[str, np.ndarray]) -> np.ndarray:
+            if param not in values:
+                raise Unsupported(f"{container}: criterion on {param}, not read before it")
+            return np.asarray(compare(values[param], _coerce(values[param], required)), dtype=bool)
+
+        return holds
+
+    def _expression(self, container: str, expression: Any) -> Callable[[dict[str, np.ndarray]], np.ndarray]:
+        """An XTCE BooleanExpression (Condition, ANDed and ORed conditions, nested) evaluated per packet, with
+        space_packet_parser's semantics (BooleanExpression.evaluate)."""
+        from space_packet_parser.xtce import comparisons
+
+        if isinstance(expression, comparisons.Condition):
+            if expression.right_param is not None:
+                raise Unsupported(f"{container}: condition comparing two parameters")
+            return self._compare(
+                container,
+                expression.left_param,
+                expression.operator,
+                expression.right_value,
+                expression.left_use_calibrated_value,
+            )
+        anded = isinstance(expression, comparisons.Anded)
+        nested = expression.ors if anded else expression.ands
+        parts = [self._expression(container, c) for c in (*expression.conditions, *nested)]
+        if not parts:
+            raise Unsupported(f"{container}: empty boolean expression")
+
+        def holds(values: dict[str, np.ndarray]) -> np.ndarray:
+            result = parts[0](values)
+            for part in parts[1:]:
+                result = (result & part(values)) if anded else (result | part(values))
+            return result
+
+        return holds
 
     def _plain(self, name: str) -> None:
         """Unsupported unless the parameter's calibrated value is its raw value (a number, no calibrator)."""

@@ -22,7 +22,6 @@ from telemetry.dictionary import DerivedParameter, PacketDefinition, Parameter
 from tests.telemetry.packet_streams import NOW_UTC_NS, T0_UTC_NS, engineering_values, packets, reference
 
 ANGLE_TOLERANCE_RAD = 1e-9  # float64 angle of a product of unit quaternions vs scipy's own
-FLOAT64_ROUNDING_REL = 1e-15  # same polynomial, different float64 evaluation order: a few ulp
 GRID_ROUNDING_ABS = 1e-15  # k * c1 recomputed from round(k * c1 / c1): float64 rounding of grid values
 ODD_LAYOUT = [
     ("u3", "uint", 3),
@@ -79,12 +78,32 @@ def _python_bit_field(row: np.ndarray, p: Parameter) -> float | int:
     return bits
 
 
-def test_polynomial_calibration_matches_numpy_polyval() -> None:
-    p = Parameter("t", "int", 48, 16, polynomial=(273.15, 0.0125, -3e-7, 1e-11))
-    raw = np.arange(-32768, 32768, 97)
-    np.testing.assert_allclose(
-        calibrate(raw, p), np.polynomial.polynomial.polyval(raw, p.polynomial), rtol=FLOAT64_ROUNDING_REL
-    )
+@pytest.mark.parametrize(
+    ("data_type", "bits", "polynomial"),
+    [
+        ("int", 16, (273.15, 0.0125, -3e-7, 1e-11)),
+        ("uint", 12, (-0.0169754359, 0.000923349552, 4.60095316e-07, -1.98291712e-10)),  # IMAP-Lo BHV_DEF_NEG_I
+        ("int", 32, (0.5, -2e-3, 0.0, 7e-21)),  # cubes beyond int64: Python's integers
+        ("uint", 64, (1.0, 1e-3)),
+        ("float", 32, (0.25, -1.5, 2e-2)),
+    ],
+)
+def test_polynomial_calibration_is_space_packet_parsers_to_the_bit(data_type: str, bits: int, polynomial) -> None:
+    """Σ c_k x^k as space_packet_parser's PolynomialCalibrator evaluates it (terms in order on Python numbers):
+    equal to the last bit, also where Horner's scheme differs by an ulp (cancellation near -13.34 here)."""
+    from space_packet_parser.xtce.calibrators import PolynomialCalibrator, PolynomialCoefficient
+
+    p = Parameter("t", data_type, 48, bits, polynomial=polynomial)
+    rng = np.random.default_rng(bits)
+    if data_type == "float":
+        raw = rng.normal(0, 1e3, 2_000).astype(np.float32)
+    else:
+        low = -(2 ** (bits - 1)) if data_type == "int" else 0
+        raw = np.array([low + int(v) % 2**bits for v in rng.integers(0, 2**63, 2_000)], dtype=object)
+        raw = raw.astype(np.int64 if data_type == "int" or bits < 64 else np.uint64)
+    terms = [PolynomialCoefficient(c, k) for k, c in enumerate(polynomial) if c != 0.0]
+    theirs = [PolynomialCalibrator(terms).calibrate(v.item()) for v in raw]
+    assert calibrate(raw, p).tolist() == theirs
 
 
 def test_attitude_error_angle_matches_scipy_relative_rotation() -> None:

@@ -358,15 +358,28 @@ IMAP_XTCE = IMAP / "suda_combined_science_definition.xml"
 IMAP_TIME = "coarse=SHCOARSE,fine=SHFINE,fine_bits=16,epoch=2010-01-01T00:00:00Z"
 
 
-def _spp_columns(data: bytes, skip: int = 0) -> tuple[Counter, dict[str, list]]:
+# The XTCE parameters of the primary header: the packet's own (sequence count and raw octets archived), not series
+PRIMARY_HEADER = ("VERSION", "TYPE", "SEC_HDR_FLG", "PKT_APID", "SEQ_FLGS", "SRC_SEQ_CTR", "PKT_LEN")
+
+
+def _spp_columns(data: bytes, skip: int = 0, xtce: Path = IMAP_XTCE) -> tuple[Counter, dict[str, list]]:
     """space_packet_parser's own reading: packets per APID and, per parameter, the value of each packet (None where
-    its container has no such parameter); enumerations as their raw codes, as we archive them."""
+    its container has no such parameter); enumerations as their raw codes, as we archive them; the primary header's
+    parameters left out. Packets no container of the XTCE matches (space_packet_parser refuses them) are not
+    counted."""
     import space_packet_parser as spp
 
-    definition = spp.load_xtce(IMAP_XTCE)
-    packets = [definition.parse_bytes(raw) for raw in spp.ccsds_generator(data, skip_header_bytes=skip)]
+    definition = spp.load_xtce(xtce)
+    packets = []
+    for raw in spp.ccsds_generator(data, skip_header_bytes=skip):
+        try:
+            packets.append(definition.parse_bytes(raw))
+        except spp.exceptions.UnrecognizedPacketTypeError:
+            continue
     counts = Counter(int(p["PKT_APID"].raw_value) for p in packets)
-    names = dict.fromkeys(k for p in packets for k, v in p.items() if not isinstance(v.raw_value, bytes))
+    names = dict.fromkeys(
+        k for p in packets for k, v in p.items() if not isinstance(v.raw_value, bytes) and k not in PRIMARY_HEADER
+    )
     columns = {
         n: [(p[n] if isinstance(p[n], (int, float)) else p[n].raw_value) if n in p else None for p in packets]
         for n in names
