@@ -31,6 +31,7 @@ __all__ = [
     "Dictionary",
     "DERIVED_KINDS",
     "DATA_TYPES",
+    "PARAMETER_NAME_MAX",
     "load_dictionary",
     "load_yaml",
     "load_ccsdspy_csv",
@@ -52,7 +53,18 @@ DERIVED_KINDS = {"attitude_error_angle": 8, "cds_time": 3, "alias": 1}
 SHIPPED = Path(__file__).with_name("dictionaries")
 FUTURE_MARGIN_NS = 86_400 * 10**9  # on-board clocks run ahead by less than a day; later stamps are corrupt
 MAX_PACKET_BITS = 8 * (PRIMARY_HEADER_OCTETS + 65536)  # CCSDS 133.0-B-2 §4.1.3.5: data field ≤ 65,536 octets
+PARAMETER_NAME_MAX = 128  # the archive stores parameter names in varchar(128) columns (telemetry/archive/models.py)
 EARLIEST_UTC_NS = 2 * 365 * 86_400 * 10**9  # 1972-01-01: UTC as defined today starts; 1970 stamps are unset clocks
+
+
+def _check_parameter_name(name: str) -> None:
+    """ValueError unless ``name`` is 1 to PARAMETER_NAME_MAX printable characters: it is archived as text, where
+    PostgreSQL refuses a NUL and anything longer than its column (SQLite stored both)."""
+    if not 0 < len(name) <= PARAMETER_NAME_MAX or any(ord(c) < 0x20 or ord(c) == 0x7F for c in name):
+        shown = name[:40].encode("unicode_escape").decode("ascii")
+        raise ValueError(
+            f"{shown}.name: a parameter name is 1 to {PARAMETER_NAME_MAX} characters, no control characters"
+        )
 
 
 @dataclass(frozen=True)
@@ -86,6 +98,7 @@ class Parameter:
     byte_order: str = "big"
 
     def __post_init__(self) -> None:
+        _check_parameter_name(self.name)
         if self.byte_order not in ("big", "little") and not (
             self.byte_order.isdigit() and sorted(self.byte_order) == [str(k + 1) for k in range(len(self.byte_order))]
         ):
@@ -114,6 +127,7 @@ class DerivedParameter:
     limits: Limits = Limits()
 
     def __post_init__(self) -> None:
+        _check_parameter_name(self.name)
         if self.kind not in DERIVED_KINDS:
             raise ValueError(f"{self.name}.kind: expected one of {sorted(DERIVED_KINDS)}, got {self.kind!r}")
         if len(self.inputs) != DERIVED_KINDS[self.kind]:

@@ -23,9 +23,10 @@ from sqlalchemy import (
 )
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column
 
+from telemetry.dictionary import PARAMETER_NAME_MAX
+
 __all__ = [
     "NAME_MAX",
-    "PARAMETER_NAME_MAX",
     "Base",
     "Satellite",
     "GroundStation",
@@ -49,7 +50,6 @@ NAMING_CONVENTION = {
 
 
 NAME_MAX = 64  # satellite, station and actor names: String(NAME_MAX) (PostgreSQL refuses longer, SQLite stores them)
-PARAMETER_NAME_MAX = 128  # parameter names (their dictionaries'), in parameter and alarm rows
 
 
 class Base(DeclarativeBase):

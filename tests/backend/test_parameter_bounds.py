@@ -180,3 +180,12 @@ def test_names_up_to_the_column_width_are_stored_and_longer_ones_are_422(tmp_pat
         csv = f"t_utc_ns,ADCFAQ4\n{(int(time.time()) - 3600) * 10**9},0.5\n".encode()
         upload = app_client.post("/api/v1/telemetry/uploads?format=csv", content=csv, headers=operator)
         assert upload.status_code == 200 and upload.json()["archive"]["samples_accepted"] == 1, upload.text
+
+
+def test_a_dictionary_parameter_name_with_a_nul_is_422_before_anything_is_archived(client: TestClient) -> None:
+    """It was stored (dictionaries are files), then every upload decoded with it was a 500 on PostgreSQL."""
+    yaml = (
+        b'packets:\n  - {name: P, apid: 5, time_code: CUC-4-2, parameters: [{name: "a\\0b", type: uint, bits: 16}]}\n'
+    )
+    answer = client.post("/api/v1/dictionaries/nul.yaml", content=yaml)
+    assert answer.status_code == 422 and answer.json()["field"] == "a\\x00b.name", answer.text

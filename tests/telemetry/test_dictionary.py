@@ -189,6 +189,9 @@ BASE_PACKET = {
         ({"time_code": "CUC-9-9"}, "time_code"),
         ({"derived": [{"name": "e", "kind": "alias", "inputs": ["zz"]}]}, "e.inputs"),
         ({"derived": [{"name": "e", "kind": "spline", "inputs": ["a"]}]}, "e.kind"),
+        ({"parameters": [{"name": "a\x00b", "type": "uint", "bits": 16}]}, "x00b.name"),  # PostgreSQL: no NUL
+        ({"parameters": [{"name": "p" * 129, "type": "uint", "bits": 16}]}, "1 to 128 characters"),  # varchar(128)
+        ({"derived": [{"name": "e\nf", "kind": "alias", "inputs": ["a"]}]}, "nf.name"),
         (
             {"parameters": [{"name": "a", "type": "uint", "bits": 16, "limits": {"red_low": 5, "yellow_low": 1}}]},
             "limits",
