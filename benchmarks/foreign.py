@@ -264,17 +264,26 @@ def ccsdspy_mixed(path: Path, definitions: dict[int, Path]) -> Run:
 
 def spp_parse(path: Path, xtce: Path, skip: int = 0) -> Run:
     """space_packet_parser: every packet parsed with the XTCE (definition loaded and file read before timing),
-    the parsed packets kept in a list; see _timed."""
+    the parsed packets kept in a list, those of an APID it has no container for refused (UnrecognizedPacketType:
+    ours keeps them raw); see _timed."""
     import space_packet_parser as spp
 
     definition = spp.load_xtce(xtce)
     data = path.read_bytes()
-    for raw in spp.ccsds_generator(_whole_packets(path, WARM_OCTETS), skip_header_bytes=skip):
-        definition.parse_bytes(raw)  # see SIDES
     parsed: list = []
 
+    def parse_all(packets: bytes) -> None:
+        for raw in spp.ccsds_generator(packets, skip_header_bytes=skip):
+            try:
+                parsed.append(definition.parse_bytes(raw))
+            except spp.exceptions.UnrecognizedPacketTypeError:
+                continue
+
+    parse_all(_whole_packets(path, WARM_OCTETS))  # see SIDES
+    parsed.clear()
+
     def work() -> tuple[int, int]:
-        parsed.extend(definition.parse_bytes(raw) for raw in spp.ccsds_generator(data, skip_header_bytes=skip))
+        parse_all(data)
         return 0, len(parsed)  # values counted after timing
 
     run = _timed(work)
@@ -328,6 +337,12 @@ ECM_DEFS = DATA / "europa_clipper_ecm" / "defs"
 ECM_FILE = DATA / "europa_clipper_ecm" / "ecm_raw2.bin"
 IDEX = DATA / "imap_idex_suda"
 IDEX_XTCE = IDEX / "suda_combined_science_definition.xml"
+IMAP = DATA / "imap_processing"
+MET = "epoch=2010-01-01T00:00:00Z"
+ULTRA = IMAP / "ultra" / "FM45_40P_Phi28p5_BeamCal_LinearScan_phi28.50_theta-0.00_20240207T102740.CCSDS"
+ULTRA_XTCE = IMAP / "ultra" / "ULTRA_SCI_COMBINED.xml"
+LO = IMAP / "lo" / "imap_lo_l0_raw_20240627_v001__first4000pkts.pkts"
+LO_XTCE = IMAP / "lo" / "lo_xtce.xml"
 CASES = {
     "cygnss": Case(
         "CYGNSS mixed, 6 fixed APIDs, ccsdspy CSV",
@@ -361,6 +376,27 @@ CASES = {
         lambda: _coarse_shift({1424}, 48, 10_000),
         lambda: _load_named(IDEX_XTCE, IMAP_TIME),
         lambda path: spp_parse(path, IDEX_XTCE),
+    ),
+    # IMAP-Ultra: 7 APIDs, 4 defined (ORed APID restrictions; 3 of many lengths, bulk container walk), 3 kept raw;
+    # a quarter of the size: space_packet_parser's rate is ~0.05 M values/s here
+    "ultra": Case(
+        "Ultra mixed variable (ORed APIDs), XTCE",
+        "spp",
+        ULTRA,
+        0.25,
+        lambda: _coarse_shift({880, 881, 883, 896}, 48, 300),  # SHCOARSE first after the header; file spans 222 s
+        lambda: _load_named(ULTRA_XTCE, f"coarse=SHCOARSE,{MET}"),
+        lambda path: spp_parse(path, ULTRA_XTCE),
+    ),
+    # IMAP-Lo: 12 APIDs, 5 defined (677 fixed with cubic calibrations; 705-708 variable, 706 segmented), 7 raw
+    "lo": Case(
+        "Lo mixed, calibrated + segmented, XTCE",
+        "spp",
+        LO,
+        0.25,
+        lambda: _coarse_shift({677, 705, 706, 707, 708}, 48, 600),  # SHCOARSE first; the file spans 563 s
+        lambda: _load_named(LO_XTCE, f"coarse=*SHCOARSE,{MET}"),
+        lambda path: spp_parse(path, LO_XTCE),
     ),
 }
 SIDES = (
