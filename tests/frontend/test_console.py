@@ -344,10 +344,11 @@ def test_unreachable_server_offers_retry_and_recovers(browser, console):
     page = browser.new_page(viewport=VIEWPORTS[0])
     # the page's timers held: its automatic retry (RETRY_S = 5 s after the notice) cannot recover the page on its
     # own between the unroute and the click (a test slowed that long clicked a button already gone); the recovery
-    # below can only be the button's
+    # below can only be the button's. The installed clock runs on from t0 until paused, and a pause_at in its past
+    # raises: paused well ahead, before the page and its timers exist.
     t0 = data.now_s()
     page.clock.install(time=t0)
-    page.clock.pause_at(t0 + 1.0)
+    page.clock.pause_at(t0 + 3600.0)
     page.route("**/api/v1/**", lambda route: route.abort("connectionrefused"))
     try:
         page.goto(f"{console['base']}/dashboard/")
