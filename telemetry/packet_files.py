@@ -8,9 +8,12 @@ peak memory is bounded whatever the file size (benchmarks/foreign.py --memory-gb
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import hashlib
 import io
 import mmap
+import os
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -24,7 +27,7 @@ from telemetry.ingest_report import DecodeResult, IngestReport
 from telemetry.limits import LimitSet
 from telemetry.validation import SequenceState
 
-__all__ = ["CHUNK_OCTETS", "chunk_octets_for", "decode_chunks", "file_sha256", "ingest_packet_file"]
+__all__ = ["CHUNK_OCTETS", "chunk_octets_for", "decode_chunks", "file_sha256", "ingest_packet_file", "keep_freed_heap"]
 
 CHUNK_OCTETS = 1 << 20  # smallest chunk, 1 MiB: decode CPU +12 % vs 2 MiB, +68 % at 512 KiB
 MAX_CHUNK_OCTETS = 8 << 20  # largest: the chunk's octets are copied a few times (framing, raw packets kept)
@@ -39,6 +42,33 @@ GROWTH = 4
 # writes: a repeated upload adds nothing). Each holds at most ~GROWTH x CHUNK_DECODED_OCTETS: bounded memory.
 AHEAD_WHILE_HASHING = 3
 HASH_WINDOW_OCTETS = 16 << 20  # a multiple of mmap.ALLOCATIONGRANULARITY; one GIL hand-over per window
+# glibc malloc: blocks below MMAP_THRESHOLD_OCTETS come from the heap, and the heap keeps up to TRIM_THRESHOLD_OCTETS
+# free at its top (see keep_freed_heap); both are the ceilings glibc's own adaptive thresholds reach (32 MiB, twice it)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # mallopt parameters, <malloc.h>
+MMAP_THRESHOLD_OCTETS = 32 << 20
+TRIM_THRESHOLD_OCTETS = 64 << 20
+
+
+@functools.cache
+def keep_freed_heap() -> bool:
+    """Have glibc's malloc keep the memory a decoded chunk frees for the next one (once per process; True when set).
+
+    By default glibc maps each block above 128 KiB on its own, unmaps it when freed and only then raises that
+    threshold to the block's size (trimming the heap's top at twice it): a process's first large file -- the upload
+    decoder's, the CLI's -- freed and faulted its chunks' read buffers, value matrices, raw packets and merged
+    archive chunks page by page again, ~10-11 k minor faults (40 MB CYGNSS file) where the working set needs ~7 k:
+    sys CPU 0.028-0.039 s of 0.26-0.30 s. With the thresholds at glibc's own ceilings from the start, freed blocks
+    stay in the heap for the next chunk (docs/archive.md, issue 12). No effect elsewhere than glibc.
+    """
+    try:
+        if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
+            return False
+        mallopt = ctypes.CDLL(None).mallopt
+    except (ValueError, OSError, AttributeError):  # no such confstr name (not glibc), no C library symbols
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD_OCTETS)) and bool(
+        mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD_OCTETS)
+    )
 
 
 def chunk_octets_for(dictionary: Dictionary) -> int:
@@ -147,6 +177,7 @@ def ingest_packet_file(
     on_chunk sees each chunk's decode result before it is archived.
     """
     report = IngestReport(source=source or str(path))
+    keep_freed_heap()
 
     def results() -> Iterator[DecodeResult]:
         with path.open("rb") as f:
