@@ -58,7 +58,9 @@ def keep_freed_heap() -> bool:
     decoder's, the CLI's -- freed and faulted its chunks' read buffers, value matrices, raw packets and merged
     archive chunks page by page again, ~10-11 k minor faults (40 MB CYGNSS file) where the working set needs ~7 k:
     sys CPU 0.028-0.039 s of 0.26-0.30 s. With the thresholds at glibc's own ceilings from the start, freed blocks
-    stay in the heap for the next chunk (docs/archive.md, issue 12). No effect elsewhere than glibc.
+    stay in the heap for the next chunk (docs/archive.md, issue 12). No effect elsewhere than glibc. Set by
+    ingest_packet_file for a file of more than one chunk: in the upload decoder's process and the CLI's, not in the
+    server's (it decodes files of one chunk in a thread of its own).
     """
     try:
         if not (os.confstr("CS_GNU_LIBC_VERSION") or "").startswith("glibc"):
@@ -177,7 +179,8 @@ def ingest_packet_file(
     on_chunk sees each chunk's decode result before it is archived.
     """
     report = IngestReport(source=source or str(path))
-    keep_freed_heap()
+    if path.stat().st_size > CHUNK_OCTETS:  # a file the process decodes in chunks (the server: one chunk at most)
+        keep_freed_heap()
 
     def results() -> Iterator[DecodeResult]:
         with path.open("rb") as f:
