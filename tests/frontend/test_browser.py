@@ -29,6 +29,9 @@ PAINT_TIMEOUT_S = 30.0
 EARTH_SHARE_RANGE = (0.15, 0.80)  # whole-Earth preset: the disc covers ~35 % of the scene area (conftest.earth_share)
 NO_EARTH_SHARE = 0.02  # the same view with the globe hidden (lines, labels, toasts alone: 0.000)
 WHATIF_TIMEOUT_MS = 180_000
+# The dashboard's reaction to a click or a load (a fetch or two and a redraw): a hang bound, each wait ending as soon
+# as the page shows it (three such waits had 10 s, the others 20 s)
+PAGE_MS = 20_000
 UTC_PATTERN = r"^\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d\.\d{3}Z$"
 
 
@@ -87,20 +90,20 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
         assert page.title().startswith("acs-twin")
         page.fill("#token", "not-a-token")
         page.click("#login button[type=submit]")
-        page.wait_for_selector("#status.error", timeout=10_000)
+        page.wait_for_selector("#status.error", timeout=PAGE_MS)
         assert page.locator("#app").is_hidden()
 
         page.fill("#token", backend_server["token"])
         page.click("#login button[type=submit]")
         # the predicted Svalbard pass (the upload also made a pass from the data itself)
         expected = next(p for p in backend_server["passes"] if p["station"] == "Svalbard")
-        row = page.wait_for_selector(f"#passes tbody tr[data-pass-id='{expected['id']}']", timeout=20_000)
+        row = page.wait_for_selector(f"#passes tbody tr[data-pass-id='{expected['id']}']", timeout=PAGE_MS)
         assert "Svalbard" in row.inner_text()
         assert f"{round(100 * expected['completeness'])} %" in row.inner_text()
 
         page.select_option("#parameter-list", ["q_ib_0", "q_ib_3"])
         row.click()
-        page.wait_for_function("document.querySelectorAll('#plots .uplot').length === 2", timeout=20_000)
+        page.wait_for_function("document.querySelectorAll('#plots .uplot').length === 2", timeout=PAGE_MS)
         # the whole pass is plotted: the last received sample is the last point drawn (none silently dropped)
         last_x = page.evaluate("acsTwin.plotsIn('#plots').map(u => u.data[0][u.data[0].length - 1])")
         assert last_x == [pytest.approx(expected["received_end_ns"] / 1e9, abs=1e-3)] * 2
@@ -132,14 +135,14 @@ def test_dashboard_logs_in_lists_the_pass_and_runs_a_what_if(browser, backend_se
 
         page.fill("#satellite", ALARM_SATELLITE)
         page.click("#satellite-form button[type=submit]")
-        alarm = _alarm_row(page, "#alarms tbody tr.state-active", 20_000)
+        alarm = _alarm_row(page, "#alarms tbody tr.state-active", PAGE_MS)
         assert "q0_watch" in alarm.inner_text()
         alarm.locator("button:text('shelve')").click()
-        page.wait_for_selector("#alarms tbody tr.state-shelved", timeout=10_000)
+        page.wait_for_selector("#alarms tbody tr.state-shelved", timeout=PAGE_MS)
         # the diary ends back inside the limits: acknowledging clears the alarm off the active list
         page.click("#alarms tbody tr.state-shelved button:text('ack')")  # shelved alarms can be acknowledged
         page.wait_for_function(
-            "document.querySelector('#alarms tbody').innerText.includes('no active alarms')", timeout=10_000
+            "document.querySelector('#alarms tbody').innerText.includes('no active alarms')", timeout=PAGE_MS
         )
         assert errors == []
     finally:
@@ -203,7 +206,7 @@ def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(
 ):
     with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
         # no predicted pass for the emulated satellite: its archived telemetry is the window
-        page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=20_000)
+        page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=PAGE_MS)
         page.fill("#duration", str(TWIN_S))  # the default start moves so that the run fits in the window
         window_s = page.evaluate("acsTwin.state.window")
         default_start = page.evaluate("Date.parse(document.querySelector('#whatif-start').value) / 1000")  # ISO 8601, Z
@@ -214,7 +217,7 @@ def test_what_if_against_the_actual_pass_names_the_true_hypothesis_best(
         page.check(f"input[value='wheel:{HIDDEN_WHEEL}:failure']")
         page.fill("#alternatives", "bad: wheel:1:melt@5")
         page.click("#whatif button[type=submit]")
-        page.wait_for_selector("#whatif-status.error", timeout=20_000)
+        page.wait_for_selector("#whatif-status.error", timeout=PAGE_MS)
         status = page.inner_text("#whatif-status")
         assert "melt" in status and "(field: fault" in status, status  # the API's message and its offending field
 
@@ -241,7 +244,7 @@ def test_what_if_where_no_hypothesis_fits_says_so_with_the_residuals(browser, ba
     """RW2 failed in the telemetry; the twin flies nominal and the alternative sticks RW3: nothing fits, and the
     dashboard says so (the server's verdict) instead of naming the least bad variant, with each one's residuals."""
     with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
-        page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=20_000)
+        page.wait_for_function("document.querySelector('#whatif-start').value !== ''", timeout=PAGE_MS)
         page.fill("#duration", str(TWIN_S))
         page.fill("#onset", str(HIDDEN_ONSET_S - TWIN_ALIGN_S))
         start = np.datetime_as_string(np.datetime64(emulated_telemetry + int(TWIN_ALIGN_S * 1e9), "ns"), unit="ms")
@@ -341,7 +344,7 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
         with _dashboard(browser, backend_server, EMULATED_SATELLITE) as (page, errors):
             _alarm_row(page, TWIN_ANOMALY_ROW, 60_000).locator("button.diagnosis-link").click()
             page.wait_for_selector("#diagnosis-detail[data-status='succeeded']", timeout=DIAGNOSIS_TIMEOUT_MS)
-            page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
+            page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=PAGE_MS)
             _record_flight_states(page)
             page.click("#diagnosis-detail .diagnosis-hypotheses tbody tr[data-rank='1'] button.fly-monitor")
             page.wait_for_function("window.flightStates.includes('shown')", timeout=FLIGHT_TIMEOUT_MS)
@@ -378,7 +381,7 @@ def test_a_diagnosed_hypothesis_flies_on_the_simulated_monitor_and_the_nominal_t
             assert flight["hypothesis"]["fault"] == "gyro_bias", flight["hypothesis"]
             assert {"gyro_rms_deg_h", "rate_estimate_rms_deg_h"} <= set(flight["summaries"]["hypothesis"]), flight
             page.click("#monitor-nominal")
-            page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=20_000)
+            page.wait_for_selector("#monitor-flight-status[data-state='nominal']", timeout=PAGE_MS)
             assert page.locator("tr.on-monitor").count() == 0
             monitor.wait_for_function("document.body.innerText.includes('simulated: nominal twin')", timeout=30_000)
             assert api.get("/api/v1/monitors/simulated").json()["showing"] == "nominal"
