@@ -844,6 +844,21 @@ def _restricts_beyond_apid(definition: Any, container: Any) -> bool:
     return False
 
 
+def _xtce_root(definition: Any, path: str | Path) -> str:
+    """The container every packet is parsed from: space_packet_parser's default (``CCSDSPacket``) when the file
+    has it, else the one container that has no base and that others extend (CTIM calls it
+    ``CCSDSTelemetryPacket``; space_packet_parser needs it named by its caller)."""
+    if definition.root_container_name in definition.containers:
+        return str(definition.root_container_name)
+    roots = [c.name for c in definition.containers.values() if not c.base_container_name and c.inheritors]
+    if len(roots) != 1:
+        raise ValueError(
+            f"{path}: no container {definition.root_container_name!r} to parse packets from, and "
+            f"{len(roots)} containers without a base that others extend ({', '.join(roots[:5])}): expected one"
+        )
+    return str(roots[0])
+
+
 def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: TimeFields | None = None) -> Dictionary:
     """A dictionary of the APID-selected containers of an XTCE file (space-packet-parser reads it).
 
@@ -855,6 +870,7 @@ def load_xtce(path: str | Path, time_code: TimeCode | None = None, time_fields: 
     import space_packet_parser as spp
 
     definition = spp.load_xtce(Path(path))
+    definition.root_container_name = _xtce_root(definition, path)
     by_apid: dict[int, list[Any]] = {}
     for container in definition.containers.values():
         if not container.abstract:

@@ -2,15 +2,18 @@
 
 Framing problems (bad header, unknown APID, bad length, truncation, CRC) are found by
 :func:`telemetry.ccsds.frame_stream`; this module judges the framed packets of one APID: a
-telecommand type, segmented sequence flags or a wrong secondary header flag is ``bad_header``;
+telecommand type, segmented sequence flags (where the definition does not accept segments) or a
+wrong secondary header flag is ``bad_header``;
 times outside the mission window are quarantined, exact repeats (same sequence count and time)
 are counted as duplicates and dropped, and in time order the 14-bit source sequence count
 (CCSDS 133.0-B-2 §4.1.3.4.3, modulo 16384) must advance by 1..8191 from the last accepted packet:
 a repeat or a step back is ``non_monotonic_sequence`` unless the next packet continues from it
-(a counter restart, accepted and reported as a gap of unknown size); a step of d > 1 is a gap
-of d − 1 packets. When the packet period is known and the time step spans half the count range
-or more (an outage between passes), the count alone is ambiguous: the step is the d + k·16384
-nearest to Δt / period, accepted if within PERIOD_TOLERANCE of it, else a restart.
+(a counter restart, accepted and reported as a gap of unknown size) or its count lies inside the
+latest gap (its time stamped a little after the next packet's, as CTIM's clock does now and then:
+accepted, the gap one packet smaller); a step of d > 1 is a gap of d − 1 packets. When the
+packet period is known and the time step spans half the count range or more (an outage between
+passes), the count alone is ambiguous: the step is the d + k·16384 nearest to Δt / period,
+accepted if within PERIOD_TOLERANCE of it, else a restart.
 """
 
 from __future__ import annotations
@@ -72,6 +75,7 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
     missing = np.zeros(n, dtype=np.int64)
     last = -1
     t_last = 0
+    gap_at, gap_from = -1, 0  # the packet after the latest gap, and the count before that gap
     for i in range(n):
         if last < 0:
             last, t_last = count[i], t_ns[i]
@@ -82,17 +86,22 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
             steps = d + SEQUENCE_COUNT_MODULUS * round((expected - d) / SEQUENCE_COUNT_MODULUS)
             ok = steps >= 1 and abs(steps - expected) <= PERIOD_TOLERANCE * expected + 2
             missing[i] = steps - 1 if ok else RESTART
-            last, t_last = count[i], t_ns[i]
+            last, t_last, gap_at = count[i], t_ns[i], -1
             continue
         if 1 <= d < HALF_RANGE:
             missing[i] = d - 1
+            if d > 1:
+                gap_at, gap_from = i, last
             last, t_last = count[i], t_ns[i]
+            continue
+        if gap_at >= 0 and missing[gap_at] > 0 and 1 <= _forward(gap_from, count[i]) < _forward(gap_from, last):
+            missing[gap_at] -= 1  # a packet of the latest gap, its time a little after the next one's: kept
             continue
         follows = i + 1 < n and 1 <= _forward(count[i], count[i + 1]) < HALF_RANGE
         resumes = i + 1 < n and 1 <= _forward(last, count[i + 1]) < HALF_RANGE
         if follows and not resumes:
             missing[i] = RESTART
-            last, t_last = count[i], t_ns[i]
+            last, t_last, gap_at = count[i], t_ns[i], -1
         else:
             status[i] = NON_MONOTONIC
     return status, missing

@@ -65,6 +65,23 @@ def test_single_count_outlier_is_quarantined_without_a_false_gap() -> None:
     assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 13, 1)]
 
 
+def test_packet_stamped_just_after_its_successor_is_kept_without_a_false_gap() -> None:
+    """Count 12 stamped 1 us after count 13 (CTIM's APID 32 does so: 4104 at +3.9 ms, 4105 at +3.6 ms): in time order
+    11, 13, 12, 14; 12 lies inside the gap 13 opened, so it is kept and the gap closes. With 13 and 14 truly lost
+    and 12 stamped after 15, the gap 11 -> 15 is reported as 2, not 3, and nothing is quarantined."""
+    count = np.arange(30)
+    t = T0_UTC_NS + np.arange(30) * PERIOD_NS
+    t[12] = t[13] + 1_000
+    verdict = validate_packets(HK, np.arange(30) * 126, count, t, 126, None, None)
+    assert verdict.quarantined == [] and sorted(verdict.accepted.tolist()) == list(range(30))
+    assert verdict.gaps == []
+    keep = np.array([i for i in range(30) if i not in (13, 14)])
+    t[12] = t[15] + 1_000
+    verdict = validate_packets(HK, keep * 126, count[keep], t[keep], 126, None, None)
+    assert verdict.quarantined == [] and len(verdict.accepted) == 28
+    assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 15, 2)]
+
+
 def test_counter_restart_is_accepted_and_reported_as_unknown_gap() -> None:
     count = np.concatenate([np.arange(3_000, 3_020), np.arange(0, 20)])
     t = T0_UTC_NS + np.arange(40) * PERIOD_NS

@@ -1,10 +1,12 @@
-"""Real packets of four more IMAP instruments (tests/data/README.md) through their teams' XTCE: per-APID counts and
-every numeric value as space_packet_parser 6.2 reads the same bytes with the same XTCE, never this code.
+"""Real packets of missions whose teams wrote XTCE (tests/data/README.md): four more IMAP instruments and the CTIM
+CubeSat. Per-APID counts and every numeric value as space_packet_parser 6.2 reads the same bytes with the same XTCE,
+never this code.
 
 IMAP-Ultra selects a container by an ORed list of APIDs; IMAP-HIT science and IMAP-Lo direct events come as
 segmented packets; IMAP-Lo's housekeeping carries cubic calibrations; IMAP-SWAPI's housekeeping container is
-shorter than its packets. Packets space_packet_parser refuses (no container for their APID) are the ones we keep
-raw, byte-exact as ccsdspy's split_by_apid gives them.
+shorter than its packets; CTIM's root container is not space_packet_parser's default and one of its clocks
+stamps a packet just after its successor. Packets space_packet_parser refuses (no container for their APID)
+are the ones we keep raw, byte-exact as ccsdspy's split_by_apid gives them.
 """
 
 from __future__ import annotations
@@ -35,19 +37,27 @@ LO = DATA / "lo" / "imap_lo_l0_raw_20240627_v001__first4000pkts.pkts"
 LO_XTCE = DATA / "lo" / "lo_xtce.xml"
 SWAPI = DATA / "swapi" / "imap_swapi_l0_raw_20240924_v001.pkts"
 SWAPI_XTCE = DATA / "swapi" / "swapi_packet_definition.xml"
+CTIM = DATA.parent / "ctim" / "ccsds_2021_155_14_39_51__first300pkts"
+CTIM_XTCE = DATA.parent / "ctim" / "ctim_xtce_v1.xml"
+CTIM_ROOT = "CCSDSTelemetryPacket"  # what space_packet_parser's own CTIM test passes as root_container_name
+# CTIM's SHCOARSE/SHFINE clock (1/65536 s) has no published epoch: the tests take the GPS epoch
+CTIM_TIME = "coarse=SHCOARSE,fine=SHFINE,fine_bits=16,epoch=1980-01-06T00:00:00Z"
 # IMAP's mission elapsed time: seconds since 2010-01-01 (the instruments' clock; these are ground runs)
 MET = "epoch=2010-01-01T00:00:00Z"
 # The XTCE parameters of the primary header: the packet's own (sequence count and raw octets archived), not series
 PRIMARY_HEADER = ("VERSION", "TYPE", "SEC_HDR_FLG", "PKT_APID", "SEQ_FLGS", "SRC_SEQ_CTR", "PKT_LEN")
+CTIM_HEADER = ("SEC_HDR_FLAG", "SEQ_CTR")  # CTIM's names for two of them
 logging.getLogger("ccsdspy").setLevel(logging.ERROR)  # it warns of the several APIDs of these streams
 
 
-def _spp_read(data: bytes, xtce: Path) -> tuple[list[tuple[bytes, dict[str, float]]], Counter]:
+def _spp_read(data: bytes, xtce: Path, root: str | None = None) -> tuple[list[tuple[bytes, dict[str, float]]], Counter]:
     """space_packet_parser's reading: (packet octets, numeric values) of every packet it parses (enumerations as
     raw codes, as archived; header parameters left out), and per APID the packets it refuses (no container)."""
     import space_packet_parser as spp
 
-    definition = spp.load_xtce(xtce)
+    definition = (
+        spp.load_xtce(xtce) if root is None else spp.XtcePacketDefinition.from_xtce(xtce, root_container_name=root)
+    )
     parsed, refused = [], Counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "bits parsed did not match the length": SWAPI's HK
@@ -60,7 +70,7 @@ def _spp_read(data: bytes, xtce: Path) -> tuple[list[tuple[bytes, dict[str, floa
             values = {
                 k: float(v if isinstance(v, (int, float)) else v.raw_value)
                 for k, v in packet.items()
-                if not isinstance(v.raw_value, bytes) and k not in PRIMARY_HEADER
+                if not isinstance(v.raw_value, bytes) and k not in PRIMARY_HEADER + CTIM_HEADER
             }
             parsed.append((bytes(raw), values))
     return parsed, refused
@@ -219,6 +229,33 @@ def test_swapi_housekeeping_longer_than_its_container_decodes_and_says_so() -> N
     summary = result.report.apids[1184]
     assert (summary.definition_octets, summary.longer_than_definition, summary.packet_octets) == (78, 17, {84: 17})
     _kept_raw_as_ccsdspy_splits_them(data, result, header_only)
+
+
+@pytest.mark.filterwarnings("ignore:Number of bits parsed")  # APIDs 1, 20 (strings): spp parses them, and warns
+def test_ctim_with_its_own_root_container_and_a_jittered_clock_through_acs_twin_ingest(tmp_path: Path, capsys) -> None:
+    """CTIM (300 packets, 9 APIDs, 3 of them polymorphic or variable): its XTCE roots every container in
+    ``CCSDSTelemetryPacket``, which space_packet_parser must be told (we crashed on a KeyError: 'CCSDSPacket');
+    the root is the one container without a base that others extend. APID 32's count 4104 is stamped 0.3 ms after
+    4105: kept (it was quarantined as non_monotonic_sequence, with a gap of one reported). Every value as
+    space_packet_parser's, through acs-twin ingest."""
+    from backend.cli import main
+    from telemetry.archive import Archive
+
+    data = CTIM.read_bytes()
+    dictionary = load_dictionary(CTIM_XTCE, time_fields=CTIM_TIME)
+    result = decode_stream(data, dictionary)
+    theirs, refused = _spp_read(data, CTIM_XTCE, root=CTIM_ROOT)
+    assert refused == Counter() and result.report.quarantined == []
+    _assert_as_space_packet_parser(result, theirs)
+    assert result.report.apids[32].missing == 0
+    url = f"sqlite:///{tmp_path / 'ctim.db'}"
+    argv = ["ingest", str(CTIM), "--dictionary", str(CTIM_XTCE), "--time-fields", CTIM_TIME]
+    assert main([*argv, "--satellite", "CTIM", "--db", url, "--user", "ops"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert {int(a): s["accepted"] for a, s in report["decode"]["apids"].items()} == Counter(_apid(p) for p, _ in theirs)
+    with Archive(url) as archive:
+        archived = set(archive.parameters("CTIM"))
+    assert archived == {name for _, values in theirs for name in values}
 
 
 @pytest.mark.parametrize(
