@@ -262,13 +262,15 @@ def ccsdspy_mixed(path: Path, definitions: dict[int, Path]) -> Run:
     return _timed(work)
 
 
-def spp_parse(path: Path, xtce: Path, skip: int = 0) -> Run:
+def spp_parse(path: Path, xtce: Path, skip: int = 0, root: str | None = None) -> Run:
     """space_packet_parser: every packet parsed with the XTCE (definition loaded and file read before timing),
     the parsed packets kept in a list, those of an APID it has no container for refused (UnrecognizedPacketType:
     ours keeps them raw); see _timed."""
     import space_packet_parser as spp
 
-    definition = spp.load_xtce(xtce)
+    definition = (
+        spp.load_xtce(xtce) if root is None else spp.XtcePacketDefinition.from_xtce(xtce, root_container_name=root)
+    )
     data = path.read_bytes()
     parsed: list = []
 
@@ -343,6 +345,8 @@ ULTRA = IMAP / "ultra" / "FM45_40P_Phi28p5_BeamCal_LinearScan_phi28.50_theta-0.0
 ULTRA_XTCE = IMAP / "ultra" / "ULTRA_SCI_COMBINED.xml"
 LO = IMAP / "lo" / "imap_lo_l0_raw_20240627_v001__first4000pkts.pkts"
 LO_XTCE = IMAP / "lo" / "lo_xtce.xml"
+CTIM = DATA / "ctim" / "ccsds_2021_155_14_39_51__first300pkts"
+CTIM_XTCE = DATA / "ctim" / "ctim_xtce_v1.xml"
 CASES = {
     "cygnss": Case(
         "CYGNSS mixed, 6 fixed APIDs, ccsdspy CSV",
@@ -397,6 +401,16 @@ CASES = {
         lambda: _coarse_shift({677, 705, 706, 707, 708}, 48, 600),  # SHCOARSE first; the file spans 563 s
         lambda: _load_named(LO_XTCE, f"coarse=*SHCOARSE,{MET}"),
         lambda path: spp_parse(path, LO_XTCE),
+    ),
+    # CTIM: 9 APIDs, all defined (7 fixed; 1 and 20 with strings: space_packet_parser parses those for us)
+    "ctim": Case(
+        "CTIM mixed, own root container, XTCE",
+        "spp",
+        CTIM,
+        0.25,
+        lambda: _coarse_shift({1, 20, 32, 33, 34, 39, 41, 42, 47}, 48, 200),  # SHCOARSE first; spans 178 s
+        lambda: _load_named(CTIM_XTCE, "coarse=SHCOARSE,fine=SHFINE,fine_bits=16,epoch=1980-01-06T00:00:00Z"),
+        lambda path: spp_parse(path, CTIM_XTCE, root="CCSDSTelemetryPacket"),
     ),
 }
 SIDES = (
