@@ -215,6 +215,15 @@ def test_lo_through_acs_twin_ingest_cubic_calibrations_to_the_bit(tmp_path: Path
     assert again["packets_accepted"] == 0 and again["duplicates_by_apid"] == {str(a): n for a, n in defined.items()}
 
 
+def test_a_time_field_named_without_its_container_prefix_is_refused_with_the_wildcard_that_fits() -> None:
+    """IMAP-Lo prefixes every parameter with its container (ILO_APP_NHK.SHCOARSE …): ``coarse=SHCOARSE`` matches
+    none, and the refusal names a parameter it meant and the wildcard spelling that matches in every packet."""
+    with pytest.raises(
+        ValueError, match=r"no parameter matching 'SHCOARSE' \(but \['ILO_.*\.SHCOARSE'\]: .*'\*SHCOARSE'"
+    ):
+        load_dictionary(LO_XTCE, time_fields=f"coarse=SHCOARSE,{MET}")
+
+
 def test_swapi_housekeeping_longer_than_its_container_decodes_and_says_so() -> None:
     """IMAP-SWAPI: the HK container (1184) has 78 octets, its packets 84; space_packet_parser parses the 78 (and
     warns), so do we, the report counting 17 packets longer than the definition. APID 1187 has no container:
