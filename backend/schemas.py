@@ -23,7 +23,6 @@ from pydantic_core import CoreSchema
 
 from backend.ingest.dictionary_catalogue import DICTIONARY_NAME, DICTIONARY_NAME_MAX
 from backend.jobs.simulators import LibraryScenario, scenario_kind
-from backend.twin.diagnosis import MAX_WINDOW_S
 from sim_core.rigid_spin import RigidSpinScenario
 from sim_core.scenario import Scenario
 from telemetry.archive import NAME_MAX
@@ -31,6 +30,7 @@ from telemetry.archive.records import AlarmRecord, PassRecord
 
 __all__ = [
     "DB_ID_MAX",
+    "DIAGNOSIS_WINDOW_MAX_S",
     "NAME_MAX",
     "SatelliteName",
     "StationName",
@@ -97,6 +97,7 @@ SatelliteName = Annotated[  # the archive's name columns hold NAME_MAX character
     str, Field(min_length=1, max_length=NAME_MAX, pattern=SATELLITE_NAME, examples=["NOAA-20"])
 ]
 StationName = Annotated[str, Field(min_length=1, max_length=NAME_MAX, examples=["Svalbard"])]
+DIAGNOSIS_WINDOW_MAX_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a few seconds of diagnosis
 DB_ID_MAX = 2**31 - 1  # id columns are INTEGER: 32 bits on PostgreSQL (64 on SQLite); a larger id was a 500 there
 DbId = Annotated[
     int, Field(ge=1, le=DB_ID_MAX, description=f"Database id, 1 to {DB_ID_MAX} (a 32-bit INTEGER column).")
@@ -393,7 +394,8 @@ class DiagnosisCreate(BaseModel):
     start_utc: datetime = Field(examples=["2026-03-20T00:00:00Z"])
     end_utc: datetime = Field(
         examples=["2026-03-20T00:20:00Z"],
-        description=f"After start_utc, at most {MAX_WINDOW_S:,.0f} s after it (else a 422 naming end_utc).",
+        description=f"After start_utc, at most {DIAGNOSIS_WINDOW_MAX_S:,.0f} s after it (else a 422 naming end_utc: "
+        "backend.twin.diagnosis.start_archived checks it).",
     )
 
 

@@ -40,7 +40,6 @@ if TYPE_CHECKING:
     from backend.twin.live import LiveDetection
 
 __all__ = [
-    "MAX_WINDOW_S",
     "DiagnosisRuns",
     "archived_reader",
     "diagnose_batches",
@@ -52,7 +51,6 @@ __all__ = [
     "start_archived",
 ]
 
-MAX_WINDOW_S = 86_400.0  # one day of housekeeping: 86,400 samples at 1 Hz, a few seconds of diagnosis
 # A file diagnosed offline may be a simulated flight dated after today (each file has its own epoch): the
 # ingest's bound against a runaway onboard clock protects the archive, which diagnosing a file never writes.
 OFFLINE_CLOCK_UTC_NS = 4_102_444_800 * 10**9  # 2100-01-01T00:00:00Z
@@ -278,11 +276,13 @@ def start_archived(
 ) -> dict[str, Any]:
     """Check a REST request (window, dictionary, scenario) and queue its diagnosis on archived packets."""
     from backend.core.errors import ApiError
+    from backend.schemas import DIAGNOSIS_WINDOW_MAX_S  # declared in the OpenAPI document on end_utc
     from sim_core import scenario_library
 
     t0, t1 = body.start_utc.timestamp(), body.end_utc.timestamp()
-    if not 0.0 < t1 - t0 <= MAX_WINDOW_S:
-        raise ApiError(422, f"end_utc: must be after start_utc and within {MAX_WINDOW_S:.0f} s of it", "end_utc")
+    if not 0.0 < t1 - t0 <= DIAGNOSIS_WINDOW_MAX_S:
+        window = f"{DIAGNOSIS_WINDOW_MAX_S:.0f} s"
+        raise ApiError(422, f"end_utc: must be after start_utc and within {window} of it", "end_utc")
     try:
         dictionary = dictionaries(body.dictionary)
         scenario = scenario_library.get(body.scenario)
