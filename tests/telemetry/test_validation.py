@@ -149,6 +149,28 @@ def test_header_fields_contradicting_a_telemetry_packet_are_bad_header(octet: in
     assert result.report.packets_accepted == 9
 
 
+def test_a_yaml_packet_marked_segmented_decodes_segments_and_counts_them(tmp_path) -> None:
+    """``segmented: true`` on ACS_HK: packets whose sequence flags mark a first, continuation or last segment
+    (CCSDS 133.0-B-2 §4.1.3.4.2.2) decode like the others and the report counts them; ACS_HK without it still
+    quarantines them as bad_header (above)."""
+    from telemetry.ccsds import crc16_ccitt
+    from telemetry.dictionary import SHIPPED, load_dictionary
+
+    text = (SHIPPED / "reference_satellite.yaml").read_text()
+    assert text.count("    apid: 256\n") == 1
+    (tmp_path / "segmented.yaml").write_text(text.replace("    apid: 256\n", "    apid: 256\n    segmented: true\n"))
+    dictionary = load_dictionary(tmp_path / "segmented.yaml")
+    rows = packets(dictionary.packets[HK], 10)
+    for i, flags in ((3, 0x40), (4, 0x00), (5, 0x80)):  # first, continuation, last segment
+        rows[i, 2] = flags | (rows[i, 2] & 0x3F)
+        c = int(crc16_ccitt(rows[i : i + 1, :-2])[0])
+        rows[i, -2:] = [c >> 8, c & 0xFF]
+    result = decode_stream(rows.tobytes(), dictionary, now_utc_ns=NOW_UTC_NS)
+    assert result.report.quarantined == [] and result.report.packets_accepted == 10
+    assert result.report.apids[HK].segmented == 3
+    assert [q.detail for q in _ingest(rows).report.quarantined] == ["sequence flags (segmented)"] * 3
+
+
 def test_undefined_apid_is_counted_and_kept_raw_garbage_is_quarantined() -> None:
     """APID 1,793 = 0x701 (uses the top APID bits) has no definition: counted and kept byte-exact; garbage has no APID."""
     from telemetry.ccsds import encode_primary_headers
