@@ -50,19 +50,10 @@ def _child_field(field: str, key: str | int) -> str:
     return str(key) if field == "body" else f"{field}.{key}"
 
 
-def json_problem(body: bytes, max_depth: int = MAX_JSON_DEPTH) -> tuple[str, str] | None:
-    """(field, why) when ``body`` is not acceptable JSON (invalid, NaN/Infinity, nested deeper than max_depth, a
-    string or key holding a NUL), else None; the field is ``body`` or the place in it (``faults.0``)."""
-    try:
-        value = orjson.loads(body)
-    except orjson.JSONDecodeError as exc:
-        return "body", f"body: not valid JSON (RFC 8259: no NaN or Infinity, nesting at most {max_depth}): {exc}"
+def _nul_place(value: Any) -> tuple[str, str] | None:
+    """(field, why) of the first string or key holding a NUL, breadth first; None when there is none."""
     level: list[tuple[str, Any]] = [("body", value)]
-    depth = 0
     while level:
-        depth += 1
-        if depth > max_depth:
-            return "body", f"body: JSON nested deeper than {max_depth} levels"
         for field, item in level:
             if isinstance(item, str) and NUL in item:
                 return field, f"{field}: {NUL_REFUSED}"
@@ -75,6 +66,29 @@ def json_problem(body: bytes, max_depth: int = MAX_JSON_DEPTH) -> tuple[str, str
             for key, child in (item.items() if isinstance(item, dict) else enumerate(item))
         ]
     return None
+
+
+def json_problem(body: bytes, max_depth: int = MAX_JSON_DEPTH) -> tuple[str, str] | None:
+    """(field, why) when ``body`` is not acceptable JSON (invalid, NaN/Infinity, nested deeper than max_depth, a
+    string or key holding a NUL), else None; the field is ``body`` or the place in it (``faults.0``)."""
+    try:
+        value = orjson.loads(body)
+    except orjson.JSONDecodeError as exc:
+        return "body", f"body: not valid JSON (RFC 8259: no NaN or Infinity, nesting at most {max_depth}): {exc}"
+    level, depth = [value], 0
+    while level:
+        depth += 1
+        if depth > max_depth:
+            return "body", f"body: JSON nested deeper than {max_depth} levels"
+        level = [
+            child
+            for item in level
+            if isinstance(item, (dict, list))
+            for child in (item.values() if isinstance(item, dict) else item)
+        ]
+    # RFC 8259 writes a NUL in a string only as the escape \u0000 (a raw control character is invalid JSON): bodies
+    # without one skip the walk that names places
+    return _nul_place(value) if b"\\u0000" in body else None
 
 
 def _is_json(scope: Scope) -> bool:
