@@ -38,6 +38,7 @@ from telemetry.archive.engine import (
 )
 from telemetry.archive.migrate import upgrade
 from telemetry.archive.models import (
+    NAME_MAX,
     Alarm,
     AlarmEvent,
     GroundStation,
@@ -116,6 +117,15 @@ def _now_ns() -> int:
     return time.time_ns()
 
 
+def _check_name(field: str, what: str, name: str) -> None:
+    """ValueError naming ``field`` unless ``name`` has 1 to NAME_MAX characters, the width of the archive's name
+    columns (PostgreSQL refuses a longer one; SQLite would store it)."""
+    if not name:
+        raise ValueError(f"{field}: {what} is required")
+    if len(name) > NAME_MAX:
+        raise ValueError(f"{field}: {what} has at most {NAME_MAX} characters, got {len(name)}")
+
+
 class Archive:
     """The telemetry archive at a database URL (migrated to the newest schema on open)."""
 
@@ -161,8 +171,7 @@ class Archive:
     # --- satellites, stations, TLEs -------------------------------------------------------
     def satellite_id(self, name: str, norad_id: int | None = None) -> int:
         """Id of the satellite called ``name``, registering it on first use."""
-        if not name:
-            raise ValueError("satellite: a satellite name is required")
+        _check_name("satellite", "a satellite name", name)
         if name in self._satellite_ids:
             return self._satellite_ids[name]
         with self._write() as conn:
@@ -187,6 +196,7 @@ class Archive:
         self, name: str, lat_deg: float, lon_deg: float, alt_m: float, min_elevation_deg: float
     ) -> int:
         """Register (or update) a ground station; returns its id."""
+        _check_name("name", "a station name", name)
         if not -90.0 <= lat_deg <= 90.0:
             raise ValueError(f"lat_deg: {lat_deg} outside -90..90")
         if not -180.0 <= lon_deg <= 360.0:
@@ -256,8 +266,7 @@ class Archive:
         Raw packets of undefined APIDs are kept with the upload; a repeated upload adds nothing and
         reports, per APID, how many of its packets are already archived.
         """
-        if not uploaded_by:
-            raise ValueError("uploaded_by: the uploader's name is required")
+        _check_name("uploaded_by", "the uploader's name", uploaded_by)
         batches = _merge_by_apid(list(batches))
         sat_id = self.satellite_id(satellite)
         with self._write() as conn:
@@ -275,8 +284,7 @@ class Archive:
         returns, every one of them is durable, as after :meth:`ingest`; if one fails, none is archived.
         """
         for u in uploads:
-            if not u.uploaded_by:
-                raise ValueError("uploaded_by: the uploader's name is required")
+            _check_name("uploaded_by", "the uploader's name", u.uploaded_by)
         sat_ids = [self.satellite_id(u.satellite) for u in uploads]
         merged = [_merge_by_apid(list(u.batches)) for u in uploads]
         with self._write() as conn:
@@ -872,6 +880,7 @@ class Archive:
         self, alarm_id: int, action: str, actor: str, *, t_ns: int | None = None, shelved_until_ns: int | None = None
     ) -> None:
         """Acknowledge, shelve (until ``shelved_until_ns``), unshelve or clear an alarm."""
+        _check_name("actor", "the actor's name", actor)
         with self._write() as conn:
             alarm_state.operator_action(
                 conn, alarm_id, action, actor, _now_ns() if t_ns is None else t_ns, shelved_until_ns

@@ -12,7 +12,7 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import inspect, text
 
-from telemetry.archive import Archive, PacketBatch, PendingUpload, upgrade
+from telemetry.archive import NAME_MAX, Archive, PacketBatch, PendingUpload, upgrade
 from telemetry.archive.engine import create_archive_engine
 from telemetry.archive.migrate import alembic_config
 from telemetry.archive.models import Base
@@ -132,6 +132,24 @@ def test_same_file_twice_is_a_reported_no_op(archive: Archive) -> None:
     assert second.duplicate_upload and second.upload_id == first.upload_id and second.packets_accepted == 0
     assert len(archive.uploads(SAT)) == 1
     assert archive.upload_contents(first.upload_id) == (500, 500)
+
+
+def test_names_fill_their_columns_and_longer_ones_name_their_field(archive: Archive) -> None:
+    """varchar(NAME_MAX) on PostgreSQL refused longer names as a DataError (SQLite stored them): the archive says so
+    first, for the API, the CLI and the live paths alike."""
+    full, over = "N" * NAME_MAX, "N" * (NAME_MAX + 1)
+    assert archive.satellite_id(full) > 0
+    assert archive.add_ground_station(full, 64.86, -147.85, 200.0, 5.0) > 0
+    assert archive.ingest(full, [synthetic_batch(10)], source="a.bin", uploaded_by=full).packets_accepted == 10
+    refusals = {
+        "satellite": lambda: archive.satellite_id(over),
+        "name": lambda: archive.add_ground_station(over, 64.86, -147.85, 200.0, 5.0),
+        "uploaded_by": lambda: archive.ingest(SAT, [synthetic_batch(10)], source="b.bin", uploaded_by=over),
+        "actor": lambda: archive.alarm_action(1, "acknowledge", over),
+    }
+    for field, call in refusals.items():
+        with pytest.raises(ValueError, match=f"^{field}: .* at most {NAME_MAX} characters, got {NAME_MAX + 1}$"):
+            call()
 
 
 def test_ground_files_without_raw_bytes_are_told_apart_by_their_values(archive: Archive) -> None:
