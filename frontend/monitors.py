@@ -24,6 +24,7 @@ from frontend.twin_geometry import TwinFrame, TwinGeometry
 from frontend.twin_panels import PLOT_WINDOW_S
 from frontend.twin_scene import ROLES, Role
 from frontend.viewer import Viewer, ViewerLink
+from frontend.viser_events import loop_safe_message_events
 from sim_core import quaternion
 
 if TYPE_CHECKING:
@@ -322,6 +323,7 @@ def serve_monitors(
     t0, t1 = feed.span_unix_s()
     n_wheels = feed.window(t0, t1).wheel_speed_rad_s.shape[1]
     first = geometry.frame(t1 if live else t0)
+    loop_safe_message_events()  # before the servers make their message buffers (frontend.viser_events)
     servers: dict[str, viser.ViserServer] = {
         role: viser.ViserServer(host=host, port=ports[role], verbose=False) for role in roles
     }
