@@ -402,6 +402,33 @@ def _bad_link(buf: np.ndarray, x: int) -> bool:
     return idle
 
 
+@njit(cache=True, nogil=True)
+def _hides_packet(buf: np.ndarray, x: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """True when a confirmed dictionary packet (its CRC valid, or another one fitting where it ends) starts inside
+    the well-formed packet at x: its length field would hide real packets, so it is garbage."""
+    n = buf.shape[0]
+    end = x + ((np.int64(buf[x + 4]) << 8) | buf[x + 5]) + PRIMARY_HEADER_OCTETS + 1
+    for y in range(x + 1, end):
+        fit = _fit(buf, y, lengths, crc)
+        if fit == 2 and _header_fits(buf, y, lengths, crc, table):
+            return True
+        if fit == 1:
+            q = y + ((np.int64(buf[y + 4]) << 8) | buf[y + 5]) + PRIMARY_HEADER_OCTETS + 1
+            fit_q = 0 if q >= n else _fit(buf, q, lengths, crc)
+            if fit_q == 1 or (fit_q == 2 and _header_fits(buf, q, lengths, crc, table)):
+                return True
+    return False
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _doubtful_link(buf: np.ndarray, x: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray) -> bool:
+    """A segmented packet at x hiding a confirmed dictionary packet (see _hides_packet). Segmented packets link
+    (missions send them), but garbage that reads as one is four times likelier than an unsegmented one: it must
+    not swallow the packets it covers (a truncated packet confirmed by one such link did, found by fuzzing)."""
+    segmented: bool = buf[x + 2] >> 6 != SEQUENCE_FLAGS_UNSEGMENTED
+    return segmented and _hides_packet(buf, x, lengths, crc, table)
+
+
 @njit(cache=True, nogil=True, inline="always")
 def _links_confirm(
     buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
@@ -425,7 +452,7 @@ def _links_confirm(
         fit = 0 if x == n else _fit(buf, x, lengths, crc)  # _header_fits, the CRC checked only where one applies
         if x == n or fit == 1 or (fit == 2 and _header_fits(buf, x, lengths, crc, table)):
             chain[3] = 1
-        elif _bad_link(buf, x):
+        elif _bad_link(buf, x) or _doubtful_link(buf, x, lengths, crc, table):
             chain[3] = 0
         else:
             chain[1] += 1
@@ -443,7 +470,7 @@ def _other_length_confirmed(
     if not _well_formed(buf, p):
         return False
     apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1:
+    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1 or _doubtful_link(buf, p, lengths, crc, table):
         return False
     q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
     return _links_confirm(buf, q, lengths, crc, table, chain)
