@@ -25,6 +25,7 @@ from telemetry import ccsds, xtce_bulk
 from telemetry.dictionary import DerivedParameter, Dictionary, PacketDefinition, Parameter, XtceSource, xtce_parameter
 from telemetry.ingest_report import (
     ApidSummary,
+    ColumnMatrices,
     DecodeResult,
     IngestReport,
     QuarantineRecord,
@@ -257,6 +258,13 @@ class _LayoutPlan:
     floats32: tuple[str, ...]
     floats64: tuple[str, ...]
     others: tuple[tuple[Parameter, int, int, np.dtype | None, np.dtype | None], ...]  # (p, slot, row, view, cast)
+    # every field plain or a blocked float (no others, names unique): the engineering values are handed out as a
+    # ColumnMatrices, one matrix per (slot, dtype) of plain fields -- (slot, dtype, positions, first row; the rows
+    # of one (slot, dtype) are consecutive, in parameter order) -- and the float blocks (positions, in their order)
+    names: tuple[str, ...]
+    plain_groups: tuple[tuple[int, np.dtype, list[int], int], ...]
+    float_positions: tuple[list[int], list[int]]
+    matrices: bool
 
 
 _PLANS: dict[int, _LayoutPlan] = {}  # by id() of a layout's parameter tuple (kept alive by the plan)
@@ -306,10 +314,23 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
     row, rows = [0] * len(parameters), [0, 0, 0, len(blocked)]
     for r, i in enumerate(blocked):
         row[i] = r
-    for i, s in enumerate(slot):
-        if not floating[i]:
+    by_view: dict[tuple[int, np.dtype], list[int]] = {}  # plain fields by (slot, dtype): consecutive rows each
+    rest = []
+    for i, (p, s, v) in enumerate(zip(parameters, slot, views)):
+        if unique and v is not None and not p.polynomial:
+            by_view.setdefault((s, v), []).append(i)
+        elif not floating[i]:
+            rest.append(i)
+    plain_groups = []
+    for (s, v), members in by_view.items():
+        plain_groups.append((s, v, members, rows[s]))
+        for i in members:
             row[i] = rows[s]
             rows[s] += 1
+    for i in rest:
+        row[i] = rows[slot[i]]
+        rows[slot[i]] += 1
+    singles = sum(parameters[i].bit_length == 32 for i in blocked)  # blocked: the 32-bit floats, then the 64-bit
     casts = tuple(d if v is None else None for d, v in zip(dtypes, views))
     plain_views: dict[tuple[int, np.dtype], int] = {}
     plain, others = [], []
@@ -341,6 +362,10 @@ def _plan(parameters: tuple[Parameter, ...]) -> _LayoutPlan:
         tuple(parameters[i].name for i in blocked if parameters[i].bit_length == 32),
         tuple(parameters[i].name for i in blocked if parameters[i].bit_length == 64),
         tuple(others),
+        tuple(p.name for p in parameters),
+        tuple(plain_groups),
+        (blocked[:singles], blocked[singles:]),
+        unique and not others,
     )
     if len(_PLANS) >= _MAX_PLANS:
         _PLANS.clear()
@@ -373,6 +398,8 @@ def _layout_values(
         plan.row,
         *outs,
     )
+    if calibrated and plan.matrices:  # engineering values: the kernel's rows as they are, one matrix per dtype
+        return _column_matrices(plan, outs)
     out = {}
     viewed = [outs[s].view(d) for s, d in plan.plain_views]
     for name, k, r in plan.plain:  # a row of its slot's matrix in its dtype: one index per parameter
@@ -392,6 +419,26 @@ def _layout_values(
     if sum(map(bool, (plan.plain, plan.floats32 or plan.floats64, plan.others))) > 1:  # in the parameters' order
         out = {p.name: out[p.name] for p in parameters}  # (plain and floats only when their names are unique)
     return out
+
+
+def _column_matrices(plan: _LayoutPlan, outs: list[np.ndarray]) -> ColumnMatrices:
+    """The engineering values of a layout of plain fields and float blocks (plan.matrices) as a ColumnMatrices of the
+    kernel's rows: the archive takes each matrix whole (concatenation, ranges, compression), not column by column.
+    The columns are the rows _layout_values hands out otherwise, in the parameters' order."""
+    groups = [
+        (dtype, positions, outs[s][first : first + len(positions)].view(dtype))
+        for s, dtype, positions, first in plan.plain_groups
+    ]
+    singles, doubles = plan.float_positions
+    if singles:  # as _raw_value and calibrate do per field: the low 32 bits as float32, then float64
+        as_single = outs[3][: len(singles)].astype(np.uint32).view(np.float32)
+        groups.append((_FLOAT64, singles, as_single.astype(np.float64)))
+    if doubles:
+        groups.append((_FLOAT64, doubles, outs[3][len(singles) : len(singles) + len(doubles)].view(np.float64)))
+    return ColumnMatrices(plan.names, groups)
+
+
+_FLOAT64 = np.dtype(np.float64)
 
 
 def _raw_values(buf: np.ndarray, offset: np.ndarray, parameters: tuple[Parameter, ...]) -> dict[str, np.ndarray]:
@@ -825,7 +872,11 @@ def _decode_apid(
         state = SequenceState.after(previous, count, t)
         if state is not None:
             carry[apid] = state
-    values = {name: v if in_order else v[accepted] for name, v in _union(parts, n).items()}
+    joined = _union(parts, n)
+    if in_order and isinstance(joined, ColumnMatrices) and not definition.derived:  # the usual case: as decoded
+        values: dict[str, np.ndarray] = joined
+    else:
+        values = {name: v if in_order else v[accepted] for name, v in joined.items()}
     for d in definition.derived:
         values[d.name] = derive(d, values, definition.time_code)
     lengths = length if in_order else length[accepted]

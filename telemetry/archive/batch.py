@@ -8,9 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from telemetry.ingest_report import ColumnMatrices, positions_by_dtype
 
 if TYPE_CHECKING:
     from telemetry.ingest_report import SampleBatch
@@ -30,53 +32,6 @@ MAX_APID = 2_047  # 11-bit APID, CCSDS 133.0-B-2 §4.1.3.3.4
 # Archive APID of parameters derived on the ground (the live twin's residuals): no raw packets, sequence counts 0;
 # 2047 is the idle packet (CCSDS 133.0-B-2 §4.1.3.3.4.4), so the highest APID a mission may use is 2045 here.
 DERIVED_APID = 2_046
-
-
-class ColumnMatrices(dict[str, np.ndarray]):
-    """Parameter columns (name -> 1-D array, in their order) that are the rows of one 2-D matrix per dtype.
-
-    ``groups``: (dtype, positions of its columns, matrix of shape (len(positions), n)). The archive reads each
-    matrix with one numpy call per step (range, narrowing, compression) where a mapping of separate columns
-    costs one call per column and step (CYGNSS: ~100 columns of a few thousand samples per archive chunk).
-    """
-
-    def __init__(self, names: Sequence[str], groups: Sequence[tuple[np.dtype, Sequence[int], np.ndarray]]) -> None:
-        columns: list[np.ndarray | None] = [None] * len(names)
-        for _, positions, matrix in groups:
-            for row, position in enumerate(positions):
-                columns[position] = matrix[row]
-        if any(c is None for c in columns):
-            raise ValueError("groups: every column needs a row of one matrix")
-        super().__init__(zip(names, cast("list[np.ndarray]", columns)))
-        self.groups = [(np.dtype(d), list(p), m) for d, p, m in groups]
-
-    @classmethod
-    def concatenated(cls, parts: Sequence[Mapping[str, np.ndarray]], lengths: Sequence[int]) -> dict[str, np.ndarray]:
-        """The columns of ``parts`` (same names in the same order, ``lengths`` samples each) joined end to end: one
-        matrix per dtype filled by one call per part and dtype; separate columns (np.concatenate's dtype
-        promotion) when a column's dtype differs between parts."""
-        names = list(parts[0])
-        columns = [list(p.values()) for p in parts]
-        dtypes = [c.dtype for c in columns[0]]
-        if not names or any([c.dtype for c in part] != dtypes for part in columns[1:]):
-            return {n: np.concatenate([np.asarray(p[n]) for p in parts]) for n in names}
-        ends = np.cumsum([0, *lengths]).tolist()
-        groups = []
-        for members in positions_by_dtype(columns[0]).values():
-            joined = np.concatenate([part[members[0]][:0] for part in columns]).dtype  # np.concatenate's: native order
-            matrix = np.empty((len(members), ends[-1]), dtype=joined)
-            for part, lo, hi in zip(columns, ends[:-1], ends[1:]):
-                matrix[:, lo:hi] = [part[i] for i in members]  # one conversion in C (np.stack: ~1 us per column)
-            groups.append((joined, members, matrix))
-        return cls(names, groups)
-
-
-def positions_by_dtype(columns: Sequence[np.ndarray]) -> dict[np.dtype, list[int]]:
-    """Positions of ``columns`` grouped by dtype (dtypes in order of first use, positions in order)."""
-    positions: dict[np.dtype, list[int]] = {}
-    for i, column in enumerate(columns):
-        positions.setdefault(column.dtype, []).append(i)
-    return positions
 
 
 def value_matrices(values: Mapping[str, np.ndarray]) -> list[tuple[np.dtype, list[int], np.ndarray]]:
