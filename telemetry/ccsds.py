@@ -430,6 +430,18 @@ def _doubtful_link(buf: np.ndarray, x: int, lengths: np.ndarray, crc: np.ndarray
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _weak_hiding(
+    buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
+) -> bool:
+    """The packet at p, its length field just confirmed by the links from its end (``chain``, see _links_confirm),
+    hides a confirmed dictionary packet while fewer than UNDEFINED_CHAIN links confirmed it: garbage does form one
+    link that ends where a real packet starts (a truncated packet did so, hiding 14, found by fuzzing); a full
+    chain is left unscanned (a scan costs ~15-20 ns an octet here)."""
+    weak: bool = chain[1] < UNDEFINED_CHAIN and _hides_packet(buf, p, lengths, crc, table)
+    return weak
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _links_confirm(
     buf: np.ndarray, q: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
 ) -> bool:
@@ -466,14 +478,14 @@ def _other_length_confirmed(
     buf: np.ndarray, p: int, lengths: np.ndarray, crc: np.ndarray, table: np.ndarray, chain: np.ndarray
 ) -> bool:
     """A well-formed packet of a defined APID whose length differs from its definition, its length field confirmed
-    by the links from its end; the decoder reports the length mismatch."""
+    by the links from its end and hiding no confirmed packet; the decoder reports the length mismatch."""
     if not _well_formed(buf, p):
         return False
     apid = ((np.int64(buf[p]) & 7) << 8) | buf[p + 1]
-    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1 or _doubtful_link(buf, p, lengths, crc, table):
+    if lengths[apid] <= 0 or crc[apid] or (buf[p] >> 4) & 1:
         return False
     q = p + ((np.int64(buf[p + 4]) << 8) | buf[p + 5]) + PRIMARY_HEADER_OCTETS + 1
-    return _links_confirm(buf, q, lengths, crc, table, chain)
+    return _links_confirm(buf, q, lengths, crc, table, chain) and not _weak_hiding(buf, p, lengths, crc, table, chain)
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -517,6 +529,8 @@ def _frame_kernel(
     is quarantined up to the next octet where a dictionary packet fits; an idle packet spanning
     exactly that stretch is counted as idle. With keep_undefined, a well-formed packet of an APID
     without definition whose length field is confirmed (see _links_confirm) is its own segment.
+    Links that confirm a packet's length field never hide a confirmed dictionary packet inside it (segmented
+    links, and any packet confirmed by fewer than UNDEFINED_CHAIN links: see _doubtful_link, _weak_hiding).
     lengths[apid]: 0 = no definition, > 0 = exact length, < 0 = any length (taken from the header).
     Unless final (buf is a chunk of longer data), framing stops at the first segment the octets after buf could
     change (see _walk_links), so the segments are those of the whole data; only a quarantined stretch longer
@@ -552,7 +566,9 @@ def _frame_kernel(
                 fit_q = _fit(buf, q, lengths, crc)
                 confirmed = fit_q == 1 or (fit_q == 2 and _header_fits(buf, q, lengths, crc, table))
             if not confirmed and keep_undefined:
-                confirmed = _links_confirm(buf, q, lengths, crc, table, chain)
+                confirmed = _links_confirm(buf, q, lengths, crc, table, chain) and not _weak_hiding(
+                    buf, p, lengths, crc, table, chain
+                )
             if not confirmed and not final and q + MAX_PACKET_OCTETS > n:
                 break  # a packet found inside it might end after buf
             if not confirmed:

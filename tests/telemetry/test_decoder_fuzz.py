@@ -106,6 +106,9 @@ NOAA_DICTIONARY = load_dictionary("noaa20_apid11_xtce.yaml")
 # long, ending where a real packet starts: that one link "confirmed" it and hid 14 packets (8c12aab, fixed by
 # _doubtful_link)
 @example(corruptions=[("insert", 425, b"\x00"), ("truncate", 2223, b"\x00")], start=367)
+# a packet truncated to 22 octets whose length field then read an unsegmented APID-97 packet 945 octets long, ending
+# where a real packet starts: 14 packets hidden as one undefined packet (a 3,000-example run; _hides_packet)
+@example(corruptions=[("truncate", 164, b"\x00")], start=6393)
 def test_without_crc_real_packets_around_cut_and_inserted_bytes_are_recovered(
     noaa_rows: list[bytes], corruptions: list, start: int
 ) -> None:
