@@ -94,7 +94,8 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
                 gap_at, gap_from = i, last
             last, t_last = count[i], t_ns[i]
             continue
-        if gap_at >= 0 and missing[gap_at] > 0 and 1 <= _forward(gap_from, count[i]) < _forward(gap_from, last):
+        inside = gap_at >= 0 and 1 <= _forward(gap_from, count[i]) < _forward(gap_from, count[gap_at])
+        if inside and missing[gap_at] > 0:  # inside the gap itself: not a count accepted after it (a late repeat)
             missing[gap_at] -= 1  # a packet of the latest gap, its time a little after the next one's: kept
             continue
         follows = i + 1 < n and 1 <= _forward(count[i], count[i + 1]) < HALF_RANGE

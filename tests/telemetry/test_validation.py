@@ -82,6 +82,18 @@ def test_packet_stamped_just_after_its_successor_is_kept_without_a_false_gap() -
     assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 15, 2)]
 
 
+def test_late_repeat_of_a_count_after_a_gap_stays_quarantined() -> None:
+    """Count 12 lost (gap 11 -> 13), then count 15 again after 20, stamped later: 15 lies between the gap and the
+    latest count but not inside the gap, so it is a repeat (non_monotonic_sequence) and the gap keeps its 1."""
+    count = np.concatenate([np.arange(12), np.arange(13, 21), [15], np.arange(21, 25)])
+    t = T0_UTC_NS + np.arange(count.size) * PERIOD_NS
+    verdict = validate_packets(HK, np.arange(count.size) * 126, count, t, 126, None, None)
+    assert [(q.reason, q.offset, q.sequence_count) for q in verdict.quarantined] == [
+        ("non_monotonic_sequence", 20 * 126, 15)
+    ]
+    assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 13, 1)]
+
+
 def test_counter_restart_is_accepted_and_reported_as_unknown_gap() -> None:
     count = np.concatenate([np.arange(3_000, 3_020), np.arange(0, 20)])
     t = T0_UTC_NS + np.arange(40) * PERIOD_NS
