@@ -705,7 +705,8 @@ _HEADER_NAMES = (*_APID_NAMES, "VERSION", "TYPE")
 def _criterion_terms(criterion: Any) -> tuple[list[Any], bool]:
     """The conditions of one restriction criterion (XTCE Comparison, or a BooleanExpression's Condition,
     ANDed or ORed conditions without nesting) as (parameter, operator, value) objects, and True when they are
-    ORed (ValueError for deeper nesting that names the APID: not read as an APID selection)."""
+    ORed. Nested AND/OR gives no terms: not read as an APID selection (a container whose APID test is nested selects
+    no APID by it), and a restriction beyond the APID for _restricts_beyond_apid."""
     from space_packet_parser.xtce import comparisons
 
     if not isinstance(criterion, comparisons.BooleanExpression):
