@@ -105,8 +105,9 @@ class TimeFields:
             found = [n for n in names if fnmatch.fnmatchcase(n, pattern)]
             if len(found) != 1:
                 what = "no parameter" if not found else f"{len(found)} parameters {found[:4]}"
-                near = [n for n in names if pattern.strip("*?").lower() in n.lower()] if not found else []
-                hint = f" (but {near[:3]}: e.g. {'*' + pattern.lstrip('*')!r} matches a prefixed name)" if near else ""
+                wider = "*" + pattern.lstrip("*")  # offered only where it matches: not for a suffix or other case
+                near = [n for n in names if fnmatch.fnmatchcase(n, wider)] if not found else []
+                hint = f" (but {near[:3]}: e.g. {wider!r} matches a prefixed name)" if near else ""
                 raise ValueError(f"time_fields.{key}: {what} matching {pattern!r}{hint}")
             bound.append((key, found[0]))
         return replace(self, fields=tuple(bound))

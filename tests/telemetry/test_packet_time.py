@@ -141,3 +141,12 @@ def test_wildcards_bind_to_exactly_one_parameter() -> None:
     assert tf.bound_to(["PKT_YEAR", "PKT_DAY", "X"]).names == ("PKT_YEAR", "PKT_DAY")
     with pytest.raises(ValueError, match="2 parameters"):
         tf.bound_to(["A_YEAR", "B_YEAR", "A_DAY"])
+
+
+def test_a_prefixed_name_is_offered_only_with_a_wildcard_that_matches_it() -> None:
+    """'*SHCOARSE' is offered for ILO.SHCOARSE, not for SHCOARSE_US (it would match nothing there either)."""
+    tf = parse_time_fields("coarse=SHCOARSE,epoch=2010-01-01T00:00:00Z")
+    with pytest.raises(ValueError, match=r"\(but \['ILO\.SHCOARSE'\]: e\.g\. '\*SHCOARSE' matches a prefixed name\)"):
+        tf.bound_to(["ILO.SHCOARSE", "X"])
+    with pytest.raises(ValueError, match=r"no parameter matching 'SHCOARSE'$"):
+        tf.bound_to(["SHCOARSE_US", "X"])
