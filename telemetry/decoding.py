@@ -466,7 +466,7 @@ def calibrate(raw: np.ndarray, p: Parameter) -> np.ndarray:
     cubic, e.g. IMAP-Lo's BHV_DEF_NEG_I). Linear calibrations give c0 + c1·x either way.
     """
     if p.polynomial:
-        y = np.full(raw.shape, p.polynomial[0])
+        y = np.full(raw.shape, float(p.polynomial[0]))  # float64 whatever the coefficients type
         for c, power in zip(p.polynomial[1:], _powers(raw, len(p.polynomial) - 1)):
             if c != 0.0:  # a term the calibrator does not list (space_packet_parser sums only those it lists)
                 y += c * power

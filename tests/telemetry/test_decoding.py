@@ -86,6 +86,7 @@ def _python_bit_field(row: np.ndarray, p: Parameter) -> float | int:
         ("int", 32, (0.5, -2e-3, 0.0, 7e-21)),  # cubes beyond int64: Python's integers
         ("uint", 64, (1.0, 1e-3)),
         ("float", 32, (0.25, -1.5, 2e-2)),
+        ("int", 16, (1, 2)),  # integer coefficients from a Python caller: still float64 engineering values
     ],
 )
 def test_polynomial_calibration_is_space_packet_parsers_to_the_bit(data_type: str, bits: int, polynomial) -> None:
