@@ -73,7 +73,7 @@ def _sessions(args: argparse.Namespace) -> Iterator[sessionmaker[Session]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Issue the token in the configured database; exit 2 on a bad setting."""
+    """Issue the token in the configured database; exit 2 on a bad setting or a name the archive cannot record."""
     from backend.core.audit_repository import AuditRepository
     from backend.core.auth import Authenticator, Role
     from backend.core.token_repository import TokenRepository
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
             AuditRepository(sessions).record(
                 "acs-twin token create", "token.create", f"token/{token_id}", {"role": args.role, "name": name}
             )
-    except _NoDatabase as exc:
+    except (_NoDatabase, ValueError) as exc:  # ValueError: a name the archive cannot record (Authenticator.issue)
         print(exc, file=sys.stderr)
         return 2
     print(f"{args.role} token {token_id} (shown once, stored hashed): {token}")

@@ -166,8 +166,12 @@ class Authenticator:
 
     def issue(self, name: str, role: Role) -> tuple[int, str]:
         """Create a token, store its hash; returns (id, plain token) — shown once, never stored."""
+        from telemetry.archive import NAME_MAX  # here: the archive's import is ~0.3 s, a token is issued rarely
+
         if not name.strip():
             raise ValueError("name: must not be empty")
+        if len(name) > NAME_MAX:  # the archive records it as uploaded_by / actor, in varchar(NAME_MAX) columns
+            raise ValueError(f"name: at most {NAME_MAX} characters (the archive's actor names), got {len(name)}")
         token = new_token()
         row = self._tokens.add(name=name, role=role.name, token_sha256=token_sha256(token))
         return row.id, token

@@ -33,3 +33,15 @@ def test_token_create_without_a_server_database_says_where_it_looked(tmp_path: P
 def test_token_create_refuses_an_unknown_role(tmp_path: Path) -> None:
     with pytest.raises(SystemExit):
         main(["token", "create", "--role", "root", "--data-dir", str(tmp_path)])
+
+
+def test_token_create_refuses_a_name_the_archive_cannot_record(tmp_path: Path, capsys) -> None:
+    """The token's name is the actor of its uploads and alarm actions (varchar(NAME_MAX)): a longer one is refused
+    when the token is made, not at its first upload."""
+    services = build_services(Settings(data_dir=tmp_path))
+    try:
+        assert main(["token", "create", "--name", "x" * 65, "--data-dir", str(tmp_path)]) == 2
+        assert "name: at most 64 characters" in capsys.readouterr().err
+        assert services.audit.list(action="token.create") == []
+    finally:
+        services.close()
