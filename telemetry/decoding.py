@@ -869,7 +869,11 @@ def _decode_apid(
     in_order = whole and accepted.size == n and bool(np.all(verdict.accepted[1:] > verdict.accepted[:-1]))
     count, t = (headers.sequence_count, t) if in_order else (headers.sequence_count[accepted], t[accepted])
     if carry is not None:
-        state = SequenceState.after(previous, count, t)
+        if verdict.ahead >= 0:  # the step to the next chunk is judged from it (not from a packet kept inside a gap)
+            ahead: tuple[int, int] | None = (int(kept[1][verdict.ahead]), int(kept[2][verdict.ahead]))
+        else:
+            ahead = None if previous is None else (previous.count, previous.t_ns)
+        state = SequenceState.after(previous, count, t, ahead)
         if state is not None:
             carry[apid] = state
     joined = _union(parts, n)

@@ -56,6 +56,9 @@ class PacketVerdict:
     quarantined: list[QuarantineRecord]
     duplicates: int
     gaps: list[SequenceGap]
+    # the accepted packet the step to the next one is judged from (its count the furthest on: a packet kept inside a
+    # gap behind it is not), an index into the input arrays; -1 when none of them (``previous`` stays it)
+    ahead: int = -1
 
 
 @njit(cache=True)
@@ -65,8 +68,9 @@ def _forward(a: int, b: int) -> int:
 
 
 @njit(cache=True)
-def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tuple[np.ndarray, np.ndarray]:
-    """Status (ACCEPTED / NON_MONOTONIC) and missing-before count (RESTART = −1) of time-ordered counts.
+def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Status (ACCEPTED / NON_MONOTONIC) and missing-before count (RESTART = −1) of time-ordered counts, and the
+    index of the packet the last step was judged from (-1 when there is none).
 
     period_ns ≤ 0: the packet period is unknown and long outages cannot be sized.
     """
@@ -76,9 +80,10 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
     last = -1
     t_last = 0
     gap_at, gap_from = -1, 0  # the packet after the latest gap, and the count before that gap
+    ahead = -1  # the packet whose count and time are last, t_last
     for i in range(n):
         if last < 0:
-            last, t_last = count[i], t_ns[i]
+            last, t_last, ahead = count[i], t_ns[i], i
             continue
         d = _forward(last, count[i])
         expected = (t_ns[i] - t_last) / period_ns if period_ns > 0 else 0.0
@@ -86,13 +91,13 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
             steps = d + SEQUENCE_COUNT_MODULUS * round((expected - d) / SEQUENCE_COUNT_MODULUS)
             ok = steps >= 1 and abs(steps - expected) <= PERIOD_TOLERANCE * expected + 2
             missing[i] = steps - 1 if ok else RESTART
-            last, t_last, gap_at = count[i], t_ns[i], -1
+            last, t_last, gap_at, ahead = count[i], t_ns[i], -1, i
             continue
         if 1 <= d < HALF_RANGE:
             missing[i] = d - 1
             if d > 1:
                 gap_at, gap_from = i, last
-            last, t_last = count[i], t_ns[i]
+            last, t_last, ahead = count[i], t_ns[i], i
             continue
         inside = gap_at >= 0 and 1 <= _forward(gap_from, count[i]) < _forward(gap_from, count[gap_at])
         if inside and missing[gap_at] > 0:  # inside the gap itself: not a count accepted after it (a late repeat)
@@ -102,10 +107,10 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
         resumes = i + 1 < n and 1 <= _forward(last, count[i + 1]) < HALF_RANGE
         if follows and not resumes:
             missing[i] = RESTART
-            last, t_last, gap_at = count[i], t_ns[i], -1
+            last, t_last, gap_at, ahead = count[i], t_ns[i], -1, i
         else:
             status[i] = NON_MONOTONIC
-    return status, missing
+    return status, missing, ahead
 
 
 def header_mismatch(headers: PrimaryHeaders, secondary_header: bool, segments: bool = False) -> np.ndarray:
@@ -181,6 +186,7 @@ def validate_packets(
         quarantined=sorted(early.quarantined + later.quarantined, key=lambda q: q.offset),
         duplicates=int(seen.sum()) + early.duplicates + later.duplicates,
         gaps=early.gaps + later.gaps,
+        ahead=-1 if later.ahead == lead else later.ahead,
     )
 
 
@@ -195,8 +201,15 @@ class SequenceState:
     recent_t_ns: np.ndarray
 
     @classmethod
-    def after(cls, previous: SequenceState | None, count: np.ndarray, t_ns: np.ndarray) -> SequenceState | None:
-        """The state once the time-ordered accepted packets (count, t_ns) follow ``previous``."""
+    def after(
+        cls,
+        previous: SequenceState | None,
+        count: np.ndarray,
+        t_ns: np.ndarray,
+        ahead: tuple[int, int] | None = None,
+    ) -> SequenceState | None:
+        """The state once the time-ordered accepted packets (count, t_ns) follow ``previous``; its count and time
+        are ``ahead`` (the packet PacketVerdict.ahead names) when given, else the newest packet's."""
         if count.size == 0:
             return previous
         in_order = t_ns.size < 2 or bool(np.all(t_ns[1:] >= t_ns[:-1]))
@@ -211,7 +224,8 @@ class SequenceState:
                 order = np.argsort(t_ns, kind="stable")
                 count, t_ns = count[order], t_ns[order]
         count, t_ns = count[-RECENT_PACKETS:].astype(np.int64), t_ns[-RECENT_PACKETS:].astype(np.int64)
-        return cls(int(count[-1]), int(t_ns[-1]), count, t_ns)
+        last_count, last_t_ns = (int(count[-1]), int(t_ns[-1])) if ahead is None else ahead
+        return cls(last_count, last_t_ns, count, t_ns)
 
     def holds(self, count: np.ndarray, t_ns: np.ndarray) -> np.ndarray:
         """Per packet, whether (count, t_ns) is one of the recent keys."""
@@ -240,7 +254,7 @@ def _judged(
     repeat = np.zeros(idx.shape, dtype=bool)
     repeat[1:] = (t[idx[1:]] == t[idx[:-1]]) & (count[idx[1:]] == count[idx[:-1]])
     idx = idx[~repeat]
-    status, missing = _sequence_kernel(count[idx], t[idx], period_ns)
+    status, missing, ahead = _sequence_kernel(count[idx], t[idx], period_ns)
     quarantined = quarantined + [
         QuarantineRecord(int(offset[i]), packet_octets, "non_monotonic_sequence", apid, int(count[i]))
         for i in idx[status == NON_MONOTONIC]
@@ -253,4 +267,5 @@ def _judged(
         for j in np.flatnonzero(missing != 0)
     ]
     quarantined.sort(key=lambda q: q.offset)
-    return PacketVerdict(accepted=kept, quarantined=quarantined, duplicates=int(repeat.sum()), gaps=gaps)
+    ahead_at = int(idx[ahead]) if ahead >= 0 else -1
+    return PacketVerdict(kept, quarantined, int(repeat.sum()), gaps, ahead_at)

@@ -232,3 +232,24 @@ def test_chunks_grow_where_the_dictionary_only_bounds_their_values_and_report_wh
     stream = CYGNSS_STREAM.read_bytes() * (2 * chunk_octets_for(cygnss) // len(CYGNSS_STREAM.read_bytes()) + 1)
     lengths = [r.consumed for _, r in decode_chunks(io.BytesIO(stream), cygnss)]
     assert max(lengths) <= chunk_octets_for(cygnss) and len(lengths) >= 3
+
+
+def test_a_packet_kept_inside_a_gap_last_in_a_chunk_leaves_no_false_gap_in_the_next() -> None:
+    """HK count 12 stamped after 13 (CTIM's clock, cc3b333): one pass keeps it and reports no gap. A first chunk
+    whose decided packets end with 13, 12 (file order) must leave the next chunk judged from 13, not 12: 14 follows."""
+    from telemetry.ccsds import crc16_ccitt, encode_time
+    from tests.telemetry.packet_streams import T0_UTC_NS, packets, reference
+
+    dictionary = reference()
+    hk = dictionary.packets[256]
+    rows = packets(hk, 40)
+    rows[12, 6:12] = encode_time(np.array([T0_UTC_NS + int(13.004 * hk.period_s * 1e9)]), hk.time_code)[0]
+    crc = int(crc16_ccitt(rows[12, :-2].tobytes()))
+    rows[12, -2:] = (crc >> 8, crc & 0xFF)
+    data, octets = rows.tobytes(), rows.shape[1]
+    assert one_pass(data, dictionary).apids[256].missing == 0
+    carry: dict = {}
+    first = decode_stream(data[: 18 * octets], dictionary, source="file", final=False, carry=carry)
+    assert first.consumed == 14 * octets and carry[256].count == 13  # the decided packets: 0..13, 12 the newest
+    rest = decode_stream(data[first.consumed :], dictionary, source="file", carry=carry)
+    assert (first.report.apids[256].missing, rest.report.apids[256].missing) == (0, 0)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from telemetry.decoding import decode_stream
-from telemetry.validation import validate_packets
+from telemetry.validation import SequenceState, validate_packets
 from tests.telemetry.packet_streams import NOW_UTC_NS, T0_UTC_NS, packets, reference
 
 HK = 256
@@ -80,6 +80,20 @@ def test_packet_stamped_just_after_its_successor_is_kept_without_a_false_gap() -
     verdict = validate_packets(HK, keep * 126, count[keep], t[keep], 126, None, None)
     assert verdict.quarantined == [] and len(verdict.accepted) == 28
     assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 15, 2)]
+
+
+def test_a_chunk_ending_with_a_packet_kept_inside_a_gap_judges_the_next_chunk_from_the_gap_s_end() -> None:
+    """Count 12 stamped after 13, last of a chunk: the next chunk's 14 follows 13 (no gap), as in one pass."""
+    count = np.arange(21)
+    t = T0_UTC_NS + np.arange(21) * PERIOD_NS
+    t[12] = t[13] + 1_000
+    assert validate_packets(HK, np.arange(21), count, t, 126, None, None).gaps == []
+    first = validate_packets(HK, np.arange(14), count[:14], t[:14], 126, None, None)
+    order = first.accepted
+    assert first.gaps == [] and count[order[-1]] == 12 and count[first.ahead] == 13
+    state = SequenceState.after(None, count[order], t[order], (int(count[first.ahead]), int(t[first.ahead])))
+    second = validate_packets(HK, np.arange(7), count[14:], t[14:], 126, None, None, previous=state)
+    assert second.gaps == [] and len(second.accepted) == 7
 
 
 def test_late_repeat_of_a_count_after_a_gap_stays_quarantined() -> None:
