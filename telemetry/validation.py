@@ -79,7 +79,7 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
     missing = np.zeros(n, dtype=np.int64)
     last = -1
     t_last = 0
-    gap_at, gap_from = -1, 0  # the packet after the latest gap, and the count before that gap
+    gap_at, gap_filled = -1, 0  # the packet after the latest gap; the count before it, or the latest kept inside
     ahead = -1  # the packet whose count and time are last, t_last
     for i in range(n):
         if last < 0:
@@ -96,12 +96,13 @@ def _sequence_kernel(count: np.ndarray, t_ns: np.ndarray, period_ns: int) -> tup
         if 1 <= d < HALF_RANGE:
             missing[i] = d - 1
             if d > 1:
-                gap_at, gap_from = i, last
+                gap_at, gap_filled = i, last
             last, t_last, ahead = count[i], t_ns[i], i
             continue
-        inside = gap_at >= 0 and 1 <= _forward(gap_from, count[i]) < _forward(gap_from, count[gap_at])
-        if inside and missing[gap_at] > 0:  # inside the gap itself: not a count accepted after it (a late repeat)
+        inside = gap_at >= 0 and 1 <= _forward(gap_filled, count[i]) < _forward(gap_filled, count[gap_at])
+        if inside and missing[gap_at] > 0:  # inside the gap's unfilled part: not a count accepted already
             missing[gap_at] -= 1  # a packet of the latest gap, its time a little after the next one's: kept
+            gap_filled = count[i]
             continue
         follows = i + 1 < n and 1 <= _forward(count[i], count[i + 1]) < HALF_RANGE
         resumes = i + 1 < n and 1 <= _forward(last, count[i + 1]) < HALF_RANGE

@@ -108,6 +108,18 @@ def test_late_repeat_of_a_count_after_a_gap_stays_quarantined() -> None:
     assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 13, 1)]
 
 
+def test_a_count_kept_inside_a_gap_fills_it_once() -> None:
+    """Counts 12 and 13 lost (gap 11 -> 14), then 12 twice, each stamped after 14: the first 12 is kept (1 left
+    missing), the second is a repeat (non_monotonic_sequence), and 13 stays missing (review of cc3b333)."""
+    count = np.concatenate([np.arange(12), [14, 12, 12, 15]])
+    t = T0_UTC_NS + np.arange(count.size) * PERIOD_NS
+    verdict = validate_packets(HK, np.arange(count.size) * 126, count, t, 126, None, None)
+    assert [(q.reason, q.offset, q.sequence_count) for q in verdict.quarantined] == [
+        ("non_monotonic_sequence", 14 * 126, 12)
+    ]
+    assert [(g.after_count, g.before_count, g.missing) for g in verdict.gaps] == [(11, 14, 1)]
+
+
 def test_counter_restart_is_accepted_and_reported_as_unknown_gap() -> None:
     count = np.concatenate([np.arange(3_000, 3_020), np.arange(0, 20)])
     t = T0_UTC_NS + np.arange(40) * PERIOD_NS
