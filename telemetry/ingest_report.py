@@ -12,7 +12,7 @@ import json
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, cast
+from typing import Any, NoReturn, cast
 
 import numpy as np
 
@@ -195,6 +195,16 @@ class ColumnMatrices(dict[str, np.ndarray]):
             raise ValueError("groups: every column needs a row of one matrix")
         super().__init__(zip(names, cast("list[np.ndarray]", columns)))
         self.groups = [(np.dtype(d), list(p), m) for d, p, m in groups]
+
+    def _read_only(self, *args: object, **kwargs: object) -> NoReturn:
+        """The matrices are what the archive reads: a column added, replaced or removed here would not be in them."""
+        raise TypeError("ColumnMatrices is read-only: build a new one, or a dict of its columns, to change columns")
+
+    __setitem__ = __delitem__ = update = pop = popitem = clear = setdefault = __ior__ = _read_only
+
+    def __reduce__(self) -> tuple[type[ColumnMatrices], tuple[list[str], list[tuple[np.dtype, list[int], np.ndarray]]]]:
+        """Pickled (a decoder process hands its batches on) and copied as what it is built from."""
+        return type(self), (list(self), self.groups)
 
     def layout(self) -> list[tuple[np.dtype, list[int]]]:
         """Each matrix's dtype and the positions of its columns: equal for two parts of one packet layout."""

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -142,3 +144,21 @@ def test_pending_parts_join_into_one_matrix_per_dtype() -> None:
     ]
     mixed = ColumnMatrices.concatenated([parts[0], {**parts[1], "a": np.arange(2, dtype=np.uint32)}], [3, 2])
     assert not isinstance(mixed, ColumnMatrices) and mixed["a"].dtype == np.uint32
+
+
+def test_column_matrices_refuse_a_change_the_matrices_would_not_see_and_pickle_whole() -> None:
+    """A column set or removed on the mapping would be missing from the matrices the archive reads: refused. A
+    pickled copy (a decoder process hands its batches on) has the same columns and groups."""
+    matrices = ColumnMatrices(["a", "b"], [(np.dtype(np.float64), [0, 1], np.arange(6.0).reshape(2, 3))])
+    for change in (
+        lambda m: m.__setitem__("c", np.zeros(3)),
+        lambda m: m.update(a=np.zeros(3)),
+        lambda m: m.pop("a"),
+        lambda m: m.__delitem__("b"),
+    ):
+        with pytest.raises(TypeError, match="read-only"):
+            change(matrices)
+    again = pickle.loads(pickle.dumps(matrices))
+    assert isinstance(again, ColumnMatrices) and list(again) == ["a", "b"]
+    assert [(d, p, m.tolist()) for d, p, m in again.groups] == [(np.dtype(np.float64), [0, 1], [[0, 1, 2], [3, 4, 5]])]
+    assert np.array_equal(again["b"], [3.0, 4.0, 5.0])
